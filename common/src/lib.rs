@@ -1,0 +1,13 @@
+//! Continuum deformation of quadcopter teams over moving frames: the paper's math (pure, no I/O),
+//! scenario files, the deterministic in-process engine, and the iceoryx2 transport.
+//!
+//! Layers, bottom to top: `math` -> `frame`, `plan`, `formation`, `graph`, `gains`, `safety`,
+//! `dynamics`, `control` (pure) -> `step` (one agent's tick) -> `scenario` (files, validation,
+//! built-ins) -> `engine`, `telemetry`, `audit` -> `messages` (repr(C) wire types) -> `transport`
+//! (the only module that names iceoryx2).
+
+pub mod math;
+pub mod dynamics;
+pub mod control;
+pub mod messages;
+pub mod transport;
