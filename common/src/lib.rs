@@ -6,8 +6,16 @@
 //! built-ins) -> `engine`, `telemetry`, `audit` -> `messages` (repr(C) wire types) -> `transport`
 //! (the only module that names iceoryx2).
 
-pub mod math;
-pub mod dynamics;
 pub mod control;
+pub mod dynamics;
+pub mod formation;
+pub mod frame;
+pub mod gains;
+pub mod geometry;
+pub mod graph;
+pub mod math;
 pub mod messages;
+pub mod plan;
+pub mod safety;
+pub mod scenario;
 pub mod transport;

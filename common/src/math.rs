@@ -41,10 +41,19 @@ pub fn singular_values_ascending(m: &Mat3) -> [Real; 3] {
     v
 }
 
-/// Complex eigenvalues of a real square matrix (re, im).
-pub fn eigenvalues_complex(m: &DMat) -> Vec<(Real, Real)> {
-    m.complex_eigenvalues()
-        .iter()
-        .map(|c| (c.re, c.im))
-        .collect()
+/// Complex eigenvalues of a real square matrix (re, im), or `None` when the Schur iteration does
+/// not converge within a bounded number of sweeps (never loops forever).
+pub fn eigenvalues_complex(m: &DMat) -> Option<Vec<(Real, Real)>> {
+    let n = m.nrows();
+    if n == 0 {
+        return Some(Vec::new());
+    }
+    let schur = nalgebra::Schur::try_new(m.clone(), 1e-13, 200 * n.max(10))?;
+    Some(
+        schur
+            .complex_eigenvalues()
+            .iter()
+            .map(|c| (c.re, c.im))
+            .collect(),
+    )
 }

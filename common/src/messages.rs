@@ -1,1 +1,328 @@
-//! placeholder: filled by its owner
+//! Wire types exchanged over shared memory, named by direction of travel:
+//! [`StateMsg`] goes from an agent to its out-neighbours and the orchestrator, [`ClockMsg`] from
+//! the orchestrator to every agent.
+//!
+//! Both are `#[repr(C)]` with plain fields only (`u32`, `u64`, `f64`, arrays), so iceoryx2 can
+//! place them in shared memory as they are (`ZeroCopySend`). Codes travel as `u32` with the
+//! documented constants below; [`AgentStatus`] and [`ClockCommand`] are the Rust-side view of
+//! them. Decoding never fails: a code this build does not know is kept as `Unknown(code)` so a
+//! newer peer cannot crash an older one.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// `StateMsg::status`: the agent is healthy.
+pub const STATUS_OK: u32 = 0;
+/// `StateMsg::status`: the agent has detected a fault and is no longer following the plan.
+pub const STATUS_FAULT: u32 = 1;
+
+/// `StateMsg::fault_code`: no fault (always the value while `status == STATUS_OK`).
+pub const FAULT_NONE: u32 = 0;
+/// `StateMsg::fault_code`: the agent's own state or command became non-finite.
+pub const FAULT_NON_FINITE: u32 = 1;
+/// `StateMsg::fault_code`: a neighbour (`fault_peer`) sent nothing before the deadline.
+pub const FAULT_NEIGHBOR_SILENT: u32 = 2;
+/// `StateMsg::fault_code`: a neighbour (`fault_peer`) reported a fault itself.
+pub const FAULT_NEIGHBOR_FAULT: u32 = 3;
+/// `StateMsg::fault_code`: samples of a neighbour (`fault_peer`) were lost (a tick gap).
+pub const FAULT_TICK_GAP: u32 = 4;
+/// `StateMsg::fault_code`: a message carried another scenario's hash (`fault_peer` is the sender,
+/// or [`NO_PEER`] when it was the clock).
+pub const FAULT_SCENARIO_MISMATCH: u32 = 5;
+/// `StateMsg::fault_code`: a safety check (separation, bounds) failed.
+pub const FAULT_SAFETY: u32 = 6;
+/// `StateMsg::fault_code`: the orchestrator's node is gone.
+pub const FAULT_ORCHESTRATOR_LOST: u32 = 7;
+
+/// `StateMsg::fault_peer` when the fault involves no other agent.
+pub const NO_PEER: u32 = u32::MAX;
+
+/// `ClockMsg::command`: agents may compute ticks up to and including `grant_tick`.
+pub const COMMAND_RUN: u32 = 0;
+/// `ClockMsg::command`: agents stop; `reason` says why.
+pub const COMMAND_STOP: u32 = 1;
+
+/// `ClockMsg::reason`: no reason (always the value with `COMMAND_RUN`).
+pub const REASON_NONE: u32 = 0;
+/// `ClockMsg::reason`: the scenario reached its last tick.
+pub const REASON_FINISHED: u32 = 1;
+/// `ClockMsg::reason`: an agent reported a fault.
+pub const REASON_AGENT_FAULT: u32 = 2;
+/// `ClockMsg::reason`: an agent stopped answering before the deadline.
+pub const REASON_AGENT_SILENT: u32 = 3;
+/// `ClockMsg::reason`: the operator interrupted the run (signal).
+pub const REASON_INTERRUPTED: u32 = 4;
+
+/// One agent's full state at one tick, published once per tick.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct StateMsg {
+    /// The tick this state belongs to (simulation time is `tick * dt`). Consumers detect lost
+    /// samples through gaps in this number.
+    pub tick: u64,
+    /// Hash of the scenario the sender runs; a mismatch means two different runs got mixed.
+    pub scenario_hash: u64,
+    /// The sender's agent id (equal to the `<id>` of the `state/<id>` service it arrives on).
+    pub id: u32,
+    /// [`STATUS_OK`] or [`STATUS_FAULT`].
+    pub status: u32,
+    /// One of the `FAULT_*` codes; [`FAULT_NONE`] while the status is ok.
+    pub fault_code: u32,
+    /// The agent the fault is about, or [`NO_PEER`].
+    pub fault_peer: u32,
+    /// The full quadcopter state; its layout belongs to the dynamics module, the transport never
+    /// looks inside.
+    pub state: [f64; 12],
+}
+
+/// The orchestrator's grant: how far agents may run, or that they must stop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+pub struct ClockMsg {
+    /// The last tick agents may compute (inclusive).
+    pub grant_tick: u64,
+    /// Hash of the scenario the orchestrator runs.
+    pub scenario_hash: u64,
+    /// [`COMMAND_RUN`] or [`COMMAND_STOP`].
+    pub command: u32,
+    /// One of the `REASON_*` codes; [`REASON_NONE`] with [`COMMAND_RUN`].
+    pub reason: u32,
+}
+
+/// Why an agent is faulty (the Rust view of `StateMsg::fault_code`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum FaultCode {
+    /// [`FAULT_NON_FINITE`]
+    NonFinite,
+    /// [`FAULT_NEIGHBOR_SILENT`]
+    NeighborSilent,
+    /// [`FAULT_NEIGHBOR_FAULT`]
+    NeighborFault,
+    /// [`FAULT_TICK_GAP`]
+    TickGap,
+    /// [`FAULT_SCENARIO_MISMATCH`]
+    ScenarioMismatch,
+    /// [`FAULT_SAFETY`]
+    Safety,
+    /// [`FAULT_ORCHESTRATOR_LOST`]
+    OrchestratorLost,
+    /// A code this build does not know (sent by a newer peer).
+    Unknown(u32),
+}
+
+impl FaultCode {
+    /// The wire value.
+    pub fn code(self) -> u32 {
+        match self {
+            FaultCode::NonFinite => FAULT_NON_FINITE,
+            FaultCode::NeighborSilent => FAULT_NEIGHBOR_SILENT,
+            FaultCode::NeighborFault => FAULT_NEIGHBOR_FAULT,
+            FaultCode::TickGap => FAULT_TICK_GAP,
+            FaultCode::ScenarioMismatch => FAULT_SCENARIO_MISMATCH,
+            FaultCode::Safety => FAULT_SAFETY,
+            FaultCode::OrchestratorLost => FAULT_ORCHESTRATOR_LOST,
+            FaultCode::Unknown(c) => c,
+        }
+    }
+
+    /// The Rust view of a wire value ([`FAULT_NONE`] has none: it is not a fault).
+    pub fn from_code(code: u32) -> Option<Self> {
+        Some(match code {
+            FAULT_NONE => return None,
+            FAULT_NON_FINITE => FaultCode::NonFinite,
+            FAULT_NEIGHBOR_SILENT => FaultCode::NeighborSilent,
+            FAULT_NEIGHBOR_FAULT => FaultCode::NeighborFault,
+            FAULT_TICK_GAP => FaultCode::TickGap,
+            FAULT_SCENARIO_MISMATCH => FaultCode::ScenarioMismatch,
+            FAULT_SAFETY => FaultCode::Safety,
+            FAULT_ORCHESTRATOR_LOST => FaultCode::OrchestratorLost,
+            other => FaultCode::Unknown(other),
+        })
+    }
+}
+
+/// The Rust view of `status`, `fault_code` and `fault_peer` together.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AgentStatus {
+    /// Healthy.
+    Ok,
+    /// Faulty, with the reason and the agent it is about (if any).
+    Fault {
+        /// What went wrong.
+        code: FaultCode,
+        /// The other agent involved, if any.
+        peer: Option<u32>,
+    },
+}
+
+impl StateMsg {
+    /// A healthy agent's state at `tick`.
+    pub fn ok(tick: u64, scenario_hash: u64, id: u32, state: [f64; 12]) -> Self {
+        Self {
+            tick,
+            scenario_hash,
+            id,
+            status: STATUS_OK,
+            fault_code: FAULT_NONE,
+            fault_peer: NO_PEER,
+            state,
+        }
+    }
+
+    /// The same message with `status` set (encodes [`AgentStatus`] into the three wire fields).
+    pub fn with_status(mut self, status: AgentStatus) -> Self {
+        match status {
+            AgentStatus::Ok => {
+                self.status = STATUS_OK;
+                self.fault_code = FAULT_NONE;
+                self.fault_peer = NO_PEER;
+            }
+            AgentStatus::Fault { code, peer } => {
+                self.status = STATUS_FAULT;
+                self.fault_code = code.code();
+                self.fault_peer = peer.unwrap_or(NO_PEER);
+            }
+        }
+        self
+    }
+
+    /// Decodes the status fields. Any status other than [`STATUS_OK`] counts as a fault, so a
+    /// corrupted or unknown status is never mistaken for health; a fault without a code decodes
+    /// as `Unknown(0)`.
+    pub fn status(&self) -> AgentStatus {
+        if self.status == STATUS_OK {
+            return AgentStatus::Ok;
+        }
+        AgentStatus::Fault {
+            code: FaultCode::from_code(self.fault_code).unwrap_or(FaultCode::Unknown(FAULT_NONE)),
+            peer: (self.fault_peer != NO_PEER).then_some(self.fault_peer),
+        }
+    }
+}
+
+/// Why the orchestrator stops a run (the Rust view of `ClockMsg::reason`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum StopReason {
+    /// [`REASON_FINISHED`]
+    Finished,
+    /// [`REASON_AGENT_FAULT`]
+    AgentFault,
+    /// [`REASON_AGENT_SILENT`]
+    AgentSilent,
+    /// [`REASON_INTERRUPTED`]
+    Interrupted,
+    /// A reason this build does not know (sent by a newer orchestrator).
+    Unknown(u32),
+}
+
+impl StopReason {
+    /// The wire value.
+    pub fn code(self) -> u32 {
+        match self {
+            StopReason::Finished => REASON_FINISHED,
+            StopReason::AgentFault => REASON_AGENT_FAULT,
+            StopReason::AgentSilent => REASON_AGENT_SILENT,
+            StopReason::Interrupted => REASON_INTERRUPTED,
+            StopReason::Unknown(c) => c,
+        }
+    }
+
+    /// The Rust view of a wire value.
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            REASON_FINISHED => StopReason::Finished,
+            REASON_AGENT_FAULT => StopReason::AgentFault,
+            REASON_AGENT_SILENT => StopReason::AgentSilent,
+            REASON_INTERRUPTED => StopReason::Interrupted,
+            other => StopReason::Unknown(other),
+        }
+    }
+}
+
+/// The Rust view of `ClockMsg::command` and `reason` together.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClockCommand {
+    /// Run up to and including the grant tick.
+    Run,
+    /// Stop now.
+    Stop(StopReason),
+}
+
+impl ClockMsg {
+    /// A grant to run up to and including `grant_tick`.
+    pub fn run(grant_tick: u64, scenario_hash: u64) -> Self {
+        Self {
+            grant_tick,
+            scenario_hash,
+            command: COMMAND_RUN,
+            reason: REASON_NONE,
+        }
+    }
+
+    /// An order to stop, sent with the last granted tick.
+    pub fn stop(grant_tick: u64, scenario_hash: u64, reason: StopReason) -> Self {
+        Self {
+            grant_tick,
+            scenario_hash,
+            command: COMMAND_STOP,
+            reason: reason.code(),
+        }
+    }
+
+    /// Decodes `command` and `reason`. Any command other than [`COMMAND_RUN`] stops: an agent
+    /// that cannot understand the orchestrator must not keep flying the plan.
+    pub fn command(&self) -> ClockCommand {
+        if self.command == COMMAND_RUN {
+            ClockCommand::Run
+        } else {
+            ClockCommand::Stop(StopReason::from_code(self.reason))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wire_sizes_are_stable() {
+        // Every process of a team must agree on the layout; pin it.
+        assert_eq!(core::mem::size_of::<StateMsg>(), 8 + 8 + 4 * 4 + 12 * 8);
+        assert_eq!(core::mem::size_of::<ClockMsg>(), 8 + 8 + 4 + 4);
+    }
+
+    #[test]
+    fn status_round_trips() {
+        let m = StateMsg::ok(3, 9, 7, [0.0; 12]);
+        assert_eq!(m.status(), AgentStatus::Ok);
+        let fault = AgentStatus::Fault {
+            code: FaultCode::NeighborSilent,
+            peer: Some(4),
+        };
+        let f = m.with_status(fault);
+        assert_eq!((f.status, f.fault_code, f.fault_peer), (1, 2, 4));
+        assert_eq!(f.status(), fault);
+        assert_eq!(f.with_status(AgentStatus::Ok), m);
+        let unknown = StateMsg {
+            status: 9,
+            fault_code: 77,
+            ..m
+        };
+        assert_eq!(
+            unknown.status(),
+            AgentStatus::Fault {
+                code: FaultCode::Unknown(77),
+                peer: None
+            }
+        );
+    }
+
+    #[test]
+    fn clock_commands_round_trip() {
+        assert_eq!(ClockMsg::run(5, 1).command(), ClockCommand::Run);
+        let s = ClockMsg::stop(5, 1, StopReason::AgentFault);
+        assert_eq!((s.command, s.reason), (COMMAND_STOP, REASON_AGENT_FAULT));
+        assert_eq!(s.command(), ClockCommand::Stop(StopReason::AgentFault));
+        let odd = ClockMsg { command: 42, ..s };
+        assert_eq!(odd.command(), ClockCommand::Stop(StopReason::AgentFault));
+    }
+}

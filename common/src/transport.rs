@@ -1,1 +1,567 @@
-//! placeholder: filled by its owner
+//! The only module that names iceoryx2: shared-memory ports of one quadcopter team.
+//!
+//! One team = one orchestrator process + one process per agent, each with one iceoryx2 node.
+//! The orchestrator creates every service of the team, sized to the team's layout; members only
+//! open them (iceoryx2 refuses an `open` that asks for larger limits than the creator set, and
+//! exact limits let the transport itself refuse ports that the layout does not allow).
+//!
+//! | service | pattern | ports |
+//! |---|---|---|
+//! | `cdm/<team>/state/<id>` | publish-subscribe [`StateMsg`](crate::messages::StateMsg) | publisher: agent `id` (max 1); subscribers: its out-neighbours + orchestrator |
+//! | `cdm/<team>/clock` | publish-subscribe [`ClockMsg`](crate::messages::ClockMsg) | publisher: orchestrator; subscribers: every agent |
+//! | `cdm/<team>/wake/<id>` | event | listener: agent `id`; notifiers: its in-neighbours + orchestrator |
+//! | `cdm/<team>/wake/orch` | event | listener: orchestrator; notifiers: every agent |
+//!
+//! Wake-up rule: publish first, notify after `send` returned, so a woken reader always finds the
+//! sample. Events merge repeated notifications, so a reader must drain everything it can after
+//! each wake-up. Waiting is a blocking `Listener::timed_wait` (not a WaitSet: iceoryx2 0.10's
+//! WaitSet can lose a wake-up, see `/work/shared/notes/iceoryx2.md`).
+//!
+//! Overflow: state and clock subscribers use iceoryx2's *safe overflow*: when a subscriber's
+//! buffer (`window + 2` states, 2 grants) is full, the publisher replaces the oldest sample. A
+//! publisher therefore never blocks on a slow or dead reader, and a reader that fell behind sees a
+//! gap in `StateMsg::tick` (every state carries its tick) instead of a stall of the whole team.
+//!
+//! Ports use `ipc::Service` (single-threaded, no locks), so [`OrchestratorPorts`] and
+//! [`MemberPorts`] are not `Send`: open them on the thread that uses them.
+//!
+//! Crashed processes leave their files in `/dev/shm` and `/tmp/iceoryx2`; the next
+//! [`OrchestratorPorts::create`] of the same team (or [`remove_dead_nodes`]) removes them.
+
+mod member;
+mod orchestrator;
+
+pub use member::MemberPorts;
+pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+use std::sync::{Once, OnceLock};
+use std::time::Duration;
+
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+
+/// Longest accepted team name; keeps every service and node name well inside iceoryx2's limits.
+pub const TEAM_NAME_MAX_LEN: usize = 48;
+
+/// Node slots each service keeps beyond the team's own processes: room for a diagnostic tool and
+/// for a duplicate agent process to get far enough to be told precisely why it is refused.
+const SPARE_NODES: usize = 2;
+
+/// Grants a subscriber of the clock keeps; agents only act on the newest one.
+const CLOCK_BUFFER: usize = 2;
+
+/// How long a stale-resource cleanup waits for another process that is cleaning the same node.
+const CLEANUP_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Everything that can go wrong in the transport. Messages name the team, the process (`who`)
+/// and the service involved.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    /// The team name is empty, too long or has characters outside `[A-Za-z0-9_-]`.
+    #[error("invalid team name {name:?}: {reason}")]
+    InvalidTeamName {
+        /// The rejected name.
+        name: String,
+        /// Which rule it breaks.
+        reason: &'static str,
+    },
+    /// The layout is inconsistent (duplicate ids, unknown neighbour, self-loop, window 0).
+    #[error("invalid team layout: {reason}")]
+    InvalidLayout {
+        /// What is wrong.
+        reason: String,
+    },
+    /// A live orchestrator (or live members of a previous run) already use the team name.
+    #[error("team {team} is already running (live nodes: {live})")]
+    TeamAlreadyRunning {
+        /// The team.
+        team: TeamName,
+        /// Names of the live nodes found, or the service that already exists.
+        live: String,
+    },
+    /// No orchestrator has created the team's services.
+    #[error("team {team} does not exist ({who} found no service {service}); start its orchestrator first")]
+    TeamNotFound {
+        /// The team.
+        team: TeamName,
+        /// The process that looked.
+        who: Role,
+        /// The service that is missing.
+        service: String,
+    },
+    /// The team exists but has no state service for this agent id.
+    #[error("agent {id} is not part of team {team} (no service {service})")]
+    NotInTeam {
+        /// The team.
+        team: TeamName,
+        /// The unknown agent id.
+        id: u32,
+        /// The service that is missing.
+        service: String,
+    },
+    /// Another process already holds this agent's exclusive port.
+    #[error("agent {id} of team {team} is already running ({service} refuses a second {port})")]
+    AgentAlreadyRunning {
+        /// The team.
+        team: TeamName,
+        /// The agent id.
+        id: u32,
+        /// The service whose exclusive port is taken.
+        service: String,
+        /// The kind of port that was refused.
+        port: &'static str,
+    },
+    /// The team's layout has no edge that allows this port (the service has no free slot for it).
+    #[error(
+        "agent {id} of team {team} is not a neighbour of agent {peer} in the team's layout \
+         ({service} has no free {port} slot)"
+    )]
+    NotANeighbor {
+        /// The team.
+        team: TeamName,
+        /// The agent opening the port.
+        id: u32,
+        /// The agent owning the service.
+        peer: u32,
+        /// The service.
+        service: String,
+        /// The kind of port that was refused.
+        port: &'static str,
+    },
+    /// A member tried to publish a state that carries another agent's id.
+    #[error("agent {id} of team {team} tried to publish a state of agent {msg_id} on {service}")]
+    ForeignState {
+        /// The team.
+        team: TeamName,
+        /// The publishing agent.
+        id: u32,
+        /// The id found in the message.
+        msg_id: u32,
+        /// The agent's state service.
+        service: String,
+    },
+    /// An iceoryx2 node could not be created.
+    #[error("team {team}, {who}: cannot create node {node}: {detail}")]
+    Node {
+        /// The team.
+        team: TeamName,
+        /// The process.
+        who: Role,
+        /// The node name.
+        node: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// iceoryx2's node registry could not be read.
+    #[error("team {team}: cannot list iceoryx2 nodes: {detail}")]
+    NodeList {
+        /// The team.
+        team: TeamName,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// Any other iceoryx2 failure on a service or port.
+    #[error("team {team}, {who}: {op} on {service} failed: {detail}")]
+    Service {
+        /// The team.
+        team: TeamName,
+        /// The process.
+        who: Role,
+        /// The service.
+        service: String,
+        /// What was attempted ("open service", "create publisher", "send", ...).
+        op: &'static str,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// A blocking wait was interrupted by a signal; the caller decides whether to stop.
+    #[error("team {team}, {who}: wait on {service} was interrupted by a signal")]
+    Interrupted {
+        /// The team.
+        team: TeamName,
+        /// The process.
+        who: Role,
+        /// The event service waited on.
+        service: String,
+    },
+    /// `setrlimit(RLIMIT_NOFILE)` failed.
+    #[error("cannot raise the open-file limit: {0}")]
+    FdLimit(#[source] std::io::Error),
+}
+
+/// Which process of a team is talking (for error messages and node names).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Role {
+    /// The orchestrator.
+    Orchestrator,
+    /// The agent with this id.
+    Agent(u32),
+}
+
+impl fmt::Display for Role {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Role::Orchestrator => f.write_str("orchestrator"),
+            Role::Agent(id) => write!(f, "agent {id}"),
+        }
+    }
+}
+
+/// A validated team name (`[A-Za-z0-9_-]`, 1 to [`TEAM_NAME_MAX_LEN`] characters). It prefixes
+/// every service and node name of the team, so two teams never see each other.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TeamName(String);
+
+impl TeamName {
+    /// Validates `name`.
+    pub fn new(name: &str) -> Result<Self, TransportError> {
+        let invalid = |reason| TransportError::InvalidTeamName {
+            name: name.to_owned(),
+            reason,
+        };
+        if name.is_empty() {
+            return Err(invalid("it is empty"));
+        }
+        if name.len() > TEAM_NAME_MAX_LEN {
+            return Err(invalid("it is longer than 48 characters"));
+        }
+        if !name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+        {
+            return Err(invalid("only A-Z, a-z, 0-9, '_' and '-' are allowed"));
+        }
+        Ok(Self(name.to_owned()))
+    }
+
+    /// The name itself.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// `cdm/<team>/state/<id>`: agent `id`'s states.
+    pub fn state_service(&self, id: u32) -> String {
+        format!("cdm/{}/state/{id}", self.0)
+    }
+
+    /// `cdm/<team>/clock`: the orchestrator's grants.
+    pub fn clock_service(&self) -> String {
+        format!("cdm/{}/clock", self.0)
+    }
+
+    /// `cdm/<team>/wake/<id>`: wakes agent `id`.
+    pub fn wake_service(&self, id: u32) -> String {
+        format!("cdm/{}/wake/{id}", self.0)
+    }
+
+    /// `cdm/<team>/wake/orch`: wakes the orchestrator.
+    pub fn orchestrator_wake_service(&self) -> String {
+        format!("cdm/{}/wake/orch", self.0)
+    }
+
+    /// The node name of a process of this team: `cdm/<team>/agent/<id>` or
+    /// `cdm/<team>/orchestrator`.
+    pub fn node_name(&self, who: Role) -> String {
+        match who {
+            Role::Orchestrator => format!("cdm/{}/orchestrator", self.0),
+            Role::Agent(id) => format!("cdm/{}/agent/{id}", self.0),
+        }
+    }
+
+    /// True when `node_name` belongs to a process of this team.
+    pub fn owns_node(&self, node_name: &str) -> bool {
+        node_name
+            .strip_prefix("cdm/")
+            .and_then(|rest| rest.strip_prefix(self.0.as_str()))
+            .is_some_and(|rest| rest.starts_with('/'))
+    }
+}
+
+impl fmt::Display for TeamName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::str::FromStr for TeamName {
+    type Err = TransportError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::new(s)
+    }
+}
+
+/// Who talks to whom in a team, validated: the orchestrator sizes every service from it.
+/// `in_neighbors[i]` are the agents whose states agent `i` reads; out-neighbours are derived.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TeamLayout {
+    ids: Vec<u32>,
+    in_neighbors: BTreeMap<u32, Vec<u32>>,
+    out_neighbors: BTreeMap<u32, Vec<u32>>,
+    window: u32,
+}
+
+impl TeamLayout {
+    /// Checks that ids are unique and non-empty, every neighbour is a team member, nobody is its
+    /// own neighbour, and `window >= 1` (how many ticks an agent may run ahead of the slowest).
+    /// Ids missing from `in_neighbors` read nobody. Neighbour lists are sorted and deduplicated.
+    pub fn new(
+        ids: Vec<u32>,
+        in_neighbors: BTreeMap<u32, Vec<u32>>,
+        window: u32,
+    ) -> Result<Self, TransportError> {
+        let invalid = |reason: String| TransportError::InvalidLayout { reason };
+        let members: BTreeSet<u32> = ids.iter().copied().collect();
+        if members.is_empty() {
+            return Err(invalid("the team has no agents".into()));
+        }
+        if members.len() != ids.len() {
+            return Err(invalid(format!("duplicate agent ids in {ids:?}")));
+        }
+        if window == 0 {
+            return Err(invalid("window must be at least 1 tick".into()));
+        }
+        let mut ins = BTreeMap::new();
+        let mut outs: BTreeMap<u32, Vec<u32>> = members.iter().map(|&i| (i, vec![])).collect();
+        for &id in &members {
+            let mut list: Vec<u32> = in_neighbors.get(&id).cloned().unwrap_or_default();
+            list.sort_unstable();
+            list.dedup();
+            for &j in &list {
+                if j == id {
+                    return Err(invalid(format!("agent {id} lists itself as a neighbour")));
+                }
+                let Some(out) = outs.get_mut(&j) else {
+                    return Err(invalid(format!(
+                        "agent {id} reads agent {j}, which is not in the team"
+                    )));
+                };
+                out.push(id);
+            }
+            ins.insert(id, list);
+        }
+        if let Some(stray) = in_neighbors.keys().find(|k| !members.contains(k)) {
+            return Err(invalid(format!(
+                "neighbours are given for agent {stray}, which is not in the team"
+            )));
+        }
+        Ok(Self {
+            ids: members.into_iter().collect(),
+            in_neighbors: ins,
+            out_neighbors: outs,
+            window,
+        })
+    }
+
+    /// The agent ids, sorted.
+    pub fn ids(&self) -> &[u32] {
+        &self.ids
+    }
+
+    /// The agents whose states `id` reads (sorted; empty for an unknown id).
+    pub fn in_neighbors(&self, id: u32) -> &[u32] {
+        self.in_neighbors.get(&id).map_or(&[], Vec::as_slice)
+    }
+
+    /// The agents that read `id`'s states (sorted; empty for an unknown id).
+    pub fn out_neighbors(&self, id: u32) -> &[u32] {
+        self.out_neighbors.get(&id).map_or(&[], Vec::as_slice)
+    }
+
+    /// How many ticks an agent may run ahead of the slowest one.
+    pub fn window(&self) -> u32 {
+        self.window
+    }
+}
+
+/// Raises this process's soft `RLIMIT_NOFILE` to the hard limit and returns the new soft limit.
+/// The orchestrator holds a few descriptors per agent, so a large team passes 1024 quickly.
+pub fn raise_fd_limit() -> Result<u64, TransportError> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
+    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } != 0 {
+        return Err(TransportError::FdLimit(std::io::Error::last_os_error()));
+    }
+    if lim.rlim_cur < lim.rlim_max {
+        lim.rlim_cur = lim.rlim_max;
+        // SAFETY: `lim` is a valid rlimit; only the soft limit changed, within the hard limit.
+        if unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &lim) } != 0 {
+            return Err(TransportError::FdLimit(std::io::Error::last_os_error()));
+        }
+    }
+    #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
+    Ok(lim.rlim_cur as u64)
+}
+
+/// Removes the files of every dead (crashed or killed) process of `team` and returns how many
+/// nodes were cleaned. Safe to call while the team runs: live nodes are never touched.
+pub fn remove_dead_nodes(team: &TeamName) -> Result<usize, TransportError> {
+    init_logging();
+    let scan = scan_team(team, process_config(Role::Orchestrator))?;
+    Ok(remove_stale(team, scan.dead))
+}
+
+/// Routes iceoryx2's log through `tracing` (the crate is built with its `tracing` logger) and
+/// sets iceoryx2's own threshold to `IOX2_LOG_LEVEL` or, by default, warn: iceoryx2 reports
+/// expected refusals (a second publisher, a missing service) at debug level, which the errors of
+/// this module already describe.
+fn init_logging() {
+    static INIT: Once = Once::new();
+    INIT.call_once(|| set_log_level_from_env_or(LogLevel::Warn));
+}
+
+/// The iceoryx2 config of a process, built once per role. Members skip iceoryx2's implicit
+/// dead-node scans (on node creation and destruction, on service open): with hundreds of
+/// processes starting together they cost seconds, and the orchestrator does that work once.
+fn process_config(who: Role) -> &'static Config {
+    static ORCHESTRATOR: OnceLock<Config> = OnceLock::new();
+    static MEMBER: OnceLock<Config> = OnceLock::new();
+    match who {
+        Role::Orchestrator => ORCHESTRATOR.get_or_init(Config::default),
+        Role::Agent(_) => MEMBER.get_or_init(|| {
+            let mut cfg = Config::default();
+            cfg.global.node.cleanup_dead_nodes_on_creation = false;
+            cfg.global.node.cleanup_dead_nodes_on_destruction = false;
+            cfg.global.service.cleanup_dead_nodes_on_open = false;
+            cfg
+        }),
+    }
+}
+
+/// Creates the one node of a process.
+fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, TransportError> {
+    let name = team.node_name(who);
+    let err = |detail: String| TransportError::Node {
+        team: team.clone(),
+        who,
+        node: name.clone(),
+        detail,
+    };
+    let node_name = NodeName::new(&name).map_err(|e| err(format!("{e:?}")))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(process_config(who))
+        // Signals belong to the process's main; iceoryx2 must not swallow SIGINT/SIGTERM.
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| err(format!("{e:?}")))
+}
+
+/// The iceoryx2 name of a service.
+fn service_name(team: &TeamName, who: Role, service: &str) -> Result<ServiceName, TransportError> {
+    ServiceName::new(service).map_err(|e| TransportError::Service {
+        team: team.clone(),
+        who,
+        service: service.to_owned(),
+        op: "name service",
+        detail: format!("{e:?}"),
+    })
+}
+
+/// Builds a [`TransportError::Service`] (the common case of every port operation).
+fn service_error(
+    team: &TeamName,
+    who: Role,
+    service: &str,
+    op: &'static str,
+    detail: impl fmt::Debug,
+) -> TransportError {
+    TransportError::Service {
+        team: team.clone(),
+        who,
+        service: service.to_owned(),
+        op,
+        detail: format!("{detail:?}"),
+    }
+}
+
+/// Blocks on `listener` until a notification arrives or `timeout` passes; true when woken.
+fn wait_on(
+    listener: &iceoryx2::port::listener::Listener<ipc::Service>,
+    timeout: Duration,
+    team: &TeamName,
+    who: Role,
+    service: &str,
+) -> Result<bool, TransportError> {
+    use iceoryx2::port::listener::ListenerWaitError;
+    match listener.timed_wait(|_| {}, timeout) {
+        Ok(n) => Ok(n > 0),
+        Err(ListenerWaitError::InterruptSignal) => Err(TransportError::Interrupted {
+            team: team.clone(),
+            who,
+            service: service.to_owned(),
+        }),
+        Err(e) => Err(service_error(team, who, service, "wait", e)),
+    }
+}
+
+/// The team's nodes found in iceoryx2's registry.
+struct TeamScan {
+    /// Names of live nodes of the team.
+    alive: Vec<String>,
+    /// Dead nodes of the team, to be cleaned.
+    dead: Vec<iceoryx2::node::DeadNodeView<ipc::Service>>,
+}
+
+/// Lists the nodes of `team` (by node name; a node whose details are unreadable is skipped).
+fn scan_team(team: &TeamName, cfg: &Config) -> Result<TeamScan, TransportError> {
+    let mut scan = TeamScan {
+        alive: vec![],
+        dead: vec![],
+    };
+    let name_of = |v: &dyn NodeView| v.details().as_ref().map(|d| d.name().to_string());
+    Node::<ipc::Service>::list(cfg, |state| {
+        match state {
+            NodeState::Alive(v) => {
+                if let Some(n) = name_of(&v).filter(|n| team.owns_node(n)) {
+                    scan.alive.push(n);
+                }
+            }
+            NodeState::Dead(v) => {
+                if name_of(&v).is_some_and(|n| team.owns_node(&n)) {
+                    scan.dead.push(v);
+                }
+            }
+            NodeState::Inaccessible(_) | NodeState::Undefined(_) => {}
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| TransportError::NodeList {
+        team: team.clone(),
+        detail: format!("{e:?}"),
+    })?;
+    scan.alive.sort();
+    Ok(scan)
+}
+
+/// Removes the resources of dead nodes; returns how many this call cleaned. Failures are logged
+/// and skipped: a leftover shows up later as a precise service error.
+fn remove_stale(team: &TeamName, dead: Vec<iceoryx2::node::DeadNodeView<ipc::Service>>) -> usize {
+    use iceoryx2::node::NodeCleanupFailure;
+    let mut removed = 0;
+    for node in dead {
+        let name = node
+            .details()
+            .as_ref()
+            .map_or_else(String::new, |d| d.name().to_string());
+        let result = match node.clone().try_remove_stale_resources() {
+            // Someone else is cleaning it: wait for them, it is not ours to count.
+            Err(NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode) => node
+                .blocking_remove_stale_resources(CLEANUP_TIMEOUT)
+                .map(|()| false),
+            Err(NodeCleanupFailure::ResourcesAlreadyCleanedUp) => Ok(false),
+            other => other.map(|()| true),
+        };
+        match result {
+            Ok(true) => removed += 1,
+            Ok(false) => {}
+            Err(e) => tracing::warn!(team = %team, node = %name, error = ?e,
+                "cannot remove the resources of a dead node"),
+        }
+    }
+    removed
+}

@@ -1,0 +1,245 @@
+//! Scenario files (TOML) and the validated scenario the engine and processes fly.
+//!
+//! `ScenarioFile` is the file's shape (serde, `deny_unknown_fields`); `Scenario` is what remains
+//! after validation, projection onto the leaders' plane and graph synthesis. Writing
+//! `Scenario::file` back out gives the scenario actually flown (`scenario.toml`).
+
+mod builtin;
+mod validate;
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::formation::{Formation, FormationError, Role};
+use crate::graph::SynthesisError;
+use crate::math::Real;
+use crate::plan::TeamPlan;
+
+pub use builtin::{generated, paper40, MAX_AGENTS};
+
+/// Default tolerance for agents off the primary leaders' plane (ERRATA 10): within it an agent
+/// is projected onto the plane (and the tool says so); beyond it the scenario is refused.
+pub const DEFAULT_PLANE_TOLERANCE_M: Real = 1.0;
+/// Default RK4 substeps per tick.
+pub const DEFAULT_SUBSTEPS: u32 = 1;
+
+/// The file format. Optional keys have documented defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    pub name: String,
+    /// Travel time of the plan T_total (eq. 15), seconds.
+    pub t_total_s: Real,
+    /// Radius of the ball around each quadcopter (Sec. VI-A), metres.
+    pub eps_m: Real,
+    /// Rate of the shared clock and state exchange, Hz; dt = 1 / comm_hz.
+    pub comm_hz: Real,
+    /// k1..k4 (eq. 44).
+    pub gains: [Real; 4],
+    /// Fix lambda_CD,min (eq. 38); default: the plan's smallest lambda_1(U_D).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lambda_cd_min: Option<Real>,
+    /// Fix delta (eq. 36); lambda_CD,min then follows from eq. 38. Exclusive with lambda_cd_min.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delta_m: Option<Real>,
+    /// RK4 substeps per tick (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub substeps: Option<u32>,
+    /// Smallest weight a synthesised graph may use (default 0.05).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weight_floor: Option<Real>,
+    /// Largest distance off the leaders' plane that is projected rather than refused (default 1 m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane_tolerance_m: Option<Real>,
+    pub agents: Vec<AgentSpec>,
+}
+
+/// One agent in a file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentSpec {
+    pub id: u32,
+    pub role: Role,
+    pub position: [Real; 3],
+    /// Primary leaders only: the destination r_g (eq. 15).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal: Option<[Real; 3]>,
+    /// Followers only: exactly three in-neighbours; synthesised when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub in_neighbors: Option<Vec<u32>>,
+}
+
+/// A scenario that cannot be flown, with where it came from and what is wrong.
+#[derive(Debug, thiserror::Error)]
+#[error("{origin}: {kind}")]
+pub struct ScenarioError {
+    /// The file path, or `built-in NAME`.
+    pub origin: String,
+    pub kind: ScenarioErrorKind,
+}
+
+/// What is wrong with a scenario; every variant names the field or the agent(s).
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioErrorKind {
+    #[error("cannot read the file: {0}")]
+    Io(String),
+    #[error("malformed scenario: {0}")]
+    Parse(String),
+    #[error("field `{field}` must be a finite number, got {value}")]
+    NonFinite { field: String, value: Real },
+    #[error("field `{field}` {reason}")]
+    Invalid { field: String, reason: String },
+    #[error("agent id {id} appears more than once")]
+    DuplicateId { id: u32 },
+    #[error("there must be exactly 3 primary leaders, found {found:?}")]
+    PrimaryCount { found: Vec<u32> },
+    #[error("primary leader {id}: `goal` is missing")]
+    MissingGoal { id: u32 },
+    #[error("agent {id} ({role}): only primary leaders have a `goal`")]
+    GoalOnNonPrimary { id: u32, role: &'static str },
+    #[error("agent {id} ({role}): only followers have `in_neighbors`")]
+    NeighborsOnLeader { id: u32, role: &'static str },
+    #[error("primary leaders {ids:?} are (nearly) collinear {when} (sine {sine:.2e}; eq. 7 needs a triangle)")]
+    Collinear {
+        ids: [u32; 3],
+        when: String,
+        sine: Real,
+    },
+    #[error("agent {id}: {distance_m:.3} m off the primary leaders' plane (tolerance {tolerance_m} m; a 2-D continuum needs every agent on it, ERRATA 10)")]
+    OffPlane {
+        id: u32,
+        distance_m: Real,
+        tolerance_m: Real,
+    },
+    #[error(transparent)]
+    Formation(#[from] FormationError),
+    #[error(transparent)]
+    Synthesis(#[from] SynthesisError),
+    #[error("gains {gains:?} are unstable for this graph: a root of eq. 26 has real part {worst_real:.4} >= 0")]
+    UnstableGains { gains: [Real; 4], worst_real: Real },
+}
+
+/// How much a loader checks. Members of a running team load a scenario the orchestrator already
+/// validated in full (they compare its hash), so they skip the O(N^3) eigenvalue checks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Checks {
+    /// Everything, including the stability of the gains over spec(W) (eq. 26).
+    Full,
+    /// Everything but the eigenvalue computations.
+    Member,
+}
+
+/// A validated scenario, ready to fly.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    /// Where it came from (path or `built-in NAME`).
+    pub origin: String,
+    /// The scenario as flown: positions projected, in-neighbours filled in.
+    pub file: ScenarioFile,
+    pub formation: Formation,
+    pub plan: TeamPlan,
+    /// Things the loader changed and the user should know (projections).
+    pub notes: Vec<String>,
+    /// Stability margin of the gains (eq. 26), when computed (`Checks::Full`).
+    pub gains_margin: Option<Real>,
+}
+
+impl Scenario {
+    /// Read and validate a scenario file.
+    pub fn load(path: &Path, checks: Checks) -> Result<Self, ScenarioError> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
+            origin: origin.clone(),
+            kind: ScenarioErrorKind::Io(e.to_string()),
+        })?;
+        Self::parse(&text, &origin, checks)
+    }
+
+    /// Validate scenario text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str, checks: Checks) -> Result<Self, ScenarioError> {
+        let file: ScenarioFile = toml::from_str(text).map_err(|e| ScenarioError {
+            origin: origin.to_string(),
+            kind: ScenarioErrorKind::Parse(e.to_string()),
+        })?;
+        Self::from_file(file, origin, checks)
+    }
+
+    /// Validate an in-memory scenario.
+    pub fn from_file(
+        file: ScenarioFile,
+        origin: &str,
+        checks: Checks,
+    ) -> Result<Self, ScenarioError> {
+        let mut s = validate::validate(file, checks).map_err(|kind| ScenarioError {
+            origin: origin.to_string(),
+            kind,
+        })?;
+        s.origin = origin.to_string();
+        Ok(s)
+    }
+
+    /// A built-in scenario by name (`paper40`).
+    pub fn builtin(name: &str) -> Result<Self, ScenarioError> {
+        match name {
+            "paper40" => Self::from_file(paper40(), "built-in paper40", Checks::Full),
+            other => Err(ScenarioError {
+                origin: format!("built-in {other}"),
+                kind: ScenarioErrorKind::Invalid {
+                    field: "scenario".into(),
+                    reason: "is not a built-in scenario (known: paper40)".into(),
+                },
+            }),
+        }
+    }
+
+    /// A generated team of `n` agents (see `builtin::generated`).
+    pub fn generated(n: usize) -> Result<Self, ScenarioError> {
+        let origin = format!("generated --n {n}");
+        let file = generated(n).map_err(|reason| ScenarioError {
+            origin: origin.clone(),
+            kind: ScenarioErrorKind::Invalid {
+                field: "--n".into(),
+                reason,
+            },
+        })?;
+        Self::from_file(file, &origin, Checks::Full)
+    }
+
+    /// The scenario as TOML (what `scenario.toml` and `scenario export` write).
+    pub fn to_toml(&self) -> String {
+        toml::to_string(&self.file).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
+    }
+
+    /// Content hash of the scenario as flown (canonical TOML, SHA-256, first 8 bytes): two
+    /// processes fly the same team only if their hashes agree.
+    pub fn content_hash(&self) -> u64 {
+        let digest = Sha256::digest(self.to_toml().as_bytes());
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&digest[..8]);
+        u64::from_le_bytes(b)
+    }
+
+    /// dt = 1 / comm_hz.
+    pub fn dt_s(&self) -> Real {
+        1.0 / self.file.comm_hz
+    }
+
+    /// The last tick of the plan: ceil(T_total * comm_hz). Ticks run 0..=last_tick.
+    pub fn last_tick(&self) -> u64 {
+        (self.file.t_total_s * self.file.comm_hz - 1e-9)
+            .ceil()
+            .max(1.0) as u64
+    }
+
+    /// RK4 substeps per tick.
+    pub fn substeps(&self) -> u32 {
+        self.file.substeps.unwrap_or(DEFAULT_SUBSTEPS)
+    }
+
+    /// The role of an agent id, if present.
+    pub fn role_of(&self, id: u32) -> Option<Role> {
+        self.formation.member(id).map(|m| m.role)
+    }
+}

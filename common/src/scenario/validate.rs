@@ -1,0 +1,296 @@
+//! Validation of a scenario file, in the order a user would want to hear about problems.
+
+use std::collections::BTreeSet;
+
+use super::{Checks, Scenario, ScenarioErrorKind as E, ScenarioFile, DEFAULT_PLANE_TOLERANCE_M};
+use crate::formation::{Formation, MemberInput, Role};
+use crate::frame::{leader_sine, Frame, MIN_LEADER_SINE};
+use crate::gains::stability_margin;
+use crate::graph::{synthesize, DEFAULT_WEIGHT_FLOOR};
+use crate::math::{vec3, Real, Vec3};
+use crate::plan::TeamPlan;
+
+fn finite(field: impl Into<String>, value: Real) -> Result<Real, E> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(E::NonFinite {
+            field: field.into(),
+            value,
+        })
+    }
+}
+
+fn positive(field: &str, value: Real) -> Result<Real, E> {
+    finite(field, value)?;
+    if value > 0.0 {
+        Ok(value)
+    } else {
+        Err(E::Invalid {
+            field: field.into(),
+            reason: format!("must be > 0, got {value}"),
+        })
+    }
+}
+
+fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
+    positive("t_total_s", f.t_total_s)?;
+    positive("comm_hz", f.comm_hz)?;
+    finite("eps_m", f.eps_m)?;
+    if f.eps_m < 0.0 {
+        return Err(E::Invalid {
+            field: "eps_m".into(),
+            reason: format!("must be >= 0, got {}", f.eps_m),
+        });
+    }
+    for (k, g) in f.gains.iter().enumerate() {
+        positive(&format!("gains[{k}] (k{})", k + 1), *g)?;
+    }
+    if f.name.trim().is_empty() {
+        return Err(E::Invalid {
+            field: "name".into(),
+            reason: "must not be empty".into(),
+        });
+    }
+    if f.lambda_cd_min.is_some() && f.delta_m.is_some() {
+        return Err(E::Invalid {
+            field: "lambda_cd_min".into(),
+            reason: "and `delta_m` are exclusive (each fixes the other through eq. 38)".into(),
+        });
+    }
+    if let Some(l) = f.lambda_cd_min {
+        finite("lambda_cd_min", l)?;
+        if !(l > 0.0 && l <= 1.0) {
+            return Err(E::Invalid {
+                field: "lambda_cd_min".into(),
+                reason: format!("must be in (0, 1], got {l}"),
+            });
+        }
+    }
+    if let Some(d) = f.delta_m {
+        positive("delta_m", d)?;
+    }
+    if let Some(s) = f.substeps {
+        if !(1..=1000).contains(&s) {
+            return Err(E::Invalid {
+                field: "substeps".into(),
+                reason: format!("must be in 1..=1000, got {s}"),
+            });
+        }
+    }
+    if let Some(w) = f.weight_floor {
+        finite("weight_floor", w)?;
+        if !(w > 0.0 && w < 1.0 / 3.0) {
+            return Err(E::Invalid {
+                field: "weight_floor".into(),
+                reason: format!("must be in (0, 1/3), got {w}"),
+            });
+        }
+    }
+    if let Some(t) = f.plane_tolerance_m {
+        finite("plane_tolerance_m", t)?;
+        if t < 0.0 {
+            return Err(E::Invalid {
+                field: "plane_tolerance_m".into(),
+                reason: format!("must be >= 0, got {t}"),
+            });
+        }
+    }
+    if f.comm_hz * f.t_total_s > 1e8 {
+        return Err(E::Invalid {
+            field: "t_total_s".into(),
+            reason: format!(
+                "times comm_hz gives {} ticks; at most 1e8 are supported",
+                f.comm_hz * f.t_total_s
+            ),
+        });
+    }
+    Ok(())
+}
+
+pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenario, E> {
+    check_numbers(&file)?;
+    if file.agents.len() < 4 {
+        return Err(E::Invalid {
+            field: "agents".into(),
+            reason: format!(
+                "needs at least 4 agents (3 primary leaders and a follower), got {}",
+                file.agents.len()
+            ),
+        });
+    }
+    if file.agents.len() > super::MAX_AGENTS {
+        return Err(E::Invalid {
+            field: "agents".into(),
+            reason: format!(
+                "has {} agents; at most {} are supported",
+                file.agents.len(),
+                super::MAX_AGENTS
+            ),
+        });
+    }
+    let mut ids = BTreeSet::new();
+    for a in &file.agents {
+        if !ids.insert(a.id) {
+            return Err(E::DuplicateId { id: a.id });
+        }
+        for (c, v) in a.position.iter().enumerate() {
+            finite(format!("agents[id={}].position[{c}]", a.id), *v)?;
+        }
+        if let Some(g) = a.goal {
+            for (c, v) in g.iter().enumerate() {
+                finite(format!("agents[id={}].goal[{c}]", a.id), *v)?;
+            }
+        }
+    }
+    let primaries: Vec<u32> = file
+        .agents
+        .iter()
+        .filter(|a| a.role == Role::Primary)
+        .map(|a| a.id)
+        .collect();
+    if primaries.len() != 3 {
+        return Err(E::PrimaryCount { found: primaries });
+    }
+    for a in &file.agents {
+        match (a.role, &a.goal, &a.in_neighbors) {
+            (Role::Primary, None, _) => return Err(E::MissingGoal { id: a.id }),
+            (Role::Secondary | Role::Follower, Some(_), _) => {
+                return Err(E::GoalOnNonPrimary {
+                    id: a.id,
+                    role: a.role.as_str(),
+                })
+            }
+            (Role::Primary | Role::Secondary, _, Some(_)) => {
+                return Err(E::NeighborsOnLeader {
+                    id: a.id,
+                    role: a.role.as_str(),
+                })
+            }
+            _ => {}
+        }
+    }
+    let prim: Vec<&super::AgentSpec> = file
+        .agents
+        .iter()
+        .filter(|a| a.role == Role::Primary)
+        .collect();
+    let pid = [prim[0].id, prim[1].id, prim[2].id];
+    let start = [
+        vec3(prim[0].position),
+        vec3(prim[1].position),
+        vec3(prim[2].position),
+    ];
+    let goal: [Vec3; 3] = std::array::from_fn(|k| vec3(prim[k].goal.unwrap_or_default()));
+    let frame = Frame::new(&start[0], &start[1], &start[2]).map_err(|e| E::Collinear {
+        ids: pid,
+        when: "at t0".into(),
+        sine: e.sine,
+    })?;
+    let sine_goal = leader_sine(&goal[0], &goal[1], &goal[2]);
+    if sine_goal.is_nan() || sine_goal < MIN_LEADER_SINE {
+        return Err(E::Collinear {
+            ids: pid,
+            when: "at their goals".into(),
+            sine: sine_goal,
+        });
+    }
+    let plan = TeamPlan::new(file.t_total_s, start, goal).map_err(|e| E::Collinear {
+        ids: pid,
+        when: "at t0".into(),
+        sine: e.sine,
+    })?;
+    // Collinear during the plan: scan the path parameter.
+    for k in 0..=1000 {
+        let s = k as Real / 1000.0;
+        let r = plan.primaries_at_s(s);
+        let sine = leader_sine(&r[0], &r[1], &r[2]);
+        if sine.is_nan() || sine < MIN_LEADER_SINE {
+            return Err(E::Collinear {
+                ids: pid,
+                when: format!("at t = {:.3} s", plan.quintic.time_of(s)),
+                sine,
+            });
+        }
+    }
+
+    // Project onto the leaders' plane (ERRATA 10).
+    let tol = file.plane_tolerance_m.unwrap_or(DEFAULT_PLANE_TOLERANCE_M);
+    let mut notes = Vec::new();
+    for a in file.agents.iter_mut() {
+        let p = vec3(a.position);
+        let (g, b, off) = frame.coords(&p);
+        if off.abs() > tol {
+            return Err(E::OffPlane {
+                id: a.id,
+                distance_m: off.abs(),
+                tolerance_m: tol,
+            });
+        }
+        // Below 1e-9 m the point is on the plane up to rounding: leave its bits alone so that a
+        // flown scenario re-validates to itself.
+        if off.abs() > 1e-9 && a.role != Role::Primary {
+            let q = frame.point(g, b);
+            notes.push(format!(
+                "agent {}: projected {:.3} m onto the primary leaders' plane (tolerance {tol} m)",
+                a.id,
+                off.abs()
+            ));
+            a.position = [q.x, q.y, q.z];
+        }
+    }
+
+    let mut inputs = Vec::with_capacity(file.agents.len());
+    for a in &file.agents {
+        let in_neighbors = match &a.in_neighbors {
+            None => None,
+            Some(v) if v.len() == 3 => Some([v[0], v[1], v[2]]),
+            Some(v) => {
+                return Err(E::Formation(
+                    crate::formation::FormationError::NotThreeNeighbors {
+                        id: a.id,
+                        given: v.clone(),
+                    },
+                ))
+            }
+        };
+        inputs.push(MemberInput {
+            id: a.id,
+            role: a.role,
+            position: vec3(a.position),
+            in_neighbors,
+        });
+    }
+    let mut formation = Formation::new(frame, &inputs)?;
+    synthesize(
+        &mut formation,
+        file.weight_floor.unwrap_or(DEFAULT_WEIGHT_FLOOR),
+    )?;
+    formation.check_links()?;
+    for a in file.agents.iter_mut() {
+        if let Some(link) = formation.member(a.id).and_then(|m| m.link) {
+            a.in_neighbors = Some(link.in_neighbors.to_vec());
+        }
+    }
+    let gains_margin = match checks {
+        Checks::Member => None,
+        Checks::Full => {
+            let margin = stability_margin(&file.gains, &formation.l_block());
+            if margin.is_nan() || margin <= 0.0 {
+                return Err(E::UnstableGains {
+                    gains: file.gains,
+                    worst_real: -margin,
+                });
+            }
+            Some(margin)
+        }
+    };
+    Ok(Scenario {
+        origin: String::new(),
+        file,
+        formation,
+        plan,
+        notes,
+        gains_margin,
+    })
+}

@@ -1,0 +1,378 @@
+//! A team member's side (one agent process): opens the services the orchestrator created.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use iceoryx2::identifiers::UniqueNodeId;
+use iceoryx2::port::listener::{Listener, ListenerCreateError};
+use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
+use iceoryx2::service::port_factory::event::PortFactory as EventService;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubService;
+
+use super::{
+    create_node, init_logging, service_error, service_name, wait_on, Role, TeamName,
+    TransportError, CLOCK_BUFFER,
+};
+use crate::messages::{ClockMsg, StateMsg};
+
+/// A neighbour's state service, read by this agent.
+struct NeighborReader {
+    _service: PubSubService<ipc::Service, StateMsg, ()>,
+    subscriber: Subscriber<ipc::Service, StateMsg, ()>,
+}
+
+/// A wake event this agent notifies.
+struct WakeWriter {
+    _service: EventService<ipc::Service>,
+    notifier: Notifier<ipc::Service>,
+}
+
+/// One agent's ports: the publisher of its `state/<id>`, subscribers on its in-neighbours' states
+/// and the clock, the listener of its `wake/<id>`, and notifiers on its out-neighbours' wake
+/// events and `wake/orch`. Fields drop in order: ports first, the node last.
+pub struct MemberPorts {
+    team: TeamName,
+    id: u32,
+    publisher: Publisher<ipc::Service, StateMsg, ()>,
+    _state: PubSubService<ipc::Service, StateMsg, ()>,
+    neighbors: BTreeMap<u32, NeighborReader>,
+    clock_subscriber: Subscriber<ipc::Service, ClockMsg, ()>,
+    _clock: PubSubService<ipc::Service, ClockMsg, ()>,
+    listener: Listener<ipc::Service>,
+    wake: EventService<ipc::Service>,
+    out_wakes: BTreeMap<u32, WakeWriter>,
+    wake_orch: WakeWriter,
+    /// The orchestrator's node, found through the clock's publisher when opening.
+    orchestrator: Option<UniqueNodeId>,
+    /// Held, never read: the node must outlive the ports created from it.
+    _node: Node<ipc::Service>,
+}
+
+impl MemberPorts {
+    /// Opens agent `id`'s ports in `team`. Fails with [`TransportError::TeamNotFound`] when no
+    /// orchestrator created the team, [`TransportError::NotInTeam`] when `id` (or an in-neighbour)
+    /// has no state service, [`TransportError::AgentAlreadyRunning`] when another process holds
+    /// agent `id`, and [`TransportError::NotANeighbor`] when the team's layout has no such edge.
+    pub fn open(
+        team: &TeamName,
+        id: u32,
+        in_neighbors: &[u32],
+        out_neighbors: &[u32],
+    ) -> Result<Self, TransportError> {
+        init_logging();
+        let who = Role::Agent(id);
+        let node = create_node(team, who)?;
+        let err =
+            |service: &str, op, e: &dyn std::fmt::Debug| service_error(team, who, service, op, e);
+
+        // The clock first: its absence means the whole team is missing.
+        let name = team.clock_service();
+        let clock = node
+            .service_builder(&service_name(team, who, &name)?)
+            .publish_subscribe::<ClockMsg>()
+            .open()
+            .map_err(|e| match e {
+                PublishSubscribeOpenError::DoesNotExist => TransportError::TeamNotFound {
+                    team: team.clone(),
+                    who,
+                    service: name.clone(),
+                },
+                e => err(&name, "open service", &e),
+            })?;
+
+        // Then the agent's identity: its exclusive publisher slot.
+        let name = team.state_service(id);
+        let state = open_state(&node, team, who, id)?;
+        let publisher = state
+            .publisher_builder()
+            .max_loaned_samples(1)
+            .create()
+            .map_err(|e| match e {
+                PublisherCreateError::ExceedsMaxSupportedPublishers => {
+                    already_running(team, id, &name, "publisher")
+                }
+                e => err(&name, "create publisher", &e),
+            })?;
+
+        let name = team.wake_service(id);
+        let wake = open_event(&node, team, who, &name)?;
+        let listener = wake.listener_builder().create().map_err(|e| match e {
+            ListenerCreateError::ExceedsMaxSupportedListeners => {
+                already_running(team, id, &name, "listener")
+            }
+            e => err(&name, "create listener", &e),
+        })?;
+
+        let mut neighbors = BTreeMap::new();
+        for &peer in in_neighbors {
+            let name = team.state_service(peer);
+            let service = open_state(&node, team, who, peer)?;
+            let subscriber = service.subscriber_builder().create().map_err(|e| match e {
+                SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
+                    not_a_neighbor(team, id, peer, &name, "subscriber")
+                }
+                e => err(&name, "create subscriber", &e),
+            })?;
+            neighbors.insert(
+                peer,
+                NeighborReader {
+                    _service: service,
+                    subscriber,
+                },
+            );
+        }
+
+        let mut out_wakes = BTreeMap::new();
+        for &peer in out_neighbors {
+            let name = team.wake_service(peer);
+            let writer = open_wake_writer(&node, team, who, &name, peer)?;
+            out_wakes.insert(peer, writer);
+        }
+        let name = team.orchestrator_wake_service();
+        let wake_orch = open_wake_writer(&node, team, who, &name, id)?;
+
+        let name = team.clock_service();
+        let clock_subscriber = clock
+            .subscriber_builder()
+            .buffer_size(CLOCK_BUFFER)
+            .create()
+            .map_err(|e| err(&name, "create subscriber", &e))?;
+        let mut orchestrator = None;
+        clock.dynamic_config().list_publishers(|p| {
+            orchestrator = Some(p.node_id);
+            CallbackProgression::Stop
+        });
+
+        Ok(Self {
+            team: team.clone(),
+            id,
+            publisher,
+            _state: state,
+            neighbors,
+            clock_subscriber,
+            _clock: clock,
+            listener,
+            wake,
+            out_wakes,
+            wake_orch,
+            orchestrator,
+            _node: node,
+        })
+    }
+
+    /// The agent id.
+    pub fn id(&self) -> u32 {
+        self.id
+    }
+
+    /// The team.
+    pub fn team(&self) -> &TeamName {
+        &self.team
+    }
+
+    /// Publishes this agent's state, then (after the send returned) wakes its out-neighbours and
+    /// the orchestrator. Returns how many subscribers the sample reached. A state carrying another
+    /// agent's id is refused.
+    pub fn publish(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
+        if msg.id != self.id {
+            return Err(TransportError::ForeignState {
+                team: self.team.clone(),
+                id: self.id,
+                msg_id: msg.id,
+                service: self.team.state_service(self.id),
+            });
+        }
+        let reached = self
+            .publisher
+            .send_copy(msg)
+            .map_err(|e| self.error(&self.team.state_service(self.id), "send", e))?;
+        for (&peer, wake) in &self.out_wakes {
+            wake.notifier
+                .notify()
+                .map_err(|e| self.error(&self.team.wake_service(peer), "notify", e))?;
+        }
+        self.wake_orch
+            .notifier
+            .notify()
+            .map_err(|e| self.error(&self.team.orchestrator_wake_service(), "notify", e))?;
+        Ok(reached)
+    }
+
+    /// Drains every in-neighbour's subscriber (neighbours in id order, each one's samples oldest
+    /// first) into `f`; returns how many samples were delivered.
+    pub fn receive_neighbors(
+        &mut self,
+        mut f: impl FnMut(StateMsg),
+    ) -> Result<usize, TransportError> {
+        let mut count = 0;
+        for (&peer, reader) in &self.neighbors {
+            while let Some(sample) = reader
+                .subscriber
+                .receive()
+                .map_err(|e| self.error(&self.team.state_service(peer), "receive", e))?
+            {
+                f(*sample);
+                count += 1;
+            }
+        }
+        Ok(count)
+    }
+
+    /// Drains the clock and returns the newest grant received since the last call, if any.
+    pub fn latest_clock(&mut self) -> Result<Option<ClockMsg>, TransportError> {
+        let mut newest = None;
+        while let Some(sample) = self
+            .clock_subscriber
+            .receive()
+            .map_err(|e| self.error(&self.team.clock_service(), "receive", e))?
+        {
+            newest = Some(*sample);
+        }
+        Ok(newest)
+    }
+
+    /// Blocks until a neighbour or the orchestrator notifies `wake/<id>` or `timeout` passes;
+    /// true when woken. Then drain both the clock and the neighbours: notifications merge.
+    pub fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
+        let service = self.team.wake_service(self.id);
+        wait_on(
+            &self.listener,
+            timeout,
+            &self.team,
+            Role::Agent(self.id),
+            &service,
+        )
+    }
+
+    /// True while the orchestrator's node is alive. Checks only the few nodes attached to this
+    /// agent's wake event (its in-neighbours, itself and the orchestrator), so it is cheap enough
+    /// for every half second. A registry that cannot be read counts as dead (fail-safe: stop).
+    pub fn orchestrator_alive(&self) -> bool {
+        let Some(orchestrator) = self.orchestrator else {
+            return false;
+        };
+        let mut alive = false;
+        let listed = self.wake.nodes(|state| {
+            if *state.node_id() == orchestrator {
+                alive = matches!(state, NodeState::Alive(_));
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        });
+        if let Err(e) = listed {
+            tracing::warn!(team = %self.team, id = self.id, error = ?e,
+                "cannot read the node registry; treating the orchestrator as gone");
+            return false;
+        }
+        alive
+    }
+
+    fn error(&self, service: &str, op: &'static str, e: impl std::fmt::Debug) -> TransportError {
+        service_error(&self.team, Role::Agent(self.id), service, op, e)
+    }
+}
+
+/// Opens `state/<owner>`: a missing service means `owner` is not in the team; a full node table
+/// on one's own service means another process is this agent.
+fn open_state(
+    node: &Node<ipc::Service>,
+    team: &TeamName,
+    who: Role,
+    owner: u32,
+) -> Result<PubSubService<ipc::Service, StateMsg, ()>, TransportError> {
+    let name = team.state_service(owner);
+    node.service_builder(&service_name(team, who, &name)?)
+        .publish_subscribe::<StateMsg>()
+        .open()
+        .map_err(|e| match (e, who) {
+            (PublishSubscribeOpenError::DoesNotExist, _) => TransportError::NotInTeam {
+                team: team.clone(),
+                id: owner,
+                service: name.clone(),
+            },
+            (PublishSubscribeOpenError::ExceedsMaxNumberOfNodes, Role::Agent(me))
+                if me == owner =>
+            {
+                already_running(team, owner, &name, "node")
+            }
+            (PublishSubscribeOpenError::ExceedsMaxNumberOfNodes, Role::Agent(me)) => {
+                not_a_neighbor(team, me, owner, &name, "node")
+            }
+            (e, _) => service_error(team, who, &name, "open service", e),
+        })
+}
+
+/// Opens an event service of the team (a missing one means the team is incomplete).
+fn open_event(
+    node: &Node<ipc::Service>,
+    team: &TeamName,
+    who: Role,
+    name: &str,
+) -> Result<EventService<ipc::Service>, TransportError> {
+    node.service_builder(&service_name(team, who, name)?)
+        .event()
+        .open()
+        .map_err(|e| match e {
+            EventOpenError::DoesNotExist => TransportError::TeamNotFound {
+                team: team.clone(),
+                who,
+                service: name.to_owned(),
+            },
+            e => service_error(team, who, name, "open service", e),
+        })
+}
+
+/// Opens a notifier on `name` (the wake event of `peer`, or `wake/orch`); a full notifier table
+/// means the layout has no edge from this agent to `peer`.
+fn open_wake_writer(
+    node: &Node<ipc::Service>,
+    team: &TeamName,
+    who: Role,
+    name: &str,
+    peer: u32,
+) -> Result<WakeWriter, TransportError> {
+    let service = open_event(node, team, who, name)?;
+    let notifier = service
+        .notifier_builder()
+        .create()
+        .map_err(|e| match (e, who) {
+            (NotifierCreateError::ExceedsMaxSupportedNotifiers, Role::Agent(me)) => {
+                not_a_neighbor(team, me, peer, name, "notifier")
+            }
+            (e, _) => service_error(team, who, name, "create notifier", e),
+        })?;
+    Ok(WakeWriter {
+        _service: service,
+        notifier,
+    })
+}
+
+fn already_running(team: &TeamName, id: u32, service: &str, port: &'static str) -> TransportError {
+    TransportError::AgentAlreadyRunning {
+        team: team.clone(),
+        id,
+        service: service.to_owned(),
+        port,
+    }
+}
+
+fn not_a_neighbor(
+    team: &TeamName,
+    id: u32,
+    peer: u32,
+    service: &str,
+    port: &'static str,
+) -> TransportError {
+    TransportError::NotANeighbor {
+        team: team.clone(),
+        id,
+        peer,
+        service: service.to_owned(),
+        port,
+    }
+}

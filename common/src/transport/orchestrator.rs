@@ -1,0 +1,437 @@
+//! The orchestrator's side: creates every service of a team and owns the clock.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use iceoryx2::node::NodeView;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventCreateError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError;
+use iceoryx2::service::port_factory::event::PortFactory as EventService;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubService;
+
+use super::{
+    create_node, init_logging, process_config, remove_stale, scan_team, service_error,
+    service_name, wait_on, Role, TeamLayout, TeamName, TransportError, CLOCK_BUFFER, SPARE_NODES,
+};
+use crate::messages::{ClockMsg, StateMsg};
+
+const WHO: Role = Role::Orchestrator;
+
+/// One agent's state service, read by the orchestrator.
+struct StateReader {
+    service: PubSubService<ipc::Service, StateMsg, ()>,
+    subscriber: Subscriber<ipc::Service, StateMsg, ()>,
+}
+
+/// One agent's wake event, notified by the orchestrator.
+struct WakeWriter {
+    service: EventService<ipc::Service>,
+    notifier: Notifier<ipc::Service>,
+}
+
+/// Every port of the orchestrator. Fields drop in order: ports first, the node last.
+struct Ports {
+    states: BTreeMap<u32, StateReader>,
+    clock: PubSubService<ipc::Service, ClockMsg, ()>,
+    clock_publisher: Publisher<ipc::Service, ClockMsg, ()>,
+    wakes: BTreeMap<u32, WakeWriter>,
+    wake_orch: EventService<ipc::Service>,
+    listener: Listener<ipc::Service>,
+    /// Held, never read: the node must outlive the ports created from it.
+    _node: Node<ipc::Service>,
+}
+
+/// The orchestrator's ports: a subscriber on every `state/<id>`, the clock publisher, a notifier
+/// on every `wake/<id>` and the listener of `wake/orch`.
+///
+/// Dropping it (or [`shutdown`](Self::shutdown)) releases the ports and then removes the
+/// resources of team members that died; what live members still hold disappears when they exit.
+pub struct OrchestratorPorts {
+    /// Always `Some` until `Drop` takes it to release the ports before sweeping dead nodes.
+    ports: Option<Ports>,
+    team: TeamName,
+    layout: TeamLayout,
+    stale_nodes_removed: usize,
+}
+
+/// How far one agent has connected its ports (see [`OrchestratorPorts::readiness`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AgentReadiness {
+    /// The agent.
+    pub id: u32,
+    /// Publishers on `state/<id>` (1 when the agent is up).
+    pub state_publishers: usize,
+    /// Subscribers on `state/<id>`, the orchestrator's included.
+    pub state_subscribers: usize,
+    /// Out-degree + 1 (the orchestrator).
+    pub expected_state_subscribers: usize,
+    /// Listeners on `wake/<id>` (1 when the agent is up).
+    pub wake_listeners: usize,
+    /// Notifiers on `wake/<id>`, the orchestrator's included.
+    pub wake_notifiers: usize,
+    /// In-degree + 1 (the orchestrator).
+    pub expected_wake_notifiers: usize,
+}
+
+impl AgentReadiness {
+    /// True when the agent and all its neighbours' ports towards it are connected.
+    pub fn is_complete(&self) -> bool {
+        self.state_publishers == 1
+            && self.state_subscribers == self.expected_state_subscribers
+            && self.wake_listeners == 1
+            && self.wake_notifiers == self.expected_wake_notifiers
+    }
+}
+
+/// Port counts of the whole team; complete when every member has opened all its ports, which is
+/// when the orchestrator may grant tick 0 (history is 0: a sample sent earlier reaches nobody).
+/// Counts come from iceoryx2's dynamic config and include ports of dead processes until they are
+/// cleaned.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Readiness {
+    /// Per agent, in id order.
+    pub agents: Vec<AgentReadiness>,
+    /// Subscribers on the clock (the team size when complete).
+    pub clock_subscribers: usize,
+    /// Notifiers on `wake/orch` (the team size when complete).
+    pub orchestrator_wake_notifiers: usize,
+}
+
+impl Readiness {
+    /// True when every port of every member is connected.
+    pub fn is_complete(&self) -> bool {
+        let n = self.agents.len();
+        self.clock_subscribers == n
+            && self.orchestrator_wake_notifiers == n
+            && self.agents.iter().all(AgentReadiness::is_complete)
+    }
+
+    /// Agents whose own or incoming ports are not all connected yet.
+    pub fn waiting_for(&self) -> Vec<u32> {
+        self.agents
+            .iter()
+            .filter(|a| !a.is_complete())
+            .map(|a| a.id)
+            .collect()
+    }
+}
+
+impl OrchestratorPorts {
+    /// Creates the team: refuses when a live process of `team` exists, removes the files of dead
+    /// ones (a crashed previous run, logged with their count), then creates every service sized
+    /// to `layout` and opens the orchestrator's ports.
+    pub fn create(team: &TeamName, layout: &TeamLayout) -> Result<Self, TransportError> {
+        init_logging();
+        let cfg = process_config(WHO);
+        let scan = scan_team(team, cfg)?;
+        if !scan.alive.is_empty() {
+            return Err(TransportError::TeamAlreadyRunning {
+                team: team.clone(),
+                live: scan.alive.join(", "),
+            });
+        }
+        let dead = scan.dead.len();
+        let stale_nodes_removed = remove_stale(team, scan.dead);
+        if dead > 0 {
+            tracing::info!(team = %team, found = dead, removed = stale_nodes_removed,
+                "removed stale resources of dead nodes of a previous run");
+        }
+
+        let node = create_node(team, WHO)?;
+        let ports = Ports::create(node, team, layout)?;
+        tracing::debug!(team = %team, agents = layout.ids().len(), "team created");
+        Ok(Self {
+            ports: Some(ports),
+            team: team.clone(),
+            layout: layout.clone(),
+            stale_nodes_removed,
+        })
+    }
+
+    /// The team.
+    pub fn team(&self) -> &TeamName {
+        &self.team
+    }
+
+    /// The layout the services were sized for.
+    pub fn layout(&self) -> &TeamLayout {
+        &self.layout
+    }
+
+    /// How many dead nodes of a previous run [`create`](Self::create) cleaned.
+    pub fn stale_nodes_removed(&self) -> usize {
+        self.stale_nodes_removed
+    }
+
+    /// Publishes a grant, then wakes every agent. Returns how many agents' listeners were reached
+    /// (fewer than the team size means some agent is not listening: dead or not yet up).
+    pub fn publish_clock(&mut self, msg: ClockMsg) -> Result<usize, TransportError> {
+        let p = self.ports();
+        p.clock_publisher
+            .send_copy(msg)
+            .map_err(|e| self.error(&self.team.clock_service(), "send", e))?;
+        let mut reached = 0;
+        for (&id, wake) in &p.wakes {
+            reached += wake
+                .notifier
+                .notify()
+                .map_err(|e| self.error(&self.team.wake_service(id), "notify", e))?;
+        }
+        Ok(reached)
+    }
+
+    /// Drains every state subscriber (agents in id order, each agent's samples oldest first) into
+    /// `f`; returns how many samples were delivered.
+    pub fn receive_states(&mut self, mut f: impl FnMut(StateMsg)) -> Result<usize, TransportError> {
+        let mut count = 0;
+        for (&id, reader) in &self.ports().states {
+            while let Some(sample) = reader
+                .subscriber
+                .receive()
+                .map_err(|e| self.error(&self.team.state_service(id), "receive", e))?
+            {
+                f(*sample);
+                count += 1;
+            }
+        }
+        Ok(count)
+    }
+
+    /// Blocks until an agent notifies `wake/orch` or `timeout` passes; true when woken. Then
+    /// drain with [`receive_states`](Self::receive_states): notifications merge.
+    pub fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
+        let service = self.team.orchestrator_wake_service();
+        wait_on(&self.ports().listener, timeout, &self.team, WHO, &service)
+    }
+
+    /// Port counts of every service: lets the orchestrator wait until all members are up.
+    pub fn readiness(&self) -> Readiness {
+        let p = self.ports();
+        let agents = self
+            .layout
+            .ids()
+            .iter()
+            .filter_map(|&id| {
+                let state = p.states.get(&id)?.service.dynamic_config();
+                let wake = p.wakes.get(&id)?.service.dynamic_config();
+                Some(AgentReadiness {
+                    id,
+                    state_publishers: state.number_of_publishers(),
+                    state_subscribers: state.number_of_subscribers(),
+                    expected_state_subscribers: self.layout.out_neighbors(id).len() + 1,
+                    wake_listeners: wake.number_of_listeners(),
+                    wake_notifiers: wake.number_of_notifiers(),
+                    expected_wake_notifiers: self.layout.in_neighbors(id).len() + 1,
+                })
+            })
+            .collect();
+        Readiness {
+            agents,
+            clock_subscribers: p.clock.dynamic_config().number_of_subscribers(),
+            orchestrator_wake_notifiers: p.wake_orch.dynamic_config().number_of_notifiers(),
+        }
+    }
+
+    /// Names of the nodes subscribed to `state/<id>`, sorted (the orchestrator's own included);
+    /// empty for an id outside the team. Lets a test check that the subscription graph is the
+    /// communication graph.
+    pub fn subscriber_nodes(&self, id: u32) -> Result<Vec<String>, TransportError> {
+        let Some(reader) = self.ports().states.get(&id) else {
+            return Ok(vec![]);
+        };
+        let mut node_ids = vec![];
+        reader.service.dynamic_config().list_subscribers(|s| {
+            node_ids.push(s.node_id);
+            CallbackProgression::Continue
+        });
+        let mut names = vec![];
+        reader
+            .service
+            .nodes(|state| {
+                let (node_id, name) = match &state {
+                    NodeState::Alive(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
+                    NodeState::Dead(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
+                    NodeState::Inaccessible(i) | NodeState::Undefined(i) => (*i, None),
+                };
+                // A node with several subscribers on one service would be listed once per port.
+                let ports = node_ids.iter().filter(|&&n| n == node_id).count();
+                let name = name.map_or_else(|| format!("<node {node_id}>"), |n| n.to_string());
+                names.extend(std::iter::repeat_n(name, ports));
+                CallbackProgression::Continue
+            })
+            .map_err(|e| TransportError::NodeList {
+                team: self.team.clone(),
+                detail: format!("{e:?}"),
+            })?;
+        names.sort();
+        Ok(names)
+    }
+
+    /// Releases every port and the node, then removes the resources of dead team members;
+    /// returns how many dead nodes were cleaned. Dropping does the same, logging instead.
+    pub fn shutdown(mut self) -> Result<usize, TransportError> {
+        drop(self.ports.take());
+        super::remove_dead_nodes(&self.team)
+    }
+
+    fn ports(&self) -> &Ports {
+        // `ports` is only taken in `shutdown` and `drop`, which consume or end `self`.
+        self.ports
+            .as_ref()
+            .expect("orchestrator ports are present until shutdown")
+    }
+
+    fn error(&self, service: &str, op: &'static str, e: impl std::fmt::Debug) -> TransportError {
+        service_error(&self.team, WHO, service, op, e)
+    }
+}
+
+impl Drop for OrchestratorPorts {
+    fn drop(&mut self) {
+        if self.ports.take().is_some() {
+            if let Err(e) = super::remove_dead_nodes(&self.team) {
+                tracing::warn!(team = %self.team, error = %e, "cannot sweep dead team members");
+            }
+        }
+    }
+}
+
+impl Ports {
+    fn create(
+        node: Node<ipc::Service>,
+        team: &TeamName,
+        layout: &TeamLayout,
+    ) -> Result<Self, TransportError> {
+        let n = layout.ids().len();
+        let buffer = layout.window() as usize + 2;
+        let err =
+            |service: &str, op, e: &dyn std::fmt::Debug| service_error(team, WHO, service, op, e);
+
+        let mut states = BTreeMap::new();
+        let mut wakes = BTreeMap::new();
+        for &id in layout.ids() {
+            let outs = layout.out_neighbors(id).len();
+            let name = team.state_service(id);
+            let service = node
+                .service_builder(&service_name(team, WHO, &name)?)
+                .publish_subscribe::<StateMsg>()
+                .max_publishers(1)
+                .max_subscribers(outs + 1)
+                .max_nodes(outs + 2 + SPARE_NODES)
+                .subscriber_max_buffer_size(buffer)
+                .subscriber_max_borrowed_samples(1)
+                .history_size(0)
+                .enable_safe_overflow(true)
+                .create()
+                .map_err(|e| pubsub_create_error(team, &name, e))?;
+            let subscriber = service
+                .subscriber_builder()
+                .buffer_size(buffer)
+                .create()
+                .map_err(|e| err(&name, "create subscriber", &e))?;
+            states.insert(
+                id,
+                StateReader {
+                    service,
+                    subscriber,
+                },
+            );
+
+            let ins = layout.in_neighbors(id).len();
+            let name = team.wake_service(id);
+            let service = node
+                .service_builder(&service_name(team, WHO, &name)?)
+                .event()
+                .max_listeners(1)
+                .max_notifiers(ins + 1)
+                .max_nodes(ins + 2 + SPARE_NODES)
+                .create()
+                .map_err(|e| event_create_error(team, &name, e))?;
+            let notifier = service
+                .notifier_builder()
+                .create()
+                .map_err(|e| err(&name, "create notifier", &e))?;
+            wakes.insert(id, WakeWriter { service, notifier });
+        }
+
+        let name = team.clock_service();
+        let clock = node
+            .service_builder(&service_name(team, WHO, &name)?)
+            .publish_subscribe::<ClockMsg>()
+            .max_publishers(1)
+            .max_subscribers(n)
+            .max_nodes(n + 1 + SPARE_NODES)
+            .subscriber_max_buffer_size(CLOCK_BUFFER)
+            .subscriber_max_borrowed_samples(1)
+            .history_size(0)
+            .enable_safe_overflow(true)
+            .create()
+            .map_err(|e| pubsub_create_error(team, &name, e))?;
+        let clock_publisher = clock
+            .publisher_builder()
+            .max_loaned_samples(1)
+            .create()
+            .map_err(|e| err(&name, "create publisher", &e))?;
+
+        let name = team.orchestrator_wake_service();
+        let wake_orch = node
+            .service_builder(&service_name(team, WHO, &name)?)
+            .event()
+            .max_listeners(1)
+            .max_notifiers(n)
+            .max_nodes(n + 1 + SPARE_NODES)
+            .create()
+            .map_err(|e| event_create_error(team, &name, e))?;
+        let listener = wake_orch
+            .listener_builder()
+            .create()
+            .map_err(|e| err(&name, "create listener", &e))?;
+
+        Ok(Self {
+            states,
+            clock,
+            clock_publisher,
+            wakes,
+            wake_orch,
+            listener,
+            _node: node,
+        })
+    }
+}
+
+/// A service that already exists means another orchestrator won the race (or live members of a
+/// previous run still hold it).
+fn pubsub_create_error(
+    team: &TeamName,
+    service: &str,
+    e: PublishSubscribeCreateError,
+) -> TransportError {
+    match e {
+        PublishSubscribeCreateError::AlreadyExists
+        | PublishSubscribeCreateError::IsBeingCreatedByAnotherInstance => {
+            TransportError::TeamAlreadyRunning {
+                team: team.clone(),
+                live: format!("service {service} already exists"),
+            }
+        }
+        e => service_error(team, WHO, service, "create service", e),
+    }
+}
+
+/// See [`pubsub_create_error`].
+fn event_create_error(team: &TeamName, service: &str, e: EventCreateError) -> TransportError {
+    match e {
+        EventCreateError::AlreadyExists | EventCreateError::IsBeingCreatedByAnotherInstance => {
+            TransportError::TeamAlreadyRunning {
+                team: team.clone(),
+                live: format!("service {service} already exists"),
+            }
+        }
+        e => service_error(team, WHO, service, "create service", e),
+    }
+}
