@@ -6,8 +6,10 @@
 //! built-ins) -> `engine`, `telemetry`, `audit` -> `messages` (repr(C) wire types) -> `transport`
 //! (the only module that names iceoryx2).
 
+pub mod audit;
 pub mod control;
 pub mod dynamics;
+pub mod engine;
 pub mod formation;
 pub mod frame;
 pub mod gains;
@@ -16,6 +18,10 @@ pub mod graph;
 pub mod math;
 pub mod messages;
 pub mod plan;
+pub mod rundir;
 pub mod safety;
 pub mod scenario;
+pub mod simulate;
+pub mod step;
+pub mod telemetry;
 pub mod transport;

@@ -1,1 +1,69 @@
-fn main() {}
+//! `orchestrator`: parses arguments, initialises logging, runs the command, and maps the outcome
+//! to an exit code: 0 safe and complete, 1 safety violation / UNSAFE, 2 bad input, 3 runtime fault.
+
+mod cli;
+mod commands;
+
+use clap::Parser;
+
+/// Exit codes of every command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Exit {
+    Safe = 0,
+    Unsafe = 1,
+    BadInput = 2,
+    Fault = 3,
+}
+
+/// A failure with its exit code.
+#[derive(Debug)]
+pub struct Failure {
+    pub exit: Exit,
+    pub message: String,
+}
+
+impl Failure {
+    pub fn bad_input(message: impl std::fmt::Display) -> Self {
+        Failure {
+            exit: Exit::BadInput,
+            message: message.to_string(),
+        }
+    }
+
+    pub fn fault(message: impl std::fmt::Display) -> Self {
+        Failure {
+            exit: Exit::Fault,
+            message: message.to_string(),
+        }
+    }
+}
+
+fn main() {
+    let cli = match cli::Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() {
+                Exit::BadInput as i32
+            } else {
+                0
+            };
+            let _ = e.print();
+            std::process::exit(code);
+        }
+    };
+    let default = if cli.quiet { "warn" } else { "info" };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+    let code = match commands::run(cli) {
+        Ok(exit) => exit as i32,
+        Err(f) => {
+            eprintln!("error: {}", f.message);
+            f.exit as i32
+        }
+    };
+    std::process::exit(code);
+}

@@ -1,0 +1,364 @@
+//! The safety audit of a run (Sec. VI, Theorem 3), fed tick by tick with the team's positions,
+//! identical for `simulate` and `launch`: collisions (separation < 2 eps), containment (a
+//! follower outside the containment prism), tracking (||r_i - r_i,HT||_2 > delta, eq. 34) and
+//! deformation (lambda_1(U_D) < lambda_CD,min, eq. 37).
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::formation::Role;
+use crate::frame::deformation_eigenvalues;
+use crate::math::{Real, Vec3};
+use crate::plan::Segment;
+use crate::safety::{self, Prism};
+use crate::scenario::Scenario;
+
+/// At most this many violation records are kept; the rest are counted.
+pub const MAX_VIOLATION_RECORDS: usize = 10_000;
+
+/// The safety numbers of a scenario (Sec. VI).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SafetyNumbers {
+    /// min over the plan of lambda_1(U_D), and when.
+    pub lambda1_min: Real,
+    pub t_lambda1_min_s: Real,
+    /// lambda_CD,min (eq. 37-38): the scenario's, or the plan's lambda1_min by default.
+    pub lambda_cd_min: Real,
+    pub d_b_m: Real,
+    pub d_s_m: Real,
+    /// eq. 35.
+    pub delta_max_m: Real,
+    /// eq. 38 (or the scenario's `delta_m`).
+    pub delta_m: Real,
+    pub eps_m: Real,
+}
+
+impl SafetyNumbers {
+    /// Compute them for a validated scenario.
+    pub fn of(s: &Scenario) -> Self {
+        let l = s.plan.lambda1_min().unwrap_or(crate::plan::Lambda1Min {
+            lambda1: 0.0,
+            s: 0.0,
+            t_s: 0.0,
+        });
+        let d_b_m = safety::d_b(&s.formation);
+        let d_s_m = safety::d_s(&s.formation);
+        let eps = s.file.eps_m;
+        let delta_max_m = safety::delta_max(d_b_m, d_s_m, eps);
+        let (lambda_cd_min, delta_m) = match (s.file.lambda_cd_min, s.file.delta_m) {
+            (_, Some(d)) => (safety::lambda_from_delta(d, delta_max_m, eps), d),
+            (Some(lc), None) => (lc, safety::delta_from_lambda(lc, delta_max_m, eps)),
+            (None, None) => (
+                l.lambda1,
+                safety::delta_from_lambda(l.lambda1, delta_max_m, eps),
+            ),
+        };
+        SafetyNumbers {
+            lambda1_min: l.lambda1,
+            t_lambda1_min_s: l.t_s,
+            lambda_cd_min,
+            d_b_m,
+            d_s_m,
+            delta_max_m,
+            delta_m,
+            eps_m: eps,
+        }
+    }
+}
+
+/// One safety violation (the tick at which a condition starts to fail for these agents).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Violation {
+    /// `collision`, `containment`, `tracking` or `deformation`.
+    pub kind: &'static str,
+    pub tick: u64,
+    pub t_s: Real,
+    pub agents: Vec<u32>,
+    /// The measured value and the limit it crossed.
+    pub value: Real,
+    pub limit: Real,
+}
+
+/// A runtime fault that ended a run early.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FaultRecord {
+    pub kind: String,
+    pub agent: Option<u32>,
+    pub peer: Option<u32>,
+    pub tick: u64,
+    pub message: String,
+}
+
+/// audit.json.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AuditReport {
+    /// SAFE, UNSAFE (a violation), or FAULT (the run did not complete).
+    pub verdict: &'static str,
+    pub scenario: String,
+    pub agents: usize,
+    /// Ticks audited (0..=last, or fewer after a fault).
+    pub ticks: u64,
+    pub complete: bool,
+    pub t_total_s: Real,
+    pub dt_s: Real,
+    pub lambda1_min: Real,
+    pub t_lambda1_min_s: Real,
+    /// lambda_1(U_D) minimum over the audited ticks.
+    pub lambda1_min_run: Real,
+    pub lambda_cd_min: Real,
+    pub d_b_m: Real,
+    pub d_s_m: Real,
+    pub delta_max_m: Real,
+    pub delta_m: Real,
+    pub eps_m: Real,
+    /// Largest ||r_i - r_i,HT||_2 over the run, every agent (ERRATA 11: the guarantee's norm).
+    pub max_deviation_m: Real,
+    /// Largest ||r_i - r_i,HT||_inf (the paper's E_max, Sec. VII-D).
+    pub max_deviation_inf_m: Real,
+    pub max_follower_deviation_m: Real,
+    /// Smallest distance between two agents over the run.
+    pub min_separation_m: Real,
+    /// Smallest signed distance of a follower to the prism's side faces over the run.
+    pub min_boundary_distance_m: Real,
+    pub violations: Vec<Violation>,
+    pub violations_dropped: u64,
+    pub fault: Option<FaultRecord>,
+}
+
+/// The audit accumulator.
+pub struct Auditor {
+    numbers: SafetyNumbers,
+    scenario: Scenario,
+    ids: Vec<u32>,
+    followers: Vec<usize>,
+    polygon: Vec<usize>,
+    active: BTreeMap<(&'static str, Vec<u32>), bool>,
+    report: AuditReport,
+}
+
+impl Auditor {
+    /// A fresh audit for a scenario.
+    pub fn new(scenario: &Scenario) -> Self {
+        let numbers = SafetyNumbers::of(scenario);
+        let f = &scenario.formation;
+        Auditor {
+            numbers,
+            scenario: scenario.clone(),
+            ids: f.members.iter().map(|m| m.id).collect(),
+            followers: (0..f.members.len())
+                .filter(|&k| f.members[k].role == Role::Follower)
+                .collect(),
+            polygon: f.polygon.clone(),
+            active: BTreeMap::new(),
+            report: AuditReport {
+                verdict: "SAFE",
+                scenario: scenario.file.name.clone(),
+                agents: f.members.len(),
+                ticks: 0,
+                complete: false,
+                t_total_s: scenario.file.t_total_s,
+                dt_s: scenario.dt_s(),
+                lambda1_min: numbers.lambda1_min,
+                t_lambda1_min_s: numbers.t_lambda1_min_s,
+                lambda1_min_run: Real::INFINITY,
+                lambda_cd_min: numbers.lambda_cd_min,
+                d_b_m: numbers.d_b_m,
+                d_s_m: numbers.d_s_m,
+                delta_max_m: numbers.delta_max_m,
+                delta_m: numbers.delta_m,
+                eps_m: numbers.eps_m,
+                max_deviation_m: 0.0,
+                max_deviation_inf_m: 0.0,
+                max_follower_deviation_m: 0.0,
+                min_separation_m: Real::INFINITY,
+                min_boundary_distance_m: Real::INFINITY,
+                violations: Vec::new(),
+                violations_dropped: 0,
+                fault: None,
+            },
+        }
+    }
+
+    /// The safety numbers used.
+    pub fn numbers(&self) -> &SafetyNumbers {
+        &self.numbers
+    }
+
+    fn flag(
+        &mut self,
+        kind: &'static str,
+        agents: Vec<u32>,
+        bad: bool,
+        tick: u64,
+        t: Real,
+        value: Real,
+        limit: Real,
+    ) {
+        let key = (kind, agents);
+        let was = self.active.get(&key).copied().unwrap_or(false);
+        if bad && !was {
+            if self.report.violations.len() < MAX_VIOLATION_RECORDS {
+                tracing::warn!(kind, tick, t_s = t, agents = ?key.1, value, limit, "safety violation");
+                self.report.violations.push(Violation {
+                    kind,
+                    tick,
+                    t_s: t,
+                    agents: key.1.clone(),
+                    value,
+                    limit,
+                });
+            } else {
+                self.report.violations_dropped += 1;
+            }
+        }
+        if bad || was {
+            self.active.insert(key, bad);
+        }
+    }
+
+    /// Audit one tick: positions and desired positions in member order.
+    pub fn observe(&mut self, tick: u64, t: Real, pos: &[Vec3], ht: &[Vec3]) {
+        let n = self.numbers;
+        let r = &mut self.report;
+        r.ticks = r.ticks.max(tick + 1);
+        // Tracking (eq. 34), 2-norm and inf-norm (ERRATA 11).
+        let mut devs = Vec::with_capacity(pos.len());
+        for (k, (p, h)) in pos.iter().zip(ht).enumerate() {
+            let e = p - h;
+            let d2 = e.norm();
+            r.max_deviation_m = r.max_deviation_m.max(d2);
+            r.max_deviation_inf_m = r.max_deviation_inf_m.max(e.amax());
+            devs.push((k, d2));
+        }
+        for &k in &self.followers {
+            self.report.max_follower_deviation_m =
+                self.report.max_follower_deviation_m.max(devs[k].1);
+        }
+        for (k, d2) in devs {
+            self.flag(
+                "tracking",
+                vec![self.ids[k]],
+                d2 > n.delta_m,
+                tick,
+                t,
+                d2,
+                n.delta_m,
+            );
+        }
+        // Collisions: every pair closer than 2 eps.
+        let (sep, _, _) = safety::min_separation(pos);
+        self.report.min_separation_m = self.report.min_separation_m.min(sep);
+        let pairs = close_pairs(pos, 2.0 * n.eps_m);
+        let mut close: BTreeMap<Vec<u32>, Real> = BTreeMap::new();
+        for (i, j, d) in pairs {
+            let mut ids = vec![self.ids[i], self.ids[j]];
+            ids.sort_unstable();
+            close.insert(ids, d);
+        }
+        let previously: Vec<Vec<u32>> = self
+            .active
+            .iter()
+            .filter(|((kind, _), on)| *kind == "collision" && **on)
+            .map(|((_, ids), _)| ids.clone())
+            .collect();
+        for ids in previously {
+            if !close.contains_key(&ids) {
+                self.active.insert(("collision", ids), false);
+            }
+        }
+        for (ids, d) in close {
+            self.flag("collision", ids, true, tick, t, d, 2.0 * n.eps_m);
+        }
+        // Containment (Theorem 3): the prism over the leaders' desired polygon.
+        let verts: Vec<Vec3> = self.polygon.iter().map(|&k| ht[k]).collect();
+        if verts.len() >= 3 {
+            let normal = (verts[1] - verts[0])
+                .cross(&(verts[2] - verts[0]))
+                .normalize();
+            let prism = Prism::new(verts, normal, n.delta_m + n.eps_m);
+            for fi in 0..self.followers.len() {
+                let k = self.followers[fi];
+                let side = prism.side_distance(&pos[k]);
+                let height = prism.height(&pos[k]).abs();
+                self.report.min_boundary_distance_m = self.report.min_boundary_distance_m.min(side);
+                let outside = side < 0.0 || height > prism.half_height_m;
+                let value = if side < 0.0 {
+                    side
+                } else {
+                    prism.half_height_m - height
+                };
+                self.flag(
+                    "containment",
+                    vec![self.ids[k]],
+                    outside,
+                    tick,
+                    t,
+                    value,
+                    0.0,
+                );
+            }
+        }
+        // Deformation (eq. 37).
+        let seg = if t <= self.scenario.plan.quintic.t_total_s {
+            Segment::Motion
+        } else {
+            Segment::Hold
+        };
+        let s = self.scenario.plan.quintic.derivatives(t, seg)[0];
+        let l1 = match self.scenario.plan.q_d_at_s(s) {
+            Ok((q, _)) => deformation_eigenvalues(&q)[0],
+            Err(_) => 0.0,
+        };
+        self.report.lambda1_min_run = self.report.lambda1_min_run.min(l1);
+        let primaries = self.ids[..3].to_vec();
+        self.flag(
+            "deformation",
+            primaries,
+            l1 < n.lambda_cd_min - 1e-9,
+            tick,
+            t,
+            l1,
+            n.lambda_cd_min,
+        );
+    }
+
+    /// Record a runtime fault (the run did not complete).
+    pub fn fault(&mut self, fault: FaultRecord) {
+        tracing::error!(kind = %fault.kind, agent = ?fault.agent, tick = fault.tick, "{}", fault.message);
+        self.report.fault = Some(fault);
+    }
+
+    /// The finished report; `complete` when every tick of the plan was audited.
+    pub fn finish(mut self, complete: bool) -> AuditReport {
+        self.report.complete = complete && self.report.fault.is_none();
+        self.report.verdict = if self.report.fault.is_some() || !self.report.complete {
+            "FAULT"
+        } else if self.report.violations.is_empty() && self.report.violations_dropped == 0 {
+            "SAFE"
+        } else {
+            "UNSAFE"
+        };
+        self.report
+    }
+}
+
+/// Every pair of points closer than `radius` (sweep along x), with their distance.
+pub fn close_pairs(pos: &[Vec3], radius: Real) -> Vec<(usize, usize, Real)> {
+    let mut order: Vec<usize> = (0..pos.len()).collect();
+    order.sort_by(|&a, &b| pos[a].x.total_cmp(&pos[b].x).then(a.cmp(&b)));
+    let mut out = Vec::new();
+    for (k, &i) in order.iter().enumerate() {
+        for &j in &order[k + 1..] {
+            if pos[j].x - pos[i].x >= radius {
+                break;
+            }
+            let d = (pos[j] - pos[i]).norm();
+            if d < radius {
+                out.push((i.min(j), i.max(j), d));
+            }
+        }
+    }
+    out.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    out
+}

@@ -1,0 +1,264 @@
+//! The deterministic in-process engine: the whole team in one process, running the same
+//! per-agent `step` the agent processes run, in member order. It is the reference the
+//! multi-process runtime must match bit for bit.
+
+use crate::dynamics::{Chain, Flat, Plant, QuadState};
+use crate::formation::Role;
+use crate::math::{Real, Vec3};
+use crate::plan::Segment;
+use crate::scenario::Scenario;
+use crate::step::{law_for, step, tick_time, Law, NeighborModel, StepConfig, StepFault};
+
+/// An agent failed to complete a tick.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("agent {id} at tick {tick}: {fault}")]
+pub struct AgentFault {
+    pub id: u32,
+    pub tick: u64,
+    pub fault: StepFault,
+}
+
+/// The step configuration of a scenario.
+pub fn step_config(s: &Scenario) -> StepConfig {
+    StepConfig {
+        gains: s.file.gains,
+        dt_s: s.dt_s(),
+        substeps: s.substeps(),
+        neighbor_model: NeighborModel::default(),
+    }
+}
+
+/// The desired position r_HT of every member at time t (eqs. 13, 23), in member order.
+pub fn desired_positions(s: &Scenario, t: Real, out: &mut Vec<Vec3>) {
+    let seg = if t <= s.plan.quintic.t_total_s {
+        Segment::Motion
+    } else {
+        Segment::Hold
+    };
+    let prim = s.plan.primary_derivs(t, seg);
+    out.clear();
+    for m in &s.formation.members {
+        let a = m.alpha;
+        out.push(prim[0][0] * a[0] + prim[1][0] * a[1] + prim[2][0] * a[2]);
+    }
+}
+
+/// The whole team in one process.
+pub struct Engine<P: Plant> {
+    cfg: StepConfig,
+    scenario: Scenario,
+    laws: Vec<Law>,
+    neighbor_idx: Vec<[usize; 3]>,
+    neighbor_ids: Vec<[u32; 3]>,
+    states: Vec<P>,
+    flats: Vec<Flat>,
+    tick: u64,
+}
+
+impl<P: Plant> Engine<P> {
+    /// A team at rest at its initial positions (`init` makes a plant at rest at a point).
+    pub fn new(scenario: &Scenario, init: impl Fn(Vec3) -> P) -> Self {
+        let f = &scenario.formation;
+        let mut laws = Vec::with_capacity(f.members.len());
+        let mut neighbor_idx = Vec::with_capacity(f.members.len());
+        let mut neighbor_ids = Vec::with_capacity(f.members.len());
+        for (k, m) in f.members.iter().enumerate() {
+            let (law, ids) = law_for(m);
+            laws.push(law);
+            neighbor_idx.push(ids.map(|id| f.index_of(id).unwrap_or(k)));
+            neighbor_ids.push(ids);
+        }
+        let states: Vec<P> = f.members.iter().map(|m| init(m.position)).collect();
+        let flats = states.iter().map(|p| p.flat()).collect();
+        Engine {
+            cfg: step_config(scenario),
+            scenario: scenario.clone(),
+            laws,
+            neighbor_idx,
+            neighbor_ids,
+            states,
+            flats,
+            tick: 0,
+        }
+    }
+
+    /// The current tick.
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+
+    /// Current plant states in member order.
+    pub fn states(&self) -> &[P] {
+        &self.states
+    }
+
+    /// The scenario flown.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// Advance every agent from tick k to k + 1: everyone reads the tick-k states, then steps.
+    pub fn advance(&mut self) -> Result<(), AgentFault> {
+        for (f, p) in self.flats.iter_mut().zip(&self.states) {
+            *f = p.flat();
+        }
+        for k in 0..self.states.len() {
+            let nb = self.neighbor_idx[k].map(|j| self.flats[j]);
+            let next = step(
+                &self.cfg,
+                &self.scenario.plan,
+                &self.laws[k],
+                self.tick,
+                &self.states[k],
+                &nb,
+                &self.neighbor_ids[k],
+            )
+            .map_err(|fault| AgentFault {
+                id: self.scenario.formation.members[k].id,
+                tick: self.tick,
+                fault,
+            })?;
+            self.states[k] = next;
+        }
+        self.tick += 1;
+        Ok(())
+    }
+}
+
+/// The nonlinear team (the product's plant).
+pub fn quad_engine(s: &Scenario) -> Engine<QuadState> {
+    Engine::new(s, QuadState::hover)
+}
+
+/// The linear 4th-order team (eq. 43a), as a reference.
+pub fn chain_engine(s: &Scenario) -> Engine<Chain> {
+    Engine::new(s, Chain::rest)
+}
+
+/// Largest follower deviation ||r_i - r_i,HT||_2 over the whole plan (eq. 34), flown by the
+/// nonlinear engine. Used to find T_threshold.
+pub fn max_follower_deviation(s: &Scenario) -> Result<Real, AgentFault> {
+    let mut e = quad_engine(s);
+    let mut ht = Vec::new();
+    let followers: Vec<usize> = s
+        .formation
+        .members
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.role == Role::Follower)
+        .map(|(k, _)| k)
+        .collect();
+    let mut worst: Real = 0.0;
+    let last = s.last_tick();
+    loop {
+        desired_positions(s, tick_time(e.tick(), s.dt_s()), &mut ht);
+        for &k in &followers {
+            worst = worst.max((e.states()[k].position() - ht[k]).norm());
+        }
+        if e.tick() >= last {
+            return Ok(worst);
+        }
+        e.advance()?;
+    }
+}
+
+/// The continuously coupled linear team of eqs. 24-25: one RK4 over all agents at once, every
+/// stage seeing every neighbour's current state (no exchange, no extrapolation). Returns the
+/// largest position difference against the engine's linear team with the given neighbour model,
+/// i.e. the error that exchanging states once per tick adds.
+pub fn exchange_error(s: &Scenario, model: NeighborModel) -> Result<Real, AgentFault> {
+    let mut e = chain_engine(s);
+    e.cfg.neighbor_model = model;
+    let n = s.formation.members.len();
+    let mut x: Vec<Flat> = s
+        .formation
+        .members
+        .iter()
+        .map(|m| Flat::rest(m.position))
+        .collect();
+    let laws = e.laws.clone();
+    let nbr = e.neighbor_idx.clone();
+    let [k1, k2, k3, k4] = s.file.gains;
+    let plan = s.plan;
+    let deriv = |t: Real, seg: Segment, x: &[Flat]| -> Vec<Flat> {
+        (0..n)
+            .map(|k| {
+                let f = &x[k];
+                let snap = match &laws[k] {
+                    Law::Leader { alpha } => {
+                        let d = plan.agent_derivs(alpha, t, seg);
+                        d[4] + (d[3] - f.j) * k1
+                            + (d[2] - f.a) * k2
+                            + (d[1] - f.v) * k3
+                            + (d[0] - f.r) * k4
+                    }
+                    Law::Follower { weights } => {
+                        let mut rd = Vec3::zeros();
+                        let mut vd = Vec3::zeros();
+                        for (j, w) in nbr[k].iter().zip(weights) {
+                            rd += x[*j].r * *w;
+                            vd += x[*j].v * *w;
+                        }
+                        (rd - f.r) * k4 + (vd - f.v) * k3 - f.a * k2 - f.j * k1
+                    }
+                };
+                Flat {
+                    r: f.v,
+                    v: f.a,
+                    a: f.j,
+                    j: snap,
+                }
+            })
+            .collect()
+    };
+    let axpy = |x: &[Flat], d: &[Flat], h: Real| -> Vec<Flat> {
+        x.iter()
+            .zip(d)
+            .map(|(a, b)| Flat {
+                r: a.r + b.r * h,
+                v: a.v + b.v * h,
+                a: a.a + b.a * h,
+                j: a.j + b.j * h,
+            })
+            .collect()
+    };
+    let dt = s.dt_s();
+    let sub = s.substeps();
+    let mut worst: Real = 0.0;
+    for tick in 0..s.last_tick() {
+        for i in 0..sub {
+            let ts = (tick as Real + i as Real / sub as Real) * dt;
+            let te = (tick as Real + (i + 1) as Real / sub as Real) * dt;
+            let pieces: Vec<(Real, Real, Segment)> = match plan.quintic.segment_of(ts, te) {
+                Some(seg) => vec![(ts, te, seg)],
+                None => {
+                    let tt = plan.quintic.t_total_s;
+                    vec![(ts, tt, Segment::Motion), (tt, te, Segment::Hold)]
+                }
+            };
+            for (a, b, seg) in pieces {
+                let h = b - a;
+                let d1 = deriv(a, seg, &x);
+                let d2 = deriv(a + h / 2.0, seg, &axpy(&x, &d1, h / 2.0));
+                let d3 = deriv(a + h / 2.0, seg, &axpy(&x, &d2, h / 2.0));
+                let d4 = deriv(b, seg, &axpy(&x, &d3, h));
+                for k in 0..n {
+                    let c = |f: fn(&Flat) -> Vec3| {
+                        (f(&d1[k]) + f(&d2[k]) * 2.0 + f(&d3[k]) * 2.0 + f(&d4[k])) * (h / 6.0)
+                    };
+                    x[k] = Flat {
+                        r: x[k].r + c(|f| f.r),
+                        v: x[k].v + c(|f| f.v),
+                        a: x[k].a + c(|f| f.a),
+                        j: x[k].j + c(|f| f.j),
+                    };
+                }
+            }
+        }
+        e.advance()?;
+        for k in 0..n {
+            worst = worst.max((e.states()[k].0.r - x[k].r).norm());
+        }
+    }
+    Ok(worst)
+}

@@ -1,0 +1,218 @@
+//! `simulate`: fly a scenario with the in-process engine into a run directory, and the
+//! pre-flight certificate of `plan` (T_threshold by simulation).
+
+use serde::Serialize;
+
+use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
+use crate::engine::{desired_positions, max_follower_deviation, quad_engine};
+use crate::math::{Real, Vec3};
+use crate::rundir::{RunDir, RunDirError};
+use crate::scenario::{Checks, Scenario};
+use crate::step::tick_time;
+use crate::telemetry::Row;
+
+/// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
+/// `on_tick` sees each tick (for progress). A control fault ends the run with the fault recorded;
+/// every complete tick stays in telemetry.csv.
+pub fn simulate(
+    s: &Scenario,
+    dir: &RunDir,
+    every: u64,
+    mut on_tick: impl FnMut(u64),
+) -> Result<AuditReport, RunDirError> {
+    dir.write_scenario(s)?;
+    let mut tel = dir.telemetry(every)?;
+    let mut audit = Auditor::new(s);
+    let mut e = quad_engine(s);
+    let mut ht = Vec::new();
+    let mut pos: Vec<Vec3> = Vec::new();
+    let mut rows: Vec<Row> = Vec::with_capacity(s.formation.members.len());
+    let order = id_order(s);
+    let last = s.last_tick();
+    let tel_path = dir.path().join("telemetry.csv");
+    let io = |source| RunDirError::Io {
+        path: tel_path.clone(),
+        source,
+    };
+    let complete = loop {
+        let tick = e.tick();
+        let t = tick_time(tick, s.dt_s());
+        desired_positions(s, t, &mut ht);
+        pos.clear();
+        pos.extend(e.states().iter().map(|q| q.position()));
+        audit.observe(tick, t, &pos, &ht);
+        if tel.keeps(tick) {
+            rows.clear();
+            for &k in &order {
+                let m = &s.formation.members[k];
+                let q = &e.states()[k];
+                rows.push(Row {
+                    tick,
+                    t_s: t,
+                    id: m.id,
+                    role: m.role,
+                    r: q.position(),
+                    v: q.velocity(),
+                    ht: ht[k],
+                });
+            }
+            tel.write_tick(&rows).map_err(io)?;
+        }
+        on_tick(tick);
+        if tick >= last {
+            break true;
+        }
+        if let Err(f) = e.advance() {
+            audit.fault(FaultRecord {
+                kind: "control".into(),
+                agent: Some(f.id),
+                peer: match f.fault {
+                    crate::step::StepFault::NeighborNonFinite { peer } => Some(peer),
+                    _ => None,
+                },
+                tick: f.tick,
+                message: f.to_string(),
+            });
+            break false;
+        }
+    };
+    tel.flush().map_err(io)?;
+    let report = audit.finish(complete);
+    dir.write_audit(&report)?;
+    Ok(report)
+}
+
+/// Member indices sorted by id (telemetry order).
+pub fn id_order(s: &Scenario) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..s.formation.members.len()).collect();
+    order.sort_by_key(|&k| s.formation.members[k].id);
+    order
+}
+
+/// The pre-flight certificate printed by `orchestrator plan`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Certificate {
+    /// SAFE or UNSAFE.
+    pub verdict: &'static str,
+    pub reasons: Vec<String>,
+    pub scenario: String,
+    pub agents: usize,
+    pub lambda1_min: Real,
+    pub t_lambda1_min_s: Real,
+    pub lambda_cd_min: Real,
+    pub d_b_m: Real,
+    pub d_s_m: Real,
+    pub delta_max_m: Real,
+    pub delta_m: Real,
+    pub eps_m: Real,
+    /// Smallest t_total_s whose simulated max follower deviation (2-norm) stays under delta.
+    pub t_threshold_s: Real,
+    pub t_total_s: Real,
+    /// Simulated max follower deviation at the scenario's own t_total_s.
+    pub max_follower_deviation_m: Real,
+    pub gains_stability_margin: Real,
+    pub notes: Vec<String>,
+}
+
+/// Max follower deviation at a given travel time (infinite when the flight faults).
+pub fn deviation_at(s: &Scenario, t_total_s: Real) -> Real {
+    let mut f = s.file.clone();
+    f.t_total_s = t_total_s;
+    match Scenario::from_file(f, &s.origin, Checks::Member) {
+        Ok(v) => max_follower_deviation(&v).unwrap_or(Real::INFINITY),
+        Err(_) => Real::INFINITY,
+    }
+}
+
+/// Smallest T with E(T) < delta, by bracketing from the 1 / T^2 law (Sec. VII-D) and
+/// bisection to 0.1 % (E falls monotonically with T in practice; the bracket is checked).
+pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
+    if !(delta_m > 0.0) {
+        return Real::INFINITY;
+    }
+    let t0 = s.file.t_total_s;
+    let guess = if e_at_t.is_finite() && e_at_t > 0.0 {
+        t0 * (e_at_t / delta_m).sqrt()
+    } else {
+        t0 * 2.0
+    };
+    let (mut lo, mut hi) = (guess * 0.9, guess * 1.1);
+    let mut grow = 0;
+    while deviation_at(s, hi) >= delta_m {
+        lo = hi;
+        hi *= 2.0;
+        grow += 1;
+        if grow > 12 {
+            return Real::INFINITY;
+        }
+    }
+    let mut shrink = 0;
+    while lo > 1e-3 && deviation_at(s, lo) < delta_m {
+        hi = lo;
+        lo *= 0.5;
+        shrink += 1;
+        if shrink > 30 {
+            return hi;
+        }
+    }
+    while (hi - lo) > 1e-3 * hi {
+        let mid = 0.5 * (lo + hi);
+        if deviation_at(s, mid) < delta_m {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi
+}
+
+/// The certificate of a scenario validated with `Checks::Full`.
+pub fn certify(s: &Scenario) -> Certificate {
+    let n = SafetyNumbers::of(s);
+    let e = deviation_at(s, s.file.t_total_s);
+    let t_thr = t_threshold(s, n.delta_m, e);
+    let margin = s.gains_margin.unwrap_or(Real::NAN);
+    let mut reasons = Vec::new();
+    if !(n.delta_m > 0.0) {
+        reasons.push(format!(
+            "delta = {:.4} m <= 0: eps = {} m is too large for D_B = {:.4} m, D_S = {:.4} m and lambda_CD,min = {:.4} (eq. 38)",
+            n.delta_m, n.eps_m, n.d_b_m, n.d_s_m, n.lambda_cd_min
+        ));
+    }
+    if n.lambda1_min < n.lambda_cd_min - 1e-12 {
+        reasons.push(format!(
+            "lambda_1(U_D) falls to {:.4} at t = {:.2} s, below lambda_CD,min = {:.4} (eq. 37)",
+            n.lambda1_min, n.t_lambda1_min_s, n.lambda_cd_min
+        ));
+    }
+    if !(s.file.t_total_s >= t_thr) {
+        reasons.push(format!(
+            "t_total_s = {} s is below T_threshold = {:.2} s: max follower deviation {:.4} m exceeds delta = {:.4} m (eq. 34)",
+            s.file.t_total_s, t_thr, e, n.delta_m
+        ));
+    }
+    if !(margin > 0.0) {
+        reasons.push(format!(
+            "gains are not stable for this graph (margin {margin:.4}, eq. 26)"
+        ));
+    }
+    Certificate {
+        verdict: if reasons.is_empty() { "SAFE" } else { "UNSAFE" },
+        reasons,
+        scenario: s.file.name.clone(),
+        agents: s.formation.members.len(),
+        lambda1_min: n.lambda1_min,
+        t_lambda1_min_s: n.t_lambda1_min_s,
+        lambda_cd_min: n.lambda_cd_min,
+        d_b_m: n.d_b_m,
+        d_s_m: n.d_s_m,
+        delta_max_m: n.delta_max_m,
+        delta_m: n.delta_m,
+        eps_m: n.eps_m,
+        t_threshold_s: t_thr,
+        t_total_s: s.file.t_total_s,
+        max_follower_deviation_m: e,
+        gains_stability_margin: margin,
+        notes: s.notes.clone(),
+    }
+}

@@ -1,0 +1,86 @@
+//! telemetry.csv: one row per agent per tick, ordered by tick then id. Numbers use Rust's
+//! shortest round-trip formatting, so equal values give equal bytes (the determinism contract
+//! between `simulate` and `launch` is checked on these bytes).
+
+use std::fmt::Write as _;
+use std::io::{self, Write};
+
+use crate::formation::Role;
+use crate::math::{Real, Vec3};
+
+/// The header line.
+pub const HEADER: &str = "tick,t,id,role,x,y,z,vx,vy,vz,x_ht,y_ht,z_ht";
+
+/// One agent at one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Row {
+    pub tick: u64,
+    pub t_s: Real,
+    pub id: u32,
+    pub role: Role,
+    pub r: Vec3,
+    pub v: Vec3,
+    pub ht: Vec3,
+}
+
+/// Writes telemetry rows, keeping every `every`-th tick. Each tick's rows are written together,
+/// so a file cut short by a fault holds only complete ticks.
+pub struct TelemetryWriter<W: Write> {
+    out: W,
+    every: u64,
+    line: String,
+}
+
+impl<W: Write> TelemetryWriter<W> {
+    /// Start a file: writes the header.
+    pub fn new(mut out: W, every: u64) -> io::Result<Self> {
+        writeln!(out, "{HEADER}")?;
+        Ok(TelemetryWriter {
+            out,
+            every: every.max(1),
+            line: String::with_capacity(4096),
+        })
+    }
+
+    /// Whether a tick is kept.
+    pub fn keeps(&self, tick: u64) -> bool {
+        tick % self.every == 0
+    }
+
+    /// Write one tick's rows (sorted by id by the caller).
+    pub fn write_tick(&mut self, rows: &[Row]) -> io::Result<()> {
+        let Some(first) = rows.first() else {
+            return Ok(());
+        };
+        if !self.keeps(first.tick) {
+            return Ok(());
+        }
+        self.line.clear();
+        for r in rows {
+            // Writing to a String cannot fail.
+            let _ = writeln!(
+                self.line,
+                "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                r.tick,
+                r.t_s,
+                r.id,
+                r.role.as_str(),
+                r.r.x,
+                r.r.y,
+                r.r.z,
+                r.v.x,
+                r.v.y,
+                r.v.z,
+                r.ht.x,
+                r.ht.y,
+                r.ht.z
+            );
+        }
+        self.out.write_all(self.line.as_bytes())
+    }
+
+    /// Flush buffered rows to the file.
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.out.flush()
+    }
+}

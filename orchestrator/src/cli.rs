@@ -1,0 +1,87 @@
+//! Command-line interface: raw arguments, converted to validated inputs before anything runs.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+/// Safe continuum deformation of quadcopter teams: plan, simulate and launch a team.
+#[derive(Debug, Parser)]
+#[command(name = "orchestrator", version, about)]
+pub struct Cli {
+    /// Print only the result (warnings and errors still go to stderr).
+    #[arg(long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Pre-flight certificate: lambda_1(U_D), D_B, D_S, delta, T_threshold; exit 0 SAFE, 1 UNSAFE.
+    Plan {
+        #[command(flatten)]
+        source: Source,
+        /// Also write the certificate as JSON.
+        #[arg(long, value_name = "FILE")]
+        json: Option<PathBuf>,
+    },
+    /// Fly the team with the deterministic in-process engine into a run directory.
+    Simulate {
+        #[command(flatten)]
+        source: Source,
+        #[command(flatten)]
+        out: OutDir,
+    },
+    /// Work with scenario files.
+    Scenario {
+        #[command(subcommand)]
+        command: ScenarioCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ScenarioCommand {
+    /// Write a built-in or generated scenario as a TOML file (after graph synthesis).
+    Export {
+        /// A built-in scenario name (paper40).
+        #[arg(conflicts_with = "n")]
+        name: Option<String>,
+        /// A generated team of N agents instead.
+        #[arg(long)]
+        n: Option<usize>,
+        /// Output file (default: standard output).
+        #[arg(long, value_name = "FILE")]
+        out: Option<PathBuf>,
+    },
+}
+
+/// Which scenario to fly: a file, a built-in, or a generated team (default: built-in paper40).
+#[derive(Debug, Args, Clone)]
+pub struct Source {
+    /// A scenario file (TOML).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["n", "builtin"])]
+    pub scenario: Option<PathBuf>,
+    /// A generated team of N agents (4..=2000).
+    #[arg(long, conflicts_with = "builtin")]
+    pub n: Option<usize>,
+    /// A built-in scenario (paper40).
+    #[arg(long, value_name = "NAME")]
+    pub builtin: Option<String>,
+    /// Override the scenario's travel time t_total_s.
+    #[arg(long, value_name = "SECONDS")]
+    pub t_total: Option<f64>,
+}
+
+/// Where a run goes.
+#[derive(Debug, Args, Clone)]
+pub struct OutDir {
+    /// The run directory (created; refused when it exists and is not empty, unless --force).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Write every K-th tick to telemetry.csv.
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: u64,
+    /// Reuse a non-empty --out directory.
+    #[arg(long)]
+    pub force: bool,
+}

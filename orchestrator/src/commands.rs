@@ -1,0 +1,156 @@
+//! The commands behind the CLI.
+
+use std::path::Path;
+use std::time::Instant;
+
+use common::audit::AuditReport;
+use common::rundir::RunDir;
+use common::scenario::{Checks, Scenario};
+use common::simulate::{certify, simulate, Certificate};
+
+use crate::cli::{Cli, Command, ScenarioCommand, Source};
+use crate::{Exit, Failure};
+
+pub fn run(cli: Cli) -> Result<Exit, Failure> {
+    match cli.command {
+        Command::Plan { source, json } => plan(&source, json.as_deref(), cli.quiet),
+        Command::Simulate { source, out } => {
+            let s = load(&source)?;
+            let dir = RunDir::create(&out.out, out.force).map_err(Failure::bad_input)?;
+            let started = Instant::now();
+            let report = simulate(&s, &dir, out.every, |_| {}).map_err(Failure::fault)?;
+            summary("simulate", &report, started, dir.path(), cli.quiet);
+            Ok(exit_of(&report))
+        }
+        Command::Scenario {
+            command: ScenarioCommand::Export { name, n, out },
+        } => {
+            let source = Source {
+                scenario: None,
+                n,
+                builtin: name,
+                t_total: None,
+            };
+            let s = load(&source)?;
+            match out {
+                Some(p) => common::rundir::write_atomic(&p, s.to_toml().as_bytes())
+                    .map_err(Failure::bad_input)?,
+                None => print!("{}", s.to_toml()),
+            }
+            Ok(Exit::Safe)
+        }
+    }
+}
+
+/// Load and fully validate the scenario a command names.
+pub fn load(source: &Source) -> Result<Scenario, Failure> {
+    let mut s = match (&source.scenario, source.n, &source.builtin) {
+        (Some(p), _, _) => Scenario::load(p, Checks::Full),
+        (None, Some(n), _) => Scenario::generated(n),
+        (None, None, Some(b)) => Scenario::builtin(b),
+        (None, None, None) => Scenario::builtin("paper40"),
+    }
+    .map_err(Failure::bad_input)?;
+    if let Some(t) = source.t_total {
+        let mut f = s.file.clone();
+        f.t_total_s = t;
+        let origin = format!("{} with --t-total {t}", s.origin);
+        s = Scenario::from_file(f, &origin, Checks::Full).map_err(Failure::bad_input)?;
+    }
+    for note in &s.notes {
+        tracing::info!("{note}");
+    }
+    Ok(s)
+}
+
+fn plan(source: &Source, json: Option<&Path>, quiet: bool) -> Result<Exit, Failure> {
+    let s = load(source)?;
+    let c = certify(&s);
+    if !quiet {
+        print_certificate(&c);
+    } else {
+        println!("{}", c.verdict);
+    }
+    if let Some(p) = json {
+        let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
+        common::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
+    }
+    Ok(if c.verdict == "SAFE" {
+        Exit::Safe
+    } else {
+        Exit::Unsafe
+    })
+}
+
+fn print_certificate(c: &Certificate) {
+    println!(
+        "pre-flight certificate: {} ({} agents)",
+        c.scenario, c.agents
+    );
+    println!(
+        "  lambda_1(U_D) min       {:.4} at t = {:.2} s",
+        c.lambda1_min, c.t_lambda1_min_s
+    );
+    println!("  lambda_CD,min           {:.4}", c.lambda_cd_min);
+    println!(
+        "  D_B, D_S                {:.4} m, {:.4} m",
+        c.d_b_m, c.d_s_m
+    );
+    println!("  eps                     {} m", c.eps_m);
+    println!("  delta_max (eq. 35)      {:.4} m", c.delta_max_m);
+    println!("  delta (eq. 38)          {:.4} m", c.delta_m);
+    println!(
+        "  gains stability margin  {:.4} (eq. 26)",
+        c.gains_stability_margin
+    );
+    println!(
+        "  t_total_s               {} s (max follower deviation {:.4} m)",
+        c.t_total_s, c.max_follower_deviation_m
+    );
+    println!("  T_threshold             {:.2} s", c.t_threshold_s);
+    println!("verdict: {}", c.verdict);
+    for r in &c.reasons {
+        println!("  - {r}");
+    }
+}
+
+/// Exit code of a finished run.
+pub fn exit_of(r: &AuditReport) -> Exit {
+    match r.verdict {
+        "SAFE" => Exit::Safe,
+        "UNSAFE" => Exit::Unsafe,
+        _ => Exit::Fault,
+    }
+}
+
+/// One-paragraph summary of a run.
+pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet: bool) {
+    let wall = started.elapsed().as_secs_f64();
+    if quiet {
+        println!("{}", r.verdict);
+        return;
+    }
+    println!(
+        "{what}: {} agents, {} ticks in {:.2} s ({:.0} ticks/s), verdict {}",
+        r.agents,
+        r.ticks,
+        wall,
+        r.ticks as f64 / wall.max(1e-9),
+        r.verdict
+    );
+    println!(
+        "  max deviation {:.4} m (delta {:.4} m), min separation {:.4} m (2 eps {} m), min boundary distance {:.4} m, lambda_1 min {:.4} (lambda_CD,min {:.4})",
+        r.max_deviation_m, r.delta_m, r.min_separation_m, 2.0 * r.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.lambda_cd_min
+    );
+    if !r.violations.is_empty() {
+        println!(
+            "  {} violation(s), first: {:?}",
+            r.violations.len(),
+            r.violations[0]
+        );
+    }
+    if let Some(f) = &r.fault {
+        println!("  fault: {}", f.message);
+    }
+    println!("  run directory: {}", dir.display());
+}
