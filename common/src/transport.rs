@@ -81,6 +81,18 @@ pub enum TransportError {
         /// Names of the live nodes found, or the service that already exists.
         live: String,
     },
+    /// The team flies a different scenario than the process that tried to join it.
+    #[error("agent {id} cannot join team {team}: its scenario (hash {mine:016x}) differs from the team's (hash {team_hash}); start it with the team's scenario file")]
+    ScenarioMismatch {
+        /// The team.
+        team: TeamName,
+        /// The agent that tried to join.
+        id: u32,
+        /// The joining process's scenario hash.
+        mine: u64,
+        /// The team's scenario hash as published on its clock service.
+        team_hash: String,
+    },
     /// No orchestrator has created the team's services.
     #[error("team {team} does not exist ({who} found no service {service}); start its orchestrator first")]
     TeamNotFound {
@@ -300,6 +312,15 @@ pub struct TeamLayout {
     in_neighbors: BTreeMap<u32, Vec<u32>>,
     out_neighbors: BTreeMap<u32, Vec<u32>>,
     window: u32,
+    scenario_hash: u64,
+}
+
+/// The clock service's attribute that carries the team's scenario hash.
+pub const SCENARIO_HASH_KEY: &str = "cdm.scenario_hash";
+
+/// The attribute value of a scenario hash.
+pub fn scenario_hash_value(hash: u64) -> String {
+    format!("{hash:016x}")
 }
 
 impl TeamLayout {
@@ -351,7 +372,20 @@ impl TeamLayout {
             in_neighbors: ins,
             out_neighbors: outs,
             window,
+            scenario_hash: 0,
         })
+    }
+
+    /// The same layout carrying the team's scenario hash (published as an attribute of the clock
+    /// service; a member whose scenario differs is refused before it opens any other port).
+    pub fn with_scenario_hash(mut self, hash: u64) -> Self {
+        self.scenario_hash = hash;
+        self
+    }
+
+    /// The team's scenario hash.
+    pub fn scenario_hash(&self) -> u64 {
+        self.scenario_hash
     }
 
     /// The agent ids, sorted.

@@ -97,7 +97,7 @@ fn chain_member(
     ins: Vec<u32>,
     outs: Vec<u32>,
 ) -> Result<Vec<(u32, u64)>, TransportError> {
-    let mut m = MemberPorts::open(&team, id, &ins, &outs)?;
+    let mut m = MemberPorts::open(&team, id, 0, &ins, &outs)?;
     let mut got = vec![];
     let mut published = false;
     let mut stopped = false;
@@ -168,6 +168,8 @@ fn chain_members_receive_exactly_their_in_neighbors() {
     }
     orch.publish_clock(ClockMsg::stop(0, HASH, StopReason::Finished))
         .unwrap();
+    // Arrival order across publishers is not defined: compare by id.
+    states.sort_by_key(|s| s.id);
     let ids: Vec<u32> = states.iter().map(|s| s.id).collect();
     assert_eq!(ids, vec![0, 1, 2]);
     assert!(states
@@ -204,8 +206,8 @@ fn a_second_orchestrator_of_a_running_team_is_refused() {
 
     let other = OrchestratorPorts::create(&b, &lay).unwrap();
     // Both teams work side by side, each agent 1 belongs to its own team.
-    let m_a = MemberPorts::open(&a, 1, &[], &[2]).unwrap();
-    let m_b = MemberPorts::open(&b, 1, &[], &[2]).unwrap();
+    let m_a = MemberPorts::open(&a, 1, 0, &[], &[2]).unwrap();
+    let m_b = MemberPorts::open(&b, 1, 0, &[], &[2]).unwrap();
     assert!(m_a.orchestrator_alive() && m_b.orchestrator_alive());
     drop((m_a, m_b, first, other));
 }
@@ -217,7 +219,7 @@ fn members_are_refused_with_precise_errors() {
     let t = team(4);
     let missing = team(5);
 
-    let err = MemberPorts::open(&missing, 1, &[], &[]).err().unwrap();
+    let err = MemberPorts::open(&missing, 1, 0, &[], &[]).err().unwrap();
     assert!(matches!(err, TransportError::TeamNotFound { .. }), "{err}");
     assert!(err
         .to_string()
@@ -226,7 +228,17 @@ fn members_are_refused_with_precise_errors() {
     let lay = layout(&[1, 2], &[(1, 2)], 1);
     let orch = OrchestratorPorts::create(&t, &lay).unwrap();
 
-    let err = MemberPorts::open(&t, 99, &[], &[]).err().unwrap();
+    // A member flying another scenario is refused before it takes any slot.
+    let err = MemberPorts::open(&t, 1, 0xdead_beef, &[], &[2])
+        .err()
+        .unwrap();
+    assert!(
+        matches!(err, TransportError::ScenarioMismatch { id: 1, .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("00000000deadbeef"), "{err}");
+
+    let err = MemberPorts::open(&t, 99, 0, &[], &[]).err().unwrap();
     assert!(
         matches!(err, TransportError::NotInTeam { id: 99, .. }),
         "{err}"
@@ -235,8 +247,8 @@ fn members_are_refused_with_precise_errors() {
         .to_string()
         .starts_with(&format!("agent 99 is not part of team {t}")));
 
-    let mut one = MemberPorts::open(&t, 1, &[], &[2]).unwrap();
-    let err = MemberPorts::open(&t, 1, &[], &[2]).err().unwrap();
+    let mut one = MemberPorts::open(&t, 1, 0, &[], &[2]).unwrap();
+    let err = MemberPorts::open(&t, 1, 0, &[], &[2]).err().unwrap();
     assert!(
         matches!(
             err,
@@ -253,12 +265,12 @@ fn members_are_refused_with_precise_errors() {
         .starts_with(&format!("agent 1 of team {t} is already running")));
 
     // Agent 2 claims it wakes agent 1: the layout has no edge 2 -> 1.
-    let err = MemberPorts::open(&t, 2, &[1], &[1]).err().unwrap();
+    let err = MemberPorts::open(&t, 2, 0, &[1], &[1]).err().unwrap();
     assert!(
         matches!(err, TransportError::NotANeighbor { id: 2, peer: 1, .. }),
         "{err}"
     );
-    let two = MemberPorts::open(&t, 2, &[1], &[]).unwrap();
+    let two = MemberPorts::open(&t, 2, 0, &[1], &[]).unwrap();
 
     let err = one
         .publish(StateMsg::ok(0, HASH, 2, [0.0; 12]))
@@ -391,8 +403,8 @@ fn nothing_of_a_team_is_left_after_drop() {
 
     let lay = layout(&[0, 1], &[(0, 1), (1, 0)], 1);
     let mut orch = OrchestratorPorts::create(&t, &lay).unwrap();
-    let mut m0 = MemberPorts::open(&t, 0, &[1], &[1]).unwrap();
-    let mut m1 = MemberPorts::open(&t, 1, &[0], &[0]).unwrap();
+    let mut m0 = MemberPorts::open(&t, 0, 0, &[1], &[1]).unwrap();
+    let mut m1 = MemberPorts::open(&t, 1, 0, &[0], &[0]).unwrap();
     wait_ready(&orch, Duration::from_secs(10));
     orch.publish_clock(ClockMsg::run(0, HASH)).unwrap();
     for m in [&mut m0, &mut m1] {
@@ -466,7 +478,7 @@ fn child_process() {
         "orchestrator" => {
             Box::new(OrchestratorPorts::create(&t, &layout(&[0, 1], &[(0, 1)], 1)).unwrap())
         }
-        _ => Box::new(MemberPorts::open(&t, 0, &[], &[1]).unwrap()),
+        _ => Box::new(MemberPorts::open(&t, 0, 0, &[], &[1]).unwrap()),
     };
     println!("READY {}", iceoryx2_pid());
     thread::sleep(Duration::from_secs(50)); // until the parent kills us
@@ -496,8 +508,8 @@ fn stale_resources_of_a_killed_team_are_removed() {
     let orch = OrchestratorPorts::create(&t, &lay).unwrap();
     assert_eq!(orch.stale_nodes_removed(), 2);
     assert_eq!(files_of(&[orch_pid, member_pid]), Vec::<String>::new());
-    let m0 = MemberPorts::open(&t, 0, &[], &[1]).unwrap();
-    let m1 = MemberPorts::open(&t, 1, &[0], &[]).unwrap();
+    let m0 = MemberPorts::open(&t, 0, 0, &[], &[1]).unwrap();
+    let m1 = MemberPorts::open(&t, 1, 0, &[0], &[]).unwrap();
     wait_ready(&orch, Duration::from_secs(10));
     drop(m0);
 
@@ -525,7 +537,7 @@ fn stale_resources_of_a_killed_team_are_removed() {
 
 /// One agent of the throughput run: publishes every granted tick, drains its neighbours.
 fn lockstep_member(team: TeamName, id: u32, ins: Vec<u32>, outs: Vec<u32>) -> u64 {
-    let mut m = MemberPorts::open(&team, id, &ins, &outs).unwrap();
+    let mut m = MemberPorts::open(&team, id, 0, &ins, &outs).unwrap();
     let (mut next, mut grant, mut received) = (0u64, None::<u64>, 0u64);
     loop {
         if let Some(c) = m.latest_clock().unwrap() {

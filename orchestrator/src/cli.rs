@@ -32,6 +32,37 @@ pub enum Command {
         #[command(flatten)]
         out: OutDir,
     },
+    /// Fly the team as processes: one per quadcopter over iceoryx2 shared memory, a shared
+    /// lockstep clock, a live safety audit. Exit 0 safe and complete, 1 violation, 2 bad input,
+    /// 3 runtime fault.
+    Launch {
+        #[command(flatten)]
+        source: Source,
+        /// The run directory (default: runs/<team>).
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+        /// Write every K-th tick to telemetry.csv.
+        #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+        every: u64,
+        /// Reuse a non-empty --out directory.
+        #[arg(long)]
+        force: bool,
+        /// The team's name: its services' prefix ([A-Za-z0-9_-], at most 48 characters).
+        #[arg(long)]
+        team: Option<String>,
+        /// Do not start the processes: wait for them to be started by hand.
+        #[arg(long)]
+        no_spawn: bool,
+        /// How many ticks an agent may run ahead of the slowest (1 = strict lockstep).
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        window: u32,
+        /// Seconds without any agent progress before the team is stopped as faulty.
+        #[arg(long, default_value_t = 5.0)]
+        agent_timeout: f64,
+        /// Seconds to wait for hand-started processes (--no-spawn) to join.
+        #[arg(long, default_value_t = 300.0)]
+        join_timeout: f64,
+    },
     /// Work with scenario files.
     Scenario {
         #[command(subcommand)]

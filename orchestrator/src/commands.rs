@@ -1,14 +1,17 @@
 //! The commands behind the CLI.
 
-use std::path::Path;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use common::audit::AuditReport;
 use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, simulate, Certificate};
 
+use common::transport::TeamName;
+
 use crate::cli::{Cli, Command, ScenarioCommand, Source};
+use crate::launch::{launch, LaunchOptions};
 use crate::{Exit, Failure};
 
 pub fn run(cli: Cli) -> Result<Exit, Failure> {
@@ -20,6 +23,54 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             let started = Instant::now();
             let report = simulate(&s, &dir, out.every, |_| {}).map_err(Failure::fault)?;
             summary("simulate", &report, started, dir.path(), cli.quiet);
+            Ok(exit_of(&report))
+        }
+        Command::Launch {
+            source,
+            out,
+            every,
+            force,
+            team,
+            no_spawn,
+            window,
+            agent_timeout,
+            join_timeout,
+        } => {
+            let s = load(&source)?;
+            let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
+            let team = TeamName::new(&team_name)
+                .map_err(|e| Failure::bad_input(format!("--team: {e}")))?;
+            let secs = |v: f64, what: &str| {
+                if v.is_finite() && v > 0.0 {
+                    Ok(Duration::from_secs_f64(v))
+                } else {
+                    Err(Failure::bad_input(format!(
+                        "{what} must be a positive number of seconds, got {v}"
+                    )))
+                }
+            };
+            let opts = LaunchOptions {
+                out: out.unwrap_or_else(|| PathBuf::from("runs").join(team.as_str())),
+                team,
+                force,
+                every,
+                window,
+                spawn: !no_spawn,
+                agent_timeout: secs(agent_timeout, "--agent-timeout")?,
+                join_timeout: secs(join_timeout, "--join-timeout")?,
+                quiet: cli.quiet,
+            };
+            let started = Instant::now();
+            let (report, ticking) = launch(&s, &opts)?;
+            summary("launch", &report, started, &opts.out, cli.quiet);
+            if !cli.quiet && ticking > Duration::ZERO {
+                println!(
+                    "  ticking: {:.2} s ({:.0} ticks/s), start-up {:.2} s",
+                    ticking.as_secs_f64(),
+                    report.ticks as f64 / ticking.as_secs_f64(),
+                    (started.elapsed() - ticking).as_secs_f64()
+                );
+            }
             Ok(exit_of(&report))
         }
         Command::Scenario {

@@ -3,6 +3,7 @@
 
 mod cli;
 mod commands;
+mod launch;
 
 use clap::Parser;
 

@@ -7,7 +7,7 @@
 //! deadline passes or a guard is dropped.
 //!
 //! This is test support: it panics, with a message naming the command, file or deadline at
-//! fault, instead of returning errors.
+//! fault, instead of returning errors. Unix only (process groups, SIGKILL).
 
 use std::ffi::OsStr;
 use std::io::Read;
@@ -52,7 +52,8 @@ fn profile_dir() -> PathBuf {
 }
 
 /// The cargo arguments that select the profile whose output directory is `dir_name`
-/// (`debug` is the `dev` profile; any other directory is named after its profile).
+/// (`debug` is the `dev` profile, as for `cargo build`; any other directory is named after its
+/// profile).
 fn profile_args(dir_name: &str) -> Vec<String> {
     match dir_name {
         "debug" => vec!["--profile".into(), "dev".into()],
@@ -61,44 +62,68 @@ fn profile_args(dir_name: &str) -> Vec<String> {
     }
 }
 
-/// Build every binary of the workspace once per test process, with the running test's profile
-/// and target directory, so that `bin` never returns a stale binary.
-fn ensure_built() {
-    static BUILT: OnceLock<()> = OnceLock::new();
-    BUILT.get_or_init(|| {
-        let dir = profile_dir();
-        let profile = dir
-            .file_name()
+/// The `cargo build` that refreshes every workspace binary in `profile_dir`: the same profile,
+/// target directory and (for `<target>/<triple>/<profile>`) target triple as the running test.
+fn build_command(profile_dir: &Path) -> Command {
+    let name = |p: &Path| {
+        p.file_name()
             .and_then(OsStr::to_str)
-            .unwrap_or_else(|| panic!("harness: profile directory {} has no name", dir.display()))
-            .to_string();
-        let target_dir = dir.parent().unwrap_or_else(|| {
-            panic!("harness: profile directory {} has no parent", dir.display())
-        });
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
-        let mut cmd = Command::new(&cargo);
-        cmd.arg("build")
-            .arg("--bins")
-            .arg("--workspace")
-            .args(profile_args(&profile))
-            .arg("--manifest-path")
-            .arg(&manifest)
-            .arg("--target-dir")
-            .arg(target_dir)
-            .stdin(Stdio::null());
-        // Cargo's own output goes to the test's stderr (shown on failure or with --nocapture).
-        let status = cmd.status().unwrap_or_else(|e| {
-            panic!(
-                "harness: cannot start `{}` to build the workspace binaries: {e}",
-                cargo.to_string_lossy()
-            )
-        });
-        assert!(
-            status.success(),
-            "harness: building the workspace binaries failed ({status}): {cmd:?}"
-        );
+            .map(str::to_string)
+            .unwrap_or_else(|| panic!("harness: directory {} has no name", p.display()))
+    };
+    let parent = |p: &Path| {
+        p.parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| panic!("harness: directory {} has no parent", p.display()))
+    };
+    let profile = name(profile_dir);
+    let mut target_dir = parent(profile_dir);
+    let mut triple = None;
+    // Cargo marks the root of a target directory with CACHEDIR.TAG; a cross build puts the
+    // profile directory one level further down, under the target triple.
+    if !target_dir.join("CACHEDIR.TAG").exists()
+        && parent(&target_dir).join("CACHEDIR.TAG").exists()
+    {
+        triple = Some(name(&target_dir));
+        target_dir = parent(&target_dir);
+    }
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut cmd = Command::new(cargo);
+    cmd.arg("build")
+        .arg("--bins")
+        .arg("--workspace")
+        .args(profile_args(&profile))
+        .arg("--manifest-path")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml"))
+        .arg("--target-dir")
+        .arg(target_dir);
+    if let Some(t) = triple {
+        cmd.arg("--target").arg(t);
+    }
+    cmd.stdin(Stdio::null());
+    cmd
+}
+
+/// Build every binary of the workspace once per test process, with the running test's profile
+/// and target directory, so that `bin` never returns a stale binary. The outcome is kept: after
+/// a failed build every later call fails with the same message instead of building again.
+fn ensure_built() {
+    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
+    let outcome = BUILT.get_or_init(|| {
+        let mut cmd = build_command(&profile_dir());
+        match cmd.output() {
+            Err(e) => Err(format!("cannot start {cmd:?}: {e}")),
+            Ok(out) if !out.status.success() => Err(format!(
+                "{cmd:?} failed ({}):\n{}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr)
+            )),
+            Ok(_) => Ok(()),
+        }
     });
+    if let Err(e) = outcome {
+        panic!("harness: building the workspace binaries failed: {e}");
+    }
 }
 
 /// The path of a workspace binary (`orchestrator`, `agent`, `leader`) of the same profile as the
@@ -143,7 +168,7 @@ impl TempDir {
         TempDir { path }
     }
 
-    /// The directory (absolute).
+    /// The directory.
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -186,11 +211,15 @@ pub fn unique_team(tag: &str) -> String {
     format!("t{pid}_{tag}_{n}")
 }
 
-/// Kill a child's whole process group (it is its group's leader: see `prepare`).
+/// How long the output pumps get to drain once a child has exited or been killed.
+const DRAIN_GRACE: Duration = Duration::from_millis(500);
+
+/// Kill a child's whole process group with SIGKILL (the child leads its group: see `prepare`).
 fn kill_group(child: &mut Child) {
     if let Ok(pid) = libc::pid_t::try_from(child.id()) {
-        // SAFETY: kill(2) with a negative pid signals a process group; no memory is involved.
-        // The group id is the child's pid, which stays reserved until we reap the child.
+        // SAFETY: kill(2) takes no pointers. A negative pid signals the process group `pid`.
+        // Linux keeps a pid number in use while it names a live process group, so even after the
+        // leader has been reaped this can only reach helpers the child left in its group.
         unsafe {
             libc::kill(-pid, libc::SIGKILL);
         }
@@ -206,7 +235,7 @@ fn prepare(cmd: &mut Command) {
         .process_group(0);
 }
 
-/// Start a thread that appends everything `src` yields to `buf` and signals `done` at EOF.
+/// Start a thread that appends everything `src` yields to `buf`; the receiver hears at EOF.
 fn pump(mut src: impl Read + Send + 'static, buf: Arc<Mutex<Vec<u8>>>) -> Receiver<()> {
     let (tx, rx) = mpsc::channel();
     thread::spawn(move || {
@@ -230,7 +259,9 @@ struct Captured {
     child: Child,
     stdout: Arc<Mutex<Vec<u8>>>,
     stderr: Arc<Mutex<Vec<u8>>>,
+    /// EOF notices of the stdout and stderr pumps, and whether each has arrived.
     eof: [Receiver<()>; 2],
+    eof_seen: [bool; 2],
     program: String,
 }
 
@@ -252,6 +283,7 @@ impl Captured {
             stdout,
             stderr,
             eof,
+            eof_seen: [false; 2],
             program,
         }
     }
@@ -261,8 +293,20 @@ impl Captured {
         (get(&self.stdout), get(&self.stderr))
     }
 
-    /// Wait for exit and for both pipes to close, until `until`. On time-out the group is killed
-    /// and `Err` carries what was collected so far.
+    /// Wait until both pipes have reached EOF (everything written has been collected), or
+    /// `until`; true when they have.
+    fn pipes_closed(&mut self, until: Instant) -> bool {
+        for (rx, seen) in self.eof.iter().zip(self.eof_seen.iter_mut()) {
+            if !*seen {
+                let left = until.saturating_duration_since(Instant::now());
+                *seen = rx.recv_timeout(left).is_ok();
+            }
+        }
+        self.eof_seen.iter().all(|s| *s)
+    }
+
+    /// Wait for exit and for both pipes to close, until `until` (plus a short grace for the
+    /// pipes). Otherwise the group is killed and `Err` carries what was collected.
     fn wait_until(&mut self, until: Instant) -> Result<Output, Output> {
         let status: Option<ExitStatus> = loop {
             match self.child.try_wait() {
@@ -272,17 +316,12 @@ impl Captured {
                 Err(e) => panic!("harness: waiting for {}: {e}", self.program),
             }
         };
-        // A helper the child left behind may still hold the pipes open: give them until the
-        // deadline too, then kill the group.
-        let mut closed = status.is_some();
-        for rx in &self.eof {
-            if closed {
-                let left = until.saturating_duration_since(Instant::now());
-                closed = rx.recv_timeout(left).is_ok();
-            }
-        }
+        // A helper the child left behind may still hold the pipes open: it gets until the
+        // deadline too, then the group is killed.
+        let closed = status.is_some() && self.pipes_closed(until.max(Instant::now() + DRAIN_GRACE));
         if !closed {
             kill_group(&mut self.child);
+            self.pipes_closed(Instant::now() + DRAIN_GRACE);
         }
         let status = match status {
             Some(s) => s,
@@ -320,39 +359,40 @@ pub fn run(cmd: &mut Command, deadline: Duration) -> Output {
     }
 }
 
-/// Start a command in the background (stdin null, output captured continuously). The returned
-/// guard kills the child's process group with SIGKILL when dropped, so a failing test leaves no
-/// process behind.
+/// Start a command in the background (stdin null, its own process group, stdout and stderr
+/// collected continuously). The returned guard kills the child's process group with SIGKILL
+/// when dropped, so a failing test leaves no process behind.
 pub fn spawn(cmd: &mut Command) -> Running {
     Running {
         inner: Some(Captured::start(cmd)),
     }
 }
 
-/// A background child started by `spawn`; killed (with its process group) on drop.
+/// A background child started by `spawn`; its process group is killed on drop.
 pub struct Running {
+    /// `None` once `finish` or `kill` has taken the child.
     inner: Option<Captured>,
 }
 
 impl Running {
-    fn captured(&self) -> &Captured {
+    fn captured(&mut self) -> &mut Captured {
         self.inner
-            .as_ref()
-            .unwrap_or_else(|| panic!("harness: child already finished"))
+            .as_mut()
+            .unwrap_or_else(|| panic!("harness: the child was already finished or killed"))
     }
 
     /// The child's process id (also its process group id).
-    pub fn id(&self) -> u32 {
+    pub fn id(&mut self) -> u32 {
         self.captured().child.id()
     }
 
     /// The command line, for messages.
-    pub fn program(&self) -> &str {
-        &self.captured().program
+    pub fn program(&mut self) -> String {
+        self.captured().program.clone()
     }
 
     /// Everything written to stdout and stderr so far (lossy UTF-8).
-    pub fn output_so_far(&self) -> (String, String) {
+    pub fn output_so_far(&mut self) -> (String, String) {
         let (o, e) = self.captured().snapshot();
         (
             String::from_utf8_lossy(&o).into_owned(),
@@ -362,29 +402,30 @@ impl Running {
 
     /// Whether the child has exited (its status is kept for `finish`).
     pub fn has_exited(&mut self) -> bool {
-        match self.inner.as_mut() {
-            Some(c) => matches!(c.child.try_wait(), Ok(Some(_))),
-            None => true,
-        }
+        matches!(self.captured().child.try_wait(), Ok(Some(_)))
     }
 
-    /// Wait until stdout or stderr contains `needle`; panics (killing the child) if the deadline
-    /// passes or the child exits first without having written it.
+    /// Wait until stdout or stderr contains `needle`. Panics, killing the child's group, if the
+    /// deadline passes or the child exits without having written it.
     pub fn wait_for_output(&mut self, needle: &str, deadline: Duration) {
         let until = Instant::now() + deadline;
         loop {
+            let exited = self.has_exited();
+            if exited {
+                // Let the pumps collect the last bytes before deciding.
+                self.captured().pipes_closed(Instant::now() + DRAIN_GRACE);
+            }
             let (o, e) = self.output_so_far();
             if o.contains(needle) || e.contains(needle) {
                 return;
             }
-            let exited = self.has_exited();
             if exited || Instant::now() >= until {
                 let why = if exited {
                     "exited".to_string()
                 } else {
                     format!("was still running after {deadline:?}")
                 };
-                let program = self.program().to_string();
+                let program = self.program();
                 let out = self.kill();
                 panic!(
                     "harness: {program} {why} without writing {needle:?}.\n{}",
@@ -395,13 +436,13 @@ impl Running {
         }
     }
 
-    /// Wait for the child to exit on its own and return its output; panics (killing its group)
-    /// if it is still running after `deadline`.
+    /// Wait for the child to exit on its own and return its output. Panics, killing its group,
+    /// if it (or a helper holding its output) is still running after `deadline`.
     pub fn finish(mut self, deadline: Duration) -> Output {
         let mut c = self
             .inner
             .take()
-            .unwrap_or_else(|| panic!("harness: child already finished"));
+            .unwrap_or_else(|| panic!("harness: the child was already finished or killed"));
         match c.wait_until(Instant::now() + deadline) {
             Ok(out) => out,
             Err(out) => panic!(
@@ -417,10 +458,9 @@ impl Running {
         let mut c = self
             .inner
             .take()
-            .unwrap_or_else(|| panic!("harness: child already finished"));
+            .unwrap_or_else(|| panic!("harness: the child was already finished or killed"));
         kill_group(&mut c.child);
-        // The pipes close once the group is dead; a short grace period for the pumps.
-        match c.wait_until(Instant::now() + Duration::from_secs(5)) {
+        match c.wait_until(Instant::now()) {
             Ok(out) | Err(out) => out,
         }
     }
@@ -470,4 +510,100 @@ pub fn write_scenario(dir: &Path, name: &str, file: &ScenarioFile) -> PathBuf {
 /// with goals), 3 secondary leaders (ids 4-6), 34 followers (ids 7-40).
 pub fn paper40() -> ScenarioFile {
     common::scenario::paper40()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sh(script: &str) -> Command {
+        let mut c = Command::new("sh");
+        c.arg("-c").arg(script);
+        c
+    }
+
+    #[test]
+    fn run_captures_status_and_output() {
+        let out = run(
+            &mut sh("echo out; echo err >&2; exit 3"),
+            Duration::from_secs(30),
+        );
+        assert_eq!(out.status.code(), Some(3), "{}", describe(&out));
+        assert_eq!(out.stdout, b"out\n");
+        assert_eq!(out.stderr, b"err\n");
+    }
+
+    #[test]
+    #[should_panic(expected = "did not finish within")]
+    fn run_kills_a_child_past_its_deadline() {
+        run(&mut sh("sleep 30"), Duration::from_millis(200));
+    }
+
+    #[test]
+    #[should_panic(expected = "did not finish within")]
+    fn run_kills_a_helper_left_holding_the_output() {
+        run(
+            &mut sh("sleep 30 & echo started"),
+            Duration::from_millis(300),
+        );
+    }
+
+    #[test]
+    fn dropping_a_spawned_child_kills_it() {
+        let mut child = spawn(&mut sh("echo ready; sleep 30"));
+        child.wait_for_output("ready", Duration::from_secs(30));
+        let pid = libc::pid_t::try_from(child.id()).expect("pid fits pid_t");
+        drop(child);
+        // SAFETY: signal 0 only checks whether the process exists.
+        let alive = unsafe { libc::kill(pid, 0) } == 0;
+        assert!(!alive, "process {pid} survived its guard");
+    }
+
+    #[test]
+    #[should_panic(expected = "exited without writing")]
+    fn waiting_for_output_a_child_never_writes_fails() {
+        spawn(&mut sh("echo something else")).wait_for_output("ready", Duration::from_secs(30));
+    }
+
+    #[test]
+    fn finish_returns_the_output_of_a_spawned_child() {
+        let out = spawn(&mut sh("echo done")).finish(Duration::from_secs(30));
+        assert!(out.status.success(), "{}", describe(&out));
+        assert_eq!(out.stdout, b"done\n");
+    }
+
+    #[test]
+    fn team_names_are_unique_short_and_plain() {
+        let a = unique_team("a tag/with:odd chars and a very long tail that goes on and on");
+        let b = unique_team("a tag/with:odd chars and a very long tail that goes on and on");
+        assert_ne!(a, b);
+        for t in [&a, &b] {
+            assert!(t.len() <= MAX_TEAM_LEN, "{t} is too long");
+            assert!(
+                t.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-'),
+                "{t} has other characters"
+            );
+            assert!(t.starts_with(&format!("t{}_", std::process::id())), "{t}");
+        }
+    }
+
+    #[test]
+    fn temp_dir_is_removed_on_drop() {
+        let dir = TempDir::new();
+        let path = dir.path().to_path_buf();
+        write_text(&path, "x.toml", "x = 1\n");
+        assert!(path.join("x.toml").is_file());
+        drop(dir);
+        assert!(!path.exists(), "{} survived its guard", path.display());
+    }
+
+    #[test]
+    fn paper40_round_trips_through_a_written_file() {
+        let dir = TempDir::new();
+        let path = write_scenario(dir.path(), "paper40.toml", &paper40());
+        let text = std::fs::read_to_string(&path).expect("read back");
+        let back: ScenarioFile = toml::from_str(&text).expect("parse back");
+        assert_eq!(back, paper40());
+    }
 }

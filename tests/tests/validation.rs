@@ -94,13 +94,15 @@ fn weights(p: V3, t: [V3; 3], n: V3) -> V3 {
     ]
 }
 
-/// Run `orchestrator plan --scenario path`.
+/// Run `orchestrator plan --scenario path`. `RUST_LOG` is cleared so that the notes the tool
+/// logs at its default level (projections) appear whatever the caller's environment says.
 fn plan(path: &Path, deadline: Duration) -> Output {
     run(
         Command::new(bin("orchestrator"))
             .arg("plan")
             .arg("--scenario")
-            .arg(path),
+            .arg(path)
+            .env_remove("RUST_LOG"),
         deadline,
     )
 }

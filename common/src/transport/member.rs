@@ -54,13 +54,15 @@ pub struct MemberPorts {
 }
 
 impl MemberPorts {
-    /// Opens agent `id`'s ports in `team`. Fails with [`TransportError::TeamNotFound`] when no
+    /// Opens agent `id`'s ports in `team`. Fails with [`TransportError::ScenarioMismatch`] when the
+    /// team flies another scenario (checked before any port is taken), [`TransportError::TeamNotFound`] when no
     /// orchestrator created the team, [`TransportError::NotInTeam`] when `id` (or an in-neighbour)
     /// has no state service, [`TransportError::AgentAlreadyRunning`] when another process holds
     /// agent `id`, and [`TransportError::NotANeighbor`] when the team's layout has no such edge.
     pub fn open(
         team: &TeamName,
         id: u32,
+        scenario_hash: u64,
         in_neighbors: &[u32],
         out_neighbors: &[u32],
     ) -> Result<Self, TransportError> {
@@ -84,6 +86,26 @@ impl MemberPorts {
                 },
                 e => err(&name, "open service", &e),
             })?;
+
+        // The team's scenario must be ours before we take any slot in it.
+        {
+            use iceoryx2::service::attribute::AttributeKey;
+            let key = AttributeKey::try_from(super::SCENARIO_HASH_KEY)
+                .map_err(|e| err(&name, "attribute key", &e))?;
+            let team_hash = clock
+                .attributes()
+                .key_value(&key, 0)
+                .map(|v| v.to_string())
+                .unwrap_or_else(|| "none".into());
+            if team_hash != super::scenario_hash_value(scenario_hash) {
+                return Err(TransportError::ScenarioMismatch {
+                    team: team.clone(),
+                    id,
+                    mine: scenario_hash,
+                    team_hash,
+                });
+            }
+        }
 
         // Then the agent's identity: its exclusive publisher slot.
         let name = team.state_service(id);

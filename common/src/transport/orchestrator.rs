@@ -370,7 +370,7 @@ impl Ports {
             .subscriber_max_borrowed_samples(1)
             .history_size(0)
             .enable_safe_overflow(true)
-            .create()
+            .create_with_attributes(&scenario_attribute(team, layout.scenario_hash())?)
             .map_err(|e| pubsub_create_error(team, &name, e))?;
         let clock_publisher = clock
             .publisher_builder()
@@ -434,4 +434,21 @@ fn event_create_error(team: &TeamName, service: &str, e: EventCreateError) -> Tr
         }
         e => service_error(team, WHO, service, "create service", e),
     }
+}
+
+/// The clock service's attribute carrying the scenario hash.
+fn scenario_attribute(
+    team: &TeamName,
+    hash: u64,
+) -> Result<iceoryx2::service::attribute::AttributeSpecifier, TransportError> {
+    use iceoryx2::service::attribute::{AttributeKey, AttributeSpecifier, AttributeValue};
+    let bad = |e: &dyn std::fmt::Debug| TransportError::InvalidLayout {
+        reason: format!("team {team}: cannot define the scenario hash attribute: {e:?}"),
+    };
+    let key = AttributeKey::try_from(super::SCENARIO_HASH_KEY).map_err(|e| bad(&e))?;
+    let value =
+        AttributeValue::try_from(super::scenario_hash_value(hash).as_str()).map_err(|e| bad(&e))?;
+    AttributeSpecifier::new()
+        .define(&key, &value)
+        .map_err(|e| bad(&e))
 }

@@ -1,0 +1,478 @@
+//! `orchestrator launch`: create the team's services, spawn one process per quadcopter (or wait
+//! for hand-started ones), step the shared clock, audit every tick live, and stop the team.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use common::audit::{AuditReport, Auditor, FaultRecord};
+use common::engine::desired_positions;
+use common::formation::Role;
+use common::math::{vec3, Vec3};
+use common::messages::{AgentStatus, ClockMsg, StateMsg, StopReason};
+use common::rundir::RunDir;
+use common::scenario::Scenario;
+use common::simulate::id_order;
+use common::step::tick_time;
+use common::telemetry::Row;
+use common::transport::{
+    raise_fd_limit, remove_dead_nodes, OrchestratorPorts, TeamLayout, TeamName,
+};
+
+use crate::Failure;
+
+/// Options of a launch, validated.
+pub struct LaunchOptions {
+    pub team: TeamName,
+    pub out: PathBuf,
+    pub force: bool,
+    pub every: u64,
+    pub window: u32,
+    pub spawn: bool,
+    pub agent_timeout: Duration,
+    pub join_timeout: Duration,
+    pub quiet: bool,
+}
+
+struct Spawned {
+    id: u32,
+    child: Child,
+}
+
+/// Run a launch to the end; returns the audit report and the wall time of the ticking phase.
+pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration), Failure> {
+    let interrupted = common::signals::install();
+    let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
+    dir.write_scenario(s).map_err(Failure::fault)?;
+    let scenario_file = dir.path().join("scenario.toml");
+    match raise_fd_limit() {
+        Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
+        Err(e) => tracing::warn!("{e}"),
+    }
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+    let ins: BTreeMap<u32, Vec<u32>> = s
+        .formation
+        .members
+        .iter()
+        .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
+        .collect();
+    let layout = TeamLayout::new(ids.clone(), ins, o.window)
+        .map_err(Failure::fault)?
+        .with_scenario_hash(s.content_hash());
+    let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
+    if ports.stale_nodes_removed() > 0 {
+        tracing::info!(
+            removed = ports.stale_nodes_removed(),
+            "removed stale resources of a previous team {}",
+            o.team
+        );
+    }
+    let mut children = Vec::new();
+    if o.spawn {
+        for m in &s.formation.members {
+            match spawn_member(&scenario_file, &o.team, m.id, m.role) {
+                Ok(c) => children.push(Spawned { id: m.id, child: c }),
+                Err(e) => {
+                    stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
+                    return Err(Failure::fault(format!("cannot start agent {}: {e}", m.id)));
+                }
+            }
+        }
+    } else if !o.quiet {
+        println!(
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
+            o.team,
+            ids.len(),
+            scenario_file.display(),
+            o.team,
+            s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
+            scenario_file.display(),
+            o.team,
+            s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
+        );
+    }
+    let mut audit = Auditor::new(s);
+    let result = run_team(
+        s,
+        o,
+        &dir,
+        &mut ports,
+        &mut children,
+        &mut audit,
+        interrupted,
+    );
+    let (complete, reason, elapsed) = match result {
+        Ok(t) => (true, StopReason::Finished, t),
+        Err((fault, reason)) => {
+            audit.fault(fault);
+            (false, reason, Duration::ZERO)
+        }
+    };
+    stop_team(&mut ports, &mut children, s, reason);
+    let shut = ports.shutdown();
+    if let Err(e) = shut {
+        tracing::warn!("{e}");
+    }
+    let report = audit.finish(complete);
+    dir.write_audit(&report).map_err(Failure::fault)?;
+    Ok((report, elapsed))
+}
+
+fn spawn_member(scenario: &Path, team: &TeamName, id: u32, role: Role) -> std::io::Result<Child> {
+    let exe = std::env::current_exe()?;
+    let bin = exe.with_file_name(if role.is_leader() { "leader" } else { "agent" });
+    Command::new(bin)
+        .arg("--scenario")
+        .arg(scenario)
+        .arg("--team")
+        .arg(team.as_str())
+        .arg("--id")
+        .arg(id.to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .spawn()
+}
+
+type Stop = (FaultRecord, StopReason);
+
+fn fault(
+    kind: &str,
+    agent: Option<u32>,
+    peer: Option<u32>,
+    tick: u64,
+    message: String,
+) -> FaultRecord {
+    FaultRecord {
+        kind: kind.into(),
+        agent,
+        peer,
+        tick,
+        message,
+    }
+}
+
+/// Wait for every process to open its ports, record the subscription graph, then tick.
+fn run_team(
+    s: &Scenario,
+    o: &LaunchOptions,
+    dir: &RunDir,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    audit: &mut Auditor,
+    interrupted: &std::sync::atomic::AtomicBool,
+) -> Result<Duration, Stop> {
+    let hash = s.content_hash();
+    let n = s.formation.members.len();
+    // 1. Readiness, with a deadline.
+    let join_deadline = if o.spawn {
+        Duration::from_secs(30) + Duration::from_millis(60 * n as u64)
+    } else {
+        o.join_timeout
+    };
+    let started = Instant::now();
+    loop {
+        if interrupted.load(Ordering::Relaxed) {
+            return Err((
+                fault(
+                    "interrupted",
+                    None,
+                    None,
+                    0,
+                    "interrupted before the start".into(),
+                ),
+                StopReason::Interrupted,
+            ));
+        }
+        if ports.readiness().is_complete() {
+            break;
+        }
+        check_children(children, 0)?;
+        if started.elapsed() > join_deadline {
+            let waiting = ports.readiness().waiting_for();
+            return Err((
+                fault(
+                    "join-timeout",
+                    waiting.first().copied(),
+                    None,
+                    0,
+                    format!(
+                        "agents {waiting:?} did not join team {} within {join_deadline:?}",
+                        o.team
+                    ),
+                ),
+                StopReason::AgentSilent,
+            ));
+        }
+        let _ = ports.wait(Duration::from_millis(20));
+    }
+    tracing::info!(
+        agents = n,
+        startup_s = started.elapsed().as_secs_f64(),
+        "team {} ready",
+        o.team
+    );
+    // 2. The subscription graph as iceoryx2 sees it.
+    let mut subs = BTreeMap::new();
+    for m in &s.formation.members {
+        let nodes = ports.subscriber_nodes(m.id).unwrap_or_default();
+        subs.insert(m.id.to_string(), nodes);
+    }
+    let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
+    let _ = common::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
+
+    // 3. Tick.
+    let mut tel = dir.telemetry(o.every).map_err(|e| {
+        (
+            fault("io", None, None, 0, e.to_string()),
+            StopReason::AgentFault,
+        )
+    })?;
+    let last = s.last_tick();
+    let order = id_order(s);
+    let index: BTreeMap<u32, usize> = s
+        .formation
+        .members
+        .iter()
+        .enumerate()
+        .map(|(k, m)| (m.id, k))
+        .collect();
+    let window = u64::from(o.window.max(1));
+    let mut pending: BTreeMap<u64, (Vec<Option<StateMsg>>, usize)> = BTreeMap::new();
+    let mut next_tick: u64 = 0; // the next tick to complete
+    let mut grant = (window - 1).min(last);
+    let send = |ports: &mut OrchestratorPorts, g: u64| ports.publish_clock(ClockMsg::run(g, hash));
+    send(ports, grant).map_err(|e| {
+        (
+            fault("transport", None, None, 0, e.to_string()),
+            StopReason::AgentFault,
+        )
+    })?;
+    let ticking = Instant::now();
+    let mut last_progress = Instant::now();
+    let mut last_child_check = Instant::now();
+    let mut ht = Vec::new();
+    let mut pos: Vec<Vec3> = vec![Vec3::zeros(); n];
+    let mut rows: Vec<Row> = Vec::with_capacity(n);
+    loop {
+        if interrupted.load(Ordering::Relaxed) {
+            return Err((
+                fault(
+                    "interrupted",
+                    None,
+                    None,
+                    next_tick,
+                    format!("interrupted at tick {next_tick}"),
+                ),
+                StopReason::Interrupted,
+            ));
+        }
+        let mut bad: Option<FaultRecord> = None;
+        ports
+            .receive_states(|msg| {
+                let Some(&k) = index.get(&msg.id) else { return };
+                if let AgentStatus::Fault { code, peer } = msg.status() {
+                    if bad.is_none() {
+                        bad = Some(fault(
+                            "agent-fault",
+                            Some(msg.id),
+                            peer,
+                            msg.tick,
+                            format!(
+                                "agent {} reported {:?} at tick {} (peer {:?})",
+                                msg.id, code, msg.tick, peer
+                            ),
+                        ));
+                    }
+                    return;
+                }
+                if msg.tick < next_tick || msg.tick > grant {
+                    return;
+                }
+                let slot = pending
+                    .entry(msg.tick)
+                    .or_insert_with(|| (vec![None; n], 0));
+                if slot.0[k].is_none() {
+                    slot.1 += 1;
+                }
+                slot.0[k] = Some(msg);
+            })
+            .map_err(|e| {
+                (
+                    fault("transport", None, None, next_tick, e.to_string()),
+                    StopReason::AgentFault,
+                )
+            })?;
+        if let Some(f) = bad {
+            return Err((f, StopReason::AgentFault));
+        }
+        let mut progressed = false;
+        while pending.get(&next_tick).is_some_and(|(_, c)| *c == n) {
+            let Some((states, _)) = pending.remove(&next_tick) else {
+                break;
+            };
+            let tick = next_tick;
+            let t = tick_time(tick, s.dt_s());
+            desired_positions(s, t, &mut ht);
+            for (k, st) in states.iter().enumerate() {
+                if let Some(m) = st {
+                    pos[k] = vec3([m.state[0], m.state[1], m.state[2]]);
+                }
+            }
+            audit.observe(tick, t, &pos, &ht);
+            if tel.keeps(tick) {
+                rows.clear();
+                for &k in &order {
+                    let m = &s.formation.members[k];
+                    let st = states[k].map(|x| x.state).unwrap_or([f64::NAN; 12]);
+                    rows.push(Row {
+                        tick,
+                        t_s: t,
+                        id: m.id,
+                        role: m.role,
+                        r: vec3([st[0], st[1], st[2]]),
+                        v: vec3([st[3], st[4], st[5]]),
+                        ht: ht[k],
+                    });
+                }
+                tel.write_tick(&rows).map_err(|e| {
+                    (
+                        fault("io", None, None, tick, e.to_string()),
+                        StopReason::AgentFault,
+                    )
+                })?;
+            }
+            next_tick += 1;
+            progressed = true;
+        }
+        if next_tick > last {
+            let _ = tel.flush();
+            return Ok(ticking.elapsed());
+        }
+        let want = (next_tick + window - 1).min(last);
+        if want > grant {
+            grant = want;
+            send(ports, grant).map_err(|e| {
+                (
+                    fault("transport", None, None, next_tick, e.to_string()),
+                    StopReason::AgentFault,
+                )
+            })?;
+        }
+        if progressed {
+            last_progress = Instant::now();
+            let _ = tel.flush();
+            continue;
+        }
+        if last_child_check.elapsed() > Duration::from_millis(100) {
+            last_child_check = Instant::now();
+            if let Err(e) = check_children(children, next_tick) {
+                let _ = tel.flush();
+                return Err(e);
+            }
+        }
+        if last_progress.elapsed() > o.agent_timeout {
+            let _ = tel.flush();
+            let have = pending.get(&next_tick);
+            let missing: Vec<u32> = s
+                .formation
+                .members
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| have.is_none_or(|(v, _)| v[*k].is_none()))
+                .map(|(_, m)| m.id)
+                .collect();
+            return Err((
+                fault(
+                    "agent-silent",
+                    missing.first().copied(),
+                    None,
+                    next_tick,
+                    format!(
+                        "agents {missing:?} sent no state for tick {next_tick} within {:?}",
+                        o.agent_timeout
+                    ),
+                ),
+                StopReason::AgentSilent,
+            ));
+        }
+        let _ = ports.wait(Duration::from_millis(20));
+    }
+}
+
+/// A spawned member that exited before the end is a fault, named with its id and the tick.
+fn check_children(children: &mut [Spawned], tick: u64) -> Result<(), Stop> {
+    for c in children.iter_mut() {
+        if let Ok(Some(status)) = c.child.try_wait() {
+            use std::os::unix::process::ExitStatusExt;
+            let how = match (status.code(), status.signal()) {
+                (_, Some(sig)) => format!("was killed by signal {sig}"),
+                (Some(code), _) => format!("exited with code {code}"),
+                _ => "exited".into(),
+            };
+            return Err((
+                fault(
+                    "agent-exited",
+                    Some(c.id),
+                    None,
+                    tick,
+                    format!("agent {} {how} at tick {tick}", c.id),
+                ),
+                StopReason::AgentFault,
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Stop message, then SIGTERM, then SIGKILL for a process that does not stop; then remove the
+/// dead nodes' resources. Bounded well under a second.
+fn stop_team(
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    s: &Scenario,
+    reason: StopReason,
+) {
+    let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), s.content_hash(), reason));
+    let wait_all = |children: &mut [Spawned], d: Duration| {
+        let until = Instant::now() + d;
+        loop {
+            let alive = children
+                .iter_mut()
+                .map(|c| matches!(c.child.try_wait(), Ok(None)))
+                .filter(|a| *a)
+                .count();
+            if alive == 0 || Instant::now() >= until {
+                return alive;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    };
+    let graceful = if reason == StopReason::Finished {
+        Duration::from_secs(3)
+    } else {
+        Duration::from_millis(300)
+    };
+    if wait_all(children, graceful) > 0 {
+        for c in children.iter_mut() {
+            if matches!(c.child.try_wait(), Ok(None)) {
+                // SAFETY: plain kill(2) on our own child's pid.
+                unsafe {
+                    libc::kill(c.child.id() as libc::pid_t, libc::SIGTERM);
+                }
+            }
+        }
+        if wait_all(children, Duration::from_millis(300)) > 0 {
+            for c in children.iter_mut() {
+                let _ = c.child.kill();
+            }
+            wait_all(children, Duration::from_millis(300));
+        }
+    }
+    match remove_dead_nodes(ports.team()) {
+        Ok(0) => {}
+        Ok(k) => tracing::info!(removed = k, "removed resources of stopped processes"),
+        Err(e) => tracing::warn!("{e}"),
+    }
+}
