@@ -102,16 +102,11 @@ pub struct AuditReport {
     pub complete: bool,
     pub t_total_s: Real,
     pub dt_s: Real,
-    pub lambda1_min: Real,
-    pub t_lambda1_min_s: Real,
+    /// The scenario's safety numbers (Sec. VI).
+    #[serde(flatten)]
+    pub numbers: SafetyNumbers,
     /// lambda_1(U_D) minimum over the audited ticks.
     pub lambda1_min_run: Real,
-    pub lambda_cd_min: Real,
-    pub d_b_m: Real,
-    pub d_s_m: Real,
-    pub delta_max_m: Real,
-    pub delta_m: Real,
-    pub eps_m: Real,
     /// Largest ||r_i - r_i,HT||_2 over the run, every agent (ERRATA 11: the guarantee's norm).
     pub max_deviation_m: Real,
     /// Largest ||r_i - r_i,HT||_inf (the paper's E_max, Sec. VII-D).
@@ -124,6 +119,17 @@ pub struct AuditReport {
     pub violations: Vec<Violation>,
     pub violations_dropped: u64,
     pub fault: Option<FaultRecord>,
+}
+
+/// One evaluated condition at one tick.
+struct Check {
+    kind: &'static str,
+    agents: Vec<u32>,
+    bad: bool,
+    tick: u64,
+    t: Real,
+    value: Real,
+    limit: Real,
 }
 
 /// The audit accumulator.
@@ -159,15 +165,8 @@ impl Auditor {
                 complete: false,
                 t_total_s: scenario.file.t_total_s,
                 dt_s: scenario.dt_s(),
-                lambda1_min: numbers.lambda1_min,
-                t_lambda1_min_s: numbers.t_lambda1_min_s,
+                numbers,
                 lambda1_min_run: Real::INFINITY,
-                lambda_cd_min: numbers.lambda_cd_min,
-                d_b_m: numbers.d_b_m,
-                d_s_m: numbers.d_s_m,
-                delta_max_m: numbers.delta_max_m,
-                delta_m: numbers.delta_m,
-                eps_m: numbers.eps_m,
                 max_deviation_m: 0.0,
                 max_deviation_inf_m: 0.0,
                 max_follower_deviation_m: 0.0,
@@ -185,35 +184,26 @@ impl Auditor {
         &self.numbers
     }
 
-    fn flag(
-        &mut self,
-        kind: &'static str,
-        agents: Vec<u32>,
-        bad: bool,
-        tick: u64,
-        t: Real,
-        value: Real,
-        limit: Real,
-    ) {
-        let key = (kind, agents);
+    fn flag(&mut self, c: Check) {
+        let key = (c.kind, c.agents);
         let was = self.active.get(&key).copied().unwrap_or(false);
-        if bad && !was {
+        if c.bad && !was {
             if self.report.violations.len() < MAX_VIOLATION_RECORDS {
-                tracing::warn!(kind, tick, t_s = t, agents = ?key.1, value, limit, "safety violation");
+                tracing::warn!(kind = c.kind, tick = c.tick, t_s = c.t, agents = ?key.1, value = c.value, limit = c.limit, "safety violation");
                 self.report.violations.push(Violation {
-                    kind,
-                    tick,
-                    t_s: t,
+                    kind: c.kind,
+                    tick: c.tick,
+                    t_s: c.t,
                     agents: key.1.clone(),
-                    value,
-                    limit,
+                    value: c.value,
+                    limit: c.limit,
                 });
             } else {
                 self.report.violations_dropped += 1;
             }
         }
-        if bad || was {
-            self.active.insert(key, bad);
+        if c.bad || was {
+            self.active.insert(key, c.bad);
         }
     }
 
@@ -236,15 +226,15 @@ impl Auditor {
                 self.report.max_follower_deviation_m.max(devs[k].1);
         }
         for (k, d2) in devs {
-            self.flag(
-                "tracking",
-                vec![self.ids[k]],
-                d2 > n.delta_m,
+            self.flag(Check {
+                kind: "tracking",
+                agents: vec![self.ids[k]],
+                bad: d2 > n.delta_m,
                 tick,
                 t,
-                d2,
-                n.delta_m,
-            );
+                value: d2,
+                limit: n.delta_m,
+            });
         }
         // Collisions: every pair closer than 2 eps.
         let (sep, _, _) = safety::min_separation(pos);
@@ -268,7 +258,15 @@ impl Auditor {
             }
         }
         for (ids, d) in close {
-            self.flag("collision", ids, true, tick, t, d, 2.0 * n.eps_m);
+            self.flag(Check {
+                kind: "collision",
+                agents: ids,
+                bad: true,
+                tick,
+                t,
+                value: d,
+                limit: 2.0 * n.eps_m,
+            });
         }
         // Containment (Theorem 3): the prism over the leaders' desired polygon.
         let verts: Vec<Vec3> = self.polygon.iter().map(|&k| ht[k]).collect();
@@ -288,15 +286,15 @@ impl Auditor {
                 } else {
                     prism.half_height_m - height
                 };
-                self.flag(
-                    "containment",
-                    vec![self.ids[k]],
-                    outside,
+                self.flag(Check {
+                    kind: "containment",
+                    agents: vec![self.ids[k]],
+                    bad: outside,
                     tick,
                     t,
                     value,
-                    0.0,
-                );
+                    limit: 0.0,
+                });
             }
         }
         // Deformation (eq. 37).
@@ -312,15 +310,15 @@ impl Auditor {
         };
         self.report.lambda1_min_run = self.report.lambda1_min_run.min(l1);
         let primaries = self.ids[..3].to_vec();
-        self.flag(
-            "deformation",
-            primaries,
-            l1 < n.lambda_cd_min - 1e-9,
+        self.flag(Check {
+            kind: "deformation",
+            agents: primaries,
+            bad: l1 < n.lambda_cd_min - 1e-9,
             tick,
             t,
-            l1,
-            n.lambda_cd_min,
-        );
+            value: l1,
+            limit: n.lambda_cd_min,
+        });
     }
 
     /// Record a runtime fault (the run did not complete).
@@ -359,6 +357,6 @@ pub fn close_pairs(pos: &[Vec3], radius: Real) -> Vec<(usize, usize, Real)> {
             }
         }
     }
-    out.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    out.sort_by_key(|a| (a.0, a.1));
     out
 }

@@ -256,8 +256,8 @@ pub fn exchange_error(s: &Scenario, model: NeighborModel) -> Result<Real, AgentF
             }
         }
         e.advance()?;
-        for k in 0..n {
-            worst = worst.max((e.states()[k].0.r - x[k].r).norm());
+        for (st, xk) in e.states().iter().zip(&x) {
+            worst = worst.max((st.0.r - xk.r).norm());
         }
     }
     Ok(worst)

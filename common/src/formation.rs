@@ -413,3 +413,75 @@ pub struct TheoremChecks {
     /// Largest residual of eq. 21 relative to the largest coordinate.
     pub eq21_relative_residual: Real,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square_team() -> Formation {
+        let pts = [
+            (1, Role::Primary, [0.0, 0.0, 0.0]),
+            (2, Role::Primary, [100.0, 0.0, 0.0]),
+            (3, Role::Primary, [0.0, 100.0, 0.0]),
+            (4, Role::Secondary, [100.0, 100.0, 0.0]),
+            (5, Role::Follower, [40.0, 40.0, 0.0]),
+            (6, Role::Follower, [60.0, 60.0, 0.0]),
+        ];
+        let inputs: Vec<MemberInput> = pts
+            .iter()
+            .map(|(id, role, p)| MemberInput {
+                id: *id,
+                role: *role,
+                position: Vec3::new(p[0], p[1], p[2]),
+                in_neighbors: None,
+            })
+            .collect();
+        let frame = Frame::new(
+            &inputs[0].position,
+            &inputs[1].position,
+            &inputs[2].position,
+        )
+        .unwrap();
+        Formation::new(frame, &inputs).unwrap()
+    }
+
+    #[test]
+    fn unreachable_followers_are_named() {
+        // Strict containment makes every follower reachable (see `graph`), so a closed cycle
+        // can only be built by bypassing `set_link`: the check must still catch it.
+        let mut f = square_team();
+        for (id, other) in [(5u32, 6u32), (6, 5)] {
+            let k = f.index_of(id).unwrap();
+            f.members[k].link = Some(Link {
+                in_neighbors: [other, other, other],
+                weights: [1.0 / 3.0; 3],
+            });
+        }
+        assert_eq!(
+            f.check_links(),
+            Err(FormationError::Unreachable { ids: vec![5, 6] })
+        );
+        f.set_link(5, [1, 2, 3]).unwrap();
+        f.set_link(6, [2, 3, 4]).unwrap();
+        assert_eq!(f.check_links(), Ok(()));
+    }
+
+    #[test]
+    fn links_are_validated() {
+        let mut f = square_team();
+        assert!(matches!(
+            f.set_link(5, [5, 1, 2]),
+            Err(FormationError::SelfNeighbor { id: 5 })
+        ));
+        assert!(matches!(
+            f.set_link(5, [9, 1, 2]),
+            Err(FormationError::UnknownNeighbor { id: 5, neighbor: 9 })
+        ));
+        // 6 = (60, 60) is outside the triangle 1, 2, 3 (x + y < 100).
+        assert!(matches!(
+            f.set_link(6, [1, 2, 3]),
+            Err(FormationError::NotInsideTriangle { id: 6, .. })
+        ));
+        assert!(matches!(f.check_links(), Err(FormationError::MissingLink { .. })));
+    }
+}

@@ -241,8 +241,7 @@ pub fn run_member(
             });
         }
         // Advance as far as grants and neighbour data allow (several ticks per wake-up).
-        loop {
-            let Some(g) = grant else { break };
+        while let Some(g) = grant {
             if published != Some(tick) && g >= tick {
                 ports.publish(StateMsg::ok(tick, hash, id, x.0))?;
                 published = Some(tick);

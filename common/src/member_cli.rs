@@ -6,14 +6,52 @@ use std::time::Duration;
 use crate::member::{run_member, Deadlines, Kind};
 use crate::transport::TeamName;
 
-/// Parsed arguments of a member process.
-#[derive(Debug, Clone)]
+/// Arguments of a member process (`agent` or `leader`).
+#[derive(Debug, Clone, clap::Parser)]
+#[command(version, about = "One quadcopter of a continuum-deformation team, as a process")]
 pub struct MemberArgs {
+    /// The team's scenario file (the run directory's scenario.toml, or the same file the
+    /// orchestrator was given).
+    #[arg(long, value_name = "FILE")]
     pub scenario: PathBuf,
+    /// The team to join (the orchestrator's --team).
+    #[arg(long)]
     pub team: String,
+    /// This quadcopter's id in the scenario.
+    #[arg(long)]
     pub id: u32,
+    /// Seconds to wait for the team to start.
+    #[arg(long = "join-timeout", default_value_t = 300.0)]
     pub join_timeout_s: f64,
+    /// Seconds without progress mid-run before stopping.
+    #[arg(long = "silence-timeout", default_value_t = 10.0)]
     pub silence_timeout_s: f64,
+}
+
+/// The whole `main` of a member binary: parse arguments, initialise logging (`RUST_LOG`,
+/// default `warn`), run, exit with the member's exit code.
+pub fn main(kind: Kind, name: &'static str) -> ! {
+    use clap::{CommandFactory, FromArgMatches};
+    let parsed = MemberArgs::command()
+        .name(name)
+        .bin_name(name)
+        .try_get_matches()
+        .and_then(|m| MemberArgs::from_arg_matches(&m));
+    let args = match parsed {
+        Ok(a) => a,
+        Err(e) => {
+            let code = if e.use_stderr() { 2 } else { 0 };
+            let _ = e.print();
+            std::process::exit(code);
+        }
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+    std::process::exit(main_for(kind, args))
 }
 
 /// Run a member process and return its exit code: 0 finished, 2 bad input, 3 runtime fault.

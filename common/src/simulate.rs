@@ -97,14 +97,8 @@ pub struct Certificate {
     pub reasons: Vec<String>,
     pub scenario: String,
     pub agents: usize,
-    pub lambda1_min: Real,
-    pub t_lambda1_min_s: Real,
-    pub lambda_cd_min: Real,
-    pub d_b_m: Real,
-    pub d_s_m: Real,
-    pub delta_max_m: Real,
-    pub delta_m: Real,
-    pub eps_m: Real,
+    #[serde(flatten)]
+    pub numbers: SafetyNumbers,
     /// Smallest t_total_s whose simulated max follower deviation (2-norm) stays under delta.
     pub t_threshold_s: Real,
     pub t_total_s: Real,
@@ -127,7 +121,7 @@ pub fn deviation_at(s: &Scenario, t_total_s: Real) -> Real {
 /// Smallest T with E(T) < delta, by bracketing from the 1 / T^2 law (Sec. VII-D) and
 /// bisection to 0.1 % (E falls monotonically with T in practice; the bracket is checked).
 pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
-    if !(delta_m > 0.0) {
+    if delta_m.is_nan() || delta_m <= 0.0 {
         return Real::INFINITY;
     }
     let t0 = s.file.t_total_s;
@@ -173,7 +167,7 @@ pub fn certify(s: &Scenario) -> Certificate {
     let t_thr = t_threshold(s, n.delta_m, e);
     let margin = s.gains_margin.unwrap_or(Real::NAN);
     let mut reasons = Vec::new();
-    if !(n.delta_m > 0.0) {
+    if n.delta_m.is_nan() || n.delta_m <= 0.0 {
         reasons.push(format!(
             "delta = {:.4} m <= 0: eps = {} m is too large for D_B = {:.4} m, D_S = {:.4} m and lambda_CD,min = {:.4} (eq. 38)",
             n.delta_m, n.eps_m, n.d_b_m, n.d_s_m, n.lambda_cd_min
@@ -185,13 +179,13 @@ pub fn certify(s: &Scenario) -> Certificate {
             n.lambda1_min, n.t_lambda1_min_s, n.lambda_cd_min
         ));
     }
-    if !(s.file.t_total_s >= t_thr) {
+    if t_thr.is_nan() || s.file.t_total_s < t_thr {
         reasons.push(format!(
             "t_total_s = {} s is below T_threshold = {:.2} s: max follower deviation {:.4} m exceeds delta = {:.4} m (eq. 34)",
             s.file.t_total_s, t_thr, e, n.delta_m
         ));
     }
-    if !(margin > 0.0) {
+    if margin.is_nan() || margin <= 0.0 {
         reasons.push(format!(
             "gains are not stable for this graph (margin {margin:.4}, eq. 26)"
         ));
@@ -201,14 +195,7 @@ pub fn certify(s: &Scenario) -> Certificate {
         reasons,
         scenario: s.file.name.clone(),
         agents: s.formation.members.len(),
-        lambda1_min: n.lambda1_min,
-        t_lambda1_min_s: n.t_lambda1_min_s,
-        lambda_cd_min: n.lambda_cd_min,
-        d_b_m: n.d_b_m,
-        d_s_m: n.d_s_m,
-        delta_max_m: n.delta_max_m,
-        delta_m: n.delta_m,
-        eps_m: n.eps_m,
+        numbers: n,
         t_threshold_s: t_thr,
         t_total_s: s.file.t_total_s,
         max_follower_deviation_m: e,

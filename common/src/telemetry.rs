@@ -44,7 +44,7 @@ impl<W: Write> TelemetryWriter<W> {
 
     /// Whether a tick is kept.
     pub fn keeps(&self, tick: u64) -> bool {
-        tick % self.every == 0
+        tick.is_multiple_of(self.every)
     }
 
     /// Write one tick's rows (sorted by id by the caller).

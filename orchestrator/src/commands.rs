@@ -140,16 +140,16 @@ fn print_certificate(c: &Certificate) {
     );
     println!(
         "  lambda_1(U_D) min       {:.4} at t = {:.2} s",
-        c.lambda1_min, c.t_lambda1_min_s
+        c.numbers.lambda1_min, c.numbers.t_lambda1_min_s
     );
-    println!("  lambda_CD,min           {:.4}", c.lambda_cd_min);
+    println!("  lambda_CD,min           {:.4}", c.numbers.lambda_cd_min);
     println!(
         "  D_B, D_S                {:.4} m, {:.4} m",
-        c.d_b_m, c.d_s_m
+        c.numbers.d_b_m, c.numbers.d_s_m
     );
-    println!("  eps                     {} m", c.eps_m);
-    println!("  delta_max (eq. 35)      {:.4} m", c.delta_max_m);
-    println!("  delta (eq. 38)          {:.4} m", c.delta_m);
+    println!("  eps                     {} m", c.numbers.eps_m);
+    println!("  delta_max (eq. 35)      {:.4} m", c.numbers.delta_max_m);
+    println!("  delta (eq. 38)          {:.4} m", c.numbers.delta_m);
     println!(
         "  gains stability margin  {:.4} (eq. 26)",
         c.gains_stability_margin
@@ -191,7 +191,7 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
     );
     println!(
         "  max deviation {:.4} m (delta {:.4} m), min separation {:.4} m (2 eps {} m), min boundary distance {:.4} m, lambda_1 min {:.4} (lambda_CD,min {:.4})",
-        r.max_deviation_m, r.delta_m, r.min_separation_m, 2.0 * r.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.lambda_cd_min
+        r.max_deviation_m, r.numbers.delta_m, r.min_separation_m, 2.0 * r.numbers.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.numbers.lambda_cd_min
     );
     if !r.violations.is_empty() {
         println!(

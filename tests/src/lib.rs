@@ -51,12 +51,12 @@ fn profile_dir() -> PathBuf {
     .to_path_buf()
 }
 
-/// The cargo arguments that select the profile whose output directory is `dir_name`
-/// (`debug` is the `dev` profile, as for `cargo build`; any other directory is named after its
-/// profile).
+/// The cargo arguments that select the profile of a test whose output directory is `dir_name`:
+/// a test in `debug` runs under the `test` profile (the workspace gives it opt-level 1, which
+/// keeps full plans affordable); any other directory is named after its profile.
 fn profile_args(dir_name: &str) -> Vec<String> {
     match dir_name {
-        "debug" => vec!["--profile".into(), "dev".into()],
+        "debug" => vec!["--profile".into(), "test".into()],
         "release" => vec!["--release".into()],
         other => vec!["--profile".into(), other.into()],
     }
