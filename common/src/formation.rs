@@ -482,6 +482,9 @@ mod tests {
             f.set_link(6, [1, 2, 3]),
             Err(FormationError::NotInsideTriangle { id: 6, .. })
         ));
-        assert!(matches!(f.check_links(), Err(FormationError::MissingLink { .. })));
+        assert!(matches!(
+            f.check_links(),
+            Err(FormationError::MissingLink { .. })
+        ));
     }
 }

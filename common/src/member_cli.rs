@@ -8,7 +8,10 @@ use crate::transport::TeamName;
 
 /// Arguments of a member process (`agent` or `leader`).
 #[derive(Debug, Clone, clap::Parser)]
-#[command(version, about = "One quadcopter of a continuum-deformation team, as a process")]
+#[command(
+    version,
+    about = "One quadcopter of a continuum-deformation team, as a process"
+)]
 pub struct MemberArgs {
     /// The team's scenario file (the run directory's scenario.toml, or the same file the
     /// orchestrator was given).
