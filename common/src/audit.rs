@@ -118,6 +118,8 @@ pub struct AuditReport {
     pub min_boundary_distance_m: Real,
     pub violations: Vec<Violation>,
     pub violations_dropped: u64,
+    /// The run was ended at its first violation (`--stop-on-violation`).
+    pub stopped_on_violation: bool,
     pub fault: Option<FaultRecord>,
 }
 
@@ -174,6 +176,7 @@ impl Auditor {
                 min_boundary_distance_m: Real::INFINITY,
                 violations: Vec::new(),
                 violations_dropped: 0,
+                stopped_on_violation: false,
                 fault: None,
             },
         }
@@ -182,6 +185,22 @@ impl Auditor {
     /// The safety numbers used.
     pub fn numbers(&self) -> &SafetyNumbers {
         &self.numbers
+    }
+
+    /// The report so far (running extremes, violations), e.g. for progress display.
+    pub fn report(&self) -> &AuditReport {
+        &self.report
+    }
+
+    /// Violations found so far (recorded and dropped).
+    pub fn violation_count(&self) -> u64 {
+        self.report.violations.len() as u64 + self.report.violations_dropped
+    }
+
+    /// The run is being ended at its first violation (`--stop-on-violation`): the report is
+    /// UNSAFE, not complete, and not a fault.
+    pub fn stop_on_violation(&mut self) {
+        self.report.stopped_on_violation = true;
     }
 
     fn flag(&mut self, c: Check) {
@@ -327,15 +346,21 @@ impl Auditor {
         self.report.fault = Some(fault);
     }
 
-    /// The finished report; `complete` when every tick of the plan was audited.
+    /// The finished report; `complete` when every tick of the plan was audited. A run stopped
+    /// at its first violation is UNSAFE (not a fault) although it is not complete.
     pub fn finish(mut self, complete: bool) -> AuditReport {
+        let violated = self.violation_count() > 0;
         self.report.complete = complete && self.report.fault.is_none();
-        self.report.verdict = if self.report.fault.is_some() || !self.report.complete {
+        self.report.verdict = if self.report.fault.is_some() {
             "FAULT"
-        } else if self.report.violations.is_empty() && self.report.violations_dropped == 0 {
-            "SAFE"
-        } else {
+        } else if self.report.stopped_on_violation && violated {
             "UNSAFE"
+        } else if !self.report.complete {
+            "FAULT"
+        } else if violated {
+            "UNSAFE"
+        } else {
+            "SAFE"
         };
         self.report
     }

@@ -11,15 +11,25 @@ use crate::scenario::{Checks, Scenario};
 use crate::step::tick_time;
 use crate::telemetry::Row;
 
+/// How `simulate` runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SimulateOptions {
+    /// Write every K-th tick to telemetry.csv.
+    pub every: u64,
+    /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
+    pub stop_on_violation: bool,
+}
+
 /// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
-/// `on_tick` sees each tick (for progress). A control fault ends the run with the fault recorded;
-/// every complete tick stays in telemetry.csv.
+/// `on_tick` sees each tick and the audit so far (for progress). A control fault ends the run
+/// with the fault recorded; every complete tick stays in telemetry.csv.
 pub fn simulate(
     s: &Scenario,
     dir: &RunDir,
-    every: u64,
-    mut on_tick: impl FnMut(u64),
+    opts: SimulateOptions,
+    mut on_tick: impl FnMut(u64, &Auditor),
 ) -> Result<AuditReport, RunDirError> {
+    let every = opts.every;
     dir.write_scenario(s)?;
     let mut tel = dir.telemetry(every)?;
     let mut audit = Auditor::new(s);
@@ -58,7 +68,11 @@ pub fn simulate(
             }
             tel.write_tick(&rows).map_err(io)?;
         }
-        on_tick(tick);
+        on_tick(tick, &audit);
+        if opts.stop_on_violation && audit.violation_count() > 0 {
+            audit.stop_on_violation();
+            break tick >= last;
+        }
         if tick >= last {
             break true;
         }

@@ -24,6 +24,13 @@ pub enum Command {
         /// Also write the certificate as JSON.
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
+        /// Fly the plan at travel times LO, LO+STEP, .., HI and draw E_max versus T_total
+        /// (fig_deviation_sweep in --out; the paper's Fig. 10).
+        #[arg(long, value_name = "LO:HI:STEP", requires = "out")]
+        sweep: Option<String>,
+        /// Where the sweep's figure and data go.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
     },
     /// Fly the team with the deterministic in-process engine into a run directory.
     Simulate {
@@ -31,6 +38,8 @@ pub enum Command {
         source: Source,
         #[command(flatten)]
         out: OutDir,
+        #[command(flatten)]
+        run: RunOptions,
     },
     /// Fly the team as processes: one per quadcopter over iceoryx2 shared memory, a shared
     /// lockstep clock, a live safety audit. Exit 0 safe and complete, 1 violation, 2 bad input,
@@ -62,6 +71,18 @@ pub enum Command {
         /// Seconds to wait for hand-started processes (--no-spawn) to join.
         #[arg(long, default_value_t = 300.0)]
         join_timeout: f64,
+        #[command(flatten)]
+        run: RunOptions,
+    },
+    /// Redraw every figure of a finished run from its telemetry.csv, audit.json and
+    /// scenario.toml (SVG and PNG, into the run directory).
+    Report {
+        /// The run directory.
+        #[arg(value_name = "RUN_DIR")]
+        dir: PathBuf,
+        /// The follower of fig_agent_<id> (default: the one deepest in the graph).
+        #[arg(long, value_name = "ID")]
+        follow: Option<u32>,
     },
     /// Work with scenario files.
     Scenario {
@@ -115,4 +136,18 @@ pub struct OutDir {
     /// Reuse a non-empty --out directory.
     #[arg(long)]
     pub force: bool,
+}
+
+/// Options shared by `simulate` and `launch`.
+#[derive(Debug, Args, Clone)]
+pub struct RunOptions {
+    /// End the run at the tick of its first safety violation (telemetry kept, exit 1).
+    #[arg(long)]
+    pub stop_on_violation: bool,
+    /// Do not draw the figures at the end of the run.
+    #[arg(long)]
+    pub no_figures: bool,
+    /// The follower of fig_agent_<id> (default: the one deepest in the graph).
+    #[arg(long, value_name = "ID")]
+    pub follow: Option<u32>,
 }

@@ -6,24 +6,66 @@ use std::time::{Duration, Instant};
 use common::audit::AuditReport;
 use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
-use common::simulate::{certify, simulate, Certificate};
+use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
 
 use common::transport::TeamName;
 
-use crate::cli::{Cli, Command, ScenarioCommand, Source};
+use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
 use crate::launch::{launch, LaunchOptions};
+use crate::progress::{Progress, Spinner};
+use crate::report::{report, ReportError};
 use crate::{Exit, Failure};
 
 pub fn run(cli: Cli) -> Result<Exit, Failure> {
     match cli.command {
-        Command::Plan { source, json } => plan(&source, json.as_deref(), cli.quiet),
-        Command::Simulate { source, out } => {
+        Command::Plan {
+            source,
+            json,
+            sweep,
+            out,
+        } => {
+            let sweep = match (sweep, out) {
+                (Some(text), Some(dir)) => Some((parse_sweep(&text)?, dir)),
+                _ => None,
+            };
+            plan(&source, json.as_deref(), sweep, cli.quiet)
+        }
+        Command::Simulate { source, out, run } => {
             let s = load(&source)?;
             let dir = RunDir::create(&out.out, out.force).map_err(Failure::bad_input)?;
             let started = Instant::now();
-            let report = simulate(&s, &dir, out.every, |_| {}).map_err(Failure::fault)?;
+            let opts = SimulateOptions {
+                every: out.every,
+                stop_on_violation: run.stop_on_violation,
+            };
+            let mut progress = Progress::new("simulate", s.last_tick(), s.dt_s(), cli.quiet);
+            let report = simulate(&s, &dir, opts, |tick, audit| {
+                progress.tick(tick, audit.report())
+            })
+            .map_err(Failure::fault)?;
+            progress.finish();
             summary("simulate", &report, started, dir.path(), cli.quiet);
+            figures_after_run(dir.path(), &run, cli.quiet);
             Ok(exit_of(&report))
+        }
+        Command::Report { dir, follow } => {
+            let started = Instant::now();
+            let files = report(&dir, follow).map_err(|e| match e {
+                ReportError::Read(_) => Failure::bad_input(e),
+                ReportError::Draw(_) => Failure::fault(e),
+            })?;
+            if !cli.quiet {
+                println!(
+                    "report: {} files in {} ({:.2} s)",
+                    files.len(),
+                    dir.display(),
+                    started.elapsed().as_secs_f64()
+                );
+                for f in &files {
+                    println!("  {}", f.display());
+                }
+            }
+            Ok(Exit::Safe)
         }
         Command::Launch {
             source,
@@ -35,6 +77,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             window,
             agent_timeout,
             join_timeout,
+            run,
         } => {
             let s = load(&source)?;
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
@@ -59,6 +102,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 agent_timeout: secs(agent_timeout, "--agent-timeout")?,
                 join_timeout: secs(join_timeout, "--join-timeout")?,
                 quiet: cli.quiet,
+                stop_on_violation: run.stop_on_violation,
             };
             let started = Instant::now();
             let (report, ticking) = launch(&s, &opts)?;
@@ -70,6 +114,9 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     report.ticks as f64 / ticking.as_secs_f64(),
                     (started.elapsed() - ticking).as_secs_f64()
                 );
+            }
+            if report.ticks > 0 {
+                figures_after_run(&opts.out, &run, cli.quiet);
             }
             Ok(exit_of(&report))
         }
@@ -114,9 +161,90 @@ pub fn load(source: &Source) -> Result<Scenario, Failure> {
     Ok(s)
 }
 
-fn plan(source: &Source, json: Option<&Path>, quiet: bool) -> Result<Exit, Failure> {
+/// Draw the figures of a finished run (unless `--no-figures`). A drawing failure is logged, not
+/// fatal: the run's own outcome decides the exit code.
+fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
+    if run.no_figures {
+        return;
+    }
+    match report(dir, run.follow) {
+        Ok(files) => {
+            if !quiet {
+                println!(
+                    "  figures: {} files (orchestrator report redraws them)",
+                    files.len()
+                );
+            }
+        }
+        Err(e) => tracing::error!("figures not drawn: {e}"),
+    }
+}
+
+/// `--sweep LO:HI:STEP`: the travel times LO, LO + STEP, .. up to HI.
+fn parse_sweep(text: &str) -> Result<Vec<f64>, Failure> {
+    let bad = || {
+        Failure::bad_input(format!("--sweep {text}: expected LO:HI:STEP in seconds with 0 < LO <= HI and STEP > 0, e.g. 40:200:20"))
+    };
+    let parts: Vec<f64> = text
+        .split(':')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad())?;
+    let [lo, hi, step] = parts[..] else {
+        return Err(bad());
+    };
+    if !(lo.is_finite() && hi.is_finite() && step.is_finite() && lo > 0.0 && hi >= lo && step > 0.0)
+    {
+        return Err(bad());
+    }
+    let n = ((hi - lo) / step + 1e-9).floor() as usize + 1;
+    if n > 1000 {
+        return Err(Failure::bad_input(format!(
+            "--sweep {text}: {n} travel times, at most 1000"
+        )));
+    }
+    Ok((0..n).map(|k| lo + step * k as f64).collect())
+}
+
+fn plan(
+    source: &Source,
+    json: Option<&Path>,
+    sweep: Option<(Vec<f64>, PathBuf)>,
+    quiet: bool,
+) -> Result<Exit, Failure> {
     let s = load(source)?;
+    let spinner = Spinner::new(
+        "certifying: flying the plan at several travel times for T_threshold",
+        quiet,
+    );
     let c = certify(&s);
+    spinner.finish();
+    if let Some((times, dir)) = sweep {
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| Failure::bad_input(format!("--out {}: {e}", dir.display())))?;
+        let spinner = Spinner::new("sweep", quiet);
+        let mut points = Vec::with_capacity(times.len());
+        for (k, &t) in times.iter().enumerate() {
+            spinner.set_message(format!(
+                "sweep: flight {}/{} at T_total = {t} s",
+                k + 1,
+                times.len()
+            ));
+            points.push((t, deviation_at(&s, t)));
+        }
+        spinner.finish();
+        let files =
+            crate::report::deviation_sweep(&dir, &points, c.numbers.delta_m, c.t_threshold_s)
+                .map_err(Failure::fault)?;
+        if !quiet {
+            println!(
+                "sweep: {} travel times, {} files in {}",
+                points.len(),
+                files.len(),
+                dir.display()
+            );
+        }
+    }
     if !quiet {
         print_certificate(&c);
     } else {

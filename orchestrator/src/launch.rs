@@ -34,6 +34,8 @@ pub struct LaunchOptions {
     pub agent_timeout: Duration,
     pub join_timeout: Duration,
     pub quiet: bool,
+    /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
+    pub stop_on_violation: bool,
 }
 
 struct Spawned {
@@ -104,7 +106,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
         interrupted,
     );
     let (complete, reason, elapsed) = match result {
-        Ok(t) => (true, StopReason::Finished, t),
+        Ok((t, complete)) => (complete, StopReason::Finished, t),
         Err((fault, reason)) => {
             audit.fault(fault);
             (false, reason, Duration::ZERO)
@@ -162,7 +164,7 @@ fn run_team(
     children: &mut [Spawned],
     audit: &mut Auditor,
     interrupted: &std::sync::atomic::AtomicBool,
-) -> Result<Duration, Stop> {
+) -> Result<(Duration, bool), Stop> {
     let hash = s.content_hash();
     let n = s.formation.members.len();
     // 1. Readiness, with a deadline.
@@ -250,6 +252,7 @@ fn run_team(
         )
     })?;
     let ticking = Instant::now();
+    let mut progress = crate::progress::Progress::new("launch", last, s.dt_s(), o.quiet);
     let mut last_progress = Instant::now();
     let mut last_child_check = Instant::now();
     let mut ht = Vec::new();
@@ -321,6 +324,7 @@ fn run_team(
                 }
             }
             audit.observe(tick, t, &pos, &ht);
+            progress.tick(tick, audit.report());
             if tel.keeps(tick) {
                 rows.clear();
                 for &k in &order {
@@ -345,10 +349,17 @@ fn run_team(
             }
             next_tick += 1;
             progressed = true;
+            if o.stop_on_violation && audit.violation_count() > 0 {
+                audit.stop_on_violation();
+                progress.finish();
+                let _ = tel.flush();
+                return Ok((ticking.elapsed(), next_tick > last));
+            }
         }
         if next_tick > last {
+            progress.finish();
             let _ = tel.flush();
-            return Ok(ticking.elapsed());
+            return Ok((ticking.elapsed(), true));
         }
         let want = (next_tick + window - 1).min(last);
         if want > grant {

@@ -4,6 +4,8 @@
 mod cli;
 mod commands;
 mod launch;
+mod progress;
+mod report;
 
 use clap::Parser;
 
