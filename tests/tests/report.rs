@@ -26,16 +26,41 @@ fn ok(out: &Output) {
 fn assert_figure(dir: &Path, stem: &str) {
     let svg = dir.join(format!("{stem}.svg"));
     let png = dir.join(format!("{stem}.png"));
-    let text = std::fs::read_to_string(&svg)
-        .unwrap_or_else(|e| panic!("{}: {e}", svg.display()));
-    assert!(text.trim_start().starts_with("<svg"), "{} is not SVG", svg.display());
-    assert!(text.trim_end().ends_with("</svg>"), "{} is cut short", svg.display());
-    assert!(text.len() > 5_000, "{} is only {} bytes", svg.display(), text.len());
-    assert!(text.contains("<text"), "{} has no text (axes, legend)", svg.display());
+    let text = std::fs::read_to_string(&svg).unwrap_or_else(|e| panic!("{}: {e}", svg.display()));
+    assert!(
+        text.trim_start().starts_with("<svg"),
+        "{} is not SVG",
+        svg.display()
+    );
+    assert!(
+        text.trim_end().ends_with("</svg>"),
+        "{} is cut short",
+        svg.display()
+    );
+    assert!(
+        text.len() > 5_000,
+        "{} is only {} bytes",
+        svg.display(),
+        text.len()
+    );
+    assert!(
+        text.contains("<text"),
+        "{} has no text (axes, legend)",
+        svg.display()
+    );
     let bytes = std::fs::read(&png).unwrap_or_else(|e| panic!("{}: {e}", png.display()));
     assert!(bytes.starts_with(PNG_MAGIC), "{} is not PNG", png.display());
-    assert!(bytes.ends_with(b"IEND\xaeB`\x82"), "{} is cut short", png.display());
-    assert!(bytes.len() > 10_000, "{} is only {} bytes", png.display(), bytes.len());
+    assert!(
+        bytes.ends_with(b"IEND\xaeB`\x82"),
+        "{} is cut short",
+        png.display()
+    );
+    assert!(
+        bytes.len() > 10_000,
+        "{} is only {} bytes",
+        png.display(),
+        bytes.len()
+    );
 }
 
 fn figure_files(dir: &Path) -> Vec<String> {
@@ -56,7 +81,10 @@ fn report_redraws_every_figure_and_fig8_has_the_audits_lambda1_minimum() {
     let mut c = orchestrator(&["simulate", "--quiet", "--no-figures", "--every", "5"]);
     c.arg("--out").arg(&run_dir);
     ok(&run(&mut c, DEADLINE));
-    assert!(figure_files(&run_dir).is_empty(), "--no-figures drew figures");
+    assert!(
+        figure_files(&run_dir).is_empty(),
+        "--no-figures drew figures"
+    );
 
     let mut c = orchestrator(&["report"]);
     c.arg(&run_dir);
@@ -84,7 +112,13 @@ fn report_redraws_every_figure_and_fig8_has_the_audits_lambda1_minimum() {
         Some("tick,t,t_over_t_total,lambda1,lambda2,lambda3")
     );
     let min = lines
-        .map(|l| l.split(',').nth(3).expect("lambda1").parse::<f64>().expect("number"))
+        .map(|l| {
+            l.split(',')
+                .nth(3)
+                .expect("lambda1")
+                .parse::<f64>()
+                .expect("number")
+        })
         .fold(f64::INFINITY, f64::min);
     let audit: Value = serde_json::from_str(
         &std::fs::read_to_string(run_dir.join("audit.json")).expect("audit.json"),
@@ -130,7 +164,10 @@ fn simulate_draws_the_figures_at_the_end_of_a_run() {
     let scenario = write_scenario(dir.path(), "short.toml", &f);
     let run_dir = dir.path().join("run");
     let mut c = orchestrator(&["simulate", "--quiet", "--every", "10", "--follow", "20"]);
-    c.arg("--scenario").arg(&scenario).arg("--out").arg(&run_dir);
+    c.arg("--scenario")
+        .arg(&scenario)
+        .arg("--out")
+        .arg(&run_dir);
     ok(&run(&mut c, DEADLINE));
     for stem in [
         "fig_eigenvalues",

@@ -35,6 +35,8 @@ pub struct AuditNumbers {
     pub delta_m: Real,
     pub t_total_s: Real,
     pub verdict_safe: bool,
+    /// The first violation's kind and time, if any.
+    pub first_violation: Option<(&'static str, Real)>,
 }
 
 /// One tick of the run, as drawn.
@@ -98,6 +100,20 @@ pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
         delta_m: num("delta_m")?,
         t_total_s: num("t_total_s")?,
         verdict_safe: v.get("verdict").and_then(|x| x.as_str()) == Some("SAFE"),
+        first_violation: v
+            .get("violations")
+            .and_then(|x| x.as_array())
+            .and_then(|a| a.first())
+            .and_then(|f| {
+                let kind = match f.get("kind")?.as_str()? {
+                    "collision" => "collision",
+                    "containment" => "containment",
+                    "tracking" => "tracking",
+                    "deformation" => "deformation",
+                    _ => "violation",
+                };
+                Some((kind, f.get("t_s")?.as_f64()?))
+            }),
     })
 }
 

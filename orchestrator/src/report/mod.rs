@@ -50,6 +50,16 @@ fn draw_all(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
     Ok(files)
 }
 
+/// A vertical line at the first violation, if the run had one.
+fn first_violation(d: &RunData, scale: Real) -> Option<Rule> {
+    d.audit.first_violation.map(|(kind, t)| Rule {
+        label: format!("first violation: {kind}, t = {t:.2} s"),
+        at: t / scale,
+        vertical: true,
+        color: PALETTE[4],
+    })
+}
+
 fn csv(dir: &Path, name: &str, text: &str) -> Result<PathBuf, String> {
     let p = dir.join(name);
     write_atomic(&p, text.as_bytes()).map_err(|x| x.to_string())?;
@@ -99,12 +109,14 @@ fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
             x_desc: "t / T_total (T_total = ".to_string() + &format!("{t_total} s)"),
             y_desc: "eigenvalue of U_D (1)".into(),
             lines,
-            rules: vec![Rule {
+            rules: std::iter::once(Rule {
                 label: format!("λ_CD,min = {:.4}", d.audit.lambda_cd_min),
                 at: d.audit.lambda_cd_min,
                 vertical: false,
                 color: LIMIT,
-            }],
+            })
+            .chain(first_violation(d, t_total))
+            .collect(),
             log_y: false,
             legend: SeriesLabelPosition::LowerLeft,
         }],
@@ -219,7 +231,10 @@ fn separation(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
                     vertical: false,
                     color: GREY,
                 },
-            ],
+            ]
+            .into_iter()
+            .chain(first_violation(d, 1.0))
+            .collect(),
             log_y: false,
             legend: SeriesLabelPosition::UpperRight,
         }],
