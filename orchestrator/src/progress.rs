@@ -37,9 +37,12 @@ pub fn margins(r: &AuditReport) -> String {
     let side = r.min_boundary_distance_m;
     let lambda = r.lambda1_min_run - r.numbers.lambda_cd_min;
     let v = r.violations.len() as u64 + r.violations_dropped;
-    format!(
-        "margins: sep {sep:+.3} m, track {track:+.3} m, side {side:+.3} m, λ1 {lambda:+.4}; {v} violation(s)"
-    )
+    let mut text =
+        format!("margin sep {sep:+.2} m, track {track:+.2} m, side {side:+.2} m, λ1 {lambda:+.3}");
+    if v > 0 {
+        text.push_str(&format!(", {v} VIOLATION(S)"));
+    }
+    text
 }
 
 impl Progress {
@@ -52,9 +55,7 @@ impl Progress {
                 Some(last_tick + 1),
                 ProgressDrawTarget::stderr_with_hz(10),
             );
-            if let Ok(style) =
-                ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} ticks {msg}")
-            {
+            if let Ok(style) = ProgressStyle::with_template("{prefix} [{bar:20}] {msg}") {
                 bar.set_style(style.progress_chars("=> "));
             }
             bar.set_prefix(what);
@@ -89,7 +90,11 @@ impl Progress {
         match &self.mode {
             Mode::Bar(bar) => {
                 bar.set_position(tick + 1);
-                bar.set_message(format!("t = {t:.2} s, {rate:.0} ticks/s, {}", margins(r)));
+                bar.set_message(format!(
+                    "tick {tick}/{}, t {t:.2} s, {rate:.0}/s, {}",
+                    self.last_tick,
+                    margins(r)
+                ));
             }
             Mode::Log => tracing::info!(
                 tick,
