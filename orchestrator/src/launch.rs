@@ -255,6 +255,7 @@ fn run_team(
     let mut progress = crate::progress::Progress::new("launch", last, s.dt_s(), o.quiet);
     let mut last_progress = Instant::now();
     let mut last_child_check = Instant::now();
+    let mut last_flush = Instant::now();
     let mut ht = Vec::new();
     let mut pos: Vec<Vec3> = vec![Vec3::zeros(); n];
     let mut rows: Vec<Row> = Vec::with_capacity(n);
@@ -361,8 +362,12 @@ fn run_team(
             let _ = tel.flush();
             return Ok((ticking.elapsed(), true));
         }
+        // Grant in steps of half a window (at least 1): every grant wakes all N members, so
+        // fewer, larger grants mean fewer wake-ups per tick; members keep up to a window of
+        // work queued.
         let want = (next_tick + window - 1).min(last);
-        if want > grant {
+        let step = (window / 2).max(1);
+        if want > grant && (want >= grant + step || want == last) {
             grant = want;
             send(ports, grant).map_err(|e| {
                 (
@@ -373,7 +378,11 @@ fn run_team(
         }
         if progressed {
             last_progress = Instant::now();
-            let _ = tel.flush();
+            // Complete ticks reach the file at least every 100 ms (and at every stop).
+            if last_flush.elapsed() > Duration::from_millis(100) {
+                let _ = tel.flush();
+                last_flush = Instant::now();
+            }
             continue;
         }
         if last_child_check.elapsed() > Duration::from_millis(100) {

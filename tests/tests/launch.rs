@@ -710,9 +710,9 @@ fn an_interrupted_orchestrator_stops_its_team_and_leaves_nothing_behind() {
     footprint.assert_nothing_left();
 }
 
-/// `--no-spawn`: members started by hand. A wrong id, the wrong binary for the role and a
-/// different scenario are refused (exit 2) without disturbing the team; the right members then
-/// fly it exactly as simulated.
+/// `--no-spawn`: members started by hand. A wrong id, the wrong binary for the role, a
+/// different scenario and a team that does not exist are refused (exit 2) without disturbing the
+/// team; the right members then fly it exactly as simulated.
 #[test]
 fn a_hand_started_team_refuses_wrong_members_and_flies_with_the_right_ones() {
     let dir = TempDir::new();
@@ -788,6 +788,12 @@ fn a_hand_started_team_refuses_wrong_members_and_flies_with_the_right_ones() {
             format!("cannot join team {team}").as_str(),
             "differs from the team's",
         ],
+    );
+    let absent = unique_team("absent");
+    refused(
+        &mut member("agent", &scenario, &absent, follower),
+        "agent of a team that does not exist",
+        &[format!("team {absent} does not exist").as_str()],
     );
     assert!(
         !orch.has_exited(),
