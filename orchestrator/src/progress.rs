@@ -117,6 +117,13 @@ impl Progress {
     }
 }
 
+impl Drop for Progress {
+    /// A run that ends on an error path leaves no half-drawn bar behind.
+    fn drop(&mut self) {
+        self.finish();
+    }
+}
+
 /// A spinner for work without ticks (`plan`): a terminal spinner with elapsed time, or one log
 /// line, or nothing when quiet.
 pub struct Spinner(Option<ProgressBar>);
