@@ -6,6 +6,8 @@
 //! - tracking: paper40 flown in 25 s (T_threshold is about 55 s) is flagged for exactly the
 //!   agents and ticks where ||r_i - r_i,HT||_2 first exceeds delta (eq. 34), recomputed here
 //!   from telemetry.csv;
+//! - containment: the same rushed flight is flagged for exactly the followers and ticks where a
+//!   follower first leaves the containment prism of Theorem 3, recomputed from telemetry.csv;
 //! - collision: a follower placed 2 m from another (2 eps = 3 m) is flagged at tick 0 naming
 //!   exactly that pair, in `simulate` and, as processes, in `launch`.
 //!
@@ -324,4 +326,51 @@ fn launch_audits_live_and_stops_at_the_first_violation() {
         bytes(&launched) == bytes(&sim),
         "launch and simulate telemetry differ"
     );
+}
+
+#[test]
+fn containment_is_flagged_for_the_followers_and_ticks_outside_the_prism() {
+    let dir = TempDir::new();
+    let mut f = paper40();
+    f.t_total_s = 25.0;
+    let scenario = write_scenario(dir.path(), "rushed.toml", &f);
+    let full = dir.path().join("full");
+    assert_exit(&simulate(&scenario, &full, &[]), 1);
+    let a = audit(&full);
+    let half_height = a["delta_m"].as_f64().expect("delta_m") + a["eps_m"].as_f64().expect("eps");
+    let s = Scenario::from_file(f.clone(), "rushed.toml", Checks::Member).expect("valid");
+    let members = &s.formation.members;
+    let index: BTreeMap<u32, usize> = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
+    // Theorem 3's prism over the leading polygon's desired positions, tick by tick, and every
+    // onset of a follower outside it (beyond a side face or a base).
+    let rows = telemetry(&full);
+    let mut outside: BTreeMap<u32, bool> = BTreeMap::new();
+    let mut expected = Vec::new();
+    for tick_rows in rows.chunks(members.len()) {
+        let mut ht = vec![common::math::Vec3::zeros(); members.len()];
+        for r in tick_rows {
+            ht[index[&r.id]] = common::math::vec3(r.ht);
+        }
+        let verts: Vec<_> = s.formation.polygon.iter().map(|&k| ht[k]).collect();
+        let normal = (verts[1] - verts[0])
+            .cross(&(verts[2] - verts[0]))
+            .normalize();
+        let prism = common::safety::Prism::new(verts, normal, half_height);
+        for r in tick_rows {
+            if members[index[&r.id]].role != Role::Follower {
+                continue;
+            }
+            let p = common::math::vec3(r.r);
+            let bad = prism.side_distance(&p) < 0.0 || prism.height(&p).abs() > half_height;
+            let was = outside.insert(r.id, bad).unwrap_or(false);
+            if bad && !was {
+                expected.push((r.tick, vec![r.id]));
+            }
+        }
+    }
+    assert!(!expected.is_empty(), "T = 25 s should leave the prism");
+    let mut got = violations(&a, "containment");
+    got.sort();
+    expected.sort();
+    assert_eq!(got, expected);
 }

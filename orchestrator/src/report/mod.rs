@@ -107,7 +107,7 @@ fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
                 d.audit.lambda1_min_run
             ),
             x_desc: "t / T_total (T_total = ".to_string() + &format!("{t_total} s)"),
-            y_desc: "eigenvalue of U_D (1)".into(),
+            y_desc: "eigenvalue of U_D (dimensionless)".into(),
             lines,
             rules: std::iter::once(Rule {
                 label: format!("λ_CD,min = {:.4}", d.audit.lambda_cd_min),
