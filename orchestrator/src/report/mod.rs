@@ -118,7 +118,7 @@ fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
             .chain(first_violation(d, t_total))
             .collect(),
             log_y: false,
-            legend: SeriesLabelPosition::LowerLeft,
+            legend: SeriesLabelPosition::MiddleLeft,
         }],
     };
     files.extend(write_figure(dir, "fig_eigenvalues", &fig)?);
