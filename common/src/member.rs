@@ -217,8 +217,15 @@ pub fn run_member(
             let Some(slot) = neighbor_ids.iter().position(|n| *n == msg.id) else {
                 return;
             };
-            if msg.status() != AgentStatus::Ok && bad.is_none() {
-                bad = Some((msg.id, format!("reported a fault at tick {}", msg.tick)));
+            if msg.status() != AgentStatus::Ok {
+                // A neighbour's fault notice is not a state: the orchestrator stops the team once
+                // every tick before the fault is complete (as the engine would have flown them).
+                tracing::debug!(
+                    peer = msg.id,
+                    tick = msg.tick,
+                    "in-neighbour reported a fault"
+                );
+                return;
             }
             if msg.scenario_hash != hash && bad.is_none() {
                 bad = Some((
@@ -283,7 +290,7 @@ pub fn run_member(
                 Err(fault) => {
                     let (code, peer) = match fault {
                         StepFault::NeighborNonFinite { peer } => (FaultCode::NonFinite, peer),
-                        StepFault::Control(_) => (FaultCode::NonFinite, NO_PEER),
+                        StepFault::Control(_) => (FaultCode::Control, NO_PEER),
                     };
                     fault_reply(&mut ports, tick, code, peer, &x);
                     return Err(MemberError::Step { id, tick, fault });

@@ -32,6 +32,9 @@ pub const FAULT_SCENARIO_MISMATCH: u32 = 5;
 pub const FAULT_SAFETY: u32 = 6;
 /// `StateMsg::fault_code`: the orchestrator's node is gone.
 pub const FAULT_ORCHESTRATOR_LOST: u32 = 7;
+/// `StateMsg::fault_code`: the controller refused to fly on (decoupling matrix M near singular:
+/// thrust near 0 or roll near 90 degrees, eq. 46).
+pub const FAULT_CONTROL: u32 = 8;
 
 /// `StateMsg::fault_peer` when the fault involves no other agent.
 pub const NO_PEER: u32 = u32::MAX;
@@ -105,6 +108,8 @@ pub enum FaultCode {
     Safety,
     /// [`FAULT_ORCHESTRATOR_LOST`]
     OrchestratorLost,
+    /// [`FAULT_CONTROL`]
+    Control,
     /// A code this build does not know (sent by a newer peer).
     Unknown(u32),
 }
@@ -120,6 +125,7 @@ impl FaultCode {
             FaultCode::ScenarioMismatch => FAULT_SCENARIO_MISMATCH,
             FaultCode::Safety => FAULT_SAFETY,
             FaultCode::OrchestratorLost => FAULT_ORCHESTRATOR_LOST,
+            FaultCode::Control => FAULT_CONTROL,
             FaultCode::Unknown(c) => c,
         }
     }
@@ -135,6 +141,7 @@ impl FaultCode {
             FAULT_SCENARIO_MISMATCH => FaultCode::ScenarioMismatch,
             FAULT_SAFETY => FaultCode::Safety,
             FAULT_ORCHESTRATOR_LOST => FaultCode::OrchestratorLost,
+            FAULT_CONTROL => FaultCode::Control,
             other => FaultCode::Unknown(other),
         })
     }

@@ -18,6 +18,8 @@ pub struct SimulateOptions {
     pub every: u64,
     /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
     pub stop_on_violation: bool,
+    /// Fly only ticks 0..=K of the plan.
+    pub max_ticks: Option<u64>,
 }
 
 /// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
@@ -38,7 +40,9 @@ pub fn simulate(
     let mut pos: Vec<Vec3> = Vec::new();
     let mut rows: Vec<Row> = Vec::with_capacity(s.formation.members.len());
     let order = id_order(s);
-    let last = s.last_tick();
+    let last = opts
+        .max_ticks
+        .map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let tel_path = dir.path().join("telemetry.csv");
     let io = |source| RunDirError::Io {
         path: tel_path.clone(),

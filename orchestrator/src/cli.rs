@@ -144,6 +144,9 @@ pub struct RunOptions {
     /// End the run at the tick of its first safety violation (telemetry kept, exit 1).
     #[arg(long)]
     pub stop_on_violation: bool,
+    /// Fly only ticks 0..=K of the plan (a shorter run of the same scenario).
+    #[arg(long, value_name = "K")]
+    pub max_ticks: Option<u64>,
     /// Do not draw the figures at the end of the run.
     #[arg(long)]
     pub no_figures: bool,

@@ -37,8 +37,12 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             let opts = SimulateOptions {
                 every: out.every,
                 stop_on_violation: run.stop_on_violation,
+                max_ticks: run.max_ticks,
             };
-            let mut progress = Progress::new("simulate", s.last_tick(), s.dt_s(), cli.quiet);
+            let last = run
+                .max_ticks
+                .map_or(s.last_tick(), |k| k.min(s.last_tick()));
+            let mut progress = Progress::new("simulate", last, s.dt_s(), cli.quiet);
             let report = simulate(&s, &dir, opts, |tick, audit| {
                 progress.tick(tick, audit.report())
             })
@@ -103,6 +107,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 join_timeout: secs(join_timeout, "--join-timeout")?,
                 quiet: cli.quiet,
                 stop_on_violation: run.stop_on_violation,
+                max_ticks: run.max_ticks,
             };
             let started = Instant::now();
             let (report, ticking) = launch(&s, &opts)?;

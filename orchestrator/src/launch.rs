@@ -11,7 +11,7 @@ use common::audit::{AuditReport, Auditor, FaultRecord};
 use common::engine::desired_positions;
 use common::formation::Role;
 use common::math::{vec3, Vec3};
-use common::messages::{AgentStatus, ClockMsg, StateMsg, StopReason};
+use common::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason};
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::simulate::id_order;
@@ -36,6 +36,8 @@ pub struct LaunchOptions {
     pub quiet: bool,
     /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
     pub stop_on_violation: bool,
+    /// Fly only ticks 0..=K of the plan.
+    pub max_ticks: Option<u64>,
 }
 
 struct Spawned {
@@ -231,7 +233,7 @@ fn run_team(
             StopReason::AgentFault,
         )
     })?;
-    let last = s.last_tick();
+    let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let order = id_order(s);
     let index: BTreeMap<u32, usize> = s
         .formation
@@ -256,6 +258,7 @@ fn run_team(
     let mut last_progress = Instant::now();
     let mut last_child_check = Instant::now();
     let mut last_flush = Instant::now();
+    let mut faulted: Option<(u64, usize, FaultRecord)> = None;
     let mut ht = Vec::new();
     let mut pos: Vec<Vec3> = vec![Vec3::zeros(); n];
     let mut rows: Vec<Row> = Vec::with_capacity(n);
@@ -272,20 +275,33 @@ fn run_team(
                 StopReason::Interrupted,
             ));
         }
-        let mut bad: Option<FaultRecord> = None;
         ports
             .receive_states(|msg| {
                 let Some(&k) = index.get(&msg.id) else { return };
                 if let AgentStatus::Fault { code, peer } = msg.status() {
-                    if bad.is_none() {
-                        bad = Some(fault(
-                            "agent-fault",
-                            Some(msg.id),
-                            peer,
+                    // Keep the earliest fault (tick, then member order), as the engine does: it
+                    // stops at the first member that fails at the first failing tick.
+                    let earlier = faulted
+                        .as_ref()
+                        .is_none_or(|(t, m, _)| (msg.tick, k) < (*t, *m));
+                    if earlier {
+                        // The same kinds as `simulate` records for the same faults.
+                        let kind = match code {
+                            FaultCode::Control | FaultCode::NonFinite => "control",
+                            _ => "agent-fault",
+                        };
+                        faulted = Some((
                             msg.tick,
-                            format!(
-                                "agent {} reported {:?} at tick {} (peer {:?})",
-                                msg.id, code, msg.tick, peer
+                            k,
+                            fault(
+                                kind,
+                                Some(msg.id),
+                                peer,
+                                msg.tick,
+                                format!(
+                                    "agent {} reported {:?} at tick {} (peer {:?})",
+                                    msg.id, code, msg.tick, peer
+                                ),
                             ),
                         ));
                     }
@@ -308,9 +324,6 @@ fn run_team(
                     StopReason::AgentFault,
                 )
             })?;
-        if let Some(f) = bad {
-            return Err((f, StopReason::AgentFault));
-        }
         let mut progressed = false;
         while pending.get(&next_tick).is_some_and(|(_, c)| *c == n) {
             let Some((states, _)) = pending.remove(&next_tick) else {
@@ -357,6 +370,14 @@ fn run_team(
                 return Ok((ticking.elapsed(), next_tick > last));
             }
         }
+        // A member that failed computing tick k + 1 published tick k first: complete every
+        // tick up to k (as the engine does), then stop.
+        if let Some((k, _, f)) = &faulted {
+            if next_tick > *k {
+                let _ = tel.flush();
+                return Err((f.clone(), StopReason::AgentFault));
+            }
+        }
         if next_tick > last {
             progress.finish();
             let _ = tel.flush();
@@ -394,6 +415,10 @@ fn run_team(
         }
         if last_progress.elapsed() > o.agent_timeout {
             let _ = tel.flush();
+            if let Some((_, _, f)) = faulted {
+                // The fault explains the silence better than the silence does.
+                return Err((f, StopReason::AgentFault));
+            }
             let have = pending.get(&next_tick);
             let missing: Vec<u32> = s
                 .formation

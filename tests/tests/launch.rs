@@ -834,3 +834,51 @@ fn a_hand_started_team_refuses_wrong_members_and_flies_with_the_right_ones() {
     assert_eq!(audit["complete"], true, "{audit:#}");
     assert_same_file(&run_dir.join("telemetry.csv"), &sim.join("telemetry.csv"));
 }
+
+/// A plan far too fast for the quadcopters makes a member's controller refuse (eq. 46 near a
+/// singular M). As processes the run must end exactly as in-process: every tick up to the fault
+/// in telemetry, byte for byte, the same agent and tick named, exit 3.
+#[test]
+fn a_control_fault_ends_a_launch_exactly_like_simulate() {
+    let dir = TempDir::new();
+    let source = ["--n", "40", "--t-total", "10", "--no-figures"];
+    let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
+    let s = run(&mut simulate(&sim, &source), SMALL_DEADLINE);
+    assert_exit(&s, 3, "simulate of a 10 s paper40");
+    let l = run(
+        &mut launch(&unique_team("ctlfault"), &out, &source),
+        SMALL_DEADLINE,
+    );
+    assert_exit(&l, 3, "launch of a 10 s paper40");
+    let (fs, fl) = (
+        read_json(&sim.join("audit.json")),
+        read_json(&out.join("audit.json")),
+    );
+    for key in ["kind", "agent", "tick"] {
+        assert_eq!(
+            fs["fault"][key], fl["fault"][key],
+            "fault.{key}: {fs:#} vs {fl:#}"
+        );
+    }
+    assert_eq!(fl["fault"]["kind"], "control", "{fl:#}");
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+}
+
+/// Scale regression: 250 processes start, fly a few ticks of their plan, and match the engine.
+#[test]
+fn a_250_process_team_flies_a_few_ticks_like_simulate() {
+    let dir = TempDir::new();
+    let source = ["--n", "250", "--max-ticks", "20", "--no-figures"];
+    let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
+    let s = run(&mut simulate(&sim, &source), SMALL_DEADLINE);
+    assert_exit(&s, 0, "simulate --n 250");
+    let l = run(
+        &mut launch(&unique_team("n250"), &out, &source),
+        Duration::from_secs(120),
+    );
+    assert_exit(&l, 0, "launch --n 250");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["agents"], 250, "{audit:#}");
+    assert_eq!(audit["ticks"], 21, "{audit:#}");
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+}
