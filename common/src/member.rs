@@ -189,6 +189,7 @@ pub fn run_member(
     let mut inbox: [BTreeMap<u64, Flat>; 3] = Default::default();
     let mut last_progress = Instant::now();
     let mut last_alive_check = Instant::now();
+    let mut unnotified = false;
     let fault_reply =
         |ports: &mut MemberPorts, tick: u64, code: FaultCode, peer: u32, x: &QuadState| {
             let msg = StateMsg::ok(tick, hash, id, x.0).with_status(AgentStatus::Fault {
@@ -250,7 +251,10 @@ pub fn run_member(
         // Advance as far as grants and neighbour data allow (several ticks per wake-up).
         while let Some(g) = grant {
             if published != Some(tick) && g >= tick {
-                ports.publish(StateMsg::ok(tick, hash, id, x.0))?;
+                // Notify on block: readers are woken once, before this member sleeps,
+                // instead of after every tick it runs ahead.
+                ports.publish_quietly(StateMsg::ok(tick, hash, id, x.0))?;
+                unnotified = true;
                 published = Some(tick);
                 progress = true;
             }
@@ -346,6 +350,12 @@ pub fn run_member(
                 waited: idle,
                 waiting_for,
             });
+        }
+        if unnotified {
+            ports.notify_readers()?;
+            unnotified = false;
+            // Readers may answer at once (a grant or a neighbour's state): look before sleeping.
+            continue;
         }
         ports.wait(Duration::from_millis(50).min(limit - idle))?;
     }

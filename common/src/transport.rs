@@ -524,11 +524,9 @@ fn wait_on(
     use iceoryx2::port::listener::ListenerWaitError;
     match listener.timed_wait(|_| {}, timeout) {
         Ok(n) => Ok(n > 0),
-        Err(ListenerWaitError::InterruptSignal) => Err(TransportError::Interrupted {
-            team: team.clone(),
-            who,
-            service: service.to_owned(),
-        }),
+        // A signal (SIGCONT after SIGSTOP, a debugger attaching, SIGINT) interrupts the wait:
+        // that is a spurious wake-up, not an error. Callers check their stop flag every loop.
+        Err(ListenerWaitError::InterruptSignal) => Ok(true),
         Err(e) => Err(service_error(team, who, service, "wait", e)),
     }
 }

@@ -201,6 +201,14 @@ impl MemberPorts {
     /// the orchestrator. Returns how many subscribers the sample reached. A state carrying another
     /// agent's id is refused.
     pub fn publish(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
+        let reached = self.publish_quietly(msg)?;
+        self.notify_readers()?;
+        Ok(reached)
+    }
+
+    /// Publishes `msg` without waking anyone: the caller must call [`Self::notify_readers`]
+    /// before it sleeps, so every published state is followed by a wake-up (notify on block).
+    pub fn publish_quietly(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
         if msg.id != self.id {
             return Err(TransportError::ForeignState {
                 team: self.team.clone(),
@@ -209,10 +217,13 @@ impl MemberPorts {
                 service: self.team.state_service(self.id),
             });
         }
-        let reached = self
-            .publisher
+        self.publisher
             .send_copy(msg)
-            .map_err(|e| self.error(&self.team.state_service(self.id), "send", e))?;
+            .map_err(|e| self.error(&self.team.state_service(self.id), "send", e))
+    }
+
+    /// Wakes every out-neighbour and the orchestrator (events merge: cheap to repeat).
+    pub fn notify_readers(&mut self) -> Result<(), TransportError> {
         for (&peer, wake) in &self.out_wakes {
             wake.notifier
                 .notify()
@@ -222,7 +233,7 @@ impl MemberPorts {
             .notifier
             .notify()
             .map_err(|e| self.error(&self.team.orchestrator_wake_service(), "notify", e))?;
-        Ok(reached)
+        Ok(())
     }
 
     /// Drains every in-neighbour's subscriber (neighbours in id order, each one's samples oldest
