@@ -189,6 +189,7 @@ pub fn run_member(
     let mut inbox: [BTreeMap<u64, Flat>; 3] = Default::default();
     let mut last_progress = Instant::now();
     let mut last_alive_check = Instant::now();
+    let inject = crate::fault_inject::from_env(id);
     let fault_reply =
         |ports: &mut MemberPorts, tick: u64, code: FaultCode, peer: u32, x: &QuadState| {
             let msg = StateMsg::ok(tick, hash, id, x.0).with_status(AgentStatus::Fault {
@@ -243,7 +244,11 @@ pub fn run_member(
         // Advance as far as grants and neighbour data allow (several ticks per wake-up).
         while let Some(g) = grant {
             if published != Some(tick) && g >= tick {
-                ports.publish(StateMsg::ok(tick, hash, id, x.0))?;
+                let mut msg = StateMsg::ok(tick, hash, id, x.0);
+                if let Some(i) = &inject {
+                    i.apply(tick, &mut msg);
+                }
+                ports.publish(msg)?;
                 published = Some(tick);
                 progress = true;
             }

@@ -11,7 +11,7 @@ use common::audit::{AuditReport, Auditor, FaultRecord};
 use common::engine::desired_positions;
 use common::formation::Role;
 use common::math::{vec3, Vec3};
-use common::messages::{AgentStatus, ClockMsg, StateMsg, StopReason};
+use common::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason};
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::simulate::id_order;
@@ -44,9 +44,6 @@ struct Spawned {
 /// Run a launch to the end; returns the audit report and the wall time of the ticking phase.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration), Failure> {
     let interrupted = common::signals::install();
-    let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
-    dir.write_scenario(s).map_err(Failure::fault)?;
-    let scenario_file = dir.path().join("scenario.toml");
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
@@ -62,6 +59,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
+    // Only now, with the team name ours, touch the run directory: a refused second launch of a
+    // running team writes nothing (not even into the first one's --out).
+    let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
+    dir.write_scenario(s).map_err(Failure::fault)?;
+    let scenario_file = dir.path().join("scenario.toml");
     if ports.stale_nodes_removed() > 0 {
         tracing::info!(
             removed = ports.stale_nodes_removed(),
@@ -136,6 +138,10 @@ fn spawn_member(scenario: &Path, team: &TeamName, id: u32, role: Role) -> std::i
 }
 
 type Stop = (FaultRecord, StopReason);
+
+/// How long a non-finite state waits for a reader's fault report (which names both agents),
+/// and a reported fault for the complete ticks before it.
+const FAULT_GRACE: Duration = Duration::from_millis(500);
 
 fn fault(
     kind: &str,
@@ -256,6 +262,12 @@ fn run_team(
     let mut ht = Vec::new();
     let mut pos: Vec<Vec3> = vec![Vec3::zeros(); n];
     let mut rows: Vec<Row> = Vec::with_capacity(n);
+    // A non-finite state is never audited or written: its readers report it with both ids; if
+    // none does within the grace (the sender has no out-neighbours), the orchestrator does.
+    let mut non_finite: Option<(u32, u64, Instant)> = None;
+    // A fault reported at tick k stops the team once ticks 0..k-1 are all in telemetry (they
+    // are on their way: the reporter was granted k), or after the grace.
+    let mut stopping: Option<(FaultRecord, Instant, bool)> = None;
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return Err((
@@ -269,26 +281,28 @@ fn run_team(
                 StopReason::Interrupted,
             ));
         }
-        let mut bad: Option<FaultRecord> = None;
+        // (fault, echo): an echo (a member stopping because its neighbour reported a fault)
+        // gives way to the root cause, whichever the drain meets first.
+        let mut bad: Option<(FaultRecord, bool)> = None;
         ports
             .receive_states(|msg| {
                 let Some(&k) = index.get(&msg.id) else { return };
                 if let AgentStatus::Fault { code, peer } = msg.status() {
-                    if bad.is_none() {
-                        bad = Some(fault(
-                            "agent-fault",
-                            Some(msg.id),
-                            peer,
-                            msg.tick,
-                            format!(
-                                "agent {} reported {:?} at tick {} (peer {:?})",
-                                msg.id, code, msg.tick, peer
-                            ),
-                        ));
+                    let echo = code == FaultCode::NeighborFault;
+                    if bad.as_ref().is_none_or(|(_, e)| *e && !echo) {
+                        let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
+                        let what =
+                            format!("agent {} reported {code:?} at tick {}{on}", msg.id, msg.tick);
+                        let f = fault("agent-fault", Some(msg.id), peer, msg.tick, what);
+                        bad = Some((f, echo));
                     }
                     return;
                 }
                 if msg.tick < next_tick || msg.tick > grant {
+                    return;
+                }
+                if msg.state.iter().any(|v| !v.is_finite()) {
+                    non_finite.get_or_insert((msg.id, msg.tick, Instant::now()));
                     return;
                 }
                 let slot = pending
@@ -305,11 +319,22 @@ fn run_team(
                     StopReason::AgentFault,
                 )
             })?;
-        if let Some(f) = bad {
-            return Err((f, StopReason::AgentFault));
+        if let Some((f, echo)) = bad {
+            if stopping.as_ref().is_none_or(|(_, _, e)| *e && !echo) {
+                let since = stopping.as_ref().map_or_else(Instant::now, |(_, t, _)| *t);
+                stopping = Some((f, since, echo));
+            }
+        }
+        if let Some((id, tick, _)) = non_finite.filter(|(_, _, t)| t.elapsed() > FAULT_GRACE) {
+            let what = format!("agent {id} published a non-finite state at tick {tick}");
+            let f = fault("non-finite-state", Some(id), None, tick, what);
+            let since = Instant::now().checked_sub(FAULT_GRACE);
+            stopping.get_or_insert((f, since.unwrap_or_else(Instant::now), false));
         }
         let mut progressed = false;
-        while pending.get(&next_tick).is_some_and(|(_, c)| *c == n) {
+        while pending.get(&next_tick).is_some_and(|(_, c)| *c == n)
+            && stopping.as_ref().is_none_or(|(f, _, _)| next_tick < f.tick)
+        {
             let Some((states, _)) = pending.remove(&next_tick) else {
                 break;
             };
@@ -347,6 +372,12 @@ fn run_team(
             next_tick += 1;
             progressed = true;
         }
+        if let Some((f, since, echo)) = stopping.take() {
+            if next_tick >= f.tick || since.elapsed() >= FAULT_GRACE {
+                return Err((f, StopReason::AgentFault));
+            }
+            stopping = Some((f, since, echo));
+        }
         if next_tick > last {
             let _ = tel.flush();
             return Ok(ticking.elapsed());
@@ -374,14 +405,15 @@ fn run_team(
             }
             continue;
         }
-        if last_child_check.elapsed() > Duration::from_millis(100) {
+        // While stopping on a reported fault, the reporter's own exit is not a second fault.
+        if stopping.is_none() && last_child_check.elapsed() > Duration::from_millis(100) {
             last_child_check = Instant::now();
             if let Err(e) = check_children(children, next_tick) {
                 let _ = tel.flush();
                 return Err(e);
             }
         }
-        if last_progress.elapsed() > o.agent_timeout {
+        if stopping.is_none() && last_progress.elapsed() > o.agent_timeout {
             let _ = tel.flush();
             let have = pending.get(&next_tick);
             let missing: Vec<u32> = s

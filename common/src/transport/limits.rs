@@ -1,0 +1,34 @@
+//! Process limits that iceoryx2 runs into with large teams, reported as such: when a port or
+//! node cannot be created while this process's file-descriptor table is (nearly) full, the error
+//! says which limit was hit and how to raise it, instead of iceoryx2's bare `InternalFailure`.
+
+/// Descriptors this close to the soft limit count as "the limit was hit": iceoryx2 releases
+/// what a failed port had opened before it reports the failure.
+const FD_MARGIN: u64 = 16;
+
+/// This process's open-file numbers at the moment of a failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FdUsage {
+    /// Descriptors open now (entries of `/proc/self/fd`).
+    pub open: u64,
+    /// The soft `RLIMIT_NOFILE`.
+    pub soft: u64,
+    /// The hard `RLIMIT_NOFILE`.
+    pub hard: u64,
+}
+
+/// `Some` when the open-file limit is (nearly) exhausted; `None` when it is not or cannot be read.
+pub fn fd_exhausted() -> Option<FdUsage> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
+    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } != 0 {
+        return None;
+    }
+    #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
+    let (soft, hard) = (lim.rlim_cur as u64, lim.rlim_max as u64);
+    let open = std::fs::read_dir("/proc/self/fd").ok()?.count() as u64;
+    (open + FD_MARGIN >= soft).then_some(FdUsage { open, soft, hard })
+}
