@@ -9,6 +9,7 @@
 //! |---|---|
 //! | `nan` | its state with x = NaN |
 //! | `tick` | its state labelled tick `<tick> + 1` (a state from the wrong step) |
+//! | `kill` | nothing: it kills itself with SIGKILL instead (a crash at a chosen tick) |
 //!
 //! Nothing else changes: the member's own integration goes on with its true state. Never set
 //! this variable outside tests; a member that acts on it says so with a warning.
@@ -23,6 +24,8 @@ pub enum Kind {
     Nan,
     /// Publish the state with the next tick's number.
     WrongTick,
+    /// Die by SIGKILL instead of publishing.
+    Kill,
 }
 
 /// One injected fault for this process.
@@ -44,6 +47,7 @@ pub fn parse(spec: &str, my_id: u32) -> Option<Injection> {
     let kind = match kind.trim() {
         "nan" => Kind::Nan,
         "tick" => Kind::WrongTick,
+        "kill" => Kind::Kill,
         _ => return None,
     };
     Some(Injection {
@@ -57,13 +61,17 @@ pub fn from_env(my_id: u32) -> Option<Injection> {
     let spec = std::env::var(ENV).ok()?;
     let found = parse(&spec, my_id);
     if let Some(i) = found {
-        tracing::warn!(?i, "{ENV} is set: this member will publish a corrupted state (test only)");
+        tracing::warn!(
+            ?i,
+            "{ENV} is set: this member will publish a corrupted state (test only)"
+        );
     }
     found
 }
 
 impl Injection {
-    /// Applies the injection to the state about to be published at `tick`.
+    /// Applies the injection to the state about to be published at `tick` (or, for `kill`,
+    /// ends the process).
     pub fn apply(&self, tick: u64, msg: &mut crate::messages::StateMsg) {
         if tick != self.tick {
             return;
@@ -71,6 +79,12 @@ impl Injection {
         match self.kind {
             Kind::Nan => msg.state[0] = f64::NAN,
             Kind::WrongTick => msg.tick = tick + 1,
+            Kind::Kill => {
+                // SAFETY: raise(2) takes no pointers; this process ends here, as a crash would.
+                unsafe {
+                    libc::raise(libc::SIGKILL);
+                }
+            }
         }
     }
 }
@@ -88,10 +102,8 @@ mod tests {
                 tick: 50
             })
         );
-        assert_eq!(
-            parse("7:tick@3", 7).map(|i| i.kind),
-            Some(Kind::WrongTick)
-        );
+        assert_eq!(parse("7:tick@3", 7).map(|i| i.kind), Some(Kind::WrongTick));
+        assert_eq!(parse("1:kill@9", 1).map(|i| i.kind), Some(Kind::Kill));
         for bad in ["7:nan@50", "7:nan", "x:nan@1", "7:inf@1", "7:nan@-1", ""] {
             assert_eq!(parse(bad, 8), None, "{bad}");
         }

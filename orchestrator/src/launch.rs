@@ -291,8 +291,10 @@ fn run_team(
                     let echo = code == FaultCode::NeighborFault;
                     if bad.as_ref().is_none_or(|(_, e)| *e && !echo) {
                         let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
-                        let what =
-                            format!("agent {} reported {code:?} at tick {}{on}", msg.id, msg.tick);
+                        let what = format!(
+                            "agent {} reported {code:?} at tick {}{on}",
+                            msg.id, msg.tick
+                        );
                         let f = fault("agent-fault", Some(msg.id), peer, msg.tick, what);
                         bad = Some((f, echo));
                     }
