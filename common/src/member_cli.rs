@@ -24,10 +24,18 @@ pub struct MemberArgs {
     #[arg(long)]
     pub id: u32,
     /// Seconds to wait for the team to start.
-    #[arg(long = "join-timeout", default_value_t = 300.0)]
+    #[arg(
+        long = "join-timeout",
+        allow_negative_numbers = true,
+        default_value_t = 300.0
+    )]
     pub join_timeout_s: f64,
     /// Seconds without progress mid-run before stopping.
-    #[arg(long = "silence-timeout", default_value_t = 10.0)]
+    #[arg(
+        long = "silence-timeout",
+        allow_negative_numbers = true,
+        default_value_t = 10.0
+    )]
     pub silence_timeout_s: f64,
 }
 
