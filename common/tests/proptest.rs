@@ -4,8 +4,8 @@
 //!   every rejection names where the problem is (a line of the file, a field or an agent).
 //! - Random valid formations (followers anywhere inside the leading polygon, 4 to 500 agents,
 //!   many seeds): graph synthesis either gives every follower three in-neighbours with weights
-//!   >= the floor that sum to one and reach it from the leaders, or a clear error naming the
-//!   follower. Never a silent bad graph.
+//!   at or above the floor, summing to one and reaching it from the leaders, or a clear error
+//!   naming the follower. Never a silent bad graph.
 //!
 //! Case counts keep the file to a few seconds in release; a watchdog ends the process if a test
 //! hangs. How to run: `cargo test --release -p common --test proptest`.
