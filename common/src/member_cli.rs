@@ -71,7 +71,7 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
     let team = match TeamName::new(&args.team) {
         Ok(t) => t,
         Err(e) => {
-            eprintln!("error: --team: {e}");
+            say(&format!("error: --team: {e}"));
             return 2;
         }
     };
@@ -90,7 +90,7 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
     ) {
         (Ok(join), Ok(silence)) => Deadlines { join, silence },
         (Err(e), _) | (_, Err(e)) => {
-            eprintln!("{e}");
+            say(&e);
             return 2;
         }
     };
@@ -106,8 +106,16 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             0
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            say(&format!("error: {e}"));
             e.exit_code()
         }
     }
+}
+
+/// Writes one line to stderr with a single write(2): the members of a team share the
+/// orchestrator's stderr, and `eprintln!` writes piece by piece, so lines of processes stopping
+/// together would interleave mid-line.
+fn say(line: &str) {
+    use std::io::Write;
+    let _ = std::io::stderr().write_all(format!("{line}\n").as_bytes());
 }

@@ -202,6 +202,24 @@ pub enum TransportError {
     /// `setrlimit(RLIMIT_NOFILE)` failed.
     #[error("cannot raise the open-file limit: {0}")]
     FdLimit(#[source] std::io::Error),
+    /// The shared-memory file system has less room than the team needs (iceoryx2 would die of
+    /// SIGBUS writing past it).
+    #[error(
+        "team {team}: {dir} has {free_kib} KiB free, a team of {agents} agents needs about \
+         {need_kib} KiB; free space there or enlarge it (e.g. `mount -o remount,size=1G {dir}`)"
+    )]
+    ShmFull {
+        /// The team.
+        team: TeamName,
+        /// The file system checked.
+        dir: &'static str,
+        /// Its free space.
+        free_kib: u64,
+        /// The team's size.
+        agents: usize,
+        /// What the team needs (with a margin).
+        need_kib: u64,
+    },
     /// A node, service or port could not be created because this process ran out of file
     /// descriptors (the orchestrator holds a few per agent).
     #[error(

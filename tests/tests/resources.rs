@@ -4,17 +4,19 @@
 //! - Every file a team creates in /dev/shm and /tmp/iceoryx2 is readable and writable by its
 //!   owner only (iceoryx2 creates them 0600 or 0400; its directories are 0750 at most).
 //! - An orchestrator that runs out of file descriptors says so, with the limit and how to raise
-//!   it, exits 2, and leaves no run directory and no shared memory behind.
+//!   it, exits 2, and leaves no run directory and no shared memory behind; so does one whose
+//!   /dev/shm has no room for the team.
 
 mod support;
 
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
 use std::path::Path;
+use std::process::Command;
 use std::time::Duration;
 
 use common::transport::TeamName;
-use integration_tests::{describe, run, spawn, unique_team, TempDir};
+use integration_tests::{bin, describe, run, spawn, unique_team, TempDir};
 use support::*;
 
 /// A hand-started team waits for its members; this bounds the wait (it is killed sooner).
@@ -114,4 +116,41 @@ fn running_out_of_file_descriptors_is_reported_with_the_limit() {
         services.is_empty() && nodes.is_empty(),
         "left {services:?} {nodes:?}"
     );
+}
+
+/// `launch --n 40` with a 256 KiB /dev/shm (a private tmpfs in a private mount namespace, so
+/// nothing else on the machine sees it): exit 2, "/dev/shm has 256 KiB free, a team of 40 agents
+/// needs about ... KiB; ... enlarge it", no run directory. Without the check iceoryx2 dies of
+/// SIGBUS writing past the full file system. Skipped (with a note) where `unshare -m` is not
+/// allowed.
+#[test]
+fn a_full_dev_shm_is_reported_with_the_space_and_how_to_enlarge_it() {
+    let probe = Command::new("unshare").args(["-m", "true"]).output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+        return;
+    }
+    let dir = TempDir::new();
+    let team = unique_team("shmfull");
+    let out = dir.path().join("run");
+    let script = format!(
+        "mount -t tmpfs -o size=256k tmpfs /dev/shm && mkdir -p {IOX2_ROOT} && \
+         mount -t tmpfs tmpfs {IOX2_ROOT} && exec \"$0\" launch --n 40 --team {team} --out \"$1\" --quiet"
+    );
+    let o = run(
+        Command::new("unshare")
+            .args(["-m", "sh", "-c", &script])
+            .arg(bin("orchestrator"))
+            .arg(&out),
+        DEADLINE,
+    );
+    assert_exit(&o, 2, "launch --n 40 with a 256 KiB /dev/shm");
+    let err = String::from_utf8_lossy(&o.stderr);
+    for needle in [
+        "/dev/shm has 256 KiB free, a team of 40 agents needs about",
+        "enlarge it (e.g. `mount -o remount,size=",
+    ] {
+        assert!(err.contains(needle), "lacks {needle:?}\n{}", describe(&o));
+    }
+    assert!(!out.exists(), "{} was written", out.display());
 }
