@@ -32,6 +32,7 @@ mod limits;
 mod member;
 mod orchestrator;
 
+pub use limits::describe_spawn_error;
 pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
 

@@ -18,7 +18,8 @@ use common::simulate::id_order;
 use common::step::tick_time;
 use common::telemetry::Row;
 use common::transport::{
-    raise_fd_limit, remove_dead_nodes, OrchestratorPorts, TeamLayout, TeamName,
+    describe_spawn_error, raise_fd_limit, remove_dead_nodes, OrchestratorPorts, TeamLayout,
+    TeamName,
 };
 
 use crate::Failure;
@@ -78,7 +79,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
-                    return Err(Failure::fault(format!("cannot start agent {}: {e}", m.id)));
+                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
+                    let mut audit = Auditor::new(s);
+                    audit.fault(fault("spawn-failed", Some(m.id), None, 0, what.clone()));
+                    let _ = dir.write_audit(&audit.finish(false));
+                    return Err(Failure::fault(what));
                 }
             }
         }

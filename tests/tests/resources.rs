@@ -154,3 +154,88 @@ fn a_full_dev_shm_is_reported_with_the_space_and_how_to_enlarge_it() {
     }
     assert!(!out.exists(), "{} was written", out.display());
 }
+
+/// A cgroup (v1 `pids` controller) for one test, removed on drop after killing what is left in
+/// it.
+struct PidsCgroup(std::path::PathBuf);
+
+impl PidsCgroup {
+    /// A fresh cgroup with `pids.max = max`; `None` where cgroups cannot be made (not root, no
+    /// v1 pids controller).
+    fn new(max: u32) -> Option<Self> {
+        let root = Path::new("/sys/fs/cgroup/pids");
+        let dir = root.join(format!("cdm-test-{}-{max}", std::process::id()));
+        std::fs::create_dir(&dir).ok()?;
+        let g = PidsCgroup(dir);
+        std::fs::write(g.0.join("pids.max"), max.to_string()).ok()?;
+        Some(g)
+    }
+}
+
+impl Drop for PidsCgroup {
+    fn drop(&mut self) {
+        let tasks = std::fs::read_to_string(self.0.join("tasks")).unwrap_or_default();
+        for pid in tasks
+            .lines()
+            .filter_map(|l| l.trim().parse::<libc::pid_t>().ok())
+        {
+            // SAFETY: kill(2) takes no pointers; these are the test's own children.
+            unsafe {
+                libc::kill(pid, libc::SIGKILL);
+            }
+        }
+        for _ in 0..100 {
+            if std::fs::remove_dir(&self.0).is_ok() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// `launch --n 10` in a cgroup that allows 5 processes (root is exempt from RLIMIT_NPROC, a
+/// cgroup is not): the 5th agent cannot be started; exit 3 naming the agent and the process
+/// limit with how to raise it; audit.json says `spawn-failed`; the started members are stopped
+/// and nothing of the team is left. Skipped (with a note) where no pids cgroup can be made.
+#[test]
+fn hitting_the_process_limit_is_reported_with_the_limit() {
+    let Some(cgroup) = PidsCgroup::new(5) else {
+        eprintln!(
+            "skipped: cannot create a cgroup under /sys/fs/cgroup/pids (needs root, cgroup v1)"
+        );
+        return;
+    };
+    let dir = TempDir::new();
+    let team = unique_team("nproc");
+    let out = dir.path().join("run");
+    let procs = cgroup.0.join("cgroup.procs");
+    let o = run(
+        Command::new("sh")
+            .arg("-c")
+            .arg("echo $$ > \"$0\" && exec \"$1\" launch --n 10 --team \"$2\" --out \"$3\" --quiet")
+            .arg(&procs)
+            .arg(bin("orchestrator"))
+            .arg(&team)
+            .arg(&out),
+        DEADLINE,
+    );
+    assert_exit(&o, 3, "launch --n 10 with 5 processes allowed");
+    let err = String::from_utf8_lossy(&o.stderr);
+    for needle in [
+        "error: cannot start agent 5: ",
+        "the process limit was hit (RLIMIT_NPROC ",
+        "or the pids.max of this process's cgroup); raise it",
+    ] {
+        assert!(err.contains(needle), "lacks {needle:?}\n{}", describe(&o));
+    }
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["fault"]["kind"], "spawn-failed", "{audit:#}");
+    assert_eq!(audit["fault"]["agent"], 5, "{audit:#}");
+    assert_no_process_of(&team);
+    let t = TeamName::new(&team).expect("team name");
+    let (services, nodes) = (team_services(&t), team_nodes(&t));
+    assert!(
+        services.is_empty() && nodes.is_empty(),
+        "left {services:?} {nodes:?}"
+    );
+}

@@ -55,3 +55,32 @@ pub fn free_bytes(dir: &str) -> Option<u64> {
     #[allow(clippy::unnecessary_cast)] // the field types differ between platforms
     Some(st.f_bavail as u64 * st.f_frsize as u64)
 }
+
+/// `e`, the error of starting a process, with the limit behind it when it is the process limit
+/// (`EAGAIN` from fork: `RLIMIT_NPROC`, which root is exempt from, or a cgroup's `pids.max`).
+pub fn describe_spawn_error(e: &std::io::Error) -> String {
+    if e.raw_os_error() != Some(libc::EAGAIN) {
+        return e.to_string();
+    }
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
+    let nproc = if unsafe { libc::getrlimit(libc::RLIMIT_NPROC, &mut lim) } == 0 {
+        let show = |v: libc::rlim_t| {
+            if v == libc::RLIM_INFINITY {
+                "unlimited".to_string()
+            } else {
+                v.to_string()
+            }
+        };
+        format!("soft {}, hard {}", show(lim.rlim_cur), show(lim.rlim_max))
+    } else {
+        "unknown".into()
+    };
+    format!(
+        "{e}: the process limit was hit (RLIMIT_NPROC {nproc}, or the pids.max of this \
+         process's cgroup); raise it (`ulimit -u`, or the cgroup's pids.max) or fly a smaller team"
+    )
+}
