@@ -5,7 +5,8 @@
 //!   owner only (iceoryx2 creates them 0600 or 0400; its directories are 0750 at most).
 //! - An orchestrator that runs out of file descriptors says so, with the limit and how to raise
 //!   it, exits 2, and leaves no run directory and no shared memory behind; so does one whose
-//!   /dev/shm has no room for the team.
+//!   /dev/shm has no room for the team, or that hits the process limit; a process that gets
+//!   SIGBUS (shared memory full under a running team) says so.
 
 mod support;
 
@@ -238,4 +239,40 @@ fn hitting_the_process_limit_is_reported_with_the_limit() {
         services.is_empty() && nodes.is_empty(),
         "left {services:?} {nodes:?}"
     );
+}
+
+/// SIGBUS, which iceoryx2 gets when /dev/shm fills up under a running team (another program
+/// filling it): the process says "/dev/shm is probably full" and exits 3 instead of dumping
+/// core silently; the orchestrator names it and stops the team, leaving nothing behind.
+#[test]
+fn a_bus_error_in_a_member_is_reported_as_shared_memory_full() {
+    let dir = TempDir::new();
+    let team = unique_team("sigbus");
+    let out = dir.path().join("run");
+    let mut orch = spawn(&mut launch(&team, &out, &["--n", "10", "--t-total", "600"]));
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
+    let procs = team_processes(&team);
+    assert_eq!(procs.len(), 11, "{procs:#?}");
+    let fp = Footprint::record(&team, procs.keys().copied());
+    let pid = member_pid(&team, 9).expect("agent 9 runs");
+    signal(pid, libc::SIGBUS);
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 3, "launch after SIGBUS in agent 9");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("bus error (SIGBUS) touching shared memory: /dev/shm is probably full"),
+        "{}",
+        describe(&o)
+    );
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["fault"]["kind"], "agent-exited", "{audit:#}");
+    assert_eq!(audit["fault"]["agent"], 9, "{audit:#}");
+    assert!(
+        audit["fault"]["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("agent 9 exited with code 3")),
+        "{audit:#}"
+    );
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
 }
