@@ -10,6 +10,7 @@ pub mod audit;
 pub mod control;
 pub mod dynamics;
 pub mod engine;
+pub mod fault_inject;
 pub mod formation;
 pub mod frame;
 pub mod gains;

@@ -190,6 +190,7 @@ pub fn run_member(
     let mut last_progress = Instant::now();
     let mut last_alive_check = Instant::now();
     let mut unnotified = false;
+    let inject = crate::fault_inject::from_env(id);
     let fault_reply =
         |ports: &mut MemberPorts, tick: u64, code: FaultCode, peer: u32, x: &QuadState| {
             let msg = StateMsg::ok(tick, hash, id, x.0).with_status(AgentStatus::Fault {
@@ -251,9 +252,13 @@ pub fn run_member(
         // Advance as far as grants and neighbour data allow (several ticks per wake-up).
         while let Some(g) = grant {
             if published != Some(tick) && g >= tick {
+                let mut msg = StateMsg::ok(tick, hash, id, x.0);
+                if let Some(i) = &inject {
+                    i.apply(tick, &mut msg);
+                }
                 // Notify on block: readers are woken once, before this member sleeps,
                 // instead of after every tick it runs ahead.
-                ports.publish_quietly(StateMsg::ok(tick, hash, id, x.0))?;
+                ports.publish_quietly(msg)?;
                 unnotified = true;
                 published = Some(tick);
                 progress = true;

@@ -24,10 +24,18 @@ pub struct MemberArgs {
     #[arg(long)]
     pub id: u32,
     /// Seconds to wait for the team to start.
-    #[arg(long = "join-timeout", default_value_t = 300.0)]
+    #[arg(
+        long = "join-timeout",
+        allow_negative_numbers = true,
+        default_value_t = 300.0
+    )]
     pub join_timeout_s: f64,
     /// Seconds without progress mid-run before stopping.
-    #[arg(long = "silence-timeout", default_value_t = 10.0)]
+    #[arg(
+        long = "silence-timeout",
+        allow_negative_numbers = true,
+        default_value_t = 10.0
+    )]
     pub silence_timeout_s: f64,
 }
 
@@ -63,7 +71,7 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
     let team = match TeamName::new(&args.team) {
         Ok(t) => t,
         Err(e) => {
-            eprintln!("error: --team: {e}");
+            say(&format!("error: --team: {e}"));
             return 2;
         }
     };
@@ -82,7 +90,7 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
     ) {
         (Ok(join), Ok(silence)) => Deadlines { join, silence },
         (Err(e), _) | (_, Err(e)) => {
-            eprintln!("{e}");
+            say(&e);
             return 2;
         }
     };
@@ -98,8 +106,16 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             0
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            say(&format!("error: {e}"));
             e.exit_code()
         }
     }
+}
+
+/// Writes one line to stderr with a single write(2): the members of a team share the
+/// orchestrator's stderr, and `eprintln!` writes piece by piece, so lines of processes stopping
+/// together would interleave mid-line.
+fn say(line: &str) {
+    use std::io::Write;
+    let _ = std::io::stderr().write_all(format!("{line}\n").as_bytes());
 }

@@ -16,6 +16,15 @@ pub enum RunDirError {
     NotEmpty { path: PathBuf },
     #[error("--out {path}: exists and is not a directory")]
     NotADirectory { path: PathBuf },
+    /// The directory cannot be created or written (a parent is a file, a read-only or virtual
+    /// file system, permissions).
+    #[error("--out {path}: cannot {what} the run directory: {source}")]
+    Unwritable {
+        path: PathBuf,
+        what: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,
@@ -53,11 +62,19 @@ impl RunDir {
                 });
             }
         } else {
-            fs::create_dir_all(path).map_err(io_err(path))?;
+            fs::create_dir_all(path).map_err(|source| RunDirError::Unwritable {
+                path: path.to_path_buf(),
+                what: "create",
+                source,
+            })?;
         }
         // Prove the directory is writable before any work starts.
         let probe = path.join(".write-probe");
-        File::create(&probe).map_err(io_err(&probe))?;
+        File::create(&probe).map_err(|source| RunDirError::Unwritable {
+            path: path.to_path_buf(),
+            what: "write into",
+            source,
+        })?;
         let _ = fs::remove_file(&probe);
         Ok(RunDir {
             path: path.to_path_buf(),

@@ -28,9 +28,11 @@
 //! Crashed processes leave their files in `/dev/shm` and `/tmp/iceoryx2`; the next
 //! [`OrchestratorPorts::create`] of the same team (or [`remove_dead_nodes`]) removes them.
 
+mod limits;
 mod member;
 mod orchestrator;
 
+pub use limits::describe_spawn_error;
 pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
 
@@ -201,6 +203,47 @@ pub enum TransportError {
     /// `setrlimit(RLIMIT_NOFILE)` failed.
     #[error("cannot raise the open-file limit: {0}")]
     FdLimit(#[source] std::io::Error),
+    /// The shared-memory file system has less room than the team needs (iceoryx2 would die of
+    /// SIGBUS writing past it).
+    #[error(
+        "team {team}: {dir} has {free_kib} KiB free, a team of {agents} agents needs about \
+         {need_kib} KiB; free space there or enlarge it (e.g. `mount -o remount,size=1G {dir}`)"
+    )]
+    ShmFull {
+        /// The team.
+        team: TeamName,
+        /// The file system checked.
+        dir: &'static str,
+        /// Its free space.
+        free_kib: u64,
+        /// The team's size.
+        agents: usize,
+        /// What the team needs (with a margin).
+        need_kib: u64,
+    },
+    /// A node, service or port could not be created because this process ran out of file
+    /// descriptors (the orchestrator holds a few per agent).
+    #[error(
+        "team {team}, {who}: {op} on {service} failed: out of file descriptors ({open} open, \
+         limit RLIMIT_NOFILE soft {soft}, hard {hard}); raise it, e.g. `ulimit -n 65536` (as \
+         root, or after raising the hard limit in /etc/security/limits.conf), and run again"
+    )]
+    FdLimitReached {
+        /// The team.
+        team: TeamName,
+        /// The process.
+        who: Role,
+        /// The service (or node) being created.
+        service: String,
+        /// What was attempted.
+        op: &'static str,
+        /// Descriptors open at the failure.
+        open: u64,
+        /// The soft limit.
+        soft: u64,
+        /// The hard limit.
+        hard: u64,
+    },
 }
 
 /// Which process of a team is talking (for error messages and node names).
@@ -482,7 +525,10 @@ fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, Transpo
         // Signals belong to the process's main; iceoryx2 must not swallow SIGINT/SIGTERM.
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| err(format!("{e:?}")))
+        .map_err(|e| match limits::fd_exhausted() {
+            Some(u) => fd_limit_reached(team, who, &name, "create node", u),
+            None => err(format!("{e:?}")),
+        })
 }
 
 /// The iceoryx2 name of a service.
@@ -504,12 +550,33 @@ fn service_error(
     op: &'static str,
     detail: impl fmt::Debug,
 ) -> TransportError {
+    if let Some(u) = limits::fd_exhausted() {
+        return fd_limit_reached(team, who, service, op, u);
+    }
     TransportError::Service {
         team: team.clone(),
         who,
         service: service.to_owned(),
         op,
         detail: format!("{detail:?}"),
+    }
+}
+
+fn fd_limit_reached(
+    team: &TeamName,
+    who: Role,
+    service: &str,
+    op: &'static str,
+    u: limits::FdUsage,
+) -> TransportError {
+    TransportError::FdLimitReached {
+        team: team.clone(),
+        who,
+        service: service.to_owned(),
+        op,
+        open: u.open,
+        soft: u.soft,
+        hard: u.hard,
     }
 }
 

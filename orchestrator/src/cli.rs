@@ -66,10 +66,10 @@ pub enum Command {
         #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4096))]
         window: u32,
         /// Seconds without any agent progress before the team is stopped as faulty.
-        #[arg(long, default_value_t = 5.0)]
+        #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
         agent_timeout: f64,
         /// Seconds to wait for hand-started processes (--no-spawn) to join.
-        #[arg(long, default_value_t = 300.0)]
+        #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
         join_timeout: f64,
         #[command(flatten)]
         run: RunOptions,
@@ -120,7 +120,7 @@ pub struct Source {
     #[arg(long, value_name = "NAME")]
     pub builtin: Option<String>,
     /// Override the scenario's travel time t_total_s.
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub t_total: Option<f64>,
 }
 

@@ -18,7 +18,8 @@ use common::simulate::id_order;
 use common::step::tick_time;
 use common::telemetry::Row;
 use common::transport::{
-    raise_fd_limit, remove_dead_nodes, OrchestratorPorts, TeamLayout, TeamName,
+    describe_spawn_error, raise_fd_limit, remove_dead_nodes, OrchestratorPorts, TeamLayout,
+    TeamName,
 };
 
 use crate::Failure;
@@ -48,9 +49,6 @@ struct Spawned {
 /// Run a launch to the end; returns the audit report and the wall time of the ticking phase.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration), Failure> {
     let interrupted = common::signals::install();
-    let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
-    dir.write_scenario(s).map_err(Failure::fault)?;
-    let scenario_file = dir.path().join("scenario.toml");
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
@@ -66,6 +64,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
+    // Only now, with the team name ours, touch the run directory: a refused second launch of a
+    // running team writes nothing (not even into the first one's --out).
+    let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
+    dir.write_scenario(s).map_err(Failure::fault)?;
+    let scenario_file = dir.path().join("scenario.toml");
     if ports.stale_nodes_removed() > 0 {
         tracing::info!(
             removed = ports.stale_nodes_removed(),
@@ -80,7 +83,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
-                    return Err(Failure::fault(format!("cannot start agent {}: {e}", m.id)));
+                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
+                    let mut audit = Auditor::new(s);
+                    audit.fault(fault("spawn-failed", Some(m.id), None, 0, what.clone()));
+                    let _ = dir.write_audit(&audit.finish(false));
+                    return Err(Failure::fault(what));
                 }
             }
         }
@@ -140,6 +147,10 @@ fn spawn_member(scenario: &Path, team: &TeamName, id: u32, role: Role) -> std::i
 }
 
 type Stop = (FaultRecord, StopReason);
+
+/// How long a non-finite state waits for a reader's fault report (which names both agents),
+/// and a reported fault for the complete ticks before it.
+const FAULT_GRACE: Duration = Duration::from_millis(500);
 
 fn fault(
     kind: &str,
@@ -258,10 +269,16 @@ fn run_team(
     let mut last_progress = Instant::now();
     let mut last_child_check = Instant::now();
     let mut last_flush = Instant::now();
-    let mut faulted: Option<(u64, usize, FaultRecord)> = None;
     let mut ht = Vec::new();
     let mut pos: Vec<Vec3> = vec![Vec3::zeros(); n];
     let mut rows: Vec<Row> = Vec::with_capacity(n);
+    // A non-finite state is never audited or written: its readers report it with both ids; if
+    // none does within the grace (the sender has no out-neighbours), the orchestrator does.
+    let mut non_finite: Option<(u32, u64, Instant)> = None;
+    // A fault reported at tick k: the reporter published tick k and failed computing k + 1, so
+    // ticks 0..=k are complete as soon as every state is in (as in `simulate`). The team stops
+    // then, or after the grace when tick k cannot complete (a non-finite state is never used).
+    let mut stopping: Option<(FaultRecord, Instant, bool, usize)> = None;
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return Err((
@@ -275,39 +292,40 @@ fn run_team(
                 StopReason::Interrupted,
             ));
         }
+        // (fault, echo, member index) of the best fault report met in this drain.
+        let mut bad: Option<(FaultRecord, bool, usize)> = None;
         ports
             .receive_states(|msg| {
                 let Some(&k) = index.get(&msg.id) else { return };
                 if let AgentStatus::Fault { code, peer } = msg.status() {
-                    // Keep the earliest fault (tick, then member order), as the engine does: it
+                    // The root cause wins over an echo (a member stopping because its neighbour
+                    // reported a fault); then the earliest (tick, member order), as the engine
                     // stops at the first member that fails at the first failing tick.
-                    let earlier = faulted
+                    let echo = code == FaultCode::NeighborFault;
+                    let better = bad
                         .as_ref()
-                        .is_none_or(|(t, m, _)| (msg.tick, k) < (*t, *m));
-                    if earlier {
-                        // The same kinds as `simulate` records for the same faults.
-                        let kind = match code {
-                            FaultCode::Control | FaultCode::NonFinite => "control",
-                            _ => "agent-fault",
+                        .is_none_or(|(f, e, m)| (echo, msg.tick, k) < (*e, f.tick, *m));
+                    if better {
+                        // The same kind as `simulate` records for a controller fault.
+                        let kind = if code == FaultCode::Control {
+                            "control"
+                        } else {
+                            "agent-fault"
                         };
-                        faulted = Some((
-                            msg.tick,
-                            k,
-                            fault(
-                                kind,
-                                Some(msg.id),
-                                peer,
-                                msg.tick,
-                                format!(
-                                    "agent {} reported {:?} at tick {} (peer {:?})",
-                                    msg.id, code, msg.tick, peer
-                                ),
-                            ),
-                        ));
+                        let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
+                        let what = format!(
+                            "agent {} reported {code:?} at tick {}{on}",
+                            msg.id, msg.tick
+                        );
+                        bad = Some((fault(kind, Some(msg.id), peer, msg.tick, what), echo, k));
                     }
                     return;
                 }
                 if msg.tick < next_tick || msg.tick > grant {
+                    return;
+                }
+                if msg.state.iter().any(|v| !v.is_finite()) {
+                    non_finite.get_or_insert((msg.id, msg.tick, Instant::now()));
                     return;
                 }
                 let slot = pending
@@ -324,8 +342,27 @@ fn run_team(
                     StopReason::AgentFault,
                 )
             })?;
+        if let Some((f, echo, k)) = bad {
+            let better = stopping
+                .as_ref()
+                .is_none_or(|(g, _, e, m)| (echo, f.tick, k) < (*e, g.tick, *m));
+            if better {
+                let since = stopping
+                    .as_ref()
+                    .map_or_else(Instant::now, |(_, t, _, _)| *t);
+                stopping = Some((f, since, echo, k));
+            }
+        }
+        if let Some((id, tick, _)) = non_finite.filter(|(_, _, t)| t.elapsed() > FAULT_GRACE) {
+            let what = format!("agent {id} published a non-finite state at tick {tick}");
+            let f = fault("non-finite-state", Some(id), None, tick, what);
+            let since = Instant::now().checked_sub(FAULT_GRACE);
+            stopping.get_or_insert((f, since.unwrap_or_else(Instant::now), false, usize::MAX));
+        }
         let mut progressed = false;
-        while pending.get(&next_tick).is_some_and(|(_, c)| *c == n) {
+        while pending.get(&next_tick).is_some_and(|(_, c)| *c == n)
+            && stopping.as_ref().is_none_or(|(f, ..)| next_tick <= f.tick)
+        {
             let Some((states, _)) = pending.remove(&next_tick) else {
                 break;
             };
@@ -370,13 +407,11 @@ fn run_team(
                 return Ok((ticking.elapsed(), next_tick > last));
             }
         }
-        // A member that failed computing tick k + 1 published tick k first: complete every
-        // tick up to k (as the engine does), then stop.
-        if let Some((k, _, f)) = &faulted {
-            if next_tick > *k {
-                let _ = tel.flush();
-                return Err((f.clone(), StopReason::AgentFault));
+        if let Some((f, since, echo, k)) = stopping.take() {
+            if next_tick > f.tick || since.elapsed() >= FAULT_GRACE {
+                return Err((f, StopReason::AgentFault));
             }
+            stopping = Some((f, since, echo, k));
         }
         if next_tick > last {
             progress.finish();
@@ -406,19 +441,16 @@ fn run_team(
             }
             continue;
         }
-        if last_child_check.elapsed() > Duration::from_millis(100) {
+        // While stopping on a reported fault, the reporter's own exit is not a second fault.
+        if stopping.is_none() && last_child_check.elapsed() > Duration::from_millis(100) {
             last_child_check = Instant::now();
             if let Err(e) = check_children(children, next_tick) {
                 let _ = tel.flush();
                 return Err(e);
             }
         }
-        if last_progress.elapsed() > o.agent_timeout {
+        if stopping.is_none() && last_progress.elapsed() > o.agent_timeout {
             let _ = tel.flush();
-            if let Some((_, _, f)) = faulted {
-                // The fault explains the silence better than the silence does.
-                return Err((f, StopReason::AgentFault));
-            }
             let have = pending.get(&next_tick);
             let missing: Vec<u32> = s
                 .formation

@@ -142,6 +142,18 @@ impl OrchestratorPorts {
                 "removed stale resources of dead nodes of a previous run");
         }
 
+        let agents = layout.ids().len();
+        let need = super::limits::shm_need_bytes(agents);
+        let dir = super::limits::SHM_DIR;
+        if let Some(free) = super::limits::free_bytes(dir).filter(|&f| f < need) {
+            return Err(TransportError::ShmFull {
+                team: team.clone(),
+                dir,
+                free_kib: free / 1024,
+                agents,
+                need_kib: need / 1024,
+            });
+        }
         let node = create_node(team, WHO)?;
         let ports = Ports::create(node, team, layout)?;
         tracing::debug!(team = %team, agents = layout.ids().len(), "team created");

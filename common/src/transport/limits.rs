@@ -1,0 +1,86 @@
+//! Process limits that iceoryx2 runs into with large teams, reported as such: when a port or
+//! node cannot be created while this process's file-descriptor table is (nearly) full, the error
+//! says which limit was hit and how to raise it, instead of iceoryx2's bare `InternalFailure`.
+
+/// Descriptors this close to the soft limit count as "the limit was hit": iceoryx2 releases
+/// what a failed port had opened before it reports the failure.
+const FD_MARGIN: u64 = 16;
+
+/// This process's open-file numbers at the moment of a failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FdUsage {
+    /// Descriptors open now (entries of `/proc/self/fd`).
+    pub open: u64,
+    /// The soft `RLIMIT_NOFILE`.
+    pub soft: u64,
+    /// The hard `RLIMIT_NOFILE`.
+    pub hard: u64,
+}
+
+/// `Some` when the open-file limit is (nearly) exhausted; `None` when it is not or cannot be read.
+pub fn fd_exhausted() -> Option<FdUsage> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
+    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } != 0 {
+        return None;
+    }
+    #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
+    let (soft, hard) = (lim.rlim_cur as u64, lim.rlim_max as u64);
+    let open = std::fs::read_dir("/proc/self/fd").ok()?.count() as u64;
+    (open + FD_MARGIN >= soft).then_some(FdUsage { open, soft, hard })
+}
+
+/// Where iceoryx2 (0.10, Linux) keeps its shared-memory segments.
+pub const SHM_DIR: &str = "/dev/shm";
+
+/// Shared memory a team takes, measured with iceoryx2 0.10: about 40 KiB per agent (10 agents:
+/// 320 KiB, 40: 1.5 MiB, 100: 3.9 MiB, orchestrator and members together); asked for with a
+/// margin of more than half again.
+pub fn shm_need_bytes(agents: usize) -> u64 {
+    (agents as u64 + 4) * 64 * 1024
+}
+
+/// Free bytes for unprivileged writers in `dir`, if it can be asked.
+pub fn free_bytes(dir: &str) -> Option<u64> {
+    let path = std::ffi::CString::new(dir).ok()?;
+    // SAFETY: `st` is zero-initialised plain data that statvfs fills; `path` is NUL-terminated.
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: both pointers are valid for the duration of the call.
+    if unsafe { libc::statvfs(path.as_ptr(), &mut st) } != 0 {
+        return None;
+    }
+    #[allow(clippy::unnecessary_cast)] // the field types differ between platforms
+    Some(st.f_bavail as u64 * st.f_frsize as u64)
+}
+
+/// `e`, the error of starting a process, with the limit behind it when it is the process limit
+/// (`EAGAIN` from fork: `RLIMIT_NPROC`, which root is exempt from, or a cgroup's `pids.max`).
+pub fn describe_spawn_error(e: &std::io::Error) -> String {
+    if e.raw_os_error() != Some(libc::EAGAIN) {
+        return e.to_string();
+    }
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
+    let nproc = if unsafe { libc::getrlimit(libc::RLIMIT_NPROC, &mut lim) } == 0 {
+        let show = |v: libc::rlim_t| {
+            if v == libc::RLIM_INFINITY {
+                "unlimited".to_string()
+            } else {
+                v.to_string()
+            }
+        };
+        format!("soft {}, hard {}", show(lim.rlim_cur), show(lim.rlim_max))
+    } else {
+        "unknown".into()
+    };
+    format!(
+        "{e}: the process limit was hit (RLIMIT_NPROC {nproc}, or the pids.max of this \
+         process's cgroup); raise it (`ulimit -u`, or the cgroup's pids.max) or fly a smaller team"
+    )
+}

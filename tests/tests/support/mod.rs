@@ -1,0 +1,445 @@
+//! Helpers shared by the fault and bad-input tests (`faults.rs`, `bad_input.rs`), copied from
+//! `launch.rs` so that file stays as it is: running `orchestrator launch`, reading run
+//! directories, finding a team's processes, and the "nothing of the team is left behind"
+//! checker (by attribution: see `launch.rs`'s module comment).
+
+#![allow(dead_code)] // each test file uses a different part
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use common::formation::Role;
+use common::scenario::ScenarioFile;
+use common::transport::TeamName;
+use integration_tests::{bin, describe, Running};
+use serde_json::Value;
+
+/// How long a team may take to start and write its first ticks.
+pub const PROGRESS_DEADLINE: Duration = Duration::from_secs(60);
+
+/// `orchestrator launch SOURCE --team TEAM --out OUT --quiet`.
+pub fn launch(team: &str, out: &Path, source: &[&str]) -> Command {
+    let mut c = Command::new(bin("orchestrator"));
+    c.arg("launch")
+        .args(source)
+        .arg("--team")
+        .arg(team)
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet");
+    c
+}
+
+/// `orchestrator simulate SOURCE --out OUT --quiet`.
+pub fn simulate(out: &Path, source: &[&str]) -> Command {
+    let mut c = Command::new(bin("orchestrator"));
+    c.arg("simulate")
+        .args(source)
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet");
+    c
+}
+
+/// `leader` or `agent` (by `role`) joining `team` as `id` with `scenario`.
+pub fn member(binary: &str, scenario: &Path, team: &str, id: u32) -> Command {
+    let mut c = Command::new(bin(binary));
+    c.arg("--scenario")
+        .arg(scenario)
+        .arg("--team")
+        .arg(team)
+        .arg("--id")
+        .arg(id.to_string());
+    c
+}
+
+pub fn binary_for(role: Role) -> &'static str {
+    if role.is_leader() {
+        "leader"
+    } else {
+        "agent"
+    }
+}
+
+pub fn assert_exit(out: &Output, code: i32, what: &str) {
+    assert_eq!(
+        out.status.code(),
+        Some(code),
+        "{what}: expected exit {code}\n{}",
+        describe(out)
+    );
+}
+
+pub fn read_json(path: &Path) -> Value {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{} is not JSON: {e}", path.display()))
+}
+
+/// The scenario a run flew (`<run>/scenario.toml`: positions projected, in-neighbours filled in).
+pub fn flown_scenario(run_dir: &Path) -> ScenarioFile {
+    let path = run_dir.join("scenario.toml");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    toml::from_str(&text).unwrap_or_else(|e| panic!("{} does not parse: {e}", path.display()))
+}
+
+/// Asserts two files are byte-identical; on a difference, names the first differing line.
+pub fn assert_same_file(a: &Path, b: &Path) {
+    let read =
+        |p: &Path| std::fs::read(p).unwrap_or_else(|e| panic!("cannot read {}: {e}", p.display()));
+    let (x, y) = (read(a), read(b));
+    if x == y {
+        return;
+    }
+    let (xl, yl): (Vec<&[u8]>, Vec<&[u8]>) = (
+        x.split(|&c| c == b'\n').collect(),
+        y.split(|&c| c == b'\n').collect(),
+    );
+    let k = xl.iter().zip(&yl).take_while(|(p, q)| p == q).count();
+    let line = |v: &[&[u8]]| {
+        v.get(k)
+            .map(|l| String::from_utf8_lossy(l).into_owned())
+            .unwrap_or_else(|| "<end of file>".into())
+    };
+    panic!(
+        "{} ({} lines) and {} ({} lines) first differ at line {}:\n  {}\n  {}",
+        a.display(),
+        xl.len(),
+        b.display(),
+        yl.len(),
+        k + 1,
+        line(&xl),
+        line(&yl)
+    );
+}
+
+/// Checks a telemetry file written every tick holds whole ticks only: ticks 0, 1, ..., k-1 in
+/// order, each with one row per agent of `ids`. Returns k.
+pub fn complete_ticks(path: &Path, ids: &BTreeSet<u32>) -> u64 {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("tick,t,id,role,x,y,z,vx,vy,vz,x_ht,y_ht,z_ht"),
+        "{}: header",
+        path.display()
+    );
+    assert!(
+        text.is_empty() || text.ends_with('\n'),
+        "{}: the last row is cut short",
+        path.display()
+    );
+    let mut ticks = 0u64;
+    let mut block: Vec<u32> = Vec::new();
+    let close = |block: &mut Vec<u32>, ticks: &mut u64| {
+        let got: BTreeSet<u32> = block.iter().copied().collect();
+        assert!(
+            block.len() == ids.len() && &got == ids,
+            "{}: tick {ticks} has rows for agents {block:?}, expected one for each of {ids:?}",
+            path.display()
+        );
+        block.clear();
+        *ticks += 1;
+    };
+    for (k, line) in lines.enumerate() {
+        let mut f = line.split(',');
+        let parse = |v: Option<&str>| -> u64 {
+            v.and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("{}: row {} is malformed: {line}", path.display(), k + 2))
+        };
+        let tick = parse(f.next());
+        let _t = f.next();
+        let id = parse(f.next()) as u32;
+        if tick != ticks {
+            close(&mut block, &mut ticks);
+        }
+        assert_eq!(
+            tick,
+            ticks,
+            "{}: row {} jumps to tick {tick}",
+            path.display(),
+            k + 2
+        );
+        block.push(id);
+    }
+    if !block.is_empty() {
+        close(&mut block, &mut ticks);
+    }
+    ticks
+}
+
+/// The arguments of process `pid` (empty for a zombie or a process that is gone).
+pub fn cmdline(pid: u32) -> Vec<String> {
+    std::fs::read(format!("/proc/{pid}/cmdline"))
+        .map(|raw| {
+            raw.split(|&b| b == 0)
+                .filter(|a| !a.is_empty())
+                .map(|a| String::from_utf8_lossy(a).into_owned())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Live processes that have `team` as one of their arguments, with their command lines.
+pub fn team_processes(team: &str) -> BTreeMap<u32, Vec<String>> {
+    let mut out = BTreeMap::new();
+    let entries = std::fs::read_dir("/proc").unwrap_or_else(|e| panic!("cannot list /proc: {e}"));
+    for e in entries.flatten() {
+        let Some(pid) = e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()) else {
+            continue;
+        };
+        let args = cmdline(pid);
+        if args.iter().any(|a| a == team) {
+            out.insert(pid, args);
+        }
+    }
+    out
+}
+
+/// The process flying agent `id` of `team` (`... --team <team> --id <id>`).
+pub fn member_pid(team: &str, id: u32) -> Option<u32> {
+    let id = id.to_string();
+    team_processes(team).into_iter().find_map(|(pid, args)| {
+        args.windows(4)
+            .any(|w| w[0] == "--team" && w[1] == team && w[2] == "--id" && w[3] == id)
+            .then_some(pid)
+    })
+}
+
+pub fn signal(pid: u32, sig: libc::c_int) {
+    let pid = libc::pid_t::try_from(pid).expect("pid fits pid_t");
+    // SAFETY: kill(2) takes no pointers; `pid` is a single process of the team under test.
+    let rc = unsafe { libc::kill(pid, sig) };
+    assert_eq!(
+        rc,
+        0,
+        "kill({pid}, {sig}): {}",
+        std::io::Error::last_os_error()
+    );
+}
+
+/// Wait until `telemetry` holds more than `rows` rows, while the orchestrator keeps running.
+pub fn wait_for_rows(orch: &mut Running, telemetry: &Path, rows: usize) {
+    let until = Instant::now() + PROGRESS_DEADLINE;
+    loop {
+        let lines = std::fs::read(telemetry)
+            .map(|b| b.iter().filter(|&&c| c == b'\n').count())
+            .unwrap_or(0);
+        if lines > rows + 1 {
+            return;
+        }
+        let why = if orch.has_exited() {
+            "exited"
+        } else if Instant::now() >= until {
+            "did not get there within the deadline"
+        } else {
+            std::thread::sleep(Duration::from_millis(10));
+            continue;
+        };
+        let program = orch.program();
+        let out = orch.kill();
+        panic!(
+            "{program} {why} before {} had {rows} rows ({lines} lines).\n{}",
+            telemetry.display(),
+            describe(&out)
+        );
+    }
+}
+
+pub const IOX2_ROOT: &str = "/tmp/iceoryx2";
+pub const SHM: &str = "/dev/shm";
+
+/// The value of `key = "value"` or `key = 123` in an iceoryx2 TOML file.
+pub fn toml_value(text: &str, key: &str) -> Option<String> {
+    text.lines().find_map(|l| {
+        let (k, v) = l.split_once('=')?;
+        (k.trim() == key).then(|| v.trim().trim_matches('"').to_string())
+    })
+}
+
+/// Files under `dir`, recursively (directories included), sorted.
+pub fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = vec![];
+    let mut dirs = vec![dir.to_path_buf()];
+    while let Some(d) = dirs.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            if e.file_type().is_ok_and(|t| t.is_dir()) {
+                dirs.push(e.path());
+            }
+            out.push(e.path());
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The team's services as iceoryx2 stores them: (hash, name) of each
+/// `/tmp/iceoryx2/services/iox2_<hash>.service` whose `service_name` belongs to `team`.
+pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
+    let prefix = format!("cdm/{team}/");
+    let mut out = vec![];
+    for path in files_under(&Path::new(IOX2_ROOT).join("services")) {
+        let Some(hash) = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .and_then(|n| n.strip_prefix("iox2_"))
+            .and_then(|n| n.strip_suffix(".service"))
+        else {
+            continue;
+        };
+        let name = std::fs::read_to_string(&path)
+            .ok()
+            .and_then(|t| toml_value(&t, "service_name"));
+        if let Some(name) = name.filter(|n| n.starts_with(&prefix)) {
+            out.push((hash.to_string(), name));
+        }
+    }
+    out
+}
+
+/// The team's nodes: (name, process id as iceoryx2 records it) from each
+/// `/tmp/iceoryx2/nodes/<node id>/iox2_node.details` whose node name belongs to `team`.
+pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
+    let mut out = vec![];
+    for path in files_under(&Path::new(IOX2_ROOT).join("nodes")) {
+        if path.file_name().and_then(|n| n.to_str()) != Some("iox2_node.details") {
+            continue;
+        }
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue;
+        };
+        let name = toml_value(&text, "name").filter(|n| team.owns_node(n));
+        let pid = toml_value(&text, "process").and_then(|p| p.parse().ok());
+        if let (Some(name), Some(pid)) = (name, pid) {
+            out.push((name, pid));
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The process id iceoryx2 packs into its 128-bit ids (node, port, service and event ids name
+/// its files): bits 64..96.
+pub fn id_pid(id: u128) -> u32 {
+    (id >> 64) as u32
+}
+
+/// A team's processes and services, recorded while it runs, to find what it leaves behind.
+pub struct Footprint {
+    team: TeamName,
+    pids: BTreeSet<u32>,
+    service_hashes: BTreeSet<String>,
+}
+
+impl Footprint {
+    /// Record the live team: the given processes, those its iceoryx2 nodes name, and the hashes
+    /// of its services.
+    pub fn record(team: &str, pids: impl IntoIterator<Item = u32>) -> Self {
+        let team = TeamName::new(team).unwrap_or_else(|e| panic!("team {team}: {e}"));
+        let mut all: BTreeSet<u32> = pids.into_iter().collect();
+        all.extend(team_nodes(&team).into_iter().map(|(_, pid)| pid));
+        let service_hashes = team_services(&team).into_iter().map(|(h, _)| h).collect();
+        Footprint {
+            team,
+            pids: all,
+            service_hashes,
+        }
+    }
+
+    /// Adds what `other` recorded (a team recorded several times while it starts and runs).
+    pub fn absorb(&mut self, other: Footprint) {
+        self.pids.extend(other.pids);
+        self.service_hashes.extend(other.service_hashes);
+    }
+
+    /// Whether `name` carries one of the team's service hashes or an id minted by one of its
+    /// processes. A pid now held by a process outside the team (recycled) does not count.
+    fn names_the_team(&self, name: &str, pids: &BTreeSet<u32>) -> bool {
+        self.service_hashes
+            .iter()
+            .any(|h| name.contains(h.as_str()))
+            || name
+                .split(|c: char| !c.is_ascii_digit())
+                .filter(|run| run.len() >= 20)
+                .filter_map(|run| run.parse::<u128>().ok())
+                .any(|id| pids.contains(&id_pid(id)))
+    }
+
+    /// Everything of the team iceoryx2 still has: services and nodes named after the team, and
+    /// files under /dev/shm and /tmp/iceoryx2 named by its services or processes.
+    pub fn leftovers(&self) -> Vec<String> {
+        let team = self.team.as_str();
+        let pids: BTreeSet<u32> = self
+            .pids
+            .iter()
+            .copied()
+            .filter(|&p| {
+                let args = cmdline(p);
+                args.is_empty() || args.iter().any(|a| a == team)
+            })
+            .collect();
+        let mut out: Vec<String> = team_services(&self.team)
+            .into_iter()
+            .map(|(_, name)| format!("service {name}"))
+            .collect();
+        out.extend(
+            team_nodes(&self.team)
+                .into_iter()
+                .map(|(name, pid)| format!("node {name} (process {pid})")),
+        );
+        for root in [SHM, IOX2_ROOT] {
+            for path in files_under(Path::new(root)) {
+                let name = path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                // iceoryx2's one global management file is shared by every process.
+                if !name.ends_with(".global_mgmt") && self.names_the_team(&name, &pids) {
+                    out.push(path.display().to_string());
+                }
+            }
+        }
+        out
+    }
+
+    /// Asserts the checker sees the live team (its services, nodes and shared-memory files), so
+    /// that an empty `leftovers` later means something.
+    pub fn assert_visible(&self, processes: usize) {
+        let live = self.leftovers();
+        let count = |p: &str| live.iter().filter(|l| l.starts_with(p)).count();
+        assert!(
+            count("service ") > 0
+                && count("node ") == processes
+                && count(SHM) > 0
+                && count(IOX2_ROOT) > 0,
+            "the live team {} does not show {processes} nodes, services and files: {live:#?}",
+            self.team
+        );
+    }
+
+    pub fn assert_nothing_left(&self) {
+        let left = self.leftovers();
+        assert!(
+            left.is_empty(),
+            "team {} left {} iceoryx2 resources behind: {left:#?}",
+            self.team,
+            left.len()
+        );
+    }
+}
+
+/// Asserts no process of `team` is alive.
+pub fn assert_no_process_of(team: &str) {
+    let procs = team_processes(team);
+    assert!(
+        procs.is_empty(),
+        "processes of team {team} survived: {procs:#?}"
+    );
+}
