@@ -4,7 +4,7 @@
 use std::hint::black_box;
 
 use common::audit::Auditor;
-use common::dynamics::{Plant, QuadState};
+use common::dynamics::QuadState;
 use common::engine::{desired_positions, quad_engine, step_config};
 use common::frame::deformation_eigenvalues;
 use common::scenario::Scenario;
