@@ -49,6 +49,9 @@ struct Spawned {
 /// Run a launch to the end; returns the audit report and the wall time of the ticking phase.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration), Failure> {
     let interrupted = common::signals::install();
+    if o.spawn {
+        member_binaries_present()?;
+    }
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
@@ -129,6 +132,23 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
     let report = audit.finish(complete);
     dir.write_audit(&report).map_err(Failure::fault)?;
     Ok((report, elapsed))
+}
+
+/// The `leader` and `agent` binaries must sit next to this one (`cargo build --release` builds
+/// them; `cargo run --bin orchestrator` alone does not). Checked before anything is created.
+fn member_binaries_present() -> Result<(), Failure> {
+    let exe = std::env::current_exe()
+        .map_err(|e| Failure::fault(format!("cannot locate the orchestrator binary: {e}")))?;
+    for name in ["leader", "agent"] {
+        let bin = exe.with_file_name(name);
+        if !bin.is_file() {
+            return Err(Failure::bad_input(format!(
+                "the `{name}` binary is missing ({}): build every binary with `cargo build --release` (`cargo run --bin orchestrator` builds only the orchestrator)",
+                bin.display()
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn spawn_member(scenario: &Path, team: &TeamName, id: u32, role: Role) -> std::io::Result<Child> {

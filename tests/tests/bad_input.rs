@@ -292,3 +292,42 @@ fn an_unwritable_out_is_refused_and_nothing_is_written() {
     assert_eq!(std::fs::read(&file).expect("read"), b"x\n");
     assert_no_team_resources(&team);
 }
+
+/// `cargo run --bin orchestrator` builds only the orchestrator: a launch without the member
+/// binaries beside it is refused before anything is created, saying how to build them.
+#[test]
+fn a_launch_without_the_member_binaries_says_how_to_build_them() {
+    let dir = TempDir::new();
+    let lonely = dir.path().join("orchestrator");
+    std::fs::copy(bin("orchestrator"), &lonely).expect("copy the orchestrator binary");
+    let out_dir = dir.path().join("run");
+    let team = unique_team("lonely");
+    let out = run(
+        Command::new(&lonely)
+            .args([
+                "launch",
+                "--n",
+                "4",
+                "--max-ticks",
+                "5",
+                "--team",
+                &team,
+                "--out",
+            ])
+            .arg(&out_dir),
+        Duration::from_secs(30),
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", describe(&out));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("binary is missing") && err.contains("cargo build --release"),
+        "{}",
+        describe(&out)
+    );
+    assert!(
+        !out_dir.exists(),
+        "nothing may be written: {}",
+        out_dir.display()
+    );
+    assert_no_team_resources(&team);
+}
