@@ -1,0 +1,153 @@
+//! The team's processes: check the member binaries, spawn one per quadcopter, notice one that
+//! exits early, and stop them all (stop message, SIGTERM, SIGKILL, then clean their resources).
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::audit::FaultRecord;
+use common::formation::Role;
+use common::messages::{ClockMsg, StopReason};
+use common::scenario::Scenario;
+use common::transport::{remove_dead_nodes, OrchestratorPorts, TeamName};
+
+use crate::Failure;
+
+/// A spawned member process.
+pub struct Spawned {
+    pub id: u32,
+    pub child: Child,
+}
+
+/// Why a run stops early: the fault to record and the reason sent to the members.
+pub type Stop = (FaultRecord, StopReason);
+
+/// A fault record.
+pub fn fault(
+    kind: &str,
+    agent: Option<u32>,
+    peer: Option<u32>,
+    tick: u64,
+    message: String,
+) -> FaultRecord {
+    FaultRecord {
+        kind: kind.into(),
+        agent,
+        peer,
+        tick,
+        message,
+    }
+}
+
+/// The `leader` and `agent` binaries must sit next to this one (`cargo build --release` builds
+/// them; `cargo run --bin orchestrator` alone does not). Checked before anything is created.
+pub fn member_binaries_present() -> Result<(), Failure> {
+    let exe = std::env::current_exe()
+        .map_err(|e| Failure::fault(format!("cannot locate the orchestrator binary: {e}")))?;
+    for name in ["leader", "agent"] {
+        let bin = exe.with_file_name(name);
+        if !bin.is_file() {
+            return Err(Failure::bad_input(format!(
+                "the `{name}` binary is missing ({}): build every binary with `cargo build --release` (`cargo run --bin orchestrator` builds only the orchestrator)",
+                bin.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+pub fn spawn_member(
+    scenario: &Path,
+    team: &TeamName,
+    id: u32,
+    role: Role,
+) -> std::io::Result<Child> {
+    let exe = std::env::current_exe()?;
+    let bin = exe.with_file_name(if role.is_leader() { "leader" } else { "agent" });
+    Command::new(bin)
+        .arg("--scenario")
+        .arg(scenario)
+        .arg("--team")
+        .arg(team.as_str())
+        .arg("--id")
+        .arg(id.to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .spawn()
+}
+
+/// A spawned member that exited before the end is a fault, named with its id and the tick.
+pub fn check_children(children: &mut [Spawned], tick: u64) -> Result<(), Stop> {
+    for c in children.iter_mut() {
+        if let Ok(Some(status)) = c.child.try_wait() {
+            use std::os::unix::process::ExitStatusExt;
+            let how = match (status.code(), status.signal()) {
+                (_, Some(sig)) => format!("was killed by signal {sig}"),
+                (Some(code), _) => format!("exited with code {code}"),
+                _ => "exited".into(),
+            };
+            return Err((
+                fault(
+                    "agent-exited",
+                    Some(c.id),
+                    None,
+                    tick,
+                    format!("agent {} {how} at tick {tick}", c.id),
+                ),
+                StopReason::AgentFault,
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Stop message, then SIGTERM, then SIGKILL for a process that does not stop; then remove the
+/// dead nodes' resources. Bounded well under a second.
+pub fn stop_team(
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    s: &Scenario,
+    reason: StopReason,
+) {
+    let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), s.content_hash(), reason));
+    let wait_all = |children: &mut [Spawned], d: Duration| {
+        let until = Instant::now() + d;
+        loop {
+            let alive = children
+                .iter_mut()
+                .map(|c| matches!(c.child.try_wait(), Ok(None)))
+                .filter(|a| *a)
+                .count();
+            if alive == 0 || Instant::now() >= until {
+                return alive;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    };
+    let graceful = if reason == StopReason::Finished {
+        Duration::from_secs(3)
+    } else {
+        Duration::from_millis(300)
+    };
+    if wait_all(children, graceful) > 0 {
+        for c in children.iter_mut() {
+            if matches!(c.child.try_wait(), Ok(None)) {
+                // SAFETY: plain kill(2) on our own child's pid.
+                unsafe {
+                    libc::kill(c.child.id() as libc::pid_t, libc::SIGTERM);
+                }
+            }
+        }
+        if wait_all(children, Duration::from_millis(300)) > 0 {
+            for c in children.iter_mut() {
+                let _ = c.child.kill();
+            }
+            wait_all(children, Duration::from_millis(300));
+        }
+    }
+    match remove_dead_nodes(ports.team()) {
+        Ok(0) => {}
+        Ok(k) => tracing::info!(removed = k, "removed resources of stopped processes"),
+        Err(e) => tracing::warn!("{e}"),
+    }
+}
