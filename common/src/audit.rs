@@ -3,7 +3,7 @@
 //! follower outside the containment prism), tracking (||r_i - r_i,HT||_2 > delta, eq. 34) and
 //! deformation (lambda_1(U_D) < lambda_CD,min, eq. 37).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Serialize;
 
@@ -123,15 +123,15 @@ pub struct AuditReport {
     pub fault: Option<FaultRecord>,
 }
 
-/// One evaluated condition at one tick.
-struct Check {
-    kind: &'static str,
-    agents: Vec<u32>,
-    bad: bool,
-    tick: u64,
-    t: Real,
-    value: Real,
-    limit: Real,
+/// Which conditions are failing right now: a violation is recorded when one starts.
+#[derive(Default)]
+struct Failing {
+    /// Per member (member order): tracking and containment.
+    tracking: Vec<bool>,
+    containment: Vec<bool>,
+    /// Colliding pairs (sorted ids).
+    collisions: BTreeSet<(u32, u32)>,
+    deformation: bool,
 }
 
 /// The audit accumulator.
@@ -141,7 +141,7 @@ pub struct Auditor {
     ids: Vec<u32>,
     followers: Vec<usize>,
     polygon: Vec<usize>,
-    active: BTreeMap<(&'static str, Vec<u32>), bool>,
+    failing: Failing,
     report: AuditReport,
 }
 
@@ -158,7 +158,11 @@ impl Auditor {
                 .filter(|&k| f.members[k].role == Role::Follower)
                 .collect(),
             polygon: f.polygon.clone(),
-            active: BTreeMap::new(),
+            failing: Failing {
+                tracking: vec![false; f.members.len()],
+                containment: vec![false; f.members.len()],
+                ..Failing::default()
+            },
             report: AuditReport {
                 verdict: "SAFE",
                 scenario: scenario.file.name.clone(),
@@ -203,90 +207,67 @@ impl Auditor {
         self.report.stopped_on_violation = true;
     }
 
-    fn flag(&mut self, c: Check) {
-        let key = (c.kind, c.agents);
-        let was = self.active.get(&key).copied().unwrap_or(false);
-        if c.bad && !was {
-            if self.report.violations.len() < MAX_VIOLATION_RECORDS {
-                tracing::warn!(kind = c.kind, tick = c.tick, t_s = c.t, agents = ?key.1, value = c.value, limit = c.limit, "safety violation");
-                self.report.violations.push(Violation {
-                    kind: c.kind,
-                    tick: c.tick,
-                    t_s: c.t,
-                    agents: key.1.clone(),
-                    value: c.value,
-                    limit: c.limit,
-                });
-            } else {
-                self.report.violations_dropped += 1;
-            }
-        }
-        if c.bad || was {
-            self.active.insert(key, c.bad);
+    /// Record a violation that starts at this tick (allocates only then).
+    fn record(
+        &mut self,
+        kind: &'static str,
+        agents: &[u32],
+        at: (u64, Real),
+        value: Real,
+        limit: Real,
+    ) {
+        let (tick, t) = at;
+        if self.report.violations.len() < MAX_VIOLATION_RECORDS {
+            tracing::warn!(kind, tick, t_s = t, agents = ?agents, value, limit, "safety violation");
+            self.report.violations.push(Violation {
+                kind,
+                tick,
+                t_s: t,
+                agents: agents.to_vec(),
+                value,
+                limit,
+            });
+        } else {
+            self.report.violations_dropped += 1;
         }
     }
 
     /// Audit one tick: positions and desired positions in member order.
     pub fn observe(&mut self, tick: u64, t: Real, pos: &[Vec3], ht: &[Vec3]) {
         let n = self.numbers;
-        let r = &mut self.report;
-        r.ticks = r.ticks.max(tick + 1);
+        let at = (tick, t);
+        self.report.ticks = self.report.ticks.max(tick + 1);
         // Tracking (eq. 34), 2-norm and inf-norm (ERRATA 11).
-        let mut devs = Vec::with_capacity(pos.len());
         for (k, (p, h)) in pos.iter().zip(ht).enumerate() {
             let e = p - h;
             let d2 = e.norm();
+            let r = &mut self.report;
             r.max_deviation_m = r.max_deviation_m.max(d2);
             r.max_deviation_inf_m = r.max_deviation_inf_m.max(e.amax());
-            devs.push((k, d2));
+            let bad = d2 > n.delta_m;
+            if bad && !self.failing.tracking[k] {
+                self.record("tracking", &[self.ids[k]], at, d2, n.delta_m);
+            }
+            self.failing.tracking[k] = bad;
         }
         for &k in &self.followers {
-            self.report.max_follower_deviation_m =
-                self.report.max_follower_deviation_m.max(devs[k].1);
-        }
-        for (k, d2) in devs {
-            self.flag(Check {
-                kind: "tracking",
-                agents: vec![self.ids[k]],
-                bad: d2 > n.delta_m,
-                tick,
-                t,
-                value: d2,
-                limit: n.delta_m,
-            });
+            let d2 = (pos[k] - ht[k]).norm();
+            self.report.max_follower_deviation_m = self.report.max_follower_deviation_m.max(d2);
         }
         // Collisions: every pair closer than 2 eps.
         let (sep, _, _) = safety::min_separation(pos);
         self.report.min_separation_m = self.report.min_separation_m.min(sep);
-        let pairs = close_pairs(pos, 2.0 * n.eps_m);
-        let mut close: BTreeMap<Vec<u32>, Real> = BTreeMap::new();
-        for (i, j, d) in pairs {
-            let mut ids = vec![self.ids[i], self.ids[j]];
-            ids.sort_unstable();
-            close.insert(ids, d);
+        let mut close: BTreeMap<(u32, u32), Real> = BTreeMap::new();
+        for (i, j, d) in close_pairs(pos, 2.0 * n.eps_m) {
+            let (a, b) = (self.ids[i], self.ids[j]);
+            close.insert((a.min(b), a.max(b)), d);
         }
-        let previously: Vec<Vec<u32>> = self
-            .active
-            .iter()
-            .filter(|((kind, _), on)| *kind == "collision" && **on)
-            .map(|((_, ids), _)| ids.clone())
-            .collect();
-        for ids in previously {
-            if !close.contains_key(&ids) {
-                self.active.insert(("collision", ids), false);
+        for (&(a, b), &d) in &close {
+            if !self.failing.collisions.contains(&(a, b)) {
+                self.record("collision", &[a, b], at, d, 2.0 * n.eps_m);
             }
         }
-        for (ids, d) in close {
-            self.flag(Check {
-                kind: "collision",
-                agents: ids,
-                bad: true,
-                tick,
-                t,
-                value: d,
-                limit: 2.0 * n.eps_m,
-            });
-        }
+        self.failing.collisions = close.into_keys().collect();
         // Containment (Theorem 3): the prism over the leaders' desired polygon.
         let verts: Vec<Vec3> = self.polygon.iter().map(|&k| ht[k]).collect();
         if verts.len() >= 3 {
@@ -300,20 +281,15 @@ impl Auditor {
                 let height = prism.height(&pos[k]).abs();
                 self.report.min_boundary_distance_m = self.report.min_boundary_distance_m.min(side);
                 let outside = side < 0.0 || height > prism.half_height_m;
-                let value = if side < 0.0 {
-                    side
-                } else {
-                    prism.half_height_m - height
-                };
-                self.flag(Check {
-                    kind: "containment",
-                    agents: vec![self.ids[k]],
-                    bad: outside,
-                    tick,
-                    t,
-                    value,
-                    limit: 0.0,
-                });
+                if outside && !self.failing.containment[k] {
+                    let value = if side < 0.0 {
+                        side
+                    } else {
+                        prism.half_height_m - height
+                    };
+                    self.record("containment", &[self.ids[k]], at, value, 0.0);
+                }
+                self.failing.containment[k] = outside;
             }
         }
         // Deformation (eq. 37).
@@ -328,16 +304,12 @@ impl Auditor {
             Err(_) => 0.0,
         };
         self.report.lambda1_min_run = self.report.lambda1_min_run.min(l1);
-        let primaries = self.ids[..3].to_vec();
-        self.flag(Check {
-            kind: "deformation",
-            agents: primaries,
-            bad: l1 < n.lambda_cd_min - 1e-9,
-            tick,
-            t,
-            value: l1,
-            limit: n.lambda_cd_min,
-        });
+        let bad = l1 < n.lambda_cd_min - 1e-9;
+        if bad && !self.failing.deformation {
+            let primaries = [self.ids[0], self.ids[1], self.ids[2]];
+            self.record("deformation", &primaries, at, l1, n.lambda_cd_min);
+        }
+        self.failing.deformation = bad;
     }
 
     /// Record a runtime fault (the run did not complete).

@@ -307,13 +307,7 @@ pub fn run_member(
             }
             tick += 1;
             for b in inbox.iter_mut() {
-                while let Some((&k, _)) = b.iter().next() {
-                    if k < tick {
-                        b.remove(&k);
-                    } else {
-                        break;
-                    }
-                }
+                *b = b.split_off(&tick);
             }
             progress = true;
         }

@@ -10,9 +10,10 @@
 //! Case counts keep the file to a few seconds in release; a watchdog ends the process if a test
 //! hangs. How to run: `cargo test --release -p common --test proptest`.
 
+mod support;
+use support::Watchdog;
+
 use std::collections::{BTreeMap, BTreeSet};
-use std::sync::mpsc;
-use std::thread;
 use std::time::Duration;
 
 use common::formation::Role;
@@ -22,30 +23,6 @@ use proptest::sample::Index;
 
 /// No case should take more than a fraction of a second; this only stops a hang.
 const DEADLINE: Duration = Duration::from_secs(60);
-
-/// Ends the whole test process if a test outlives its deadline (a hang must not block CI).
-struct Watchdog(Option<mpsc::Sender<()>>);
-
-impl Watchdog {
-    fn new(test: &'static str) -> Self {
-        let (tx, rx) = mpsc::channel::<()>();
-        thread::spawn(move || {
-            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(DEADLINE) {
-                eprintln!("watchdog: test {test} exceeded its {DEADLINE:?} deadline; aborting");
-                std::process::exit(3);
-            }
-        });
-        Self(Some(tx))
-    }
-}
-
-impl Drop for Watchdog {
-    fn drop(&mut self) {
-        if let Some(tx) = self.0.take() {
-            let _ = tx.send(());
-        }
-    }
-}
 
 /// Whether a rejection says where the problem is: a line of the file (TOML errors), a field, an
 /// agent, a follower or the leaders, or the gains.
@@ -271,7 +248,7 @@ proptest! {
     fn edited_paper40_text_is_accepted_soundly_or_refused_clearly(
         edits in prop::collection::vec(edit(), 1..4)
     ) {
-        let _dog = Watchdog::new("edited paper40 text");
+        let _dog = Watchdog::new("edited paper40 text", DEADLINE);
         let mut text = paper40_text().to_string();
         for e in &edits {
             text = apply(&text, e);
@@ -332,7 +309,7 @@ proptest! {
         own in prop::collection::vec(agent(), 0..10),
         from_paper in any::<bool>(), pick in any::<Index>(), replace in agent(),
     ) {
-        let _dog = Watchdog::new("random structured scenarios");
+        let _dog = Watchdog::new("random structured scenarios", DEADLINE);
         let file = if from_paper {
             // paper40 with one agent replaced by a random one: mostly near-valid files.
             let mut f = paper40();
@@ -384,7 +361,7 @@ impl Rng {
 /// sweep is not vacuous).
 #[test]
 fn random_formations_get_a_sound_graph_or_a_clear_error() {
-    let _dog = Watchdog::new("random formations");
+    let _dog = Watchdog::new("random formations", DEADLINE);
     let mut sizes: Vec<usize> = vec![4, 5, 9, 10, 11, 40, 100, 250, 500];
     let mut rng = Rng(0x5eed_cafe_f00d_d00d);
     while sizes.len() < 48 {

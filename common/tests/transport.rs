@@ -7,10 +7,13 @@
 //! How to run (the throughput line is printed, never asserted):
 //! `cargo test --release -p common --test transport -- --nocapture`
 
+mod support;
+use support::Watchdog;
+
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
-use std::sync::{mpsc, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -38,30 +41,6 @@ fn exclusive_files() -> RwLockWriteGuard<'static, ()> {
 
 fn team(n: u32) -> TeamName {
     TeamName::new(&format!("t{}_{n}", std::process::id())).unwrap()
-}
-
-/// Ends the whole test process if a test outlives its deadline (a hang must not block CI).
-struct Watchdog(Option<mpsc::Sender<()>>);
-
-impl Watchdog {
-    fn new(test: &'static str, deadline: Duration) -> Self {
-        let (tx, rx) = mpsc::channel::<()>();
-        thread::spawn(move || {
-            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(deadline) {
-                eprintln!("watchdog: test {test} exceeded its {deadline:?} deadline; aborting");
-                std::process::exit(3);
-            }
-        });
-        Self(Some(tx))
-    }
-}
-
-impl Drop for Watchdog {
-    fn drop(&mut self) {
-        if let Some(tx) = self.0.take() {
-            let _ = tx.send(());
-        }
-    }
 }
 
 fn layout(ids: &[u32], edges: &[(u32, u32)], window: u32) -> TeamLayout {

@@ -134,6 +134,20 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
 /// and a reported fault for the complete ticks before it.
 const FAULT_GRACE: Duration = Duration::from_millis(500);
 
+/// The stop of a run interrupted by SIGINT / SIGTERM.
+fn interrupted_at(tick: u64, when: &str) -> Stop {
+    (
+        fault(
+            "interrupted",
+            None,
+            None,
+            tick,
+            format!("interrupted {when}"),
+        ),
+        StopReason::Interrupted,
+    )
+}
+
 /// Wait for every process to open its ports, record the subscription graph, then tick.
 fn run_team(
     s: &Scenario,
@@ -155,16 +169,7 @@ fn run_team(
     let started = Instant::now();
     loop {
         if interrupted.load(Ordering::Relaxed) {
-            return Err((
-                fault(
-                    "interrupted",
-                    None,
-                    None,
-                    0,
-                    "interrupted before the start".into(),
-                ),
-                StopReason::Interrupted,
-            ));
+            return Err(interrupted_at(0, "before the start"));
         }
         if ports.readiness().is_complete() {
             break;
@@ -221,6 +226,7 @@ fn run_team(
         .collect();
     let window = u64::from(o.window.max(1));
     let mut pending: BTreeMap<u64, (Vec<Option<StateMsg>>, usize)> = BTreeMap::new();
+    let mut spare: Vec<Vec<Option<StateMsg>>> = Vec::new();
     let mut next_tick: u64 = 0; // the next tick to complete
     let mut grant = (window - 1).min(last);
     let send = |ports: &mut OrchestratorPorts, g: u64| ports.publish_clock(ClockMsg::run(g, hash));
@@ -247,16 +253,7 @@ fn run_team(
     let mut stopping: Option<(FaultRecord, Instant, bool, usize)> = None;
     loop {
         if interrupted.load(Ordering::Relaxed) {
-            return Err((
-                fault(
-                    "interrupted",
-                    None,
-                    None,
-                    next_tick,
-                    format!("interrupted at tick {next_tick}"),
-                ),
-                StopReason::Interrupted,
-            ));
+            return Err(interrupted_at(next_tick, &format!("at tick {next_tick}")));
         }
         // (fault, echo, member index) of the best fault report met in this drain.
         let mut bad: Option<(FaultRecord, bool, usize)> = None;
@@ -296,7 +293,7 @@ fn run_team(
                 }
                 let slot = pending
                     .entry(msg.tick)
-                    .or_insert_with(|| (vec![None; n], 0));
+                    .or_insert_with(|| (spare.pop().unwrap_or_else(|| vec![None; n]), 0));
                 if slot.0[k].is_none() {
                     slot.1 += 1;
                 }
@@ -329,7 +326,7 @@ fn run_team(
         while pending.get(&next_tick).is_some_and(|(_, c)| *c == n)
             && stopping.as_ref().is_none_or(|(f, ..)| next_tick <= f.tick)
         {
-            let Some((states, _)) = pending.remove(&next_tick) else {
+            let Some((mut states, _)) = pending.remove(&next_tick) else {
                 break;
             };
             let tick = next_tick;
@@ -364,6 +361,9 @@ fn run_team(
                     )
                 })?;
             }
+            // The slot vector serves a later tick (no allocation per tick).
+            states.fill(None);
+            spare.push(states);
             next_tick += 1;
             progressed = true;
             if o.stop_on_violation && audit.violation_count() > 0 {

@@ -141,32 +141,26 @@ impl Panel {
             .margin(12)
             .x_label_area_size(48)
             .y_label_area_size(78);
+        // The same axes for a linear and a logarithmic y (two coordinate types in plotters).
+        macro_rules! axes_then_series {
+            ($chart:expr) => {{
+                let mut chart = $chart.map_err(e)?;
+                chart
+                    .configure_mesh()
+                    .x_desc(&self.x_desc)
+                    .y_desc(&self.y_desc)
+                    .label_style((FAMILY, 14))
+                    .axis_desc_style((FAMILY, 16))
+                    .light_line_style(WHITE.mix(0.0))
+                    .draw()
+                    .map_err(e)?;
+                self.series(&mut chart, (x0, x1), (y0, y1))
+            }};
+        }
         if self.log_y {
-            let mut chart = builder
-                .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
-                .map_err(e)?;
-            chart
-                .configure_mesh()
-                .x_desc(&self.x_desc)
-                .y_desc(&self.y_desc)
-                .label_style((FAMILY, 14))
-                .axis_desc_style((FAMILY, 16))
-                .light_line_style(WHITE.mix(0.0))
-                .draw()
-                .map_err(e)?;
-            self.series(&mut chart, (x0, x1), (y0, y1))
+            axes_then_series!(builder.build_cartesian_2d(x0..x1, (y0..y1).log_scale()))
         } else {
-            let mut chart = builder.build_cartesian_2d(x0..x1, y0..y1).map_err(e)?;
-            chart
-                .configure_mesh()
-                .x_desc(&self.x_desc)
-                .y_desc(&self.y_desc)
-                .label_style((FAMILY, 14))
-                .axis_desc_style((FAMILY, 16))
-                .light_line_style(WHITE.mix(0.0))
-                .draw()
-                .map_err(e)?;
-            self.series(&mut chart, (x0, x1), (y0, y1))
+            axes_then_series!(builder.build_cartesian_2d(x0..x1, y0..y1))
         }
     }
 
