@@ -221,6 +221,26 @@ pub enum TransportError {
         /// What the team needs (with a margin).
         need_kib: u64,
     },
+    /// The orchestrator's open-file limit is below what the team needs (checked before anything
+    /// is created).
+    #[error(
+        "team {team}: a team of {agents} agents needs about {need} file descriptors in the \
+         orchestrator, which would run out of file descriptors (limit RLIMIT_NOFILE soft {soft}, \
+         hard {hard}); raise it, e.g. `ulimit -n {need}` (as root, or after raising the hard \
+         limit in /etc/security/limits.conf), or fly a smaller team"
+    )]
+    FdLimitTooLow {
+        /// The team.
+        team: TeamName,
+        /// The team's size.
+        agents: usize,
+        /// Descriptors the team needs.
+        need: u64,
+        /// The soft limit.
+        soft: u64,
+        /// The hard limit.
+        hard: u64,
+    },
     /// A node, service or port could not be created because this process ran out of file
     /// descriptors (the orchestrator holds a few per agent).
     #[error(

@@ -29,8 +29,50 @@ pub fn fd_exhausted() -> Option<FdUsage> {
     }
     #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
     let (soft, hard) = (lim.rlim_cur as u64, lim.rlim_max as u64);
-    let open = std::fs::read_dir("/proc/self/fd").ok()?.count() as u64;
+    let open = match std::fs::read_dir("/proc/self/fd") {
+        Ok(d) => d.count() as u64,
+        // Listing the table needs a descriptor of its own: failing for lack of one is the answer.
+        Err(e) if matches!(e.raw_os_error(), Some(libc::EMFILE | libc::ENFILE)) => soft,
+        Err(_) => return None,
+    };
     (open + FD_MARGIN >= soft).then_some(FdUsage { open, soft, hard })
+}
+
+/// Descriptors the orchestrator holds for a team of `agents`, measured with iceoryx2 0.10 (per
+/// agent: a state service, its subscriber, a wake event and its notifier, 11 descriptors in all;
+/// 19 more for the node, the clock and the orchestrator's own event: N=40 holds 459, N=100 1119),
+/// with a margin for the run directory, the children's pipes and the logging.
+pub fn orchestrator_fd_need(agents: usize) -> u64 {
+    64 + 12 * agents as u64
+}
+
+/// The orchestrator's open-file limit against what a team needs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FdShortfall {
+    /// What the team needs ([`orchestrator_fd_need`]).
+    pub need: u64,
+    /// The soft `RLIMIT_NOFILE`.
+    pub soft: u64,
+    /// The hard `RLIMIT_NOFILE`.
+    pub hard: u64,
+}
+
+/// `Some` when this process's soft open-file limit is below what a team of `agents` needs, so
+/// the launch can refuse before it creates anything (instead of failing half-way, at whichever
+/// iceoryx2 call happens to take the last descriptor).
+pub fn fd_short(agents: usize) -> Option<FdShortfall> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
+    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } != 0 {
+        return None;
+    }
+    #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
+    let (soft, hard) = (lim.rlim_cur as u64, lim.rlim_max as u64);
+    let need = orchestrator_fd_need(agents);
+    (soft < need).then_some(FdShortfall { need, soft, hard })
 }
 
 /// Where iceoryx2 (0.10, Linux) keeps its shared-memory segments.

@@ -154,6 +154,15 @@ impl OrchestratorPorts {
                 need_kib: need / 1024,
             });
         }
+        if let Some(u) = super::limits::fd_short(agents) {
+            return Err(TransportError::FdLimitTooLow {
+                team: team.clone(),
+                agents,
+                need: u.need,
+                soft: u.soft,
+                hard: u.hard,
+            });
+        }
         let node = create_node(team, WHO)?;
         let ports = Ports::create(node, team, layout)?;
         tracing::debug!(team = %team, agents = layout.ids().len(), "team created");
