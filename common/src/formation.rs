@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::frame::Frame;
 use crate::geometry::{barycentric, convex_hull, signed_boundary_distance};
-use crate::math::{eigenvalues_complex, DMat, Real, Vec2, Vec3};
+use crate::math::{eigenvalues_by_components, DMat, Real, Vec2, Vec3};
 
 /// What an agent is in the team.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -388,7 +388,7 @@ impl Formation {
                 eq21_residual = eq21_residual.max(resid.abs() / scale);
             }
         }
-        let l_max_real = match eigenvalues_complex(&l) {
+        let l_max_real = match eigenvalues_by_components(&l) {
             Some(ev) => ev.iter().map(|e| e.0).fold(Real::NEG_INFINITY, Real::max),
             None => Real::NAN,
         };

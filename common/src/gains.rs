@@ -2,7 +2,7 @@
 //! team's characteristic polynomial factors into s^4 + k1 s^3 + k2 s^2 - k3 mu s - k4 mu for
 //! every eigenvalue mu of W (mu = -1 for leaders, mu in spec(L) for followers).
 
-use crate::math::{eigenvalues_complex, DMat, Real};
+use crate::math::{eigenvalues_by_components, DMat, Real};
 use nalgebra::Complex;
 
 type C = Complex<Real>;
@@ -27,7 +27,7 @@ pub fn mode_roots(gains: &[Real; 4], mu: (Real, Real)) -> [(Real, Real); 4] {
 /// follower-follower block of W (eq. 2); spec(W) = {-1} u spec(L) since W is block triangular.
 /// NaN when the eigenvalues of L cannot be computed.
 pub fn stability_margin(gains: &[Real; 4], l: &DMat) -> Real {
-    let Some(mut mus) = eigenvalues_complex(l) else {
+    let Some(mut mus) = eigenvalues_by_components(l) else {
         return Real::NAN;
     };
     mus.push((-1.0, 0.0));

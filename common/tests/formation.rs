@@ -32,6 +32,43 @@ fn theorem_identities_on_generated_teams() {
     }
 }
 
+/// The synthesised graph is acyclic (ERRATA 7): followers can be ordered so that each one's
+/// in-neighbours are leaders or earlier followers, which is what lets every process of a team
+/// run a whole window of ticks per wake-up. L's spectrum is then exactly {-1}.
+#[test]
+fn synthesised_graphs_are_acyclic_with_spectrum_minus_one() {
+    for n in [10usize, 40, 250, 1000] {
+        let s = Scenario::generated(n).unwrap();
+        let mut done: std::collections::BTreeSet<u32> = s
+            .formation
+            .members
+            .iter()
+            .filter(|m| m.role.is_leader())
+            .map(|m| m.id)
+            .collect();
+        let mut left: Vec<(u32, [u32; 3])> = s
+            .formation
+            .members
+            .iter()
+            .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors)))
+            .collect();
+        // Kahn's algorithm: peel off followers whose in-neighbours are all done.
+        while !left.is_empty() {
+            let before = left.len();
+            left.retain(|(id, ins)| {
+                let ready = ins.iter().all(|j| done.contains(j));
+                if ready {
+                    done.insert(*id);
+                }
+                !ready
+            });
+            assert!(left.len() < before, "n={n}: a cycle among {left:?}");
+        }
+        let c = s.formation.theorem_checks();
+        assert_eq!(c.l_max_real_eigenvalue, -1.0, "n={n}: {c:?}");
+    }
+}
+
 #[test]
 fn paper40_projects_secondary_leaders_and_is_deterministic() {
     let a = Scenario::builtin("paper40").unwrap();

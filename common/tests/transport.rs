@@ -304,12 +304,15 @@ fn id_pid(id: u128) -> u32 {
 
 /// This process's pid as iceoryx2 encodes it (the host pid, which may differ in a container).
 fn iceoryx2_pid() -> u32 {
-    let probe = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let probe = NodeBuilder::new()
+        .config(&common::transport::iceoryx2_config())
+        .create::<ipc::Service>()
+        .unwrap();
     id_pid(probe.id().value())
 }
 
 /// Everything of `team` still visible: its services, its nodes, and any iceoryx2 file under
-/// /dev/shm or /tmp/iceoryx2 whose name carries an id minted by one of `pids`.
+/// /dev/shm (iceoryx2's root included) whose name carries an id minted by one of `pids`.
 fn leftovers(team: &TeamName, pids: &[u32]) -> Vec<String> {
     let mut out = team_entries(team);
     out.extend(files_of(pids));
@@ -318,7 +321,7 @@ fn leftovers(team: &TeamName, pids: &[u32]) -> Vec<String> {
 
 /// The services and nodes named after `team` in iceoryx2's registries.
 fn team_entries(team: &TeamName) -> Vec<String> {
-    let cfg = Config::default();
+    let cfg = common::transport::iceoryx2_config();
     let prefix = format!("cdm/{team}/");
     let mut out = vec![];
     ipc::Service::list(&cfg, |s| {
@@ -345,10 +348,14 @@ fn team_entries(team: &TeamName) -> Vec<String> {
     out
 }
 
-/// Files under /dev/shm and /tmp/iceoryx2 whose names carry an iceoryx2 id minted by `pids`.
+/// Files under /dev/shm (iceoryx2's root, `IOX2_ROOT`, is inside it) whose names carry an
+/// iceoryx2 id minted by `pids`.
 fn files_of(pids: &[u32]) -> Vec<String> {
     let mut out = vec![];
-    let mut dirs = vec![std::path::PathBuf::from("/dev/shm"), "/tmp/iceoryx2".into()];
+    let mut dirs = vec![std::path::PathBuf::from("/dev/shm")];
+    if !common::transport::IOX2_ROOT.starts_with("/dev/shm/") {
+        dirs.push(common::transport::IOX2_ROOT.into());
+    }
     while let Some(dir) = dirs.pop() {
         let Ok(entries) = std::fs::read_dir(&dir) else {
             continue;
@@ -406,7 +413,7 @@ fn nothing_of_a_team_is_left_after_drop() {
 
     // The checker does see a live team (services, nodes, files named by our ids).
     let live = leftovers(&t, &[me]);
-    for what in ["service ", "node ", "/dev/shm/", "/tmp/iceoryx2/"] {
+    for what in ["service ", "node ", "/dev/shm/"] {
         assert!(
             live.iter().any(|l| l.starts_with(what)),
             "no {what} in {live:#?}"

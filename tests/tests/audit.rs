@@ -3,7 +3,7 @@
 //!
 //! - deformation: paper40 with lambda_CD,min = 0.6 is flagged at the first tick where
 //!   lambda_1(U_D) falls under 0.6 (eq. 37), naming the three primary leaders;
-//! - tracking: paper40 flown in 25 s (T_threshold is about 55 s) is flagged for exactly the
+//! - tracking: paper40 flown in 25 s (T_threshold is about 34 s) is flagged for exactly the
 //!   agents and ticks where ||r_i - r_i,HT||_2 first exceeds delta (eq. 34), recomputed here
 //!   from telemetry.csv;
 //! - containment: the same rushed flight is flagged for exactly the followers and ticks where a
@@ -182,7 +182,7 @@ fn deformation_is_flagged_where_lambda1_first_falls_under_lambda_cd_min() {
 fn tracking_is_flagged_for_the_agents_and_ticks_that_exceed_delta() {
     let dir = TempDir::new();
     let mut f = paper40();
-    f.t_total_s = 25.0; // T_threshold of paper40 is about 55 s (README).
+    f.t_total_s = 25.0; // T_threshold of paper40 is about 34 s (README).
     let scenario = write_scenario(dir.path(), "rushed.toml", &f);
     let full = dir.path().join("full");
     let out = simulate(&scenario, &full, &[]);

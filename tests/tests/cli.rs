@@ -1,7 +1,7 @@
 //! The orchestrator's offline commands on the paper's 40-agent scenario: `plan` (the pre-flight
 //! certificate and its exit code), `simulate` (the run directory) and `scenario export`.
 //!
-//! paper40 (`--builtin paper40`, the default) has T_threshold ~ 54.7 s and t_total 200 s; one
+//! paper40 (`--builtin paper40`, the default) has T_threshold ~ 34.1 s and t_total 200 s; one
 //! `plan` takes a second or two in release, a `simulate` of 6,001 ticks about half a second.
 
 use std::collections::BTreeMap;
@@ -129,7 +129,7 @@ fn telemetry_lines(run_dir: &Path) -> Vec<String> {
         .collect()
 }
 
-/// paper40 at its t_total (200 s) is SAFE (exit 0); at 40 s, below T_threshold, it is UNSAFE
+/// paper40 at its t_total (200 s) is SAFE (exit 0); at 25 s, below T_threshold, it is UNSAFE
 /// (exit 1) with a reason naming T_threshold.
 #[test]
 fn plan_certifies_paper40_and_refuses_a_plan_faster_than_t_threshold() {
@@ -153,22 +153,22 @@ fn plan_certifies_paper40_and_refuses_a_plan_faster_than_t_threshold() {
     let (out, fast) = plan(
         dir.path(),
         "fast",
-        &["--builtin", "paper40", "--t-total", "40"],
+        &["--builtin", "paper40", "--t-total", "25"],
     );
-    assert_exit(&out, 1, "plan paper40 --t-total 40");
+    assert_exit(&out, 1, "plan paper40 --t-total 25");
     assert_eq!(fast["verdict"], "UNSAFE", "{fast:#}");
-    assert_eq!(number(&fast, "t_total_s"), 40.0);
+    assert_eq!(number(&fast, "t_total_s"), 25.0);
     let threshold = number(&fast, "t_threshold_s");
     assert!(
-        40.0 < threshold && threshold <= 200.0,
-        "T_threshold {threshold} s must lie between the UNSAFE 40 s and the SAFE 200 s"
+        25.0 < threshold && threshold <= 200.0,
+        "T_threshold {threshold} s must lie between the UNSAFE 25 s and the SAFE 200 s"
     );
     // T_threshold is found by bisection to 0.1 % (common::simulate::t_threshold), starting from
     // the scenario's t_total: two plans agree to that precision, not to the last bit.
     let other = number(&safe, "t_threshold_s");
     assert!(
         (threshold - other).abs() <= 1e-3 * threshold.max(other),
-        "T_threshold {threshold} s at t_total 40 s, {other} s at 200 s"
+        "T_threshold {threshold} s at t_total 25 s, {other} s at 200 s"
     );
     let reasons: Vec<&str> = fast["reasons"]
         .as_array()
@@ -179,8 +179,8 @@ fn plan_certifies_paper40_and_refuses_a_plan_faster_than_t_threshold() {
     assert!(
         reasons
             .iter()
-            .any(|r| r.contains("T_threshold") && r.contains("40")),
-        "no reason names T_threshold and t_total 40: {reasons:?}"
+            .any(|r| r.contains("T_threshold") && r.contains("25")),
+        "no reason names T_threshold and t_total 25: {reasons:?}"
     );
     assert!(
         String::from_utf8_lossy(&out.stdout).contains("verdict: UNSAFE"),

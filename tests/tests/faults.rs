@@ -1,6 +1,6 @@
 //! Faults a flying team must survive (issue 6), each with the real binaries over real iceoryx2
 //! shared memory, each under a deadline. After each: the documented exit code, no process of the
-//! team alive, nothing of the team in /dev/shm or /tmp/iceoryx2, telemetry.csv holding only
+//! team alive, nothing of the team in /dev/shm or /dev/shm/cdm-iceoryx2, telemetry.csv holding only
 //! whole ticks (every one before the fault), and audit.json saying what happened.
 //!
 //! - A primary or a secondary leader dies (SIGKILL) at a chosen tick.
@@ -362,6 +362,7 @@ fn a_foreign_process_cannot_publish_into_a_team() {
     let t = TeamName::new(&team).expect("team name");
     let node = NodeBuilder::new()
         .name(&NodeName::new("foreign").expect("node name"))
+        .config(&common::transport::iceoryx2_config())
         .create::<ipc::Service>()
         .expect("a foreign node");
     let name = |s: String| ServiceName::new(&s).expect("service name");
@@ -460,22 +461,22 @@ fn a_neighbour_state_from_the_wrong_step_is_reported_with_both_ids() {
     a_bad_state_of_agent_1("tick", "TickGap");
 }
 
-/// A NaN from agent 2, which no member reads: the orchestrator reports it itself.
+/// A NaN from agent 10 (a follower deepest in the acyclic graph), which no member reads: the orchestrator reports it itself.
 #[test]
 fn a_non_finite_state_nobody_reads_is_reported_by_the_orchestrator() {
     let dir = TempDir::new();
     let team = unique_team("bad_leaf");
     let out = dir.path().join("run");
-    let o = launch_injected(&team, &out, 2, "nan");
-    assert_exit(&o, 3, "launch with a NaN state of agent 2");
+    let o = launch_injected(&team, &out, 10, "nan");
+    assert_exit(&o, 3, "launch with a NaN state of agent 10");
     let s = flown_scenario(&out);
     assert!(
         s.agents
             .iter()
-            .all(|a| !a.in_neighbors.as_ref().is_some_and(|i| i.contains(&2))),
-        "agent 2 has readers in this layout: pick another"
+            .all(|a| !a.in_neighbors.as_ref().is_some_and(|i| i.contains(&10))),
+        "agent 10 has readers in this layout: pick another"
     );
     let fault = assert_fault(&out, &s, "non-finite-state");
-    assert_eq!(fault["agent"], 2, "{fault:#}");
+    assert_eq!(fault["agent"], 10, "{fault:#}");
     assert_eq!(fault["tick"], FAULT_TICK, "{fault:#}");
 }

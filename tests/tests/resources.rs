@@ -1,7 +1,7 @@
 //! Resource safety (issue 6): what a team's shared memory lets other users do, and running out
 //! of file descriptors.
 //!
-//! - Every file a team creates in /dev/shm and /tmp/iceoryx2 is readable and writable by its
+//! - Every file a team creates in /dev/shm and /dev/shm/cdm-iceoryx2 is readable and writable by its
 //!   owner only (iceoryx2 creates them 0600 or 0400; its directories are 0750 at most).
 //! - An orchestrator that runs out of file descriptors says so, with the limit and how to raise
 //!   it, exits 2, and leaves no run directory and no shared memory behind; so does one whose
@@ -61,7 +61,7 @@ fn a_teams_shared_memory_files_are_owner_only() {
             wrong.push(format!("{f}: {m:o}"));
         }
     }
-    // The roots themselves: /tmp/iceoryx2 is not writable by group or others.
+    // The roots themselves: /dev/shm/cdm-iceoryx2 is not writable by group or others.
     let root = mode(Path::new(IOX2_ROOT));
     assert_eq!(root & 0o022, 0, "{IOX2_ROOT} is {root:o}");
     assert!(

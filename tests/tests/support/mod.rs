@@ -250,7 +250,7 @@ pub fn wait_for_rows(orch: &mut Running, telemetry: &Path, rows: usize) {
     }
 }
 
-pub const IOX2_ROOT: &str = "/tmp/iceoryx2";
+pub use common::transport::IOX2_ROOT;
 pub const SHM: &str = "/dev/shm";
 
 /// The value of `key = "value"` or `key = 123` in an iceoryx2 TOML file.
@@ -281,7 +281,7 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
 }
 
 /// The team's services as iceoryx2 stores them: (hash, name) of each
-/// `/tmp/iceoryx2/services/iox2_<hash>.service` whose `service_name` belongs to `team`.
+/// `<IOX2_ROOT>/services/iox2_<hash>.service` whose `service_name` belongs to `team`.
 pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
     let prefix = format!("cdm/{team}/");
     let mut out = vec![];
@@ -305,7 +305,7 @@ pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
 }
 
 /// The team's nodes: (name, process id as iceoryx2 records it) from each
-/// `/tmp/iceoryx2/nodes/<node id>/iox2_node.details` whose node name belongs to `team`.
+/// `<IOX2_ROOT>/nodes/<node id>/iox2_node.details` whose node name belongs to `team`.
 pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
     let mut out = vec![];
     for path in files_under(&Path::new(IOX2_ROOT).join("nodes")) {
@@ -373,7 +373,7 @@ impl Footprint {
     }
 
     /// Everything of the team iceoryx2 still has: services and nodes named after the team, and
-    /// files under /dev/shm and /tmp/iceoryx2 named by its services or processes.
+    /// files under /dev/shm and IOX2_ROOT named by its services or processes.
     pub fn leftovers(&self) -> Vec<String> {
         let team = self.team.as_str();
         let pids: BTreeSet<u32> = self
@@ -394,8 +394,13 @@ impl Footprint {
                 .into_iter()
                 .map(|(name, pid)| format!("node {name} (process {pid})")),
         );
-        for root in [SHM, IOX2_ROOT] {
-            for path in files_under(Path::new(root)) {
+        // IOX2_ROOT lies inside /dev/shm: each file is listed once.
+        let mut files = files_under(Path::new(SHM));
+        if !Path::new(IOX2_ROOT).starts_with(SHM) {
+            files.extend(files_under(Path::new(IOX2_ROOT)));
+        }
+        {
+            for path in files {
                 let name = path
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
@@ -414,10 +419,14 @@ impl Footprint {
     pub fn assert_visible(&self, processes: usize) {
         let live = self.leftovers();
         let count = |p: &str| live.iter().filter(|l| l.starts_with(p)).count();
+        let segments = live
+            .iter()
+            .filter(|l| l.starts_with(SHM) && !l.starts_with(IOX2_ROOT))
+            .count();
         assert!(
             count("service ") > 0
                 && count("node ") == processes
-                && count(SHM) > 0
+                && segments > 0
                 && count(IOX2_ROOT) > 0,
             "the live team {} does not show {processes} nodes, services and files: {live:#?}",
             self.team
