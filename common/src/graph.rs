@@ -2,9 +2,13 @@
 //! them. For every follower pick exactly three in-neighbours whose triangle strictly contains it
 //! with every weight (eq. 18) at least a floor.
 //!
-//! The graph is acyclic (ERRATA 7 allows it): followers are taken from the leading polygon's
-//! boundary inwards (an "onion" order) and each picks its in-neighbours among the leaders and the
-//! followers before it. A follower's state for a tick then never waits, through a cycle, on its
+//! The graph is acyclic (ERRATA 7 allows it): followers are taken in farthest-point order (next
+//! the follower farthest from every agent already placed, the leaders first), and each picks its
+//! in-neighbours among the agents placed before it. Early followers are spread over the polygon
+//! and later ones fill in between, so at every step the placed agents surround the next follower
+//! at about its distance to the nearest of them: triangles stay local (no follower reaches across
+//! the formation, no agent has hundreds of readers) at every scale, like the levels of a
+//! multigrid. A follower's state for a tick then never waits, through a cycle, on its
 //! own state for that tick, so in the multi-process team every agent can run a whole window of
 //! ticks on one wake-up once its in-neighbours have; with cycles every tick costs a round trip
 //! of wake-ups around the cycle. It also makes the followers' block of L triangular with
@@ -16,7 +20,6 @@
 //! still checked (`Formation::check_links`).
 
 use crate::formation::{triangle_weights, Formation, FormationError, Role};
-use crate::geometry::signed_boundary_distance;
 use crate::math::{Real, Vec2};
 
 /// Default smallest communication weight a synthesised graph may use.
@@ -34,8 +37,9 @@ pub struct SynthesisError {
 /// Candidate set sizes tried in turn (nearest agents first).
 const CANDIDATES: [usize; 4] = [10, 16, 28, 48];
 
-/// Give every follower without in-neighbours a triangle: among its nearest agents (distance, then
-/// id: deterministic) and the leaders, the triangle that maximises the smallest weight, subject to weight >= floor.
+/// Give every follower without in-neighbours a triangle: among the agents placed before it (in
+/// farthest-point order) nearest to it (distance, then id: deterministic), the triangle that
+/// maximises the smallest weight, subject to weight >= floor.
 pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), SynthesisError> {
     let leaders: Vec<u32> = formation
         .members
@@ -49,7 +53,7 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
         .filter(|m| m.role.is_leader())
         .map(|m| (m.id, m.planar))
         .collect();
-    for (id, p) in onion_order(formation) {
+    for (id, p) in farthest_point_order(formation) {
         if formation.member(id).is_some_and(|m| m.link.is_some()) {
             // In-neighbours given in the file are kept; the follower still serves later ones.
             placed.push((id, p));
@@ -58,14 +62,18 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
         let near = nearest(&placed, &p);
         let mut best: Option<([u32; 3], Real)> = None;
         let mut best_any = Real::NEG_INFINITY;
-        for &k in &CANDIDATES {
-            let k = k.min(near.len());
-            // The k nearest agents plus every leader: a follower on the outer ring of a lattice
-            // has nothing but leaders beyond it.
+        // The k nearest agents placed before this follower; at last also every leader: the
+        // outermost followers along a straight edge of the polygon have nothing but the edge's
+        // ends (leaders) beyond them, which is why leaders have the most readers (N = 1000: 36).
+        let passes = CANDIDATES
+            .iter()
+            .map(|&k| (k, false))
+            .chain([(CANDIDATES[1], true)]);
+        for (k, with_leaders) in passes {
             let cand: Vec<&(Real, u32, Vec2)> = near
                 .iter()
                 .enumerate()
-                .filter(|(rank, (_, j, _))| *rank < k || leaders.contains(j))
+                .filter(|(rank, (_, j, _))| *rank < k || (with_leaders && leaders.contains(j)))
                 .map(|(_, c)| c)
                 .collect();
             let kc = cand.len();
@@ -87,7 +95,7 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
                     }
                 }
             }
-            if best.is_some() || k == near.len() {
+            if best.is_some() {
                 break;
             }
         }
@@ -110,21 +118,43 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
     Ok(())
 }
 
-/// The followers from the leading polygon's boundary inwards (distance to the boundary, then
-/// id: deterministic).
-fn onion_order(formation: &Formation) -> Vec<(u32, Vec2)> {
-    let polygon = formation.polygon_points();
-    let mut order: Vec<(Real, u32, Vec2)> = formation
+/// The followers in farthest-point order: each next one is the follower farthest from the
+/// leaders and the followers before it (ties: the smaller id). O(N^2), deterministic.
+fn farthest_point_order(formation: &Formation) -> Vec<(u32, Vec2)> {
+    let leaders: Vec<Vec2> = formation
+        .members
+        .iter()
+        .filter(|m| m.role.is_leader())
+        .map(|m| m.planar)
+        .collect();
+    let mut left: Vec<(u32, Vec2, Real)> = formation
         .members
         .iter()
         .filter(|m| m.role == Role::Follower)
         .map(|m| {
-            let depth = signed_boundary_distance(&m.planar, &polygon);
-            (depth, m.id, m.planar)
+            let d = leaders
+                .iter()
+                .map(|q| (q - m.planar).norm())
+                .fold(Real::INFINITY, Real::min);
+            (m.id, m.planar, d)
         })
         .collect();
-    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    order.into_iter().map(|(_, id, p)| (id, p)).collect()
+    left.sort_by_key(|e| e.0);
+    let mut order = Vec::with_capacity(left.len());
+    while !left.is_empty() {
+        let mut k = 0;
+        for (i, e) in left.iter().enumerate() {
+            if e.2 > left[k].2 {
+                k = i;
+            }
+        }
+        let (id, p, _) = left.remove(k);
+        for e in &mut left {
+            e.2 = e.2.min((e.1 - p).norm());
+        }
+        order.push((id, p));
+    }
+    order
 }
 
 /// `pts` by distance from `p`, then id.

@@ -216,7 +216,8 @@ pub enum TransportError {
     /// SIGBUS writing past it).
     #[error(
         "team {team}: {dir} has {free_kib} KiB free, a team of {agents} agents needs about \
-         {need_kib} KiB; free space there or enlarge it (e.g. `mount -o remount,size=1G {dir}`)"
+         {need_kib} KiB with a window of {window} ticks; free space there, enlarge it (e.g. \
+         `mount -o remount,size=1G {dir}`) or launch with a smaller --window"
     )]
     ShmFull {
         /// The team.
@@ -227,6 +228,8 @@ pub enum TransportError {
         free_kib: u64,
         /// The team's size.
         agents: usize,
+        /// The clock window (ticks an agent may run ahead).
+        window: u32,
         /// What the team needs (with a margin).
         need_kib: u64,
     },
@@ -520,31 +523,34 @@ fn init_logging() {
     INIT.call_once(|| set_log_level_from_env_or(LogLevel::Warn));
 }
 
-/// The iceoryx2 config of a process, built once per role. Members skip iceoryx2's implicit
-/// dead-node scans (on node creation and destruction, on service open): with hundreds of
-/// processes starting together they cost seconds, and the orchestrator does that work once.
-fn process_config(who: Role) -> &'static Config {
-    static ORCHESTRATOR: OnceLock<Config> = OnceLock::new();
-    static MEMBER: OnceLock<Config> = OnceLock::new();
-    let base = || {
+/// The iceoryx2 config of this runtime's processes, built once. No process runs iceoryx2's
+/// implicit dead-node scans (on node creation and destruction, on service open): with hundreds
+/// of processes starting together they cost seconds, and they clean up every team on the machine,
+/// so one launch could remove the evidence of another team's crash while it is being examined.
+/// The orchestrator cleans up its own team's dead nodes explicitly ([`OrchestratorPorts::create`],
+/// [`remove_dead_nodes`]).
+fn process_config(_who: Role) -> &'static Config {
+    static CONFIG: OnceLock<Config> = OnceLock::new();
+    CONFIG.get_or_init(|| {
         let mut cfg = Config::default();
         match iceoryx2::prelude::Path::new(IOX2_ROOT_SLASH.as_bytes()) {
             Ok(root) => cfg.global.set_root_path(&root),
             // A constant that fits iceoryx2's path type; kept as a fallback, never expected.
             Err(e) => tracing::warn!("iceoryx2 root {IOX2_ROOT}: {e:?}; using the default"),
         }
+        // Each subscriber pre-allocates (and touches) room for this many connections of departed
+        // publishers, about 3.6 KiB each: iceoryx2's default of 128 cost 460 KiB per subscriber,
+        // a quarter of a member's memory and most of the orchestrator's (N subscribers). Every
+        // state service has one publisher for the team's lifetime; 2 covers the one borrowed
+        // sample a subscriber may hold (iceoryx2 asks for at least that many).
+        cfg.defaults
+            .publish_subscribe
+            .subscriber_expired_connection_buffer = 2;
+        cfg.global.node.cleanup_dead_nodes_on_creation = false;
+        cfg.global.node.cleanup_dead_nodes_on_destruction = false;
+        cfg.global.service.cleanup_dead_nodes_on_open = false;
         cfg
-    };
-    match who {
-        Role::Orchestrator => ORCHESTRATOR.get_or_init(base),
-        Role::Agent(_) => MEMBER.get_or_init(|| {
-            let mut cfg = base();
-            cfg.global.node.cleanup_dead_nodes_on_creation = false;
-            cfg.global.node.cleanup_dead_nodes_on_destruction = false;
-            cfg.global.service.cleanup_dead_nodes_on_open = false;
-            cfg
-        }),
-    }
+    })
 }
 
 /// The iceoryx2 configuration of this runtime's processes (root [`IOX2_ROOT`]), for tools and

@@ -62,8 +62,9 @@ pub enum Command {
         /// Do not start the processes: wait for them to be started by hand.
         #[arg(long)]
         no_spawn: bool,
-        /// How many ticks an agent may run ahead of the slowest (1 = strict lockstep).
-        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        /// How many ticks an agent may run ahead of the slowest (1 = strict lockstep). Larger
+        /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory.
+        #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
         window: u32,
         /// Seconds without any agent progress before the team is stopped as faulty.
         #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]

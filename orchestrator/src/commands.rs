@@ -110,7 +110,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 max_ticks: run.max_ticks,
             };
             let started = Instant::now();
-            let (report, ticking) = launch(&s, &opts)?;
+            let crate::launch::Launched {
+                report,
+                ticking,
+                member_peak_rss,
+            } = launch(&s, &opts)?;
             summary("launch", &report, started, &opts.out, cli.quiet);
             if !cli.quiet && ticking > Duration::ZERO {
                 println!(
@@ -119,6 +123,16 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     report.ticks as f64 / ticking.as_secs_f64(),
                     (started.elapsed() - ticking).as_secs_f64()
                 );
+                if let (Some((id, member)), Some(me)) =
+                    (member_peak_rss, crate::team::own_peak_rss())
+                {
+                    println!(
+                        "  peak resident memory: largest member {:.1} MiB (agent {id}), \
+                         orchestrator {:.1} MiB",
+                        member as f64 / 1024.0,
+                        me as f64 / 1024.0
+                    );
+                }
             }
             if report.ticks > 0 {
                 figures_after_run(&opts.out, &run, cli.quiet);

@@ -42,8 +42,19 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
 }
 
-/// Run a launch to the end; returns the audit report and the wall time of the ticking phase.
-pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration), Failure> {
+/// What a finished launch reports.
+pub struct Launched {
+    /// The audit report (also written to audit.json).
+    pub report: AuditReport,
+    /// Wall time of the ticking phase.
+    pub ticking: Duration,
+    /// The member with the largest peak resident memory and that peak in KiB, read just before
+    /// the team was stopped (spawned teams only).
+    pub member_peak_rss: Option<(u32, u64)>,
+}
+
+/// Run a launch to the end.
+pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let interrupted = common::signals::install();
     if o.spawn {
         member_binaries_present()?;
@@ -120,6 +131,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
             (false, reason, Duration::ZERO)
         }
     };
+    let member_peak_rss = crate::team::largest_member_peak_rss(&children);
     stop_team(&mut ports, &mut children, s, reason);
     let shut = ports.shutdown();
     if let Err(e) = shut {
@@ -127,7 +139,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<(AuditReport, Duration)
     }
     let report = audit.finish(complete);
     dir.write_audit(&report).map_err(Failure::fault)?;
-    Ok((report, elapsed))
+    Ok(Launched {
+        report,
+        ticking: elapsed,
+        member_peak_rss,
+    })
 }
 
 /// How long a non-finite state waits for a reader's fault report (which names both agents),
@@ -322,6 +338,24 @@ fn run_team(
             let since = Instant::now().checked_sub(FAULT_GRACE);
             stopping.get_or_insert((f, since.unwrap_or_else(Instant::now), false, usize::MAX));
         }
+        // Grant before auditing and writing: members go on while the orchestrator does its share.
+        // Grant in steps of half a window (at least 1): every grant wakes members, so fewer,
+        // larger grants mean fewer wake-ups per tick; members keep up to a window queued.
+        let mut complete = next_tick;
+        while pending.get(&complete).is_some_and(|(_, c)| *c == n) {
+            complete += 1;
+        }
+        let want = (complete + window - 1).min(last);
+        let step = (window / 2).max(1);
+        if want > grant && (want >= grant + step || want == last) {
+            grant = want;
+            send(ports, grant).map_err(|e| {
+                (
+                    fault("transport", None, None, next_tick, e.to_string()),
+                    StopReason::AgentFault,
+                )
+            })?;
+        }
         let mut progressed = false;
         while pending.get(&next_tick).is_some_and(|(_, c)| *c == n)
             && stopping.as_ref().is_none_or(|(f, ..)| next_tick <= f.tick)
@@ -383,20 +417,6 @@ fn run_team(
             progress.finish();
             let _ = tel.flush();
             return Ok((ticking.elapsed(), true));
-        }
-        // Grant in steps of half a window (at least 1): every grant wakes all N members, so
-        // fewer, larger grants mean fewer wake-ups per tick; members keep up to a window of
-        // work queued.
-        let want = (next_tick + window - 1).min(last);
-        let step = (window / 2).max(1);
-        if want > grant && (want >= grant + step || want == last) {
-            grant = want;
-            send(ports, grant).map_err(|e| {
-                (
-                    fault("transport", None, None, next_tick, e.to_string()),
-                    StopReason::AgentFault,
-                )
-            })?;
         }
         if progressed {
             last_progress = Instant::now();

@@ -151,3 +151,26 @@ pub fn stop_team(
         Err(e) => tracing::warn!("{e}"),
     }
 }
+
+/// The member with the largest peak resident memory (`VmHWM`, KiB) among the running `children`,
+/// read from `/proc` before the team is stopped; `None` when none can be read.
+pub fn largest_member_peak_rss(children: &[Spawned]) -> Option<(u32, u64)> {
+    children
+        .iter()
+        .filter_map(|c| {
+            let status = std::fs::read_to_string(format!("/proc/{}/status", c.child.id())).ok()?;
+            Some((c.id, vm_hwm_kib(&status)?))
+        })
+        .max_by_key(|&(id, kib)| (kib, std::cmp::Reverse(id)))
+}
+
+/// This process's peak resident memory in KiB.
+pub fn own_peak_rss() -> Option<u64> {
+    vm_hwm_kib(&std::fs::read_to_string("/proc/self/status").ok()?)
+}
+
+/// The `VmHWM:` line of a `/proc/<pid>/status` text, in KiB.
+fn vm_hwm_kib(status: &str) -> Option<u64> {
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}

@@ -27,7 +27,7 @@ use common::formation::Role;
 use common::messages::{ClockMsg, StateMsg};
 use common::scenario::{Checks, Scenario, ScenarioFile};
 use common::transport::{MemberPorts, TeamName, TransportError};
-use integration_tests::{describe, run, spawn, unique_team, Running, TempDir};
+use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
 use serde_json::Value;
 use support::*;
 
@@ -461,22 +461,42 @@ fn a_neighbour_state_from_the_wrong_step_is_reported_with_both_ids() {
     a_bad_state_of_agent_1("tick", "TickGap");
 }
 
-/// A NaN from agent 10 (a follower deepest in the acyclic graph), which no member reads: the orchestrator reports it itself.
+/// A NaN from a follower no member reads (found in the team's exported scenario): the
+/// orchestrator reports it itself.
 #[test]
 fn a_non_finite_state_nobody_reads_is_reported_by_the_orchestrator() {
     let dir = TempDir::new();
     let team = unique_team("bad_leaf");
     let out = dir.path().join("run");
-    let o = launch_injected(&team, &out, 10, "nan");
-    assert_exit(&o, 3, "launch with a NaN state of agent 10");
-    let s = flown_scenario(&out);
-    assert!(
-        s.agents
-            .iter()
-            .all(|a| !a.in_neighbors.as_ref().is_some_and(|i| i.contains(&10))),
-        "agent 10 has readers in this layout: pick another"
+    let exported = dir.path().join("team.toml");
+    let mut export = Command::new(bin("orchestrator"));
+    export
+        .args(["scenario", "export"])
+        .args(TEAM)
+        .arg("--out")
+        .arg(&exported);
+    assert_exit(&run(&mut export, SHORT_DEADLINE), 0, "scenario export");
+    let s = flown_scenario_file(&exported);
+    let read: BTreeSet<u32> = s
+        .agents
+        .iter()
+        .flat_map(|a| a.in_neighbors.iter().flatten().copied())
+        .collect();
+    let leaf = s
+        .agents
+        .iter()
+        .map(|a| a.id)
+        .filter(|id| !read.contains(id))
+        .max()
+        .expect("an agent without readers");
+    let o = launch_injected(&team, &out, leaf, "nan");
+    assert_exit(&o, 3, &format!("launch with a NaN state of agent {leaf}"));
+    assert_eq!(
+        flown_scenario(&out).agents,
+        s.agents,
+        "the flown team is the exported one"
     );
     let fault = assert_fault(&out, &s, "non-finite-state");
-    assert_eq!(fault["agent"], 10, "{fault:#}");
+    assert_eq!(fault["agent"], leaf, "{fault:#}");
     assert_eq!(fault["tick"], FAULT_TICK, "{fault:#}");
 }

@@ -78,11 +78,12 @@ pub fn fd_short(agents: usize) -> Option<FdShortfall> {
 /// Where iceoryx2 (0.10, Linux) keeps its shared-memory segments.
 pub const SHM_DIR: &str = "/dev/shm";
 
-/// Shared memory a team takes, measured with iceoryx2 0.10: about 40 KiB per agent (10 agents:
-/// 320 KiB, 40: 1.5 MiB, 100: 3.9 MiB, orchestrator and members together); asked for with a
-/// margin of more than half again.
-pub fn shm_need_bytes(agents: usize) -> u64 {
-    (agents as u64 + 4) * 64 * 1024
+/// Shared memory a team takes with a window of `window` ticks, measured with iceoryx2 0.10 at
+/// N = 100 as the space the tmpfs reports used (segments and iceoryx2's root files): about
+/// 54 KiB per agent at window 4, and the state segments grow by about 0.8 KiB per agent per tick
+/// of window (window 256: 207 KiB, 1024: 789 KiB per agent); asked for with a margin.
+pub fn shm_need_bytes(agents: usize, window: u32) -> u64 {
+    (agents as u64 + 4) * (64 + u64::from(window)) * 1024
 }
 
 /// Free bytes for unprivileged writers in `dir`, if it can be asked.

@@ -143,7 +143,7 @@ impl OrchestratorPorts {
         }
 
         let agents = layout.ids().len();
-        let need = super::limits::shm_need_bytes(agents);
+        let need = super::limits::shm_need_bytes(agents, layout.window());
         let dir = super::limits::SHM_DIR;
         if let Some(free) = super::limits::free_bytes(dir).filter(|&f| f < need) {
             return Err(TransportError::ShmFull {
@@ -151,6 +151,7 @@ impl OrchestratorPorts {
                 dir,
                 free_kib: free / 1024,
                 agents,
+                window: layout.window(),
                 need_kib: need / 1024,
             });
         }

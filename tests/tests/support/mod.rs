@@ -80,8 +80,12 @@ pub fn read_json(path: &Path) -> Value {
 
 /// The scenario a run flew (`<run>/scenario.toml`: positions projected, in-neighbours filled in).
 pub fn flown_scenario(run_dir: &Path) -> ScenarioFile {
-    let path = run_dir.join("scenario.toml");
-    let text = std::fs::read_to_string(&path)
+    flown_scenario_file(&run_dir.join("scenario.toml"))
+}
+
+/// A scenario file as the runtime writes it.
+pub fn flown_scenario_file(path: &Path) -> ScenarioFile {
+    let text = std::fs::read_to_string(path)
         .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
     toml::from_str(&text).unwrap_or_else(|e| panic!("{} does not parse: {e}", path.display()))
 }
