@@ -113,15 +113,16 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             let crate::launch::Launched {
                 report,
                 ticking,
+                startup,
                 member_peak_rss,
             } = launch(&s, &opts)?;
             summary("launch", &report, started, &opts.out, cli.quiet);
             if !cli.quiet && ticking > Duration::ZERO {
                 println!(
-                    "  ticking: {:.2} s ({:.0} ticks/s), start-up {:.2} s",
+                    "  ticking: {:.2} s ({:.0} ticks/s), start-up {:.2} s (command to first tick)",
                     ticking.as_secs_f64(),
                     report.ticks as f64 / ticking.as_secs_f64(),
-                    (started.elapsed() - ticking).as_secs_f64()
+                    startup.as_secs_f64()
                 );
                 if let (Some((id, member)), Some(me)) =
                     (member_peak_rss, crate::team::own_peak_rss())

@@ -42,12 +42,18 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
 }
 
+/// When the orchestrator process started (set first thing in `main`): start-up is measured from
+/// here to the first grant.
+pub static PROCESS_START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+
 /// What a finished launch reports.
 pub struct Launched {
     /// The audit report (also written to audit.json).
     pub report: AuditReport,
     /// Wall time of the ticking phase.
     pub ticking: Duration,
+    /// From the command's start to the first grant (zero when the team never ticked).
+    pub startup: Duration,
     /// The member with the largest peak resident memory and that peak in KiB, read just before
     /// the team was stopped (spawned teams only).
     pub member_peak_rss: Option<(u32, u64)>,
@@ -124,6 +130,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         &mut audit,
         interrupted,
     );
+    let ended = Instant::now();
     let (complete, reason, elapsed) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, t),
         Err((fault, reason)) => {
@@ -139,9 +146,14 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     let report = audit.finish(complete);
     dir.write_audit(&report).map_err(Failure::fault)?;
+    let startup = match PROCESS_START.get() {
+        Some(&t0) if elapsed > Duration::ZERO => (ended - elapsed).saturating_duration_since(t0),
+        _ => Duration::ZERO,
+    };
     Ok(Launched {
         report,
         ticking: elapsed,
+        startup,
         member_peak_rss,
     })
 }

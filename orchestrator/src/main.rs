@@ -43,6 +43,7 @@ impl Failure {
 }
 
 fn main() {
+    let _ = launch::PROCESS_START.set(std::time::Instant::now());
     let cli = match cli::Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

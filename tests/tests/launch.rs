@@ -427,6 +427,32 @@ fn a_control_fault_ends_a_launch_exactly_like_simulate() {
     assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
 }
 
+/// Determinism does not depend on the clock window: strict lockstep (1), small windows and the
+/// benchmarks' sizes (64; the default 256 is every other launch test) give the same telemetry
+/// as `simulate`, byte for byte.
+#[test]
+fn every_window_gives_the_telemetry_of_simulate() {
+    let dir = TempDir::new();
+    let source = ["--n", "40", "--max-ticks", "600", "--no-figures"];
+    let sim = dir.path().join("sim");
+    assert_exit(
+        &run(&mut simulate(&sim, &source), SMALL_DEADLINE),
+        0,
+        "simulate --n 40",
+    );
+    for window in ["1", "4", "64"] {
+        let out = dir.path().join(format!("w{window}"));
+        let mut args = source.to_vec();
+        args.extend(["--window", window]);
+        let l = run(
+            &mut launch(&unique_team(&format!("w{window}")), &out, &args),
+            SMALL_DEADLINE,
+        );
+        assert_exit(&l, 0, &format!("launch --n 40 --window {window}"));
+        assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+    }
+}
+
 /// Scale regression: 250 processes start, fly a few ticks of their plan, and match the engine.
 #[test]
 fn a_250_process_team_flies_a_few_ticks_like_simulate() {

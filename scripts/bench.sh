@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Every number of BENCHMARKS.md's main table in one run on this machine, so ratios hold when its
+# speed drifts: the in-process engine alone (the arithmetic floor), `simulate` (engine + audit +
+# telemetry, the same outputs as launch), `orchestrator launch` (one process per quadcopter), a
+# bare iceoryx2 central barrier (no math), start-up (command to first tick) and peak memory.
+# Also checks launch's telemetry is byte-identical to simulate's for every N.
+#
+# Usage: [WINDOW=256] [QUICK=1] scripts/bench.sh [N ...]     (default N: 10 40 100 250 1000)
+#   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
+#   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release --quiet
+bin=target/release
+out=$(mktemp -d /tmp/cdm-bench.XXXXXX)
+trap 'rm -rf "$out"' EXIT
+window=${WINDOW:-256}
+ns=("$@"); [ ${#ns[@]} -gt 0 ] || ns=(10 40 100 250 1000)
+
+echo "Machine: nproc $(nproc), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'),"\
+  "$(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo), kernel $(uname -r);"\
+  "commit $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%dT%H:%MZ)."
+echo "Command: WINDOW=$window${QUICK:+ QUICK=$QUICK} scripts/bench.sh ${ns[*]}"
+echo
+echo "| N | ticks flown | engine ticks/s | simulate ticks/s | launch ticks/s (window $window) | barrier ticks/s | launch/engine | launch/simulate | launch/barrier | start-up s | largest member RSS MiB | orchestrator RSS MiB |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+rate() { sed -E 's/.*\(([0-9]+) ticks\/s\).*/\1/'; }
+for n in "${ns[@]}"; do
+  limit=()
+  case "$n" in
+    250) limit=(--max-ticks 4999) ;;
+    1000) [ -n "${QUICK:-}" ] && limit=(--max-ticks 2999) ;;
+  esac
+  eng_ticks=5000; [ "$n" -ge 1000 ] && eng_ticks=1000
+  eng=$("$bin/cdm-bench" engine --n "$n" --ticks "$eng_ticks" | rate)
+  s=$("$bin/orchestrator" simulate --n "$n" "${limit[@]}" --no-figures --out "$out/s$n" 2>/dev/null | grep "^simulate:")
+  sim=$(rate <<<"$s")
+  ticks=$(sed -E 's/.* ([0-9]+) ticks in .*/\1/' <<<"$s")
+  l=$("$bin/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --window "$window" \
+      --team "bench$n-$$" --out "$out/l$n" 2>/dev/null)
+  lt=$(grep "ticking:" <<<"$l" | rate)
+  su=$(grep "ticking:" <<<"$l" | sed -E 's/.*start-up ([0-9.]+) s.*/\1/')
+  mem=$(grep "peak resident memory" <<<"$l")
+  member=$(sed -E 's/.*largest member ([0-9.]+) MiB.*/\1/' <<<"$mem")
+  orch=$(sed -E 's/.*orchestrator ([0-9.]+) MiB.*/\1/' <<<"$mem")
+  cmp -s "$out/s$n/telemetry.csv" "$out/l$n/telemetry.csv" \
+    || { echo "telemetry of launch and simulate differ for N=$n" >&2; exit 1; }
+  bar_ticks=2000; [ "$n" -ge 250 ] && bar_ticks=500; [ "$n" -ge 1000 ] && bar_ticks=200
+  bar=$("$bin/cdm-bench" barrier --n "$n" --ticks "$bar_ticks" | rate)
+  ratio() { awk -v a="$1" -v b="$2" 'BEGIN{printf "%.2f", a/b}'; }
+  echo "| $n | $ticks | $eng | $sim | $lt | $bar | $(ratio "$lt" "$eng") | $(ratio "$lt" "$sim") | $(ratio "$lt" "$bar") | $su | $member | $orch |"
+  rm -rf "$out/s$n" "$out/l$n"
+done
