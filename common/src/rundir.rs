@@ -91,6 +91,14 @@ impl RunDir {
         write_atomic(&self.path.join("scenario.toml"), s.to_toml().as_bytes())
     }
 
+    /// Write scenario.json (the same scenario for the member processes, which parse JSON with a
+    /// fraction of TOML's memory) and return its path.
+    pub fn write_member_scenario(&self, s: &Scenario) -> Result<PathBuf, RunDirError> {
+        let p = self.path.join("scenario.json");
+        write_atomic(&p, s.to_json().as_bytes())?;
+        Ok(p)
+    }
+
     /// Open telemetry.csv for streaming.
     pub fn telemetry(&self, every: u64) -> Result<TelemetryWriter<BufWriter<File>>, RunDirError> {
         let p = self.path.join("telemetry.csv");

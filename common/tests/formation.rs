@@ -108,3 +108,22 @@ fn timing_generated() {
         println!("n={n} gen {t1:?} member {t2:?} full {:?}", t.elapsed());
     }
 }
+
+/// `launch` hands its members scenario.json: read back, it is the very same scenario (same
+/// canonical TOML, same hash), for the paper's team and a large generated one.
+#[test]
+fn a_scenario_read_back_from_json_has_the_same_hash() {
+    for s in [
+        Scenario::builtin("paper40").unwrap(),
+        Scenario::generated(1000).unwrap(),
+    ] {
+        let back = Scenario::parse_json(&s.to_json(), "json", Checks::Member).unwrap();
+        assert_eq!(back.to_toml(), s.to_toml(), "{}", s.file.name);
+        assert_eq!(back.content_hash(), s.content_hash());
+    }
+    let err = Scenario::parse_json("{\"name\": 1}", "bad.json", Checks::Member).unwrap_err();
+    assert!(
+        err.to_string().starts_with("bad.json: malformed scenario"),
+        "{err}"
+    );
+}

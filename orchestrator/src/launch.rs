@@ -84,7 +84,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     // running team writes nothing (not even into the first one's --out).
     let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
     dir.write_scenario(s).map_err(Failure::fault)?;
+    // Humans start members with scenario.toml; spawned members read the JSON copy (same hash).
     let scenario_file = dir.path().join("scenario.toml");
+    let member_file = dir.write_member_scenario(s).map_err(Failure::fault)?;
     if ports.stale_nodes_removed() > 0 {
         tracing::info!(
             removed = ports.stale_nodes_removed(),
@@ -95,7 +97,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = Vec::new();
     if o.spawn {
         for m in &s.formation.members {
-            match spawn_member(&scenario_file, &o.team, m.id, m.role) {
+            match spawn_member(&member_file, &o.team, m.id, m.role) {
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);

@@ -154,7 +154,22 @@ impl Scenario {
             origin: origin.clone(),
             kind: ScenarioErrorKind::Io(e.to_string()),
         })?;
+        if path.extension().is_some_and(|e| e == "json") {
+            return Self::parse_json(&text, &origin, checks);
+        }
         Self::parse(&text, &origin, checks)
+    }
+
+    /// Validate scenario text in JSON (the same fields as the TOML file). `launch` hands its
+    /// members this form: serde_json reads straight into the structs, where the TOML parser
+    /// builds a document first (a 1000-agent file: about 0.2 MiB against 3.9 MiB of peak memory
+    /// in each of 1000 processes).
+    pub fn parse_json(text: &str, origin: &str, checks: Checks) -> Result<Self, ScenarioError> {
+        let file: ScenarioFile = serde_json::from_str(text).map_err(|e| ScenarioError {
+            origin: origin.to_string(),
+            kind: ScenarioErrorKind::Parse(e.to_string()),
+        })?;
+        Self::from_file(file, origin, checks)
     }
 
     /// Validate scenario text; `origin` names it in errors.
@@ -205,6 +220,11 @@ impl Scenario {
             },
         })?;
         Self::from_file(file, &origin, Checks::Full)
+    }
+
+    /// The scenario as compact JSON (what `launch` hands its members; see [`Self::parse_json`]).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(&self.file).unwrap_or_else(|e| format!("cannot serialise: {e}"))
     }
 
     /// The scenario as TOML (what `scenario.toml` and `scenario export` write).
