@@ -131,6 +131,18 @@ fn team_sizes_outside_4_to_2000_are_refused() {
         }
     }
     refused("orchestrator", &["launch", "--n", "-4"], &["'-4'"]);
+    // The bounds themselves are accepted: a 4- and a 2000-agent team are generated (acyclic
+    // graph, spectrum of L by components: well under a second each).
+    for n in ["4", "2000"] {
+        let file = dir.path().join(format!("team{n}.toml"));
+        let mut cmd = Command::new(bin("orchestrator"));
+        cmd.args(["scenario", "export", "--n", n, "--out"]).arg(&file);
+        let o = run(&mut cmd, Duration::from_secs(60));
+        assert_eq!(o.status.code(), Some(0), "export --n {n}\n{}", describe(&o));
+        let text = std::fs::read_to_string(&file).expect("exported file");
+        let agents = text.matches("[[agents]]").count();
+        assert_eq!(agents.to_string(), n, "export --n {n} wrote {agents} agents");
+    }
 }
 
 /// Numbers and names the types accept but the tool does not: exit 2 naming the option.

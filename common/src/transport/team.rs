@@ -1,0 +1,195 @@
+//! Team names (the prefix of every service and node of a team) and team layouts (who reads
+//! whom: the orchestrator sizes every service from it).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+
+use super::{Role, TransportError, TEAM_NAME_MAX_LEN};
+
+/// A validated team name (`[A-Za-z0-9_-]`, 1 to [`TEAM_NAME_MAX_LEN`] characters). It prefixes
+/// every service and node name of the team, so two teams never see each other.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TeamName(String);
+
+impl TeamName {
+    /// Validates `name`.
+    pub fn new(name: &str) -> Result<Self, TransportError> {
+        let invalid = |reason| TransportError::InvalidTeamName {
+            name: name.to_owned(),
+            reason,
+        };
+        if name.is_empty() {
+            return Err(invalid("it is empty"));
+        }
+        if name.len() > TEAM_NAME_MAX_LEN {
+            return Err(invalid("it is longer than 48 characters"));
+        }
+        if !name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+        {
+            return Err(invalid("only A-Z, a-z, 0-9, '_' and '-' are allowed"));
+        }
+        Ok(Self(name.to_owned()))
+    }
+
+    /// The name itself.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// `cdm/<team>/state/<id>`: agent `id`'s states.
+    pub fn state_service(&self, id: u32) -> String {
+        format!("cdm/{}/state/{id}", self.0)
+    }
+
+    /// `cdm/<team>/clock`: the orchestrator's grants.
+    pub fn clock_service(&self) -> String {
+        format!("cdm/{}/clock", self.0)
+    }
+
+    /// `cdm/<team>/wake/<id>`: wakes agent `id`.
+    pub fn wake_service(&self, id: u32) -> String {
+        format!("cdm/{}/wake/{id}", self.0)
+    }
+
+    /// `cdm/<team>/wake/orch`: wakes the orchestrator.
+    pub fn orchestrator_wake_service(&self) -> String {
+        format!("cdm/{}/wake/orch", self.0)
+    }
+
+    /// The node name of a process of this team: `cdm/<team>/agent/<id>` or
+    /// `cdm/<team>/orchestrator`.
+    pub fn node_name(&self, who: Role) -> String {
+        match who {
+            Role::Orchestrator => format!("cdm/{}/orchestrator", self.0),
+            Role::Agent(id) => format!("cdm/{}/agent/{id}", self.0),
+        }
+    }
+
+    /// True when `node_name` belongs to a process of this team.
+    pub fn owns_node(&self, node_name: &str) -> bool {
+        node_name
+            .strip_prefix("cdm/")
+            .and_then(|rest| rest.strip_prefix(self.0.as_str()))
+            .is_some_and(|rest| rest.starts_with('/'))
+    }
+}
+
+impl fmt::Display for TeamName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::str::FromStr for TeamName {
+    type Err = TransportError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::new(s)
+    }
+}
+
+/// Who talks to whom in a team, validated: the orchestrator sizes every service from it.
+/// `in_neighbors[i]` are the agents whose states agent `i` reads; out-neighbours are derived.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TeamLayout {
+    ids: Vec<u32>,
+    in_neighbors: BTreeMap<u32, Vec<u32>>,
+    out_neighbors: BTreeMap<u32, Vec<u32>>,
+    window: u32,
+    scenario_hash: u64,
+}
+
+/// The clock service's attribute that carries the team's scenario hash.
+pub const SCENARIO_HASH_KEY: &str = "cdm.scenario_hash";
+
+/// The attribute value of a scenario hash.
+pub fn scenario_hash_value(hash: u64) -> String {
+    format!("{hash:016x}")
+}
+
+impl TeamLayout {
+    /// Checks that ids are unique and non-empty, every neighbour is a team member, nobody is its
+    /// own neighbour, and `window >= 1` (how many ticks an agent may run ahead of the slowest).
+    /// Ids missing from `in_neighbors` read nobody. Neighbour lists are sorted and deduplicated.
+    pub fn new(
+        ids: Vec<u32>,
+        in_neighbors: BTreeMap<u32, Vec<u32>>,
+        window: u32,
+    ) -> Result<Self, TransportError> {
+        let invalid = |reason: String| TransportError::InvalidLayout { reason };
+        let members: BTreeSet<u32> = ids.iter().copied().collect();
+        if members.is_empty() {
+            return Err(invalid("the team has no agents".into()));
+        }
+        if members.len() != ids.len() {
+            return Err(invalid(format!("duplicate agent ids in {ids:?}")));
+        }
+        if window == 0 {
+            return Err(invalid("window must be at least 1 tick".into()));
+        }
+        let mut ins = BTreeMap::new();
+        let mut outs: BTreeMap<u32, Vec<u32>> = members.iter().map(|&i| (i, vec![])).collect();
+        for &id in &members {
+            let mut list: Vec<u32> = in_neighbors.get(&id).cloned().unwrap_or_default();
+            list.sort_unstable();
+            list.dedup();
+            for &j in &list {
+                if j == id {
+                    return Err(invalid(format!("agent {id} lists itself as a neighbour")));
+                }
+                let Some(out) = outs.get_mut(&j) else {
+                    return Err(invalid(format!(
+                        "agent {id} reads agent {j}, which is not in the team"
+                    )));
+                };
+                out.push(id);
+            }
+            ins.insert(id, list);
+        }
+        if let Some(stray) = in_neighbors.keys().find(|k| !members.contains(k)) {
+            return Err(invalid(format!(
+                "neighbours are given for agent {stray}, which is not in the team"
+            )));
+        }
+        Ok(Self {
+            ids: members.into_iter().collect(),
+            in_neighbors: ins,
+            out_neighbors: outs,
+            window,
+            scenario_hash: 0,
+        })
+    }
+
+    /// The same layout carrying the team's scenario hash (published as an attribute of the clock
+    /// service; a member whose scenario differs is refused before it opens any other port).
+    pub fn with_scenario_hash(mut self, hash: u64) -> Self {
+        self.scenario_hash = hash;
+        self
+    }
+
+    /// The team's scenario hash.
+    pub fn scenario_hash(&self) -> u64 {
+        self.scenario_hash
+    }
+
+    /// The agent ids, sorted.
+    pub fn ids(&self) -> &[u32] {
+        &self.ids
+    }
+
+    /// The agents whose states `id` reads (sorted; empty for an unknown id).
+    pub fn in_neighbors(&self, id: u32) -> &[u32] {
+        self.in_neighbors.get(&id).map_or(&[], Vec::as_slice)
+    }
+
+    /// The agents that read `id`'s states (sorted; empty for an unknown id).
+    pub fn out_neighbors(&self, id: u32) -> &[u32] {
+        self.out_neighbors.get(&id).map_or(&[], Vec::as_slice)
+    }
+
+    /// How many ticks an agent may run ahead of the slowest one.
+    pub fn window(&self) -> u32 {
+        self.window
+    }
+}
