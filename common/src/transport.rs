@@ -25,17 +25,23 @@
 //! Ports use `ipc::Service` (single-threaded, no locks), so [`OrchestratorPorts`] and
 //! [`MemberPorts`] are not `Send`: open them on the thread that uses them.
 //!
-//! iceoryx2 keeps its node and service files (and event sockets) under [`IOX2_ROOT`], on the
+//! iceoryx2 keeps its node and service files (and event sockets) under [`iox2_root`], on the
 //! `/dev/shm` tmpfs instead of its default `/tmp/iceoryx2`: where `/tmp` is a disk file system
 //! (ext4 here) the directory look-ups of 1000 processes opening their services took most of the
 //! start-up (N = 1000: 26 s with `/tmp`, 12 s with the tmpfs root).
 //!
-//! Crashed processes leave their files in `/dev/shm` and [`IOX2_ROOT`]; the next
+//! Crashed processes leave their files in `/dev/shm` and [`iox2_root`]; the next
 //! [`OrchestratorPorts::create`] of the same team (or [`remove_dead_nodes`]) removes them.
 
-/// Where iceoryx2 keeps this runtime's node and service files and event sockets (a tmpfs).
-pub const IOX2_ROOT: &str = "/dev/shm/cdm-iceoryx2";
-const IOX2_ROOT_SLASH: &str = "/dev/shm/cdm-iceoryx2/";
+/// Where iceoryx2 keeps this runtime's node and service files and event sockets (a tmpfs):
+/// `/dev/shm/cdm-iceoryx2-<uid>`: one root per user, since iceoryx2 creates its root owner-only
+/// (0750) and cannot mix users on one service anyway; with a shared root the first user on a
+/// machine would lock every other user out.
+pub fn iox2_root() -> &'static str {
+    static ROOT: OnceLock<String> = OnceLock::new();
+    // SAFETY: getuid(2) cannot fail and touches no memory of ours.
+    ROOT.get_or_init(|| format!("/dev/shm/cdm-iceoryx2-{}", unsafe { libc::getuid() }))
+}
 
 mod error;
 mod limits;
@@ -136,10 +142,11 @@ fn process_config(_who: Role) -> &'static Config {
     static CONFIG: OnceLock<Config> = OnceLock::new();
     CONFIG.get_or_init(|| {
         let mut cfg = Config::default();
-        match iceoryx2::prelude::Path::new(IOX2_ROOT_SLASH.as_bytes()) {
+        let root = format!("{}/", iox2_root());
+        match iceoryx2::prelude::Path::new(root.as_bytes()) {
             Ok(root) => cfg.global.set_root_path(&root),
             // A constant that fits iceoryx2's path type; kept as a fallback, never expected.
-            Err(e) => tracing::warn!("iceoryx2 root {IOX2_ROOT}: {e:?}; using the default"),
+            Err(e) => tracing::warn!("iceoryx2 root {root}: {e:?}; using the default"),
         }
         // Each subscriber pre-allocates (and touches) room for this many connections of departed
         // publishers, about 3.6 KiB each: iceoryx2's default of 128 cost 460 KiB per subscriber,
@@ -156,7 +163,7 @@ fn process_config(_who: Role) -> &'static Config {
     })
 }
 
-/// The iceoryx2 configuration of this runtime's processes (root [`IOX2_ROOT`]), for tools and
+/// The iceoryx2 configuration of this runtime's processes (root [`iox2_root`]), for tools and
 /// tests that list its services and nodes.
 pub fn iceoryx2_config() -> Config {
     process_config(Role::Orchestrator).clone()

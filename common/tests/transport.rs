@@ -348,13 +348,13 @@ fn team_entries(team: &TeamName) -> Vec<String> {
     out
 }
 
-/// Files under /dev/shm (iceoryx2's root, `IOX2_ROOT`, is inside it) whose names carry an
+/// Files under /dev/shm (iceoryx2's root, `iox2_root()`, is inside it) whose names carry an
 /// iceoryx2 id minted by `pids`.
 fn files_of(pids: &[u32]) -> Vec<String> {
     let mut out = vec![];
     let mut dirs = vec![std::path::PathBuf::from("/dev/shm")];
-    if !common::transport::IOX2_ROOT.starts_with("/dev/shm/") {
-        dirs.push(common::transport::IOX2_ROOT.into());
+    if !common::transport::iox2_root().starts_with("/dev/shm/") {
+        dirs.push(common::transport::iox2_root().into());
     }
     while let Some(dir) = dirs.pop() {
         let Ok(entries) = std::fs::read_dir(&dir) else {

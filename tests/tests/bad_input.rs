@@ -136,12 +136,17 @@ fn team_sizes_outside_4_to_2000_are_refused() {
     for n in ["4", "2000"] {
         let file = dir.path().join(format!("team{n}.toml"));
         let mut cmd = Command::new(bin("orchestrator"));
-        cmd.args(["scenario", "export", "--n", n, "--out"]).arg(&file);
+        cmd.args(["scenario", "export", "--n", n, "--out"])
+            .arg(&file);
         let o = run(&mut cmd, Duration::from_secs(60));
         assert_eq!(o.status.code(), Some(0), "export --n {n}\n{}", describe(&o));
         let text = std::fs::read_to_string(&file).expect("exported file");
         let agents = text.matches("[[agents]]").count();
-        assert_eq!(agents.to_string(), n, "export --n {n} wrote {agents} agents");
+        assert_eq!(
+            agents.to_string(),
+            n,
+            "export --n {n} wrote {agents} agents"
+        );
     }
 }
 

@@ -6,7 +6,7 @@
 //! - Two teams fly at once without seeing each other.
 //! - A follower killed with SIGKILL, or the orchestrator interrupted with SIGINT, stops the whole
 //!   team with a fault (exit 3): the telemetry keeps only complete ticks, no process of the team
-//!   survives, and nothing of the team is left in /dev/shm or /dev/shm/cdm-iceoryx2.
+//!   survives, and nothing of the team is left in /dev/shm or /dev/shm/cdm-iceoryx2-<uid>.
 //! - A hand-started team (`--no-spawn`) refuses members with a wrong id, the wrong binary or a
 //!   different scenario (exit 2), then flies with the right ones.
 //!

@@ -1,7 +1,7 @@
 //! Resource safety (issue 6): what a team's shared memory lets other users do, and running out
 //! of file descriptors.
 //!
-//! - Every file a team creates in /dev/shm and /dev/shm/cdm-iceoryx2 is readable and writable by its
+//! - Every file a team creates in /dev/shm and /dev/shm/cdm-iceoryx2-<uid> is readable and writable by its
 //!   owner only (iceoryx2 creates them 0600 or 0400; its directories are 0750 at most).
 //! - An orchestrator that runs out of file descriptors says so, with the limit and how to raise
 //!   it, exits 2, and leaves no run directory and no shared memory behind; so does one whose
@@ -46,7 +46,7 @@ fn a_teams_shared_memory_files_are_owner_only() {
     let files: Vec<String> = fp
         .leftovers()
         .into_iter()
-        .filter(|l| l.starts_with(SHM) || l.starts_with(IOX2_ROOT))
+        .filter(|l| l.starts_with(SHM) || l.starts_with(iox2_root()))
         .collect();
     let mut wrong = vec![];
     for f in &files {
@@ -61,9 +61,9 @@ fn a_teams_shared_memory_files_are_owner_only() {
             wrong.push(format!("{f}: {m:o}"));
         }
     }
-    // The roots themselves: /dev/shm/cdm-iceoryx2 is not writable by group or others.
-    let root = mode(Path::new(IOX2_ROOT));
-    assert_eq!(root & 0o022, 0, "{IOX2_ROOT} is {root:o}");
+    // The roots themselves: /dev/shm/cdm-iceoryx2-<uid> is not writable by group or others.
+    let root = mode(Path::new(iox2_root()));
+    assert_eq!(root & 0o022, 0, "{} is {root:o}", iox2_root());
     assert!(
         wrong.is_empty(),
         "{} of {} team files are open to others: {wrong:#?}",
@@ -137,9 +137,10 @@ fn a_full_dev_shm_is_reported_with_the_space_and_how_to_enlarge_it() {
     let dir = TempDir::new();
     let team = unique_team("shmfull");
     let out = dir.path().join("run");
+    let root = iox2_root();
     let script = format!(
-        "mount -t tmpfs -o size=256k tmpfs /dev/shm && mkdir -p {IOX2_ROOT} && \
-         mount -t tmpfs tmpfs {IOX2_ROOT} && exec \"$0\" launch --n 40 --team {team} --out \"$1\" --quiet"
+        "mount -t tmpfs -o size=256k tmpfs /dev/shm && mkdir -p {root} && \
+         mount -t tmpfs tmpfs {root} && exec \"$0\" launch --n 40 --team {team} --out \"$1\" --quiet"
     );
     let o = run(
         Command::new("unshare")

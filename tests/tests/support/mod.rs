@@ -254,7 +254,7 @@ pub fn wait_for_rows(orch: &mut Running, telemetry: &Path, rows: usize) {
     }
 }
 
-pub use common::transport::IOX2_ROOT;
+pub use common::transport::iox2_root;
 pub const SHM: &str = "/dev/shm";
 
 /// The value of `key = "value"` or `key = 123` in an iceoryx2 TOML file.
@@ -289,7 +289,7 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
 pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
     let prefix = format!("cdm/{team}/");
     let mut out = vec![];
-    for path in files_under(&Path::new(IOX2_ROOT).join("services")) {
+    for path in files_under(&Path::new(iox2_root()).join("services")) {
         let Some(hash) = path
             .file_name()
             .and_then(|n| n.to_str())
@@ -312,7 +312,7 @@ pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
 /// `<IOX2_ROOT>/nodes/<node id>/iox2_node.details` whose node name belongs to `team`.
 pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
     let mut out = vec![];
-    for path in files_under(&Path::new(IOX2_ROOT).join("nodes")) {
+    for path in files_under(&Path::new(iox2_root()).join("nodes")) {
         if path.file_name().and_then(|n| n.to_str()) != Some("iox2_node.details") {
             continue;
         }
@@ -377,7 +377,7 @@ impl Footprint {
     }
 
     /// Everything of the team iceoryx2 still has: services and nodes named after the team, and
-    /// files under /dev/shm and IOX2_ROOT named by its services or processes.
+    /// files under /dev/shm and iox2_root() named by its services or processes.
     pub fn leftovers(&self) -> Vec<String> {
         let team = self.team.as_str();
         let pids: BTreeSet<u32> = self
@@ -398,10 +398,10 @@ impl Footprint {
                 .into_iter()
                 .map(|(name, pid)| format!("node {name} (process {pid})")),
         );
-        // IOX2_ROOT lies inside /dev/shm: each file is listed once.
+        // iox2_root() lies inside /dev/shm: each file is listed once.
         let mut files = files_under(Path::new(SHM));
-        if !Path::new(IOX2_ROOT).starts_with(SHM) {
-            files.extend(files_under(Path::new(IOX2_ROOT)));
+        if !Path::new(iox2_root()).starts_with(SHM) {
+            files.extend(files_under(Path::new(iox2_root())));
         }
         {
             for path in files {
@@ -425,13 +425,13 @@ impl Footprint {
         let count = |p: &str| live.iter().filter(|l| l.starts_with(p)).count();
         let segments = live
             .iter()
-            .filter(|l| l.starts_with(SHM) && !l.starts_with(IOX2_ROOT))
+            .filter(|l| l.starts_with(SHM) && !l.starts_with(iox2_root()))
             .count();
         assert!(
             count("service ") > 0
                 && count("node ") == processes
                 && segments > 0
-                && count(IOX2_ROOT) > 0,
+                && count(iox2_root()) > 0,
             "the live team {} does not show {processes} nodes, services and files: {live:#?}",
             self.team
         );
