@@ -41,19 +41,14 @@ const CANDIDATES: [usize; 4] = [10, 16, 28, 48];
 /// farthest-point order) nearest to it (distance, then id: deterministic), the triangle that
 /// maximises the smallest weight, subject to weight >= floor.
 pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), SynthesisError> {
-    let leaders: Vec<u32> = formation
-        .members
-        .iter()
-        .filter(|m| m.role.is_leader())
-        .map(|m| m.id)
-        .collect();
-    let mut placed: Vec<(u32, Vec2)> = formation
+    let leaders: Vec<(u32, Vec2)> = formation
         .members
         .iter()
         .filter(|m| m.role.is_leader())
         .map(|m| (m.id, m.planar))
         .collect();
-    for (id, p) in farthest_point_order(formation) {
+    let mut placed = leaders.clone();
+    for (id, p) in farthest_point_order(formation, &leaders) {
         if formation.member(id).is_some_and(|m| m.link.is_some()) {
             // In-neighbours given in the file are kept; the follower still serves later ones.
             placed.push((id, p));
@@ -73,7 +68,9 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
             let cand: Vec<&(Real, u32, Vec2)> = near
                 .iter()
                 .enumerate()
-                .filter(|(rank, (_, j, _))| *rank < k || (with_leaders && leaders.contains(j)))
+                .filter(|(rank, (_, j, _))| {
+                    *rank < k || (with_leaders && leaders.iter().any(|(l, _)| l == j))
+                })
                 .map(|(_, c)| c)
                 .collect();
             let kc = cand.len();
@@ -120,13 +117,7 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
 
 /// The followers in farthest-point order: each next one is the follower farthest from the
 /// leaders and the followers before it (ties: the smaller id). O(N^2), deterministic.
-fn farthest_point_order(formation: &Formation) -> Vec<(u32, Vec2)> {
-    let leaders: Vec<Vec2> = formation
-        .members
-        .iter()
-        .filter(|m| m.role.is_leader())
-        .map(|m| m.planar)
-        .collect();
+fn farthest_point_order(formation: &Formation, leaders: &[(u32, Vec2)]) -> Vec<(u32, Vec2)> {
     let mut left: Vec<(u32, Vec2, Real)> = formation
         .members
         .iter()
@@ -134,7 +125,7 @@ fn farthest_point_order(formation: &Formation) -> Vec<(u32, Vec2)> {
         .map(|m| {
             let d = leaders
                 .iter()
-                .map(|q| (q - m.planar).norm())
+                .map(|(_, q)| (q - m.planar).norm())
                 .fold(Real::INFINITY, Real::min);
             (m.id, m.planar, d)
         })

@@ -94,32 +94,15 @@ impl fmt::Display for Role {
 }
 
 /// Raises this process's soft `RLIMIT_NOFILE` to the hard limit and returns the new soft limit.
-/// The orchestrator holds a few descriptors per agent, so a large team passes 1024 quickly.
 pub fn raise_fd_limit() -> Result<u64, TransportError> {
-    let mut lim = libc::rlimit {
-        rlim_cur: 0,
-        rlim_max: 0,
-    };
-    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
-    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } != 0 {
-        return Err(TransportError::FdLimit(std::io::Error::last_os_error()));
-    }
-    if lim.rlim_cur < lim.rlim_max {
-        lim.rlim_cur = lim.rlim_max;
-        // SAFETY: `lim` is a valid rlimit; only the soft limit changed, within the hard limit.
-        if unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &lim) } != 0 {
-            return Err(TransportError::FdLimit(std::io::Error::last_os_error()));
-        }
-    }
-    #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
-    Ok(lim.rlim_cur as u64)
+    limits::raise_fd_limit().map_err(TransportError::FdLimit)
 }
 
 /// Removes the files of every dead (crashed or killed) process of `team` and returns how many
 /// nodes were cleaned. Safe to call while the team runs: live nodes are never touched.
 pub fn remove_dead_nodes(team: &TeamName) -> Result<usize, TransportError> {
     init_logging();
-    let scan = scan_team(team, process_config(Role::Orchestrator))?;
+    let scan = scan_team(team, process_config())?;
     Ok(remove_stale(team, scan.dead))
 }
 
@@ -138,7 +121,7 @@ fn init_logging() {
 /// so one launch could remove the evidence of another team's crash while it is being examined.
 /// The orchestrator cleans up its own team's dead nodes explicitly ([`OrchestratorPorts::create`],
 /// [`remove_dead_nodes`]).
-fn process_config(_who: Role) -> &'static Config {
+fn process_config() -> &'static Config {
     static CONFIG: OnceLock<Config> = OnceLock::new();
     CONFIG.get_or_init(|| {
         let mut cfg = Config::default();
@@ -166,7 +149,7 @@ fn process_config(_who: Role) -> &'static Config {
 /// The iceoryx2 configuration of this runtime's processes (root [`iox2_root`]), for tools and
 /// tests that list its services and nodes.
 pub fn iceoryx2_config() -> Config {
-    process_config(Role::Orchestrator).clone()
+    process_config().clone()
 }
 
 /// Creates the one node of a process.
@@ -181,7 +164,7 @@ fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, Transpo
     let node_name = NodeName::new(&name).map_err(|e| err(format!("{e:?}")))?;
     NodeBuilder::new()
         .name(&node_name)
-        .config(process_config(who))
+        .config(process_config())
         // Signals belong to the process's main; iceoryx2 must not swallow SIGINT/SIGTERM.
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()

@@ -133,11 +133,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         interrupted,
     );
     let ended = Instant::now();
-    let (complete, reason, elapsed) = match result {
-        Ok((t, complete)) => (complete, StopReason::Finished, t),
+    let (complete, reason, first_tick) = match result {
+        Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
         Err((fault, reason)) => {
             audit.fault(fault);
-            (false, reason, Duration::ZERO)
+            (false, reason, None)
         }
     };
     let member_peak_rss = crate::team::largest_member_peak_rss(&children);
@@ -148,13 +148,13 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     let report = audit.finish(complete);
     dir.write_audit(&report).map_err(Failure::fault)?;
-    let startup = match PROCESS_START.get() {
-        Some(&t0) if elapsed > Duration::ZERO => (ended - elapsed).saturating_duration_since(t0),
+    let startup = match (PROCESS_START.get(), first_tick) {
+        (Some(&t0), Some(t)) => t.saturating_duration_since(t0),
         _ => Duration::ZERO,
     };
     Ok(Launched {
         report,
-        ticking: elapsed,
+        ticking: first_tick.map_or(Duration::ZERO, |t| ended - t),
         startup,
         member_peak_rss,
     })
@@ -178,7 +178,8 @@ fn interrupted_at(tick: u64, when: &str) -> Stop {
     )
 }
 
-/// Wait for every process to open its ports, record the subscription graph, then tick.
+/// Wait for every process to open its ports, record the subscription graph, then tick; returns
+/// when ticking began and whether every tick of the plan was completed.
 fn run_team(
     s: &Scenario,
     o: &LaunchOptions,
@@ -187,7 +188,7 @@ fn run_team(
     children: &mut [Spawned],
     audit: &mut Auditor,
     interrupted: &std::sync::atomic::AtomicBool,
-) -> Result<(Duration, bool), Stop> {
+) -> Result<(Instant, bool), Stop> {
     let hash = s.content_hash();
     let n = s.formation.members.len();
     // 1. Readiness, with a deadline.
@@ -371,9 +372,7 @@ fn run_team(
             })?;
         }
         let mut progressed = false;
-        while pending.get(&next_tick).is_some_and(|(_, c)| *c == n)
-            && stopping.as_ref().is_none_or(|(f, ..)| next_tick <= f.tick)
-        {
+        while next_tick < complete && stopping.as_ref().is_none_or(|(f, ..)| next_tick <= f.tick) {
             let Some((mut states, _)) = pending.remove(&next_tick) else {
                 break;
             };
@@ -418,7 +417,7 @@ fn run_team(
                 audit.stop_on_violation();
                 progress.finish();
                 let _ = tel.flush();
-                return Ok((ticking.elapsed(), next_tick > last));
+                return Ok((ticking, next_tick > last));
             }
         }
         if let Some((f, since, echo, k)) = stopping.take() {
@@ -430,7 +429,7 @@ fn run_team(
         if next_tick > last {
             progress.finish();
             let _ = tel.flush();
-            return Ok((ticking.elapsed(), true));
+            return Ok((ticking, true));
         }
         if progressed {
             last_progress = Instant::now();

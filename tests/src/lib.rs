@@ -305,6 +305,19 @@ impl Captured {
         self.eof_seen.iter().all(|s| *s)
     }
 
+    /// [`Self::wait_until`] `deadline` from now; past it (group killed) panics naming the command
+    /// and the deadline, with the output so far.
+    fn finish_or_panic(&mut self, deadline: Duration) -> Output {
+        match self.wait_until(Instant::now() + deadline) {
+            Ok(out) => out,
+            Err(out) => panic!(
+                "harness: {} did not finish within {deadline:?}; killed.\n{}",
+                self.program,
+                describe(&out)
+            ),
+        }
+    }
+
     /// Wait for exit and for both pipes to close, until `until` (plus a short grace for the
     /// pipes). Otherwise the group is killed and `Err` carries what was collected.
     fn wait_until(&mut self, until: Instant) -> Result<Output, Output> {
@@ -348,15 +361,7 @@ impl Captured {
 /// it left holding its output) is still running after `deadline`, its process group is killed
 /// with SIGKILL and this panics naming the command and the deadline, with the output so far.
 pub fn run(cmd: &mut Command, deadline: Duration) -> Output {
-    let mut c = Captured::start(cmd);
-    match c.wait_until(Instant::now() + deadline) {
-        Ok(out) => out,
-        Err(out) => panic!(
-            "harness: {} did not finish within {deadline:?}; killed.\n{}",
-            c.program,
-            describe(&out)
-        ),
-    }
+    Captured::start(cmd).finish_or_panic(deadline)
 }
 
 /// Start a command in the background (stdin null, its own process group, stdout and stderr
@@ -443,14 +448,7 @@ impl Running {
             .inner
             .take()
             .unwrap_or_else(|| panic!("harness: the child was already finished or killed"));
-        match c.wait_until(Instant::now() + deadline) {
-            Ok(out) => out,
-            Err(out) => panic!(
-                "harness: {} did not finish within {deadline:?}; killed.\n{}",
-                c.program,
-                describe(&out)
-            ),
-        }
+        c.finish_or_panic(deadline)
     }
 
     /// Kill the child's process group now (SIGKILL) and return what it wrote.

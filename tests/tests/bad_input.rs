@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use common::transport::TeamName;
 use integration_tests::{bin, describe, run, unique_team, TempDir};
 use support::*;
 
@@ -32,31 +31,13 @@ fn refused(binary: &str, args: &[&str], needles: &[&str]) -> Output {
     let o = run(&mut command(binary, args), DEADLINE);
     let what = format!("{binary} {}", args.join(" "));
     assert_exit(&o, 2, &what);
-    let err = String::from_utf8_lossy(&o.stderr);
-    for n in needles {
-        assert!(
-            err.contains(n),
-            "{what}: stderr lacks {n:?}\n{}",
-            describe(&o)
-        );
-    }
+    assert_stderr_has(&o, &what, needles);
     assert!(
         o.stdout.is_empty(),
         "{what}: wrote to stdout\n{}",
         describe(&o)
     );
     o
-}
-
-/// Asserts the team left nothing in iceoryx2's registry (no service, no node).
-fn assert_no_team_resources(team: &str) {
-    let t = TeamName::new(team).expect("team name");
-    let services = team_services(&t);
-    let nodes = team_nodes(&t);
-    assert!(
-        services.is_empty() && nodes.is_empty(),
-        "team {team} left {services:?} {nodes:?}"
-    );
 }
 
 /// Every file under `dir` with its contents.

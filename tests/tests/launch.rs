@@ -27,7 +27,7 @@ use std::time::Duration;
 
 use common::formation::Role;
 use common::scenario::ScenarioFile;
-use integration_tests::{bin, describe, run, spawn, unique_team, write_scenario, Running, TempDir};
+use integration_tests::{bin, run, spawn, unique_team, write_scenario, Running, TempDir};
 use serde_json::Value;
 
 /// paper40 as processes takes ~10-20 s on two cores; the rest is slack for a loaded machine.
@@ -322,14 +322,7 @@ fn a_hand_started_team_refuses_wrong_members_and_flies_with_the_right_ones() {
     let refused = |cmd: &mut Command, what: &str, needles: &[&str]| {
         let o = run(cmd, REFUSE_DEADLINE);
         assert_exit(&o, 2, what);
-        let err = String::from_utf8_lossy(&o.stderr);
-        for n in needles {
-            assert!(
-                err.contains(n),
-                "{what}: stderr lacks {n:?}\n{}",
-                describe(&o)
-            );
-        }
+        assert_stderr_has(&o, what, needles);
     };
     refused(
         &mut member("agent", &scenario, &team, 999),

@@ -16,7 +16,6 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use common::transport::TeamName;
 use integration_tests::{bin, describe, run, spawn, unique_team, TempDir};
 use support::*;
 
@@ -103,23 +102,20 @@ fn running_out_of_file_descriptors_is_reported_with_the_limit() {
         });
     }
     let o = run(&mut cmd, DEADLINE);
-    assert_exit(&o, 2, "launch --n 40 with 64 file descriptors");
-    let err = String::from_utf8_lossy(&o.stderr);
-    for needle in [
-        "out of file descriptors",
-        "a team of 40 agents needs about 544 file descriptors",
-        "limit RLIMIT_NOFILE soft 64, hard 64",
-        "ulimit -n",
-    ] {
-        assert!(err.contains(needle), "lacks {needle:?}\n{}", describe(&o));
-    }
-    assert!(!out.exists(), "{} was written", out.display());
-    let t = TeamName::new(&team).expect("team name");
-    let (services, nodes) = (team_services(&t), team_nodes(&t));
-    assert!(
-        services.is_empty() && nodes.is_empty(),
-        "left {services:?} {nodes:?}"
+    let what = "launch --n 40 with 64 file descriptors";
+    assert_exit(&o, 2, what);
+    assert_stderr_has(
+        &o,
+        what,
+        &[
+            "out of file descriptors",
+            "a team of 40 agents needs about 544 file descriptors",
+            "limit RLIMIT_NOFILE soft 64, hard 64",
+            "ulimit -n",
+        ],
     );
+    assert!(!out.exists(), "{} was written", out.display());
+    assert_no_team_resources(&team);
 }
 
 /// `launch --n 40` with a 256 KiB /dev/shm (a private tmpfs in a private mount namespace, so
@@ -149,14 +145,16 @@ fn a_full_dev_shm_is_reported_with_the_space_and_how_to_enlarge_it() {
             .arg(&out),
         DEADLINE,
     );
-    assert_exit(&o, 2, "launch --n 40 with a 256 KiB /dev/shm");
-    let err = String::from_utf8_lossy(&o.stderr);
-    for needle in [
-        "/dev/shm has 256 KiB free, a team of 40 agents needs about",
-        "enlarge it (e.g. `mount -o remount,size=",
-    ] {
-        assert!(err.contains(needle), "lacks {needle:?}\n{}", describe(&o));
-    }
+    let what = "launch --n 40 with a 256 KiB /dev/shm";
+    assert_exit(&o, 2, what);
+    assert_stderr_has(
+        &o,
+        what,
+        &[
+            "/dev/shm has 256 KiB free, a team of 40 agents needs about",
+            "enlarge it (e.g. `mount -o remount,size=",
+        ],
+    );
     assert!(!out.exists(), "{} was written", out.display());
 }
 
@@ -224,25 +222,22 @@ fn hitting_the_process_limit_is_reported_with_the_limit() {
             .arg(&out),
         DEADLINE,
     );
-    assert_exit(&o, 3, "launch --n 10 with 5 processes allowed");
-    let err = String::from_utf8_lossy(&o.stderr);
-    for needle in [
-        "error: cannot start agent 5: ",
-        "the process limit was hit (RLIMIT_NPROC ",
-        "or the pids.max of this process's cgroup); raise it",
-    ] {
-        assert!(err.contains(needle), "lacks {needle:?}\n{}", describe(&o));
-    }
+    let what = "launch --n 10 with 5 processes allowed";
+    assert_exit(&o, 3, what);
+    assert_stderr_has(
+        &o,
+        what,
+        &[
+            "error: cannot start agent 5: ",
+            "the process limit was hit (RLIMIT_NPROC ",
+            "or the pids.max of this process's cgroup); raise it",
+        ],
+    );
     let audit = read_json(&out.join("audit.json"));
     assert_eq!(audit["fault"]["kind"], "spawn-failed", "{audit:#}");
     assert_eq!(audit["fault"]["agent"], 5, "{audit:#}");
     assert_no_process_of(&team);
-    let t = TeamName::new(&team).expect("team name");
-    let (services, nodes) = (team_services(&t), team_nodes(&t));
-    assert!(
-        services.is_empty() && nodes.is_empty(),
-        "left {services:?} {nodes:?}"
-    );
+    assert_no_team_resources(&team);
 }
 
 /// SIGBUS, which iceoryx2 gets when /dev/shm fills up under a running team (another program

@@ -17,18 +17,40 @@ pub struct FdUsage {
     pub hard: u64,
 }
 
-/// `Some` when the open-file limit is (nearly) exhausted; `None` when it is not or cannot be read.
-pub fn fd_exhausted() -> Option<FdUsage> {
+/// This process's (soft, hard) limit of `resource` (`libc::RLIMIT_*`).
+fn limit(resource: libc::__rlimit_resource_t) -> std::io::Result<(u64, u64)> {
     let mut lim = libc::rlimit {
         rlim_cur: 0,
         rlim_max: 0,
     };
     // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
-    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } != 0 {
-        return None;
+    if unsafe { libc::getrlimit(resource, &mut lim) } != 0 {
+        return Err(std::io::Error::last_os_error());
     }
     #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
-    let (soft, hard) = (lim.rlim_cur as u64, lim.rlim_max as u64);
+    Ok((lim.rlim_cur as u64, lim.rlim_max as u64))
+}
+
+/// Raises this process's soft `RLIMIT_NOFILE` to the hard limit and returns the new soft limit.
+/// The orchestrator holds about 12 descriptors per agent, so a large team passes 1024 quickly.
+pub fn raise_fd_limit() -> std::io::Result<u64> {
+    let (soft, hard) = limit(libc::RLIMIT_NOFILE)?;
+    if soft < hard {
+        let lim = libc::rlimit {
+            rlim_cur: hard as libc::rlim_t,
+            rlim_max: hard as libc::rlim_t,
+        };
+        // SAFETY: `lim` is a valid rlimit; only the soft limit changed, within the hard limit.
+        if unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &lim) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    Ok(hard)
+}
+
+/// `Some` when the open-file limit is (nearly) exhausted; `None` when it is not or cannot be read.
+pub fn fd_exhausted() -> Option<FdUsage> {
+    let (soft, hard) = limit(libc::RLIMIT_NOFILE).ok()?;
     let open = match std::fs::read_dir("/proc/self/fd") {
         Ok(d) => d.count() as u64,
         // Listing the table needs a descriptor of its own: failing for lack of one is the answer.
@@ -61,16 +83,7 @@ pub struct FdShortfall {
 /// the launch can refuse before it creates anything (instead of failing half-way, at whichever
 /// iceoryx2 call happens to take the last descriptor).
 pub fn fd_short(agents: usize) -> Option<FdShortfall> {
-    let mut lim = libc::rlimit {
-        rlim_cur: 0,
-        rlim_max: 0,
-    };
-    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
-    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } != 0 {
-        return None;
-    }
-    #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
-    let (soft, hard) = (lim.rlim_cur as u64, lim.rlim_max as u64);
+    let (soft, hard) = limit(libc::RLIMIT_NOFILE).ok()?;
     let need = orchestrator_fd_need(agents);
     (soft < need).then_some(FdShortfall { need, soft, hard })
 }
@@ -105,23 +118,18 @@ pub fn describe_spawn_error(e: &std::io::Error) -> String {
     if e.raw_os_error() != Some(libc::EAGAIN) {
         return e.to_string();
     }
-    let mut lim = libc::rlimit {
-        rlim_cur: 0,
-        rlim_max: 0,
+    let show = |v: u64| {
+        #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
+        if v == libc::RLIM_INFINITY as u64 {
+            "unlimited".to_string()
+        } else {
+            v.to_string()
+        }
     };
-    // SAFETY: `lim` is a valid, writable rlimit for the duration of the call.
-    let nproc = if unsafe { libc::getrlimit(libc::RLIMIT_NPROC, &mut lim) } == 0 {
-        let show = |v: libc::rlim_t| {
-            if v == libc::RLIM_INFINITY {
-                "unlimited".to_string()
-            } else {
-                v.to_string()
-            }
-        };
-        format!("soft {}, hard {}", show(lim.rlim_cur), show(lim.rlim_max))
-    } else {
-        "unknown".into()
-    };
+    let nproc = limit(libc::RLIMIT_NPROC).map_or_else(
+        |_| "unknown".to_string(),
+        |(soft, hard)| format!("soft {}, hard {}", show(soft), show(hard)),
+    );
     format!(
         "{e}: the process limit was hit (RLIMIT_NPROC {nproc}, or the pids.max of this \
          process's cgroup); raise it (`ulimit -u`, or the cgroup's pids.max) or fly a smaller team"

@@ -127,7 +127,7 @@ impl OrchestratorPorts {
     /// to `layout` and opens the orchestrator's ports.
     pub fn create(team: &TeamName, layout: &TeamLayout) -> Result<Self, TransportError> {
         init_logging();
-        let cfg = process_config(WHO);
+        let cfg = process_config();
         let scan = scan_team(team, cfg)?;
         if !scan.alive.is_empty() {
             return Err(TransportError::TeamAlreadyRunning {

@@ -1,7 +1,6 @@
-//! Helpers shared by the fault and bad-input tests (`faults.rs`, `bad_input.rs`), copied from
-//! `launch.rs` so that file stays as it is: running `orchestrator launch`, reading run
-//! directories, finding a team's processes, and the "nothing of the team is left behind"
-//! checker (by attribution: see `launch.rs`'s module comment).
+//! Helpers shared by the integration tests: running `orchestrator launch`, reading run
+//! directories, checking refusals, finding a team's processes, and the "nothing of the team is
+//! left behind" checker (by attribution: see `launch.rs`'s module comment).
 
 #![allow(dead_code)] // each test file uses a different part
 
@@ -69,6 +68,29 @@ pub fn assert_exit(out: &Output, code: i32, what: &str) {
         Some(code),
         "{what}: expected exit {code}\n{}",
         describe(out)
+    );
+}
+
+/// Asserts every needle is in `out`'s stderr (`what` names the command in the message).
+pub fn assert_stderr_has(out: &Output, what: &str, needles: &[&str]) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    for n in needles {
+        assert!(
+            err.contains(n),
+            "{what}: stderr lacks {n:?}\n{}",
+            describe(out)
+        );
+    }
+}
+
+/// Asserts the team left nothing in iceoryx2's registry (no service, no node).
+pub fn assert_no_team_resources(team: &str) {
+    let t = TeamName::new(team).expect("team name");
+    let services = team_services(&t);
+    let nodes = team_nodes(&t);
+    assert!(
+        services.is_empty() && nodes.is_empty(),
+        "team {team} left {services:?} {nodes:?}"
     );
 }
 
