@@ -141,6 +141,23 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// The Python of the test virtual environment (`.venv` at the workspace root, made by
+/// `scripts/test-deps.sh` with the pinned readers of `python/requirements-test.txt`). Panics,
+/// naming the script to run, when it is missing: tests that need a reader never skip.
+pub fn venv_python() -> PathBuf {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(".venv")
+        .join("bin")
+        .join("python");
+    assert!(
+        path.is_file(),
+        "harness: {} is missing; run scripts/test-deps.sh first (the README's test command does)",
+        path.display()
+    );
+    path
+}
+
 /// Counter shared by `TempDir` and `unique_team` so names never repeat within a process.
 static COUNTER: AtomicU64 = AtomicU64::new(0);
 
