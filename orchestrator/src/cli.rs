@@ -85,6 +85,10 @@ pub enum Command {
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
     },
+    /// Remove what teams of yours left behind when all their processes died (SIGKILL, a
+    /// crash): their iceoryx2 files in /dev/shm. Running teams are never touched. `launch` does
+    /// the same before it starts.
+    Clean,
     /// Work with scenario files.
     Scenario {
         #[command(subcommand)]

@@ -6,6 +6,7 @@ mod commands;
 mod launch;
 mod progress;
 mod report;
+mod stall;
 mod team;
 
 use clap::Parser;
