@@ -62,7 +62,7 @@ impl StallWatch {
     }
 
     /// The fault to record for a member `fault` found at `now`: an `orchestrator-stalled` record
-    /// naming the stall (and keeping the member's own message) when a stall ended less than
+    /// naming the stall (and keeping the member's own message and tick) when a stall ended less than
     /// [`BLAME_WINDOW`] before; `fault` itself otherwise.
     pub fn explain(&self, fault: FaultRecord, now: Instant) -> FaultRecord {
         match self.stall {
@@ -70,7 +70,8 @@ impl StallWatch {
                 kind: "orchestrator-stalled".into(),
                 agent: None,
                 peer: None,
-                tick: s.tick,
+                // As every fault record: the first tick the team did not complete.
+                tick: fault.tick,
                 message: format!(
                     "the orchestrator itself did not run for {:.1} s at tick {} (stopped or \
                      starved), so its clock stalled and the members stopped by themselves \
@@ -116,7 +117,7 @@ mod tests {
         assert!(w.turn(t0 + Duration::from_secs(20), 42));
         let f = w.explain(exited(43), t0 + Duration::from_secs(21));
         assert_eq!(f.kind, "orchestrator-stalled");
-        assert_eq!((f.agent, f.tick), (None, 42));
+        assert_eq!((f.agent, f.tick), (None, 43));
         assert!(
             f.message.contains("did not run for 20.0 s at tick 42"),
             "{}",
