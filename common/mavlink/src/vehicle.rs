@@ -161,8 +161,8 @@ impl MavlinkVehicle {
         }
     }
 
-    /// One tick at `now`: check the link, then return what to send (a HEARTBEAT when one is
-    /// due, the setpoint once the vehicle is known, an `--arm` command when one is due).
+    /// One tick at `now`: check the link, then return what to send once the vehicle is known
+    /// (a HEARTBEAT when one is due, the setpoint, an `--arm` command when one is due).
     /// `team_ready` says every vehicle of the team reports ready (gates `--arm`).
     pub fn on_tick(
         &mut self,
@@ -172,6 +172,10 @@ impl MavlinkVehicle {
     ) -> Result<Vec<MavMessage>, VehicleError> {
         self.health.check(now)?;
         let mut out = Vec::with_capacity(3);
+        // Nothing to say before the vehicle is known: there is no one to address.
+        let Some(target) = self.target else {
+            return Ok(out);
+        };
         let heartbeat_due = self
             .last_heartbeat_sent
             .is_none_or(|t| now.saturating_sub(t) >= HEARTBEAT_INTERVAL);
@@ -180,9 +184,6 @@ impl MavlinkVehicle {
             self.counters.heartbeats_sent += 1;
             out.push(messages::heartbeat());
         }
-        let Some(target) = self.target else {
-            return Ok(out);
-        };
         if let Some(sp) = setpoint {
             let started = *self.stream_started.get_or_insert(now);
             // time_boot_ms is the member's milliseconds since the link started (wraps after 49 days).
@@ -376,9 +377,8 @@ mod tests {
     #[test]
     fn setpoints_every_tick_heartbeat_once_a_second() {
         let mut v = MavlinkVehicle::new(config(false));
-        // Before the vehicle is heard: only our heartbeat, no setpoint (no target yet).
-        let out = v.on_tick(ms(0), Some(&hover()), false).unwrap();
-        assert!(matches!(out.as_slice(), [MavMessage::HEARTBEAT(_)]));
+        // Before the vehicle is heard there is no one to address.
+        assert!(v.on_tick(ms(0), Some(&hover()), false).unwrap().is_empty());
         let mut setpoints = 0;
         let mut beats = 0;
         for k in 1..=100u64 {
@@ -393,7 +393,7 @@ mod tests {
             }
         }
         assert_eq!(setpoints, 100);
-        assert_eq!(beats, 2); // at 1.0 s and 2.0 s (the first went out at 0 s)
+        assert_eq!(beats, 2); // at 0.02 s (first tick with a target) and 1.02 s
     }
 
     #[test]
