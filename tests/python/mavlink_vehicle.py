@@ -80,6 +80,7 @@ class Vehicle:
         self.custom_mode = 0
         self.armed = False
         self.setpoint_times = []
+        self.setpoint_stamps_ms = []
         self.type_masks = set()
         self.frames = set()
         self.counts = {}
@@ -108,6 +109,7 @@ class Vehicle:
                 self.wrong_target += 1
                 return
             self.setpoint_times.append(now)
+            self.setpoint_stamps_ms.append(msg.time_boot_ms)
             self.type_masks.add(msg.type_mask)
             self.frames.add(msg.coordinate_frame)
             self.setpoint = ([msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz],
@@ -168,10 +170,16 @@ class Vehicle:
     def summary(self, conn, went_silent_at, exit_reason):
         t = self.setpoint_times
         rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else None
+        # The same rate on the sender's clock (the setpoints' time_boot_ms): what the member sent,
+        # free of this process's own scheduling delays on a loaded machine.
+        ms = self.setpoint_stamps_ms
+        stamp_rate = ((len(ms) - 1) * 1000.0 / (ms[-1] - ms[0])
+                      if len(ms) > 1 and ms[-1] > ms[0] else None)
         return {
             "sysid": self.args.sysid,
             "setpoints_received": len(t),
             "setpoint_rate_hz": rate,
+            "setpoint_rate_by_stamp_hz": stamp_rate,
             "setpoint_window_s": (t[-1] - t[0]) if t else None,
             "type_masks": sorted(self.type_masks),
             "frames": sorted(self.frames),
