@@ -210,7 +210,7 @@ fn no_vehicle_and_bad_ports_are_clear_errors() {
     let out = integration_tests::run(&mut alone, DEADLINE);
     assert_eq!(out.status.code(), Some(3), "{}", describe(&out));
     assert!(
-        String::from_utf8_lossy(&out.stderr).contains("agent 7: no vehicle heard within 1s"),
+        String::from_utf8_lossy(&out.stderr).contains("agent 7: no vehicle heard within 1.0 s"),
         "{}",
         describe(&out)
     );

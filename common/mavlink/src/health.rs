@@ -13,7 +13,7 @@ pub const POSITION_TIMEOUT: Duration = Duration::from_millis(500);
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum LinkFault {
     /// Nothing usable (a HEARTBEAT and a position) arrived before the connect deadline.
-    #[error("agent {agent}: no vehicle heard within {waited:?} (needs a HEARTBEAT and a LOCAL_POSITION_NED)")]
+    #[error("agent {agent}: no vehicle heard within {:.1} s (needs a HEARTBEAT and a LOCAL_POSITION_NED)", waited.as_secs_f64())]
     NeverHeard { agent: u32, waited: Duration },
     /// The vehicle's HEARTBEAT stopped.
     #[error(
@@ -21,7 +21,7 @@ pub enum LinkFault {
     )]
     HeartbeatLost { agent: u32, silent: Duration },
     /// The vehicle's LOCAL_POSITION_NED stopped.
-    #[error("agent {agent}: vehicle lost: no LOCAL_POSITION_NED for {silent:?} (limit {POSITION_TIMEOUT:?})")]
+    #[error("agent {agent}: vehicle lost: no LOCAL_POSITION_NED for {:.3} s (limit {:.1} s)", silent.as_secs_f64(), POSITION_TIMEOUT.as_secs_f64())]
     PositionLost { agent: u32, silent: Duration },
 }
 

@@ -19,6 +19,8 @@ pub const DEFAULT_BASE_PORT: u16 = 14540;
 /// Largest UDP payload read at once (a MAVLink 2 frame is at most 280 bytes; a datagram may
 /// carry several).
 const DATAGRAM_BYTES: usize = 65_536;
+/// Datagrams one `receive` reads at most (a vehicle sends a few per tick).
+const MAX_DATAGRAMS_PER_RECEIVE: usize = 1024;
 
 /// Why the member's UDP link failed.
 #[derive(Debug, thiserror::Error)]
@@ -119,18 +121,21 @@ impl UdpLink {
         }
     }
 
-    /// Hand every datagram waiting on the socket to `vehicle` as received at `now`; returns the
+    /// Hand the datagrams waiting on the socket to `vehicle` as received at `now`; returns the
     /// number of MAVLink messages decoded. Frames with a bad checksum are skipped by the reader.
+    /// Replies go to the address of the last datagram that carried the vehicle's messages.
     pub fn receive(
         &mut self,
         now: Duration,
         vehicle: &mut MavlinkVehicle,
     ) -> Result<usize, UdpError> {
         let mut decoded = 0;
-        loop {
+        // Bounded: a flood cannot keep the caller's tick from ending; the rest waits for the
+        // next tick.
+        for _ in 0..MAX_DATAGRAMS_PER_RECEIVE {
             let (n, from) = match self.socket.recv_from(&mut self.buf) {
                 Ok(got) => got,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(decoded),
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
                 // A previous reply hit a closed port (ICMP): nothing to read, not a failure;
                 // the loss detector decides whether the vehicle is gone.
                 Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
@@ -142,8 +147,9 @@ impl UdpLink {
                 match reader.read_any_message::<MavMessage>() {
                     Ok((header, msg)) => {
                         decoded += 1;
-                        self.peer = Some(from);
-                        vehicle.on_message(now, &header, &msg);
+                        if vehicle.on_message(now, &header, &msg) {
+                            self.peer = Some(from);
+                        }
                     }
                     Err(MessageReadError::Io(_)) => break,
                     Err(MessageReadError::Parse(e)) => {
@@ -152,6 +158,7 @@ impl UdpLink {
                 }
             }
         }
+        Ok(decoded)
     }
 
     /// Encode `msgs` (MAVLink 2) and send them to the vehicle; nothing is sent before the
@@ -185,7 +192,73 @@ impl UdpLink {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ned::VehicleOrigin;
+    use crate::vehicle::VehicleConfig;
+    use mavlink::dialects::common::{MavAutopilot, MavModeFlag, MavState, MavType, HEARTBEAT_DATA};
     use std::net::Ipv4Addr;
+
+    fn beat_from(socket: &UdpSocket, to: SocketAddr, system_id: u32, autopilot: MavAutopilot) {
+        let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot,
+            base_mode: MavModeFlag::empty(),
+            system_status: MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        });
+        let header = MavHeader {
+            system_id,
+            component_id: 1,
+            sequence: 0,
+        };
+        let mut frame = Vec::new();
+        mavlink::write_v2_msg(&mut frame, header, &msg).unwrap();
+        socket.send_to(&frame, to).unwrap();
+    }
+
+    /// Receive until `vehicle` has taken in `want` messages (bounded: loopback is immediate).
+    fn receive_until(link: &mut UdpLink, vehicle: &mut MavlinkVehicle, want: u64) {
+        for _ in 0..1000 {
+            link.receive(Duration::ZERO, vehicle).unwrap();
+            let c = vehicle.counters();
+            if c.heartbeats_received + c.ignored >= want {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        panic!("loopback heartbeats did not arrive");
+    }
+
+    #[test]
+    fn replies_go_to_the_vehicle_not_to_other_senders() {
+        let localhost = IpAddr::V4(Ipv4Addr::LOCALHOST);
+        let mut link = UdpLink::bind(1, SocketAddr::new(localhost, 0)).unwrap();
+        let mut vehicle = MavlinkVehicle::new(VehicleConfig {
+            agent: 1,
+            origin: VehicleOrigin::default(),
+            arm: false,
+            connect_deadline: Duration::from_secs(5),
+        });
+        let autopilot = UdpSocket::bind((localhost, 0)).unwrap();
+        let gcs = UdpSocket::bind((localhost, 0)).unwrap();
+        beat_from(
+            &autopilot,
+            link.local_addr(),
+            1,
+            MavAutopilot::MAV_AUTOPILOT_PX4,
+        );
+        receive_until(&mut link, &mut vehicle, 1);
+        assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
+        // A ground station on the same port does not steal the replies.
+        beat_from(
+            &gcs,
+            link.local_addr(),
+            255,
+            MavAutopilot::MAV_AUTOPILOT_INVALID,
+        );
+        receive_until(&mut link, &mut vehicle, 2);
+        assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
+    }
 
     #[test]
     fn member_i_listens_on_base_plus_i() {

@@ -107,8 +107,9 @@ impl MavlinkVehicle {
         }
     }
 
-    /// A message from the vehicle arrived at `now`.
-    pub fn on_message(&mut self, now: Duration, header: &MavHeader, msg: &MavMessage) {
+    /// A message arrived at `now`. Returns whether it came from the vehicle this link follows
+    /// (the socket replies to where such messages come from, not to any other sender).
+    pub fn on_message(&mut self, now: Duration, header: &MavHeader, msg: &MavMessage) -> bool {
         if let MavMessage::HEARTBEAT(hb) = msg {
             // Lock onto the first autopilot heard; ground stations and companions also beat.
             // MAVLink 2 system ids are one byte on the wire; the header type is wider.
@@ -157,8 +158,12 @@ impl MavlinkVehicle {
                     time_boot_ms: a.time_boot_ms,
                 });
             }
-            _ => self.counters.ignored += 1,
+            _ => {
+                self.counters.ignored += 1;
+                return false;
+            }
         }
+        true
     }
 
     /// One tick at `now`: check the link, then return what to send once the vehicle is known
@@ -354,15 +359,12 @@ mod tests {
             sequence: 0,
         };
         // A ground station's heartbeat and position are not the vehicle's.
-        v.on_message(
-            ms(1),
-            &gcs,
-            &heartbeat(MavAutopilot::MAV_AUTOPILOT_INVALID, 0, false),
-        );
-        v.on_message(ms(1), &gcs, &position(5.0, 5.0, 5.0));
+        let gcs_beat = heartbeat(MavAutopilot::MAV_AUTOPILOT_INVALID, 0, false);
+        assert!(!v.on_message(ms(1), &gcs, &gcs_beat));
+        assert!(!v.on_message(ms(1), &gcs, &position(5.0, 5.0, 5.0)));
         assert_eq!(v.target(), None);
         heard(&mut v, ms(2));
-        v.on_message(ms(3), &gcs, &position(5.0, 5.0, 5.0));
+        assert!(!v.on_message(ms(3), &gcs, &position(5.0, 5.0, 5.0)));
         assert_eq!(
             v.target(),
             Some(Target {
