@@ -61,7 +61,10 @@ fn vehicle(port: u16, extra: &[&str]) -> Command {
 /// Start the member, wait until it listens, run the vehicle beside it; both outputs.
 fn fly(member_args: &[&str], vehicle_args: &[&str]) -> (Output, Output) {
     let port = free_port();
-    let mut m = spawn(&mut member(port, member_args));
+    // Python and pymavlink may take seconds to start on a loaded machine: wait long for them.
+    let mut args = vec!["--connect-timeout-s", "30"];
+    args.extend_from_slice(member_args);
+    let mut m = spawn(&mut member(port, &args));
     m.wait_for_output("listening on", DEADLINE);
     let v = spawn(&mut vehicle(port, vehicle_args));
     let m_out = m.finish(DEADLINE);
