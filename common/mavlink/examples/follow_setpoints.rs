@@ -15,12 +15,12 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
+use cdm_core::plan::{Quintic, Segment};
+use cdm_math::{Real, Vec3};
 use cdm_mavlink::{
     member_addr, MavlinkVehicle, Setpoint, UdpLink, VehicleConfig, VehicleOrigin, DEFAULT_BASE_PORT,
 };
 use clap::Parser;
-use common::math::{Real, Vec3};
-use common::plan::{Quintic, Segment};
 
 #[derive(Debug, Parser)]
 #[command(about = "Stream a straight-line plan to one MAVLink vehicle and report how it went")]

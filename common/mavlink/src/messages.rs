@@ -8,7 +8,7 @@ use mavlink::dialects::common::{
 
 use crate::arming::ArmAction;
 use crate::ned::{enu_to_ned_vector, to_f32, VehicleOrigin};
-use common::math::Vec3;
+use cdm_math::Vec3;
 
 /// The member's MAVLink system id. Autopilots default to 1 and ground stations to 255; 245 is
 /// what MAVSDK uses for a ground station, so it collides with neither default.

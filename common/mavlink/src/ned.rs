@@ -5,7 +5,7 @@
 //! local origin. A point is converted after subtracting `--vehicle-origin` (the scenario
 //! coordinates of the vehicle's NED origin); velocities and accelerations are only rotated.
 
-use common::math::{Real, Vec3};
+use cdm_math::{Real, Vec3};
 
 /// The scenario coordinates (ENU, metres) of a vehicle's local NED origin (`--vehicle-origin`).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

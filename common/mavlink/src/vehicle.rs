@@ -11,7 +11,7 @@ use crate::arming::{ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
 use crate::health::{LinkFault, LinkHealth};
 use crate::messages::{self, Setpoint, Target};
 use crate::ned::{from_f32, ned_to_enu_vector, VehicleOrigin};
-use common::math::{Real, Vec3};
+use cdm_math::{Real, Vec3};
 
 /// The member sends its own HEARTBEAT this often (MAVLink's 1 Hz convention).
 pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
