@@ -185,6 +185,9 @@ fn a_launch_leaves_nothing_in_dev_shm_that_another_user_can_write() {
     assert!(shared.is_empty(), "not under prefix {prefix}: {shared:#?}");
 }
 
+/// One way to spoil a user's iceoryx2 root: its name, how to do it, what the refusal must say.
+type Case<'a> = (&'a str, Box<dyn Fn() + 'a>, &'a [&'a str]);
+
 /// Item 2: the user's iceoryx2 root `/dev/shm/cdm-iceoryx2-<uid>` created beforehand by another
 /// user, or writable by group or others, or a link: the launch refuses, exit 2, naming the path,
 /// the owner and the mode and saying what to do; it writes no run directory. Before the fix the
@@ -203,7 +206,7 @@ fn a_squatted_or_open_iceoryx2_root_is_refused_naming_owner_and_mode() {
     let root_text = root.display().to_string();
     let target = dir.path().join("elsewhere");
     std::fs::create_dir(&target).expect("mkdir");
-    let cases: [(&str, Box<dyn Fn()>, &[&str]); 3] = [
+    let cases: [Case; 3] = [
         (
             "owned by another user",
             Box::new(|| {
