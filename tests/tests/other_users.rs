@@ -143,46 +143,88 @@ fn short_launch(user: &TestUser, orch: &Path, team: &str, out: &Path) -> Output 
     run(&mut c, DEADLINE)
 }
 
-/// Item 1: a launch leaves nothing in /dev/shm that another user can write, and everything it
-/// keeps there directly carries the user's own iceoryx2 prefix `cdm<uid>_`. Before the fix,
-/// every launch kept `iox2_<hash>_node.0_10_0.global_mgmt` with mode 0666, one file shared by
-/// every user (16 bytes of garbage in it stopped every launch of every user).
+/// Item 1: a user's launch leaves nothing in /dev/shm that another user can write, everything it
+/// keeps there directly carries the user's own iceoryx2 prefix `cdm<uid>_`, and another user who
+/// writes 16 bytes of garbage into every file of /dev/shm they can cannot stop the next launch.
+/// In a private /dev/shm (mount namespace), so that the launch creates what iceoryx2 keeps for
+/// good. Before the fix the launch kept `iox2_<hash>_node.0_10_0.global_mgmt` with mode 0666,
+/// one file shared by every user, and the garbage made every later launch fail
+/// (`UnableToGenerateUniqueNodeId`, exit 2).
 #[test]
 fn a_launch_leaves_nothing_in_dev_shm_that_another_user_can_write() {
-    let Some(user) = TestUser::create("w") else {
+    let probe = Command::new("unshare").args(["-m", "true"]).output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+        return;
+    }
+    let (Some(user), Some(other)) = (TestUser::create("w"), TestUser::create("x")) else {
         return;
     };
     let dir = TempDir::new();
     let orch = binaries_for_everyone(dir.path());
     let out = out_dir_of(&user, dir.path(), "run");
-    let o = short_launch(&user, &orch, &unique_team("users"), &out);
-    assert_exit(&o, 0, "launch --n 4 as a second user");
-    let files = user.shm_files();
-    assert!(!files.is_empty(), "the launch kept nothing in {SHM}?");
-    let open: Vec<_> = files.iter().filter(|(_, m)| m & 0o002 != 0).collect();
-    assert!(open.is_empty(), "writable by others: {open:#?}");
-    let world = Command::new("find")
-        .args([SHM, "-perm", "-o+w", "-user", &user.name])
-        .output()
-        .expect("find");
+    let script = r#"
+set -u
+O="$0"; OUT="$1"; U="$2"; G="$3"; XU="$4"; XG="$5"; TEAM="$6"
+mount -t tmpfs -o size=512m,mode=1777 tmpfs /dev/shm || exit 90
+as_user() { setpriv --reuid="$U" --regid="$G" --clear-groups "$@"; }
+fly() { timeout 60 setpriv --reuid="$U" --regid="$G" --clear-groups "$O" launch --n 4   --max-ticks 20 --no-figures --quiet --force --team "$TEAM" --out "$OUT"; echo "launch exit $?"; }
+fly
+find /dev/shm -mindepth 1 -maxdepth 1 -printf 'entry %u %m %f
+'
+find /dev/shm -perm -o+w ! -type d -printf 'writable %p
+'
+for f in $(find /dev/shm -type f); do
+  setpriv --reuid="$XU" --regid="$XG" --clear-groups sh -c 'printf 0123456789abcdef > "$1"' sh "$f"     2>/dev/null && echo "overwritten $f"
+done
+fly
+"#;
+    let o = run(
+        Command::new("unshare")
+            .args(["-m", "sh", "-c", script])
+            .arg(&orch)
+            .arg(&out)
+            .args([user.uid, user.gid, other.uid, other.gid].map(|v| v.to_string()))
+            .arg(unique_team("users")),
+        DEADLINE,
+    );
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
+    let lines = |tag: &str| -> Vec<String> {
+        said.lines()
+            .filter_map(|l| l.strip_prefix(tag))
+            .map(str::to_owned)
+            .collect()
+    };
+    let all = describe(&o);
     assert_eq!(
-        String::from_utf8_lossy(&world.stdout),
-        "",
-        "find -perm -o+w"
+        lines("launch exit "),
+        ["0", "0"],
+        "both launches fly:\n{all}"
+    );
+    assert_eq!(
+        lines("writable "),
+        Vec::<String>::new(),
+        "find -perm -o+w:\n{all}"
+    );
+    assert_eq!(
+        lines("overwritten "),
+        Vec::<String>::new(),
+        "another user wrote:\n{all}"
     );
     let prefix = format!("cdm{}_", user.uid);
-    let root = user.iox2_root();
-    let shared: Vec<_> = files
-        .iter()
-        .filter(|(p, _)| p.parent() == Some(Path::new(SHM)))
-        .filter(|(p, _)| *p != root)
-        .filter(|(p, _)| {
-            !p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with(&prefix))
-        })
-        .collect();
-    assert!(shared.is_empty(), "not under prefix {prefix}: {shared:#?}");
+    let root = format!("cdm-iceoryx2-{}", user.uid);
+    let entries = lines("entry ");
+    assert!(
+        !entries.is_empty(),
+        "the launch kept nothing in {SHM}?\n{all}"
+    );
+    for e in &entries {
+        let name = e.rsplit(' ').next().unwrap_or_default();
+        assert!(
+            name == root || name.starts_with(&prefix),
+            "{e}: not the user's root nor under the prefix {prefix}\n{all}"
+        );
+    }
 }
 
 /// One way to spoil a user's iceoryx2 root: its name, how to do it, what the refusal must say.
