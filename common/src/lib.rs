@@ -3,13 +3,14 @@
 //!
 //! Layers, bottom to top: `math` -> `frame`, `plan`, `formation`, `graph`, `gains`, `safety`,
 //! `dynamics`, `control` (pure) -> `step` (one agent's tick) -> `scenario` (files, validation,
-//! built-ins) -> `engine`, `telemetry`, `audit` -> `messages` (repr(C) wire types) -> `transport`
+//! built-ins) -> `engine`, `telemetry`, `audit`, `export` (pure) -> `messages` (repr(C) wire types) -> `transport`
 //! (the only module that names iceoryx2).
 
 pub mod audit;
 pub mod control;
 pub mod dynamics;
 pub mod engine;
+pub mod export;
 pub mod fault_inject;
 pub mod formation;
 pub mod frame;
