@@ -8,9 +8,13 @@
 //! Horner's rule in f32 (its two zero leading coefficients of the 8 stored add no error).
 //! With the unit roundoff u = 2^-24 and gamma_n = n u / (1 - n u) (Higham, Accuracy and
 //! Stability of Numerical Algorithms, eq. 5.3), the error at local time t in [0, d] is at most
+//!
+//! ```text
 //!   gamma_{2n+1} sum_m |c_m| (d (1 + u))^m       rounded coefficients, Horner (n = 5)
 //! + u d |p'|_max                                  local time rounded to f32
 //! + gamma_{K+1} T_total |p'|_max                  piece start drift from K rounded durations
+//! ```
+//!
 //! where |p'|_max <= sum_m m |c_m| d^(m-1) on the piece.
 
 use crate::math::Real;

@@ -37,9 +37,9 @@ impl AgentTrajectory {
     pub fn new(plan: &TeamPlan, id: u32, alpha: &[Real; 3]) -> Self {
         let mut a = Vec3::zeros();
         let mut b = Vec3::zeros();
-        for j in 0..3 {
-            a += plan.start[j] * alpha[j];
-            b += (plan.goal[j] - plan.start[j]) * alpha[j];
+        for ((start, goal), w) in plan.start.iter().zip(&plan.goal).zip(alpha) {
+            a += start * *w;
+            b += (goal - start) * *w;
         }
         AgentTrajectory {
             id,

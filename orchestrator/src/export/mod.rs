@@ -58,70 +58,86 @@ struct Record<'a> {
 pub fn run(target: ExportTarget, quiet: bool) -> Result<Exit, Failure> {
     match target {
         ExportTarget::Crazyswarm2 { source, out, frame } => {
-            let sc = scaled(&source, &frame)?;
-            let split = crazyflie_split(&sc.trajs, DEFAULT_TOLERANCE_M)
-                .map_err(|e| Failure::bad_input(format!("export crazyswarm2: {e}")))?;
-            let cert = certify_quietly(&sc.scenario, quiet);
-            create_dir(&out)?;
-            let record = Record {
-                target: "crazyswarm2",
-                scale: sc.frame.scale,
-                origin_m: sc.frame.origin.into(),
-                pieces_per_agent: split.pieces,
-                piece_duration_s: split.piece_duration_s,
-                f32_bound_m: Some(split.f32_bound_m),
-                f32_tolerance_m: Some(DEFAULT_TOLERANCE_M),
-                trajectory_bytes: Some(split.bytes),
-                trajectory_memory_bytes: Some(float32::TRAJECTORY_MEMORY_BYTES),
-                certificate: &cert,
-            };
-            write_record(&out, "", &record, &sc.scenario)?;
-            report(&sc, &record, quiet);
-            if !quiet {
-                println!(
-                    "  crazyflie: {} piece(s) of {:.3} s per quadcopter, {} of {} bytes; float32 error bound {:.3e} m (limit {} m)",
-                    split.pieces,
-                    split.piece_duration_s,
-                    split.bytes,
-                    float32::TRAJECTORY_MEMORY_BYTES,
-                    split.f32_bound_m,
-                    DEFAULT_TOLERANCE_M
-                );
-            }
-            if refused(&cert, frame.force, &out) {
-                return Ok(Exit::Unsafe);
-            }
-            crazyswarm2::write(&out, &sc, &split)?;
-            draw(&out, "top_view", &sc, quiet);
-            done(&out, &cert, quiet)
+            to_crazyswarm2(&source, &out, &frame, quiet)
         }
-        ExportTarget::Skybrush { source, out, frame } => {
-            let sc = scaled(&source, &frame)?;
-            let count = skybrush_piece_count(sc.scenario.file.t_total_s);
-            let cert = certify_quietly(&sc.scenario, quiet);
-            let (dir, stem) = beside(&out)?;
-            let record = Record {
-                target: "skybrush",
-                scale: sc.frame.scale,
-                origin_m: sc.frame.origin.into(),
-                pieces_per_agent: count,
-                piece_duration_s: sc.scenario.file.t_total_s / count as Real,
-                f32_bound_m: None,
-                f32_tolerance_m: None,
-                trajectory_bytes: None,
-                trajectory_memory_bytes: None,
-                certificate: &cert,
-            };
-            write_record(&dir, &format!("{stem}."), &record, &sc.scenario)?;
-            report(&sc, &record, quiet);
-            if refused(&cert, frame.force, &out) {
-                return Ok(Exit::Unsafe);
-            }
-            skybrush::write(&out, &sc, count, &cert)?;
-            draw(&dir, &format!("{stem}.top_view"), &sc, quiet);
-            done(&out, &cert, quiet)
-        }
+        ExportTarget::Skybrush { source, out, frame } => to_skybrush(&source, &out, &frame, quiet),
     }
+}
+
+fn to_crazyswarm2(
+    source: &Source,
+    out: &Path,
+    frame: &ExportFrame,
+    quiet: bool,
+) -> Result<Exit, Failure> {
+    let sc = scaled(source, frame)?;
+    let split = crazyflie_split(&sc.trajs, DEFAULT_TOLERANCE_M)
+        .map_err(|e| Failure::bad_input(format!("export crazyswarm2: {e}")))?;
+    let cert = certify_quietly(&sc.scenario, quiet);
+    create_dir(out)?;
+    let record = Record {
+        target: "crazyswarm2",
+        scale: sc.frame.scale,
+        origin_m: sc.frame.origin.into(),
+        pieces_per_agent: split.pieces,
+        piece_duration_s: split.piece_duration_s,
+        f32_bound_m: Some(split.f32_bound_m),
+        f32_tolerance_m: Some(DEFAULT_TOLERANCE_M),
+        trajectory_bytes: Some(split.bytes),
+        trajectory_memory_bytes: Some(float32::TRAJECTORY_MEMORY_BYTES),
+        certificate: &cert,
+    };
+    write_record(out, "", &record, &sc.scenario)?;
+    report(&sc, &record, quiet);
+    if !quiet {
+        println!(
+            "  crazyflie: {} piece(s) of {:.3} s per quadcopter, {} of {} bytes; float32 error bound {:.3e} m (limit {} m)",
+            split.pieces,
+            split.piece_duration_s,
+            split.bytes,
+            float32::TRAJECTORY_MEMORY_BYTES,
+            split.f32_bound_m,
+            DEFAULT_TOLERANCE_M
+        );
+    }
+    if refused(&cert, frame.force, out) {
+        return Ok(Exit::Unsafe);
+    }
+    crazyswarm2::write(out, &sc, &split)?;
+    draw(out, "top_view", &sc, quiet);
+    done(out, &cert, quiet)
+}
+
+fn to_skybrush(
+    source: &Source,
+    out: &Path,
+    frame: &ExportFrame,
+    quiet: bool,
+) -> Result<Exit, Failure> {
+    let sc = scaled(source, frame)?;
+    let count = skybrush_piece_count(sc.scenario.file.t_total_s);
+    let cert = certify_quietly(&sc.scenario, quiet);
+    let (dir, stem) = beside(out)?;
+    let record = Record {
+        target: "skybrush",
+        scale: sc.frame.scale,
+        origin_m: sc.frame.origin.into(),
+        pieces_per_agent: count,
+        piece_duration_s: sc.scenario.file.t_total_s / count as Real,
+        f32_bound_m: None,
+        f32_tolerance_m: None,
+        trajectory_bytes: None,
+        trajectory_memory_bytes: None,
+        certificate: &cert,
+    };
+    write_record(&dir, &format!("{stem}."), &record, &sc.scenario)?;
+    report(&sc, &record, quiet);
+    if refused(&cert, frame.force, out) {
+        return Ok(Exit::Unsafe);
+    }
+    skybrush::write(out, &sc, count, &cert)?;
+    draw(&dir, &format!("{stem}.top_view"), &sc, quiet);
+    done(out, &cert, quiet)
 }
 
 /// Load the scenario, map it into the target frame with the target radius and validate it
