@@ -51,7 +51,10 @@ fn reference(scenario: &Path, tmp: &Path) -> std::path::PathBuf {
 fn python(script: &str, args: &[&Path]) -> Output {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("python");
     let mut c = Command::new(venv_python());
-    c.arg(dir.join(script)).args(args).current_dir(&dir);
+    c.arg(dir.join(script))
+        .args(args)
+        .current_dir(&dir)
+        .env("PYTHONDONTWRITEBYTECODE", "1");
     run(&mut c, DEADLINE)
 }
 
