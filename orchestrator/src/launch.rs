@@ -11,6 +11,7 @@ use common::engine::desired_positions;
 use common::formation::Role;
 use common::math::{vec3, Vec3};
 use common::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason};
+use common::outcome::FaultKind;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::simulate::id_order;
@@ -103,7 +104,13 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
                     let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
                     let mut audit = Auditor::new(s);
-                    audit.fault(fault("spawn-failed", Some(m.id), None, 0, what.clone()));
+                    audit.fault(fault(
+                        FaultKind::SpawnFailed,
+                        Some(m.id),
+                        None,
+                        0,
+                        what.clone(),
+                    ));
                     let _ = dir.write_audit(&audit.finish(false));
                     return Err(Failure::fault(what));
                 }
@@ -168,7 +175,7 @@ const FAULT_GRACE: Duration = Duration::from_millis(500);
 fn interrupted_at(tick: u64, when: &str) -> Stop {
     (
         fault(
-            "interrupted",
+            FaultKind::Interrupted,
             None,
             None,
             tick,
@@ -210,7 +217,7 @@ fn run_team(
             let waiting = ports.readiness().waiting_for();
             return Err((
                 fault(
-                    "join-timeout",
+                    FaultKind::JoinTimeout,
                     waiting.first().copied(),
                     None,
                     0,
@@ -242,7 +249,7 @@ fn run_team(
     // 3. Tick.
     let mut tel = dir.telemetry(o.every).map_err(|e| {
         (
-            fault("io", None, None, 0, e.to_string()),
+            fault(FaultKind::Io, None, None, 0, e.to_string()),
             StopReason::AgentFault,
         )
     })?;
@@ -263,7 +270,7 @@ fn run_team(
     let send = |ports: &mut OrchestratorPorts, g: u64| ports.publish_clock(ClockMsg::run(g, hash));
     send(ports, grant).map_err(|e| {
         (
-            fault("transport", None, None, 0, e.to_string()),
+            fault(FaultKind::Transport, None, None, 0, e.to_string()),
             StopReason::AgentFault,
         )
     })?;
@@ -302,9 +309,9 @@ fn run_team(
                     if better {
                         // The same kind as `simulate` records for a controller fault.
                         let kind = if code == FaultCode::Control {
-                            "control"
+                            FaultKind::Control
                         } else {
-                            "agent-fault"
+                            FaultKind::AgentFault
                         };
                         let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
                         let what = format!(
@@ -332,7 +339,7 @@ fn run_team(
             })
             .map_err(|e| {
                 (
-                    fault("transport", None, None, next_tick, e.to_string()),
+                    fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
                     StopReason::AgentFault,
                 )
             })?;
@@ -349,7 +356,7 @@ fn run_team(
         }
         if let Some((id, tick, _)) = non_finite.filter(|(_, _, t)| t.elapsed() > FAULT_GRACE) {
             let what = format!("agent {id} published a non-finite state at tick {tick}");
-            let f = fault("non-finite-state", Some(id), None, tick, what);
+            let f = fault(FaultKind::NonFiniteState, Some(id), None, tick, what);
             let since = Instant::now().checked_sub(FAULT_GRACE);
             stopping.get_or_insert((f, since.unwrap_or_else(Instant::now), false, usize::MAX));
         }
@@ -366,7 +373,7 @@ fn run_team(
             grant = want;
             send(ports, grant).map_err(|e| {
                 (
-                    fault("transport", None, None, next_tick, e.to_string()),
+                    fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
                     StopReason::AgentFault,
                 )
             })?;
@@ -403,7 +410,7 @@ fn run_team(
                 }
                 tel.write_tick(&rows).map_err(|e| {
                     (
-                        fault("io", None, None, tick, e.to_string()),
+                        fault(FaultKind::Io, None, None, tick, e.to_string()),
                         StopReason::AgentFault,
                     )
                 })?;
@@ -461,7 +468,7 @@ fn run_team(
                 .collect();
             return Err((
                 fault(
-                    "agent-silent",
+                    FaultKind::AgentSilent,
                     missing.first().copied(),
                     None,
                     next_tick,
