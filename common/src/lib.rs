@@ -11,7 +11,9 @@ pub use cdm_core::{
     plan, rundir, safety, scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
-pub use cdm_runtime::{fault_inject, messages, signals};
+pub use cdm_runtime::{
+    fault_inject, member_core, member_loop, messages, seams, signals, team_core,
+};
 
 pub mod member;
 pub mod member_cli;
