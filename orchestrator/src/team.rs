@@ -103,7 +103,8 @@ pub fn check_children(children: &mut [Spawned], tick: u64) -> Result<(), Stop> {
 }
 
 /// Stop message, then SIGTERM, then SIGKILL for a process that does not stop; then remove the
-/// dead nodes' resources. Bounded well under a second.
+/// dead nodes' resources. Bounded: about 3.6 s after a finished run (3 s to stop on its own),
+/// 0.9 s otherwise.
 pub fn stop_team(
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],
