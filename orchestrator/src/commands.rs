@@ -12,6 +12,7 @@ use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOpt
 use common::transport::TeamName;
 
 use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
+use crate::export;
 use crate::launch::{launch, LaunchOptions};
 use crate::progress::{Progress, Spinner};
 use crate::report::{report, ReportError};
@@ -141,6 +142,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             }
             Ok(exit_of(&report))
         }
+        Command::Export { target } => export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
         } => {
@@ -282,7 +284,7 @@ fn plan(
     })
 }
 
-fn print_certificate(c: &Certificate) {
+pub fn print_certificate(c: &Certificate) {
     println!(
         "pre-flight certificate: {} ({} agents)",
         c.scenario, c.agents
