@@ -7,11 +7,13 @@
 //! fault injection; no iceoryx2) -> `cdm-iox` (the only library crate that names iceoryx2).
 
 pub use cdm_core::{
-    audit, control, dynamics, engine, export, formation, frame, gains, geometry, graph, math, plan,
-    rundir, safety, scenario, simulate, step, telemetry,
+    audit, control, dynamics, engine, export, formation, frame, gains, geometry, graph, math,
+    outcome, plan, rundir, safety, scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
-pub use cdm_runtime::{fault_inject, messages, signals};
+pub use cdm_runtime::{
+    fault_inject, member_core, member_loop, messages, seams, signals, team_core,
+};
 
 pub mod member;
 pub mod member_cli;

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use common::audit::AuditReport;
+use common::outcome::Verdict;
 use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
@@ -306,7 +307,7 @@ fn plan(
         let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
         common::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
     }
-    Ok(if c.verdict == "SAFE" {
+    Ok(if c.verdict == Verdict::Safe {
         Exit::Safe
     } else {
         Exit::Unsafe
@@ -348,9 +349,9 @@ pub fn print_certificate(c: &Certificate) {
 /// Exit code of a finished run.
 pub fn exit_of(r: &AuditReport) -> Exit {
     match r.verdict {
-        "SAFE" => Exit::Safe,
-        "UNSAFE" => Exit::Unsafe,
-        _ => Exit::Fault,
+        Verdict::Safe => Exit::Safe,
+        Verdict::Unsafe => Exit::Unsafe,
+        Verdict::Fault => Exit::Fault,
     }
 }
 

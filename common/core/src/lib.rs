@@ -21,6 +21,7 @@ pub mod frame;
 pub mod gains;
 pub mod geometry;
 pub mod graph;
+pub mod outcome;
 pub mod plan;
 pub mod rundir;
 pub mod safety;

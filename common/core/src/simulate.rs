@@ -6,6 +6,7 @@ use serde::Serialize;
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
 use crate::engine::{desired_positions, max_follower_deviation, quad_engine};
 use crate::math::{Real, Vec3};
+use crate::outcome::{FaultKind, Verdict};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
 use crate::step::tick_time;
@@ -82,7 +83,7 @@ pub fn simulate(
         }
         if let Err(f) = e.advance() {
             audit.fault(FaultRecord {
-                kind: "control".into(),
+                kind: FaultKind::Control,
                 agent: Some(f.id),
                 peer: match f.fault {
                     crate::step::StepFault::NeighborNonFinite { peer } => Some(peer),
@@ -111,7 +112,7 @@ pub fn id_order(s: &Scenario) -> Vec<usize> {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Certificate {
     /// SAFE or UNSAFE.
-    pub verdict: &'static str,
+    pub verdict: Verdict,
     pub reasons: Vec<String>,
     pub scenario: String,
     pub agents: usize,
@@ -209,7 +210,11 @@ pub fn certify(s: &Scenario) -> Certificate {
         ));
     }
     Certificate {
-        verdict: if reasons.is_empty() { "SAFE" } else { "UNSAFE" },
+        verdict: if reasons.is_empty() {
+            Verdict::Safe
+        } else {
+            Verdict::Unsafe
+        },
         reasons,
         scenario: s.file.name.clone(),
         agents: s.formation.members.len(),
