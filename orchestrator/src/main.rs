@@ -7,6 +7,7 @@ mod launch;
 mod progress;
 mod report;
 mod team;
+mod viewer;
 
 use clap::Parser;
 
