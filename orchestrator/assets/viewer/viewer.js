@@ -49,7 +49,9 @@ const poly = scene.polygon.length;
 const polygon = lines(poly, 0x7cf29a, 1, true);
 const prism = lines(poly * 6, 0x7cf29a, 0.45, false); // two bases and the side edges
 const graph = lines(scene.edges.length * 2, 0x9aa7b8, 0.35, false);
-graph.visible = false;
+// `?graph=1` opens the page with the communication graph shown.
+graph.visible = new URLSearchParams(location.search).get('graph') === '1';
+$('graph').checked = graph.visible;
 $('graph').addEventListener('change', (e) => { graph.visible = e.target.checked; draw(); });
 const track = new THREE.Line(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0xffffff }));
 track.frustumCulled = false;
@@ -256,10 +258,13 @@ function replay() {
 }
 
 // --- live --------------------------------------------------------------------------------------
+// `?frames=N` closes the stream after N frames with positions (data-first-tick records the first):
+// a headless browser's --virtual-time-budget then sees an idle network and takes its snapshot.
 function follow() {
   $('controls').style.display = 'none';
   const events = new EventSource('events');
-  let framed = false;
+  const limit = Number(new URLSearchParams(location.search).get('frames') || 0);
+  let framed = false, full = 0;
   events.addEventListener('frame', (e) => {
     const msg = JSON.parse(e.data);
     if (msg.frame.rate !== undefined) rate = msg.frame.rate;
@@ -269,9 +274,11 @@ function follow() {
     frames.push(msg.frame);
     if (msg.frame.p && msg.frame.p.length) {
       shown = frames.length - 1;
-      if (!framed) { frame_camera([msg.frame]); framed = true; }
+      if (!framed) { frame_camera([msg.frame]); framed = true; $('cdm-status').dataset.firstTick = String(msg.frame.tick); }
+      full += 1;
     }
     draw();
+    if (limit > 0 && full >= limit) events.close();
   });
   events.addEventListener('end', (e) => {
     const msg = JSON.parse(e.data);

@@ -349,8 +349,17 @@ pub struct ViolationMark {
     pub agents: Vec<u32>,
 }
 
-/// Read audit.json's verdict and violations (the timeline markers of the viewer).
-pub fn read_verdict_and_violations(path: &Path) -> Result<(String, Vec<ViolationMark>), ReadError> {
+/// What the viewer's timeline needs from audit.json.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timeline {
+    pub verdict: String,
+    /// Ticks audited (and so in telemetry, every K-th with `--every K`).
+    pub ticks: u64,
+    pub violations: Vec<ViolationMark>,
+}
+
+/// Read audit.json's verdict, tick count and violations (the timeline markers of the viewer).
+pub fn read_timeline(path: &Path) -> Result<Timeline, ReadError> {
     let text = std::fs::read_to_string(path).map_err(io(path))?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
@@ -379,7 +388,15 @@ pub fn read_verdict_and_violations(path: &Path) -> Result<(String, Vec<Violation
                 .collect()
         })
         .unwrap_or_default();
-    Ok((verdict, marks))
+    let ticks = v
+        .get("ticks")
+        .and_then(serde_json::Value::as_u64)
+        .ok_or_else(|| invalid(path, "field `ticks` is missing or not a count"))?;
+    Ok(Timeline {
+        verdict,
+        ticks,
+        violations: marks,
+    })
 }
 
 #[cfg(test)]

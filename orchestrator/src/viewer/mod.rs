@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use common::scenario::{Checks, Scenario};
 
-use crate::report::data::{read_audit, read_verdict_and_violations, stream_ticks, ReadError};
+use crate::report::data::{read_audit, read_timeline, stream_ticks, ReadError};
 use scene::{frame_stride, FrameMaker, Scene};
 
 pub use serve::serve_page;
@@ -47,17 +47,17 @@ pub fn replay_scene(dir: &Path) -> Result<Scene, ViewerError> {
     })?;
     let audit_path = dir.join("audit.json");
     let numbers = read_audit(&audit_path)?;
-    let (verdict, violations) = read_verdict_and_violations(&audit_path)?;
+    let timeline = read_timeline(&audit_path)?;
     let mut scene = Scene::new(
         &scenario,
         numbers.delta_m,
         numbers.eps_m,
         numbers.lambda_cd_min,
     );
-    scene.verdict = verdict;
-    scene.violations = violations;
+    scene.verdict = timeline.verdict;
+    scene.violations = timeline.violations;
     let n = scenario.formation.members.len();
-    scene.stride = frame_stride(scenario.last_tick() + 1, n, REPLAY_BUDGET_BYTES);
+    scene.stride = frame_stride(timeline.ticks.max(1), n, REPLAY_BUDGET_BYTES);
     let maker = FrameMaker::new(&scenario, scene.half_height_m);
     let mut seen = 0u64;
     let mut last = None;
