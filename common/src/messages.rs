@@ -55,8 +55,15 @@ pub const REASON_AGENT_SILENT: u32 = 3;
 /// `ClockMsg::reason`: the operator interrupted the run (signal).
 pub const REASON_INTERRUPTED: u32 = 4;
 
+/// Stable iceoryx2 type name of [`StateMsg`] (independent of the crate path; Python's
+/// `python/cdm_bus.py` declares the same).
+pub const STATE_MSG_TYPE_NAME: &str = "cdm::StateMsg";
+/// Stable iceoryx2 type name of [`ClockMsg`].
+pub const CLOCK_MSG_TYPE_NAME: &str = "cdm::ClockMsg";
+
 /// One agent's full state at one tick, published once per tick.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("cdm::StateMsg")]
 #[repr(C)]
 pub struct StateMsg {
     /// The tick this state belongs to (simulation time is `tick * dt`). Consumers detect lost
@@ -79,6 +86,7 @@ pub struct StateMsg {
 
 /// The orchestrator's grant: how far agents may run, or that they must stop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[type_name("cdm::ClockMsg")]
 #[repr(C)]
 pub struct ClockMsg {
     /// The last tick agents may compute (inclusive).
@@ -295,6 +303,14 @@ mod tests {
         // Every process of a team must agree on the layout; pin it.
         assert_eq!(core::mem::size_of::<StateMsg>(), 8 + 8 + 4 * 4 + 12 * 8);
         assert_eq!(core::mem::size_of::<ClockMsg>(), 8 + 8 + 4 + 4);
+    }
+
+    #[test]
+    fn type_names_are_stable() {
+        // Services are matched by these names (Python's cdm_bus.py too): never a crate path.
+        // SAFETY: type_name() only returns the derive's constant.
+        assert_eq!(unsafe { StateMsg::type_name() }, STATE_MSG_TYPE_NAME);
+        assert_eq!(unsafe { ClockMsg::type_name() }, CLOCK_MSG_TYPE_NAME);
     }
 
     #[test]
