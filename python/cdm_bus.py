@@ -52,8 +52,8 @@ class StateMsg(ctypes.Structure):
 
     @staticmethod
     def type_name():
-        """The stable name the Rust type declares (`#[type_name("cdm::StateMsg")]`)."""
-        return "cdm::StateMsg"
+        """The stable name the Rust type declares (`cdm_iox::STATE_TYPE_NAME`)."""
+        return "cdm::State"
 
     def position(self):
         return (self.state[0], self.state[1], self.state[2])
@@ -71,8 +71,8 @@ class ClockMsg(ctypes.Structure):
 
     @staticmethod
     def type_name():
-        """The stable name the Rust type declares (`#[type_name("cdm::ClockMsg")]`)."""
-        return "cdm::ClockMsg"
+        """The stable name the Rust type declares (`cdm_iox::CLOCK_TYPE_NAME`)."""
+        return "cdm::Clock"
 
 
 STATUS_OK = 0

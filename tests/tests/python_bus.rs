@@ -51,12 +51,12 @@ fn python_wire_types_and_paths_are_the_rust_ones() {
         cfg.global.prefix.to_string(),
         format!(
             "{} {}",
-            common::messages::STATE_MSG_TYPE_NAME,
+            common::transport::STATE_TYPE_NAME,
             std::mem::size_of::<common::messages::StateMsg>()
         ),
         format!(
             "{} {}",
-            common::messages::CLOCK_MSG_TYPE_NAME,
+            common::transport::CLOCK_TYPE_NAME,
             std::mem::size_of::<common::messages::ClockMsg>()
         ),
     ];

@@ -3,12 +3,11 @@
 //! the orchestrator to every agent.
 //!
 //! Both are `#[repr(C)]` with plain fields only (`u32`, `u64`, `f64`, arrays), so iceoryx2 can
-//! place them in shared memory as they are (`ZeroCopySend`). Codes travel as `u32` with the
+//! place them in shared memory as they are. The backend (cdm-iox) gives them `ZeroCopySend` and
+//! their stable type names; this crate does not name iceoryx2. Codes travel as `u32` with the
 //! documented constants below; [`AgentStatus`] and [`ClockCommand`] are the Rust-side view of
 //! them. Decoding never fails: a code this build does not know is kept as `Unknown(code)` so a
 //! newer peer cannot crash an older one.
-
-use iceoryx2::prelude::ZeroCopySend;
 
 /// `StateMsg::status`: the agent is healthy.
 pub const STATUS_OK: u32 = 0;
@@ -55,15 +54,8 @@ pub const REASON_AGENT_SILENT: u32 = 3;
 /// `ClockMsg::reason`: the operator interrupted the run (signal).
 pub const REASON_INTERRUPTED: u32 = 4;
 
-/// Stable iceoryx2 type name of [`StateMsg`] (independent of the crate path; Python's
-/// `python/cdm_bus.py` declares the same).
-pub const STATE_MSG_TYPE_NAME: &str = "cdm::StateMsg";
-/// Stable iceoryx2 type name of [`ClockMsg`].
-pub const CLOCK_MSG_TYPE_NAME: &str = "cdm::ClockMsg";
-
 /// One agent's full state at one tick, published once per tick.
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("cdm::StateMsg")]
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct StateMsg {
     /// The tick this state belongs to (simulation time is `tick * dt`). Consumers detect lost
@@ -85,8 +77,7 @@ pub struct StateMsg {
 }
 
 /// The orchestrator's grant: how far agents may run, or that they must stop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("cdm::ClockMsg")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(C)]
 pub struct ClockMsg {
     /// The last tick agents may compute (inclusive).
@@ -303,14 +294,6 @@ mod tests {
         // Every process of a team must agree on the layout; pin it.
         assert_eq!(core::mem::size_of::<StateMsg>(), 8 + 8 + 4 * 4 + 12 * 8);
         assert_eq!(core::mem::size_of::<ClockMsg>(), 8 + 8 + 4 + 4);
-    }
-
-    #[test]
-    fn type_names_are_stable() {
-        // Services are matched by these names (Python's cdm_bus.py too): never a crate path.
-        // SAFETY: type_name() only returns the derive's constant.
-        assert_eq!(unsafe { StateMsg::type_name() }, STATE_MSG_TYPE_NAME);
-        assert_eq!(unsafe { ClockMsg::type_name() }, CLOCK_MSG_TYPE_NAME);
     }
 
     #[test]
