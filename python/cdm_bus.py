@@ -118,11 +118,14 @@ class TeamReader:
             self.subscribers[agent_id] = service.subscriber_builder().create()
         # tick -> {id: StateMsg}
         self.pending = {}
+        # The newest tick returned: older samples (a buffer replayed after a publisher left, a
+        # laggard) are ignored, so ticks come out strictly increasing.
+        self.done_tick = -1
 
     def poll(self):
         """Takes every sample that arrived; returns the ticks now complete, oldest first, as
-        (tick, {id: StateMsg}). A tick some agent's sample was lost for is dropped once a later
-        tick completes."""
+        (tick, {id: StateMsg}), each tick once and strictly increasing. A tick some agent's
+        sample was lost for (the observer fell behind) is dropped once a later tick completes."""
         for agent_id, sub in self.subscribers.items():
             while True:
                 sample = sub.receive()
@@ -130,15 +133,15 @@ class TeamReader:
                     break
                 msg = StateMsg.from_buffer_copy(sample.payload().contents)
                 sample.delete()
-                if msg.status == STATUS_OK:
+                if msg.status == STATUS_OK and msg.tick > self.done_tick:
                     self.pending.setdefault(msg.tick, {})[agent_id] = msg
         done = [t for t, states in self.pending.items() if len(states) == len(self.ids)]
         out = []
         for t in sorted(done):
             out.append((t, self.pending.pop(t)))
         if done:
-            newest = max(done)
-            for t in [t for t in self.pending if t < newest]:
+            self.done_tick = max(done)
+            for t in [t for t in self.pending if t < self.done_tick]:
                 del self.pending[t]
         return out
 

@@ -129,6 +129,11 @@ fn watch_py_reads_a_live_team_like_the_audit() {
         );
         let tick: u64 = f[1].parse().unwrap_or_else(|e| panic!("{line}: {e}"));
         let sep: f64 = f[5].parse().unwrap_or_else(|e| panic!("{line}: {e}"));
+        assert!(
+            seen.keys().next_back().is_none_or(|&last| tick > last),
+            "ticks must come out strictly increasing: {tick} after {:?}",
+            seen.keys().next_back()
+        );
         seen.insert(tick, sep);
     }
     assert_eq!(

@@ -343,3 +343,51 @@ fn replay_of_a_thousand_agents_stays_within_its_budget() {
     let s = status(&file_url(&out.join("replay.html")), tmp.path(), true);
     assert_eq!((s.agents, s.tick), (1000, 1500), "{s:?}");
 }
+
+#[test]
+fn bad_serve_addresses_and_run_directories_are_refused() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("never");
+    let o = out.to_str().unwrap_or_default();
+    let bad = run(
+        &mut orchestrator(&["launch", "--out", o, "--serve", "nowhere"]),
+        RUN_DEADLINE,
+    );
+    assert_eq!(bad.status.code(), Some(2), "{}", describe(&bad));
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("--serve nowhere"),
+        "{}",
+        describe(&bad)
+    );
+    // A port that is taken: refused before any process or file of the team exists.
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let addr = taken
+        .local_addr()
+        .unwrap_or_else(|e| panic!("{e}"))
+        .to_string();
+    let team = unique_team("busyport");
+    let busy = run(
+        &mut orchestrator(&["launch", "--team", &team, "--out", o, "--serve", &addr]),
+        RUN_DEADLINE,
+    );
+    assert_eq!(busy.status.code(), Some(2), "{}", describe(&busy));
+    assert!(
+        String::from_utf8_lossy(&busy.stderr).contains("cannot listen"),
+        "{}",
+        describe(&busy)
+    );
+    assert!(!out.exists(), "a refused launch created {}", out.display());
+    // `view` of a directory that is not a run names the file it misses.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap_or_else(|e| panic!("{e}"));
+    let view = run(
+        &mut orchestrator(&["view", empty.to_str().unwrap_or_default()]),
+        RUN_DEADLINE,
+    );
+    assert_eq!(view.status.code(), Some(2), "{}", describe(&view));
+    assert!(
+        String::from_utf8_lossy(&view.stderr).contains("scenario.toml"),
+        "{}",
+        describe(&view)
+    );
+}
