@@ -239,10 +239,10 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     common::rundir::write_atomic(&path, page.as_bytes()).map_err(Failure::bad_input)?;
     if !quiet {
         println!(
-            "view: {} ({} frames of {} ticks, {:.1} MB)",
+            "view: {} ({} frames, every {} tick(s) of telemetry, {:.1} MB)",
             path.display(),
             scene.frames.len(),
-            scene.last_tick + 1,
+            scene.stride,
             page.len() as f64 / 1e6
         );
     }

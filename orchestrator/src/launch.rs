@@ -65,6 +65,12 @@ pub struct Launched {
     pub live: Option<LiveView>,
 }
 
+/// What watches every completed tick: the audit, and the live view when `--serve` asked for one.
+struct Watchers<'a> {
+    audit: &'a mut Auditor,
+    live: &'a mut Option<LiveView>,
+}
+
 /// Starts the live view before the team, so a bad address stops nothing (exit 2).
 fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure> {
     let view = LiveView::start(addr, s, Auditor::new(s).numbers()).map_err(Failure::bad_input)?;
@@ -148,9 +154,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         &dir,
         &mut ports,
         &mut children,
-        &mut audit,
+        Watchers {
+            audit: &mut audit,
+            live: &mut live,
+        },
         interrupted,
-        &mut live,
     );
     let ended = Instant::now();
     let (complete, reason, first_tick) = match result {
@@ -210,10 +218,10 @@ fn run_team(
     dir: &RunDir,
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],
-    audit: &mut Auditor,
+    watchers: Watchers<'_>,
     interrupted: &std::sync::atomic::AtomicBool,
-    live: &mut Option<LiveView>,
 ) -> Result<(Instant, bool), Stop> {
+    let Watchers { audit, live } = watchers;
     let hash = s.content_hash();
     let n = s.formation.members.len();
     // 1. Readiness, with a deadline.
