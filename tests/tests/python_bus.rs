@@ -26,7 +26,10 @@ fn python_dir() -> PathBuf {
 
 fn python(args: &[&str]) -> Command {
     let mut c = Command::new(venv_python());
-    c.env("PYTHONPATH", python_dir()).args(args);
+    // No __pycache__ in the source tree.
+    c.env("PYTHONPATH", python_dir())
+        .env("PYTHONDONTWRITEBYTECODE", "1")
+        .args(args);
     c
 }
 
