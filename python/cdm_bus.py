@@ -84,14 +84,18 @@ def state_service(team, agent_id):
 
 
 def team_ids(team, config):
-    """The ids of the team's agents, from the state services iceoryx2 lists (sorted)."""
+    """The ids of the team's agents, from the state services iceoryx2 lists (sorted); empty
+    until the orchestrator has created all of them (`cdm/<team>/wake/orch` comes last)."""
     pattern = re.compile(r"^cdm/" + re.escape(team) + r"/state/(\d+)$")
     ids = []
+    complete = False
     for details in iox2.Service.list(config, iox2.ServiceType.Ipc):
-        m = pattern.match(details.name().to_string())
+        name = details.name().to_string()
+        complete = complete or name == f"cdm/{team}/wake/orch"
+        m = pattern.match(name)
         if m:
             ids.append(int(m.group(1)))
-    return sorted(ids)
+    return sorted(ids) if complete else []
 
 
 class TeamReader:

@@ -7,7 +7,8 @@ How to run (iceoryx2 0.10 from PyPI, e.g. the test venv of scripts/test-deps.sh)
   Terminal 2:  .venv/bin/python python/examples/watch.py --team demo
 
 Prints `tick <k> t <seconds> min_separation <metres> agents <i> <j>` per complete tick; ends
-when the team has been silent for --silence seconds (or after --ticks lines).
+when the team has been silent for --silence seconds after its first tick (or after --ticks
+lines); exit 2 when the team does not appear, 3 when it shows no tick, within --join seconds.
 """
 
 import argparse
@@ -50,8 +51,12 @@ def main():
             last_tick_at = time.monotonic()
             if a.ticks and printed >= a.ticks:
                 return 0
-        if time.monotonic() - last_tick_at > a.silence:
-            return 0 if printed else 3
+        # Before the first tick the team may still be starting: wait up to --join for it.
+        if printed and time.monotonic() - last_tick_at > a.silence:
+            return 0
+        if not printed and time.monotonic() > deadline:
+            print(f"watch: team {a.team}: no complete tick within {a.join} s", file=sys.stderr)
+            return 3
         reader.wait(0.005)
 
 
