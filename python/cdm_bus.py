@@ -15,10 +15,10 @@ import re
 import iceoryx2 as iox2
 
 # Where the runtime keeps iceoryx2's files and what its shared-memory names start with. Mirrors
-# the one Rust function that decides both (`common::transport`, `iox2_root` and the global
+# the one Rust function that decides both (cdm-iox, `common::transport`: root and global
 # prefix); tests/tests/python_bus.rs checks the two agree. Change them here only.
 ROOT_FORMAT = "/dev/shm/cdm-iceoryx2-{uid}/"
-PREFIX_FORMAT = "iox2_"
+PREFIX_FORMAT = "cdm{uid}_"
 
 
 def bus_paths(uid=None):
