@@ -16,6 +16,19 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// Where `--serve` listens when no address is given: loopback only.
+pub const DEFAULT_SERVE: &str = "127.0.0.1:8080";
+
+/// A `--serve` address: `HOST:PORT`, or a bare `PORT` on 127.0.0.1.
+pub fn serve_addr(text: &str) -> Result<std::net::SocketAddr, String> {
+    if let Ok(port) = text.parse::<u16>() {
+        return Ok(std::net::SocketAddr::from(([127, 0, 0, 1], port)));
+    }
+    text.parse().map_err(|_| {
+        format!("--serve {text}: expected HOST:PORT (e.g. 127.0.0.1:8080) or a port number")
+    })
+}
+
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Pre-flight certificate: lambda_1(U_D), D_B, D_S, delta, T_threshold; exit 0 SAFE, 1 UNSAFE.
@@ -73,8 +86,22 @@ pub enum Command {
         /// Seconds to wait for hand-started processes (--no-spawn) to join.
         #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
         join_timeout: f64,
+        /// Serve a live 3-D view of the team while it flies (ADDR: HOST:PORT or PORT; a bare
+        /// --serve is 127.0.0.1:8080). Only loopback unless another address is given.
+        #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_SERVE)]
+        serve: Option<String>,
         #[command(flatten)]
         run: RunOptions,
+    },
+    /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained
+    /// page that works from file://; with --serve, also serves it until interrupted.
+    View {
+        /// The run directory.
+        #[arg(value_name = "RUN_DIR")]
+        dir: PathBuf,
+        /// Serve the page on ADDR (HOST:PORT or PORT; a bare --serve is 127.0.0.1:8080).
+        #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_SERVE)]
+        serve: Option<String>,
     },
     /// Redraw every figure of a finished run from its telemetry.csv, audit.json and
     /// scenario.toml (SVG and PNG, into the run directory).

@@ -52,6 +52,9 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             progress.finish();
             summary("simulate", &report, started, dir.path(), cli.quiet);
             figures_after_run(dir.path(), &run, cli.quiet);
+            if report.ticks > 0 {
+                replay_after_run(dir.path(), cli.quiet);
+            }
             Ok(exit_of(&report))
         }
         Command::Report { dir, follow } => {
@@ -83,6 +86,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             window,
             agent_timeout,
             join_timeout,
+            serve,
             run,
         } => {
             let s = load(&source)?;
@@ -110,6 +114,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 quiet: cli.quiet,
                 stop_on_violation: run.stop_on_violation,
                 max_ticks: run.max_ticks,
+                serve: serve
+                    .as_deref()
+                    .map(crate::cli::serve_addr)
+                    .transpose()
+                    .map_err(Failure::bad_input)?,
             };
             let started = Instant::now();
             let crate::launch::Launched {
@@ -117,6 +126,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 ticking,
                 startup,
                 member_peak_rss,
+                live: _live,
             } = launch(&s, &opts)?;
             summary("launch", &report, started, &opts.out, cli.quiet);
             if !cli.quiet && ticking > Duration::ZERO {
@@ -139,9 +149,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             }
             if report.ticks > 0 {
                 figures_after_run(&opts.out, &run, cli.quiet);
+                replay_after_run(&opts.out, cli.quiet);
             }
             Ok(exit_of(&report))
         }
+        Command::View { dir, serve } => view(&dir, serve.as_deref(), cli.quiet),
         Command::Clean => clean(cli.quiet),
         Command::Export { target } => export::run(target, cli.quiet),
         Command::Scenario {
@@ -231,6 +243,54 @@ fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
         }
         Err(e) => tracing::error!("figures not drawn: {e}"),
     }
+}
+
+/// Write replay.html into a finished run's directory. A failure is logged, not fatal (as for the
+/// figures): the run's own outcome decides the exit code.
+fn replay_after_run(dir: &Path, quiet: bool) {
+    let started = Instant::now();
+    match crate::viewer::write_replay(dir) {
+        Ok(path) if !quiet => println!(
+            "  replay: {} ({:.2} s; orchestrator view redraws it)",
+            path.display(),
+            started.elapsed().as_secs_f64()
+        ),
+        Ok(_) => {}
+        Err(e) => tracing::error!("replay.html not written: {e}"),
+    }
+}
+
+/// `view RUN_DIR [--serve ADDR]`: (re)write replay.html, and serve it until interrupted.
+fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
+    let addr = serve
+        .map(crate::cli::serve_addr)
+        .transpose()
+        .map_err(Failure::bad_input)?;
+    let scene = crate::viewer::replay_scene(dir).map_err(Failure::bad_input)?;
+    let page = crate::viewer::page(Some(&scene));
+    let path = dir.join("replay.html");
+    common::rundir::write_atomic(&path, page.as_bytes()).map_err(Failure::bad_input)?;
+    if !quiet {
+        println!(
+            "view: {} ({} frames, every {} tick(s) of telemetry, {:.1} MB)",
+            path.display(),
+            scene.frames.len(),
+            scene.stride,
+            page.len() as f64 / 1e6
+        );
+    }
+    let Some(addr) = addr else {
+        return Ok(Exit::Safe);
+    };
+    let interrupted = common::signals::install();
+    let server =
+        crate::viewer::serve_page(&addr.to_string(), page, None).map_err(Failure::bad_input)?;
+    // Only the final line goes to stdout in quiet mode: tools read the address from it.
+    println!("serving http://{}/ (Ctrl-C stops)", server.addr);
+    while !interrupted.load(std::sync::atomic::Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    Ok(Exit::Safe)
 }
 
 /// `--sweep LO:HI:STEP`: the travel times LO, LO + STEP, .. up to HI.

@@ -7,6 +7,8 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use common::audit::{AuditReport, Auditor, FaultRecord};
+
+use crate::viewer::live::LiveView;
 use common::engine::desired_positions;
 use common::formation::Role;
 use common::math::{vec3, Vec3};
@@ -42,6 +44,8 @@ pub struct LaunchOptions {
     pub stop_on_violation: bool,
     /// Fly only ticks 0..=K of the plan.
     pub max_ticks: Option<u64>,
+    /// Serve the live view on this address.
+    pub serve: Option<std::net::SocketAddr>,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -59,6 +63,23 @@ pub struct Launched {
     /// The member with the largest peak resident memory and that peak in KiB, read just before
     /// the team was stopped (spawned teams only).
     pub member_peak_rss: Option<(u32, u64)>,
+    /// The live view (`--serve`), kept serving until the caller drops it.
+    pub live: Option<LiveView>,
+}
+
+/// What watches every completed tick: the audit, and the live view when `--serve` asked for one.
+struct Watchers<'a> {
+    audit: &'a mut Auditor,
+    live: &'a mut Option<LiveView>,
+}
+
+/// Starts the live view before the team, so a bad address stops nothing (exit 2).
+fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure> {
+    let view = LiveView::start(addr, s, Auditor::new(s).numbers()).map_err(Failure::bad_input)?;
+    if !quiet {
+        println!("live view: http://{}/", view.addr());
+    }
+    Ok(view)
 }
 
 /// Run a launch to the end.
@@ -67,6 +88,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     if o.spawn {
         member_binaries_present()?;
     }
+    let mut live = match o.serve {
+        Some(addr) => Some(start_live(s, &addr.to_string(), o.quiet)?),
+        None => None,
+    };
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
@@ -137,7 +162,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         &dir,
         &mut ports,
         &mut children,
-        &mut audit,
+        Watchers {
+            audit: &mut audit,
+            live: &mut live,
+        },
         interrupted,
     );
     let ended = Instant::now();
@@ -156,6 +184,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     let report = audit.finish(complete);
     dir.write_audit(&report).map_err(Failure::fault)?;
+    if let Some(v) = &live {
+        v.finish(&report);
+    }
     let startup = match (PROCESS_START.get(), first_tick) {
         (Some(&t0), Some(t)) => t.saturating_duration_since(t0),
         _ => Duration::ZERO,
@@ -165,6 +196,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         ticking: first_tick.map_or(Duration::ZERO, |t| ended - t),
         startup,
         member_peak_rss,
+        live,
     })
 }
 
@@ -194,9 +226,10 @@ fn run_team(
     dir: &RunDir,
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],
-    audit: &mut Auditor,
+    watchers: Watchers<'_>,
     interrupted: &std::sync::atomic::AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
+    let Watchers { audit, live } = watchers;
     let hash = s.content_hash();
     let n = s.formation.members.len();
     // 1. Readiness, with a deadline.
@@ -395,6 +428,9 @@ fn run_team(
                 }
             }
             audit.observe(tick, t, &pos, &ht);
+            if let Some(v) = live.as_mut() {
+                v.tick(tick, t, &pos, &ht, audit.report());
+            }
             progress.tick(tick, audit.report());
             if tel.keeps(tick) {
                 rows.clear();

@@ -9,6 +9,7 @@ mod progress;
 mod report;
 mod stall;
 mod team;
+mod viewer;
 
 use clap::Parser;
 

@@ -397,7 +397,8 @@ fn a_second_launch_of_a_running_team_is_refused_and_writes_nothing() {
 // ---------------------------------------------------------------------------------------------
 
 /// A process outside the team opens its services while it flies: another payload type on a
-/// state service, a second publisher of a state or of the clock, an extra subscriber, and a
+/// state service, a second publisher of a state or of the clock, a subscriber beyond the one
+/// observer slot, and a
 /// second process claiming a running agent's id are all refused; the team flies exactly as
 /// `simulate` does.
 #[test]
@@ -433,8 +434,14 @@ fn a_foreign_process_cannot_publish_into_a_team() {
         publisher.is_err(),
         "a second publisher of agent 1's state was accepted"
     );
+    // One observer may read the states (watch.py); a second one is refused.
+    let observer = state.subscriber_builder().create();
+    assert!(observer.is_ok(), "the observer's subscriber was refused");
     let subscriber = state.subscriber_builder().create();
-    assert!(subscriber.is_err(), "an extra subscriber was accepted");
+    assert!(
+        subscriber.is_err(),
+        "a second extra subscriber was accepted"
+    );
     let clock = node
         .service_builder(&name(t.clock_service()))
         .publish_subscribe::<ClockWire>()

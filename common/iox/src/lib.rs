@@ -103,6 +103,11 @@ pub const TEAM_NAME_MAX_LEN: usize = 48;
 /// for a duplicate agent process to get far enough to be told precisely why it is refused.
 const SPARE_NODES: usize = 2;
 
+/// Subscriber slots each state service keeps beyond the team's own readers: room for one
+/// observer (`python/examples/watch.py`, a viewer) to read every member's state. The team's
+/// publishers never wait for it (safe overflow: a slow observer loses its oldest samples).
+const OBSERVER_SLOTS: usize = 1;
+
 /// Grants a subscriber of the clock keeps; agents only act on the newest one.
 const CLOCK_BUFFER: usize = 2;
 

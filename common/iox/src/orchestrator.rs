@@ -17,7 +17,7 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubSer
 use super::dead_teams::{remove_dead, scan_teams};
 use super::{
     create_node, init_logging, process_config, service_error, service_name, wait_on, Role,
-    TeamLayout, TeamName, TransportError, CLOCK_BUFFER, SPARE_NODES,
+    TeamLayout, TeamName, TransportError, CLOCK_BUFFER, OBSERVER_SLOTS, SPARE_NODES,
 };
 use crate::messages::{ClockMsg, StateMsg};
 use crate::wire::{ClockWire, StateWire, Wire};
@@ -84,7 +84,10 @@ impl AgentReadiness {
     /// True when the agent and all its neighbours' ports towards it are connected.
     pub fn is_complete(&self) -> bool {
         self.state_publishers == 1
-            && self.state_subscribers == self.expected_state_subscribers
+            // An observer may already be subscribed: at least the team's readers. Every member
+            // takes its state subscriptions before its notifier on wake/orch, so once all of
+            // those are in (`Readiness::is_complete`), no member's subscription is missing.
+            && self.state_subscribers >= self.expected_state_subscribers
             && self.wake_listeners == 1
             && self.wake_notifiers == self.expected_wake_notifiers
     }
@@ -348,8 +351,8 @@ impl Ports {
                 .service_builder(&service_name(team, WHO, &name)?)
                 .publish_subscribe::<StateWire>()
                 .max_publishers(1)
-                .max_subscribers(outs + 1)
-                .max_nodes(outs + 2 + SPARE_NODES)
+                .max_subscribers(outs + 1 + OBSERVER_SLOTS)
+                .max_nodes(outs + 2 + SPARE_NODES + OBSERVER_SLOTS)
                 .subscriber_max_buffer_size(buffer)
                 .subscriber_max_borrowed_samples(1)
                 .history_size(0)

@@ -188,6 +188,87 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         .collect();
     let eps_half = audit.delta_m + audit.eps_m;
 
+    let mut data = RunData {
+        scenario: scenario.clone(),
+        audit,
+        follow,
+        samples: Vec::new(),
+        first: Vec::new(),
+        last: Vec::new(),
+        primary_paths: [Vec::new(), Vec::new(), Vec::new()],
+    };
+    let expected_ticks = scenario.last_tick() + 1;
+    let path_stride = (expected_ticks / 400).max(1);
+    stream_ticks(dir, &scenario, |tp| {
+        let (tick, t, pos, ht) = (tp.tick, tp.t_s, tp.pos, tp.ht);
+        let (sep, _, _) = min_separation(pos);
+        let boundary = boundary_distance(&scenario, &followers, eps_half, pos, ht);
+        if data.first.is_empty() {
+            data.first = pos.to_vec();
+        }
+        if tick.is_multiple_of(path_stride) {
+            for (p, path) in data.primary_paths.iter_mut().enumerate() {
+                path.push(pos[p]);
+            }
+        }
+        data.last.clear();
+        data.last.extend_from_slice(pos);
+        data.samples.push(TickSample {
+            tick,
+            t_s: t,
+            lambdas: lambdas_at(&scenario, t),
+            min_separation_m: sep,
+            min_boundary_m: boundary,
+            follow_r: pos[follow_k],
+            follow_ht: ht[follow_k],
+        });
+    })?;
+    Ok(data)
+}
+
+/// D_S(t): the smallest signed distance of a follower (member indices `followers`) to the sides
+/// of Theorem 3's prism over the leaders' desired polygon, as the audit builds it (infinite
+/// without a polygon).
+pub fn boundary_distance(
+    s: &Scenario,
+    followers: &[usize],
+    half_height_m: Real,
+    pos: &[Vec3],
+    ht: &[Vec3],
+) -> Real {
+    let verts: Vec<Vec3> = s.formation.polygon.iter().map(|&k| ht[k]).collect();
+    if verts.len() < 3 {
+        return Real::INFINITY;
+    }
+    let normal = (verts[1] - verts[0])
+        .cross(&(verts[2] - verts[0]))
+        .normalize();
+    let prism = Prism::new(verts, normal, half_height_m);
+    followers
+        .iter()
+        .map(|&k| prism.side_distance(&pos[k]))
+        .fold(Real::INFINITY, Real::min)
+}
+
+/// One complete tick of a run's telemetry, in the scenario's member order.
+pub struct TickPositions<'a> {
+    pub tick: u64,
+    pub t_s: Real,
+    /// Actual positions r_i.
+    pub pos: &'a [Vec3],
+    /// Desired positions r_i,HT.
+    pub ht: &'a [Vec3],
+}
+
+/// Stream a run directory's telemetry one complete tick at a time (paper40 is 800k rows, so
+/// nothing but one tick is held). Every reader of telemetry goes through here.
+pub fn stream_ticks(
+    dir: &Path,
+    scenario: &Scenario,
+    mut on_tick: impl FnMut(TickPositions<'_>),
+) -> Result<(), ReadError> {
+    let members = &scenario.formation.members;
+    let index: BTreeMap<u32, usize> = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
     let tel_path = dir.join("telemetry.csv");
     let file = File::open(&tel_path).map_err(io(&tel_path))?;
     let mut lines = BufReader::with_capacity(1 << 20, file).lines();
@@ -210,49 +291,6 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let mut ht = vec![Vec3::zeros(); n];
     let mut seen = 0usize;
     let mut current: Option<(u64, Real)> = None;
-    let mut data = RunData {
-        scenario: scenario.clone(),
-        audit,
-        follow,
-        samples: Vec::new(),
-        first: Vec::new(),
-        last: Vec::new(),
-        primary_paths: [Vec::new(), Vec::new(), Vec::new()],
-    };
-    let expected_ticks = scenario.last_tick() + 1;
-    let path_stride = (expected_ticks / 400).max(1);
-    let finish_tick = |tick: u64, t: Real, pos: &[Vec3], ht: &[Vec3], data: &mut RunData| {
-        let (sep, _, _) = min_separation(pos);
-        // Theorem 3's prism over the leaders' desired polygon, as the audit builds it.
-        let verts: Vec<Vec3> = scenario.formation.polygon.iter().map(|&k| ht[k]).collect();
-        let mut boundary = Real::INFINITY;
-        if verts.len() >= 3 {
-            let normal = (verts[1] - verts[0])
-                .cross(&(verts[2] - verts[0]))
-                .normalize();
-            let prism = Prism::new(verts, normal, eps_half);
-            for &k in &followers {
-                boundary = boundary.min(prism.side_distance(&pos[k]));
-            }
-        }
-        if data.first.is_empty() {
-            data.first = pos.to_vec();
-        }
-        if tick.is_multiple_of(path_stride) {
-            for (p, path) in data.primary_paths.iter_mut().enumerate() {
-                path.push(pos[p]);
-            }
-        }
-        data.samples.push(TickSample {
-            tick,
-            t_s: t,
-            lambdas: lambdas_at(&scenario, t),
-            min_separation_m: sep,
-            min_boundary_m: boundary,
-            follow_r: pos[follow_k],
-            follow_ht: ht[follow_k],
-        });
-    };
     for (lineno, line) in lines.enumerate() {
         let line = line.map_err(io(&tel_path))?;
         let bad = |what: &str| invalid(&tel_path, format!("line {}: {what}", lineno + 2));
@@ -271,7 +309,12 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
                 if seen != n {
                     return Err(bad(&format!("tick {ct} has {seen} rows, expected {n}")));
                 }
-                finish_tick(ct, t, &pos, &ht, &mut data);
+                on_tick(TickPositions {
+                    tick: ct,
+                    t_s: t,
+                    pos: &pos,
+                    ht: &ht,
+                });
                 seen = 0;
             }
         }
@@ -281,7 +324,12 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         seen += 1;
     }
     match current {
-        Some((ct, t)) if seen == n => finish_tick(ct, t, &pos, &ht, &mut data),
+        Some((ct, t)) if seen == n => on_tick(TickPositions {
+            tick: ct,
+            t_s: t,
+            pos: &pos,
+            ht: &ht,
+        }),
         Some((ct, _)) => {
             return Err(invalid(
                 &tel_path,
@@ -290,8 +338,65 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         }
         None => return Err(invalid(&tel_path, "no rows")),
     }
-    data.last = pos;
-    Ok(data)
+    Ok(())
+}
+
+/// One violation of audit.json, as the viewer marks it on its timeline.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ViolationMark {
+    pub tick: u64,
+    pub kind: String,
+    pub agents: Vec<u32>,
+}
+
+/// What the viewer's timeline needs from audit.json.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timeline {
+    pub verdict: String,
+    /// Ticks audited (and so in telemetry, every K-th with `--every K`).
+    pub ticks: u64,
+    pub violations: Vec<ViolationMark>,
+}
+
+/// Read audit.json's verdict, tick count and violations (the timeline markers of the viewer).
+pub fn read_timeline(path: &Path) -> Result<Timeline, ReadError> {
+    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
+    let verdict = v
+        .get("verdict")
+        .and_then(|x| x.as_str())
+        .ok_or_else(|| invalid(path, "field `verdict` is missing or not a string"))?
+        .to_owned();
+    let marks = v
+        .get("violations")
+        .and_then(|x| x.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|f| {
+                    Some(ViolationMark {
+                        tick: f.get("tick")?.as_u64()?,
+                        kind: f.get("kind")?.as_str()?.to_owned(),
+                        agents: f
+                            .get("agents")?
+                            .as_array()?
+                            .iter()
+                            .filter_map(|x| x.as_u64().and_then(|x| u32::try_from(x).ok()))
+                            .collect(),
+                    })
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let ticks = v
+        .get("ticks")
+        .and_then(serde_json::Value::as_u64)
+        .ok_or_else(|| invalid(path, "field `ticks` is missing or not a count"))?;
+    Ok(Timeline {
+        verdict,
+        ticks,
+        violations: marks,
+    })
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! directory alone (telemetry.csv, audit.json, scenario.toml), as SVG and PNG, with the data of
 //! the safety figures beside them as CSV.
 
-mod data;
+pub mod data;
 mod formation;
 mod plot;
 mod top_view;

@@ -1,0 +1,195 @@
+//! What the viewer draws, as plain data: the team's static description ([`Scene`]) and one
+//! [`Frame`] per shown tick with the four margins of the live audit. Pure: no I/O, the same code
+//! feeds `replay.html` and the live `--serve` stream.
+
+use serde::Serialize;
+
+use common::formation::Role;
+use common::math::{Real, Vec3};
+use common::safety::min_separation;
+use common::scenario::Scenario;
+
+use crate::report::data::{boundary_distance, lambdas_at, ViolationMark};
+
+/// One agent as the viewer lists it.
+#[derive(Debug, Clone, Serialize)]
+pub struct AgentInfo {
+    pub id: u32,
+    pub role: &'static str,
+}
+
+/// The static part of a run: who flies, the graph, the limits the margins are measured against.
+#[derive(Debug, Clone, Serialize)]
+pub struct Scene {
+    pub scenario: String,
+    pub agents: Vec<AgentInfo>,
+    /// Communication graph as (in-neighbour, follower) member indices (eq. 18).
+    pub edges: Vec<[usize; 2]>,
+    /// Member indices of the leading polygon, counter-clockwise.
+    pub polygon: Vec<usize>,
+    /// Theorem 3's prism half height, delta + eps.
+    pub half_height_m: Real,
+    pub eps_m: Real,
+    pub delta_m: Real,
+    pub lambda_cd_min: Real,
+    pub dt_s: Real,
+    pub last_tick: u64,
+    /// `SAFE`, `UNSAFE`, `FAULT`, or `RUNNING` while a live team flies.
+    pub verdict: String,
+    pub violations: Vec<ViolationMark>,
+    /// Replay only (empty live: frames arrive as events).
+    pub frames: Vec<Frame>,
+    /// How many ticks one replay frame stands for (1 live).
+    pub stride: u64,
+}
+
+/// One shown tick.
+#[derive(Debug, Clone, Serialize)]
+pub struct Frame {
+    pub tick: u64,
+    pub t: Real,
+    /// Positions in millimetres, x y z per member (integers keep replay.html small).
+    pub p: Vec<i64>,
+    /// Smallest distance between two agents (limit 2 eps, Fig. 11).
+    pub sep: Real,
+    /// Largest follower deviation |r - r_HT| (limit delta, eq. 38).
+    pub dev: Real,
+    /// Smallest follower distance to the prism's sides (limit 0, Theorem 3, Fig. 11).
+    pub bnd: Real,
+    /// lambda_1(U_D) (limit lambda_CD,min, Fig. 8).
+    pub l1: Real,
+    /// Ticks per second of wall time (live frames only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rate: Option<Real>,
+}
+
+impl Scene {
+    /// The static scene of a scenario; `delta_m` and `eps_m` come from the audit.
+    pub fn new(s: &Scenario, delta_m: Real, eps_m: Real, lambda_cd_min: Real) -> Self {
+        let members = &s.formation.members;
+        let index = |id: u32| members.iter().position(|m| m.id == id);
+        let edges = members
+            .iter()
+            .enumerate()
+            .filter_map(|(k, m)| m.link.map(|l| (k, l)))
+            .flat_map(|(k, l)| {
+                l.in_neighbors
+                    .into_iter()
+                    .filter_map(index)
+                    .map(move |j| [j, k])
+            })
+            .collect();
+        Scene {
+            scenario: s.origin.clone(),
+            agents: members
+                .iter()
+                .map(|m| AgentInfo {
+                    id: m.id,
+                    role: m.role.as_str(),
+                })
+                .collect(),
+            edges,
+            polygon: s.formation.polygon.clone(),
+            half_height_m: delta_m + eps_m,
+            eps_m,
+            delta_m,
+            lambda_cd_min,
+            dt_s: s.dt_s(),
+            last_tick: s.last_tick(),
+            verdict: "RUNNING".to_owned(),
+            violations: Vec::new(),
+            frames: Vec::new(),
+            stride: 1,
+        }
+    }
+}
+
+/// Computes frames for one scenario (keeps the follower list between ticks).
+pub struct FrameMaker {
+    followers: Vec<usize>,
+    half_height_m: Real,
+}
+
+impl FrameMaker {
+    pub fn new(scenario: &Scenario, half_height_m: Real) -> Self {
+        let followers = (0..scenario.formation.members.len())
+            .filter(|&k| scenario.formation.members[k].role == Role::Follower)
+            .collect();
+        FrameMaker {
+            followers,
+            half_height_m,
+        }
+    }
+
+    /// The frame of one tick from actual (`pos`) and desired (`ht`) positions in member order.
+    pub fn frame(&self, s: &Scenario, tick: u64, t: Real, pos: &[Vec3], ht: &[Vec3]) -> Frame {
+        let dev = self
+            .followers
+            .iter()
+            .map(|&k| (pos[k] - ht[k]).norm())
+            .fold(0.0, Real::max);
+        Frame {
+            tick,
+            t,
+            p: pos
+                .iter()
+                .flat_map(|r| [r.x, r.y, r.z])
+                .map(|v| (v * 1000.0).round() as i64)
+                .collect(),
+            sep: finite_or(min_separation(pos).0, -1.0),
+            dev,
+            bnd: finite_or(
+                boundary_distance(s, &self.followers, self.half_height_m, pos, ht),
+                -1.0,
+            ),
+            l1: lambdas_at(s, t)[0],
+            rate: None,
+        }
+    }
+}
+
+/// JSON has no infinity: a team without a pair or a polygon shows `fallback`.
+fn finite_or(v: Real, fallback: Real) -> Real {
+    if v.is_finite() {
+        v
+    } else {
+        fallback
+    }
+}
+
+/// Frames kept so that replay.html stays within `budget_bytes` at `agents` agents: each frame
+/// costs about 7 bytes per coordinate; 3 MB are left for three.js and the page.
+pub fn frame_stride(ticks: u64, agents: usize, budget_bytes: usize) -> u64 {
+    let per_frame = agents * 3 * 7 + 120;
+    let frames = (budget_bytes.saturating_sub(3 << 20) / per_frame).clamp(2, 3000) as u64;
+    ticks.div_ceil(frames).max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stride_keeps_a_thousand_agents_within_twenty_megabytes() {
+        let budget = 20 << 20;
+        let ticks = 10_001;
+        let stride = frame_stride(ticks, 1000, budget);
+        let frames = ticks.div_ceil(stride) + 1;
+        assert!(frames as usize * (1000 * 3 * 7 + 120) + (3 << 20) <= budget);
+        assert_eq!(frame_stride(100, 40, budget), 1);
+    }
+
+    #[test]
+    fn paper40_scene_has_three_in_neighbours_per_follower() {
+        let s = Scenario::builtin("paper40").expect("paper40");
+        let scene = Scene::new(&s, 0.1, 0.2, 0.5);
+        let followers = s
+            .formation
+            .members
+            .iter()
+            .filter(|m| m.role == Role::Follower)
+            .count();
+        assert_eq!(scene.edges.len(), 3 * followers);
+        assert_eq!(scene.agents.len(), 40);
+    }
+}

@@ -1,0 +1,168 @@
+"""Python on a team's live bus: the wire types of `common/src/messages.rs` as ctypes structures,
+and the iceoryx2 configuration of the runtime's processes, for the `iceoryx2` package from PyPI
+(0.10, the version of the Rust side).
+
+Each agent publishes its state on `cdm/<team>/state/<id>`; a team keeps one spare subscriber slot
+on each of these services for an observer such as `examples/watch.py`. An observer never slows
+the team: when it falls behind, it loses its oldest samples.
+"""
+
+import ctypes
+import math
+import os
+import re
+
+import iceoryx2 as iox2
+
+# Where the runtime keeps iceoryx2's files and what its shared-memory names start with. Mirrors
+# the one Rust function that decides both (cdm-iox, `common::transport`: root and global
+# prefix); tests/tests/python_bus.rs checks the two agree. Change them here only.
+ROOT_FORMAT = "/dev/shm/cdm-iceoryx2-{uid}/"
+PREFIX_FORMAT = "cdm{uid}_"
+
+
+def bus_paths(uid=None):
+    """The iceoryx2 root directory and global prefix of the runtime for user `uid`."""
+    uid = os.getuid() if uid is None else uid
+    return ROOT_FORMAT.format(uid=uid), PREFIX_FORMAT.format(uid=uid)
+
+
+def bus_config():
+    """An iceoryx2 config equal to the runtime's where it matters to open its services."""
+    config = iox2.config.default()
+    root, prefix = bus_paths()
+    config.global_cfg.root_path = iox2.Path.new(root)
+    config.global_cfg.prefix = iox2.FileName.new(prefix)
+    return config
+
+
+class StateMsg(ctypes.Structure):
+    """One agent's full state at one tick (`common::messages::StateMsg`, 128 bytes)."""
+
+    _fields_ = [
+        ("tick", ctypes.c_uint64),
+        ("scenario_hash", ctypes.c_uint64),
+        ("id", ctypes.c_uint32),
+        ("status", ctypes.c_uint32),
+        ("fault_code", ctypes.c_uint32),
+        ("fault_peer", ctypes.c_uint32),
+        # x y z, vx vy vz, then attitude and rates: the layout of common/src/dynamics.rs.
+        ("state", ctypes.c_double * 12),
+    ]
+
+    @staticmethod
+    def type_name():
+        """The stable name the Rust type declares (`cdm_iox::STATE_TYPE_NAME`)."""
+        return "cdm::State"
+
+    def position(self):
+        return (self.state[0], self.state[1], self.state[2])
+
+
+class ClockMsg(ctypes.Structure):
+    """The orchestrator's grant (`common::messages::ClockMsg`, 24 bytes)."""
+
+    _fields_ = [
+        ("grant_tick", ctypes.c_uint64),
+        ("scenario_hash", ctypes.c_uint64),
+        ("command", ctypes.c_uint32),
+        ("reason", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name():
+        """The stable name the Rust type declares (`cdm_iox::CLOCK_TYPE_NAME`)."""
+        return "cdm::Clock"
+
+
+STATUS_OK = 0
+
+
+def state_service(team, agent_id):
+    """`cdm/<team>/state/<id>`, as `common::transport::TeamName::state_service` names it."""
+    return f"cdm/{team}/state/{agent_id}"
+
+
+def team_ids(team, config):
+    """The ids of the team's agents, from the state services iceoryx2 lists (sorted); empty
+    until the orchestrator has created all of them (`cdm/<team>/wake/orch` comes last)."""
+    pattern = re.compile(r"^cdm/" + re.escape(team) + r"/state/(\d+)$")
+    ids = []
+    complete = False
+    for details in iox2.Service.list(config, iox2.ServiceType.Ipc):
+        name = details.name().to_string()
+        complete = complete or name == f"cdm/{team}/wake/orch"
+        m = pattern.match(name)
+        if m:
+            ids.append(int(m.group(1)))
+    return sorted(ids) if complete else []
+
+
+class TeamReader:
+    """Subscribes to every state service of a running team and assembles complete ticks."""
+
+    def __init__(self, team, node_name="cdm-python"):
+        self.config = bus_config()
+        self.node = (
+            iox2.NodeBuilder.new()
+            .name(iox2.NodeName.new(node_name))
+            .config(self.config)
+            .create(iox2.ServiceType.Ipc)
+        )
+        self.ids = team_ids(team, self.config)
+        if not self.ids:
+            raise LookupError(f"team {team}: no state service (is it running, as this user?)")
+        self.subscribers = {}
+        for agent_id in self.ids:
+            service = (
+                self.node.service_builder(iox2.ServiceName.new(state_service(team, agent_id)))
+                .publish_subscribe(StateMsg)
+                .open()
+            )
+            self.subscribers[agent_id] = service.subscriber_builder().create()
+        # tick -> {id: StateMsg}
+        self.pending = {}
+        # The newest tick returned: older samples (a buffer replayed after a publisher left, a
+        # laggard) are ignored, so ticks come out strictly increasing.
+        self.done_tick = -1
+
+    def poll(self):
+        """Takes every sample that arrived; returns the ticks now complete, oldest first, as
+        (tick, {id: StateMsg}), each tick once and strictly increasing. A tick some agent's
+        sample was lost for (the observer fell behind) is dropped once a later tick completes."""
+        for agent_id, sub in self.subscribers.items():
+            while True:
+                sample = sub.receive()
+                if sample is None:
+                    break
+                msg = StateMsg.from_buffer_copy(sample.payload().contents)
+                sample.delete()
+                if msg.status == STATUS_OK and msg.tick > self.done_tick:
+                    self.pending.setdefault(msg.tick, {})[agent_id] = msg
+        done = [t for t, states in self.pending.items() if len(states) == len(self.ids)]
+        out = []
+        for t in sorted(done):
+            out.append((t, self.pending.pop(t)))
+        if done:
+            self.done_tick = max(done)
+            for t in [t for t in self.pending if t < self.done_tick]:
+                del self.pending[t]
+        return out
+
+    def wait(self, seconds):
+        """Sleeps up to `seconds` (the node's wait also notices signals)."""
+        self.node.wait(iox2.Duration.from_secs_f64(seconds))
+
+
+def min_separation(states):
+    """The smallest distance between two agents (the audit's D_B(t), Fig. 11) and the pair."""
+    pts = sorted((m.position(), i) for i, m in states.items())
+    best = (float("inf"), None, None)
+    for k, (p, i) in enumerate(pts):
+        for q, j in pts[k + 1 :]:
+            if q[0] - p[0] > best[0]:
+                break
+            d = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
+            if d < best[0]:
+                best = (d, min(i, j), max(i, j))
+    return best

@@ -1,0 +1,164 @@
+//! Python on a team's live bus (`python/cdm_bus.py`, the PyPI `iceoryx2` 0.10 package in the test
+//! venv of scripts/test-deps.sh): the Python wire types and iceoryx2 paths are the Rust ones, and
+//! `python/examples/watch.py` reads a running team and prints, per tick, the same smallest
+//! separation as the audit's function computes from the same states (telemetry.csv).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use common::math::{vec3, Vec3};
+use integration_tests::{bin, describe, run, spawn, unique_team, venv_python, TempDir};
+
+/// A Python start-up and one query.
+const PYTHON_DEADLINE: Duration = Duration::from_secs(60);
+/// paper40 for 100,001 ticks as processes: ~10 s on two idle cores.
+const TEAM_DEADLINE: Duration = Duration::from_secs(600);
+/// watch.py's lines: enough ticks to compare. Python drains 40 subscribers more slowly than a
+/// fast team publishes, so it completes the ticks it can (the team never waits for it); the
+/// buffered last ticks of a finished team complete in any case.
+const WATCHED_TICKS: usize = 50;
+
+fn python_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("python")
+}
+
+fn python(args: &[&str]) -> Command {
+    let mut c = Command::new(venv_python());
+    // No __pycache__ in the source tree.
+    c.env("PYTHONPATH", python_dir())
+        .env("PYTHONDONTWRITEBYTECODE", "1")
+        .args(args);
+    c
+}
+
+#[test]
+fn python_wire_types_and_paths_are_the_rust_ones() {
+    let out = run(
+        &mut python(&[
+            "-c",
+            "import ctypes, cdm_bus as b; r, p = b.bus_paths(); \
+             print(r); print(p); \
+             print(b.StateMsg.type_name(), ctypes.sizeof(b.StateMsg)); \
+             print(b.ClockMsg.type_name(), ctypes.sizeof(b.ClockMsg))",
+        ]),
+        PYTHON_DEADLINE,
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    let cfg = common::transport::iceoryx2_config();
+    let want = [
+        cfg.global.root_path().to_string(),
+        cfg.global.prefix.to_string(),
+        format!(
+            "{} {}",
+            common::transport::STATE_TYPE_NAME,
+            std::mem::size_of::<common::messages::StateMsg>()
+        ),
+        format!(
+            "{} {}",
+            common::transport::CLOCK_TYPE_NAME,
+            std::mem::size_of::<common::messages::ClockMsg>()
+        ),
+    ];
+    assert_eq!(
+        lines, want,
+        "python/cdm_bus.py disagrees with the Rust side"
+    );
+}
+
+/// Per-tick positions of telemetry.csv, for the ticks asked.
+fn positions(path: &Path, ticks: &BTreeMap<u64, f64>) -> BTreeMap<u64, Vec<Vec3>> {
+    use std::io::BufRead;
+    let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let last = ticks.keys().next_back().copied().unwrap_or(0);
+    let mut out: BTreeMap<u64, Vec<Vec3>> = BTreeMap::new();
+    for line in std::io::BufReader::new(file).lines().skip(1) {
+        let line = line.unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let f: Vec<&str> = line.split(',').collect();
+        let tick: u64 = f[0].parse().unwrap_or(u64::MAX);
+        if tick > last {
+            break;
+        }
+        if ticks.contains_key(&tick) {
+            let num = |i: usize| f[i].parse::<f64>().unwrap_or(f64::NAN);
+            out.entry(tick)
+                .or_default()
+                .push(vec3([num(4), num(5), num(6)]));
+        }
+    }
+    out
+}
+
+#[test]
+fn watch_py_reads_a_live_team_like_the_audit() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("run");
+    let team = unique_team("watch");
+    let orch = spawn(Command::new(bin("orchestrator")).args([
+        "launch",
+        "--team",
+        &team,
+        "--out",
+        out.to_str().unwrap_or_default(),
+        "--no-figures",
+        "--t-total",
+        "1000",
+    ]));
+    let script = python_dir().join("examples").join("watch.py");
+    let watched = run(
+        &mut python(&[
+            script.to_str().unwrap_or_default(),
+            "--team",
+            &team,
+            "--ticks",
+            &WATCHED_TICKS.to_string(),
+            "--silence",
+            "30",
+        ]),
+        PYTHON_DEADLINE,
+    );
+    assert_eq!(watched.status.code(), Some(0), "{}", describe(&watched));
+    let done = orch.finish(TEAM_DEADLINE);
+    assert_eq!(done.status.code(), Some(0), "{}", describe(&done));
+
+    // `tick <k> t <s> min_separation <m> agents <i> <j>`
+    let mut seen = BTreeMap::new();
+    for line in String::from_utf8_lossy(&watched.stdout).lines() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        assert!(
+            f.len() == 9 && f[0] == "tick" && f[4] == "min_separation",
+            "{line}"
+        );
+        let tick: u64 = f[1].parse().unwrap_or_else(|e| panic!("{line}: {e}"));
+        let sep: f64 = f[5].parse().unwrap_or_else(|e| panic!("{line}: {e}"));
+        assert!(
+            seen.keys().next_back().is_none_or(|&last| tick > last),
+            "ticks must come out strictly increasing: {tick} after {:?}",
+            seen.keys().next_back()
+        );
+        seen.insert(tick, sep);
+    }
+    assert_eq!(
+        seen.len(),
+        WATCHED_TICKS,
+        "one line per tick, no tick twice"
+    );
+    let states = positions(&out.join("telemetry.csv"), &seen);
+    for (tick, sep) in &seen {
+        let pos = states
+            .get(tick)
+            .unwrap_or_else(|| panic!("tick {tick} is not in telemetry.csv"));
+        assert_eq!(pos.len(), 40, "tick {tick}");
+        // The audit's own function over the same states.
+        let (audit_sep, _, _) = common::safety::min_separation(pos);
+        assert!(
+            (sep - audit_sep).abs() <= 1e-9,
+            "tick {tick}: watch.py {sep} m, audit {audit_sep} m"
+        );
+    }
+}

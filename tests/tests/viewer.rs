@@ -1,0 +1,393 @@
+//! The 3-D viewer in a real browser (headless Chromium, Debian's package; installed by
+//! scripts/test-deps.sh): `replay.html` from `file://` with the network disabled, `view --serve`
+//! and a live `launch --serve`. The DOM contract (`#cdm-status`: data-agents, data-tick,
+//! data-verdict) must match the run, the screenshot must show the agents, and the page must log
+//! no error (the page counts window errors, rejections and console.error in data-errors, and
+//! Chromium's log is searched for uncaught exceptions).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::Duration;
+
+use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
+use serde_json::Value;
+
+/// One headless Chromium page load; the page renders in well under a second on an idle machine.
+const BROWSER_DEADLINE: Duration = Duration::from_secs(120);
+/// A short simulate or a view start.
+const RUN_DEADLINE: Duration = Duration::from_secs(180);
+/// A live team of 100k ticks: ~20 s on two idle cores, far more under load.
+const LIVE_DEADLINE: Duration = Duration::from_secs(600);
+/// Virtual time the page gets before its snapshot (Chromium's --virtual-time-budget).
+const PAGE_BUDGET_MS: &str = "8000";
+
+fn orchestrator(args: &[&str]) -> Command {
+    let mut c = Command::new(bin("orchestrator"));
+    c.args(args);
+    c
+}
+
+fn ok(out: &Output) {
+    assert_eq!(out.status.code(), Some(0), "{}", describe(out));
+}
+
+fn read_json(path: &Path) -> Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Headless Chromium on `url`, as root needs it (no sandbox), WebGL by SwiftShader; `action` is
+/// `--dump-dom` or `--screenshot=PATH`. `offline` runs it in an empty network namespace.
+fn chromium(url: &str, action: &str, profile: &Path, offline: bool) -> Output {
+    let args = [
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--no-first-run",
+        "--window-size=1200,800",
+        "--enable-logging=stderr",
+        "--v=0",
+    ];
+    let mut c = if offline {
+        let mut c = Command::new("unshare");
+        c.args(["--net", "--", "chromium"]);
+        c
+    } else {
+        Command::new("chromium")
+    };
+    c.args(args)
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!("--virtual-time-budget={PAGE_BUDGET_MS}"))
+        .arg(action)
+        .arg(url);
+    let out = run(&mut c, BROWSER_DEADLINE);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "chromium {url}: {}",
+        describe(&out)
+    );
+    out
+}
+
+/// The page's `#cdm-status` attributes, read from Chromium's DOM dump; asserts no page error.
+fn status(url: &str, dir: &Path, offline: bool) -> Status {
+    let out = chromium(url, "--dump-dom", &dir.join("profile"), offline);
+    let dom = String::from_utf8_lossy(&out.stdout);
+    let log = String::from_utf8_lossy(&out.stderr);
+    for bad in ["Uncaught", "ERROR:CONSOLE"] {
+        assert!(
+            !log.contains(bad),
+            "{url}: `{bad}` in Chromium's log:\n{log}"
+        );
+    }
+    let start = dom
+        .find("<div id=\"cdm-status\"")
+        .unwrap_or_else(|| panic!("{url}: no #cdm-status in the page:\n{dom}"));
+    let tag = &dom[start..start + dom[start..].find('>').unwrap_or(0)];
+    let attr = |name: &str| {
+        let key = format!("{name}=\"");
+        let at = tag
+            .find(&key)
+            .unwrap_or_else(|| panic!("{url}: no {name} in {tag}"));
+        let rest = &tag[at + key.len()..];
+        rest[..rest.find('"').unwrap_or(0)].to_owned()
+    };
+    let num = |name: &str| {
+        attr(name)
+            .parse::<i64>()
+            .unwrap_or_else(|e| panic!("{url}: {name} in {tag}: {e}"))
+    };
+    assert_eq!(attr("data-errors"), "0", "{url}: page errors: {tag}\n{log}");
+    Status {
+        agents: num("data-agents"),
+        tick: num("data-tick"),
+        first_tick: tag
+            .contains("data-first-tick")
+            .then(|| num("data-first-tick")),
+        verdict: attr("data-verdict"),
+    }
+}
+
+#[derive(Debug)]
+struct Status {
+    agents: i64,
+    tick: i64,
+    first_tick: Option<i64>,
+    verdict: String,
+}
+
+/// Takes a screenshot and asserts it is not blank: several colours, and the agents drawn (many
+/// pixels of the followers' blue in the middle of the view, where the camera keeps the team).
+fn screenshot(url: &str, dir: &Path, offline: bool) -> PathBuf {
+    let path = dir.join("shot.png");
+    chromium(
+        url,
+        &format!("--screenshot={}", path.display()),
+        &dir.join("profile"),
+        offline,
+    );
+    let file = std::fs::File::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader
+        .next_frame(&mut buf)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let channels = info.color_type.samples();
+    let (w, h) = (info.width as usize, info.height as usize);
+    let px = |x: usize, y: usize| {
+        let i = (y * w + x) * channels;
+        (buf[i], buf[i + 1], buf[i + 2])
+    };
+    let mut colours = std::collections::BTreeSet::new();
+    let mut blue = 0usize;
+    for y in 0..h {
+        for x in 0..w {
+            let (r, g, b) = px(x, y);
+            colours.insert((r >> 4, g >> 4, b >> 4));
+            let middle = (w / 4..3 * w / 4).contains(&x) && (h / 4..3 * h / 4).contains(&y);
+            if middle && b > 120 && b as u32 > r as u32 + 60 {
+                blue += 1;
+            }
+        }
+    }
+    assert!(
+        colours.len() >= 8,
+        "{}: only {} colours",
+        path.display(),
+        colours.len()
+    );
+    assert!(
+        blue >= 300,
+        "{}: only {blue} follower-blue pixels in the middle: agents not drawn",
+        path.display()
+    );
+    path
+}
+
+/// A finished paper40 run (2,000 ticks) in a fresh directory.
+fn paper40_run(tmp: &TempDir) -> (PathBuf, Value) {
+    let out = tmp.path().join("run");
+    let o = out.to_str().unwrap_or_default();
+    ok(&run(
+        &mut orchestrator(&[
+            "simulate",
+            "--out",
+            o,
+            "--no-figures",
+            "--max-ticks",
+            "2000",
+        ]),
+        RUN_DEADLINE,
+    ));
+    let audit = read_json(&out.join("audit.json"));
+    (out, audit)
+}
+
+fn file_url(path: &Path) -> String {
+    let abs = std::fs::canonicalize(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    format!("file://{}", abs.display())
+}
+
+#[test]
+fn replay_html_works_from_file_with_the_network_disabled() {
+    let tmp = TempDir::new();
+    let (out, audit) = paper40_run(&tmp);
+    let replay = out.join("replay.html");
+    let page = std::fs::read_to_string(&replay).unwrap_or_else(|e| panic!("{e}"));
+    // Self-contained: nothing is loaded from anywhere else.
+    for remote in ["src=\"http", "href=\"http", "import('http", "from 'http"] {
+        assert!(!page.contains(remote), "replay.html refers to {remote}");
+    }
+    let s = status(&file_url(&replay), tmp.path(), true);
+    assert_eq!(s.agents, 40, "{s:?}");
+    // The replay opens on the run's last tick.
+    assert_eq!(s.tick, 2000, "{s:?}");
+    assert_eq!(s.verdict, audit["verdict"].as_str().unwrap_or("?"), "{s:?}");
+    screenshot(&file_url(&replay), tmp.path(), true);
+}
+
+#[test]
+fn view_serves_the_replay_of_a_finished_run() {
+    let tmp = TempDir::new();
+    let (out, audit) = paper40_run(&tmp);
+    std::fs::remove_file(out.join("replay.html")).unwrap_or_else(|e| panic!("{e}"));
+    let o = out.to_str().unwrap_or_default();
+    let mut view = spawn(&mut orchestrator(&["view", o, "--serve", "127.0.0.1:0"]));
+    view.wait_for_output("serving http://", RUN_DEADLINE);
+    let url = served_url(&mut view, "serving ");
+    assert!(
+        out.join("replay.html").is_file(),
+        "view rewrites replay.html"
+    );
+    let s = status(&url, tmp.path(), false);
+    assert_eq!(
+        (s.agents, s.tick, s.verdict.as_str()),
+        (40, 2000, audit["verdict"].as_str().unwrap_or("?")),
+        "{s:?}"
+    );
+    let done = view.kill();
+    assert!(done.status.signal_or_code_known(), "{}", describe(&done));
+}
+
+/// The `http://HOST:PORT/` the command printed after `prefix`.
+fn served_url(child: &mut Running, prefix: &str) -> String {
+    let (stdout, _) = child.output_so_far();
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with(prefix))
+        .unwrap_or_else(|| panic!("no `{prefix}` line in:\n{stdout}"));
+    let at = line.find("http://").unwrap_or(0);
+    line[at..]
+        .split_whitespace()
+        .next()
+        .unwrap_or("")
+        .to_owned()
+}
+
+trait Known {
+    fn signal_or_code_known(&self) -> bool;
+}
+
+impl Known for std::process::ExitStatus {
+    fn signal_or_code_known(&self) -> bool {
+        use std::os::unix::process::ExitStatusExt;
+        self.code().is_some() || self.signal().is_some()
+    }
+}
+
+#[test]
+fn a_live_launch_is_served_and_its_tick_advances() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("live");
+    let team = unique_team("viewer");
+    let o = out.to_str().unwrap_or_default();
+    // 100,001 ticks: long enough to look at it several times while it flies.
+    let mut orch = spawn(&mut orchestrator(&[
+        "launch",
+        "--team",
+        &team,
+        "--out",
+        o,
+        "--no-figures",
+        "--t-total",
+        "1000",
+        "--serve",
+        "127.0.0.1:0",
+    ]));
+    orch.wait_for_output("live view: http://", RUN_DEADLINE);
+    let base = served_url(&mut orch, "live view: ");
+    // `?frames=5`: the page closes its stream after five frames, so Chromium can take its snapshot.
+    let url = format!("{base}?frames=5");
+    let first = status(&url, tmp.path(), false);
+    let second = status(&url, tmp.path(), false);
+    let shot_url = format!("{base}?frames=5&graph=1");
+    let shot = screenshot(&shot_url, tmp.path(), false);
+    if let Some(keep) = std::env::var_os("CDM_VIEWER_SCREENSHOT") {
+        // The README's picture comes from here: CDM_VIEWER_SCREENSHOT=docs/viewer-live.png.
+        std::fs::copy(&shot, &keep)
+            .unwrap_or_else(|e| panic!("{}: {e}", Path::new(&keep).display()));
+    }
+    let done = orch.finish(LIVE_DEADLINE);
+    ok(&done);
+    let audit = read_json(&out.join("audit.json"));
+    let last = audit["ticks"].as_i64().unwrap_or(0) - 1;
+    for s in [&first, &second] {
+        assert_eq!(s.agents, 40, "{s:?}");
+        let f = s.first_tick.unwrap_or(i64::MAX);
+        assert!(f < s.tick, "the tick advances within one page: {s:?}");
+        assert!(s.tick <= last, "{s:?} beyond the last tick {last}");
+        // While the team flies the page says so, or the final verdict once it has landed.
+        assert!(
+            s.verdict == "RUNNING" || s.verdict == audit["verdict"].as_str().unwrap_or("?"),
+            "{s:?}"
+        );
+    }
+    assert!(
+        first.tick < second.tick,
+        "a later page shows a later tick: {first:?} then {second:?}"
+    );
+    assert!(
+        first.tick < last,
+        "the first look happened while the team flew: {first:?}, last tick {last}"
+    );
+}
+
+#[test]
+fn replay_of_a_thousand_agents_stays_within_its_budget() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("n1000");
+    let o = out.to_str().unwrap_or_default();
+    ok(&run(
+        &mut orchestrator(&[
+            "simulate",
+            "--n",
+            "1000",
+            "--out",
+            o,
+            "--no-figures",
+            "--max-ticks",
+            "1500",
+        ]),
+        RUN_DEADLINE,
+    ));
+    let size = std::fs::metadata(out.join("replay.html"))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .len();
+    // The budget of orchestrator/src/viewer/mod.rs (REPLAY_BUDGET_BYTES).
+    assert!(size <= 20 << 20, "replay.html is {size} bytes at N = 1000");
+    let s = status(&file_url(&out.join("replay.html")), tmp.path(), true);
+    assert_eq!((s.agents, s.tick), (1000, 1500), "{s:?}");
+}
+
+#[test]
+fn bad_serve_addresses_and_run_directories_are_refused() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("never");
+    let o = out.to_str().unwrap_or_default();
+    let bad = run(
+        &mut orchestrator(&["launch", "--out", o, "--serve", "nowhere"]),
+        RUN_DEADLINE,
+    );
+    assert_eq!(bad.status.code(), Some(2), "{}", describe(&bad));
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("--serve nowhere"),
+        "{}",
+        describe(&bad)
+    );
+    // A port that is taken: refused before any process or file of the team exists.
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let addr = taken
+        .local_addr()
+        .unwrap_or_else(|e| panic!("{e}"))
+        .to_string();
+    let team = unique_team("busyport");
+    let busy = run(
+        &mut orchestrator(&["launch", "--team", &team, "--out", o, "--serve", &addr]),
+        RUN_DEADLINE,
+    );
+    assert_eq!(busy.status.code(), Some(2), "{}", describe(&busy));
+    assert!(
+        String::from_utf8_lossy(&busy.stderr).contains("cannot listen"),
+        "{}",
+        describe(&busy)
+    );
+    assert!(!out.exists(), "a refused launch created {}", out.display());
+    // `view` of a directory that is not a run names the file it misses.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap_or_else(|e| panic!("{e}"));
+    let view = run(
+        &mut orchestrator(&["view", empty.to_str().unwrap_or_default()]),
+        RUN_DEADLINE,
+    );
+    assert_eq!(view.status.code(), Some(2), "{}", describe(&view));
+    assert!(
+        String::from_utf8_lossy(&view.stderr).contains("scenario.toml"),
+        "{}",
+        describe(&view)
+    );
+}
