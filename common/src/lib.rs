@@ -11,6 +11,7 @@ pub mod control;
 pub mod dynamics;
 pub mod engine;
 pub mod fault_inject;
+pub mod files;
 pub mod formation;
 pub mod frame;
 pub mod gains;

@@ -32,7 +32,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         }
         Command::Simulate { source, out, run } => {
             let s = load(&source)?;
-            let dir = RunDir::create(&out.out, out.force).map_err(Failure::bad_input)?;
+            let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
             let started = Instant::now();
             let opts = SimulateOptions {
                 every: out.every,
@@ -59,14 +59,14 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 ReportError::Draw(_) => Failure::fault(e),
             })?;
             if !cli.quiet {
-                println!(
+                out!(
                     "report: {} files in {} ({:.2} s)",
                     files.len(),
                     dir.display(),
                     started.elapsed().as_secs_f64()
                 );
                 for f in &files {
-                    println!("  {}", f.display());
+                    out!("  {}", f.display());
                 }
             }
             Ok(Exit::Safe)
@@ -118,7 +118,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             } = launch(&s, &opts)?;
             summary("launch", &report, started, &opts.out, cli.quiet);
             if !cli.quiet && ticking > Duration::ZERO {
-                println!(
+                out!(
                     "  ticking: {:.2} s ({:.0} ticks/s), start-up {:.2} s (command to first tick)",
                     ticking.as_secs_f64(),
                     report.ticks as f64 / ticking.as_secs_f64(),
@@ -127,7 +127,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 if let (Some((id, member)), Some(me)) =
                     (member_peak_rss, crate::team::own_peak_rss())
                 {
-                    println!(
+                    out!(
                         "  peak resident memory: largest member {:.1} MiB (agent {id}), \
                          orchestrator {:.1} MiB",
                         member as f64 / 1024.0,
@@ -153,7 +153,10 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             match out {
                 Some(p) => common::rundir::write_atomic(&p, s.to_toml().as_bytes())
                     .map_err(Failure::bad_input)?,
-                None => print!("{}", s.to_toml()),
+                None => {
+                    use std::io::Write as _;
+                    let _ = std::io::stdout().write_all(s.to_toml().as_bytes());
+                }
             }
             Ok(Exit::Safe)
         }
@@ -190,7 +193,7 @@ fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
     match report(dir, run.follow) {
         Ok(files) => {
             if !quiet {
-                println!(
+                out!(
                     "  figures: {} files (orchestrator report redraws them)",
                     files.len()
                 );
@@ -257,7 +260,7 @@ fn plan(
             crate::report::deviation_sweep(&dir, &points, c.numbers.delta_m, c.t_threshold_s)
                 .map_err(Failure::fault)?;
         if !quiet {
-            println!(
+            out!(
                 "sweep: {} travel times, {} files in {}",
                 points.len(),
                 files.len(),
@@ -268,7 +271,7 @@ fn plan(
     if !quiet {
         print_certificate(&c);
     } else {
-        println!("{}", c.verdict);
+        out!("{}", c.verdict);
     }
     if let Some(p) = json {
         let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
@@ -282,34 +285,38 @@ fn plan(
 }
 
 fn print_certificate(c: &Certificate) {
-    println!(
+    out!(
         "pre-flight certificate: {} ({} agents)",
-        c.scenario, c.agents
+        c.scenario,
+        c.agents
     );
-    println!(
+    out!(
         "  lambda_1(U_D) min       {:.4} at t = {:.2} s",
-        c.numbers.lambda1_min, c.numbers.t_lambda1_min_s
+        c.numbers.lambda1_min,
+        c.numbers.t_lambda1_min_s
     );
-    println!("  lambda_CD,min           {:.4}", c.numbers.lambda_cd_min);
-    println!(
+    out!("  lambda_CD,min           {:.4}", c.numbers.lambda_cd_min);
+    out!(
         "  D_B, D_S                {:.4} m, {:.4} m",
-        c.numbers.d_b_m, c.numbers.d_s_m
+        c.numbers.d_b_m,
+        c.numbers.d_s_m
     );
-    println!("  eps                     {} m", c.numbers.eps_m);
-    println!("  delta_max (eq. 35)      {:.4} m", c.numbers.delta_max_m);
-    println!("  delta (eq. 38)          {:.4} m", c.numbers.delta_m);
-    println!(
+    out!("  eps                     {} m", c.numbers.eps_m);
+    out!("  delta_max (eq. 35)      {:.4} m", c.numbers.delta_max_m);
+    out!("  delta (eq. 38)          {:.4} m", c.numbers.delta_m);
+    out!(
         "  gains stability margin  {:.4} (eq. 26)",
         c.gains_stability_margin
     );
-    println!(
+    out!(
         "  t_total_s               {} s (max follower deviation {:.4} m)",
-        c.t_total_s, c.max_follower_deviation_m
+        c.t_total_s,
+        c.max_follower_deviation_m
     );
-    println!("  T_threshold             {:.2} s", c.t_threshold_s);
-    println!("verdict: {}", c.verdict);
+    out!("  T_threshold             {:.2} s", c.t_threshold_s);
+    out!("verdict: {}", c.verdict);
     for r in &c.reasons {
-        println!("  - {r}");
+        out!("  - {r}");
     }
 }
 
@@ -326,10 +333,10 @@ pub fn exit_of(r: &AuditReport) -> Exit {
 pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet: bool) {
     let wall = started.elapsed().as_secs_f64();
     if quiet {
-        println!("{}", r.verdict);
+        out!("{}", r.verdict);
         return;
     }
-    println!(
+    out!(
         "{what}: {} agents, {} ticks in {:.2} s ({:.0} ticks/s), verdict {}",
         r.agents,
         r.ticks,
@@ -337,19 +344,19 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
         r.ticks as f64 / wall.max(1e-9),
         r.verdict
     );
-    println!(
+    out!(
         "  max deviation {:.4} m (delta {:.4} m), min separation {:.4} m (2 eps {} m), min boundary distance {:.4} m, lambda_1 min {:.4} (lambda_CD,min {:.4})",
         r.max_deviation_m, r.numbers.delta_m, r.min_separation_m, 2.0 * r.numbers.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.numbers.lambda_cd_min
     );
     if !r.violations.is_empty() {
-        println!(
+        out!(
             "  {} violation(s), first: {:?}",
             r.violations.len(),
             r.violations[0]
         );
     }
     if let Some(f) = &r.fault {
-        println!("  fault: {}", f.message);
+        out!("  fault: {}", f.message);
     }
-    println!("  run directory: {}", dir.display());
+    out!("  run directory: {}", dir.display());
 }

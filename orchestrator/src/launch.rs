@@ -82,7 +82,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
-    let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
+    let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
     dir.write_scenario(s).map_err(Failure::fault)?;
     // Humans start members with scenario.toml; spawned members read the JSON copy (same hash).
     let scenario_file = dir.path().join("scenario.toml");
@@ -110,7 +110,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             }
         }
     } else if !o.quiet {
-        println!(
+        out!(
             "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
             o.team,
             ids.len(),
@@ -402,10 +402,8 @@ fn run_team(
                     });
                 }
                 tel.write_tick(&rows).map_err(|e| {
-                    (
-                        fault("io", None, None, tick, e.to_string()),
-                        StopReason::AgentFault,
-                    )
+                    let what = format!("cannot write telemetry: {e}");
+                    (fault("io", None, None, tick, what), StopReason::AgentFault)
                 })?;
             }
             // The slot vector serves a later tick (no allocation per tick).
@@ -426,16 +424,25 @@ fn run_team(
             }
             stopping = Some((f, since, echo, k));
         }
+        // A failed flush (a full disk) is a fault: the file keeps its whole ticks, no later
+        // tick may follow a gap.
+        let io = |e: std::io::Error| {
+            let what = format!("cannot write telemetry: {e}");
+            (
+                fault("io", None, None, next_tick, what),
+                StopReason::AgentFault,
+            )
+        };
         if next_tick > last {
             progress.finish();
-            let _ = tel.flush();
+            tel.flush().map_err(io)?;
             return Ok((ticking, true));
         }
         if progressed {
             last_progress = Instant::now();
             // Complete ticks reach the file at least every 100 ms (and at every stop).
             if last_flush.elapsed() > Duration::from_millis(100) {
-                let _ = tel.flush();
+                tel.flush().map_err(io)?;
                 last_flush = Instant::now();
             }
             continue;
