@@ -21,6 +21,7 @@ pub mod math;
 pub mod member;
 pub mod member_cli;
 pub mod messages;
+pub mod options;
 pub mod plan;
 pub mod rundir;
 pub mod safety;

@@ -56,6 +56,8 @@ pub struct TelemetryWriter<W: Rewind> {
     line: String,
     /// Bytes of whole ticks the output has taken.
     committed: u64,
+    /// Where each buffered tick ends in `line`, so a batch cut short keeps its whole ticks.
+    tick_ends: Vec<usize>,
 }
 
 impl<W: Rewind> TelemetryWriter<W> {
@@ -66,9 +68,11 @@ impl<W: Rewind> TelemetryWriter<W> {
             every: every.max(1),
             line: String::with_capacity(BATCH_BYTES + 4096),
             committed: 0,
+            tick_ends: Vec::new(),
         };
         w.line.push_str(HEADER);
         w.line.push('\n');
+        w.tick_ends.push(w.line.len());
         w.flush()?;
         Ok(w)
     }
@@ -107,27 +111,51 @@ impl<W: Rewind> TelemetryWriter<W> {
             }
             line.push('\n');
         }
+        self.tick_ends.push(self.line.len());
         if self.line.len() >= BATCH_BYTES {
             self.flush()?;
         }
         Ok(())
     }
 
-    /// Hand the buffered ticks to the output. On failure the output is cut back to the ticks
-    /// written before (the error is the write's, not the cut's) and the buffer is dropped.
+    /// Hand the buffered ticks to the output. When the output fails part way (a full disk) it
+    /// is cut back to the last whole tick it took; the error is the write's, the rest of the
+    /// batch is dropped.
     pub fn flush(&mut self) -> io::Result<()> {
-        let written = self
-            .out
-            .write_all(self.line.as_bytes())
-            .and_then(|()| self.out.flush());
-        let len = self.line.len() as u64;
-        self.line.clear();
-        match written {
-            Ok(()) => {
-                self.committed += len;
-                Ok(())
+        let bytes = self.line.as_bytes();
+        let mut done = 0;
+        let mut failed = None;
+        while done < bytes.len() {
+            match self.out.write(&bytes[done..]) {
+                Ok(0) => {
+                    failed = Some(io::Error::from(io::ErrorKind::WriteZero));
+                    break;
+                }
+                Ok(n) => done += n,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
             }
-            Err(e) => {
+        }
+        let failed = failed.or_else(|| self.out.flush().err());
+        let kept = match failed {
+            None => done,
+            Some(_) => self
+                .tick_ends
+                .iter()
+                .copied()
+                .take_while(|&e| e <= done)
+                .last()
+                .unwrap_or(0),
+        };
+        self.committed += kept as u64;
+        self.line.clear();
+        self.tick_ends.clear();
+        match failed {
+            None => Ok(()),
+            Some(e) => {
                 let _ = self.out.rewind_to(self.committed);
                 Err(e)
             }

@@ -8,6 +8,7 @@ use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
 
+use common::options::timeout;
 use common::transport::TeamName;
 
 use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
@@ -32,6 +33,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         }
         Command::Simulate { source, out, run } => {
             let s = load(&source)?;
+            check_follow(&s, run.follow)?;
             let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
             let started = Instant::now();
             let opts = SimulateOptions {
@@ -84,18 +86,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             run,
         } => {
             let s = load(&source)?;
+            check_follow(&s, run.follow)?;
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
             let team = TeamName::new(&team_name)
                 .map_err(|e| Failure::bad_input(format!("--team: {e}")))?;
-            let secs = |v: f64, what: &str| {
-                if v.is_finite() && v > 0.0 {
-                    Ok(Duration::from_secs_f64(v))
-                } else {
-                    Err(Failure::bad_input(format!(
-                        "{what} must be a positive number of seconds, got {v}"
-                    )))
-                }
-            };
+            let secs = |v: f64, what: &str| timeout(what, v).map_err(Failure::bad_input);
             let opts = LaunchOptions {
                 out: out.unwrap_or_else(|| PathBuf::from("runs").join(team.as_str())),
                 team,
@@ -184,6 +179,28 @@ pub fn load(source: &Source) -> Result<Scenario, Failure> {
     Ok(s)
 }
 
+/// `--follow ID` names an agent of the scenario: checked before the flight, not after it.
+fn check_follow(s: &Scenario, follow: Option<u32>) -> Result<(), Failure> {
+    match follow {
+        Some(id) if s.role_of(id).is_none() => Err(Failure::bad_input(format!(
+            "--follow {id}: {} has no agent with this id",
+            s.origin
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// A travel time from `option` (`--sweep`) checked as `--t-total` is: the same scenario rules
+/// (enough ticks to resolve the motion, at most 1e8 ticks).
+fn check_travel_time(s: &Scenario, t: f64, option: &str) -> Result<(), Failure> {
+    let mut f = s.file.clone();
+    f.t_total_s = t;
+    let origin = format!("{} with {option} travel time {t}", s.origin);
+    Scenario::from_file(f, &origin, Checks::Member)
+        .map(drop)
+        .map_err(Failure::bad_input)
+}
+
 /// Draw the figures of a finished run (unless `--no-figures`). A drawing failure is logged, not
 /// fatal: the run's own outcome decides the exit code.
 fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
@@ -236,6 +253,11 @@ fn plan(
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let s = load(source)?;
+    if let Some((times, _)) = &sweep {
+        for t in [times.first(), times.last()].into_iter().flatten() {
+            check_travel_time(&s, *t, "--sweep")?;
+        }
+    }
     let spinner = Spinner::new(
         "certifying: flying the plan at several travel times for T_threshold",
         quiet,

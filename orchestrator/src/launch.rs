@@ -178,6 +178,27 @@ fn interrupted_at(tick: u64, when: &str) -> Stop {
     )
 }
 
+/// The stop when the team did not gather in time: names the agents no process joined as (or,
+/// when all joined, those still waiting for a neighbour's ports).
+fn join_timeout(r: &common::transport::Readiness, team: &TeamName, within: Duration) -> Stop {
+    let missing = r.not_joined();
+    let (ids, what) = if missing.is_empty() {
+        (r.waiting_for(), "did not connect to their neighbours in")
+    } else {
+        (missing, "did not join")
+    };
+    let list: Vec<String> = ids.iter().map(u32::to_string).collect();
+    let message = format!(
+        "agents {} {what} team {team} within {} s",
+        list.join(", "),
+        within.as_secs_f64()
+    );
+    (
+        fault("join-timeout", ids.first().copied(), None, 0, message),
+        StopReason::AgentSilent,
+    )
+}
+
 /// Wait for every process to open its ports, record the subscription graph, then tick; returns
 /// when ticking began and whether every tick of the plan was completed.
 fn run_team(
@@ -207,20 +228,7 @@ fn run_team(
         }
         check_children(children, 0)?;
         if started.elapsed() > join_deadline {
-            let waiting = ports.readiness().waiting_for();
-            return Err((
-                fault(
-                    "join-timeout",
-                    waiting.first().copied(),
-                    None,
-                    0,
-                    format!(
-                        "agents {waiting:?} did not join team {} within {join_deadline:?}",
-                        o.team
-                    ),
-                ),
-                StopReason::AgentSilent,
-            ));
+            return Err(join_timeout(&ports.readiness(), &o.team, join_deadline));
         }
         let _ = ports.wait(Duration::from_millis(20));
     }
