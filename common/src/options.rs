@@ -12,8 +12,14 @@ pub fn timeout(option: &str, seconds: f64) -> Result<Duration, String> {
     if seconds > 0.0 && seconds <= MAX_TIMEOUT_S {
         Ok(Duration::from_secs_f64(seconds))
     } else {
+        // 1e308 as "1e308", not 309 digits.
+        let shown = if seconds.abs() >= 1e6 {
+            format!("{seconds:e}")
+        } else {
+            seconds.to_string()
+        };
         Err(format!(
-            "{option} must be a number of seconds in (0, {MAX_TIMEOUT_S}], got {seconds}"
+            "{option} must be a number of seconds in (0, {MAX_TIMEOUT_S}], got {shown}"
         ))
     }
 }

@@ -140,15 +140,6 @@ fn check_resolution(f: &ScenarioFile) -> Result<(), E> {
             reason: format!("must be at most {MAX_COMM_HZ} Hz, got {}", f.comm_hz),
         });
     }
-    let ticks = f.t_total_s * f.comm_hz;
-    if ticks < MIN_MOTION_TICKS {
-        return Err(E::Invalid {
-            field: "t_total_s".into(),
-            reason: format!(
-                "times comm_hz gives {ticks} ticks over the motion; at least {MIN_MOTION_TICKS} are needed to resolve it (raise t_total_s or comm_hz)"
-            ),
-        });
-    }
     let pole = crate::gains::mode_roots(&f.gains, (-1.0, 0.0))
         .iter()
         .map(|&(re, im)| re.hypot(im))
@@ -163,6 +154,15 @@ fn check_resolution(f: &ScenarioFile) -> Result<(), E> {
                 "{} Hz is too coarse for the gains' fastest pole ({pole:.4} rad/s): an RK4 step dt / substeps = {h} s needs step x pole <= {MAX_STEP_TIMES_POLE}; raise comm_hz to at least {:.4} Hz or substeps",
                 f.comm_hz,
                 pole * substeps.recip() / MAX_STEP_TIMES_POLE
+            ),
+        });
+    }
+    let ticks = f.t_total_s * f.comm_hz;
+    if ticks < MIN_MOTION_TICKS {
+        return Err(E::Invalid {
+            field: "t_total_s".into(),
+            reason: format!(
+                "times comm_hz gives {ticks} ticks over the motion; at least {MIN_MOTION_TICKS} are needed to resolve it (raise t_total_s or comm_hz)"
             ),
         });
     }
