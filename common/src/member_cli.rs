@@ -22,14 +22,14 @@ pub struct MemberArgs {
     /// This quadcopter's id in the scenario.
     #[arg(long)]
     pub id: u32,
-    /// Seconds to wait for the team to start.
+    /// Seconds to wait for the team to start (at most 86400).
     #[arg(
         long = "join-timeout",
         allow_negative_numbers = true,
         default_value_t = 300.0
     )]
     pub join_timeout_s: f64,
-    /// Seconds without progress mid-run before stopping.
+    /// Seconds without progress mid-run before stopping (at most 86400).
     #[arg(
         long = "silence-timeout",
         allow_negative_numbers = true,
@@ -45,6 +45,18 @@ pub fn main(kind: Kind, name: &'static str) -> ! {
     let parsed = MemberArgs::command()
         .name(name)
         .bin_name(name)
+        .about(match kind {
+            Kind::Leader => {
+                "One primary or secondary leader of a continuum-deformation team, as a process \
+                 (followers fly with `agent`). Exit 0 when the team finished its plan, 2 bad \
+                 input, 3 the team was stopped or failed."
+            }
+            Kind::Agent => {
+                "One follower of a continuum-deformation team, as a process (leaders fly with \
+                 `leader`). Exit 0 when the team finished its plan, 2 bad input, 3 the team \
+                 was stopped or failed."
+            }
+        })
         .try_get_matches()
         .and_then(|m| MemberArgs::from_arg_matches(&m));
     let args = match parsed {
@@ -57,9 +69,11 @@ pub fn main(kind: Kind, name: &'static str) -> ! {
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    // Plain text when stderr is a file or a pipe, as the orchestrator does.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
     std::process::exit(main_for(kind, args))
 }

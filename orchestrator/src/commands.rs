@@ -358,23 +358,37 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
         out!("{}", r.verdict);
         return;
     }
+    // No rate for a run that flew no tick (it would read "inf" or "NaN").
+    let rate = if r.ticks > 0 {
+        format!(" ({:.0} ticks/s)", r.ticks as f64 / wall.max(1e-9))
+    } else {
+        String::new()
+    };
     out!(
-        "{what}: {} agents, {} ticks in {:.2} s ({:.0} ticks/s), verdict {}",
+        "{what}: {} agents, {} ticks in {:.2} s{rate}, verdict {}",
         r.agents,
         r.ticks,
         wall,
-        r.ticks as f64 / wall.max(1e-9),
         r.verdict
     );
-    out!(
-        "  max deviation {:.4} m (delta {:.4} m), min separation {:.4} m (2 eps {} m), min boundary distance {:.4} m, lambda_1 min {:.4} (lambda_CD,min {:.4})",
-        r.max_deviation_m, r.numbers.delta_m, r.min_separation_m, 2.0 * r.numbers.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.numbers.lambda_cd_min
-    );
-    if !r.violations.is_empty() {
+    // A run that flew no tick has no margins (they would read "inf").
+    if r.ticks > 0 {
         out!(
-            "  {} violation(s), first: {:?}",
+            "  max deviation {:.4} m (delta {:.4} m), min separation {:.4} m (2 eps {} m), min boundary distance {:.4} m, lambda_1 min {:.4} (lambda_CD,min {:.4})",
+            r.max_deviation_m, r.numbers.delta_m, r.min_separation_m, 2.0 * r.numbers.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.numbers.lambda_cd_min
+        );
+    }
+    if !r.violations.is_empty() {
+        let v = &r.violations[0];
+        out!(
+            "  {} violation(s), first: {} at tick {} (t = {:.2} s), agents {:?}, value {:.4} against the limit {:.4}",
             r.violations.len(),
-            r.violations[0]
+            v.kind,
+            v.tick,
+            v.t_s,
+            v.agents,
+            v.value,
+            v.limit
         );
     }
     if let Some(f) = &r.fault {
