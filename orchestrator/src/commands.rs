@@ -12,6 +12,7 @@ use common::options::timeout;
 use common::transport::TeamName;
 
 use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
+use crate::export;
 use crate::launch::{launch, LaunchOptions};
 use crate::progress::{Progress, Spinner};
 use crate::report::{report, ReportError};
@@ -135,6 +136,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             }
             Ok(exit_of(&report))
         }
+        Command::Export { target } => export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
         } => {
@@ -306,7 +308,7 @@ fn plan(
     })
 }
 
-fn print_certificate(c: &Certificate) {
+pub fn print_certificate(c: &Certificate) {
     out!(
         "pre-flight certificate: {} ({} agents)",
         c.scenario,

@@ -13,6 +13,7 @@ macro_rules! out {
 
 mod cli;
 mod commands;
+mod export;
 mod launch;
 mod progress;
 mod report;

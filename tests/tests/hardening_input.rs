@@ -144,6 +144,9 @@ fn follow_and_sweep_are_checked_up_front() {
     assert!(!sweep.exists());
 }
 
+/// A named change to one agent's section of a file, and what the error must say.
+type Edit = (&'static str, fn(&str) -> String, &'static str);
+
 /// Item 14: in a 1000-agent file, an unknown key on an agent, an unknown role and a position
 /// with two components are reported with the agent's id.
 #[test]
@@ -159,7 +162,7 @@ fn malformed_agents_are_named_by_id() {
     // Section 701 is the 700th agent (index 699).
     let k = 700;
     let id = toml_value(sections[k], "id").expect("id");
-    let edits: [(&str, fn(&str) -> String, &str); 3] = [
+    let edits: [Edit; 3] = [
         (
             "unknown key",
             |s| s.replacen("role =", "colour = 1\nrole =", 1),

@@ -146,8 +146,8 @@ fn check_resolution(f: &ScenarioFile) -> Result<(), E> {
         .fold(0.0, Real::max);
     let substeps = Real::from(f.substeps.unwrap_or(super::DEFAULT_SUBSTEPS).max(1));
     let h = 1.0 / f.comm_hz / substeps;
-    // `!(<=)` also refuses a NaN pole (gains too large to find the roots).
-    if !(h * pole <= MAX_STEP_TIMES_POLE) {
+    // A NaN pole (gains too large to find the roots) is refused too.
+    if h * pole > MAX_STEP_TIMES_POLE || pole.is_nan() {
         return Err(E::Invalid {
             field: "comm_hz".into(),
             reason: format!(

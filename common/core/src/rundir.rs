@@ -185,7 +185,7 @@ impl RunDir {
             .ok()
             .filter(|f| f.metadata().is_ok_and(|m| m.is_file()));
         let Some(f) = reserved else {
-            return Ok(write_atomic(&p, text.as_bytes())?);
+            return write_atomic(&p, text.as_bytes());
         };
         let done = files::fill(f, &tmp, text.as_bytes()).and_then(|()| {
             fs::rename(&tmp, &p).map_err(|source| FileError::Io {

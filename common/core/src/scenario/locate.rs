@@ -79,7 +79,7 @@ fn section_at(text: &str, offset: usize) -> Option<Who> {
             }
             let agents =
                 t.starts_with("[[") && t.trim_start_matches('[').trim_start().starts_with("agents");
-            who = agents.then(|| Who {
+            who = agents.then_some(Who {
                 index: sections,
                 id: None,
             });

@@ -8,6 +8,8 @@ pub type Mat2 = nalgebra::Matrix2<Real>;
 pub type Mat3 = nalgebra::Matrix3<Real>;
 pub type DMat = nalgebra::DMatrix<Real>;
 pub type DVec = nalgebra::DVector<Real>;
+/// A complex number (the closed-loop modes of eq. 26).
+pub type Complex = nalgebra::Complex<Real>;
 
 /// Gravity in m/s^2 (Appendix A).
 pub const GRAVITY_MPS2: Real = 9.81;
