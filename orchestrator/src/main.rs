@@ -17,6 +17,7 @@ mod export;
 mod launch;
 mod progress;
 mod report;
+mod stall;
 mod team;
 
 use clap::Parser;
