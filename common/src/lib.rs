@@ -7,8 +7,8 @@
 //! fault injection; no iceoryx2) -> `cdm-iox` (the only library crate that names iceoryx2).
 
 pub use cdm_core::{
-    audit, control, dynamics, engine, export, formation, frame, gains, geometry, graph, math,
-    outcome, plan, rundir, safety, scenario, simulate, step, telemetry,
+    audit, control, dynamics, engine, export, files, formation, frame, gains, geometry, graph,
+    math, outcome, plan, rundir, safety, scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
 pub use cdm_runtime::{
@@ -17,3 +17,4 @@ pub use cdm_runtime::{
 
 pub mod member;
 pub mod member_cli;
+pub mod options;

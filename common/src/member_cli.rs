@@ -1,10 +1,9 @@
 //! The command line shared by the `agent` and `leader` binaries.
 
-use std::path::PathBuf;
-use std::time::Duration;
-
 use crate::member::{run_member, Deadlines, Kind};
+use crate::options::timeout;
 use crate::transport::TeamName;
+use std::path::PathBuf;
 
 /// Arguments of a member process (`agent` or `leader`).
 #[derive(Debug, Clone, clap::Parser)]
@@ -23,14 +22,14 @@ pub struct MemberArgs {
     /// This quadcopter's id in the scenario.
     #[arg(long)]
     pub id: u32,
-    /// Seconds to wait for the team to start.
+    /// Seconds to wait for the team to start (at most 86400).
     #[arg(
         long = "join-timeout",
         allow_negative_numbers = true,
         default_value_t = 300.0
     )]
     pub join_timeout_s: f64,
-    /// Seconds without progress mid-run before stopping.
+    /// Seconds without progress mid-run before stopping (at most 86400).
     #[arg(
         long = "silence-timeout",
         allow_negative_numbers = true,
@@ -46,6 +45,18 @@ pub fn main(kind: Kind, name: &'static str) -> ! {
     let parsed = MemberArgs::command()
         .name(name)
         .bin_name(name)
+        .about(match kind {
+            Kind::Leader => {
+                "One primary or secondary leader of a continuum-deformation team, as a process \
+                 (followers fly with `agent`). Exit 0 when the team finished its plan, 2 bad \
+                 input, 3 the team was stopped or failed."
+            }
+            Kind::Agent => {
+                "One follower of a continuum-deformation team, as a process (leaders fly with \
+                 `leader`). Exit 0 when the team finished its plan, 2 bad input, 3 the team \
+                 was stopped or failed."
+            }
+        })
         .try_get_matches()
         .and_then(|m| MemberArgs::from_arg_matches(&m));
     let args = match parsed {
@@ -58,9 +69,11 @@ pub fn main(kind: Kind, name: &'static str) -> ! {
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    // Plain text when stderr is a file or a pipe, as the orchestrator does.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
     std::process::exit(main_for(kind, args))
 }
@@ -75,41 +88,49 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             return 2;
         }
     };
-    let secs = |s: f64, what: &str| {
-        if s.is_finite() && s > 0.0 {
-            Ok(Duration::from_secs_f64(s))
-        } else {
-            Err(format!(
-                "error: {what} must be a positive number of seconds, got {s}"
-            ))
-        }
-    };
     let deadlines = match (
-        secs(args.join_timeout_s, "--join-timeout"),
-        secs(args.silence_timeout_s, "--silence-timeout"),
+        timeout("--join-timeout", args.join_timeout_s),
+        timeout("--silence-timeout", args.silence_timeout_s),
     ) {
         (Ok(join), Ok(silence)) => Deadlines { join, silence },
         (Err(e), _) | (_, Err(e)) => {
-            say(&e);
+            say(&format!("error: {e}"));
             return 2;
         }
     };
     let span = tracing::info_span!("agent", id = args.id);
     let _g = span.enter();
     match run_member(kind, &args.scenario, &team, args.id, deadlines, interrupted) {
-        Ok(f) => {
-            tracing::debug!(
-                tick = f.tick,
-                reason = f.reason,
-                "stopped by the orchestrator"
-            );
-            0
-        }
+        Ok(f) => stopped(&team, args.id, f),
         Err(e) => {
             say(&format!("error: {e}"));
             e.exit_code()
         }
     }
+}
+
+/// The exit code of a member the orchestrator stopped: 0 only when the team finished its plan.
+/// A team stopped for a fault, a silence (members that never joined) or an interruption did not
+/// fly, so its members exit 3 and say why, like the orchestrator.
+fn stopped(team: &TeamName, id: u32, f: crate::member::Finished) -> i32 {
+    use crate::messages::StopReason;
+    tracing::debug!(
+        tick = f.tick,
+        reason = f.reason,
+        "stopped by the orchestrator"
+    );
+    let why = match StopReason::from_code(f.reason) {
+        StopReason::Finished => return 0,
+        StopReason::AgentFault => "an agent failed".to_string(),
+        StopReason::AgentSilent => "agents went silent or never joined".to_string(),
+        StopReason::Interrupted => "the orchestrator was interrupted".to_string(),
+        StopReason::Unknown(c) => format!("reason code {c}"),
+    };
+    say(&format!(
+        "error: agent {id}: team {team} was stopped by its orchestrator at tick {} before the end of the plan: {why} (the orchestrator's audit.json has the details)",
+        f.tick
+    ));
+    3
 }
 
 /// Writes one line to stderr with a single write(2): the members of a team share the

@@ -31,7 +31,8 @@ pub fn serve_addr(text: &str) -> Result<std::net::SocketAddr, String> {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Pre-flight certificate: lambda_1(U_D), D_B, D_S, delta, T_threshold; exit 0 SAFE, 1 UNSAFE.
+    /// Pre-flight certificate: lambda_1(U_D), D_B, D_S, delta, T_threshold. Exit 0 SAFE,
+    /// 1 UNSAFE, 2 bad input, 3 a file cannot be written.
     Plan {
         #[command(flatten)]
         source: Source,
@@ -46,7 +47,8 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
     },
-    /// Fly the team with the deterministic in-process engine into a run directory.
+    /// Fly the team with the deterministic in-process engine into a run directory. Exit 0 safe
+    /// and complete, 1 violation, 2 bad input, 3 runtime fault (a control fault, a full disk).
     Simulate {
         #[command(flatten)]
         source: Source,
@@ -70,7 +72,8 @@ pub enum Command {
         /// Reuse a non-empty --out directory.
         #[arg(long)]
         force: bool,
-        /// The team's name: its services' prefix ([A-Za-z0-9_-], at most 48 characters).
+        /// The team's name: its services' prefix ([A-Za-z0-9_-], at most 48 characters;
+        /// default cdm<pid of the orchestrator>).
         #[arg(long)]
         team: Option<String>,
         /// Do not start the processes: wait for them to be started by hand.
@@ -80,10 +83,11 @@ pub enum Command {
         /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory.
         #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
         window: u32,
-        /// Seconds without any agent progress before the team is stopped as faulty.
+        /// Seconds without any agent progress before the team is stopped as faulty (at most
+        /// 86400).
         #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
         agent_timeout: f64,
-        /// Seconds to wait for hand-started processes (--no-spawn) to join.
+        /// Seconds to wait for hand-started processes (--no-spawn) to join (at most 86400).
         #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
         join_timeout: f64,
         /// Serve a live 3-D view of the team while it flies (ADDR: HOST:PORT or PORT; a bare
@@ -109,7 +113,8 @@ pub enum Command {
         /// The run directory.
         #[arg(value_name = "RUN_DIR")]
         dir: PathBuf,
-        /// The follower of fig_agent_<id> (default: the one deepest in the graph).
+        /// The agent of fig_agent_<id>, a follower or a leader (default: the follower deepest
+        /// in the graph).
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
     },
@@ -135,13 +140,13 @@ pub enum Command {
 pub enum ScenarioCommand {
     /// Write a built-in or generated scenario as a TOML file (after graph synthesis).
     Export {
-        /// A built-in scenario name (paper40).
+        /// A built-in scenario name (paper40, the default).
         #[arg(conflicts_with = "n")]
         name: Option<String>,
-        /// A generated team of N agents instead.
+        /// A generated team of N agents instead (4..=2000).
         #[arg(long)]
         n: Option<usize>,
-        /// Output file (default: standard output).
+        /// Output file (default: standard output); an existing file is replaced.
         #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
@@ -237,13 +242,15 @@ pub struct RunOptions {
     /// End the run at the tick of its first safety violation (telemetry kept, exit 1).
     #[arg(long)]
     pub stop_on_violation: bool,
-    /// Fly only ticks 0..=K of the plan (a shorter run of the same scenario).
+    /// Fly only ticks 0..=K of the plan, that is K + 1 ticks (a shorter run of the same
+    /// scenario).
     #[arg(long, value_name = "K")]
     pub max_ticks: Option<u64>,
     /// Do not draw the figures at the end of the run.
     #[arg(long)]
     pub no_figures: bool,
-    /// The follower of fig_agent_<id> (default: the one deepest in the graph).
+    /// The agent of fig_agent_<id>, a follower or a leader (default: the follower deepest in
+    /// the graph); checked before the flight.
     #[arg(long, value_name = "ID")]
     pub follow: Option<u32>,
 }

@@ -9,6 +9,7 @@ use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
 
+use common::options::timeout;
 use common::transport::TeamName;
 
 use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
@@ -34,7 +35,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         }
         Command::Simulate { source, out, run } => {
             let s = load(&source)?;
-            let dir = RunDir::create(&out.out, out.force).map_err(Failure::bad_input)?;
+            check_follow(&s, run.follow)?;
+            let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
             let started = Instant::now();
             let opts = SimulateOptions {
                 every: out.every,
@@ -64,14 +66,14 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 ReportError::Draw(_) => Failure::fault(e),
             })?;
             if !cli.quiet {
-                println!(
+                out!(
                     "report: {} files in {} ({:.2} s)",
                     files.len(),
                     dir.display(),
                     started.elapsed().as_secs_f64()
                 );
                 for f in &files {
-                    println!("  {}", f.display());
+                    out!("  {}", f.display());
                 }
             }
             Ok(Exit::Safe)
@@ -90,18 +92,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             run,
         } => {
             let s = load(&source)?;
+            check_follow(&s, run.follow)?;
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
             let team = TeamName::new(&team_name)
                 .map_err(|e| Failure::bad_input(format!("--team: {e}")))?;
-            let secs = |v: f64, what: &str| {
-                if v.is_finite() && v > 0.0 {
-                    Ok(Duration::from_secs_f64(v))
-                } else {
-                    Err(Failure::bad_input(format!(
-                        "{what} must be a positive number of seconds, got {v}"
-                    )))
-                }
-            };
+            let secs = |v: f64, what: &str| timeout(what, v).map_err(Failure::bad_input);
             let opts = LaunchOptions {
                 out: out.unwrap_or_else(|| PathBuf::from("runs").join(team.as_str())),
                 team,
@@ -130,7 +125,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             } = launch(&s, &opts)?;
             summary("launch", &report, started, &opts.out, cli.quiet);
             if !cli.quiet && ticking > Duration::ZERO {
-                println!(
+                out!(
                     "  ticking: {:.2} s ({:.0} ticks/s), start-up {:.2} s (command to first tick)",
                     ticking.as_secs_f64(),
                     report.ticks as f64 / ticking.as_secs_f64(),
@@ -139,7 +134,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 if let (Some((id, member)), Some(me)) =
                     (member_peak_rss, crate::team::own_peak_rss())
                 {
-                    println!(
+                    out!(
                         "  peak resident memory: largest member {:.1} MiB (agent {id}), \
                          orchestrator {:.1} MiB",
                         member as f64 / 1024.0,
@@ -169,7 +164,10 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             match out {
                 Some(p) => common::rundir::write_atomic(&p, s.to_toml().as_bytes())
                     .map_err(Failure::bad_input)?,
-                None => print!("{}", s.to_toml()),
+                None => {
+                    use std::io::Write as _;
+                    let _ = std::io::stdout().write_all(s.to_toml().as_bytes());
+                }
             }
             Ok(Exit::Safe)
         }
@@ -226,6 +224,28 @@ pub fn load(source: &Source) -> Result<Scenario, Failure> {
     Ok(s)
 }
 
+/// `--follow ID` names an agent of the scenario: checked before the flight, not after it.
+fn check_follow(s: &Scenario, follow: Option<u32>) -> Result<(), Failure> {
+    match follow {
+        Some(id) if s.role_of(id).is_none() => Err(Failure::bad_input(format!(
+            "--follow {id}: {} has no agent with this id",
+            s.origin
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// A travel time from `option` (`--sweep`) checked as `--t-total` is: the same scenario rules
+/// (enough ticks to resolve the motion, at most 1e8 ticks).
+fn check_travel_time(s: &Scenario, t: f64, option: &str) -> Result<(), Failure> {
+    let mut f = s.file.clone();
+    f.t_total_s = t;
+    let origin = format!("{} with {option} travel time {t}", s.origin);
+    Scenario::from_file(f, &origin, Checks::Member)
+        .map(drop)
+        .map_err(Failure::bad_input)
+}
+
 /// Draw the figures of a finished run (unless `--no-figures`). A drawing failure is logged, not
 /// fatal: the run's own outcome decides the exit code.
 fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
@@ -235,7 +255,7 @@ fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
     match report(dir, run.follow) {
         Ok(files) => {
             if !quiet {
-                println!(
+                out!(
                     "  figures: {} files (orchestrator report redraws them)",
                     files.len()
                 );
@@ -326,6 +346,11 @@ fn plan(
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let s = load(source)?;
+    if let Some((times, _)) = &sweep {
+        for t in [times.first(), times.last()].into_iter().flatten() {
+            check_travel_time(&s, *t, "--sweep")?;
+        }
+    }
     let spinner = Spinner::new(
         "certifying: flying the plan at several travel times for T_threshold",
         quiet,
@@ -350,7 +375,7 @@ fn plan(
             crate::report::deviation_sweep(&dir, &points, c.numbers.delta_m, c.t_threshold_s)
                 .map_err(Failure::fault)?;
         if !quiet {
-            println!(
+            out!(
                 "sweep: {} travel times, {} files in {}",
                 points.len(),
                 files.len(),
@@ -361,7 +386,7 @@ fn plan(
     if !quiet {
         print_certificate(&c);
     } else {
-        println!("{}", c.verdict);
+        out!("{}", c.verdict);
     }
     if let Some(p) = json {
         let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
@@ -375,34 +400,38 @@ fn plan(
 }
 
 pub fn print_certificate(c: &Certificate) {
-    println!(
+    out!(
         "pre-flight certificate: {} ({} agents)",
-        c.scenario, c.agents
+        c.scenario,
+        c.agents
     );
-    println!(
+    out!(
         "  lambda_1(U_D) min       {:.4} at t = {:.2} s",
-        c.numbers.lambda1_min, c.numbers.t_lambda1_min_s
+        c.numbers.lambda1_min,
+        c.numbers.t_lambda1_min_s
     );
-    println!("  lambda_CD,min           {:.4}", c.numbers.lambda_cd_min);
-    println!(
+    out!("  lambda_CD,min           {:.4}", c.numbers.lambda_cd_min);
+    out!(
         "  D_B, D_S                {:.4} m, {:.4} m",
-        c.numbers.d_b_m, c.numbers.d_s_m
+        c.numbers.d_b_m,
+        c.numbers.d_s_m
     );
-    println!("  eps                     {} m", c.numbers.eps_m);
-    println!("  delta_max (eq. 35)      {:.4} m", c.numbers.delta_max_m);
-    println!("  delta (eq. 38)          {:.4} m", c.numbers.delta_m);
-    println!(
+    out!("  eps                     {} m", c.numbers.eps_m);
+    out!("  delta_max (eq. 35)      {:.4} m", c.numbers.delta_max_m);
+    out!("  delta (eq. 38)          {:.4} m", c.numbers.delta_m);
+    out!(
         "  gains stability margin  {:.4} (eq. 26)",
         c.gains_stability_margin
     );
-    println!(
+    out!(
         "  t_total_s               {} s (max follower deviation {:.4} m)",
-        c.t_total_s, c.max_follower_deviation_m
+        c.t_total_s,
+        c.max_follower_deviation_m
     );
-    println!("  T_threshold             {:.2} s", c.t_threshold_s);
-    println!("verdict: {}", c.verdict);
+    out!("  T_threshold             {:.2} s", c.t_threshold_s);
+    out!("verdict: {}", c.verdict);
     for r in &c.reasons {
-        println!("  - {r}");
+        out!("  - {r}");
     }
 }
 
@@ -419,30 +448,44 @@ pub fn exit_of(r: &AuditReport) -> Exit {
 pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet: bool) {
     let wall = started.elapsed().as_secs_f64();
     if quiet {
-        println!("{}", r.verdict);
+        out!("{}", r.verdict);
         return;
     }
-    println!(
-        "{what}: {} agents, {} ticks in {:.2} s ({:.0} ticks/s), verdict {}",
+    // No rate for a run that flew no tick (it would read "inf" or "NaN").
+    let rate = if r.ticks > 0 {
+        format!(" ({:.0} ticks/s)", r.ticks as f64 / wall.max(1e-9))
+    } else {
+        String::new()
+    };
+    out!(
+        "{what}: {} agents, {} ticks in {:.2} s{rate}, verdict {}",
         r.agents,
         r.ticks,
         wall,
-        r.ticks as f64 / wall.max(1e-9),
         r.verdict
     );
-    println!(
-        "  max deviation {:.4} m (delta {:.4} m), min separation {:.4} m (2 eps {} m), min boundary distance {:.4} m, lambda_1 min {:.4} (lambda_CD,min {:.4})",
-        r.max_deviation_m, r.numbers.delta_m, r.min_separation_m, 2.0 * r.numbers.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.numbers.lambda_cd_min
-    );
+    // A run that flew no tick has no margins (they would read "inf").
+    if r.ticks > 0 {
+        out!(
+            "  max deviation {:.4} m (delta {:.4} m), min separation {:.4} m (2 eps {} m), min boundary distance {:.4} m, lambda_1 min {:.4} (lambda_CD,min {:.4})",
+            r.max_deviation_m, r.numbers.delta_m, r.min_separation_m, 2.0 * r.numbers.eps_m, r.min_boundary_distance_m, r.lambda1_min_run, r.numbers.lambda_cd_min
+        );
+    }
     if !r.violations.is_empty() {
-        println!(
-            "  {} violation(s), first: {:?}",
+        let v = &r.violations[0];
+        out!(
+            "  {} violation(s), first: {} at tick {} (t = {:.2} s), agents {:?}, value {:.4} against the limit {:.4}",
             r.violations.len(),
-            r.violations[0]
+            v.kind,
+            v.tick,
+            v.t_s,
+            v.agents,
+            v.value,
+            v.limit
         );
     }
     if let Some(f) = &r.fault {
-        println!("  fault: {}", f.message);
+        out!("  fault: {}", f.message);
     }
-    println!("  run directory: {}", dir.display());
+    out!("  run directory: {}", dir.display());
 }

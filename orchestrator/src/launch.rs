@@ -109,7 +109,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
-    let dir = RunDir::create(&o.out, o.force).map_err(Failure::bad_input)?;
+    let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
     dir.write_scenario(s).map_err(Failure::fault)?;
     // Humans start members with scenario.toml; spawned members read the JSON copy (same hash).
     let scenario_file = dir.path().join("scenario.toml");
@@ -143,7 +143,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             }
         }
     } else if !o.quiet {
-        println!(
+        out!(
             "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
             o.team,
             ids.len(),
@@ -218,6 +218,33 @@ fn interrupted_at(tick: u64, when: &str) -> Stop {
     )
 }
 
+/// The stop when the team did not gather in time: names the agents no process joined as (or,
+/// when all joined, those still waiting for a neighbour's ports).
+fn join_timeout(r: &common::transport::Readiness, team: &TeamName, within: Duration) -> Stop {
+    let missing = r.not_joined();
+    let (ids, what) = if missing.is_empty() {
+        (r.waiting_for(), "did not connect to their neighbours in")
+    } else {
+        (missing, "did not join")
+    };
+    let list: Vec<String> = ids.iter().map(u32::to_string).collect();
+    let message = format!(
+        "agents {} {what} team {team} within {} s",
+        list.join(", "),
+        within.as_secs_f64()
+    );
+    (
+        fault(
+            FaultKind::JoinTimeout,
+            ids.first().copied(),
+            None,
+            0,
+            message,
+        ),
+        StopReason::AgentSilent,
+    )
+}
+
 /// Wait for every process to open its ports, record the subscription graph, then tick; returns
 /// when ticking began and whether every tick of the plan was completed.
 fn run_team(
@@ -248,20 +275,7 @@ fn run_team(
         }
         check_children(children, 0)?;
         if started.elapsed() > join_deadline {
-            let waiting = ports.readiness().waiting_for();
-            return Err((
-                fault(
-                    FaultKind::JoinTimeout,
-                    waiting.first().copied(),
-                    None,
-                    0,
-                    format!(
-                        "agents {waiting:?} did not join team {} within {join_deadline:?}",
-                        o.team
-                    ),
-                ),
-                StopReason::AgentSilent,
-            ));
+            return Err(join_timeout(&ports.readiness(), &o.team, join_deadline));
         }
         let _ = ports.wait(Duration::from_millis(20));
     }
@@ -449,7 +463,13 @@ fn run_team(
                 }
                 tel.write_tick(&rows).map_err(|e| {
                     (
-                        fault(FaultKind::Io, None, None, tick, e.to_string()),
+                        fault(
+                            FaultKind::Io,
+                            None,
+                            None,
+                            tick,
+                            format!("cannot write telemetry: {e}"),
+                        ),
                         StopReason::AgentFault,
                     )
                 })?;
@@ -472,16 +492,25 @@ fn run_team(
             }
             stopping = Some((f, since, rank));
         }
+        // A failed flush (a full disk) is a fault: the file keeps its whole ticks, no later
+        // tick may follow a gap.
+        let io = |e: std::io::Error| {
+            let what = format!("cannot write telemetry: {e}");
+            (
+                fault(FaultKind::Io, None, None, next_tick, what),
+                StopReason::AgentFault,
+            )
+        };
         if next_tick > last {
             progress.finish();
-            let _ = tel.flush();
+            tel.flush().map_err(io)?;
             return Ok((ticking, true));
         }
         if progressed {
             last_progress = Instant::now();
             // Complete ticks reach the file at least every 100 ms (and at every stop).
             if last_flush.elapsed() > Duration::from_millis(100) {
-                let _ = tel.flush();
+                tel.flush().map_err(io)?;
                 last_flush = Instant::now();
             }
             continue;

@@ -1,6 +1,16 @@
 //! `orchestrator`: parses arguments, initialises logging, runs the command, and maps the outcome
 //! to an exit code: 0 safe and complete, 1 safety violation / UNSAFE, 2 bad input, 3 runtime fault.
 
+/// `println!` that never panics: a closed or full stdout (`plan | head -1`, `launch >
+/// /dev/full`) must not stop a command before its files are complete. What cannot be printed is
+/// dropped; the run's outcome still decides the exit code.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 mod cli;
 mod commands;
 mod export;
@@ -45,6 +55,18 @@ impl Failure {
     }
 }
 
+/// A run directory that cannot be used: a full disk is a runtime fault (exit 3), anything else
+/// (a file in the way, permissions) bad input.
+impl From<common::rundir::RunDirError> for Failure {
+    fn from(e: common::rundir::RunDirError) -> Self {
+        if e.is_disk_full() {
+            Failure::fault(e)
+        } else {
+            Failure::bad_input(e)
+        }
+    }
+}
+
 fn main() {
     let _ = launch::PROCESS_START.set(std::time::Instant::now());
     let cli = match cli::Cli::try_parse() {
@@ -70,7 +92,8 @@ fn main() {
     let code = match commands::run(cli) {
         Ok(exit) => exit as i32,
         Err(f) => {
-            eprintln!("error: {}", f.message);
+            use std::io::Write as _;
+            let _ = writeln!(std::io::stderr(), "error: {}", f.message);
             f.exit as i32
         }
     };

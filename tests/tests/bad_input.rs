@@ -142,19 +142,19 @@ fn bad_numbers_and_names_are_refused_naming_the_option() {
     let cases: &[(&[&str], &str)] = &[
         (
             &["--agent-timeout", "-1"],
-            "--agent-timeout must be a positive number of seconds, got -1",
+            "--agent-timeout must be a number of seconds in (0, 86400], got -1",
         ),
         (
             &["--agent-timeout", "0"],
-            "--agent-timeout must be a positive number of seconds, got 0",
+            "--agent-timeout must be a number of seconds in (0, 86400], got 0",
         ),
         (
             &["--agent-timeout", "nan"],
-            "--agent-timeout must be a positive number of seconds, got NaN",
+            "--agent-timeout must be a number of seconds in (0, 86400], got NaN",
         ),
         (
             &["--join-timeout", "inf"],
-            "--join-timeout must be a positive number of seconds, got inf",
+            "--join-timeout must be a number of seconds in (0, 86400], got inf",
         ),
         (
             &["--window", "0"],
@@ -196,7 +196,7 @@ fn bad_numbers_and_names_are_refused_naming_the_option() {
             "agent",
             &args,
             &[&format!(
-                "{flag} must be a positive number of seconds, got {v}"
+                "{flag} must be a number of seconds in (0, 86400], got {v}"
             )],
         );
     }

@@ -16,6 +16,7 @@ pub mod control;
 pub mod dynamics;
 pub mod engine;
 pub mod export;
+pub mod files;
 pub mod formation;
 pub mod frame;
 pub mod gains;

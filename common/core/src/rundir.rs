@@ -1,13 +1,21 @@
 //! A run directory: scenario.toml (as flown), telemetry.csv (streamed, complete ticks only) and
-//! audit.json (written atomically: temporary file, then rename).
+//! audit.json (written atomically: temporary file, then rename; its room reserved when the
+//! directory is opened, so a run that fills the disk still records its outcome). Nothing here
+//! follows a symbolic link (`files::create_file`).
 
-use std::fs::{self, File};
-use std::io::{BufWriter, Write};
+use std::fs::{self, File, OpenOptions};
+use std::io::{self, Write};
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 use crate::audit::AuditReport;
+use crate::files::{self, FileError};
 use crate::scenario::Scenario;
-use crate::telemetry::TelemetryWriter;
+use crate::telemetry::{Rewind, TelemetryWriter};
+
+/// Room reserved for audit.json when a run directory is opened (a paper40 audit with a few
+/// hundred violations is about 60 KiB).
+pub const AUDIT_RESERVE_BYTES: u64 = 128 << 10;
 
 /// A run directory problem, naming the path.
 #[derive(Debug, thiserror::Error)]
@@ -25,12 +33,27 @@ pub enum RunDirError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{path}: {source}")]
+    #[error("{}: {}", path.display(), files::describe(path, source))]
     Io {
         path: PathBuf,
         #[source]
         source: std::io::Error,
     },
+    #[error(transparent)]
+    File(#[from] FileError),
+}
+
+impl RunDirError {
+    /// Whether the file system (or quota) is full: a runtime fault (exit 3), not bad input.
+    pub fn is_disk_full(&self) -> bool {
+        match self {
+            RunDirError::Io { source, .. } | RunDirError::Unwritable { source, .. } => {
+                files::is_disk_full(source)
+            }
+            RunDirError::File(f) => f.is_disk_full(),
+            _ => false,
+        }
+    }
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> RunDirError + '_ {
@@ -68,17 +91,49 @@ impl RunDir {
                 source,
             })?;
         }
-        // Prove the directory is writable before any work starts.
-        let probe = path.join(".write-probe");
-        File::create(&probe).map_err(|source| RunDirError::Unwritable {
+        // Reserving audit.json's room also proves the directory writable before any work.
+        let dir = RunDir {
             path: path.to_path_buf(),
-            what: "write into",
-            source,
+        };
+        dir.reserve_audit().map_err(|e| match e {
+            FileError::Io { source, .. } if !files::is_disk_full(&source) => {
+                RunDirError::Unwritable {
+                    path: path.to_path_buf(),
+                    what: "write into",
+                    source,
+                }
+            }
+            other => RunDirError::File(other),
         })?;
-        let _ = fs::remove_file(&probe);
-        Ok(RunDir {
-            path: path.to_path_buf(),
-        })
+        Ok(dir)
+    }
+
+    /// Allocate audit.json's temporary file (`audit.json.tmp`) at its full reserved size, so the
+    /// final audit is written into blocks the run's telemetry cannot take.
+    fn reserve_audit(&self) -> Result<(), FileError> {
+        let tmp = files::temporary_of(&self.path.join("audit.json"));
+        let f = files::create_file(&tmp)?;
+        let at = |source| FileError::Io {
+            path: tmp.clone(),
+            source,
+        };
+        use std::os::fd::AsRawFd;
+        let len = AUDIT_RESERVE_BYTES as libc::off_t;
+        // SAFETY: a valid open descriptor and a non-negative range.
+        let rc = unsafe { libc::posix_fallocate(f.as_raw_fd(), 0, len) };
+        let reserved = match rc {
+            0 => Ok(()),
+            // No fallocate on this file system: write the bytes instead.
+            libc::EOPNOTSUPP | libc::EINVAL => (&f)
+                .write_all(&vec![b' '; AUDIT_RESERVE_BYTES as usize])
+                .map_err(at),
+            e => Err(at(io::Error::from_raw_os_error(e))),
+        };
+        if reserved.is_err() {
+            drop(f);
+            let _ = fs::remove_file(&tmp);
+        }
+        reserved
     }
 
     /// The directory.
@@ -99,31 +154,87 @@ impl RunDir {
         Ok(p)
     }
 
-    /// Open telemetry.csv for streaming.
-    pub fn telemetry(&self, every: u64) -> Result<TelemetryWriter<BufWriter<File>>, RunDirError> {
+    /// Open telemetry.csv for streaming (whole ticks only, even when the disk fills up).
+    pub fn telemetry(&self, every: u64) -> Result<TelemetryWriter<RunFile>, RunDirError> {
         let p = self.path.join("telemetry.csv");
-        let f = File::create(&p).map_err(io_err(&p))?;
-        TelemetryWriter::new(BufWriter::with_capacity(1 << 20, f), every).map_err(io_err(&p))
+        let file = files::create_file(&p)?;
+        TelemetryWriter::new(
+            RunFile {
+                file,
+                path: p.clone(),
+            },
+            every,
+        )
+        .map_err(io_err(&p))
     }
 
-    /// Write audit.json atomically.
+    /// Write audit.json atomically into the room reserved for it (a fresh temporary when the
+    /// reservation is gone). On failure the previous audit.json, if any, is left as it was.
     pub fn write_audit(&self, report: &AuditReport) -> Result<(), RunDirError> {
         let p = self.path.join("audit.json");
         let text = serde_json::to_string_pretty(report).map_err(|e| RunDirError::Io {
             path: p.clone(),
             source: std::io::Error::other(e),
         })?;
-        write_atomic(&p, text.as_bytes())
+        let tmp = files::temporary_of(&p);
+        // The reservation is our own regular file; O_NOFOLLOW refuses a link put in its place.
+        let reserved = OpenOptions::new()
+            .write(true)
+            .custom_flags(libc::O_NOFOLLOW)
+            .open(&tmp)
+            .ok()
+            .filter(|f| f.metadata().is_ok_and(|m| m.is_file()));
+        let Some(f) = reserved else {
+            return write_atomic(&p, text.as_bytes());
+        };
+        let done = files::fill(f, &tmp, text.as_bytes()).and_then(|()| {
+            fs::rename(&tmp, &p).map_err(|source| FileError::Io {
+                path: p.clone(),
+                source,
+            })
+        });
+        if done.is_err() {
+            let _ = fs::remove_file(&tmp);
+        }
+        Ok(done?)
     }
 }
 
-/// Write a file through a temporary sibling and a rename, so readers never see half a file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunDirError> {
-    let tmp = path.with_extension("tmp");
-    {
-        let mut f = File::create(&tmp).map_err(io_err(&tmp))?;
-        f.write_all(bytes).map_err(io_err(&tmp))?;
-        f.sync_all().map_err(io_err(&tmp))?;
+/// telemetry.csv: a file whose errors name it (and the free space when the disk is full).
+pub struct RunFile {
+    file: File,
+    path: PathBuf,
+}
+
+impl RunFile {
+    fn named(&self, e: io::Error) -> io::Error {
+        let what = format!(
+            "{}: {}",
+            self.path.display(),
+            files::describe(&self.path, &e)
+        );
+        io::Error::new(e.kind(), what)
     }
-    fs::rename(&tmp, path).map_err(io_err(path))
+}
+
+impl Write for RunFile {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.file.write(buf).map_err(|e| self.named(e))
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.file.flush().map_err(|e| self.named(e))
+    }
+}
+
+impl Rewind for RunFile {
+    fn rewind_to(&mut self, len: u64) -> io::Result<()> {
+        self.file.rewind_to(len)
+    }
+}
+
+/// Write a file through a temporary sibling and a rename, so readers never see half a file (see
+/// [`files::write_atomic`]: never follows a link, keeps the old file on failure).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunDirError> {
+    Ok(files::write_atomic(path, bytes)?)
 }

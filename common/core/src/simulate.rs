@@ -44,11 +44,6 @@ pub fn simulate(
     let last = opts
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
-    let tel_path = dir.path().join("telemetry.csv");
-    let io = |source| RunDirError::Io {
-        path: tel_path.clone(),
-        source,
-    };
     let complete = loop {
         let tick = e.tick();
         let t = tick_time(tick, s.dt_s());
@@ -71,7 +66,10 @@ pub fn simulate(
                     ht: ht[k],
                 });
             }
-            tel.write_tick(&rows).map_err(io)?;
+            if let Err(e) = tel.write_tick(&rows) {
+                audit.fault(write_fault(tick, &e));
+                break false;
+            }
         }
         on_tick(tick, &audit);
         if opts.stop_on_violation && audit.violation_count() > 0 {
@@ -95,10 +93,29 @@ pub fn simulate(
             break false;
         }
     };
-    tel.flush().map_err(io)?;
+    let complete = match tel.flush() {
+        Ok(()) => complete,
+        Err(e) => {
+            let tick = audit.report().ticks;
+            audit.fault(write_fault(tick, &e));
+            false
+        }
+    };
     let report = audit.finish(complete);
     dir.write_audit(&report)?;
     Ok(report)
+}
+
+/// A telemetry write that failed (a full disk): the run stops there, its audit is still
+/// written (into the room reserved for it) and names the file.
+fn write_fault(tick: u64, e: &std::io::Error) -> FaultRecord {
+    FaultRecord {
+        kind: crate::outcome::FaultKind::Io,
+        agent: None,
+        peer: None,
+        tick,
+        message: format!("cannot write telemetry: {e}"),
+    }
 }
 
 /// Member indices sorted by id (telemetry order).

@@ -22,23 +22,59 @@ pub struct Row {
     pub ht: Vec3,
 }
 
-/// Writes telemetry rows, keeping every `every`-th tick. Each tick's rows are written together,
-/// so a file cut short by a fault holds only complete ticks.
-pub struct TelemetryWriter<W: Write> {
+/// Where telemetry goes: a writer that can drop everything after a given length, so a failed
+/// write (a full disk) leaves the file ending on a whole tick.
+pub trait Rewind: Write {
+    /// Truncate to `len` bytes and continue writing there.
+    fn rewind_to(&mut self, len: u64) -> io::Result<()>;
+}
+
+impl Rewind for Vec<u8> {
+    fn rewind_to(&mut self, len: u64) -> io::Result<()> {
+        self.truncate(usize::try_from(len).unwrap_or(usize::MAX));
+        Ok(())
+    }
+}
+
+impl Rewind for std::fs::File {
+    fn rewind_to(&mut self, len: u64) -> io::Result<()> {
+        use std::io::Seek;
+        self.set_len(len)?;
+        self.seek(io::SeekFrom::Start(len)).map(drop)
+    }
+}
+
+/// Buffered bytes written to the output at once (whole ticks only).
+const BATCH_BYTES: usize = 1 << 20;
+
+/// Writes telemetry rows, keeping every `every`-th tick. Rows are buffered a whole tick at a
+/// time and handed to the output in batches of whole ticks; when a batch fails (a full disk)
+/// the output is cut back to the last whole batch, so the file holds only complete ticks.
+pub struct TelemetryWriter<W: Rewind> {
     out: W,
     every: u64,
     line: String,
+    /// Bytes of whole ticks the output has taken.
+    committed: u64,
+    /// Where each buffered tick ends in `line`, so a batch cut short keeps its whole ticks.
+    tick_ends: Vec<usize>,
 }
 
-impl<W: Write> TelemetryWriter<W> {
+impl<W: Rewind> TelemetryWriter<W> {
     /// Start a file: writes the header.
-    pub fn new(mut out: W, every: u64) -> io::Result<Self> {
-        writeln!(out, "{HEADER}")?;
-        Ok(TelemetryWriter {
+    pub fn new(out: W, every: u64) -> io::Result<Self> {
+        let mut w = TelemetryWriter {
             out,
             every: every.max(1),
-            line: String::with_capacity(4096),
-        })
+            line: String::with_capacity(BATCH_BYTES + 4096),
+            committed: 0,
+            tick_ends: Vec::new(),
+        };
+        w.line.push_str(HEADER);
+        w.line.push('\n');
+        w.tick_ends.push(w.line.len());
+        w.flush()?;
+        Ok(w)
     }
 
     /// Whether a tick is kept.
@@ -54,7 +90,6 @@ impl<W: Write> TelemetryWriter<W> {
         if !self.keeps(first.tick) {
             return Ok(());
         }
-        self.line.clear();
         // Shortest round-trip text (zmij, itoa): std's float formatting took over half of the
         // orchestrator's time at N = 40. NaN (a missing state) prints as "NaN".
         let mut ints = itoa::Buffer::new();
@@ -76,11 +111,125 @@ impl<W: Write> TelemetryWriter<W> {
             }
             line.push('\n');
         }
-        self.out.write_all(self.line.as_bytes())
+        self.tick_ends.push(self.line.len());
+        if self.line.len() >= BATCH_BYTES {
+            self.flush()?;
+        }
+        Ok(())
     }
 
-    /// Flush buffered rows to the file.
+    /// Hand the buffered ticks to the output. When the output fails part way (a full disk) it
+    /// is cut back to the last whole tick it took; the error is the write's, the rest of the
+    /// batch is dropped.
     pub fn flush(&mut self) -> io::Result<()> {
-        self.out.flush()
+        let bytes = self.line.as_bytes();
+        let mut done = 0;
+        let mut failed = None;
+        while done < bytes.len() {
+            match self.out.write(&bytes[done..]) {
+                Ok(0) => {
+                    failed = Some(io::Error::from(io::ErrorKind::WriteZero));
+                    break;
+                }
+                Ok(n) => done += n,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            }
+        }
+        let failed = failed.or_else(|| self.out.flush().err());
+        let kept = match failed {
+            None => done,
+            Some(_) => self
+                .tick_ends
+                .iter()
+                .copied()
+                .take_while(|&e| e <= done)
+                .last()
+                .unwrap_or(0),
+        };
+        self.committed += kept as u64;
+        self.line.clear();
+        self.tick_ends.clear();
+        match failed {
+            None => Ok(()),
+            Some(e) => {
+                let _ = self.out.rewind_to(self.committed);
+                Err(e)
+            }
+        }
+    }
+
+    /// Bytes of whole ticks written so far (the file's length after a failed write).
+    pub fn committed_len(&self) -> u64 {
+        self.committed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Takes `room` bytes, then fails like a full disk.
+    struct Full {
+        bytes: Vec<u8>,
+        room: usize,
+    }
+
+    impl Write for Full {
+        fn write(&mut self, b: &[u8]) -> io::Result<usize> {
+            let n = b.len().min(self.room - self.bytes.len());
+            if n == 0 {
+                return Err(io::Error::from_raw_os_error(libc::ENOSPC));
+            }
+            self.bytes.extend_from_slice(&b[..n]);
+            Ok(n)
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Rewind for Full {
+        fn rewind_to(&mut self, len: u64) -> io::Result<()> {
+            self.bytes.truncate(len as usize);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_full_output_keeps_whole_ticks_only() {
+        let row = |tick| Row {
+            tick,
+            t_s: tick as f64 * 0.01,
+            id: 1,
+            role: Role::Follower,
+            r: Vec3::zeros(),
+            v: Vec3::zeros(),
+            ht: Vec3::zeros(),
+        };
+        let mut w = TelemetryWriter::new(
+            Full {
+                bytes: Vec::new(),
+                room: 200,
+            },
+            1,
+        )
+        .unwrap();
+        let mut failed = false;
+        for tick in 0..20 {
+            w.write_tick(&[row(tick)]).unwrap();
+            if w.flush().is_err() {
+                failed = true;
+                break;
+            }
+        }
+        assert!(failed);
+        let text = String::from_utf8(w.out.bytes.clone()).unwrap();
+        assert!(text.ends_with('\n'), "{text:?}");
+        assert_eq!(text.len() as u64, w.committed_len());
+        assert!(text.lines().all(|l| l.split(',').count() == 13));
     }
 }

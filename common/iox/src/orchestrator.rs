@@ -116,6 +116,16 @@ impl Readiness {
             && self.agents.iter().all(AgentReadiness::is_complete)
     }
 
+    /// Agents that have not joined: no process has opened their own ports (state publisher,
+    /// wake listener). Agents that joined but wait on a neighbour are not among them.
+    pub fn not_joined(&self) -> Vec<u32> {
+        self.agents
+            .iter()
+            .filter(|a| a.state_publishers == 0 || a.wake_listeners == 0)
+            .map(|a| a.id)
+            .collect()
+    }
+
     /// Agents whose own or incoming ports are not all connected yet.
     pub fn waiting_for(&self) -> Vec<u32> {
         self.agents

@@ -91,7 +91,7 @@ fn to_crazyswarm2(
     write_record(out, "", &record, &sc.scenario)?;
     report(&sc, &record, quiet);
     if !quiet {
-        println!(
+        out!(
             "  crazyflie: {} piece(s) of {:.3} s per quadcopter, {} of {} bytes; float32 error bound {:.3e} m (limit {} m)",
             split.pieces,
             split.piece_duration_s,
@@ -224,7 +224,7 @@ fn report(sc: &Scaled, record: &Record<'_>, quiet: bool) {
     if quiet {
         return;
     }
-    println!(
+    out!(
         "export {}: {} quadcopters, scale {}, origin {:?} m, eps {} m, {} piece(s) of {:.3} s each",
         record.target,
         sc.trajs.len(),
@@ -236,7 +236,7 @@ fn report(sc: &Scaled, record: &Record<'_>, quiet: bool) {
     );
     print_certificate(record.certificate);
     if record.certificate.t_threshold_s.is_finite() {
-        println!(
+        out!(
             "  the show is SAFE at this scale when it lasts at least T_threshold = {:.2} s (--t-total)",
             record.certificate.t_threshold_s
         );
@@ -282,7 +282,7 @@ fn draw(dir: &Path, stem: &str, sc: &Scaled, quiet: bool) {
         sc.frame.scale
     );
     match top_view(dir, stem, &title, paths) {
-        Ok(files) if !quiet => println!("  top view: {}", files[files.len() - 1].display()),
+        Ok(files) if !quiet => out!("  top view: {}", files[files.len() - 1].display()),
         Ok(_) => {}
         Err(e) => tracing::error!("top view not drawn: {e}"),
     }
@@ -290,9 +290,9 @@ fn draw(dir: &Path, stem: &str, sc: &Scaled, quiet: bool) {
 
 fn done(out: &Path, cert: &Certificate, quiet: bool) -> Result<Exit, Failure> {
     if quiet {
-        println!("{}", cert.verdict);
+        out!("{}", cert.verdict);
     } else {
-        println!("  written: {}", out.display());
+        out!("  written: {}", out.display());
     }
     Ok(if cert.verdict == Verdict::Safe {
         Exit::Safe

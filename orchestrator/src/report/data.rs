@@ -3,8 +3,7 @@
 //! streamed one tick at a time (paper40 is 800k rows) so memory holds per-tick series only.
 
 use std::collections::{BTreeMap, VecDeque};
-use std::fs::File;
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use common::formation::Role;
@@ -24,6 +23,30 @@ pub enum ReadError {
     },
     #[error("{path}: {message}")]
     Invalid { path: PathBuf, message: String },
+    /// Not a regular file, or too large to read whole.
+    #[error(transparent)]
+    File(#[from] common::files::FileError),
+}
+
+/// The longest telemetry line read (a row is about 250 bytes).
+const MAX_LINE_BYTES: u64 = 4096;
+
+/// The next line of `r` without its newline, at most [`MAX_LINE_BYTES`] long; `None` at the end.
+fn next_line(r: &mut impl BufRead, line: &mut String) -> std::io::Result<Option<()>> {
+    line.clear();
+    let n = r.take(MAX_LINE_BYTES + 1).read_line(line)?;
+    if n == 0 {
+        return Ok(None);
+    }
+    if line.len() as u64 > MAX_LINE_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("a line longer than {MAX_LINE_BYTES} bytes"),
+        ));
+    }
+    let end = line.trim_end_matches(['\n', '\r']).len();
+    line.truncate(end);
+    Ok(Some(()))
 }
 
 /// The safety numbers the audit used (audit.json).
@@ -85,7 +108,7 @@ fn invalid(path: &Path, message: impl Into<String>) -> ReadError {
 
 /// Read audit.json's safety numbers.
 pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
-    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let text = common::files::read_input(path, common::files::MAX_INPUT_BYTES)?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
     let num = |key: &str| {
@@ -270,29 +293,34 @@ pub fn stream_ticks(
     let members = &scenario.formation.members;
     let index: BTreeMap<u32, usize> = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
     let tel_path = dir.join("telemetry.csv");
-    let file = File::open(&tel_path).map_err(io(&tel_path))?;
-    let mut lines = BufReader::with_capacity(1 << 20, file).lines();
-    match lines.next() {
-        Some(Ok(h)) if h.trim() == common::telemetry::HEADER => {}
-        Some(Ok(h)) => {
+    let mut reader = BufReader::with_capacity(1 << 20, common::files::open_input(&tel_path)?);
+    let mut line = String::new();
+    match next_line(&mut reader, &mut line) {
+        Ok(Some(())) if line.trim() == common::telemetry::HEADER => {}
+        Ok(Some(())) => {
             return Err(invalid(
                 &tel_path,
                 format!(
-                    "unexpected header `{h}`, expected `{}`",
+                    "unexpected header `{line}`, expected `{}`",
                     common::telemetry::HEADER
                 ),
             ))
         }
-        Some(Err(e)) => return Err(io(&tel_path)(e)),
-        None => return Err(invalid(&tel_path, "empty file")),
+        Err(e) => return Err(io(&tel_path)(e)),
+        Ok(None) => return Err(invalid(&tel_path, "empty file")),
     }
     let n = members.len();
     let mut pos = vec![Vec3::zeros(); n];
     let mut ht = vec![Vec3::zeros(); n];
     let mut seen = 0usize;
     let mut current: Option<(u64, Real)> = None;
-    for (lineno, line) in lines.enumerate() {
-        let line = line.map_err(io(&tel_path))?;
+    let mut lineno = 0usize;
+    while next_line(&mut reader, &mut line)
+        .map_err(|e| io(&tel_path)(e))?
+        .is_some()
+    {
+        lineno += 1;
+        let lineno = lineno - 1;
         let bad = |what: &str| invalid(&tel_path, format!("line {}: {what}", lineno + 2));
         let f: Vec<&str> = line.split(',').collect();
         if f.len() != 13 {

@@ -9,6 +9,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use common::math::Real;
+use common::rundir::write_atomic;
 
 /// DejaVu Sans (assets/DejaVuSans-LICENSE.txt: Bitstream Vera license, redistributable).
 const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
@@ -51,25 +52,45 @@ pub trait Figure {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
 }
 
-/// Write `<stem>.svg` and `<stem>.png` into `dir`; returns both paths.
+/// Write `<stem>.svg` and `<stem>.png` into `dir`; returns both paths. Both are drawn in memory
+/// and written atomically (`write_atomic`: never through a link, never half a file, the old
+/// figure kept when the disk is full).
 pub fn write_figure<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Result<Vec<PathBuf>, String> {
     ensure_font()?;
     let svg = dir.join(format!("{stem}.svg"));
     let png = dir.join(format!("{stem}.png"));
     let named = |p: &Path, x: String| format!("{}: {x}", p.display());
+    let (w, h) = fig.size();
+    let mut text = String::new();
     {
-        let root = SVGBackend::new(&svg, fig.size()).into_drawing_area();
+        let root = SVGBackend::with_string(&mut text, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|x| named(&svg, e(x)))?;
         fig.draw(&root).map_err(|x| named(&svg, x))?;
         root.present().map_err(|x| named(&svg, e(x)))?;
     }
+    write_atomic(&svg, text.as_bytes()).map_err(|x| x.to_string())?;
+    let mut rgb = vec![0u8; w as usize * h as usize * 3];
     {
-        let root = BitMapBackend::new(&png, fig.size()).into_drawing_area();
+        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|x| named(&png, e(x)))?;
         fig.draw(&root).map_err(|x| named(&png, x))?;
         root.present().map_err(|x| named(&png, e(x)))?;
     }
+    let bytes = encode_png(&rgb, w, h).map_err(|x| named(&png, x.to_string()))?;
+    write_atomic(&png, &bytes).map_err(|x| x.to_string())?;
     Ok(vec![svg, png])
+}
+
+/// An RGB8 image as PNG bytes.
+fn encode_png(rgb: &[u8], w: u32, h: u32) -> Result<Vec<u8>, png::EncodingError> {
+    let mut out = Vec::with_capacity(rgb.len() / 4);
+    let mut enc = png::Encoder::new(&mut out, w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header()?;
+    writer.write_image_data(rgb)?;
+    writer.finish()?;
+    Ok(out)
 }
 
 /// A line of a 2-D chart.

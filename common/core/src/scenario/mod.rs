@@ -5,6 +5,7 @@
 //! `Scenario::file` back out gives the scenario actually flown (`scenario.toml`).
 
 mod builtin;
+mod locate;
 mod validate;
 
 use std::path::Path;
@@ -150,9 +151,12 @@ impl Scenario {
     /// Read and validate a scenario file.
     pub fn load(path: &Path, checks: Checks) -> Result<Self, ScenarioError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
-            origin: origin.clone(),
-            kind: ScenarioErrorKind::Io(e.to_string()),
+        // Regular files only, and at most 64 MiB: `/dev/zero` or a FIFO is refused at once.
+        let text = crate::files::read_input(path, crate::files::MAX_INPUT_BYTES).map_err(|e| {
+            ScenarioError {
+                origin: origin.clone(),
+                kind: ScenarioErrorKind::Io(e.reason()),
+            }
         })?;
         if path.extension().is_some_and(|e| e == "json") {
             return Self::parse_json(&text, &origin, checks);
@@ -165,23 +169,31 @@ impl Scenario {
     /// builds a document first (a 1000-agent file: about 0.2 MiB against 3.9 MiB of peak memory
     /// in each of 1000 processes).
     pub fn parse_json(text: &str, origin: &str, checks: Checks) -> Result<Self, ScenarioError> {
-        Self::from_parsed(serde_json::from_str(text), origin, checks)
+        let parsed = serde_json::from_str(text).map_err(|e| {
+            let who = locate::json_agent(text);
+            locate::named(who, e.to_string())
+        });
+        Self::from_parsed(parsed, origin, checks)
     }
 
     /// Validate scenario text; `origin` names it in errors.
     pub fn parse(text: &str, origin: &str, checks: Checks) -> Result<Self, ScenarioError> {
-        Self::from_parsed(toml::from_str(text), origin, checks)
+        let parsed = toml::from_str(text).map_err(|e: toml::de::Error| {
+            let who = locate::toml_agent(text, e.span().map(|r| r.start));
+            locate::named(who, e.to_string())
+        });
+        Self::from_parsed(parsed, origin, checks)
     }
 
     /// A parser's result, validated; a parse error becomes `Parse`, naming `origin`.
-    fn from_parsed<E: std::fmt::Display>(
-        parsed: Result<ScenarioFile, E>,
+    fn from_parsed(
+        parsed: Result<ScenarioFile, String>,
         origin: &str,
         checks: Checks,
     ) -> Result<Self, ScenarioError> {
         let file = parsed.map_err(|e| ScenarioError {
             origin: origin.to_string(),
-            kind: ScenarioErrorKind::Parse(e.to_string()),
+            kind: ScenarioErrorKind::Parse(e),
         })?;
         Self::from_file(file, origin, checks)
     }

@@ -96,12 +96,73 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
             });
         }
     }
+    if f.name.len() > MAX_NAME_BYTES {
+        return Err(E::Invalid {
+            field: "name".into(),
+            reason: format!(
+                "is {} bytes long; at most {MAX_NAME_BYTES} bytes are allowed",
+                f.name.len()
+            ),
+        });
+    }
+    check_resolution(f)?;
     if f.comm_hz * f.t_total_s > 1e8 {
         return Err(E::Invalid {
             field: "t_total_s".into(),
             reason: format!(
                 "times comm_hz gives {} ticks; at most 1e8 are supported",
                 f.comm_hz * f.t_total_s
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The longest scenario name (it is printed, hashed and carried by every member).
+pub const MAX_NAME_BYTES: usize = 256;
+/// The fewest ticks over the motion (T_total * comm_hz): fewer cannot resolve the quintic
+/// (eq. 15), and the controller faults at tick 0.
+pub const MIN_MOTION_TICKS: Real = 10.0;
+/// The fastest clock: beyond it a tick is shorter than a process wake-up (BENCHMARKS.md), and
+/// the certificate's flights grow without bound.
+pub const MAX_COMM_HZ: Real = 10_000.0;
+/// Largest h |lambda| for an RK4 step h and the gains' fastest pole lambda. RK4 is stable up to
+/// about 2.8 on the real axis; 1 keeps the integration accurate, not merely stable.
+pub const MAX_STEP_TIMES_POLE: Real = 1.0;
+
+/// Whether the ticks can resolve the motion: enough ticks over T_total, and an RK4 step
+/// (dt / substeps) short enough for the fastest pole of the leaders' tracking loop
+/// s^4 + k1 s^3 + k2 s^2 + k3 s + k4 (eq. 26 with mu = -1).
+fn check_resolution(f: &ScenarioFile) -> Result<(), E> {
+    if f.comm_hz > MAX_COMM_HZ {
+        return Err(E::Invalid {
+            field: "comm_hz".into(),
+            reason: format!("must be at most {MAX_COMM_HZ} Hz, got {}", f.comm_hz),
+        });
+    }
+    let pole = crate::gains::mode_roots(&f.gains, (-1.0, 0.0))
+        .iter()
+        .map(|&(re, im)| re.hypot(im))
+        .fold(0.0, Real::max);
+    let substeps = Real::from(f.substeps.unwrap_or(super::DEFAULT_SUBSTEPS).max(1));
+    let h = 1.0 / f.comm_hz / substeps;
+    // A NaN pole (gains too large to find the roots) is refused too.
+    if h * pole > MAX_STEP_TIMES_POLE || pole.is_nan() {
+        return Err(E::Invalid {
+            field: "comm_hz".into(),
+            reason: format!(
+                "{} Hz is too coarse for the gains' fastest pole ({pole:.4} rad/s): an RK4 step dt / substeps = {h} s needs step x pole <= {MAX_STEP_TIMES_POLE}; raise comm_hz to at least {:.4} Hz or substeps",
+                f.comm_hz,
+                pole * substeps.recip() / MAX_STEP_TIMES_POLE
+            ),
+        });
+    }
+    let ticks = f.t_total_s * f.comm_hz;
+    if ticks < MIN_MOTION_TICKS {
+        return Err(E::Invalid {
+            field: "t_total_s".into(),
+            reason: format!(
+                "times comm_hz gives {ticks} ticks over the motion; at least {MIN_MOTION_TICKS} are needed to resolve it (raise t_total_s or comm_hz)"
             ),
         });
     }
