@@ -16,6 +16,7 @@ pub mod frame;
 pub mod gains;
 pub mod geometry;
 pub mod graph;
+pub mod linear_certificate;
 pub mod math;
 pub mod member;
 pub mod member_cli;

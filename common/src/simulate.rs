@@ -5,6 +5,7 @@ use serde::Serialize;
 
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
 use crate::engine::{desired_positions, max_follower_deviation, quad_engine};
+use crate::linear_certificate::LinearTeam;
 use crate::math::{Real, Vec3};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
@@ -138,7 +139,8 @@ pub fn deviation_at(s: &Scenario, t_total_s: Real) -> Real {
 
 /// Smallest T with E(T) < delta, by bracketing from the 1 / T^2 law (Sec. VII-D) and
 /// bisection to 0.1 % (E falls monotonically with T in practice; the bracket is checked).
-pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
+/// `e_of` gives E(T).
+pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real, e_of: impl Fn(Real) -> Real) -> Real {
     if delta_m.is_nan() || delta_m <= 0.0 {
         return Real::INFINITY;
     }
@@ -150,7 +152,7 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
     };
     let (mut lo, mut hi) = (guess * 0.9, guess * 1.1);
     let mut grow = 0;
-    while deviation_at(s, hi) >= delta_m {
+    while e_of(hi) >= delta_m {
         lo = hi;
         hi *= 2.0;
         grow += 1;
@@ -159,7 +161,7 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
         }
     }
     let mut shrink = 0;
-    while lo > 1e-3 && deviation_at(s, lo) < delta_m {
+    while lo > 1e-3 && e_of(lo) < delta_m {
         hi = lo;
         lo *= 0.5;
         shrink += 1;
@@ -169,7 +171,7 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
     }
     while (hi - lo) > 1e-3 * hi {
         let mid = 0.5 * (lo + hi);
-        if deviation_at(s, mid) < delta_m {
+        if e_of(mid) < delta_m {
             hi = mid;
         } else {
             lo = mid;
@@ -181,8 +183,17 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
 /// The certificate of a scenario validated with `Checks::Full`.
 pub fn certify(s: &Scenario) -> Certificate {
     let n = SafetyNumbers::of(s);
-    let e = deviation_at(s, s.file.t_total_s);
-    let t_thr = t_threshold(s, n.delta_m, e);
+    // E(T) on the exactly linear error dynamics when the graph allows (linear_certificate.rs),
+    // otherwise by flying the nonlinear team at every trial T.
+    let linear = LinearTeam::new(s)
+        .inspect_err(|why| tracing::info!("the certificate flies the plan: {why}"))
+        .ok();
+    let deviation = |t| match &linear {
+        Some(team) => team.max_follower_deviation(t),
+        None => deviation_at(s, t),
+    };
+    let e = deviation(s.file.t_total_s);
+    let t_thr = t_threshold(s, n.delta_m, e, deviation);
     let margin = s.gains_margin.unwrap_or(Real::NAN);
     let mut reasons = Vec::new();
     if n.delta_m.is_nan() || n.delta_m <= 0.0 {

@@ -234,7 +234,7 @@ fn plan(
 ) -> Result<Exit, Failure> {
     let s = load(source)?;
     let spinner = Spinner::new(
-        "certifying: flying the plan at several travel times for T_threshold",
+        "certifying: E_max at several travel times for T_threshold",
         quiet,
     );
     let c = certify(&s);
