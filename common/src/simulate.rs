@@ -10,7 +10,7 @@ use crate::math::{Real, Vec3};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
 use crate::step::tick_time;
-use crate::telemetry::Row;
+use crate::telemetry::{Row, TelemetryFormat, TelemetrySink};
 
 /// How `simulate` runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -21,20 +21,22 @@ pub struct SimulateOptions {
     pub stop_on_violation: bool,
     /// Fly only ticks 0..=K of the plan.
     pub max_ticks: Option<u64>,
+    /// The format `tel` writes (names the file in errors).
+    pub telemetry: TelemetryFormat,
 }
 
 /// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
 /// `on_tick` sees each tick and the audit so far (for progress). A control fault ends the run
 /// with the fault recorded; every complete tick stays in telemetry.csv.
+/// `tel` is the run's telemetry file (`RunDir::telemetry` for CSV), opened with `opts.every`.
 pub fn simulate(
     s: &Scenario,
     dir: &RunDir,
     opts: SimulateOptions,
+    tel: &mut dyn TelemetrySink,
     mut on_tick: impl FnMut(u64, &Auditor),
 ) -> Result<AuditReport, RunDirError> {
-    let every = opts.every;
     dir.write_scenario(s)?;
-    let mut tel = dir.telemetry(every)?;
     let mut audit = Auditor::new(s);
     let mut e = quad_engine(s);
     let mut ht = Vec::new();
@@ -44,7 +46,7 @@ pub fn simulate(
     let last = opts
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
-    let tel_path = dir.path().join("telemetry.csv");
+    let tel_path = dir.path().join(opts.telemetry.file_name());
     let io = |source| RunDirError::Io {
         path: tel_path.clone(),
         source,
@@ -95,7 +97,7 @@ pub fn simulate(
             break false;
         }
     };
-    tel.flush().map_err(io)?;
+    tel.finish().map_err(io)?;
     let report = audit.finish(complete);
     dir.write_audit(&report)?;
     Ok(report)

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
+use common::telemetry::TelemetryFormat;
 
 /// Safe continuum deformation of quadcopter teams: plan, simulate and launch a team.
 #[derive(Debug, Parser)]
@@ -50,7 +51,7 @@ pub enum Command {
         /// The run directory (default: runs/<team>).
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
-        /// Write every K-th tick to telemetry.csv.
+        /// Write every K-th tick to the telemetry file.
         #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
         every: u64,
         /// Reuse a non-empty --out directory.
@@ -131,7 +132,7 @@ pub struct OutDir {
     /// The run directory (created; refused when it exists and is not empty, unless --force).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
-    /// Write every K-th tick to telemetry.csv.
+    /// Write every K-th tick to the telemetry file.
     #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub every: u64,
     /// Reuse a non-empty --out directory.
@@ -154,4 +155,7 @@ pub struct RunOptions {
     /// The follower of fig_agent_<id> (default: the one deepest in the graph).
     #[arg(long, value_name = "ID")]
     pub follow: Option<u32>,
+    /// Telemetry file format: telemetry.csv or telemetry.parquet (same columns and values).
+    #[arg(long, value_enum, value_name = "FORMAT", default_value_t = TelemetryFormat::Csv)]
+    pub telemetry: TelemetryFormat,
 }

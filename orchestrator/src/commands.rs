@@ -31,6 +31,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             plan(&source, json.as_deref(), sweep, cli.quiet)
         }
         Command::Simulate { source, out, run } => {
+            crate::telemetry::check_available(run.telemetry)?;
             let s = load(&source)?;
             let dir = RunDir::create(&out.out, out.force).map_err(Failure::bad_input)?;
             let started = Instant::now();
@@ -38,12 +39,15 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 every: out.every,
                 stop_on_violation: run.stop_on_violation,
                 max_ticks: run.max_ticks,
+                telemetry: run.telemetry,
             };
+            let mut tel = crate::telemetry::open(&dir, run.telemetry, out.every)
+                .map_err(Failure::bad_input)?;
             let last = run
                 .max_ticks
                 .map_or(s.last_tick(), |k| k.min(s.last_tick()));
             let mut progress = Progress::new("simulate", last, s.dt_s(), cli.quiet);
-            let report = simulate(&s, &dir, opts, |tick, audit| {
+            let report = simulate(&s, &dir, opts, tel.as_mut(), |tick, audit| {
                 progress.tick(tick, audit.report())
             })
             .map_err(Failure::fault)?;
@@ -83,6 +87,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             join_timeout,
             run,
         } => {
+            crate::telemetry::check_available(run.telemetry)?;
             let s = load(&source)?;
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
             let team = TeamName::new(&team_name)
@@ -101,6 +106,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 team,
                 force,
                 every,
+                telemetry: run.telemetry,
                 window,
                 spawn: !no_spawn,
                 agent_timeout: secs(agent_timeout, "--agent-timeout")?,

@@ -31,6 +31,8 @@ pub struct LaunchOptions {
     pub out: PathBuf,
     pub force: bool,
     pub every: u64,
+    /// The telemetry file's format.
+    pub telemetry: common::telemetry::TelemetryFormat,
     pub window: u32,
     pub spawn: bool,
     pub agent_timeout: Duration,
@@ -240,7 +242,7 @@ fn run_team(
     let _ = common::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
 
     // 3. Tick.
-    let mut tel = dir.telemetry(o.every).map_err(|e| {
+    let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
         (
             fault("io", None, None, 0, e.to_string()),
             StopReason::AgentFault,
@@ -428,7 +430,12 @@ fn run_team(
         }
         if next_tick > last {
             progress.finish();
-            let _ = tel.flush();
+            tel.finish().map_err(|e| {
+                (
+                    fault("io", None, None, last, e.to_string()),
+                    StopReason::AgentFault,
+                )
+            })?;
             return Ok((ticking, true));
         }
         if progressed {

@@ -7,6 +7,7 @@ mod launch;
 mod progress;
 mod report;
 mod team;
+mod telemetry;
 
 use clap::Parser;
 

@@ -1,6 +1,6 @@
 //! The data behind the figures, read back from a run directory alone: scenario.toml (the plan
-//! and the graph), audit.json (the safety numbers and violations) and telemetry.csv, which is
-//! streamed one tick at a time (paper40 is 800k rows) so memory holds per-tick series only.
+//! and the graph), audit.json (the safety numbers and violations) and the telemetry (CSV or
+//! Parquet, [`read_telemetry`]), which is streamed one tick at a time (paper40 is 800k rows) so memory holds per-tick series only.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::fs::File;
@@ -12,6 +12,7 @@ use common::math::{vec3, Real, Vec3};
 use common::plan::Segment;
 use common::safety::{min_separation, Prism};
 use common::scenario::{Checks, Scenario};
+use common::telemetry::{Row, TelemetryFormat, HEADER};
 
 /// A run directory that cannot be read, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -164,6 +165,74 @@ pub fn lambdas_at(s: &Scenario, t: Real) -> [Real; 3] {
     s.plan.lambdas_at_s(sp).unwrap_or([0.0; 3])
 }
 
+/// The telemetry of a run directory, row by row in file order (tick, then id), in whichever
+/// format the run wrote: telemetry.parquet when present, else telemetry.csv. One row (CSV) or one
+/// record batch (Parquet) is in memory at a time. `visit` refuses a row with a message, which is
+/// reported with the file and row. Returns the file read.
+pub fn read_telemetry(
+    dir: &Path,
+    mut visit: impl FnMut(&Row) -> Result<(), String>,
+) -> Result<PathBuf, ReadError> {
+    let parquet = dir.join(TelemetryFormat::Parquet.file_name());
+    if parquet.exists() {
+        read_parquet(&parquet, visit)?;
+        return Ok(parquet);
+    }
+    let path = dir.join(TelemetryFormat::Csv.file_name());
+    let file = File::open(&path).map_err(io(&path))?;
+    let mut lines = BufReader::with_capacity(1 << 20, file).lines();
+    match lines.next() {
+        Some(Ok(h)) if h.trim() == HEADER => {}
+        Some(Ok(h)) => {
+            return Err(invalid(
+                &path,
+                format!("unexpected header `{h}`, expected `{HEADER}`"),
+            ))
+        }
+        Some(Err(e)) => return Err(io(&path)(e)),
+        None => return Err(invalid(&path, "empty file")),
+    }
+    for (lineno, line) in lines.enumerate() {
+        let line = line.map_err(io(&path))?;
+        let bad = |what: &str| invalid(&path, format!("line {}: {what}", lineno + 2));
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != 13 {
+            return Err(bad("expected 13 fields"));
+        }
+        let num = |i: usize| f[i].parse::<Real>().map_err(|_| bad("not a number"));
+        let row = Row {
+            tick: f[0].parse().map_err(|_| bad("bad tick"))?,
+            t_s: num(1)?,
+            id: f[2].parse().map_err(|_| bad("bad id"))?,
+            role: Role::from_name(f[3]).ok_or_else(|| bad("bad role"))?,
+            r: vec3([num(4)?, num(5)?, num(6)?]),
+            v: vec3([num(7)?, num(8)?, num(9)?]),
+            ht: vec3([num(10)?, num(11)?, num(12)?]),
+        };
+        visit(&row).map_err(|m| bad(&m))?;
+    }
+    Ok(path)
+}
+
+#[cfg(feature = "parquet")]
+fn read_parquet(
+    path: &Path,
+    visit: impl FnMut(&Row) -> Result<(), String>,
+) -> Result<(), ReadError> {
+    cdm_parquet::read_rows(path, visit).map_err(|e| invalid(path, e.to_string()))
+}
+
+#[cfg(not(feature = "parquet"))]
+fn read_parquet(
+    path: &Path,
+    _visit: impl FnMut(&Row) -> Result<(), String>,
+) -> Result<(), ReadError> {
+    Err(invalid(
+        path,
+        "this orchestrator was built without its `parquet` feature",
+    ))
+}
+
 /// Read a run directory. `follow` overrides the followed agent (it must be a member).
 pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let sc_path = dir.join("scenario.toml");
@@ -188,23 +257,6 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         .collect();
     let eps_half = audit.delta_m + audit.eps_m;
 
-    let tel_path = dir.join("telemetry.csv");
-    let file = File::open(&tel_path).map_err(io(&tel_path))?;
-    let mut lines = BufReader::with_capacity(1 << 20, file).lines();
-    match lines.next() {
-        Some(Ok(h)) if h.trim() == common::telemetry::HEADER => {}
-        Some(Ok(h)) => {
-            return Err(invalid(
-                &tel_path,
-                format!(
-                    "unexpected header `{h}`, expected `{}`",
-                    common::telemetry::HEADER
-                ),
-            ))
-        }
-        Some(Err(e)) => return Err(io(&tel_path)(e)),
-        None => return Err(invalid(&tel_path, "empty file")),
-    }
     let n = members.len();
     let mut pos = vec![Vec3::zeros(); n];
     let mut ht = vec![Vec3::zeros(); n];
@@ -253,33 +305,25 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
             follow_ht: ht[follow_k],
         });
     };
-    for (lineno, line) in lines.enumerate() {
-        let line = line.map_err(io(&tel_path))?;
-        let bad = |what: &str| invalid(&tel_path, format!("line {}: {what}", lineno + 2));
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() != 13 {
-            return Err(bad("expected 13 fields"));
-        }
-        let num = |i: usize| f[i].parse::<Real>().map_err(|_| bad("not a number"));
-        let tick: u64 = f[0].parse().map_err(|_| bad("bad tick"))?;
-        let id: u32 = f[2].parse().map_err(|_| bad("bad id"))?;
-        let Some(&k) = index.get(&id) else {
-            return Err(bad(&format!("agent {id} is not in scenario.toml")));
+    let tel_path = read_telemetry(dir, |row| {
+        let Some(&k) = index.get(&row.id) else {
+            return Err(format!("agent {} is not in scenario.toml", row.id));
         };
         if let Some((ct, t)) = current {
-            if ct != tick {
+            if ct != row.tick {
                 if seen != n {
-                    return Err(bad(&format!("tick {ct} has {seen} rows, expected {n}")));
+                    return Err(format!("tick {ct} has {seen} rows, expected {n}"));
                 }
                 finish_tick(ct, t, &pos, &ht, &mut data);
                 seen = 0;
             }
         }
-        current = Some((tick, num(1)?));
-        pos[k] = vec3([num(4)?, num(5)?, num(6)?]);
-        ht[k] = vec3([num(10)?, num(11)?, num(12)?]);
+        current = Some((row.tick, row.t_s));
+        pos[k] = row.r;
+        ht[k] = row.ht;
         seen += 1;
-    }
+        Ok(())
+    })?;
     match current {
         Some((ct, t)) if seen == n => finish_tick(ct, t, &pos, &ht, &mut data),
         Some((ct, _)) => {
