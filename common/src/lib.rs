@@ -1,32 +1,17 @@
-//! Continuum deformation of quadcopter teams over moving frames: the paper's math (pure, no I/O),
-//! scenario files, the deterministic in-process engine, and the iceoryx2 transport.
+//! The facade every binary uses: the old module paths (`common::plan`, `common::transport`, ...)
+//! re-exported from the crates under `common/`, plus the member process's loop and CLI, which
+//! join the runtime to the iceoryx2 backend.
 //!
-//! Layers, bottom to top: `math` -> `frame`, `plan`, `formation`, `graph`, `gains`, `safety`,
-//! `dynamics`, `control` (pure) -> `step` (one agent's tick) -> `scenario` (files, validation,
-//! built-ins) -> `engine`, `telemetry`, `audit` -> `messages` (repr(C) wire types) -> `transport`
-//! (the only module that names iceoryx2).
+//! Crates, bottom to top: `cdm-math` (the only one that names nalgebra) -> `cdm-core` (math
+//! through the engine and the audit; no I/O crates) -> `cdm-runtime` (wire messages, signals,
+//! fault injection; no iceoryx2) -> `cdm-iox` (the only library crate that names iceoryx2).
 
-pub mod audit;
-pub mod control;
-pub mod dynamics;
-pub mod engine;
-pub mod fault_inject;
-pub mod formation;
-pub mod frame;
-pub mod gains;
-pub mod geometry;
-pub mod graph;
-pub mod linear_certificate;
-pub mod math;
+pub use cdm_core::{
+    audit, control, dynamics, engine, export, formation, frame, gains, geometry, graph,
+    linear_certificate, math, plan, rundir, safety, scenario, simulate, step, telemetry,
+};
+pub use cdm_iox as transport;
+pub use cdm_runtime::{fault_inject, messages, signals};
+
 pub mod member;
 pub mod member_cli;
-pub mod messages;
-pub mod plan;
-pub mod rundir;
-pub mod safety;
-pub mod scenario;
-pub mod signals;
-pub mod simulate;
-pub mod step;
-pub mod telemetry;
-pub mod transport;

@@ -86,6 +86,13 @@ pub enum Command {
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
     },
+    /// Export the plan to the stacks that fly real fleets (Crazyswarm2, Skybrush), scaled into
+    /// the target volume and certified again there: exit 0 SAFE, 1 UNSAFE (files written only
+    /// with --force), 2 bad input or a plan the target cannot hold.
+    Export {
+        #[command(subcommand)]
+        target: ExportTarget,
+    },
     /// Work with scenario files.
     Scenario {
         #[command(subcommand)]
@@ -107,6 +114,59 @@ pub enum ScenarioCommand {
         #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExportTarget {
+    /// One <id>.csv of polynomial pieces per quadcopter (Crazyswarm2's uav_trajectory format),
+    /// crazyflies.yaml, README.txt, certificate.json, scenario.toml and a top view into --out.
+    Crazyswarm2 {
+        #[command(flatten)]
+        source: Source,
+        /// The output directory (created; our files in it are replaced).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        #[command(flatten)]
+        frame: ExportFrame,
+    },
+    /// A Skybrush show (.skyc: a ZIP holding show.json with Bézier trajectories), with
+    /// <stem>.certificate.json and <stem>.scenario.toml beside it.
+    Skybrush {
+        #[command(flatten)]
+        source: Source,
+        /// The show file to write (e.g. show.skyc).
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        #[command(flatten)]
+        frame: ExportFrame,
+    },
+}
+
+/// Where an exported plan flies: p -> scale p + origin, and the target vehicles' radius.
+#[derive(Debug, Args, Clone)]
+pub struct ExportFrame {
+    /// Multiply every position and goal by S (the paper's team is 300 m wide; a lab is 5 m).
+    #[arg(
+        long,
+        value_name = "S",
+        default_value_t = 1.0,
+        allow_negative_numbers = true
+    )]
+    pub scale: f64,
+    /// Then add X,Y,Z metres (default 0,0,0).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub origin: Option<String>,
+    /// The radius of the target vehicles' ball, metres (0.1 for a Crazyflie).
+    #[arg(
+        long,
+        value_name = "METRES",
+        default_value_t = 0.1,
+        allow_negative_numbers = true
+    )]
+    pub eps: f64,
+    /// Write the files even when the certificate at the target scale is UNSAFE (exit 1 stays).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Which scenario to fly: a file, a built-in, or a generated team (default: built-in paper40).
@@ -156,6 +216,15 @@ pub struct RunOptions {
     #[arg(long, value_name = "ID")]
     pub follow: Option<u32>,
     /// Telemetry file format: telemetry.csv or telemetry.parquet (same columns and values).
-    #[arg(long, value_enum, value_name = "FORMAT", default_value_t = TelemetryFormat::Csv)]
+    #[arg(long, value_name = "FORMAT", default_value = "csv", value_parser = telemetry_format())]
     pub telemetry: TelemetryFormat,
+}
+
+/// `--telemetry csv|parquet` (the format type lives in cdm-core, which has no clap).
+fn telemetry_format() -> impl clap::builder::TypedValueParser<Value = TelemetryFormat> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(["csv", "parquet"]).map(|s| match s.as_str() {
+        "parquet" => TelemetryFormat::Parquet,
+        _ => TelemetryFormat::Csv,
+    })
 }

@@ -11,6 +11,7 @@ use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOpt
 use common::transport::TeamName;
 
 use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
+use crate::export;
 use crate::launch::{launch, LaunchOptions};
 use crate::progress::{Progress, Spinner};
 use crate::report::{report, ReportError};
@@ -146,6 +147,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             }
             Ok(exit_of(&report))
         }
+        Command::Export { target } => export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
         } => {
@@ -287,7 +289,7 @@ fn plan(
     })
 }
 
-fn print_certificate(c: &Certificate) {
+pub fn print_certificate(c: &Certificate) {
     println!(
         "pre-flight certificate: {} ({} agents)",
         c.scenario, c.agents

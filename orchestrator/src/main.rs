@@ -3,6 +3,7 @@
 
 mod cli;
 mod commands;
+mod export;
 mod launch;
 mod progress;
 mod report;

@@ -9,6 +9,7 @@
 //! This is test support: it panics, with a message naming the command, file or deadline at
 //! fault, instead of returning errors. Unix only (process groups, SIGKILL).
 
+use std::collections::BTreeMap;
 use std::ffi::OsStr;
 use std::io::Read;
 use std::os::unix::process::CommandExt;
@@ -16,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -62,9 +63,9 @@ fn profile_args(dir_name: &str) -> Vec<String> {
     }
 }
 
-/// The `cargo build` that refreshes every workspace binary in `profile_dir`: the same profile,
+/// The `cargo build` of `what` (e.g. `--bins --workspace`) into `profile_dir`: the same profile,
 /// target directory and (for `<target>/<triple>/<profile>`) target triple as the running test.
-fn build_command(profile_dir: &Path) -> Command {
+fn build_command(profile_dir: &Path, what: &[&str]) -> Command {
     let name = |p: &Path| {
         p.file_name()
             .and_then(OsStr::to_str)
@@ -90,8 +91,7 @@ fn build_command(profile_dir: &Path) -> Command {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut cmd = Command::new(cargo);
     cmd.arg("build")
-        .arg("--bins")
-        .arg("--workspace")
+        .args(what)
         .args(profile_args(&profile))
         .arg("--manifest-path")
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml"))
@@ -104,13 +104,16 @@ fn build_command(profile_dir: &Path) -> Command {
     cmd
 }
 
-/// Build every binary of the workspace once per test process, with the running test's profile
-/// and target directory, so that `bin` never returns a stale binary. The outcome is kept: after
-/// a failed build every later call fails with the same message instead of building again.
-fn ensure_built() {
-    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
-    let outcome = BUILT.get_or_init(|| {
-        let mut cmd = build_command(&profile_dir());
+/// Run `cargo build <what>` once per test process and `what`, with the running test's profile
+/// and target directory, so that nothing the tests run is stale. The outcome is kept: after a
+/// failed build every later call fails with the same message instead of building again.
+fn build_once(what: &[&str]) {
+    static BUILT: Mutex<BTreeMap<Vec<String>, Result<(), String>>> = Mutex::new(BTreeMap::new());
+    let key: Vec<String> = what.iter().map(|s| s.to_string()).collect();
+    // Held across the build: two tests asking for the same thing build it once.
+    let mut built = BUILT.lock().unwrap_or_else(|p| p.into_inner());
+    let outcome = built.entry(key).or_insert_with(|| {
+        let mut cmd = build_command(&profile_dir(), what);
         match cmd.output() {
             Err(e) => Err(format!("cannot start {cmd:?}: {e}")),
             Ok(out) if !out.status.success() => Err(format!(
@@ -122,8 +125,27 @@ fn ensure_built() {
         }
     });
     if let Err(e) = outcome {
-        panic!("harness: building the workspace binaries failed: {e}");
+        panic!("harness: building {what:?} failed: {e}");
     }
+}
+
+fn ensure_built() {
+    build_once(&["--bins", "--workspace"]);
+}
+
+/// The path of example `name` of workspace package `package`, of the same profile as the
+/// running test (built on first use, like [`bin`]).
+pub fn example(package: &str, name: &str) -> PathBuf {
+    build_once(&["--package", package, "--example", name]);
+    let path = profile_dir()
+        .join("examples")
+        .join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        path.is_file(),
+        "harness: example `{name}` of `{package}` not found at {} after building it",
+        path.display()
+    );
+    path
 }
 
 /// The path of a workspace binary (`orchestrator`, `agent`, `leader`) of the same profile as the

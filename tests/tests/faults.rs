@@ -24,9 +24,8 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use common::formation::Role;
-use common::messages::{ClockMsg, StateMsg};
 use common::scenario::{Checks, Scenario, ScenarioFile};
-use common::transport::{MemberPorts, TeamName, TransportError};
+use common::transport::{ClockWire, MemberPorts, StateWire, TeamName, TransportError};
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
 use serde_json::Value;
 use support::*;
@@ -375,7 +374,7 @@ fn a_foreign_process_cannot_publish_into_a_team() {
     // The right type: the service opens (it is readable metadata), but no port is granted.
     let state = node
         .service_builder(&name(t.state_service(1)))
-        .publish_subscribe::<StateMsg>()
+        .publish_subscribe::<StateWire>()
         .open()
         .expect("open agent 1's state service");
     let publisher = state.publisher_builder().create();
@@ -387,7 +386,7 @@ fn a_foreign_process_cannot_publish_into_a_team() {
     assert!(subscriber.is_err(), "an extra subscriber was accepted");
     let clock = node
         .service_builder(&name(t.clock_service()))
-        .publish_subscribe::<ClockMsg>()
+        .publish_subscribe::<ClockWire>()
         .open()
         .expect("open the clock service");
     assert!(

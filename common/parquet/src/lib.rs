@@ -1,4 +1,4 @@
-//! telemetry.parquet: the columns of telemetry.csv (`common::telemetry::HEADER`) as a Parquet
+//! telemetry.parquet: the columns of telemetry.csv (`cdm_core::telemetry::HEADER`) as a Parquet
 //! file, written and read with the `parquet` and `arrow` crates, so pandas, polars, DuckDB and
 //! pyarrow read it as they are.
 //!
@@ -13,9 +13,9 @@ use std::sync::Arc;
 
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
-use common::formation::Role;
-use common::math::Vec3;
-use common::telemetry::{Row, TelemetrySink};
+use cdm_core::formation::Role;
+use cdm_core::math::Vec3;
+use cdm_core::telemetry::{Row, TelemetrySink};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;

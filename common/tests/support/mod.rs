@@ -1,4 +1,4 @@
-//! Shared by the `common` integration tests.
+//! Shared by the integration tests of `common` and `cdm-iox`.
 
 use std::sync::mpsc;
 use std::thread;

@@ -16,6 +16,7 @@ use clap::{Parser, Subcommand};
 use common::engine::quad_engine;
 use common::messages::StateMsg;
 use common::scenario::Scenario;
+use common::transport::{StateWire, Wire};
 use iceoryx2::prelude::*;
 
 #[derive(Parser)]
@@ -118,7 +119,7 @@ fn barrier(n: usize, ticks: u64) -> Result<(), String> {
     for id in 0..n {
         let st = node
             .service_builder(&service(&run, &format!("state/{id}"))?)
-            .publish_subscribe::<StateMsg>()
+            .publish_subscribe::<StateWire>()
             .max_publishers(1)
             .max_subscribers(4)
             .max_nodes(6)
@@ -222,7 +223,7 @@ fn barrier(n: usize, ticks: u64) -> Result<(), String> {
         while got < n {
             for (_, sub) in &states {
                 while let Ok(Some(s)) = sub.receive() {
-                    if s.tick == tick {
+                    if s.0.tick == tick {
                         got += 1;
                         last = Instant::now();
                     }
@@ -265,7 +266,7 @@ fn barrier_member(run: &str, n: usize, id: usize) -> Result<(), String> {
     let node = node()?;
     let open_state = |k: usize| {
         node.service_builder(&service(run, &format!("state/{k}"))?)
-            .publish_subscribe::<StateMsg>()
+            .publish_subscribe::<StateWire>()
             .open()
             .map_err(|e| format!("member {id}: state/{k}: {e:?}"))
     };
@@ -327,14 +328,14 @@ fn barrier_member(run: &str, n: usize, id: usize) -> Result<(), String> {
         // Read the neighbours' latest samples (the previous tick), publish this tick's.
         for (_, sub) in &subs {
             while let Ok(Some(s)) = sub.receive() {
-                sum += s.state[0];
+                sum += s.0.state[0];
             }
         }
         tick += 1;
         let mut msg = StateMsg::ok(tick, 0, me, [0.0; 12]);
         msg.state[0] = sum * 0.0 + tick as f64;
         publisher
-            .send_copy(msg)
+            .send_copy(Wire(msg))
             .map_err(|e| format!("member {id}: send: {e:?}"))?;
         acker
             .notify()

@@ -8,6 +8,8 @@ pub type Mat2 = nalgebra::Matrix2<Real>;
 pub type Mat3 = nalgebra::Matrix3<Real>;
 pub type DMat = nalgebra::DMatrix<Real>;
 pub type DVec = nalgebra::DVector<Real>;
+/// A complex number (the closed-loop modes of eq. 26).
+pub type Complex = nalgebra::Complex<Real>;
 /// One axis of a 4th-order chain (position, velocity, acceleration, jerk) and its maps.
 pub type Vec4 = nalgebra::Vector4<Real>;
 pub type Mat4 = nalgebra::Matrix4<Real>;

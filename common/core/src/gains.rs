@@ -2,10 +2,7 @@
 //! team's characteristic polynomial factors into s^4 + k1 s^3 + k2 s^2 - k3 mu s - k4 mu for
 //! every eigenvalue mu of W (mu = -1 for leaders, mu in spec(L) for followers).
 
-use crate::math::{eigenvalues_by_components, DMat, Real};
-use nalgebra::Complex;
-
-type C = Complex<Real>;
+use crate::math::{eigenvalues_by_components, Complex as C, DMat, Real};
 
 /// Roots of s^4 + k1 s^3 + k2 s^2 - k3 mu s - k4 mu for one (complex) eigenvalue mu of W.
 pub fn mode_roots(gains: &[Real; 4], mu: (Real, Real)) -> [(Real, Real); 4] {

@@ -5,8 +5,10 @@
 //! this binary creates iceoryx2 files at the same time; the rest share it.
 //!
 //! How to run (the throughput line is printed, never asserted):
-//! `cargo test --release -p common --test transport -- --nocapture`
+//! `cargo test --release -p cdm-iox --test transport -- --nocapture`
 
+// The facade's tests and these share one watchdog.
+#[path = "../../tests/support/mod.rs"]
 mod support;
 use support::Watchdog;
 
@@ -17,10 +19,10 @@ use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use common::messages::{ClockCommand, ClockMsg, StateMsg, StopReason};
-use common::transport::{
+use cdm_iox::{
     remove_dead_nodes, MemberPorts, OrchestratorPorts, Role, TeamLayout, TeamName, TransportError,
 };
+use cdm_runtime::messages::{ClockCommand, ClockMsg, StateMsg, StopReason};
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 
@@ -305,7 +307,7 @@ fn id_pid(id: u128) -> u32 {
 /// This process's pid as iceoryx2 encodes it (the host pid, which may differ in a container).
 fn iceoryx2_pid() -> u32 {
     let probe = NodeBuilder::new()
-        .config(&common::transport::iceoryx2_config())
+        .config(&cdm_iox::iceoryx2_config())
         .create::<ipc::Service>()
         .unwrap();
     id_pid(probe.id().value())
@@ -321,7 +323,7 @@ fn leftovers(team: &TeamName, pids: &[u32]) -> Vec<String> {
 
 /// The services and nodes named after `team` in iceoryx2's registries.
 fn team_entries(team: &TeamName) -> Vec<String> {
-    let cfg = common::transport::iceoryx2_config();
+    let cfg = cdm_iox::iceoryx2_config();
     let prefix = format!("cdm/{team}/");
     let mut out = vec![];
     ipc::Service::list(&cfg, |s| {
@@ -353,8 +355,8 @@ fn team_entries(team: &TeamName) -> Vec<String> {
 fn files_of(pids: &[u32]) -> Vec<String> {
     let mut out = vec![];
     let mut dirs = vec![std::path::PathBuf::from("/dev/shm")];
-    if !common::transport::iox2_root().starts_with("/dev/shm/") {
-        dirs.push(common::transport::iox2_root().into());
+    if !cdm_iox::iox2_root().starts_with("/dev/shm/") {
+        dirs.push(cdm_iox::iox2_root().into());
     }
     while let Some(dir) = dirs.pop() {
         let Ok(entries) = std::fs::read_dir(&dir) else {

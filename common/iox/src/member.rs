@@ -19,11 +19,12 @@ use super::{
     TransportError, CLOCK_BUFFER,
 };
 use crate::messages::{ClockMsg, StateMsg};
+use crate::wire::{ClockWire, StateWire, Wire};
 
 /// A neighbour's state service, read by this agent.
 struct NeighborReader {
-    _service: PubSubService<ipc::Service, StateMsg, ()>,
-    subscriber: Subscriber<ipc::Service, StateMsg, ()>,
+    _service: PubSubService<ipc::Service, StateWire, ()>,
+    subscriber: Subscriber<ipc::Service, StateWire, ()>,
 }
 
 /// A wake event this agent notifies.
@@ -38,11 +39,11 @@ struct WakeWriter {
 pub struct MemberPorts {
     team: TeamName,
     id: u32,
-    publisher: Publisher<ipc::Service, StateMsg, ()>,
-    _state: PubSubService<ipc::Service, StateMsg, ()>,
+    publisher: Publisher<ipc::Service, StateWire, ()>,
+    _state: PubSubService<ipc::Service, StateWire, ()>,
     neighbors: BTreeMap<u32, NeighborReader>,
-    clock_subscriber: Subscriber<ipc::Service, ClockMsg, ()>,
-    _clock: PubSubService<ipc::Service, ClockMsg, ()>,
+    clock_subscriber: Subscriber<ipc::Service, ClockWire, ()>,
+    _clock: PubSubService<ipc::Service, ClockWire, ()>,
     listener: Listener<ipc::Service>,
     wake: EventService<ipc::Service>,
     out_wakes: BTreeMap<u32, WakeWriter>,
@@ -76,7 +77,7 @@ impl MemberPorts {
         let name = team.clock_service();
         let clock = node
             .service_builder(&service_name(team, who, &name)?)
-            .publish_subscribe::<ClockMsg>()
+            .publish_subscribe::<ClockWire>()
             .open()
             .map_err(|e| match e {
                 PublishSubscribeOpenError::DoesNotExist => TransportError::TeamNotFound {
@@ -218,7 +219,7 @@ impl MemberPorts {
             });
         }
         self.publisher
-            .send_copy(msg)
+            .send_copy(Wire(msg))
             .map_err(|e| self.error(&self.team.state_service(self.id), "send", e))
     }
 
@@ -249,7 +250,7 @@ impl MemberPorts {
                 .receive()
                 .map_err(|e| self.error(&self.team.state_service(peer), "receive", e))?
             {
-                f(*sample);
+                f(sample.payload().0);
                 count += 1;
             }
         }
@@ -264,7 +265,7 @@ impl MemberPorts {
             .receive()
             .map_err(|e| self.error(&self.team.clock_service(), "receive", e))?
         {
-            newest = Some(*sample);
+            newest = Some(sample.payload().0);
         }
         Ok(newest)
     }
@@ -317,10 +318,10 @@ fn open_state(
     team: &TeamName,
     who: Role,
     owner: u32,
-) -> Result<PubSubService<ipc::Service, StateMsg, ()>, TransportError> {
+) -> Result<PubSubService<ipc::Service, StateWire, ()>, TransportError> {
     let name = team.state_service(owner);
     node.service_builder(&service_name(team, who, &name)?)
-        .publish_subscribe::<StateMsg>()
+        .publish_subscribe::<StateWire>()
         .open()
         .map_err(|e| match (e, who) {
             (PublishSubscribeOpenError::DoesNotExist, _) => TransportError::NotInTeam {

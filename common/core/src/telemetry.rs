@@ -13,7 +13,7 @@ pub const HEADER: &str = "tick,t,id,role,x,y,z,vx,vy,vz,x_ht,y_ht,z_ht";
 /// The file format of a run's telemetry (`--telemetry`). CSV is the default: it is what the
 /// byte-identical determinism tests compare. Parquet (crate `cdm-parquet`) holds the same
 /// columns and values in a fraction of the bytes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TelemetryFormat {
     #[default]
     Csv,

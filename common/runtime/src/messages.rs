@@ -3,12 +3,11 @@
 //! the orchestrator to every agent.
 //!
 //! Both are `#[repr(C)]` with plain fields only (`u32`, `u64`, `f64`, arrays), so iceoryx2 can
-//! place them in shared memory as they are (`ZeroCopySend`). Codes travel as `u32` with the
+//! place them in shared memory as they are. The backend (cdm-iox) gives them `ZeroCopySend` and
+//! their stable type names; this crate does not name iceoryx2. Codes travel as `u32` with the
 //! documented constants below; [`AgentStatus`] and [`ClockCommand`] are the Rust-side view of
 //! them. Decoding never fails: a code this build does not know is kept as `Unknown(code)` so a
 //! newer peer cannot crash an older one.
-
-use iceoryx2::prelude::ZeroCopySend;
 
 /// `StateMsg::status`: the agent is healthy.
 pub const STATUS_OK: u32 = 0;
@@ -56,7 +55,7 @@ pub const REASON_AGENT_SILENT: u32 = 3;
 pub const REASON_INTERRUPTED: u32 = 4;
 
 /// One agent's full state at one tick, published once per tick.
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct StateMsg {
     /// The tick this state belongs to (simulation time is `tick * dt`). Consumers detect lost
@@ -78,7 +77,7 @@ pub struct StateMsg {
 }
 
 /// The orchestrator's grant: how far agents may run, or that they must stop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(C)]
 pub struct ClockMsg {
     /// The last tick agents may compute (inclusive).

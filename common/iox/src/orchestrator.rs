@@ -19,13 +19,14 @@ use super::{
     service_name, wait_on, Role, TeamLayout, TeamName, TransportError, CLOCK_BUFFER, SPARE_NODES,
 };
 use crate::messages::{ClockMsg, StateMsg};
+use crate::wire::{ClockWire, StateWire, Wire};
 
 const WHO: Role = Role::Orchestrator;
 
 /// One agent's state service, read by the orchestrator.
 struct StateReader {
-    service: PubSubService<ipc::Service, StateMsg, ()>,
-    subscriber: Subscriber<ipc::Service, StateMsg, ()>,
+    service: PubSubService<ipc::Service, StateWire, ()>,
+    subscriber: Subscriber<ipc::Service, StateWire, ()>,
 }
 
 /// One agent's wake event, notified by the orchestrator.
@@ -37,8 +38,8 @@ struct WakeWriter {
 /// Every port of the orchestrator. Fields drop in order: ports first, the node last.
 struct Ports {
     states: BTreeMap<u32, StateReader>,
-    clock: PubSubService<ipc::Service, ClockMsg, ()>,
-    clock_publisher: Publisher<ipc::Service, ClockMsg, ()>,
+    clock: PubSubService<ipc::Service, ClockWire, ()>,
+    clock_publisher: Publisher<ipc::Service, ClockWire, ()>,
     wakes: BTreeMap<u32, WakeWriter>,
     wake_orch: EventService<ipc::Service>,
     listener: Listener<ipc::Service>,
@@ -195,7 +196,7 @@ impl OrchestratorPorts {
     pub fn publish_clock(&mut self, msg: ClockMsg) -> Result<usize, TransportError> {
         let p = self.ports();
         p.clock_publisher
-            .send_copy(msg)
+            .send_copy(Wire(msg))
             .map_err(|e| self.error(&self.team.clock_service(), "send", e))?;
         let mut reached = 0;
         for (&id, wake) in &p.wakes {
@@ -217,7 +218,7 @@ impl OrchestratorPorts {
                 .receive()
                 .map_err(|e| self.error(&self.team.state_service(id), "receive", e))?
             {
-                f(*sample);
+                f(sample.payload().0);
                 count += 1;
             }
         }
@@ -341,7 +342,7 @@ impl Ports {
             let name = team.state_service(id);
             let service = node
                 .service_builder(&service_name(team, WHO, &name)?)
-                .publish_subscribe::<StateMsg>()
+                .publish_subscribe::<StateWire>()
                 .max_publishers(1)
                 .max_subscribers(outs + 1)
                 .max_nodes(outs + 2 + SPARE_NODES)
@@ -384,7 +385,7 @@ impl Ports {
         let name = team.clock_service();
         let clock = node
             .service_builder(&service_name(team, WHO, &name)?)
-            .publish_subscribe::<ClockMsg>()
+            .publish_subscribe::<ClockWire>()
             .max_publishers(1)
             .max_subscribers(n)
             .max_nodes(n + 1 + SPARE_NODES)

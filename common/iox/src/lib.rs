@@ -1,4 +1,5 @@
-//! The only module that names iceoryx2: shared-memory ports of one quadcopter team.
+//! The iceoryx2 backend, the only library crate that names iceoryx2: shared-memory ports of one
+//! quadcopter team.
 //!
 //! One team = one orchestrator process + one process per agent, each with one iceoryx2 node.
 //! The orchestrator creates every service of the team, sized to the team's layout; members only
@@ -48,12 +49,17 @@ mod limits;
 mod member;
 mod orchestrator;
 mod team;
+mod wire;
 
 pub use error::TransportError;
 pub use limits::describe_spawn_error;
 pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
 pub use team::{scenario_hash_value, TeamLayout, TeamName, SCENARIO_HASH_KEY};
+pub use wire::{ClockWire, StateWire, Wire, CLOCK_TYPE_NAME, STATE_TYPE_NAME};
+
+/// The runtime's wire messages, at the path the backend's modules name them.
+use cdm_runtime::messages;
 
 use std::fmt;
 use std::sync::{Once, OnceLock};

@@ -369,8 +369,8 @@ fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> Real {
         let g = &ch.pos[k * ch.levels..k * ch.levels + c.len()];
         let mut e = [0.0; 3];
         for (gl, cl) in g.iter().zip(c) {
-            for a in 0..3 {
-                e[a] += gl * cl[a];
+            for (ea, ca) in e.iter_mut().zip(cl) {
+                *ea += gl * ca;
             }
         }
         (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()

@@ -1,0 +1,31 @@
+//! Continuum deformation of quadcopter teams over moving frames, with no I/O beyond reading a
+//! scenario and writing a run directory: the paper's math, scenario files, the deterministic
+//! whole-team engine, the audit and the telemetry. No iceoryx2, clap or tracing-subscriber: a
+//! library on its own.
+//!
+//! Layers, bottom to top: `math` (the cdm-math crate) -> `frame`, `plan`, `formation`, `graph`,
+//! `gains`, `safety`, `dynamics`, `control` (pure) -> `step` (one member's tick) -> `scenario`
+//! (files, validation, built-ins) -> `engine`, `telemetry`, `audit`, `simulate`, `rundir`;
+//! `export` (pure: the plan's exact pieces for Crazyswarm2 and Skybrush).
+
+/// The numeric facade, re-exported so `crate::math::Vec3` reads as before the split.
+pub use cdm_math as math;
+
+pub mod audit;
+pub mod control;
+pub mod dynamics;
+pub mod engine;
+pub mod export;
+pub mod formation;
+pub mod frame;
+pub mod gains;
+pub mod geometry;
+pub mod graph;
+pub mod linear_certificate;
+pub mod plan;
+pub mod rundir;
+pub mod safety;
+pub mod scenario;
+pub mod simulate;
+pub mod step;
+pub mod telemetry;

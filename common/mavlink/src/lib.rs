@@ -1,0 +1,23 @@
+//! The MAVLink vehicle plant (issue 13): a member's link to a PX4 or ArduPilot vehicle. The
+//! member reads the vehicle's measured state (HEARTBEAT, LOCAL_POSITION_NED, ATTITUDE) and sends
+//! it setpoints (SET_POSITION_TARGET_LOCAL_NED with velocity and acceleration feed-forward) and a
+//! HEARTBEAT once a second.
+//!
+//! Layers: `ned` (frame conversion), `health` (loss detection), `arming` (`--arm` sequence) and
+//! `messages` (what is sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
+//! without I/O, driven by the caller's clock; `udp` is the socket. The encoding is the `mavlink`
+//! crate's (MAVLink 2, common dialect).
+
+pub mod arming;
+pub mod health;
+pub mod messages;
+pub mod ned;
+pub mod udp;
+pub mod vehicle;
+
+pub use arming::{ArmAction, ArmError, ArmStage, Autopilot};
+pub use health::LinkFault;
+pub use messages::Setpoint;
+pub use ned::VehicleOrigin;
+pub use udp::{member_addr, UdpError, UdpLink, DEFAULT_BASE_PORT};
+pub use vehicle::{MavlinkVehicle, MeasuredState, VehicleConfig, VehicleError};

@@ -1,0 +1,275 @@
+//! The thin I/O around [`MavlinkVehicle`]: one UDP socket per member, bound to `H:(P + i)`,
+//! replying to the address the vehicle's packets come from. It decodes and encodes with the
+//! `mavlink` crate and does nothing else; every decision is the vehicle's.
+
+use std::io;
+use std::net::{IpAddr, SocketAddr, UdpSocket};
+use std::time::Duration;
+
+use mavlink::dialects::common::MavMessage;
+use mavlink::error::MessageReadError;
+use mavlink::{MavHeader, MavlinkReader};
+
+use crate::messages::{MEMBER_COMPONENT_ID, MEMBER_SYSTEM_ID};
+use crate::vehicle::MavlinkVehicle;
+
+/// PX4 multi-vehicle SITL sends instance k's offboard link to UDP 14540 + k.
+pub const DEFAULT_BASE_PORT: u16 = 14540;
+
+/// Largest UDP payload read at once (a MAVLink 2 frame is at most 280 bytes; a datagram may
+/// carry several).
+const DATAGRAM_BYTES: usize = 65_536;
+/// Datagrams one `receive` reads at most (a vehicle sends a few per tick).
+const MAX_DATAGRAMS_PER_RECEIVE: usize = 1024;
+
+/// Why the member's UDP link failed.
+#[derive(Debug, thiserror::Error)]
+pub enum UdpError {
+    /// `P + i` does not fit in a port number.
+    #[error("agent {agent}: --mavlink-base-port {base_port} + member index {index} exceeds 65535")]
+    PortOutOfRange {
+        agent: u32,
+        base_port: u16,
+        index: u32,
+    },
+    /// The socket could not be bound (address in use, bad host).
+    #[error("agent {agent}: cannot bind UDP {addr} for its vehicle")]
+    Bind {
+        agent: u32,
+        addr: SocketAddr,
+        #[source]
+        source: io::Error,
+    },
+    /// Receiving or sending failed.
+    #[error("agent {agent}: UDP {op} on {addr} failed")]
+    Io {
+        agent: u32,
+        op: &'static str,
+        addr: SocketAddr,
+        #[source]
+        source: io::Error,
+    },
+}
+
+/// The address member `index` (scenario order, from 0) listens on: `host:(base_port + index)`.
+pub fn member_addr(
+    agent: u32,
+    host: IpAddr,
+    base_port: u16,
+    index: u32,
+) -> Result<SocketAddr, UdpError> {
+    let port = u32::from(base_port)
+        .checked_add(index)
+        .and_then(|p| u16::try_from(p).ok())
+        .ok_or(UdpError::PortOutOfRange {
+            agent,
+            base_port,
+            index,
+        })?;
+    Ok(SocketAddr::new(host, port))
+}
+
+/// One member's socket.
+#[derive(Debug)]
+pub struct UdpLink {
+    agent: u32,
+    socket: UdpSocket,
+    local: SocketAddr,
+    /// Where the last valid MAVLink came from; replies go there.
+    peer: Option<SocketAddr>,
+    sequence: u8,
+    buf: Vec<u8>,
+}
+
+impl UdpLink {
+    /// Bind `addr` (non-blocking: the caller's loop paces itself).
+    pub fn bind(agent: u32, addr: SocketAddr) -> Result<Self, UdpError> {
+        let bind_err = |source| UdpError::Bind {
+            agent,
+            addr,
+            source,
+        };
+        let socket = UdpSocket::bind(addr).map_err(bind_err)?;
+        socket.set_nonblocking(true).map_err(bind_err)?;
+        let local = socket.local_addr().map_err(bind_err)?;
+        Ok(UdpLink {
+            agent,
+            socket,
+            local,
+            peer: None,
+            sequence: 0,
+            buf: vec![0; DATAGRAM_BYTES],
+        })
+    }
+
+    /// The bound address.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local
+    }
+
+    /// The vehicle's address, once it has been heard.
+    pub fn peer(&self) -> Option<SocketAddr> {
+        self.peer
+    }
+
+    fn io_err(&self, op: &'static str, source: io::Error) -> UdpError {
+        UdpError::Io {
+            agent: self.agent,
+            op,
+            addr: self.local,
+            source,
+        }
+    }
+
+    /// Hand the datagrams waiting on the socket to `vehicle` as received at `now`; returns the
+    /// number of MAVLink messages decoded. Frames with a bad checksum are skipped by the reader.
+    /// Replies go to the address of the last datagram that carried the vehicle's messages.
+    pub fn receive(
+        &mut self,
+        now: Duration,
+        vehicle: &mut MavlinkVehicle,
+    ) -> Result<usize, UdpError> {
+        let mut decoded = 0;
+        // Bounded: a flood cannot keep the caller's tick from ending; the rest waits for the
+        // next tick.
+        for _ in 0..MAX_DATAGRAMS_PER_RECEIVE {
+            let (n, from) = match self.socket.recv_from(&mut self.buf) {
+                Ok(got) => got,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                // A previous reply hit a closed port (ICMP): nothing to read, not a failure;
+                // the loss detector decides whether the vehicle is gone.
+                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+                Err(e) => return Err(self.io_err("receive", e)),
+            };
+            let mut reader = MavlinkReader::new(&self.buf[..n]);
+            // Each read consumes at least one byte of the datagram, so this ends.
+            loop {
+                match reader.read_any_message::<MavMessage>() {
+                    Ok((header, msg)) => {
+                        decoded += 1;
+                        if vehicle.on_message(now, &header, &msg) {
+                            self.peer = Some(from);
+                        }
+                    }
+                    Err(MessageReadError::Io(_)) => break,
+                    Err(MessageReadError::Parse(e)) => {
+                        tracing::debug!(agent = self.agent, %from, error = ?e, "undecodable MAVLink frame skipped");
+                    }
+                }
+            }
+        }
+        Ok(decoded)
+    }
+
+    /// Encode `msgs` (MAVLink 2) and send them to the vehicle; nothing is sent before the
+    /// vehicle has been heard (there is no address to send to).
+    pub fn send(&mut self, msgs: &[MavMessage]) -> Result<(), UdpError> {
+        let Some(peer) = self.peer else {
+            return Ok(());
+        };
+        for msg in msgs {
+            let header = MavHeader {
+                system_id: u32::from(MEMBER_SYSTEM_ID),
+                component_id: MEMBER_COMPONENT_ID,
+                sequence: self.sequence,
+            };
+            self.sequence = self.sequence.wrapping_add(1);
+            let mut frame = Vec::with_capacity(64);
+            mavlink::write_v2_msg(&mut frame, header, msg)
+                .map_err(|e| self.io_err("encode", io::Error::other(e.to_string())))?;
+            match self.socket.send_to(&frame, peer) {
+                Ok(_) => {}
+                // A full socket buffer drops this frame: the next tick sends a fresher one.
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => {}
+                Err(e) => return Err(self.io_err("send", e)),
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ned::VehicleOrigin;
+    use crate::vehicle::VehicleConfig;
+    use mavlink::dialects::common::{MavAutopilot, MavModeFlag, MavState, MavType, HEARTBEAT_DATA};
+    use std::net::Ipv4Addr;
+
+    fn beat_from(socket: &UdpSocket, to: SocketAddr, system_id: u32, autopilot: MavAutopilot) {
+        let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot,
+            base_mode: MavModeFlag::empty(),
+            system_status: MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        });
+        let header = MavHeader {
+            system_id,
+            component_id: 1,
+            sequence: 0,
+        };
+        let mut frame = Vec::new();
+        mavlink::write_v2_msg(&mut frame, header, &msg).unwrap();
+        socket.send_to(&frame, to).unwrap();
+    }
+
+    /// Receive until `vehicle` has taken in `want` messages (bounded: loopback is immediate).
+    fn receive_until(link: &mut UdpLink, vehicle: &mut MavlinkVehicle, want: u64) {
+        for _ in 0..1000 {
+            link.receive(Duration::ZERO, vehicle).unwrap();
+            let c = vehicle.counters();
+            if c.heartbeats_received + c.ignored >= want {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        panic!("loopback heartbeats did not arrive");
+    }
+
+    #[test]
+    fn replies_go_to_the_vehicle_not_to_other_senders() {
+        let localhost = IpAddr::V4(Ipv4Addr::LOCALHOST);
+        let mut link = UdpLink::bind(1, SocketAddr::new(localhost, 0)).unwrap();
+        let mut vehicle = MavlinkVehicle::new(VehicleConfig {
+            agent: 1,
+            origin: VehicleOrigin::default(),
+            arm: false,
+            connect_deadline: Duration::from_secs(5),
+        });
+        let autopilot = UdpSocket::bind((localhost, 0)).unwrap();
+        let gcs = UdpSocket::bind((localhost, 0)).unwrap();
+        beat_from(
+            &autopilot,
+            link.local_addr(),
+            1,
+            MavAutopilot::MAV_AUTOPILOT_PX4,
+        );
+        receive_until(&mut link, &mut vehicle, 1);
+        assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
+        // A ground station on the same port does not steal the replies.
+        beat_from(
+            &gcs,
+            link.local_addr(),
+            255,
+            MavAutopilot::MAV_AUTOPILOT_INVALID,
+        );
+        receive_until(&mut link, &mut vehicle, 2);
+        assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
+    }
+
+    #[test]
+    fn member_i_listens_on_base_plus_i() {
+        let host = IpAddr::V4(Ipv4Addr::LOCALHOST);
+        assert_eq!(
+            member_addr(4, host, DEFAULT_BASE_PORT, 3).unwrap(),
+            "127.0.0.1:14543".parse().unwrap()
+        );
+        let err = member_addr(4, host, 65_530, 6).unwrap_err();
+        assert!(err
+            .to_string()
+            .starts_with("agent 4: --mavlink-base-port 65530"));
+    }
+}

@@ -1,0 +1,439 @@
+//! [`MavlinkVehicle`]: one member's view of its vehicle, without I/O. Messages from the vehicle
+//! and the caller's clock go in; measured state, faults and the messages to send come out. The
+//! socket is `udp::UdpLink`'s.
+
+use std::time::Duration;
+
+use mavlink::dialects::common::{MavAutopilot, MavMessage, MavModeFlag};
+use mavlink::MavHeader;
+
+use crate::arming::{ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
+use crate::health::{LinkFault, LinkHealth};
+use crate::messages::{self, Setpoint, Target};
+use crate::ned::{from_f32, ned_to_enu_vector, VehicleOrigin};
+use cdm_math::{Real, Vec3};
+
+/// The member sends its own HEARTBEAT this often (MAVLink's 1 Hz convention).
+pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
+
+/// How one member's link is set up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleConfig {
+    /// The member's agent id (named in every fault).
+    pub agent: u32,
+    /// `--vehicle-origin`: where the vehicle's NED origin is in the scenario.
+    pub origin: VehicleOrigin,
+    /// `--arm`: switch mode and arm once the team is ready; otherwise stream only.
+    pub arm: bool,
+    /// How long to wait for the vehicle's first HEARTBEAT and position.
+    pub connect_deadline: Duration,
+}
+
+/// The vehicle's measured state in scenario coordinates (LOCAL_POSITION_NED converted). The
+/// message carries no acceleration or higher derivatives: a member publishing this state sets
+/// them to zero.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasuredState {
+    pub position: Vec3,
+    pub velocity: Vec3,
+    /// The vehicle's own timestamp (ms since its boot).
+    pub time_boot_ms: u32,
+    /// When it arrived, on the caller's clock.
+    pub received_at: Duration,
+}
+
+/// The vehicle's last ATTITUDE (radians, the vehicle's NED body convention), kept for the
+/// audit's record.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Attitude {
+    pub roll_rad: Real,
+    pub pitch_rad: Real,
+    pub yaw_rad: Real,
+    pub time_boot_ms: u32,
+}
+
+/// Message counts, for summaries and tests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LinkCounters {
+    pub heartbeats_received: u64,
+    pub positions_received: u64,
+    pub attitudes_received: u64,
+    /// Messages from another system than the vehicle's, or of a type the member does not use.
+    pub ignored: u64,
+    pub setpoints_sent: u64,
+    pub heartbeats_sent: u64,
+    pub commands_sent: u64,
+}
+
+/// Why the link to a member's vehicle failed (each variant's source names the member).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum VehicleError {
+    #[error(transparent)]
+    Link(#[from] LinkFault),
+    #[error(transparent)]
+    Arm(#[from] ArmError),
+}
+
+/// One member's MAVLink vehicle, as pure logic.
+#[derive(Debug, Clone)]
+pub struct MavlinkVehicle {
+    config: VehicleConfig,
+    health: LinkHealth,
+    arm: ArmSequence,
+    /// The autopilot this link locked onto (system and component of its first HEARTBEAT).
+    target: Option<Target>,
+    mode: Option<VehicleMode>,
+    state: Option<MeasuredState>,
+    attitude: Option<Attitude>,
+    last_heartbeat_sent: Option<Duration>,
+    stream_started: Option<Duration>,
+    counters: LinkCounters,
+}
+
+impl MavlinkVehicle {
+    /// A link whose clock starts now (`Duration::ZERO` on the caller's clock).
+    pub fn new(config: VehicleConfig) -> Self {
+        MavlinkVehicle {
+            config,
+            health: LinkHealth::new(config.agent, config.connect_deadline),
+            arm: ArmSequence::new(config.agent, config.arm),
+            target: None,
+            mode: None,
+            state: None,
+            attitude: None,
+            last_heartbeat_sent: None,
+            stream_started: None,
+            counters: LinkCounters::default(),
+        }
+    }
+
+    /// A message arrived at `now`. Returns whether it came from the vehicle this link follows
+    /// (the socket replies to where such messages come from, not to any other sender).
+    pub fn on_message(&mut self, now: Duration, header: &MavHeader, msg: &MavMessage) -> bool {
+        if let MavMessage::HEARTBEAT(hb) = msg {
+            // Lock onto the first autopilot heard; ground stations and companions also beat.
+            // MAVLink 2 system ids are one byte on the wire; the header type is wider.
+            if let (None, Ok(system)) = (self.target, u8::try_from(header.system_id)) {
+                if hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID {
+                    self.target = Some(Target {
+                        system,
+                        component: header.component_id,
+                    });
+                }
+            }
+        }
+        let from_vehicle = self
+            .target
+            .is_some_and(|t| u32::from(t.system) == header.system_id);
+        match msg {
+            MavMessage::HEARTBEAT(hb)
+                if from_vehicle && hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID =>
+            {
+                self.counters.heartbeats_received += 1;
+                self.health.on_heartbeat(now);
+                self.mode = Some(VehicleMode {
+                    autopilot: autopilot_of(hb.autopilot),
+                    custom_mode: hb.custom_mode,
+                    armed: hb
+                        .base_mode
+                        .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
+                });
+            }
+            MavMessage::LOCAL_POSITION_NED(p) if from_vehicle => {
+                self.counters.positions_received += 1;
+                self.health.on_position(now);
+                self.state = Some(MeasuredState {
+                    position: self.config.origin.ned_to_enu(&from_f32(p.x, p.y, p.z)),
+                    velocity: ned_to_enu_vector(&from_f32(p.vx, p.vy, p.vz)),
+                    time_boot_ms: p.time_boot_ms,
+                    received_at: now,
+                });
+            }
+            MavMessage::ATTITUDE(a) if from_vehicle => {
+                self.counters.attitudes_received += 1;
+                self.attitude = Some(Attitude {
+                    roll_rad: Real::from(a.roll),
+                    pitch_rad: Real::from(a.pitch),
+                    yaw_rad: Real::from(a.yaw),
+                    time_boot_ms: a.time_boot_ms,
+                });
+            }
+            _ => {
+                self.counters.ignored += 1;
+                return false;
+            }
+        }
+        true
+    }
+
+    /// One tick at `now`: check the link, then return what to send once the vehicle is known
+    /// (a HEARTBEAT when one is due, the setpoint, an `--arm` command when one is due).
+    /// `team_ready` says every vehicle of the team reports ready (gates `--arm`).
+    pub fn on_tick(
+        &mut self,
+        now: Duration,
+        setpoint: Option<&Setpoint>,
+        team_ready: bool,
+    ) -> Result<Vec<MavMessage>, VehicleError> {
+        self.health.check(now)?;
+        let mut out = Vec::with_capacity(3);
+        // Nothing to say before the vehicle is known: there is no one to address.
+        let Some(target) = self.target else {
+            return Ok(out);
+        };
+        let heartbeat_due = self
+            .last_heartbeat_sent
+            .is_none_or(|t| now.saturating_sub(t) >= HEARTBEAT_INTERVAL);
+        if heartbeat_due {
+            self.last_heartbeat_sent = Some(now);
+            self.counters.heartbeats_sent += 1;
+            out.push(messages::heartbeat());
+        }
+        if let Some(sp) = setpoint {
+            let started = *self.stream_started.get_or_insert(now);
+            // time_boot_ms is the member's milliseconds since the link started (wraps after 49 days).
+            let ms = u32::try_from(now.as_millis() % (1 << 32)).unwrap_or(0);
+            out.push(messages::position_target(
+                target,
+                ms,
+                &self.config.origin,
+                sp,
+            ));
+            self.counters.setpoints_sent += 1;
+            let streamed = now.saturating_sub(started);
+            if let Some(action) = self.arm.on_tick(now, self.mode, streamed, team_ready)? {
+                let confirmation =
+                    u8::try_from(self.arm.requests().saturating_sub(1)).unwrap_or(u8::MAX);
+                out.push(messages::command(target, action, confirmation));
+                self.counters.commands_sent += 1;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Whether the vehicle has been heard (HEARTBEAT and position): it reports ready.
+    pub fn ready(&self) -> bool {
+        self.health.connected()
+    }
+
+    /// The last measured state, if any.
+    pub fn state(&self) -> Option<&MeasuredState> {
+        self.state.as_ref()
+    }
+
+    /// The last attitude, if any.
+    pub fn attitude(&self) -> Option<&Attitude> {
+        self.attitude.as_ref()
+    }
+
+    /// The last HEARTBEAT's mode and armed state, if any.
+    pub fn mode(&self) -> Option<&VehicleMode> {
+        self.mode.as_ref()
+    }
+
+    /// Where `--arm` is.
+    pub fn arm_stage(&self) -> ArmStage {
+        self.arm.stage()
+    }
+
+    /// The autopilot the link locked onto.
+    pub fn target(&self) -> Option<Target> {
+        self.target
+    }
+
+    /// Message counts so far.
+    pub fn counters(&self) -> &LinkCounters {
+        &self.counters
+    }
+
+    /// The member's agent id.
+    pub fn agent(&self) -> u32 {
+        self.config.agent
+    }
+}
+
+fn autopilot_of(a: MavAutopilot) -> Autopilot {
+    match a {
+        MavAutopilot::MAV_AUTOPILOT_PX4 => Autopilot::Px4,
+        MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Autopilot::ArduPilot,
+        other => Autopilot::Other(other as u32),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavlink::dialects::common::{
+        MavState, MavType, ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA,
+    };
+
+    const VEHICLE: MavHeader = MavHeader {
+        system_id: 3,
+        component_id: 1,
+        sequence: 0,
+    };
+
+    fn ms(v: u64) -> Duration {
+        Duration::from_millis(v)
+    }
+
+    fn config(arm: bool) -> VehicleConfig {
+        VehicleConfig {
+            agent: 12,
+            origin: VehicleOrigin(Vec3::new(10.0, 20.0, 0.0)),
+            arm,
+            connect_deadline: ms(5000),
+        }
+    }
+
+    fn heartbeat(autopilot: MavAutopilot, custom_mode: u32, armed: bool) -> MavMessage {
+        let base_mode = if armed {
+            MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+        } else {
+            MavModeFlag::empty()
+        };
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot,
+            base_mode,
+            system_status: MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        })
+    }
+
+    fn position(n: f32, e: f32, d: f32) -> MavMessage {
+        MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+            time_boot_ms: 99,
+            x: n,
+            y: e,
+            z: d,
+            vx: 1.0,
+            vy: 0.0,
+            vz: -0.5,
+        })
+    }
+
+    fn hover() -> Setpoint {
+        Setpoint {
+            position: Vec3::new(10.0, 20.0, 2.0),
+            velocity: Vec3::zeros(),
+            acceleration: Vec3::zeros(),
+        }
+    }
+
+    fn heard(v: &mut MavlinkVehicle, now: Duration) {
+        v.on_message(
+            now,
+            &VEHICLE,
+            &heartbeat(MavAutopilot::MAV_AUTOPILOT_PX4, 0, false),
+        );
+        v.on_message(now, &VEHICLE, &position(1.0, 2.0, -3.0));
+    }
+
+    #[test]
+    fn measured_state_is_in_scenario_coordinates() {
+        let mut v = MavlinkVehicle::new(config(false));
+        heard(&mut v, ms(10));
+        let s = v.state().unwrap();
+        assert_eq!(s.position, Vec3::new(12.0, 21.0, 3.0));
+        assert_eq!(s.velocity, Vec3::new(0.0, 1.0, 0.5));
+        assert!(v.ready());
+        v.on_message(
+            ms(11),
+            &VEHICLE,
+            &MavMessage::ATTITUDE(ATTITUDE_DATA {
+                yaw: 0.5,
+                ..ATTITUDE_DATA::default()
+            }),
+        );
+        assert_eq!(v.attitude().unwrap().yaw_rad, 0.5);
+    }
+
+    #[test]
+    fn only_the_autopilot_is_followed() {
+        let mut v = MavlinkVehicle::new(config(false));
+        let gcs = MavHeader {
+            system_id: 255,
+            component_id: 190,
+            sequence: 0,
+        };
+        // A ground station's heartbeat and position are not the vehicle's.
+        let gcs_beat = heartbeat(MavAutopilot::MAV_AUTOPILOT_INVALID, 0, false);
+        assert!(!v.on_message(ms(1), &gcs, &gcs_beat));
+        assert!(!v.on_message(ms(1), &gcs, &position(5.0, 5.0, 5.0)));
+        assert_eq!(v.target(), None);
+        heard(&mut v, ms(2));
+        assert!(!v.on_message(ms(3), &gcs, &position(5.0, 5.0, 5.0)));
+        assert_eq!(
+            v.target(),
+            Some(Target {
+                system: 3,
+                component: 1
+            })
+        );
+        assert_eq!(v.state().unwrap().position, Vec3::new(12.0, 21.0, 3.0));
+        assert_eq!(v.counters().ignored, 3);
+    }
+
+    #[test]
+    fn setpoints_every_tick_heartbeat_once_a_second() {
+        let mut v = MavlinkVehicle::new(config(false));
+        // Before the vehicle is heard there is no one to address.
+        assert!(v.on_tick(ms(0), Some(&hover()), false).unwrap().is_empty());
+        let mut setpoints = 0;
+        let mut beats = 0;
+        for k in 1..=100u64 {
+            let now = ms(20 * k);
+            heard(&mut v, now);
+            for m in v.on_tick(now, Some(&hover()), true).unwrap() {
+                match m {
+                    MavMessage::SET_POSITION_TARGET_LOCAL_NED(_) => setpoints += 1,
+                    MavMessage::HEARTBEAT(_) => beats += 1,
+                    other => panic!("unexpected {other:?} without --arm"),
+                }
+            }
+        }
+        assert_eq!(setpoints, 100);
+        assert_eq!(beats, 2); // at 0.02 s (first tick with a target) and 1.02 s
+    }
+
+    #[test]
+    fn a_silent_vehicle_is_a_fault_naming_the_agent() {
+        let mut v = MavlinkVehicle::new(config(false));
+        heard(&mut v, ms(100));
+        v.on_tick(ms(600), Some(&hover()), true).unwrap();
+        let err = v.on_tick(ms(601), Some(&hover()), true).unwrap_err();
+        assert!(matches!(
+            err,
+            VehicleError::Link(LinkFault::PositionLost { agent: 12, .. })
+        ));
+        assert!(err.to_string().contains("agent 12"));
+    }
+
+    #[test]
+    fn arm_sends_offboard_then_arm_as_command_long() {
+        let mut v = MavlinkVehicle::new(config(true));
+        let mut commands = Vec::new();
+        for k in 0..=150u64 {
+            let now = ms(20 * k);
+            // The fake PX4 obeys: OFFBOARD once asked, armed once asked.
+            let offboard = commands.iter().any(|c| matches!(c, MavMessage::COMMAND_LONG(d) if d.command == mavlink::dialects::common::MavCmd::MAV_CMD_DO_SET_MODE));
+            let armed = commands.len() > 1;
+            let mode = if offboard { 6 << 16 } else { 0 };
+            v.on_message(
+                now,
+                &VEHICLE,
+                &heartbeat(MavAutopilot::MAV_AUTOPILOT_PX4, mode, armed),
+            );
+            v.on_message(now, &VEHICLE, &position(1.0, 2.0, -3.0));
+            let out = v.on_tick(now, Some(&hover()), true).unwrap();
+            commands.extend(
+                out.into_iter()
+                    .filter(|m| matches!(m, MavMessage::COMMAND_LONG(_))),
+            );
+        }
+        assert_eq!(commands.len(), 2, "{commands:?}");
+        assert_eq!(v.arm_stage(), ArmStage::Armed);
+    }
+}

@@ -1,0 +1,251 @@
+#!/usr/bin/env python3
+"""A stand-in MAVLink vehicle for the tests of the member's vehicle link (issue 13).
+
+pymavlink (pinned in python/requirements-test.txt) does all the encoding and decoding, so the
+Rust side is checked against an implementation nobody here wrote. The vehicle is a point mass
+tracking the last SET_POSITION_TARGET_LOCAL_NED it received (position, velocity and acceleration
+feed-forward). It sends HEARTBEAT, LOCAL_POSITION_NED and ATTITUDE at --rate-hz from its own UDP
+socket to the member's port, answers DO_SET_MODE / COMPONENT_ARM_DISARM like a strict PX4
+(OFFBOARD only while setpoints stream; arming only in OFFBOARD), counts what it received and the
+frames that failed their checksum, can go silent after --silent-after seconds, and prints one
+JSON summary on stdout at exit.
+
+Every loop is bounded: the vehicle exits after --max-s seconds, or --idle-exit-s seconds after
+the last setpoint.
+
+How to run (with the Rust example listening on 127.0.0.1:14540):
+    .venv/bin/python tests/python/mavlink_vehicle.py --port 14540 --start-ned 0,0,-2
+"""
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+# MAVLink 2 and the common dialect (what PX4 speaks) must be chosen before pymavlink loads one.
+os.environ["MAVLINK20"] = "1"
+os.environ["MAVLINK_DIALECT"] = "common"
+from pymavlink import mavutil  # noqa: E402
+
+mavutil.set_dialect("common")
+mavlink = mavutil.mavlink
+
+PX4_MAIN_MODE_OFFBOARD = 6
+ARDUCOPTER_GUIDED = 4
+# The vehicle's tracking law: a critically damped second-order loop (omega = 3 rad/s).
+KP = 9.0
+KD = 6.0
+GRAVITY = 9.81
+# PX4 drops out of OFFBOARD when setpoints stop for this long (COM_OF_LOSS_T default 1 s; we are
+# stricter to see it in short tests).
+OFFBOARD_LOSS_S = 0.5
+
+
+def vec3(text):
+    parts = [float(p) for p in text.split(",")]
+    if len(parts) != 3 or not all(math.isfinite(p) for p in parts):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers x,y,z, got {text!r}")
+    return parts
+
+
+def parse_args():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--host", default="127.0.0.1", help="the member's address")
+    p.add_argument("--port", type=int, required=True, help="the member's UDP port (P + i)")
+    p.add_argument("--sysid", type=int, default=1, help="this vehicle's MAVLink system id")
+    p.add_argument("--autopilot", choices=["px4", "ardupilot"], default="px4")
+    p.add_argument("--start-ned", type=vec3, default=[0.0, 0.0, 0.0], help="start position, NED m")
+    p.add_argument("--rate-hz", type=float, default=50.0)
+    p.add_argument("--require-arm", action="store_true",
+                   help="move only when armed in OFFBOARD/GUIDED (otherwise track any setpoint)")
+    p.add_argument("--silent-after", type=float, default=None,
+                   help="stop sending after this many seconds (the member must name the loss)")
+    p.add_argument("--mute", choices=["all", "heartbeat", "position"], default="all",
+                   help="what --silent-after stops")
+    p.add_argument("--max-s", type=float, default=30.0, help="hard bound on the run time")
+    p.add_argument("--idle-exit-s", type=float, default=1.5,
+                   help="exit this long after the last setpoint")
+    return p.parse_args()
+
+
+class Vehicle:
+    def __init__(self, args):
+        self.args = args
+        self.pos = list(args.start_ned)
+        self.vel = [0.0, 0.0, 0.0]
+        self.acc = [0.0, 0.0, 0.0]
+        self.setpoint = None  # (pos, vel, acc)
+        self.custom_mode = 0
+        self.armed = False
+        self.setpoint_times = []
+        self.setpoint_stamps_ms = []
+        self.type_masks = set()
+        self.frames = set()
+        self.counts = {}
+        self.bad_data = 0
+        self.not_mavlink2 = 0
+        self.wrong_target = 0
+        self.commands = []
+        self.member_sysids = set()
+
+    def guided(self):
+        if self.args.autopilot == "px4":
+            return (self.custom_mode >> 16) & 0xFF == PX4_MAIN_MODE_OFFBOARD
+        return self.custom_mode == ARDUCOPTER_GUIDED
+
+    def on_message(self, conn, msg, now):
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            self.bad_data += 1
+            return
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if msg.get_msgbuf()[0] != 0xFD:
+            self.not_mavlink2 += 1
+        self.member_sysids.add(msg.get_srcSystem())
+        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+            if msg.target_system != self.args.sysid:
+                self.wrong_target += 1
+                return
+            self.setpoint_times.append(now)
+            self.setpoint_stamps_ms.append(msg.time_boot_ms)
+            self.type_masks.add(msg.type_mask)
+            self.frames.add(msg.coordinate_frame)
+            self.setpoint = ([msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz],
+                             [msg.afx, msg.afy, msg.afz])
+        elif kind == "COMMAND_LONG":
+            self.on_command(conn, msg, now)
+
+    def on_command(self, conn, msg, now):
+        streaming = bool(self.setpoint_times) and now - self.setpoint_times[-1] < OFFBOARD_LOSS_S
+        result = mavlink.MAV_RESULT_DENIED
+        if msg.command == mavlink.MAV_CMD_DO_SET_MODE and streaming:
+            if self.args.autopilot == "px4":
+                self.custom_mode = (int(msg.param2) & 0xFF) << 16 | (int(msg.param3) & 0xFF) << 24
+            else:
+                self.custom_mode = int(msg.param2)
+            result = mavlink.MAV_RESULT_ACCEPTED
+        elif msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and self.guided():
+            self.armed = msg.param1 == 1.0
+            result = mavlink.MAV_RESULT_ACCEPTED
+        self.commands.append({"command": msg.command, "param1": msg.param1, "param2": msg.param2,
+                              "confirmation": msg.confirmation, "result": result})
+        conn.mav.command_ack_send(msg.command, result)
+
+    def step(self, dt, now):
+        flying = self.setpoint is not None and (not self.args.require_arm or
+                                                (self.armed and self.guided()))
+        if self.args.autopilot == "px4" and self.guided() and (
+                not self.setpoint_times or now - self.setpoint_times[-1] > OFFBOARD_LOSS_S):
+            self.custom_mode = 3 << 16  # PX4 falls back to POSCTL when the stream stops
+        if flying:
+            p, v, a = self.setpoint
+            self.acc = [a[k] + KP * (p[k] - self.pos[k]) + KD * (v[k] - self.vel[k])
+                        for k in range(3)]
+        else:
+            self.acc = [0.0, 0.0, 0.0]
+        # Semi-implicit Euler at the fixed step: the vehicle's own time, not the wall clock.
+        self.vel = [self.vel[k] + self.acc[k] * dt for k in range(3)]
+        self.pos = [self.pos[k] + self.vel[k] * dt for k in range(3)]
+
+    def send(self, conn, boot_ms, silent):
+        mute = self.args.mute
+        if not (silent and mute in ("all", "heartbeat")):
+            autopilot = (mavlink.MAV_AUTOPILOT_PX4 if self.args.autopilot == "px4"
+                         else mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
+            base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            if self.armed:
+                base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+            conn.mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, autopilot, base,
+                                    self.custom_mode, mavlink.MAV_STATE_ACTIVE)
+        if not (silent and mute in ("all", "position")):
+            conn.mav.local_position_ned_send(boot_ms, *self.pos, *self.vel)
+        if not (silent and mute == "all"):
+            # Small-angle attitude that would produce the commanded horizontal acceleration.
+            roll = math.atan2(self.acc[1], GRAVITY)
+            pitch = -math.atan2(self.acc[0], GRAVITY)
+            conn.mav.attitude_send(boot_ms, roll, pitch, 0.0, 0.0, 0.0, 0.0)
+
+    def summary(self, conn, went_silent_at, exit_reason):
+        t = self.setpoint_times
+        rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else None
+        # The same rate on the sender's clock (the setpoints' time_boot_ms): what the member sent,
+        # free of this process's own scheduling delays on a loaded machine.
+        ms = self.setpoint_stamps_ms
+        stamp_rate = ((len(ms) - 1) * 1000.0 / (ms[-1] - ms[0])
+                      if len(ms) > 1 and ms[-1] > ms[0] else None)
+        return {
+            "sysid": self.args.sysid,
+            "setpoints_received": len(t),
+            "setpoint_rate_hz": rate,
+            "setpoint_rate_by_stamp_hz": stamp_rate,
+            "setpoint_window_s": (t[-1] - t[0]) if t else None,
+            "type_masks": sorted(self.type_masks),
+            "frames": sorted(self.frames),
+            "bad_data": self.bad_data,
+            "receive_errors": conn.mav.total_receive_errors,
+            "packets_received": conn.mav.total_packets_received,
+            "not_mavlink2": self.not_mavlink2,
+            "wrong_target": self.wrong_target,
+            "messages": self.counts,
+            "member_sysids": sorted(self.member_sysids),
+            "commands": self.commands,
+            "armed": self.armed,
+            "custom_mode": self.custom_mode,
+            "final_position_ned": self.pos,
+            "last_setpoint_ned": self.setpoint[0] if self.setpoint else None,
+            "went_silent_at_s": went_silent_at,
+            "exit": exit_reason,
+        }
+
+
+def drain(conn, vehicle, now):
+    # Bounded: at most this many messages per tick (a flood cannot stall the loop).
+    for _ in range(1000):
+        msg = conn.recv_msg()
+        if msg is None:
+            return
+        vehicle.on_message(conn, msg, now)
+
+
+def main():
+    args = parse_args()
+    if not (0 < args.port < 65536) or not (0 < args.rate_hz <= 1000) or args.max_s <= 0:
+        print("mavlink_vehicle: --port, --rate-hz or --max-s out of range", file=sys.stderr)
+        return 2
+    conn = mavutil.mavlink_connection(f"udpout:{args.host}:{args.port}",
+                                      source_system=args.sysid, source_component=1)
+    vehicle = Vehicle(args)
+    dt = 1.0 / args.rate_hz
+    start = time.monotonic()
+    went_silent_at = None
+    exit_reason = "max-s"
+    k = 0
+    while True:
+        now = time.monotonic() - start
+        if now >= args.max_s:
+            break
+        t = vehicle.setpoint_times
+        if t and now - t[-1] > args.idle_exit_s:
+            exit_reason = "idle"
+            break
+        drain(conn, vehicle, now)
+        vehicle.step(dt, now)
+        silent = args.silent_after is not None and now >= args.silent_after
+        if silent and went_silent_at is None:
+            went_silent_at = now
+            print(f"mavlink_vehicle {args.sysid}: silent ({args.mute}) at {now:.2f} s",
+                  file=sys.stderr, flush=True)
+        vehicle.send(conn, int(k * dt * 1000), silent)
+        k += 1
+        # Paced on the wall clock, one fixed step per tick (late ticks are not skipped).
+        wait = start + k * dt - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+    print(json.dumps(vehicle.summary(conn, went_silent_at, exit_reason)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
