@@ -86,6 +86,10 @@ pub enum Command {
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
     },
+    /// Remove what teams of yours left behind when all their processes died (SIGKILL, a
+    /// crash): their iceoryx2 files in /dev/shm. Running teams are never touched. `launch` does
+    /// the same before it starts.
+    Clean,
     /// Export the plan to the stacks that fly real fleets (Crazyswarm2, Skybrush), scaled into
     /// the target volume and certified again there: exit 0 SAFE, 1 UNSAFE (files written only
     /// with --force), 2 bad input or a plan the target cannot hold.

@@ -7,6 +7,7 @@ mod export;
 mod launch;
 mod progress;
 mod report;
+mod stall;
 mod team;
 mod telemetry;
 
