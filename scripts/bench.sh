@@ -5,7 +5,13 @@
 # bare iceoryx2 central barrier (no math), start-up (command to first tick) and peak memory.
 # Also checks launch's telemetry is byte-identical to simulate's for every N.
 #
-# Usage: [WINDOW=256] [QUICK=1] scripts/bench.sh [N ...]     (default N: 10 40 100 250 1000)
+# Then, at N = FORMATS_N (default 1000; FORMATS_N=0 skips it): the certificate (`plan`) against one
+# in-process flight of the same plan (`simulate --every 1000`, almost no telemetry), and the
+# full-telemetry `simulate` in each format (file size, wall time, peak memory); writing cost =
+# that run's time minus the --every 1000 run's.
+#
+# Usage: [WINDOW=256] [QUICK=1] [FORMATS_N=1000] scripts/bench.sh [N ...]
+#   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
 set -euo pipefail
@@ -50,4 +56,25 @@ for n in "${ns[@]}"; do
   ratio() { awk -v a="$1" -v b="$2" 'BEGIN{printf "%.2f", a/b}'; }
   echo "| $n | $ticks | $eng | $sim | $lt | $bar | $(ratio "$lt" "$eng") | $(ratio "$lt" "$sim") | $(ratio "$lt" "$bar") | $su | $member | $orch |"
   rm -rf "$out/s$n" "$out/l$n"
+done
+
+fn=${FORMATS_N:-1000}
+[ "$fn" -gt 0 ] || exit 0
+secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }
+echo
+echo "Certificate and telemetry formats at N = $fn (one after the other, full plan):"
+echo
+echo "| command | wall s | peak RSS MiB | telemetry file MB | against simulate --every 1000 |"
+echo "|---|---|---|---|---|"
+read -r plan_s plan_kb < <(secs "$bin/orchestrator" plan --n "$fn" --quiet)
+read -r base_s base_kb < <(secs "$bin/orchestrator" simulate --n "$fn" --every 1000 --no-figures --quiet --out "$out/base")
+rm -rf "$out/base"
+mib() { awk -v k="$1" 'BEGIN{printf "%.1f", k/1024}'; }
+echo "| \`plan --n $fn\` | $plan_s | $(mib "$plan_kb") | | $(awk -v a="$plan_s" -v b="$base_s" 'BEGIN{printf "%.3f of the time", a/b}') |"
+echo "| \`simulate --n $fn --every 1000\` | $base_s | $(mib "$base_kb") | | 1 |"
+for fmt in csv parquet; do
+  read -r f_s f_kb < <(secs "$bin/orchestrator" simulate --n "$fn" --telemetry "$fmt" --no-figures --quiet --out "$out/$fmt")
+  size=$(stat -c %s "$out/$fmt/telemetry.$fmt")
+  echo "| \`simulate --n $fn --telemetry $fmt\` | $f_s | $(mib "$f_kb") | $(awk -v b="$size" 'BEGIN{printf "%.0f", b/1e6}') | $(awk -v a="$f_s" -v b="$base_s" 'BEGIN{printf "writing costs %.1f s (%.2f x the flight)", a-b, (a-b)/b}') |"
+  rm -rf "$out/$fmt"
 done

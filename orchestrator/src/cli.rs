@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
+use common::telemetry::TelemetryFormat;
 
 /// Safe continuum deformation of quadcopter teams: plan, simulate and launch a team.
 #[derive(Debug, Parser)]
@@ -66,7 +67,7 @@ pub enum Command {
         /// The run directory (default: runs/<team>).
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
-        /// Write every K-th tick to telemetry.csv.
+        /// Write every K-th tick to the telemetry file.
         #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
         every: u64,
         /// Reuse a non-empty --out directory.
@@ -228,7 +229,7 @@ pub struct OutDir {
     /// The run directory (created; refused when it exists and is not empty, unless --force).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
-    /// Write every K-th tick to telemetry.csv.
+    /// Write every K-th tick to the telemetry file.
     #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub every: u64,
     /// Reuse a non-empty --out directory.
@@ -253,4 +254,16 @@ pub struct RunOptions {
     /// the graph); checked before the flight.
     #[arg(long, value_name = "ID")]
     pub follow: Option<u32>,
+    /// Telemetry file format: telemetry.csv or telemetry.parquet (same columns and values).
+    #[arg(long, value_name = "FORMAT", default_value = "csv", value_parser = telemetry_format())]
+    pub telemetry: TelemetryFormat,
+}
+
+/// `--telemetry csv|parquet` (the format type lives in cdm-core, which has no clap).
+fn telemetry_format() -> impl clap::builder::TypedValueParser<Value = TelemetryFormat> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(["csv", "parquet"]).map(|s| match s.as_str() {
+        "parquet" => TelemetryFormat::Parquet,
+        _ => TelemetryFormat::Csv,
+    })
 }

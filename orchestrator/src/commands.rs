@@ -34,6 +34,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             plan(&source, json.as_deref(), sweep, cli.quiet)
         }
         Command::Simulate { source, out, run } => {
+            crate::telemetry::check_available(run.telemetry)?;
             let s = load(&source)?;
             check_follow(&s, run.follow)?;
             let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
@@ -42,12 +43,15 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 every: out.every,
                 stop_on_violation: run.stop_on_violation,
                 max_ticks: run.max_ticks,
+                telemetry: run.telemetry,
             };
+            let mut tel = crate::telemetry::open(&dir, run.telemetry, out.every)
+                .map_err(Failure::bad_input)?;
             let last = run
                 .max_ticks
                 .map_or(s.last_tick(), |k| k.min(s.last_tick()));
             let mut progress = Progress::new("simulate", last, s.dt_s(), cli.quiet);
-            let report = simulate(&s, &dir, opts, |tick, audit| {
+            let report = simulate(&s, &dir, opts, tel.as_mut(), |tick, audit| {
                 progress.tick(tick, audit.report())
             })
             .map_err(Failure::fault)?;
@@ -91,6 +95,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             serve,
             run,
         } => {
+            crate::telemetry::check_available(run.telemetry)?;
             let s = load(&source)?;
             check_follow(&s, run.follow)?;
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
@@ -102,6 +107,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 team,
                 force,
                 every,
+                telemetry: run.telemetry,
                 window,
                 spawn: !no_spawn,
                 agent_timeout: secs(agent_timeout, "--agent-timeout")?,
@@ -352,7 +358,7 @@ fn plan(
         }
     }
     let spinner = Spinner::new(
-        "certifying: flying the plan at several travel times for T_threshold",
+        "certifying: E_max at several travel times for T_threshold",
         quiet,
     );
     let c = certify(&s);

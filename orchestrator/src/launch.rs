@@ -35,6 +35,8 @@ pub struct LaunchOptions {
     pub out: PathBuf,
     pub force: bool,
     pub every: u64,
+    /// The telemetry file's format.
+    pub telemetry: common::telemetry::TelemetryFormat,
     pub window: u32,
     pub spawn: bool,
     pub agent_timeout: Duration,
@@ -295,7 +297,7 @@ fn run_team(
     let _ = common::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
 
     // 3. Tick.
-    let mut tel = dir.telemetry(o.every).map_err(|e| {
+    let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
         (
             fault(FaultKind::Io, None, None, 0, e.to_string()),
             StopReason::AgentFault,
@@ -503,7 +505,7 @@ fn run_team(
         };
         if next_tick > last {
             progress.finish();
-            tel.flush().map_err(io)?;
+            tel.finish().map_err(io)?;
             return Ok((ticking, true));
         }
         if progressed {

@@ -19,6 +19,7 @@ mod progress;
 mod report;
 mod stall;
 mod team;
+mod telemetry;
 mod viewer;
 
 use clap::Parser;

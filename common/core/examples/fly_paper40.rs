@@ -21,8 +21,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         every: 1,
         stop_on_violation: false,
         max_ticks: None,
+        telemetry: Default::default(),
     };
-    let report = simulate(&s, &dir, opts, |_, _| {})?;
+    let mut tel = dir.telemetry(opts.every)?;
+    let report = simulate(&s, &dir, opts, &mut tel, |_, _| {})?;
     println!(
         "flown: {} ticks, verdict {}, max deviation {:.4} m, min separation {:.3} m ({})",
         report.ticks,

@@ -32,6 +32,13 @@ impl Role {
         }
     }
 
+    /// The role of a lowercase name (the inverse of [`Role::as_str`]).
+    pub fn from_name(name: &str) -> Option<Role> {
+        [Role::Primary, Role::Secondary, Role::Follower]
+            .into_iter()
+            .find(|r| r.as_str() == name)
+    }
+
     /// Leaders (primary or secondary) track r_HT directly.
     pub fn is_leader(self) -> bool {
         !matches!(self, Role::Follower)

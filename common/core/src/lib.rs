@@ -22,6 +22,7 @@ pub mod frame;
 pub mod gains;
 pub mod geometry;
 pub mod graph;
+pub mod linear_certificate;
 pub mod outcome;
 pub mod plan;
 pub mod rundir;

@@ -5,12 +5,13 @@ use serde::Serialize;
 
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
 use crate::engine::{desired_positions, max_follower_deviation, quad_engine};
+use crate::linear_certificate::LinearTeam;
 use crate::math::{Real, Vec3};
 use crate::outcome::{FaultKind, Verdict};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
 use crate::step::tick_time;
-use crate::telemetry::Row;
+use crate::telemetry::{Row, TelemetryFormat, TelemetrySink};
 
 /// How `simulate` runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -21,20 +22,22 @@ pub struct SimulateOptions {
     pub stop_on_violation: bool,
     /// Fly only ticks 0..=K of the plan.
     pub max_ticks: Option<u64>,
+    /// The format `tel` writes (names the file in errors).
+    pub telemetry: TelemetryFormat,
 }
 
 /// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
 /// `on_tick` sees each tick and the audit so far (for progress). A control fault ends the run
 /// with the fault recorded; every complete tick stays in telemetry.csv.
+/// `tel` is the run's telemetry file (`RunDir::telemetry` for CSV), opened with `opts.every`.
 pub fn simulate(
     s: &Scenario,
     dir: &RunDir,
     opts: SimulateOptions,
+    tel: &mut dyn TelemetrySink,
     mut on_tick: impl FnMut(u64, &Auditor),
 ) -> Result<AuditReport, RunDirError> {
-    let every = opts.every;
     dir.write_scenario(s)?;
-    let mut tel = dir.telemetry(every)?;
     let mut audit = Auditor::new(s);
     let mut e = quad_engine(s);
     let mut ht = Vec::new();
@@ -93,7 +96,7 @@ pub fn simulate(
             break false;
         }
     };
-    let complete = match tel.flush() {
+    let complete = match tel.finish() {
         Ok(()) => complete,
         Err(e) => {
             let tick = audit.report().ticks;
@@ -156,7 +159,8 @@ pub fn deviation_at(s: &Scenario, t_total_s: Real) -> Real {
 
 /// Smallest T with E(T) < delta, by bracketing from the 1 / T^2 law (Sec. VII-D) and
 /// bisection to 0.1 % (E falls monotonically with T in practice; the bracket is checked).
-pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
+/// `e_of` gives E(T).
+pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real, e_of: impl Fn(Real) -> Real) -> Real {
     if delta_m.is_nan() || delta_m <= 0.0 {
         return Real::INFINITY;
     }
@@ -168,7 +172,7 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
     };
     let (mut lo, mut hi) = (guess * 0.9, guess * 1.1);
     let mut grow = 0;
-    while deviation_at(s, hi) >= delta_m {
+    while e_of(hi) >= delta_m {
         lo = hi;
         hi *= 2.0;
         grow += 1;
@@ -177,7 +181,7 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
         }
     }
     let mut shrink = 0;
-    while lo > 1e-3 && deviation_at(s, lo) < delta_m {
+    while lo > 1e-3 && e_of(lo) < delta_m {
         hi = lo;
         lo *= 0.5;
         shrink += 1;
@@ -187,7 +191,7 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
     }
     while (hi - lo) > 1e-3 * hi {
         let mid = 0.5 * (lo + hi);
-        if deviation_at(s, mid) < delta_m {
+        if e_of(mid) < delta_m {
             hi = mid;
         } else {
             lo = mid;
@@ -199,8 +203,17 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real) -> Real {
 /// The certificate of a scenario validated with `Checks::Full`.
 pub fn certify(s: &Scenario) -> Certificate {
     let n = SafetyNumbers::of(s);
-    let e = deviation_at(s, s.file.t_total_s);
-    let t_thr = t_threshold(s, n.delta_m, e);
+    // E(T) on the exactly linear error dynamics when the graph allows (linear_certificate.rs),
+    // otherwise by flying the nonlinear team at every trial T.
+    let linear = LinearTeam::new(s)
+        .inspect_err(|why| tracing::info!("the certificate flies the plan: {why}"))
+        .ok();
+    let deviation = |t| match &linear {
+        Some(team) => team.max_follower_deviation(t),
+        None => deviation_at(s, t),
+    };
+    let e = deviation(s.file.t_total_s);
+    let t_thr = t_threshold(s, n.delta_m, e, deviation);
     let margin = s.gains_margin.unwrap_or(Real::NAN);
     let mut reasons = Vec::new();
     if n.delta_m.is_nan() || n.delta_m <= 0.0 {

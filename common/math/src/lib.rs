@@ -10,6 +10,11 @@ pub type DMat = nalgebra::DMatrix<Real>;
 pub type DVec = nalgebra::DVector<Real>;
 /// A complex number (the closed-loop modes of eq. 26).
 pub type Complex = nalgebra::Complex<Real>;
+/// One axis of a 4th-order chain (position, velocity, acceleration, jerk) and its maps.
+pub type Vec4 = nalgebra::Vector4<Real>;
+pub type Mat4 = nalgebra::Matrix4<Real>;
+/// A chain with its input generator (exact discretisation by one matrix exponential).
+pub type Mat8 = nalgebra::SMatrix<Real, 8, 8>;
 
 /// Gravity in m/s^2 (Appendix A).
 pub const GRAVITY_MPS2: Real = 9.81;

@@ -1,6 +1,7 @@
 //! The data behind the figures, read back from a run directory alone: scenario.toml (the plan
-//! and the graph), audit.json (the safety numbers and violations) and telemetry.csv, which is
-//! streamed one tick at a time (paper40 is 800k rows) so memory holds per-tick series only.
+//! and the graph), audit.json (the safety numbers and violations) and the telemetry (CSV or
+//! Parquet, [`read_telemetry`]), streamed one tick at a time (paper40 is 800k rows) so memory
+//! holds per-tick series only.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{BufRead, BufReader, Read};
@@ -11,6 +12,7 @@ use common::math::{vec3, Real, Vec3};
 use common::plan::Segment;
 use common::safety::{min_separation, Prism};
 use common::scenario::{Checks, Scenario};
+use common::telemetry::{Row, TelemetryFormat, HEADER};
 
 /// A run directory that cannot be read, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -283,6 +285,79 @@ pub struct TickPositions<'a> {
     pub ht: &'a [Vec3],
 }
 
+/// The telemetry of a run directory, row by row in file order (tick, then id), in whichever
+/// format the run wrote: telemetry.parquet when present, else telemetry.csv (a regular file,
+/// lines of bounded length). One row (CSV) or one record batch (Parquet) is in memory at a time.
+/// `visit` refuses a row with a message, which is reported with the file and row. Returns the
+/// file read.
+pub fn read_telemetry(
+    dir: &Path,
+    mut visit: impl FnMut(&Row) -> Result<(), String>,
+) -> Result<PathBuf, ReadError> {
+    let parquet = dir.join(TelemetryFormat::Parquet.file_name());
+    if parquet.exists() {
+        read_parquet(&parquet, visit)?;
+        return Ok(parquet);
+    }
+    let path = dir.join(TelemetryFormat::Csv.file_name());
+    let mut reader = BufReader::with_capacity(1 << 20, common::files::open_input(&path)?);
+    let mut line = String::new();
+    match next_line(&mut reader, &mut line) {
+        Ok(Some(())) if line.trim() == HEADER => {}
+        Ok(Some(())) => {
+            return Err(invalid(
+                &path,
+                format!("unexpected header `{line}`, expected `{HEADER}`"),
+            ))
+        }
+        Err(e) => return Err(io(&path)(e)),
+        Ok(None) => return Err(invalid(&path, "empty file")),
+    }
+    let mut lineno = 1usize;
+    while next_line(&mut reader, &mut line)
+        .map_err(|e| io(&path)(e))?
+        .is_some()
+    {
+        lineno += 1;
+        let bad = |what: &str| invalid(&path, format!("line {lineno}: {what}"));
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != 13 {
+            return Err(bad("expected 13 fields"));
+        }
+        let num = |i: usize| f[i].parse::<Real>().map_err(|_| bad("not a number"));
+        let row = Row {
+            tick: f[0].parse().map_err(|_| bad("bad tick"))?,
+            t_s: num(1)?,
+            id: f[2].parse().map_err(|_| bad("bad id"))?,
+            role: Role::from_name(f[3]).ok_or_else(|| bad("bad role"))?,
+            r: vec3([num(4)?, num(5)?, num(6)?]),
+            v: vec3([num(7)?, num(8)?, num(9)?]),
+            ht: vec3([num(10)?, num(11)?, num(12)?]),
+        };
+        visit(&row).map_err(|m| bad(&m))?;
+    }
+    Ok(path)
+}
+
+#[cfg(feature = "parquet")]
+fn read_parquet(
+    path: &Path,
+    visit: impl FnMut(&Row) -> Result<(), String>,
+) -> Result<(), ReadError> {
+    cdm_parquet::read_rows(path, visit).map_err(|e| invalid(path, e.to_string()))
+}
+
+#[cfg(not(feature = "parquet"))]
+fn read_parquet(
+    path: &Path,
+    _visit: impl FnMut(&Row) -> Result<(), String>,
+) -> Result<(), ReadError> {
+    Err(invalid(
+        path,
+        "this orchestrator was built without its `parquet` feature",
+    ))
+}
+
 /// Stream a run directory's telemetry one complete tick at a time (paper40 is 800k rows, so
 /// nothing but one tick is held). Every reader of telemetry goes through here.
 pub fn stream_ticks(
@@ -292,50 +367,19 @@ pub fn stream_ticks(
 ) -> Result<(), ReadError> {
     let members = &scenario.formation.members;
     let index: BTreeMap<u32, usize> = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
-    let tel_path = dir.join("telemetry.csv");
-    let mut reader = BufReader::with_capacity(1 << 20, common::files::open_input(&tel_path)?);
-    let mut line = String::new();
-    match next_line(&mut reader, &mut line) {
-        Ok(Some(())) if line.trim() == common::telemetry::HEADER => {}
-        Ok(Some(())) => {
-            return Err(invalid(
-                &tel_path,
-                format!(
-                    "unexpected header `{line}`, expected `{}`",
-                    common::telemetry::HEADER
-                ),
-            ))
-        }
-        Err(e) => return Err(io(&tel_path)(e)),
-        Ok(None) => return Err(invalid(&tel_path, "empty file")),
-    }
     let n = members.len();
     let mut pos = vec![Vec3::zeros(); n];
     let mut ht = vec![Vec3::zeros(); n];
     let mut seen = 0usize;
     let mut current: Option<(u64, Real)> = None;
-    let mut lineno = 0usize;
-    while next_line(&mut reader, &mut line)
-        .map_err(|e| io(&tel_path)(e))?
-        .is_some()
-    {
-        lineno += 1;
-        let lineno = lineno - 1;
-        let bad = |what: &str| invalid(&tel_path, format!("line {}: {what}", lineno + 2));
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() != 13 {
-            return Err(bad("expected 13 fields"));
-        }
-        let num = |i: usize| f[i].parse::<Real>().map_err(|_| bad("not a number"));
-        let tick: u64 = f[0].parse().map_err(|_| bad("bad tick"))?;
-        let id: u32 = f[2].parse().map_err(|_| bad("bad id"))?;
-        let Some(&k) = index.get(&id) else {
-            return Err(bad(&format!("agent {id} is not in scenario.toml")));
+    let tel_path = read_telemetry(dir, |row| {
+        let Some(&k) = index.get(&row.id) else {
+            return Err(format!("agent {} is not in scenario.toml", row.id));
         };
         if let Some((ct, t)) = current {
-            if ct != tick {
+            if ct != row.tick {
                 if seen != n {
-                    return Err(bad(&format!("tick {ct} has {seen} rows, expected {n}")));
+                    return Err(format!("tick {ct} has {seen} rows, expected {n}"));
                 }
                 on_tick(TickPositions {
                     tick: ct,
@@ -346,11 +390,12 @@ pub fn stream_ticks(
                 seen = 0;
             }
         }
-        current = Some((tick, num(1)?));
-        pos[k] = vec3([num(4)?, num(5)?, num(6)?]);
-        ht[k] = vec3([num(10)?, num(11)?, num(12)?]);
+        current = Some((row.tick, row.t_s));
+        pos[k] = row.r;
+        ht[k] = row.ht;
         seen += 1;
-    }
+        Ok(())
+    })?;
     match current {
         Some((ct, t)) if seen == n => on_tick(TickPositions {
             tick: ct,

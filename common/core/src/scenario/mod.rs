@@ -265,9 +265,7 @@ impl Scenario {
 
     /// The last tick of the plan: ceil(T_total * comm_hz). Ticks run 0..=last_tick.
     pub fn last_tick(&self) -> u64 {
-        (self.file.t_total_s * self.file.comm_hz - 1e-9)
-            .ceil()
-            .max(1.0) as u64
+        last_tick_of(self.file.t_total_s, self.file.comm_hz)
     }
 
     /// RK4 substeps per tick.
@@ -279,4 +277,9 @@ impl Scenario {
     pub fn role_of(&self, id: u32) -> Option<Role> {
         self.formation.member(id).map(|m| m.role)
     }
+}
+
+/// The last tick of a plan of `t_total_s` at `comm_hz`: ceil(T_total * comm_hz), at least 1.
+pub fn last_tick_of(t_total_s: Real, comm_hz: Real) -> u64 {
+    (t_total_s * comm_hz - 1e-9).ceil().max(1.0) as u64
 }
