@@ -20,6 +20,7 @@ pub mod gains;
 pub mod geometry;
 pub mod graph;
 pub mod plan;
+pub mod repair;
 pub mod rundir;
 pub mod safety;
 pub mod scenario;
