@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
+use common::loss::{OnLoss, ScriptedLoss};
 
 /// Safe continuum deformation of quadcopter teams: plan, simulate and launch a team.
 #[derive(Debug, Parser)]
@@ -154,4 +155,28 @@ pub struct RunOptions {
     /// The follower of fig_agent_<id> (default: the one deepest in the graph).
     #[arg(long, value_name = "ID")]
     pub follow: Option<u32>,
+    /// Lose member ID once it has published its state of time SECONDS (repeatable). With
+    /// `--on-loss repair` its readers switch to new triangles and the team flies on.
+    #[arg(long, value_name = "ID@SECONDS")]
+    pub lose: Vec<ScriptedLoss>,
+    /// What losing a member does: repair the graph and fly on, or stop the run as a fault
+    /// (exit 3).
+    #[arg(long, value_enum, default_value_t = OnLossArg::Repair)]
+    pub on_loss: OnLossArg,
+}
+
+/// `--on-loss`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnLossArg {
+    Repair,
+    Stop,
+}
+
+impl From<OnLossArg> for OnLoss {
+    fn from(a: OnLossArg) -> Self {
+        match a {
+            OnLossArg::Repair => OnLoss::Repair,
+            OnLossArg::Stop => OnLoss::Stop,
+        }
+    }
 }

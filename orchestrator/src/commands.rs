@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use common::audit::AuditReport;
+use common::loss::LossSchedule;
 use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
@@ -38,6 +39,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 every: out.every,
                 stop_on_violation: run.stop_on_violation,
                 max_ticks: run.max_ticks,
+                losses: LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?,
+                on_loss: run.on_loss.into(),
             };
             let last = run
                 .max_ticks
@@ -84,6 +87,13 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             run,
         } => {
             let s = load(&source)?;
+            if !run.lose.is_empty() {
+                // Killing a member process and re-opening its readers' services needs the
+                // sans-I/O member loop (issue 16, process side); until then, simulate it.
+                return Err(Failure::bad_input(
+                    "--lose is not supported by launch yet: use simulate --lose",
+                ));
+            }
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
             let team = TeamName::new(&team_name)
                 .map_err(|e| Failure::bad_input(format!("--team: {e}")))?;
@@ -350,6 +360,20 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
     }
     if let Some(f) = &r.fault {
         println!("  fault: {}", f.message);
+    }
+    if !r.losses.is_empty() {
+        let ids: Vec<String> = r
+            .losses
+            .iter()
+            .map(|l| format!("{} from tick {}", l.id, l.tick))
+            .collect();
+        let switched: usize = r.losses.iter().map(|l| l.retriangulated.len()).sum();
+        let degraded: usize = r.losses.iter().map(|l| l.degraded.len()).sum();
+        println!(
+            "  lost {} member(s) ({}): {switched} follower(s) re-triangulated, {degraded} degraded to the plan",
+            r.losses.len(),
+            ids.join(", ")
+        );
     }
     println!("  run directory: {}", dir.display());
 }

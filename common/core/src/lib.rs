@@ -19,6 +19,7 @@ pub mod frame;
 pub mod gains;
 pub mod geometry;
 pub mod graph;
+pub mod loss;
 pub mod plan;
 pub mod repair;
 pub mod rundir;

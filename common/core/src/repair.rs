@@ -84,7 +84,9 @@ pub fn repair(formation: &Formation, floor: Real, lost: &BTreeSet<u32>) -> Repai
             .collect();
         let pick = best_triangle(&p, &nearest(&acyclic, &p), &leader_ids, floor)
             .or_else(|_| best_triangle(&p, &nearest(&survivors, &p), &leader_ids, floor));
-        let set = pick.ok().and_then(|new| f.set_link(id, new).ok().map(|()| new));
+        let set = pick
+            .ok()
+            .and_then(|new| f.set_link(id, new).ok().map(|()| new));
         match set {
             Some(new) => retriangulated.push(Retriangulation {
                 id,
@@ -212,7 +214,11 @@ mod tests {
                 for (j, w) in link.in_neighbors.iter().zip(link.weights) {
                     rd += ht[f.index_of(*j).unwrap()] * w;
                 }
-                assert!((rd - ht[k]).norm() < 1e-7, "Theorem 1 for {} at t={t}", m.id);
+                assert!(
+                    (rd - ht[k]).norm() < 1e-7,
+                    "Theorem 1 for {} at t={t}",
+                    m.id
+                );
             }
         }
     }

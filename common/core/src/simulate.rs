@@ -4,7 +4,8 @@
 use serde::Serialize;
 
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
-use crate::engine::{desired_positions, max_follower_deviation, quad_engine};
+use crate::engine::{desired_positions, max_follower_deviation, quad_engine, AgentFault};
+use crate::loss::{LossSchedule, LossState, OnLoss};
 use crate::math::{Real, Vec3};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
@@ -12,7 +13,7 @@ use crate::step::tick_time;
 use crate::telemetry::Row;
 
 /// How `simulate` runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct SimulateOptions {
     /// Write every K-th tick to telemetry.csv.
     pub every: u64,
@@ -20,22 +21,28 @@ pub struct SimulateOptions {
     pub stop_on_violation: bool,
     /// Fly only ticks 0..=K of the plan.
     pub max_ticks: Option<u64>,
+    /// Members lost in flight (`--lose`), validated against the scenario.
+    pub losses: LossSchedule,
+    /// What a loss does (`--on-loss`).
+    pub on_loss: OnLoss,
 }
 
 /// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
 /// `on_tick` sees each tick and the audit so far (for progress). A control fault ends the run
-/// with the fault recorded; every complete tick stays in telemetry.csv.
+/// with the fault recorded; every complete tick stays in telemetry.csv. Scripted losses repair
+/// the graph (or end the run as a fault with `OnLoss::Stop`); a lost member's rows leave
+/// telemetry.csv from the tick its loss applies.
 pub fn simulate(
     s: &Scenario,
     dir: &RunDir,
     opts: SimulateOptions,
     mut on_tick: impl FnMut(u64, &Auditor),
 ) -> Result<AuditReport, RunDirError> {
-    let every = opts.every;
     dir.write_scenario(s)?;
-    let mut tel = dir.telemetry(every)?;
+    let mut tel = dir.telemetry(opts.every)?;
     let mut audit = Auditor::new(s);
     let mut e = quad_engine(s);
+    let mut losses = LossState::new(s, opts.losses.clone());
     let mut ht = Vec::new();
     let mut pos: Vec<Vec3> = Vec::new();
     let mut rows: Vec<Row> = Vec::with_capacity(s.formation.members.len());
@@ -51,13 +58,20 @@ pub fn simulate(
     let complete = loop {
         let tick = e.tick();
         let t = tick_time(tick, s.dt_s());
+        if let Some(ids) = losses.due(tick) {
+            if opts.on_loss == OnLoss::Stop {
+                audit.fault(lost_fault(tick, &ids));
+                break false;
+            }
+            losses.apply(s, tick, &ids, &mut e, &mut audit);
+        }
         desired_positions(s, t, &mut ht);
         pos.clear();
         pos.extend(e.states().iter().map(|q| q.position()));
         audit.observe(tick, t, &pos, &ht);
         if tel.keeps(tick) {
             rows.clear();
-            for &k in &order {
+            for &k in order.iter().filter(|&&k| e.alive()[k]) {
                 let m = &s.formation.members[k];
                 let q = &e.states()[k];
                 rows.push(Row {
@@ -81,16 +95,7 @@ pub fn simulate(
             break true;
         }
         if let Err(f) = e.advance() {
-            audit.fault(FaultRecord {
-                kind: "control".into(),
-                agent: Some(f.id),
-                peer: match f.fault {
-                    crate::step::StepFault::NeighborNonFinite { peer } => Some(peer),
-                    _ => None,
-                },
-                tick: f.tick,
-                message: f.to_string(),
-            });
+            audit.fault(control_fault(&f));
             break false;
         }
     };
@@ -98,6 +103,33 @@ pub fn simulate(
     let report = audit.finish(complete);
     dir.write_audit(&report)?;
     Ok(report)
+}
+
+fn control_fault(f: &AgentFault) -> FaultRecord {
+    FaultRecord {
+        kind: "control".into(),
+        agent: Some(f.id),
+        peer: match f.fault {
+            crate::step::StepFault::NeighborNonFinite { peer } => Some(peer),
+            _ => None,
+        },
+        tick: f.tick,
+        message: f.to_string(),
+    }
+}
+
+/// `--on-loss stop`: a lost member is a fault, as when losses were not survivable.
+fn lost_fault(tick: u64, ids: &[u32]) -> FaultRecord {
+    FaultRecord {
+        kind: "lost".into(),
+        agent: ids.first().copied(),
+        peer: None,
+        tick,
+        message: format!(
+            "agent(s) {ids:?} lost after tick {} (--on-loss stop)",
+            tick.saturating_sub(1)
+        ),
+    }
 }
 
 /// Member indices sorted by id (telemetry order).
