@@ -27,7 +27,7 @@ pub enum ReadError {
 }
 
 /// The safety numbers the audit used (audit.json).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct AuditNumbers {
     pub lambda_cd_min: Real,
     pub lambda1_min_run: Real,
@@ -37,6 +37,8 @@ pub struct AuditNumbers {
     pub verdict_safe: bool,
     /// The first violation's kind and time, if any.
     pub first_violation: Option<(&'static str, Real)>,
+    /// Members lost in flight: (id, the first tick without its row in telemetry.csv).
+    pub losses: Vec<(u32, u64)>,
 }
 
 /// One tick of the run, as drawn.
@@ -114,6 +116,18 @@ pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
                 };
                 Some((kind, f.get("t_s")?.as_f64()?))
             }),
+        losses: v
+            .get("losses")
+            .and_then(|x| x.as_array())
+            .map(|a| {
+                a.iter()
+                    .filter_map(|l| {
+                        let id = u32::try_from(l.get("id")?.as_u64()?).ok()?;
+                        Some((id, l.get("tick")?.as_u64()?))
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
     })
 }
 
@@ -187,6 +201,14 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         .filter(|&k| members[k].role == Role::Follower)
         .collect();
     let eps_half = audit.delta_m + audit.eps_m;
+    // A lost member has no rows from its loss's tick on; it leaves separation and containment.
+    let lost_from: Vec<(usize, u64)> = audit
+        .losses
+        .iter()
+        .filter_map(|(id, tick)| Some((*index.get(id)?, *tick)))
+        .collect();
+    let alive = |k: usize, tick: u64| lost_from.iter().all(|&(j, t)| j != k || tick < t);
+    let expected_rows = |tick: u64| (0..members.len()).filter(|&k| alive(k, tick)).count();
 
     let tel_path = dir.join("telemetry.csv");
     let file = File::open(&tel_path).map_err(io(&tel_path))?;
@@ -222,7 +244,11 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let expected_ticks = scenario.last_tick() + 1;
     let path_stride = (expected_ticks / 400).max(1);
     let finish_tick = |tick: u64, t: Real, pos: &[Vec3], ht: &[Vec3], data: &mut RunData| {
-        let (sep, _, _) = min_separation(pos);
+        let living: Vec<Vec3> = (0..pos.len())
+            .filter(|&k| alive(k, tick))
+            .map(|k| pos[k])
+            .collect();
+        let (sep, _, _) = min_separation(&living);
         // Theorem 3's prism over the leaders' desired polygon, as the audit builds it.
         let verts: Vec<Vec3> = scenario.formation.polygon.iter().map(|&k| ht[k]).collect();
         let mut boundary = Real::INFINITY;
@@ -231,7 +257,7 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
                 .cross(&(verts[2] - verts[0]))
                 .normalize();
             let prism = Prism::new(verts, normal, eps_half);
-            for &k in &followers {
+            for &k in followers.iter().filter(|&&k| alive(k, tick)) {
                 boundary = boundary.min(prism.side_distance(&pos[k]));
             }
         }
@@ -268,6 +294,7 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         };
         if let Some((ct, t)) = current {
             if ct != tick {
+                let n = expected_rows(ct);
                 if seen != n {
                     return Err(bad(&format!("tick {ct} has {seen} rows, expected {n}")));
                 }
@@ -281,11 +308,14 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         seen += 1;
     }
     match current {
-        Some((ct, t)) if seen == n => finish_tick(ct, t, &pos, &ht, &mut data),
+        Some((ct, t)) if seen == expected_rows(ct) => finish_tick(ct, t, &pos, &ht, &mut data),
         Some((ct, _)) => {
             return Err(invalid(
                 &tel_path,
-                format!("last tick {ct} has {seen} rows, expected {n}"),
+                format!(
+                    "last tick {ct} has {seen} rows, expected {}",
+                    expected_rows(ct)
+                ),
             ))
         }
         None => return Err(invalid(&tel_path, "no rows")),
