@@ -20,6 +20,7 @@ pub mod gains;
 pub mod geometry;
 pub mod graph;
 pub mod loss;
+pub mod losscert;
 pub mod plan;
 pub mod repair;
 pub mod rundir;
