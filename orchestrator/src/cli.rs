@@ -32,6 +32,11 @@ pub enum Command {
         /// Where the sweep's figure and data go.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
+        /// Also certify the loss of every single member: fly the plan with each one lost at the
+        /// nominal peak deviation (graph repaired) and list the members the team cannot lose
+        /// (exit 1 when there is one).
+        #[arg(long)]
+        losses: bool,
     },
     /// Fly the team with the deterministic in-process engine into a run directory.
     Simulate {

@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 
 use common::audit::AuditReport;
 use common::loss::LossSchedule;
+use common::losscert::{certify_losses, LossCertificate};
 use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
@@ -24,12 +25,13 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             json,
             sweep,
             out,
+            losses,
         } => {
             let sweep = match (sweep, out) {
                 (Some(text), Some(dir)) => Some((parse_sweep(&text)?, dir)),
                 _ => None,
             };
-            plan(&source, json.as_deref(), sweep, cli.quiet)
+            plan(&source, json.as_deref(), sweep, losses, cli.quiet)
         }
         Command::Simulate { source, out, run } => {
             let s = load(&source)?;
@@ -240,6 +242,7 @@ fn plan(
     source: &Source,
     json: Option<&Path>,
     sweep: Option<(Vec<f64>, PathBuf)>,
+    losses: bool,
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let s = load(source)?;
@@ -247,8 +250,23 @@ fn plan(
         "certifying: flying the plan at several travel times for T_threshold",
         quiet,
     );
-    let c = certify(&s);
+    let mut c = certify(&s);
     spinner.finish();
+    if losses {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let spinner = Spinner::new(
+            &format!("loss certificate: losing each of {} members", c.agents),
+            quiet,
+        );
+        let started = Instant::now();
+        c.losses = Some(certify_losses(&s, threads));
+        spinner.finish();
+        tracing::info!(
+            seconds = started.elapsed().as_secs_f64(),
+            threads,
+            "loss certificate"
+        );
+    }
     if let Some((times, dir)) = sweep {
         std::fs::create_dir_all(&dir)
             .map_err(|e| Failure::bad_input(format!("--out {}: {e}", dir.display())))?;
@@ -277,6 +295,9 @@ fn plan(
     }
     if !quiet {
         print_certificate(&c);
+        if let Some(l) = &c.losses {
+            print_loss_certificate(l);
+        }
     } else {
         println!("{}", c.verdict);
     }
@@ -284,7 +305,11 @@ fn plan(
         let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
         common::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
     }
-    Ok(if c.verdict == "SAFE" {
+    let loses = c
+        .losses
+        .as_ref()
+        .is_some_and(|l| !l.survives_any_single_loss);
+    Ok(if c.verdict == "SAFE" && !loses {
         Exit::Safe
     } else {
         Exit::Unsafe
@@ -321,6 +346,46 @@ fn print_certificate(c: &Certificate) {
     for r in &c.reasons {
         println!("  - {r}");
     }
+}
+
+fn print_loss_certificate(l: &LossCertificate) {
+    println!(
+        "loss certificate: each member lost after tick {} (t = {:.2} s, the nominal peak follower deviation {:.4} m)",
+        l.loss_last_tick, l.loss_t_s, l.nominal_max_follower_deviation_m
+    );
+    println!("  id  role       verdict  switched  degraded  affected  max repaired dev  max shift");
+    for m in &l.members {
+        println!(
+            "  {:<3} {:<10} {:<8} {:>8}  {:>8}  {:>8}  {:>14.4} m  {:>7.4} m",
+            m.id,
+            m.role,
+            m.verdict,
+            m.retriangulated.len(),
+            m.degraded.len(),
+            m.affected,
+            m.max_repaired_deviation_m,
+            m.max_shift_m
+        );
+        for r in &m.reasons {
+            println!("      - {r}");
+        }
+    }
+    let worst = l.members.iter().max_by(|a, b| {
+        a.max_repaired_deviation_m
+            .total_cmp(&b.max_repaired_deviation_m)
+    });
+    if let Some(w) = worst {
+        println!(
+            "  worst repair transient: losing {} ({}), follower {} deviates {:.4} m at t = {:.2} s (delta {:.4} m)",
+            w.id,
+            w.role,
+            w.worst_id.map_or("-".into(), |id| id.to_string()),
+            w.max_repaired_deviation_m, w.worst_t_s, l.delta_m
+        );
+    }
+    let degraded: usize = l.members.iter().filter(|m| !m.degraded.is_empty()).count();
+    println!("  losses that leave a follower flying its plan: {degraded}");
+    println!("loss verdict: {}", l.verdict);
 }
 
 /// Exit code of a finished run.

@@ -6,6 +6,7 @@ use serde::Serialize;
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
 use crate::engine::{desired_positions, max_follower_deviation, quad_engine, AgentFault};
 use crate::loss::{LossSchedule, LossState, OnLoss};
+use crate::losscert::LossCertificate;
 use crate::math::{Real, Vec3};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
@@ -156,6 +157,9 @@ pub struct Certificate {
     pub max_follower_deviation_m: Real,
     pub gains_stability_margin: Real,
     pub notes: Vec<String>,
+    /// `plan --losses`: the loss of every single member, certified (`losscert`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub losses: Option<LossCertificate>,
 }
 
 /// Max follower deviation at a given travel time (infinite when the flight faults).
@@ -251,5 +255,6 @@ pub fn certify(s: &Scenario) -> Certificate {
         max_follower_deviation_m: e,
         gains_stability_margin: margin,
         notes: s.notes.clone(),
+        losses: None,
     }
 }
