@@ -166,7 +166,9 @@ impl LossState {
 }
 
 /// One record per id lost at `tick`; a follower whose link changed is told under the lost
-/// member it read (under the first id when it read none of them: a knock-on switch).
+/// member it read (under the first id when it read none of them: a knock-on switch, when a
+/// follower repaired for an earlier loss picks again because the repair is a function of the
+/// whole lost set, the same in every process whatever order the losses were seen in).
 fn records(
     s: &Scenario,
     tick: u64,
@@ -204,6 +206,10 @@ fn records(
             (_, None) => out[slot].degraded.push(m.id),
             (None, Some(_)) => {}
         }
+    }
+    for rec in &mut out {
+        rec.retriangulated.sort_by_key(|x| x.id);
+        rec.degraded.sort_unstable();
     }
     out
 }

@@ -41,7 +41,7 @@ pub struct Repair {
     /// (weights of eq. 18), degraded ones none; lost members keep theirs (they no longer fly).
     pub formation: Formation,
     pub lost: BTreeSet<u32>,
-    /// Followers that switched triangles, in synthesis order.
+    /// Followers that switched triangles, by id.
     pub retriangulated: Vec<Retriangulation>,
     /// Followers with no valid triangle left: they fly their own plan (sorted ids).
     pub degraded: Vec<u32>,
@@ -106,6 +106,7 @@ pub fn repair(formation: &Formation, floor: Real, lost: &BTreeSet<u32>) -> Repai
         degraded.push(id);
     }
     degraded.sort_unstable();
+    retriangulated.sort_by_key(|x| x.id);
     Repair {
         formation: f,
         lost: lost.clone(),
