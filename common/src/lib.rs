@@ -7,8 +7,8 @@
 //! fault injection; no iceoryx2) -> `cdm-iox` (the only library crate that names iceoryx2).
 
 pub use cdm_core::{
-    audit, control, dynamics, engine, formation, frame, gains, geometry, graph, loss, losscert,
-    math, plan, repair, rundir, safety, scenario, simulate, step, telemetry,
+    audit, control, dynamics, engine, export, formation, frame, gains, geometry, graph, loss,
+    losscert, math, plan, repair, rundir, safety, scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
 pub use cdm_runtime::{fault_inject, messages, signals};

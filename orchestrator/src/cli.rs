@@ -91,6 +91,17 @@ pub enum Command {
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
     },
+    /// Remove what teams of yours left behind when all their processes died (SIGKILL, a
+    /// crash): their iceoryx2 files in /dev/shm. Running teams are never touched. `launch` does
+    /// the same before it starts.
+    Clean,
+    /// Export the plan to the stacks that fly real fleets (Crazyswarm2, Skybrush), scaled into
+    /// the target volume and certified again there: exit 0 SAFE, 1 UNSAFE (files written only
+    /// with --force), 2 bad input or a plan the target cannot hold.
+    Export {
+        #[command(subcommand)]
+        target: ExportTarget,
+    },
     /// Work with scenario files.
     Scenario {
         #[command(subcommand)]
@@ -112,6 +123,59 @@ pub enum ScenarioCommand {
         #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExportTarget {
+    /// One <id>.csv of polynomial pieces per quadcopter (Crazyswarm2's uav_trajectory format),
+    /// crazyflies.yaml, README.txt, certificate.json, scenario.toml and a top view into --out.
+    Crazyswarm2 {
+        #[command(flatten)]
+        source: Source,
+        /// The output directory (created; our files in it are replaced).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        #[command(flatten)]
+        frame: ExportFrame,
+    },
+    /// A Skybrush show (.skyc: a ZIP holding show.json with Bézier trajectories), with
+    /// <stem>.certificate.json and <stem>.scenario.toml beside it.
+    Skybrush {
+        #[command(flatten)]
+        source: Source,
+        /// The show file to write (e.g. show.skyc).
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        #[command(flatten)]
+        frame: ExportFrame,
+    },
+}
+
+/// Where an exported plan flies: p -> scale p + origin, and the target vehicles' radius.
+#[derive(Debug, Args, Clone)]
+pub struct ExportFrame {
+    /// Multiply every position and goal by S (the paper's team is 300 m wide; a lab is 5 m).
+    #[arg(
+        long,
+        value_name = "S",
+        default_value_t = 1.0,
+        allow_negative_numbers = true
+    )]
+    pub scale: f64,
+    /// Then add X,Y,Z metres (default 0,0,0).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub origin: Option<String>,
+    /// The radius of the target vehicles' ball, metres (0.1 for a Crazyflie).
+    #[arg(
+        long,
+        value_name = "METRES",
+        default_value_t = 0.1,
+        allow_negative_numbers = true
+    )]
+    pub eps: f64,
+    /// Write the files even when the certificate at the target scale is UNSAFE (exit 1 stays).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Which scenario to fly: a file, a built-in, or a generated team (default: built-in paper40).

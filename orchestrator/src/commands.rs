@@ -13,6 +13,7 @@ use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOpt
 use common::transport::TeamName;
 
 use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
+use crate::export;
 use crate::launch::{launch, LaunchOptions};
 use crate::progress::{Progress, Spinner};
 use crate::report::{report, ReportError};
@@ -152,6 +153,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             }
             Ok(exit_of(&report))
         }
+        Command::Clean => clean(cli.quiet),
+        Command::Export { target } => export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
         } => {
@@ -170,6 +173,35 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             Ok(Exit::Safe)
         }
     }
+}
+
+/// `orchestrator clean`: removes the resources of this user's teams whose processes are all
+/// dead and says which teams they were.
+fn clean(quiet: bool) -> Result<Exit, Failure> {
+    use common::transport::TransportError;
+    use std::io::Write;
+    let removed = common::transport::remove_dead_teams().map_err(|e| match e {
+        TransportError::UnsafeIox2Path { .. } => Failure::bad_input(e),
+        e => Failure::fault(e),
+    })?;
+    let mut text = String::new();
+    for t in &removed {
+        text += &format!(
+            "removed team {}: the iceoryx2 resources of {} dead processes\n",
+            t.team, t.removed
+        );
+    }
+    if removed.is_empty() {
+        text += &format!(
+            "nothing to remove: no team under {} has all its processes dead\n",
+            common::transport::iox2_root()
+        );
+    }
+    if !quiet {
+        // A closed standard output is no reason to fail: the cleaning is done.
+        let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    }
+    Ok(Exit::Safe)
 }
 
 /// Load and fully validate the scenario a command names.
@@ -316,7 +348,7 @@ fn plan(
     })
 }
 
-fn print_certificate(c: &Certificate) {
+pub fn print_certificate(c: &Certificate) {
     println!(
         "pre-flight certificate: {} ({} agents)",
         c.scenario, c.agents

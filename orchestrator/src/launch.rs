@@ -164,7 +164,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
 /// and a reported fault for the complete ticks before it.
 const FAULT_GRACE: Duration = Duration::from_millis(500);
 
-/// The stop of a run interrupted by SIGINT / SIGTERM.
+/// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT.
 fn interrupted_at(tick: u64, when: &str) -> Stop {
     (
         fault(
@@ -172,7 +172,7 @@ fn interrupted_at(tick: u64, when: &str) -> Stop {
             None,
             None,
             tick,
-            format!("interrupted {when}"),
+            format!("interrupted by {} {when}", common::signals::received()),
         ),
         StopReason::Interrupted,
     )
@@ -282,9 +282,15 @@ fn run_team(
     // ticks 0..=k are complete as soon as every state is in (as in `simulate`). The team stops
     // then, or after the grace when tick k cannot complete (a non-finite state is never used).
     let mut stopping: Option<(FaultRecord, Instant, bool, usize)> = None;
+    let mut stall = crate::stall::StallWatch::new(Instant::now());
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return Err(interrupted_at(next_tick, &format!("at tick {next_tick}")));
+        }
+        // The orchestrator itself did not run for a while: its members get a fresh timeout, and
+        // a member that stopped meanwhile is blamed on the stall (`stall.explain`).
+        if stall.turn(Instant::now(), next_tick) {
+            last_progress = Instant::now();
         }
         // (fault, echo, member index) of the best fault report met in this drain.
         let mut bad: Option<(FaultRecord, bool, usize)> = None;
@@ -443,9 +449,9 @@ fn run_team(
         // While stopping on a reported fault, the reporter's own exit is not a second fault.
         if stopping.is_none() && last_child_check.elapsed() > Duration::from_millis(100) {
             last_child_check = Instant::now();
-            if let Err(e) = check_children(children, next_tick) {
+            if let Err((f, reason)) = check_children(children, next_tick) {
                 let _ = tel.flush();
-                return Err(e);
+                return Err((stall.explain(f, Instant::now()), reason));
             }
         }
         if stopping.is_none() && last_progress.elapsed() > o.agent_timeout {
@@ -459,19 +465,17 @@ fn run_team(
                 .filter(|(k, _)| have.is_none_or(|(v, _)| v[*k].is_none()))
                 .map(|(_, m)| m.id)
                 .collect();
-            return Err((
-                fault(
-                    "agent-silent",
-                    missing.first().copied(),
-                    None,
-                    next_tick,
-                    format!(
-                        "agents {missing:?} sent no state for tick {next_tick} within {:?}",
-                        o.agent_timeout
-                    ),
+            let f = fault(
+                "agent-silent",
+                missing.first().copied(),
+                None,
+                next_tick,
+                format!(
+                    "agents {missing:?} sent no state for tick {next_tick} within {:?}",
+                    o.agent_timeout
                 ),
-                StopReason::AgentSilent,
-            ));
+            );
+            return Err((stall.explain(f, Instant::now()), StopReason::AgentSilent));
         }
         let _ = ports.wait(Duration::from_millis(20));
     }

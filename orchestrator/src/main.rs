@@ -3,9 +3,11 @@
 
 mod cli;
 mod commands;
+mod export;
 mod launch;
 mod progress;
 mod report;
+mod stall;
 mod team;
 
 use clap::Parser;

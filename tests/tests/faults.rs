@@ -215,6 +215,57 @@ fn a_terminated_orchestrator_stops_its_team_and_leaves_nothing_behind() {
     fp.assert_nothing_left();
 }
 
+/// SIGHUP (the terminal closed) and SIGQUIT to the orchestrator: handled like SIGTERM, the
+/// stop sequence, exit 3, audit.json with `interrupted` naming the signal, nothing left. Their
+/// default actions killed the orchestrator at once (exit 129 / 131, no audit.json, the team's
+/// files left in /dev/shm).
+#[test]
+fn a_hangup_or_quit_signal_stops_the_team_like_sigterm() {
+    for (sig, name) in [(libc::SIGHUP, "SIGHUP"), (libc::SIGQUIT, "SIGQUIT")] {
+        let dir = TempDir::new();
+        let team = unique_team(&name.to_lowercase());
+        let out = dir.path().join("run");
+        let (mut orch, s, fp) = running(&team, &out, &[]);
+        signal(orch.id(), sig);
+        let o = orch.finish(STOP_DEADLINE);
+        assert_exit(&o, 3, &format!("launch after {name}"));
+        let fault = assert_fault(&out, &s, "interrupted");
+        assert!(message(&fault).contains(name), "{fault:#}");
+        assert_no_process_of(&team);
+        fp.assert_nothing_left();
+    }
+}
+
+/// SIGSTOP of the orchestrator for 20 s, then SIGCONT: its members see no grant for their
+/// silence timeout (10 s) and stop by themselves; the orchestrator records that its own clock
+/// stalled (`orchestrator-stalled`, no agent blamed), not `agent 1 exited`. Exit 3, nothing left.
+#[test]
+fn a_stopped_orchestrator_records_that_its_clock_stalled() {
+    let dir = TempDir::new();
+    let team = unique_team("orchstop");
+    let out = dir.path().join("run");
+    let (mut orch, s, fp) = running(&team, &out, &[]);
+    let pid = orch.id();
+    signal(pid, libc::SIGSTOP);
+    std::thread::sleep(Duration::from_secs(20));
+    signal(pid, libc::SIGCONT);
+    let o = orch.finish(STOP_DEADLINE);
+    assert_exit(&o, 3, "launch after SIGSTOP for 20 s and SIGCONT");
+    let audit = read_json(&out.join("audit.json"));
+    let fault = &audit["fault"];
+    assert_eq!(fault["kind"], "orchestrator-stalled", "{audit:#}");
+    assert_eq!(fault["agent"], Value::Null, "{audit:#}");
+    assert!(
+        message(fault).contains("the orchestrator itself did not run for"),
+        "{audit:#}"
+    );
+    // The stall began at a tick the team had not completed; telemetry holds whole ticks.
+    let ticks = complete_ticks(&out.join("telemetry.csv"), &ids_of(&s));
+    assert_eq!(fault["tick"], ticks, "{audit:#}");
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
+}
+
 /// SIGKILL of the orchestrator: every member notices the clock's node is dead and exits by
 /// itself (exit 3, "the orchestrator of team T is gone"); telemetry keeps whole ticks; then a
 /// new launch of the same team removes the dead orchestrator's files and flies to the end.

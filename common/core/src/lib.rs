@@ -5,7 +5,8 @@
 //!
 //! Layers, bottom to top: `math` (the cdm-math crate) -> `frame`, `plan`, `formation`, `graph`,
 //! `gains`, `safety`, `dynamics`, `control` (pure) -> `step` (one member's tick) -> `scenario`
-//! (files, validation, built-ins) -> `engine`, `telemetry`, `audit`, `simulate`, `rundir`.
+//! (files, validation, built-ins) -> `engine`, `telemetry`, `audit`, `simulate`, `rundir`;
+//! `export` (pure: the plan's exact pieces for Crazyswarm2 and Skybrush).
 
 /// The numeric facade, re-exported so `crate::math::Vec3` reads as before the split.
 pub use cdm_math as math;
@@ -14,6 +15,7 @@ pub mod audit;
 pub mod control;
 pub mod dynamics;
 pub mod engine;
+pub mod export;
 pub mod formation;
 pub mod frame;
 pub mod gains;

@@ -28,6 +28,37 @@ pub enum TransportError {
         /// Names of the live nodes found, or the service that already exists.
         live: String,
     },
+    /// This user's iceoryx2 root or a file under this user's iceoryx2 prefix in `/dev/shm` is not
+    /// safely ours: another user could rename, delete or overwrite the team's files through it.
+    #[error(
+        "{path} is {problem} (owner uid {owner}, mode {mode:04o}); this runtime needs it owned by \
+         you (uid {uid}) and writable by no one else, or another user could rename, delete or \
+         overwrite your team's files; remove it (as its owner or root: `rm -rf {path}`) and \
+         launch again"
+    )]
+    UnsafeIox2Path {
+        /// The directory or file.
+        path: String,
+        /// What is wrong with it.
+        problem: &'static str,
+        /// Its owner's user id.
+        owner: u32,
+        /// Its permission bits.
+        mode: u32,
+        /// This process's user id.
+        uid: u32,
+    },
+    /// This user's iceoryx2 root or management segment could not be created or examined.
+    #[error("cannot check the {what} {path}: {source}")]
+    Iox2PathCheck {
+        /// The directory or file.
+        path: String,
+        /// What it is.
+        what: &'static str,
+        /// The system's error.
+        #[source]
+        source: std::io::Error,
+    },
     /// The team flies a different scenario than the process that tried to join it.
     #[error("agent {id} cannot join team {team}: its scenario (hash {mine:016x}) differs from the team's (hash {team_hash}); start it with the team's scenario file")]
     ScenarioMismatch {
@@ -118,6 +149,14 @@ pub enum TransportError {
     NodeList {
         /// The team.
         team: TeamName,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// iceoryx2's node registry of this user could not be read.
+    #[error("cannot list the iceoryx2 nodes under {root}: {detail}")]
+    NodeRegistry {
+        /// This user's iceoryx2 root.
+        root: String,
         /// iceoryx2's error.
         detail: String,
     },

@@ -34,23 +34,51 @@
 //! Crashed processes leave their files in `/dev/shm` and [`iox2_root`]; the next
 //! [`OrchestratorPorts::create`] of the same team (or [`remove_dead_nodes`]) removes them.
 
-/// Where iceoryx2 keeps this runtime's node and service files and event sockets (a tmpfs):
-/// `/dev/shm/cdm-iceoryx2-<uid>`: one root per user, since iceoryx2 creates its root owner-only
-/// (0750) and cannot mix users on one service anyway; with a shared root the first user on a
-/// machine would lock every other user out.
-pub fn iox2_root() -> &'static str {
-    static ROOT: OnceLock<String> = OnceLock::new();
-    // SAFETY: getuid(2) cannot fail and touches no memory of ours.
-    ROOT.get_or_init(|| format!("/dev/shm/cdm-iceoryx2-{}", unsafe { libc::getuid() }))
+/// Where and under which names iceoryx2 keeps this user's files: the one place both are decided
+/// (the Python tools mirror it). One per user, so nothing in `/dev/shm` is shared between users:
+/// - `root`, `/dev/shm/cdm-iceoryx2-<uid>`: node and service files and event sockets (a tmpfs).
+///   iceoryx2 creates its root owner-only (0750) and cannot mix users on one service anyway; a
+///   shared root would let the first user on a machine lock every other user out.
+/// - `prefix`, `cdm<uid>_`: the first part of every file iceoryx2 creates directly in `/dev/shm`
+///   (shared-memory segments and its global management segment). With iceoryx2's default
+///   `iox2_`, every user shared one world-writable (0666) management file: garbage written into
+///   it stopped every launch of every user, and creating it first locked the others out.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Iox2Location {
+    /// iceoryx2's root directory.
+    pub root: String,
+    /// iceoryx2's global prefix.
+    pub prefix: String,
 }
 
+/// This user's [`Iox2Location`], computed once.
+pub fn iox2_location() -> &'static Iox2Location {
+    static LOCATION: OnceLock<Iox2Location> = OnceLock::new();
+    LOCATION.get_or_init(|| {
+        // SAFETY: getuid(2) cannot fail and touches no memory of ours.
+        let uid = unsafe { libc::getuid() };
+        Iox2Location {
+            root: format!("/dev/shm/cdm-iceoryx2-{uid}"),
+            prefix: format!("cdm{uid}_"),
+        }
+    })
+}
+
+/// This user's iceoryx2 root directory ([`Iox2Location::root`]).
+pub fn iox2_root() -> &'static str {
+    &iox2_location().root
+}
+
+mod dead_teams;
 mod error;
 mod limits;
 mod member;
 mod orchestrator;
+mod ownership;
 mod team;
 mod wire;
 
+pub use dead_teams::{remove_dead_teams, RemovedTeam};
 pub use error::TransportError;
 pub use limits::describe_spawn_error;
 pub use member::MemberPorts;
@@ -108,8 +136,10 @@ pub fn raise_fd_limit() -> Result<u64, TransportError> {
 /// nodes were cleaned. Safe to call while the team runs: live nodes are never touched.
 pub fn remove_dead_nodes(team: &TeamName) -> Result<usize, TransportError> {
     init_logging();
-    let scan = scan_team(team, process_config())?;
-    Ok(remove_stale(team, scan.dead))
+    let mut teams = dead_teams::scan_teams(process_config())?;
+    Ok(teams
+        .remove(team)
+        .map_or(0, |scan| remove_stale(team, scan.dead)))
 }
 
 /// Routes iceoryx2's log through `tracing` (the crate is built with its `tracing` logger) and
@@ -131,11 +161,16 @@ fn process_config() -> &'static Config {
     static CONFIG: OnceLock<Config> = OnceLock::new();
     CONFIG.get_or_init(|| {
         let mut cfg = Config::default();
-        let root = format!("{}/", iox2_root());
+        let here = iox2_location();
+        let root = format!("{}/", here.root);
+        // Both fit iceoryx2's types (short ASCII); the warnings are a fallback, never expected.
         match iceoryx2::prelude::Path::new(root.as_bytes()) {
             Ok(root) => cfg.global.set_root_path(&root),
-            // A constant that fits iceoryx2's path type; kept as a fallback, never expected.
             Err(e) => tracing::warn!("iceoryx2 root {root}: {e:?}; using the default"),
+        }
+        match FileName::new(here.prefix.as_bytes()) {
+            Ok(prefix) => cfg.global.prefix = prefix,
+            Err(e) => tracing::warn!("iceoryx2 prefix {}: {e:?}; using the default", here.prefix),
         }
         // Each subscriber pre-allocates (and touches) room for this many connections of departed
         // publishers, about 3.6 KiB each: iceoryx2's default of 128 cost 460 KiB per subscriber,
@@ -168,7 +203,14 @@ fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, Transpo
         detail,
     };
     let node_name = NodeName::new(&name).map_err(|e| err(format!("{e:?}")))?;
-    NodeBuilder::new()
+    // Before iceoryx2 writes anything: our root and management segment must be ours alone. The
+    // orchestrator (first of a team) also checks the segment; members skip the `/dev/shm` listing.
+    let here = iox2_location();
+    ownership::check_root(here)?;
+    if who == Role::Orchestrator {
+        ownership::check_global_mgmt(here, false)?;
+    }
+    let node = NodeBuilder::new()
         .name(&node_name)
         .config(process_config())
         // Signals belong to the process's main; iceoryx2 must not swallow SIGINT/SIGTERM.
@@ -177,7 +219,12 @@ fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, Transpo
         .map_err(|e| match limits::fd_exhausted() {
             Some(u) => fd_limit_reached(team, who, &name, "create node", u),
             None => err(format!("{e:?}")),
-        })
+        })?;
+    if who == Role::Orchestrator {
+        // iceoryx2 creates the management segment world-writable (0666); make it ours alone.
+        ownership::check_global_mgmt(here, true)?;
+    }
+    Ok(node)
 }
 
 /// The iceoryx2 name of a service.
@@ -245,45 +292,6 @@ fn wait_on(
         Err(ListenerWaitError::InterruptSignal) => Ok(true),
         Err(e) => Err(service_error(team, who, service, "wait", e)),
     }
-}
-
-/// The team's nodes found in iceoryx2's registry.
-struct TeamScan {
-    /// Names of live nodes of the team.
-    alive: Vec<String>,
-    /// Dead nodes of the team, to be cleaned.
-    dead: Vec<iceoryx2::node::DeadNodeView<ipc::Service>>,
-}
-
-/// Lists the nodes of `team` (by node name; a node whose details are unreadable is skipped).
-fn scan_team(team: &TeamName, cfg: &Config) -> Result<TeamScan, TransportError> {
-    let mut scan = TeamScan {
-        alive: vec![],
-        dead: vec![],
-    };
-    let name_of = |v: &dyn NodeView| v.details().as_ref().map(|d| d.name().to_string());
-    Node::<ipc::Service>::list(cfg, |state| {
-        match state {
-            NodeState::Alive(v) => {
-                if let Some(n) = name_of(&v).filter(|n| team.owns_node(n)) {
-                    scan.alive.push(n);
-                }
-            }
-            NodeState::Dead(v) => {
-                if name_of(&v).is_some_and(|n| team.owns_node(&n)) {
-                    scan.dead.push(v);
-                }
-            }
-            NodeState::Inaccessible(_) | NodeState::Undefined(_) => {}
-        }
-        CallbackProgression::Continue
-    })
-    .map_err(|e| TransportError::NodeList {
-        team: team.clone(),
-        detail: format!("{e:?}"),
-    })?;
-    scan.alive.sort();
-    Ok(scan)
 }
 
 /// Removes the resources of dead nodes; returns how many this call cleaned. Failures are logged

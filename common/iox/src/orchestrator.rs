@@ -14,9 +14,10 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError;
 use iceoryx2::service::port_factory::event::PortFactory as EventService;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubService;
 
+use super::dead_teams::{remove_dead, scan_teams};
 use super::{
-    create_node, init_logging, process_config, remove_stale, scan_team, service_error,
-    service_name, wait_on, Role, TeamLayout, TeamName, TransportError, CLOCK_BUFFER, SPARE_NODES,
+    create_node, init_logging, process_config, service_error, service_name, wait_on, Role,
+    TeamLayout, TeamName, TransportError, CLOCK_BUFFER, SPARE_NODES,
 };
 use crate::messages::{ClockMsg, StateMsg};
 use crate::wire::{ClockWire, StateWire, Wire};
@@ -123,24 +124,27 @@ impl Readiness {
 }
 
 impl OrchestratorPorts {
-    /// Creates the team: refuses when a live process of `team` exists, removes the files of dead
-    /// ones (a crashed previous run, logged with their count), then creates every service sized
-    /// to `layout` and opens the orchestrator's ports.
+    /// Creates the team: refuses when a live process of `team` exists, removes the files of
+    /// every team of this user whose processes are all dead (this team's previous run included;
+    /// logged per team), then creates every service sized to `layout` and opens the
+    /// orchestrator's ports.
     pub fn create(team: &TeamName, layout: &TeamLayout) -> Result<Self, TransportError> {
         init_logging();
         let cfg = process_config();
-        let scan = scan_team(team, cfg)?;
-        if !scan.alive.is_empty() {
+        let teams = scan_teams(cfg)?;
+        if let Some(scan) = teams.get(team).filter(|s| !s.alive.is_empty()) {
             return Err(TransportError::TeamAlreadyRunning {
                 team: team.clone(),
                 live: scan.alive.join(", "),
             });
         }
-        let dead = scan.dead.len();
-        let stale_nodes_removed = remove_stale(team, scan.dead);
-        if dead > 0 {
-            tracing::info!(team = %team, found = dead, removed = stale_nodes_removed,
-                "removed stale resources of dead nodes of a previous run");
+        let mut stale_nodes_removed = 0;
+        for gone in remove_dead(teams) {
+            if &gone.team == team {
+                stale_nodes_removed = gone.removed;
+            }
+            tracing::info!(team = %gone.team, found = gone.dead_nodes, removed = gone.removed,
+                "removed stale resources of a team whose processes are all dead");
         }
 
         let agents = layout.ids().len();

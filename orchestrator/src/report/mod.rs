@@ -5,6 +5,7 @@
 mod data;
 mod formation;
 mod plot;
+mod top_view;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -16,6 +17,7 @@ use common::rundir::write_atomic;
 
 pub use data::{read_run, ReadError, RunData};
 use plot::{thin, thin_min, write_figure, Line, Panel, Rule, Stack, GREY, LIMIT, PALETTE};
+pub use top_view::{top_view, TopPath};
 
 /// Points per plotted line (decimation keeps files small and drawing fast).
 const MAX_POINTS: usize = 1500;

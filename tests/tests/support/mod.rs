@@ -307,7 +307,8 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
 }
 
 /// The team's services as iceoryx2 stores them: (hash, name) of each
-/// `<IOX2_ROOT>/services/iox2_<hash>.service` whose `service_name` belongs to `team`.
+/// `<IOX2_ROOT>/services/<prefix><hash>.service` (prefix: `cdm<uid>_`, see
+/// `common::transport::iox2_location`) whose `service_name` belongs to `team`.
 pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
     let prefix = format!("cdm/{team}/");
     let mut out = vec![];
@@ -315,7 +316,7 @@ pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
         let Some(hash) = path
             .file_name()
             .and_then(|n| n.to_str())
-            .and_then(|n| n.strip_prefix("iox2_"))
+            .and_then(|n| n.strip_prefix(common::transport::iox2_location().prefix.as_str()))
             .and_then(|n| n.strip_suffix(".service"))
         else {
             continue;
@@ -331,11 +332,12 @@ pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
 }
 
 /// The team's nodes: (name, process id as iceoryx2 records it) from each
-/// `<IOX2_ROOT>/nodes/<node id>/iox2_node.details` whose node name belongs to `team`.
+/// `<IOX2_ROOT>/nodes/<node id>/<prefix>node.details` whose node name belongs to `team`.
 pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
     let mut out = vec![];
     for path in files_under(&Path::new(iox2_root()).join("nodes")) {
-        if path.file_name().and_then(|n| n.to_str()) != Some("iox2_node.details") {
+        let details = format!("{}node.details", common::transport::iox2_location().prefix);
+        if path.file_name().and_then(|n| n.to_str()) != Some(details.as_str()) {
             continue;
         }
         let Ok(text) = std::fs::read_to_string(&path) else {

@@ -1,0 +1,65 @@
+//! Exports of a plan to the stacks that fly real fleets (Crazyswarm2, Skybrush): every agent's
+//! exact degree-5 trajectory (eqs. 13-16), cut into pieces, in the power basis of each piece or
+//! as Bézier control points, the single-precision error bound that picks a Crazyflie's cut, and
+//! the target frame the plan is scaled into. Pure: no I/O (the files are written by
+//! `orchestrator export`).
+
+pub mod float32;
+pub mod poly;
+pub mod scale;
+
+pub use float32::{crazyflie_split, CrazyflieSplit, SplitError, DEFAULT_TOLERANCE_M};
+pub use poly::{pieces, AgentTrajectory, Piece, DEGREE};
+pub use scale::{FrameError, TargetFrame};
+
+use crate::math::Real;
+use crate::scenario::Scenario;
+use crate::simulate::id_order;
+
+/// The longest segment a Skybrush show may have: its server refuses segments over 65.5 s
+/// (skybrush-server `TrajectorySpecification.segments`); 60 s keeps a margin.
+pub const SKYBRUSH_MAX_SEGMENT_S: Real = 60.0;
+
+/// Every agent's desired trajectory r_HT(t), in id order (the order of telemetry.csv).
+pub fn team_trajectories(s: &Scenario) -> Vec<AgentTrajectory> {
+    id_order(s)
+        .into_iter()
+        .map(|k| {
+            let m = &s.formation.members[k];
+            AgentTrajectory::new(&s.plan, m.id, &m.alpha)
+        })
+        .collect()
+}
+
+/// Equal Skybrush segments of at most `SKYBRUSH_MAX_SEGMENT_S` each.
+pub fn skybrush_piece_count(t_total_s: Real) -> usize {
+    ((t_total_s / SKYBRUSH_MAX_SEGMENT_S).ceil() as usize).max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::desired_positions;
+    use crate::scenario::{paper40, Checks};
+
+    /// The exported polynomials are the engine's own r_HT, agent by agent.
+    #[test]
+    fn team_trajectories_match_the_engine() {
+        let s = Scenario::from_file(paper40(), "paper40", Checks::Member).unwrap();
+        let trajs = team_trajectories(&s);
+        let order = id_order(&s);
+        let mut ht = Vec::new();
+        for t in [0.0, 13.7, 100.0, 199.99, 200.0] {
+            desired_positions(&s, t, &mut ht);
+            for (tr, &k) in trajs.iter().zip(&order) {
+                assert!(
+                    (tr.position(t) - ht[k]).norm() < 1e-9,
+                    "agent {} t={t}",
+                    tr.id
+                );
+            }
+        }
+        assert_eq!(skybrush_piece_count(200.0), 4);
+        assert_eq!(skybrush_piece_count(60.0), 1);
+    }
+}

@@ -1,0 +1,108 @@
+//! The target frame of an export: p -> S p + origin for every position and goal. A homogeneous
+//! deformation commutes with it (Q stays, d becomes S d + (I - Q) origin), so Q and lambda(U_D)
+//! are unchanged while D_B, D_S and the linear tracking error scale by S (eqs. 11, 34-38); the
+//! vehicles' radius does not shrink, so the certificate is issued again on the scaled scenario.
+
+use crate::math::{Real, Vec3};
+use crate::scenario::ScenarioFile;
+
+/// Scale and origin of the target frame (metres, z up, like the scenario's own frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetFrame {
+    pub scale: Real,
+    pub origin: Vec3,
+}
+
+/// A target frame that cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FrameError {
+    #[error("--scale must be a positive finite number, got {0}")]
+    Scale(Real),
+    #[error("--origin must be three finite numbers X,Y,Z in metres, got {0:?}")]
+    Origin(String),
+    #[error("--eps must be a positive finite radius in metres, got {0}")]
+    Eps(Real),
+}
+
+impl TargetFrame {
+    /// A checked frame.
+    pub fn new(scale: Real, origin: Vec3) -> Result<Self, FrameError> {
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(FrameError::Scale(scale));
+        }
+        Ok(TargetFrame { scale, origin })
+    }
+
+    /// `X,Y,Z` in metres.
+    pub fn parse_origin(text: &str) -> Result<Vec3, FrameError> {
+        let v: Vec<Real> = text
+            .split(',')
+            .map(|p| p.trim().parse::<Real>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| FrameError::Origin(text.to_string()))?;
+        match v[..] {
+            [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
+            _ => Err(FrameError::Origin(text.to_string())),
+        }
+    }
+
+    /// A point of the scenario's frame in the target frame.
+    pub fn map(&self, p: [Real; 3]) -> [Real; 3] {
+        let q = Vec3::from(p) * self.scale + self.origin;
+        [q.x, q.y, q.z]
+    }
+
+    /// The scenario as flown, mapped into the target frame with the target vehicles' radius
+    /// `eps_m`. Lengths the file fixes (delta_m, the plane tolerance) scale with it; the travel
+    /// time, gains and graph stay.
+    pub fn apply(&self, file: &ScenarioFile, eps_m: Real) -> Result<ScenarioFile, FrameError> {
+        if !(eps_m.is_finite() && eps_m > 0.0) {
+            return Err(FrameError::Eps(eps_m));
+        }
+        let mut f = file.clone();
+        f.eps_m = eps_m;
+        f.delta_m = f.delta_m.map(|d| d * self.scale);
+        f.plane_tolerance_m = f.plane_tolerance_m.map(|d| d * self.scale);
+        for a in &mut f.agents {
+            a.position = self.map(a.position);
+            a.goal = a.goal.map(|g| self.map(g));
+        }
+        Ok(f)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::{paper40, Checks, Scenario};
+
+    #[test]
+    fn scaling_keeps_lambda_and_scales_distances() {
+        let base = Scenario::from_file(paper40(), "paper40", Checks::Member).unwrap();
+        let frame = TargetFrame::new(0.01, Vec3::new(1.0, -2.0, -8.0)).unwrap();
+        let f = frame.apply(&base.file, 0.1).unwrap();
+        let scaled = Scenario::from_file(f, "scaled", Checks::Member).unwrap();
+        let (l0, l1) = (
+            base.plan.lambda1_min().unwrap(),
+            scaled.plan.lambda1_min().unwrap(),
+        );
+        assert!((l0.lambda1 - l1.lambda1).abs() < 1e-9);
+        let d0 = crate::safety::d_b(&base.formation);
+        let d1 = crate::safety::d_b(&scaled.formation);
+        assert!((d1 - 0.01 * d0).abs() < 1e-9 * d0);
+        assert_eq!(scaled.file.eps_m, 0.1);
+    }
+
+    #[test]
+    fn bad_frames_are_named() {
+        assert!(TargetFrame::new(0.0, Vec3::zeros()).is_err());
+        assert!(TargetFrame::new(Real::NAN, Vec3::zeros()).is_err());
+        assert!(TargetFrame::parse_origin("1,2").is_err());
+        assert!(TargetFrame::parse_origin("1,x,3").is_err());
+        assert!(TargetFrame::parse_origin("1,2,inf").is_err());
+        assert_eq!(
+            TargetFrame::parse_origin(" 1, -2.5,3").unwrap(),
+            Vec3::new(1.0, -2.5, 3.0)
+        );
+    }
+}

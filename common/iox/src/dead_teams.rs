@@ -1,0 +1,235 @@
+//! Finding and removing what teams of this user left behind when all their processes died
+//! (SIGKILL, a crash, a power-off of the terminal): a launch does it for every such team, and
+//! `orchestrator clean` on demand. A team with any live process is never touched: its dead
+//! members are evidence of a fault its orchestrator is still examining.
+
+use std::collections::BTreeMap;
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+
+use super::{init_logging, iox2_root, process_config, remove_stale, TeamName, TransportError};
+
+/// What a scan of this user's iceoryx2 registry found of one team.
+#[derive(Default)]
+pub(super) struct TeamScan {
+    /// Names of live nodes of the team, sorted.
+    pub alive: Vec<String>,
+    /// Dead nodes of the team, to be cleaned.
+    pub dead: Vec<iceoryx2::node::DeadNodeView<ipc::Service>>,
+}
+
+/// A team whose processes were all dead, and what was removed of it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RemovedTeam {
+    /// The team.
+    pub team: TeamName,
+    /// Its dead processes (iceoryx2 nodes) found.
+    pub dead_nodes: usize,
+    /// How many of them this call cleaned (the others were cleaned meanwhile by someone else).
+    pub removed: usize,
+}
+
+/// The team a node name (`cdm/<team>/...`) belongs to; `None` for nodes of other tools.
+fn team_of(node_name: &str) -> Option<TeamName> {
+    let rest = node_name.strip_prefix("cdm/")?;
+    let (team, _) = rest.split_once('/')?;
+    TeamName::new(team).ok()
+}
+
+/// Every team of this user in iceoryx2's registry, with its live and dead nodes (a node whose
+/// details are unreadable is skipped).
+pub(super) fn scan_teams(cfg: &Config) -> Result<BTreeMap<TeamName, TeamScan>, TransportError> {
+    let mut teams: BTreeMap<TeamName, TeamScan> = BTreeMap::new();
+    let team_of_view = |v: &dyn NodeView| {
+        v.details()
+            .as_ref()
+            .map(|d| d.name().to_string())
+            .and_then(|n| team_of(&n).map(|t| (t, n)))
+    };
+    Node::<ipc::Service>::list(cfg, |state| {
+        match state {
+            NodeState::Alive(v) => {
+                if let Some((t, n)) = team_of_view(&v) {
+                    teams.entry(t).or_default().alive.push(n);
+                }
+            }
+            NodeState::Dead(v) => {
+                if let Some((t, _)) = team_of_view(&v) {
+                    teams.entry(t).or_default().dead.push(v);
+                }
+            }
+            NodeState::Inaccessible(_) | NodeState::Undefined(_) => {}
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| TransportError::NodeRegistry {
+        root: iox2_root().to_owned(),
+        detail: format!("{e:?}"),
+    })?;
+    for scan in teams.values_mut() {
+        scan.alive.sort();
+    }
+    Ok(teams)
+}
+
+/// Removes the resources of every team in `teams` none of whose processes is alive.
+pub(super) fn remove_dead(teams: BTreeMap<TeamName, TeamScan>) -> Vec<RemovedTeam> {
+    if teams.values().any(|s| !s.dead.is_empty()) {
+        remove_unfinished_segments();
+    }
+    teams
+        .into_iter()
+        .filter(|(_, scan)| scan.alive.is_empty() && !scan.dead.is_empty())
+        .map(|(team, scan)| {
+            let dead_nodes = scan.dead.len();
+            let leftovers: Vec<NodeFiles> = scan.dead.iter().filter_map(NodeFiles::of).collect();
+            let removed = remove_stale(&team, scan.dead);
+            for node in &leftovers {
+                node.sweep(&team);
+            }
+            RemovedTeam {
+                team,
+                dead_nodes,
+                removed,
+            }
+        })
+        .collect()
+}
+
+/// Removes the resources of every team of this user whose processes are all dead, and says
+/// which. Live teams, and the dead members of live teams, are left alone.
+pub fn remove_dead_teams() -> Result<Vec<RemovedTeam>, TransportError> {
+    init_logging();
+    // Never read another user's files as if they were ours.
+    super::ownership::check_root(super::iox2_location())?;
+    Ok(remove_dead(scan_teams(process_config())?))
+}
+
+/// Removes the shared-memory segments under this user's prefix that a process killed while
+/// creating them left empty: size 0, not yet readable (iceoryx2 makes a segment readable once
+/// it is initialised), and created by a process that no longer exists (the process id is in
+/// bits 64..96 of the 128-bit id that names the segment). iceoryx2 0.10 waits without a deadline
+/// for such a segment to be sized when it removes a dead node (`MappingSizeIsZero` in its
+/// `open`), so the cleanup of the dead team would hang; nothing else can ever use them.
+fn remove_unfinished_segments() {
+    const SHM: &str = "/dev/shm";
+    let prefix = &super::iox2_location().prefix;
+    let Ok(entries) = std::fs::read_dir(SHM) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(name) = name.to_str().filter(|n| n.starts_with(prefix.as_str())) else {
+            continue;
+        };
+        let Ok(meta) = entry.metadata() else { continue };
+        let unfinished =
+            meta.is_file() && meta.len() == 0 && meta.permissions().mode() & 0o400 == 0;
+        if unfinished && creator_is_dead(name) {
+            let path = entry.path();
+            match std::fs::remove_file(&path) {
+                Ok(()) => tracing::info!(file = %path.display(),
+                    "removed a shared-memory segment its killed creator left unfinished"),
+                Err(e) => tracing::warn!(file = %path.display(), error = %e,
+                    "cannot remove an unfinished shared-memory segment"),
+            }
+        }
+    }
+}
+
+/// True when every 128-bit id in `name` was minted by a process that no longer exists (and
+/// there is at least one).
+fn creator_is_dead(name: &str) -> bool {
+    let mut pids = name
+        .split(|c: char| !c.is_ascii_digit())
+        .filter(|run| run.len() >= 20)
+        .filter_map(|run| run.parse::<u128>().ok())
+        .map(|id| (id >> 64) as u32 as libc::pid_t)
+        .peekable();
+    pids.peek().is_some()
+        && pids.all(|pid| {
+            // SAFETY: kill(2) with signal 0 only asks whether the process exists.
+            pid > 0
+                && unsafe { libc::kill(pid, 0) } != 0
+                && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH)
+        })
+}
+
+/// The files iceoryx2 keeps for one dead node in this user's root, read before iceoryx2's own
+/// cleanup: the node's directory of tags, its monitor files, and the static configs of the
+/// services it had tagged. A node killed while it created a service or a port defeats
+/// iceoryx2 0.10's cleanup (the node stays, `InternalError`; or an empty static config stays,
+/// "non-existing service"), and no later process can remove what is left; only this user's
+/// teams with every process dead are swept, and only these names.
+struct NodeFiles {
+    /// The node id as iceoryx2 writes it in file names (decimal).
+    id: String,
+    /// Hashes of the services the node had tagged.
+    services: Vec<String>,
+}
+
+impl NodeFiles {
+    fn of(node: &iceoryx2::node::DeadNodeView<ipc::Service>) -> Option<Self> {
+        let id = u128::from_str_radix(&node.id().to_string(), 16)
+            .ok()?
+            .to_string();
+        let prefix = &super::iox2_location().prefix;
+        let dir = Path::new(iox2_root()).join("nodes").join(&id);
+        let services = std::fs::read_dir(dir)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|e| {
+                let name = e.file_name().into_string().ok()?;
+                let hash = name
+                    .strip_prefix(prefix.as_str())?
+                    .strip_suffix(".service_tag")?;
+                Some(hash.to_owned())
+            })
+            .collect();
+        Some(Self { id, services })
+    }
+
+    /// Removes what iceoryx2's cleanup left of the node: empty static configs of its services
+    /// (a service whose creation was cut short), its directory and its monitor files.
+    fn sweep(&self, team: &TeamName) {
+        let root = Path::new(iox2_root());
+        let prefix = &super::iox2_location().prefix;
+        let mut gone: Vec<PathBuf> = vec![];
+        for hash in &self.services {
+            let path = root
+                .join("services")
+                .join(format!("{prefix}{hash}.service"));
+            if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file() && m.len() == 0) {
+                gone.push(path);
+            }
+        }
+        let nodes = root.join("nodes");
+        let own = format!("{prefix}{}.", self.id);
+        for entry in std::fs::read_dir(&nodes).into_iter().flatten().flatten() {
+            if entry
+                .file_name()
+                .to_str()
+                .is_some_and(|n| n.starts_with(&own))
+            {
+                gone.push(entry.path());
+            }
+        }
+        let dir = nodes.join(&self.id);
+        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+            gone.push(entry.path());
+        }
+        let mut removed = 0;
+        for path in &gone {
+            removed += usize::from(std::fs::remove_file(path).is_ok());
+        }
+        removed += usize::from(std::fs::remove_dir(&dir).is_ok());
+        if removed > 0 {
+            tracing::info!(team = %team, node = %self.id, files = removed,
+                "removed what iceoryx2's cleanup left of a node killed mid-creation");
+        }
+    }
+}

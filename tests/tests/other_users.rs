@@ -1,0 +1,397 @@
+//! Other local users, and teams that died (issue 10, items 1, 2 and 4), with the real binaries.
+//!
+//! - Users: two users created for the test (`useradd`; removed with their files at the end) run
+//!   the binaries, copied into a directory they can read, with `setpriv`. Needs root (CI runs as
+//!   root); skipped with a note elsewhere.
+//! - Dead teams: `launch --n 200` killed (SIGKILL) 50 ms after its start, in a private mount
+//!   namespace with a /dev/shm of its own so that other tests on the machine do not disturb the
+//!   comparison of /dev/shm before and after; skipped where `unshare -m` is not allowed.
+
+mod support;
+
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::Duration;
+
+use integration_tests::{bin, describe, run, spawn, unique_team, TempDir};
+use support::*;
+
+/// A small team's launch and stop take a few seconds; the rest is slack for a loaded machine.
+const DEADLINE: Duration = Duration::from_secs(120);
+
+/// A user created for one test, removed (with every file it owns in /dev/shm) when dropped.
+struct TestUser {
+    name: String,
+    uid: u32,
+    gid: u32,
+}
+
+impl TestUser {
+    /// Creates a user; `None` (the test is skipped) when this process may not.
+    fn create(tag: &str) -> Option<Self> {
+        // SAFETY: geteuid(2) cannot fail.
+        if unsafe { libc::geteuid() } != 0 {
+            eprintln!("skipped: creating users needs root");
+            return None;
+        }
+        let name = format!("cdm{tag}{}", std::process::id() % 100_000);
+        // useradd takes a lock on /etc/passwd: another test may hold it for a moment.
+        let mut created = false;
+        for _ in 0..50 {
+            let o = run(
+                Command::new("useradd").args(["-M", "-N", "-s", "/usr/sbin/nologin", &name]),
+                DEADLINE,
+            );
+            if o.status.success() {
+                created = true;
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        assert!(created, "useradd {name} failed");
+        let id = |flag: &str| -> u32 {
+            let o = run(Command::new("id").args([flag, &name]), DEADLINE);
+            String::from_utf8_lossy(&o.stdout)
+                .trim()
+                .parse()
+                .unwrap_or_else(|e| panic!("id {flag} {name}: {e}: {}", describe(&o)))
+        };
+        Some(TestUser {
+            uid: id("-u"),
+            gid: id("-g"),
+            name,
+        })
+    }
+
+    /// `program args` run as this user.
+    fn command(&self, program: &Path) -> Command {
+        let mut c = Command::new("setpriv");
+        c.arg(format!("--reuid={}", self.uid))
+            .arg(format!("--regid={}", self.gid))
+            .arg("--clear-groups")
+            .arg(program);
+        c
+    }
+
+    /// The files this user owns directly in /dev/shm.
+    fn shm_files(&self) -> Vec<(PathBuf, u32)> {
+        files_under(Path::new(SHM))
+            .into_iter()
+            .filter_map(|p| {
+                let m = std::fs::symlink_metadata(&p).ok()?;
+                (m.uid() == self.uid).then(|| (p, m.mode() & 0o7777))
+            })
+            .collect()
+    }
+
+    fn iox2_root(&self) -> PathBuf {
+        PathBuf::from(format!("{SHM}/cdm-iceoryx2-{}", self.uid))
+    }
+}
+
+impl Drop for TestUser {
+    fn drop(&mut self) {
+        for (p, _) in self.shm_files() {
+            if p.is_dir() {
+                let _ = std::fs::remove_dir_all(&p);
+            } else {
+                let _ = std::fs::remove_file(&p);
+            }
+        }
+        let _ = Command::new("userdel").arg(&self.name).output();
+    }
+}
+
+/// The three binaries copied into `dir` (readable and executable by everyone), so that a test
+/// user can run them whatever the permissions of the build directory.
+fn binaries_for_everyone(dir: &Path) -> PathBuf {
+    let bins = dir.join("bin");
+    std::fs::create_dir_all(&bins).expect("create bin dir");
+    for name in ["orchestrator", "leader", "agent"] {
+        let to = bins.join(name);
+        std::fs::copy(bin(name), &to).unwrap_or_else(|e| panic!("copy {name}: {e}"));
+        std::fs::set_permissions(&to, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    }
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    std::fs::set_permissions(&bins, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    bins.join("orchestrator")
+}
+
+/// A run directory writable by `user` only.
+fn out_dir_of(user: &TestUser, dir: &Path, name: &str) -> PathBuf {
+    let d = dir.join(name);
+    std::fs::create_dir(&d).expect("create out dir");
+    std::os::unix::fs::chown(&d, Some(user.uid), Some(user.gid)).expect("chown out dir");
+    d
+}
+
+/// `launch --n 4` of a few ticks as `user`.
+fn short_launch(user: &TestUser, orch: &Path, team: &str, out: &Path) -> Output {
+    let mut c = user.command(orch);
+    c.args([
+        "launch",
+        "--n",
+        "4",
+        "--max-ticks",
+        "20",
+        "--no-figures",
+        "--force",
+    ])
+    .args(["--team", team, "--out"])
+    .arg(out);
+    run(&mut c, DEADLINE)
+}
+
+/// Item 1: a user's launch leaves nothing in /dev/shm that another user can write, everything it
+/// keeps there directly carries the user's own iceoryx2 prefix `cdm<uid>_`, and another user who
+/// writes 16 bytes of garbage into every file of /dev/shm they can cannot stop the next launch.
+/// In a private /dev/shm (mount namespace), so that the launch creates what iceoryx2 keeps for
+/// good. Before the fix the launch kept `iox2_<hash>_node.0_10_0.global_mgmt` with mode 0666,
+/// one file shared by every user, and the garbage made every later launch fail
+/// (`UnableToGenerateUniqueNodeId`, exit 2).
+#[test]
+fn a_launch_leaves_nothing_in_dev_shm_that_another_user_can_write() {
+    let probe = Command::new("unshare").args(["-m", "true"]).output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+        return;
+    }
+    let (Some(user), Some(other)) = (TestUser::create("w"), TestUser::create("x")) else {
+        return;
+    };
+    let dir = TempDir::new();
+    let orch = binaries_for_everyone(dir.path());
+    let out = out_dir_of(&user, dir.path(), "run");
+    let script = r#"
+set -u
+O="$0"; OUT="$1"; U="$2"; G="$3"; XU="$4"; XG="$5"; TEAM="$6"
+mount -t tmpfs -o size=512m,mode=1777 tmpfs /dev/shm || exit 90
+as_user() { setpriv --reuid="$U" --regid="$G" --clear-groups "$@"; }
+fly() { timeout 60 setpriv --reuid="$U" --regid="$G" --clear-groups "$O" launch --n 4   --max-ticks 20 --no-figures --quiet --force --team "$TEAM" --out "$OUT"; echo "launch exit $?"; }
+fly
+find /dev/shm -mindepth 1 -maxdepth 1 -printf 'entry %u %m %f
+'
+find /dev/shm -perm -o+w ! -type d -printf 'writable %p
+'
+for f in $(find /dev/shm -type f); do
+  setpriv --reuid="$XU" --regid="$XG" --clear-groups sh -c 'printf 0123456789abcdef > "$1"' sh "$f"     2>/dev/null && echo "overwritten $f"
+done
+fly
+"#;
+    let o = run(
+        Command::new("unshare")
+            .args(["-m", "sh", "-c", script])
+            .arg(&orch)
+            .arg(&out)
+            .args([user.uid, user.gid, other.uid, other.gid].map(|v| v.to_string()))
+            .arg(unique_team("users")),
+        DEADLINE,
+    );
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
+    let lines = |tag: &str| -> Vec<String> {
+        said.lines()
+            .filter_map(|l| l.strip_prefix(tag))
+            .map(str::to_owned)
+            .collect()
+    };
+    let all = describe(&o);
+    assert_eq!(
+        lines("launch exit "),
+        ["0", "0"],
+        "both launches fly:\n{all}"
+    );
+    assert_eq!(
+        lines("writable "),
+        Vec::<String>::new(),
+        "find -perm -o+w:\n{all}"
+    );
+    assert_eq!(
+        lines("overwritten "),
+        Vec::<String>::new(),
+        "another user wrote:\n{all}"
+    );
+    let prefix = format!("cdm{}_", user.uid);
+    let root = format!("cdm-iceoryx2-{}", user.uid);
+    let entries = lines("entry ");
+    assert!(
+        !entries.is_empty(),
+        "the launch kept nothing in {SHM}?\n{all}"
+    );
+    for e in &entries {
+        let name = e.rsplit(' ').next().unwrap_or_default();
+        assert!(
+            name == root || name.starts_with(&prefix),
+            "{e}: not the user's root nor under the prefix {prefix}\n{all}"
+        );
+    }
+}
+
+/// One way to spoil a user's iceoryx2 root: its name, how to do it, what the refusal must say.
+type Case<'a> = (&'a str, Box<dyn Fn() + 'a>, &'a [&'a str]);
+
+/// Item 2: the user's iceoryx2 root `/dev/shm/cdm-iceoryx2-<uid>` created beforehand by another
+/// user, or writable by group or others, or a link: the launch refuses, exit 2, naming the path,
+/// the owner and the mode and saying what to do; it writes no run directory. Before the fix the
+/// launch used such a root as it was (another user could then delete the team's event sockets).
+#[test]
+fn a_squatted_or_open_iceoryx2_root_is_refused_naming_owner_and_mode() {
+    let Some(user) = TestUser::create("v") else {
+        return;
+    };
+    let Some(squatter) = TestUser::create("s") else {
+        return;
+    };
+    let dir = TempDir::new();
+    let orch = binaries_for_everyone(dir.path());
+    let root = user.iox2_root();
+    let root_text = root.display().to_string();
+    let target = dir.path().join("elsewhere");
+    std::fs::create_dir(&target).expect("mkdir");
+    let cases: [Case; 3] = [
+        (
+            "owned by another user",
+            Box::new(|| {
+                let mut c = squatter.command(Path::new("/bin/mkdir"));
+                c.args(["-m", "0777"]).arg(&root);
+                assert_exit(&run(&mut c, DEADLINE), 0, "mkdir as the squatter");
+            }),
+            &[
+                "owned by another user",
+                &format!("owner uid {}", squatter.uid),
+                "mode 0777",
+            ],
+        ),
+        (
+            "writable by others",
+            Box::new(|| {
+                std::fs::create_dir(&root).expect("mkdir root");
+                std::os::unix::fs::chown(&root, Some(user.uid), Some(user.gid)).expect("chown");
+                std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o777))
+                    .expect("chmod");
+            }),
+            &[
+                "writable by group or others",
+                &format!("owner uid {}", user.uid),
+                "mode 0777",
+            ],
+        ),
+        (
+            "a link",
+            Box::new(|| std::os::unix::fs::symlink(&target, &root).expect("symlink")),
+            &["not a directory (a link or a file)"],
+        ),
+    ];
+    for (what, prepare, needles) in cases {
+        let _ = std::fs::remove_file(&root);
+        let _ = std::fs::remove_dir_all(&root);
+        prepare();
+        let out = out_dir_of(&user, dir.path(), &what.replace(' ', "-"));
+        let run_dir = out.join("run");
+        let o = short_launch(&user, &orch, &unique_team("squat"), &run_dir);
+        let case = format!("launch with an iceoryx2 root {what}");
+        assert_exit(&o, 2, &case);
+        let mut all = vec![root_text.as_str(), "remove it", "and launch again"];
+        all.extend_from_slice(needles);
+        assert_stderr_has(&o, &case, &all);
+        assert!(
+            !run_dir.exists(),
+            "{case}: {} was written",
+            run_dir.display()
+        );
+    }
+    let _ = std::fs::remove_file(&root);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Item 4, part 1: `launch --n 200` killed (SIGKILL) 50 ms after it started (mid-way through
+/// creating the team's services), then a launch of another team: that launch removes what the
+/// dead team left, and /dev/shm returns to its state before the killed launch. In a private
+/// /dev/shm (mount namespace), after one warm-up launch that creates what iceoryx2 keeps for
+/// good (the user's root directory and management segment). Before the fix, only a later launch
+/// of the same team name removed anything, and iceoryx2 itself could not remove what a kill in
+/// the middle of a service's creation left (it even waited forever on an empty segment).
+#[test]
+fn a_team_killed_during_start_up_is_removed_by_the_next_launch_of_another_team() {
+    let probe = Command::new("unshare").args(["-m", "true"]).output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+        return;
+    }
+    let dir = TempDir::new();
+    let killed = unique_team("killed");
+    let other = unique_team("after");
+    let before = dir.path().join("before.txt");
+    let after = dir.path().join("after.txt");
+    // One shell in the namespace drives the sequence; each step has its own deadline.
+    let script = r#"
+set -eu
+O="$0"; D="$1"; KILLED="$2"; OTHER="$3"
+mount -t tmpfs -o size=1g tmpfs /dev/shm
+timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --quiet --team warmup --out "$D/w" >/dev/null
+find /dev/shm | sort > "$D/before.txt"
+"$O" launch --n 200 --quiet --no-figures --team "$KILLED" --out "$D/k" >/dev/null 2>&1 &
+PID=$!
+sleep 0.05
+kill -9 "$PID"
+wait "$PID" || true
+echo "left by the killed team: $(find /dev/shm | wc -l) entries"
+i=0
+while pgrep -f -- "--team $KILLED" >/dev/null; do
+  i=$((i+1)); [ "$i" -lt 600 ] || { echo "members of $KILLED still alive"; exit 1; }
+  sleep 0.1
+done
+timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --team "$OTHER" --out "$D/o"
+find /dev/shm | sort > "$D/after.txt"
+"#;
+    let o = run(
+        Command::new("unshare")
+            .args(["-m", "sh", "-c", script])
+            .arg(bin("orchestrator"))
+            .arg(dir.path())
+            .args([&killed, &other]),
+        DEADLINE,
+    );
+    assert!(o.status.success(), "{}", describe(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&format!("team={killed}")) && err.contains("removed stale resources"),
+        "the second launch says it removed the killed team:\n{err}"
+    );
+    let before = std::fs::read_to_string(before).expect("before.txt");
+    let after = std::fs::read_to_string(after).expect("after.txt");
+    assert_eq!(
+        before,
+        after,
+        "/dev/shm before the killed launch and after the next one differ\n{}",
+        describe(&o)
+    );
+}
+
+/// Item 4, part 2: `orchestrator clean` while a team flies leaves it alone (the team completes
+/// and leaves nothing behind); it says what it did.
+#[test]
+fn clean_never_touches_a_live_team() {
+    let dir = TempDir::new();
+    let team = unique_team("cleanlive");
+    let out = dir.path().join("run");
+    let mut orch = spawn(&mut launch(&team, &out, &["--n", "10", "--t-total", "600"]));
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
+    let procs = team_processes(&team);
+    let fp = Footprint::record(&team, procs.keys().copied());
+    fp.assert_visible(11);
+    let o = run(Command::new(bin("orchestrator")).arg("clean"), DEADLINE);
+    assert_exit(&o, 0, "orchestrator clean");
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("nothing to remove") || said.contains("removed team "),
+        "{}",
+        describe(&o)
+    );
+    assert!(!said.contains(&team), "clean touched the live team: {said}");
+    fp.assert_visible(11);
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 0, "the team after `orchestrator clean`");
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
+}
