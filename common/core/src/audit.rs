@@ -300,34 +300,7 @@ impl Auditor {
             let d2 = (pos[k] - ht[k]).norm();
             self.report.max_follower_deviation_m = self.report.max_follower_deviation_m.max(d2);
         }
-        // Collisions: every pair closer than 2 eps.
-        let (living, idx): (Vec<Vec3>, Vec<usize>) = if self.report.losses.is_empty() {
-            (Vec::new(), Vec::new())
-        } else {
-            (0..pos.len())
-                .filter(|&k| self.alive[k])
-                .map(|k| (pos[k], k))
-                .unzip()
-        };
-        let bodies = if self.report.losses.is_empty() {
-            pos
-        } else {
-            &living
-        };
-        let id_of = |i: usize| self.ids[if idx.is_empty() { i } else { idx[i] }];
-        let (sep, _, _) = safety::min_separation(bodies);
-        self.report.min_separation_m = self.report.min_separation_m.min(sep);
-        let mut close: BTreeMap<(u32, u32), Real> = BTreeMap::new();
-        for (i, j, d) in close_pairs(bodies, 2.0 * n.eps_m) {
-            let (a, b) = (id_of(i), id_of(j));
-            close.insert((a.min(b), a.max(b)), d);
-        }
-        for (&(a, b), &d) in &close {
-            if !self.failing.collisions.contains(&(a, b)) {
-                self.record("collision", &[a, b], at, d, 2.0 * n.eps_m);
-            }
-        }
-        self.failing.collisions = close.into_keys().collect();
+        self.observe_collisions(at, pos);
         // Containment (Theorem 3): the prism over the leaders' desired polygon.
         let verts: Vec<Vec3> = self.polygon.iter().map(|&k| ht[k]).collect();
         if verts.len() >= 3 {
@@ -373,6 +346,38 @@ impl Auditor {
             self.record("deformation", &primaries, at, l1, n.lambda_cd_min);
         }
         self.failing.deformation = bad;
+    }
+
+    /// Collisions (every pair of living bodies closer than 2 eps) and the smallest separation.
+    fn observe_collisions(&mut self, at: (u64, Real), pos: &[Vec3]) {
+        let n = self.numbers;
+        let (living, idx): (Vec<Vec3>, Vec<usize>) = if self.report.losses.is_empty() {
+            (Vec::new(), Vec::new())
+        } else {
+            (0..pos.len())
+                .filter(|&k| self.alive[k])
+                .map(|k| (pos[k], k))
+                .unzip()
+        };
+        let bodies = if self.report.losses.is_empty() {
+            pos
+        } else {
+            &living
+        };
+        let id_of = |i: usize| self.ids[if idx.is_empty() { i } else { idx[i] }];
+        let (sep, _, _) = safety::min_separation(bodies);
+        self.report.min_separation_m = self.report.min_separation_m.min(sep);
+        let mut close: BTreeMap<(u32, u32), Real> = BTreeMap::new();
+        for (i, j, d) in close_pairs(bodies, 2.0 * n.eps_m) {
+            let (a, b) = (id_of(i), id_of(j));
+            close.insert((a.min(b), a.max(b)), d);
+        }
+        for (&(a, b), &d) in &close {
+            if !self.failing.collisions.contains(&(a, b)) {
+                self.record("collision", &[a, b], at, d, 2.0 * n.eps_m);
+            }
+        }
+        self.failing.collisions = close.into_keys().collect();
     }
 
     /// Record a runtime fault (the run did not complete).
