@@ -8,10 +8,12 @@
 
 pub use cdm_core::{
     audit, control, dynamics, engine, export, formation, frame, gains, geometry, graph, loss,
-    losscert, math, plan, repair, rundir, safety, scenario, simulate, step, telemetry,
+    losscert, math, outcome, plan, repair, rundir, safety, scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
-pub use cdm_runtime::{fault_inject, messages, signals};
+pub use cdm_runtime::{
+    fault_inject, member_core, member_loop, messages, seams, signals, team_core,
+};
 
 pub mod member;
 pub mod member_cli;

@@ -1,21 +1,22 @@
-//! One team member as a process: the loop around `step::step` that only does I/O.
-//!
-//! Protocol (see ARCHITECTURE.md): the orchestrator grants ticks on the clock service; a member
-//! publishes its tick-k state once tick k is granted, and computes tick k + 1 once k + 1 is
-//! granted and its three in-neighbours' tick-k states are in. Every state carries its tick, so a
-//! neighbour that runs ahead is buffered, never confused. Every wait has a deadline.
+//! One team member as a process: the member core (cdm-runtime, no I/O) flown over the iceoryx2
+//! ports by the generic loop. This file only loads the scenario, checks the binary flies this
+//! member's role, opens the ports and maps the outcome to an error with an exit code.
 
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
 
-use crate::dynamics::{Flat, QuadState};
+use cdm_runtime::member_core::MemberCore;
+use cdm_runtime::member_loop::{fly, LoopError};
+use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
+
 use crate::engine::step_config;
 use crate::formation::Role;
-use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};
 use crate::scenario::{Checks, Scenario, ScenarioError};
-use crate::step::{law_for, step, Law, StepFault};
+use crate::step::StepFault;
 use crate::transport::{MemberPorts, TeamName, TransportError};
+
+pub use cdm_runtime::member_core::{Deadlines, Finished, MemberFault};
 
 /// Which binary is running: leaders fly primary and secondary leaders, agents fly followers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,24 +37,6 @@ impl Kind {
         match self {
             Kind::Leader => "leader",
             Kind::Agent => "agent",
-        }
-    }
-}
-
-/// Deadlines of a member.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Deadlines {
-    /// How long to wait for the team to start (first grant) while the orchestrator lives.
-    pub join: Duration,
-    /// How long without progress (no grant, no neighbour state) before giving up mid-run.
-    pub silence: Duration,
-}
-
-impl Default for Deadlines {
-    fn default() -> Self {
-        Deadlines {
-            join: Duration::from_secs(300),
-            silence: Duration::from_secs(10),
         }
     }
 }
@@ -120,15 +103,6 @@ impl MemberError {
     }
 }
 
-/// How a member ended normally.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Finished {
-    /// The last tick published.
-    pub tick: u64,
-    /// The orchestrator's stop reason code.
-    pub reason: u32,
-}
-
 /// Run one member until the orchestrator stops the team.
 pub fn run_member(
     kind: Kind,
@@ -158,16 +132,9 @@ pub fn run_member(
             origin: s.origin.clone(),
         });
     }
-    let (law, neighbor_ids) = law_for(&me);
-    let is_follower = matches!(law, Law::Follower { .. });
-    let mut ins: Vec<u32> = if is_follower {
-        neighbor_ids.to_vec()
-    } else {
-        Vec::new()
-    };
-    ins.sort_unstable();
-    let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
     let hash = s.content_hash();
+    let ins = MemberCore::<ModelVehicle, LockstepClock>::subscriptions(&me);
+    let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
     let mut ports = MemberPorts::open(team, id, hash, &ins, &outs)?;
     tracing::info!(
         id,
@@ -178,279 +145,65 @@ pub fn run_member(
         "joined: subscribed to state services of {:?}",
         ins
     );
-
-    let cfg = step_config(&s);
-    let last = s.last_tick();
-    let mut x = QuadState::hover(me.position);
-    let mut tick: u64 = 0;
-    let mut published: Option<u64> = None;
-    let mut grant: Option<u64> = None;
-    let mut inbox: [Inbox; 3] = Default::default();
-    let mut last_progress = Instant::now();
-    let mut last_alive_check = Instant::now();
-    let mut unnotified = false;
+    // The deadlines start once the ports are open (opening takes seconds at N = 1000).
+    let clock = MonotonicClock::start();
+    let vehicle = ModelVehicle::new(step_config(&s), &s.plan, &me);
+    let parts = (vehicle, LockstepClock::default());
+    let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now());
     let inject = crate::fault_inject::from_env(id);
-    let fault_reply =
-        |ports: &mut MemberPorts, tick: u64, code: FaultCode, peer: u32, x: &QuadState| {
-            let msg = StateMsg::ok(tick, hash, id, x.0).with_status(AgentStatus::Fault {
-                code,
-                peer: if peer == NO_PEER { None } else { Some(peer) },
-            });
-            let _ = ports.publish(msg);
-            linger(ports, interrupted);
-        };
+    fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
+        .map_err(|e| MemberError::from_loop(e, id, team))
+}
 
-    loop {
-        if interrupted.load(Ordering::Relaxed) {
-            return Err(MemberError::Interrupted { id, tick });
-        }
-        let mut progress = false;
-        if let Some(c) = ports.latest_clock()? {
-            progress |= on_clock(&c, hash, &mut grant, id, team)?;
-            if matches!(c.command(), ClockCommand::Stop(_)) {
-                return Ok(Finished {
-                    tick,
-                    reason: c.reason,
-                });
-            }
-        }
-        let mut bad: Option<(u32, String)> = None;
-        ports.receive_neighbors(|msg| {
-            let Some(slot) = neighbor_ids.iter().position(|n| *n == msg.id) else {
-                return;
-            };
-            if msg.status() != AgentStatus::Ok {
-                // A neighbour's fault notice is not a state: the orchestrator stops the team once
-                // every tick before the fault is complete (as the engine would have flown them).
-                tracing::debug!(
-                    peer = msg.id,
-                    tick = msg.tick,
-                    "in-neighbour reported a fault"
-                );
-                return;
-            }
-            if msg.scenario_hash != hash && bad.is_none() {
-                bad = Some((
-                    msg.id,
-                    format!("sent a state of another scenario (tick {})", msg.tick),
-                ));
-            }
-            if msg.tick >= tick {
-                inbox[slot].insert(msg.tick, QuadState(msg.state).flat());
-                progress = true;
-            }
-        })?;
-        if let Some((peer, what)) = bad {
-            fault_reply(&mut ports, tick, FaultCode::NeighborFault, peer, &x);
-            return Err(MemberError::Neighbor {
-                id,
-                tick,
-                peer,
-                what,
-            });
-        }
-        // Advance as far as grants and neighbour data allow (several ticks per wake-up).
-        while let Some(g) = grant {
-            if published != Some(tick) && g >= tick {
-                let mut msg = StateMsg::ok(tick, hash, id, x.0);
-                if let Some(i) = &inject {
-                    i.apply(tick, &mut msg);
+impl MemberError {
+    /// The loop's outcome as this process reports it (messages unchanged since the loop was one
+    /// function).
+    fn from_loop(e: LoopError<TransportError>, id: u32, team: &TeamName) -> Self {
+        match e {
+            LoopError::Transport(e) => MemberError::Transport(e),
+            LoopError::Interrupted { tick } => MemberError::Interrupted { id, tick },
+            LoopError::Fault(f) => match f {
+                MemberFault::ScenarioMismatch { mine, team: theirs } => {
+                    MemberError::Transport(TransportError::ScenarioMismatch {
+                        team: team.clone(),
+                        id,
+                        mine,
+                        team_hash: crate::transport::scenario_hash_value(theirs),
+                    })
                 }
-                // Notify on block: readers are woken once, before this member sleeps,
-                // instead of after every tick it runs ahead.
-                ports.publish_quietly(msg)?;
-                unnotified = true;
-                published = Some(tick);
-                progress = true;
-            }
-            if published != Some(tick) || tick >= last || g < tick + 1 {
-                break;
-            }
-            let mut flats = [Flat::rest(me.position); 3];
-            if is_follower {
-                let mut ready = true;
-                for (slot, f) in flats.iter_mut().enumerate() {
-                    match inbox[slot].get(tick) {
-                        Some(v) => *f = *v,
-                        None => {
-                            // A later tick without this one: a sample was lost.
-                            if let Some(later) = inbox[slot].first_tick() {
-                                if later > tick {
-                                    let peer = neighbor_ids[slot];
-                                    fault_reply(&mut ports, tick, FaultCode::TickGap, peer, &x);
-                                    return Err(MemberError::Neighbor {
-                                        id,
-                                        tick,
-                                        peer,
-                                        what: format!("skipped from tick {tick} to {later}"),
-                                    });
-                                }
-                            }
-                            ready = false;
-                        }
-                    }
-                }
-                if !ready {
-                    break;
-                }
-            }
-            match step(&cfg, &s.plan, &law, tick, &x, &flats, &neighbor_ids) {
-                Ok(next) => x = next,
-                Err(fault) => {
-                    let (code, peer) = match fault {
-                        StepFault::NeighborNonFinite { peer } => (FaultCode::NonFinite, peer),
-                        StepFault::Control(_) => (FaultCode::Control, NO_PEER),
-                    };
-                    fault_reply(&mut ports, tick, code, peer, &x);
-                    return Err(MemberError::Step { id, tick, fault });
-                }
-            }
-            tick += 1;
-            for b in inbox.iter_mut() {
-                b.drop_before(tick);
-            }
-            progress = true;
-        }
-        if progress {
-            last_progress = Instant::now();
-            continue;
-        }
-        let idle = last_progress.elapsed();
-        if last_alive_check.elapsed() >= Duration::from_millis(500) {
-            last_alive_check = Instant::now();
-            if !ports.orchestrator_alive() {
-                return Err(MemberError::OrchestratorLost {
+                MemberFault::OrchestratorLost { tick } => MemberError::OrchestratorLost {
                     id,
                     team: team.to_string(),
                     tick,
-                });
-            }
-        }
-        let limit = if grant.is_none() {
-            deadlines.join
-        } else {
-            deadlines.silence
-        };
-        if idle >= limit {
-            let waiting_for = if grant.is_none() {
-                "the team to start".to_string()
-            } else if grant.is_some_and(|g| g < tick + 1) || published != Some(tick) {
-                format!("a grant of tick {}", tick + 1)
-            } else {
-                let missing: Vec<u32> = (0..3)
-                    .filter(|&k| inbox[k].get(tick).is_none())
-                    .map(|k| neighbor_ids[k])
-                    .collect();
-                format!("tick-{tick} states of in-neighbours {missing:?}")
-            };
-            return Err(MemberError::Silent {
-                id,
-                tick,
-                waited: idle,
-                waiting_for,
-            });
-        }
-        if unnotified {
-            ports.notify_readers()?;
-            unnotified = false;
-            // Readers may answer at once (a grant or a neighbour's state): look before sleeping.
-            continue;
-        }
-        // Every wake-up that matters is a notification (a grant, a neighbour's state, a stop) or
-        // a signal; the slice only bounds how late the deadlines and the orchestrator check run.
-        // Short slices cost: 1000 members polling every 50 ms took a tenth of a core at start-up.
-        ports.wait(WAIT_SLICE.min(limit - idle))?;
-    }
-}
-
-/// One in-neighbour's states not yet used, by tick (ascending). A neighbour publishes its ticks
-/// in order, so states are appended and taken from the front: no allocation per tick (a
-/// `BTreeMap` here took a sixth of a member's time at N = 40).
-#[derive(Debug, Default)]
-struct Inbox(std::collections::VecDeque<(u64, Flat)>);
-
-impl Inbox {
-    /// Stores `tick`'s state; a repeated tick replaces the earlier one.
-    fn insert(&mut self, tick: u64, f: Flat) {
-        match self.0.back() {
-            Some(&(last, _)) if last >= tick => match self.0.binary_search_by_key(&tick, |e| e.0) {
-                Ok(k) => self.0[k].1 = f,
-                Err(k) => self.0.insert(k, (tick, f)),
+                },
+                MemberFault::Silent {
+                    tick,
+                    waited,
+                    waiting_for,
+                } => MemberError::Silent {
+                    id,
+                    tick,
+                    waited,
+                    waiting_for: waiting_for.to_string(),
+                },
+                MemberFault::Step { tick, fault } => MemberError::Step { id, tick, fault },
+                MemberFault::ForeignState {
+                    tick,
+                    peer,
+                    peer_tick,
+                } => MemberError::Neighbor {
+                    id,
+                    tick,
+                    peer,
+                    what: format!("sent a state of another scenario (tick {peer_tick})"),
+                },
+                MemberFault::TickGap { tick, peer, later } => MemberError::Neighbor {
+                    id,
+                    tick,
+                    peer,
+                    what: format!("skipped from tick {tick} to {later}"),
+                },
             },
-            _ => self.0.push_back((tick, f)),
         }
     }
-
-    fn get(&self, tick: u64) -> Option<&Flat> {
-        // Used ticks are dropped, so the wanted one is (nearly always) at the front.
-        self.0
-            .iter()
-            .find(|e| e.0 >= tick)
-            .filter(|e| e.0 == tick)
-            .map(|e| &e.1)
-    }
-
-    fn first_tick(&self) -> Option<u64> {
-        self.0.front().map(|e| e.0)
-    }
-
-    fn drop_before(&mut self, tick: u64) {
-        while self.0.front().is_some_and(|e| e.0 < tick) {
-            self.0.pop_front();
-        }
-    }
-}
-
-/// How long a member that reported a fault keeps its ports open for the orchestrator's stop.
-const LINGER: Duration = Duration::from_secs(5);
-
-/// After a fault report: keep the process (and so its published states) alive until the
-/// orchestrator stops the team, it is gone, or [`LINGER`] passes. iceoryx2 drops the samples a
-/// subscriber has not yet taken when their publisher's process exits, so a member that ran ahead
-/// (a large window) and exited at once could take its fault report, and the states before it,
-/// with it; the orchestrator would then see only an exited process.
-fn linger(ports: &mut MemberPorts, interrupted: &AtomicBool) {
-    let start = Instant::now();
-    let mut last_alive_check = Instant::now();
-    while start.elapsed() < LINGER && !interrupted.load(Ordering::Relaxed) {
-        match ports.latest_clock() {
-            Ok(Some(c)) if matches!(c.command(), ClockCommand::Stop(_)) => return,
-            Ok(_) => {}
-            Err(_) => return,
-        }
-        if last_alive_check.elapsed() >= Duration::from_millis(500) {
-            last_alive_check = Instant::now();
-            if !ports.orchestrator_alive() {
-                return;
-            }
-        }
-        if ports.wait(Duration::from_millis(100)).is_err() {
-            return;
-        }
-    }
-}
-
-/// The longest single wait of a member.
-const WAIT_SLICE: Duration = Duration::from_millis(250);
-
-fn on_clock(
-    c: &ClockMsg,
-    hash: u64,
-    grant: &mut Option<u64>,
-    id: u32,
-    team: &TeamName,
-) -> Result<bool, MemberError> {
-    if c.scenario_hash != hash {
-        return Err(MemberError::Transport(TransportError::ScenarioMismatch {
-            team: team.clone(),
-            id,
-            mine: hash,
-            team_hash: crate::transport::scenario_hash_value(c.scenario_hash),
-        }));
-    }
-    if c.command() == ClockCommand::Run && grant.is_none_or(|g| c.grant_tick > g) {
-        *grant = Some(c.grant_tick);
-        return Ok(true);
-    }
-    Ok(false)
 }

@@ -1,4 +1,5 @@
-//! Command-line interface: raw arguments, converted to validated inputs before anything runs.
+//! Command-line interface: the raw arguments as clap parses them; `commands.rs` turns them into
+//! each command's options and loads and checks the scenario.
 
 use std::path::PathBuf;
 

@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use common::audit::AuditReport;
 use common::loss::LossSchedule;
 use common::losscert::{certify_losses, LossCertificate};
+use common::outcome::Verdict;
 use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
@@ -341,7 +342,7 @@ fn plan(
         .losses
         .as_ref()
         .is_some_and(|l| !l.survives_any_single_loss);
-    Ok(if c.verdict == "SAFE" && !loses {
+    Ok(if c.verdict == Verdict::Safe && !loses {
         Exit::Safe
     } else {
         Exit::Unsafe
@@ -391,7 +392,7 @@ fn print_loss_certificate(l: &LossCertificate) {
             "  {:<3} {:<10} {:<8} {:>8}  {:>8}  {:>8}  {:>14.4} m  {:>7.4} m",
             m.id,
             m.role,
-            m.verdict,
+            m.verdict.as_str(),
             m.retriangulated.len(),
             m.degraded.len(),
             m.affected,
@@ -423,9 +424,9 @@ fn print_loss_certificate(l: &LossCertificate) {
 /// Exit code of a finished run.
 pub fn exit_of(r: &AuditReport) -> Exit {
     match r.verdict {
-        "SAFE" => Exit::Safe,
-        "UNSAFE" => Exit::Unsafe,
-        _ => Exit::Fault,
+        Verdict::Safe => Exit::Safe,
+        Verdict::Unsafe => Exit::Unsafe,
+        Verdict::Fault => Exit::Fault,
     }
 }
 

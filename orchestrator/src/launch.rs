@@ -11,10 +11,12 @@ use common::engine::desired_positions;
 use common::formation::Role;
 use common::math::{vec3, Vec3};
 use common::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason};
+use common::outcome::FaultKind;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::simulate::id_order;
 use common::step::tick_time;
+use common::team_core::{first_grant, next_grant, FaultRank};
 use common::telemetry::Row;
 use common::transport::{
     describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName,
@@ -103,7 +105,13 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
                     let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
                     let mut audit = Auditor::new(s);
-                    audit.fault(fault("spawn-failed", Some(m.id), None, 0, what.clone()));
+                    audit.fault(fault(
+                        FaultKind::SpawnFailed,
+                        Some(m.id),
+                        None,
+                        0,
+                        what.clone(),
+                    ));
                     let _ = dir.write_audit(&audit.finish(false));
                     return Err(Failure::fault(what));
                 }
@@ -168,7 +176,7 @@ const FAULT_GRACE: Duration = Duration::from_millis(500);
 fn interrupted_at(tick: u64, when: &str) -> Stop {
     (
         fault(
-            "interrupted",
+            FaultKind::Interrupted,
             None,
             None,
             tick,
@@ -210,7 +218,7 @@ fn run_team(
             let waiting = ports.readiness().waiting_for();
             return Err((
                 fault(
-                    "join-timeout",
+                    FaultKind::JoinTimeout,
                     waiting.first().copied(),
                     None,
                     0,
@@ -242,7 +250,7 @@ fn run_team(
     // 3. Tick.
     let mut tel = dir.telemetry(o.every).map_err(|e| {
         (
-            fault("io", None, None, 0, e.to_string()),
+            fault(FaultKind::Io, None, None, 0, e.to_string()),
             StopReason::AgentFault,
         )
     })?;
@@ -259,11 +267,11 @@ fn run_team(
     let mut pending: BTreeMap<u64, (Vec<Option<StateMsg>>, usize)> = BTreeMap::new();
     let mut spare: Vec<Vec<Option<StateMsg>>> = Vec::new();
     let mut next_tick: u64 = 0; // the next tick to complete
-    let mut grant = (window - 1).min(last);
+    let mut grant = first_grant(window, last);
     let send = |ports: &mut OrchestratorPorts, g: u64| ports.publish_clock(ClockMsg::run(g, hash));
     send(ports, grant).map_err(|e| {
         (
-            fault("transport", None, None, 0, e.to_string()),
+            fault(FaultKind::Transport, None, None, 0, e.to_string()),
             StopReason::AgentFault,
         )
     })?;
@@ -281,7 +289,7 @@ fn run_team(
     // A fault reported at tick k: the reporter published tick k and failed computing k + 1, so
     // ticks 0..=k are complete as soon as every state is in (as in `simulate`). The team stops
     // then, or after the grace when tick k cannot complete (a non-finite state is never used).
-    let mut stopping: Option<(FaultRecord, Instant, bool, usize)> = None;
+    let mut stopping: Option<(FaultRecord, Instant, FaultRank)> = None;
     let mut stall = crate::stall::StallWatch::new(Instant::now());
     loop {
         if interrupted.load(Ordering::Relaxed) {
@@ -292,32 +300,30 @@ fn run_team(
         if stall.turn(Instant::now(), next_tick) {
             last_progress = Instant::now();
         }
-        // (fault, echo, member index) of the best fault report met in this drain.
-        let mut bad: Option<(FaultRecord, bool, usize)> = None;
+        // The best fault report met in this drain, and its rank.
+        let mut bad: Option<(FaultRecord, FaultRank)> = None;
         ports
             .receive_states(|msg| {
                 let Some(&k) = index.get(&msg.id) else { return };
                 if let AgentStatus::Fault { code, peer } = msg.status() {
-                    // The root cause wins over an echo (a member stopping because its neighbour
-                    // reported a fault); then the earliest (tick, member order), as the engine
-                    // stops at the first member that fails at the first failing tick.
-                    let echo = code == FaultCode::NeighborFault;
-                    let better = bad
-                        .as_ref()
-                        .is_none_or(|(f, e, m)| (echo, msg.tick, k) < (*e, f.tick, *m));
-                    if better {
+                    let rank = FaultRank {
+                        echo: code == FaultCode::NeighborFault,
+                        tick: msg.tick,
+                        member: k,
+                    };
+                    if rank.outranks(bad.as_ref().map(|(_, r)| r)) {
                         // The same kind as `simulate` records for a controller fault.
                         let kind = if code == FaultCode::Control {
-                            "control"
+                            FaultKind::Control
                         } else {
-                            "agent-fault"
+                            FaultKind::AgentFault
                         };
                         let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
                         let what = format!(
                             "agent {} reported {code:?} at tick {}{on}",
                             msg.id, msg.tick
                         );
-                        bad = Some((fault(kind, Some(msg.id), peer, msg.tick, what), echo, k));
+                        bad = Some((fault(kind, Some(msg.id), peer, msg.tick, what), rank));
                     }
                     return;
                 }
@@ -338,26 +344,26 @@ fn run_team(
             })
             .map_err(|e| {
                 (
-                    fault("transport", None, None, next_tick, e.to_string()),
+                    fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
                     StopReason::AgentFault,
                 )
             })?;
-        if let Some((f, echo, k)) = bad {
-            let better = stopping
-                .as_ref()
-                .is_none_or(|(g, _, e, m)| (echo, f.tick, k) < (*e, g.tick, *m));
-            if better {
-                let since = stopping
-                    .as_ref()
-                    .map_or_else(Instant::now, |(_, t, _, _)| *t);
-                stopping = Some((f, since, echo, k));
+        if let Some((f, rank)) = bad {
+            if rank.outranks(stopping.as_ref().map(|(_, _, r)| r)) {
+                let since = stopping.as_ref().map_or_else(Instant::now, |(_, t, _)| *t);
+                stopping = Some((f, since, rank));
             }
         }
         if let Some((id, tick, _)) = non_finite.filter(|(_, _, t)| t.elapsed() > FAULT_GRACE) {
             let what = format!("agent {id} published a non-finite state at tick {tick}");
-            let f = fault("non-finite-state", Some(id), None, tick, what);
+            let f = fault(FaultKind::NonFiniteState, Some(id), None, tick, what);
             let since = Instant::now().checked_sub(FAULT_GRACE);
-            stopping.get_or_insert((f, since.unwrap_or_else(Instant::now), false, usize::MAX));
+            let rank = FaultRank {
+                echo: false,
+                tick,
+                member: usize::MAX,
+            };
+            stopping.get_or_insert((f, since.unwrap_or_else(Instant::now), rank));
         }
         // Grant before auditing and writing: members go on while the orchestrator does its share.
         // Grant in steps of half a window (at least 1): every grant wakes members, so fewer,
@@ -366,13 +372,11 @@ fn run_team(
         while pending.get(&complete).is_some_and(|(_, c)| *c == n) {
             complete += 1;
         }
-        let want = (complete + window - 1).min(last);
-        let step = (window / 2).max(1);
-        if want > grant && (want >= grant + step || want == last) {
+        if let Some(want) = next_grant(complete, grant, window, last) {
             grant = want;
             send(ports, grant).map_err(|e| {
                 (
-                    fault("transport", None, None, next_tick, e.to_string()),
+                    fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
                     StopReason::AgentFault,
                 )
             })?;
@@ -409,7 +413,7 @@ fn run_team(
                 }
                 tel.write_tick(&rows).map_err(|e| {
                     (
-                        fault("io", None, None, tick, e.to_string()),
+                        fault(FaultKind::Io, None, None, tick, e.to_string()),
                         StopReason::AgentFault,
                     )
                 })?;
@@ -426,11 +430,11 @@ fn run_team(
                 return Ok((ticking, next_tick > last));
             }
         }
-        if let Some((f, since, echo, k)) = stopping.take() {
+        if let Some((f, since, rank)) = stopping.take() {
             if next_tick > f.tick || since.elapsed() >= FAULT_GRACE {
                 return Err((f, StopReason::AgentFault));
             }
-            stopping = Some((f, since, echo, k));
+            stopping = Some((f, since, rank));
         }
         if next_tick > last {
             progress.finish();
@@ -466,7 +470,7 @@ fn run_team(
                 .map(|(_, m)| m.id)
                 .collect();
             let f = fault(
-                "agent-silent",
+                FaultKind::AgentSilent,
                 missing.first().copied(),
                 None,
                 next_tick,

@@ -8,6 +8,7 @@
 use std::time::{Duration, Instant};
 
 use common::audit::FaultRecord;
+use common::outcome::FaultKind;
 
 /// A gap between two turns of the loop that counts as a stall of the orchestrator itself.
 pub const STALL_MIN: Duration = Duration::from_secs(2);
@@ -67,7 +68,7 @@ impl StallWatch {
     pub fn explain(&self, fault: FaultRecord, now: Instant) -> FaultRecord {
         match self.stall {
             Some(s) if now.saturating_duration_since(s.ended) <= BLAME_WINDOW => FaultRecord {
-                kind: "orchestrator-stalled".into(),
+                kind: FaultKind::OrchestratorStalled,
                 agent: None,
                 peer: None,
                 // As every fault record: the first tick the team did not complete.
@@ -92,7 +93,7 @@ mod tests {
 
     fn exited(tick: u64) -> FaultRecord {
         FaultRecord {
-            kind: "agent-exited".into(),
+            kind: FaultKind::AgentExited,
             agent: Some(1),
             peer: None,
             tick,
@@ -116,7 +117,7 @@ mod tests {
         let mut w = StallWatch::new(t0);
         assert!(w.turn(t0 + Duration::from_secs(20), 42));
         let f = w.explain(exited(43), t0 + Duration::from_secs(21));
-        assert_eq!(f.kind, "orchestrator-stalled");
+        assert_eq!(f.kind, FaultKind::OrchestratorStalled);
         assert_eq!((f.agent, f.tick), (None, 43));
         assert!(
             f.message.contains("did not run for 20.0 s at tick 42"),

@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use common::audit::FaultRecord;
 use common::formation::Role;
 use common::messages::{ClockMsg, StopReason};
+use common::outcome::FaultKind;
 use common::scenario::Scenario;
 use common::transport::{remove_dead_nodes, OrchestratorPorts, TeamName};
 
@@ -24,14 +25,14 @@ pub type Stop = (FaultRecord, StopReason);
 
 /// A fault record.
 pub fn fault(
-    kind: &str,
+    kind: FaultKind,
     agent: Option<u32>,
     peer: Option<u32>,
     tick: u64,
     message: String,
 ) -> FaultRecord {
     FaultRecord {
-        kind: kind.into(),
+        kind,
         agent,
         peer,
         tick,
@@ -88,7 +89,7 @@ pub fn check_children(children: &mut [Spawned], tick: u64) -> Result<(), Stop> {
             };
             return Err((
                 fault(
-                    "agent-exited",
+                    FaultKind::AgentExited,
                     Some(c.id),
                     None,
                     tick,
@@ -102,7 +103,8 @@ pub fn check_children(children: &mut [Spawned], tick: u64) -> Result<(), Stop> {
 }
 
 /// Stop message, then SIGTERM, then SIGKILL for a process that does not stop; then remove the
-/// dead nodes' resources. Bounded well under a second.
+/// dead nodes' resources. Bounded: about 3.6 s after a finished run (3 s to stop on its own),
+/// 0.9 s otherwise.
 pub fn stop_team(
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],

@@ -10,6 +10,7 @@ use serde::Serialize;
 use crate::formation::Role;
 use crate::frame::deformation_eigenvalues;
 use crate::math::{Real, Vec3};
+use crate::outcome::{FaultKind, Verdict};
 use crate::plan::Segment;
 use crate::repair::Retriangulation;
 use crate::safety::{self, Prism};
@@ -84,7 +85,7 @@ pub struct Violation {
 /// A runtime fault that ended a run early.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FaultRecord {
-    pub kind: String,
+    pub kind: FaultKind,
     pub agent: Option<u32>,
     pub peer: Option<u32>,
     pub tick: u64,
@@ -115,7 +116,7 @@ pub struct LossRecord {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct AuditReport {
     /// SAFE, UNSAFE (a violation), or FAULT (the run did not complete).
-    pub verdict: &'static str,
+    pub verdict: Verdict,
     pub scenario: String,
     pub agents: usize,
     /// Ticks audited (0..=last, or fewer after a fault).
@@ -192,7 +193,7 @@ impl Auditor {
                 ..Failing::default()
             },
             report: AuditReport {
-                verdict: "SAFE",
+                verdict: Verdict::Safe,
                 scenario: scenario.file.name.clone(),
                 agents: f.members.len(),
                 ticks: 0,
@@ -392,15 +393,15 @@ impl Auditor {
         let violated = self.violation_count() > 0;
         self.report.complete = complete && self.report.fault.is_none();
         self.report.verdict = if self.report.fault.is_some() {
-            "FAULT"
+            Verdict::Fault
         } else if self.report.stopped_on_violation && violated {
-            "UNSAFE"
+            Verdict::Unsafe
         } else if !self.report.complete {
-            "FAULT"
+            Verdict::Fault
         } else if violated {
-            "UNSAFE"
+            Verdict::Unsafe
         } else {
-            "SAFE"
+            Verdict::Safe
         };
         self.report
     }

@@ -23,6 +23,7 @@ pub mod geometry;
 pub mod graph;
 pub mod loss;
 pub mod losscert;
+pub mod outcome;
 pub mod plan;
 pub mod repair;
 pub mod rundir;

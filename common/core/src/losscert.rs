@@ -26,6 +26,7 @@ use crate::engine::{desired_positions, quad_engine, step_config, Engine};
 use crate::formation::{Formation, Role};
 use crate::graph::DEFAULT_WEIGHT_FLOOR;
 use crate::math::{Real, Vec3};
+use crate::outcome::Verdict;
 use crate::repair::{repair, Repair, Retriangulation};
 use crate::safety::Prism;
 use crate::scenario::Scenario;
@@ -36,8 +37,8 @@ use crate::step::{law_for, step, tick_time, Law, StepConfig};
 pub struct MemberLoss {
     pub id: u32,
     pub role: &'static str,
-    /// SAFE or UNSAFE.
-    pub verdict: &'static str,
+    /// Safe or Unsafe.
+    pub verdict: Verdict,
     pub reasons: Vec<String>,
     pub retriangulated: Vec<Retriangulation>,
     /// Followers left with no triangle, flying their own plan.
@@ -65,7 +66,7 @@ pub struct LossCertificate {
     /// Every member is lost right after publishing this tick (the nominal peak deviation).
     pub loss_last_tick: u64,
     pub loss_t_s: Real,
-    pub nominal_verdict: &'static str,
+    pub nominal_verdict: Verdict,
     pub nominal_max_follower_deviation_m: Real,
     pub nominal_min_separation_m: Real,
     pub delta_m: Real,
@@ -99,7 +100,11 @@ pub fn certify_losses(s: &Scenario, threads: usize) -> LossCertificate {
         .members
         .iter()
         .map(|m| m.id)
-        .filter(|id| !members.iter().any(|b| b.id == *id && b.verdict == "SAFE"))
+        .filter(|id| {
+            !members
+                .iter()
+                .any(|b| b.id == *id && b.verdict == Verdict::Safe)
+        })
         .collect();
     let survives = cannot_lose.is_empty();
     LossCertificate {
@@ -128,7 +133,7 @@ pub fn certify_losses(s: &Scenario, threads: usize) -> LossCertificate {
 #[derive(Debug, Clone, Copy)]
 struct Nominal {
     peak_tick: u64,
-    verdict: &'static str,
+    verdict: Verdict,
     max_follower_deviation_m: Real,
     min_separation_m: Real,
     delta_m: Real,
@@ -218,7 +223,7 @@ impl Branch {
         let out = MemberLoss {
             id,
             role: s.role_of(id).map_or("unknown", |r| r.as_str()),
-            verdict: "SAFE",
+            verdict: Verdict::Safe,
             reasons: Vec::new(),
             retriangulated: r.retriangulated.clone(),
             degraded: r.degraded.clone(),
@@ -317,7 +322,7 @@ impl Branch {
 
 /// Mark a branch UNSAFE, keeping the first few reasons.
 fn fail(out: &mut MemberLoss, reason: String) {
-    out.verdict = "UNSAFE";
+    out.verdict = Verdict::Unsafe;
     if out.reasons.len() < 4 {
         out.reasons.push(reason);
     }
@@ -401,14 +406,14 @@ fn prism_at(f: &Formation, ht: &[Vec3], half_height_m: Real) -> Prism {
 /// The branch's verdict: the nominal flight was safe, the branch's members stayed within
 /// tracking and containment, and the separation bound holds.
 fn verdict(mut out: MemberLoss, nominal: &Nominal, eps_m: Real) -> MemberLoss {
-    if nominal.verdict != "SAFE" {
-        out.verdict = "UNSAFE";
+    if nominal.verdict != Verdict::Safe {
+        out.verdict = Verdict::Unsafe;
         out.reasons
             .push(format!("the nominal flight is {}", nominal.verdict));
     }
     let bound = nominal.min_separation_m - 2.0 * out.max_shift_m;
     if bound < 2.0 * eps_m {
-        out.verdict = "UNSAFE";
+        out.verdict = Verdict::Unsafe;
         out.reasons.push(format!(
             "separation not certified: nominal {:.4} m - 2 x shift {:.4} m < 2 eps = {} m",
             nominal.min_separation_m,
@@ -515,7 +520,7 @@ mod tests {
         f.t_total_s = 2.0;
         let fast = Scenario::from_file(f, "paper40 at 2 s", Checks::Member).unwrap();
         let c = certify_losses(&fast, 2);
-        assert_ne!(c.nominal_verdict, "SAFE");
+        assert_ne!(c.nominal_verdict, Verdict::Safe);
         assert!(!c.survives_any_single_loss);
         assert_eq!(c.cannot_lose.len(), 40);
     }

@@ -8,6 +8,7 @@ use crate::engine::{desired_positions, max_follower_deviation, quad_engine, Agen
 use crate::loss::{LossSchedule, LossState, OnLoss};
 use crate::losscert::LossCertificate;
 use crate::math::{Real, Vec3};
+use crate::outcome::{FaultKind, Verdict};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
 use crate::step::tick_time;
@@ -108,7 +109,7 @@ pub fn simulate(
 
 fn control_fault(f: &AgentFault) -> FaultRecord {
     FaultRecord {
-        kind: "control".into(),
+        kind: FaultKind::Control,
         agent: Some(f.id),
         peer: match f.fault {
             crate::step::StepFault::NeighborNonFinite { peer } => Some(peer),
@@ -122,7 +123,7 @@ fn control_fault(f: &AgentFault) -> FaultRecord {
 /// `--on-loss stop`: a lost member is a fault, as when losses were not survivable.
 fn lost_fault(tick: u64, ids: &[u32]) -> FaultRecord {
     FaultRecord {
-        kind: "lost".into(),
+        kind: FaultKind::Lost,
         agent: ids.first().copied(),
         peer: None,
         tick,
@@ -144,7 +145,7 @@ pub fn id_order(s: &Scenario) -> Vec<usize> {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Certificate {
     /// SAFE or UNSAFE.
-    pub verdict: &'static str,
+    pub verdict: Verdict,
     pub reasons: Vec<String>,
     pub scenario: String,
     pub agents: usize,
@@ -245,7 +246,11 @@ pub fn certify(s: &Scenario) -> Certificate {
         ));
     }
     Certificate {
-        verdict: if reasons.is_empty() { "SAFE" } else { "UNSAFE" },
+        verdict: if reasons.is_empty() {
+            Verdict::Safe
+        } else {
+            Verdict::Unsafe
+        },
         reasons,
         scenario: s.file.name.clone(),
         agents: s.formation.members.len(),

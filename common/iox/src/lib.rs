@@ -16,7 +16,7 @@
 //! Wake-up rule: publish first, notify after `send` returned, so a woken reader always finds the
 //! sample. Events merge repeated notifications, so a reader must drain everything it can after
 //! each wake-up. Waiting is a blocking `Listener::timed_wait` (not a WaitSet: iceoryx2 0.10's
-//! WaitSet can lose a wake-up, see `/work/shared/notes/iceoryx2.md`).
+//! WaitSet can lose a wake-up under load).
 //!
 //! Overflow: state and clock subscribers use iceoryx2's *safe overflow*: when a subscriber's
 //! buffer (`window + 2` states, 2 grants) is full, the publisher replaces the oldest sample. A

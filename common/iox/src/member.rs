@@ -410,3 +410,35 @@ fn not_a_neighbor(
         port,
     }
 }
+
+impl cdm_runtime::seams::MemberTransport for MemberPorts {
+    type Error = TransportError;
+
+    fn publish(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
+        MemberPorts::publish(self, msg)
+    }
+
+    fn publish_quietly(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
+        MemberPorts::publish_quietly(self, msg)
+    }
+
+    fn notify_readers(&mut self) -> Result<(), TransportError> {
+        MemberPorts::notify_readers(self)
+    }
+
+    fn receive_neighbors(&mut self, f: impl FnMut(StateMsg)) -> Result<usize, TransportError> {
+        MemberPorts::receive_neighbors(self, f)
+    }
+
+    fn latest_clock(&mut self) -> Result<Option<ClockMsg>, TransportError> {
+        MemberPorts::latest_clock(self)
+    }
+
+    fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
+        MemberPorts::wait(self, timeout)
+    }
+
+    fn orchestrator_alive(&self) -> bool {
+        MemberPorts::orchestrator_alive(self)
+    }
+}

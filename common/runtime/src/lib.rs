@@ -1,7 +1,13 @@
-//! The team protocol's parts that need no transport: the `#[repr(C)]` wire messages (plain
-//! types; the iceoryx2 backend gives them their shared-memory trait), the signal flags and the
-//! test-only fault injection. No iceoryx2 here: the compiler holds that rule.
+//! The team protocol without a transport: the `#[repr(C)]` wire messages (plain types; the
+//! iceoryx2 backend gives them their shared-memory trait), the seams (transport, clocks,
+//! vehicle), the member's protocol core (no I/O) and the generic loop around it, the signal
+//! flags and the test-only fault injection. No iceoryx2 here: the compiler holds that rule.
 
 pub mod fault_inject;
+mod inbox;
+pub mod member_core;
+pub mod member_loop;
 pub mod messages;
+pub mod seams;
 pub mod signals;
+pub mod team_core;

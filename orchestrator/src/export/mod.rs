@@ -17,6 +17,7 @@ use common::export::{
 };
 use common::formation::Role;
 use common::math::{Real, Vec3};
+use common::outcome::Verdict;
 use common::rundir::write_atomic;
 use common::scenario::{Checks, Scenario};
 use common::simulate::{certify, id_order, Certificate};
@@ -244,7 +245,7 @@ fn report(sc: &Scaled, record: &Record<'_>, quiet: bool) {
 
 /// An UNSAFE certificate refuses the export unless `force`.
 fn refused(cert: &Certificate, force: bool, out: &Path) -> bool {
-    if cert.verdict == "SAFE" {
+    if cert.verdict == Verdict::Safe {
         return false;
     }
     if force {
@@ -293,7 +294,7 @@ fn done(out: &Path, cert: &Certificate, quiet: bool) -> Result<Exit, Failure> {
     } else {
         println!("  written: {}", out.display());
     }
-    Ok(if cert.verdict == "SAFE" {
+    Ok(if cert.verdict == Verdict::Safe {
         Exit::Safe
     } else {
         Exit::Unsafe

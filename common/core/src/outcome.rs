@@ -1,0 +1,158 @@
+//! Typed outcomes of a run: the verdict and the kind of a fault that ended it. Both are compared
+//! as enums everywhere and become text only at the edge (audit.json, the certificate, stdout),
+//! with the very strings those files had when they were `&str`.
+
+use std::fmt;
+
+use serde::Serialize;
+
+/// The verdict of a run (audit.json) or of a pre-flight certificate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub enum Verdict {
+    /// Every audited condition held over a complete run (or the certificate found no reason).
+    #[serde(rename = "SAFE")]
+    Safe,
+    /// A safety condition failed (a violation, or a certificate reason).
+    #[serde(rename = "UNSAFE")]
+    Unsafe,
+    /// The run did not complete: a runtime fault ended it.
+    #[serde(rename = "FAULT")]
+    Fault,
+}
+
+impl Verdict {
+    /// The text audit.json and stdout carry.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Verdict::Safe => "SAFE",
+            Verdict::Unsafe => "UNSAFE",
+            Verdict::Fault => "FAULT",
+        }
+    }
+}
+
+impl fmt::Display for Verdict {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// What kind of runtime fault ended a run (`fault.kind` in audit.json).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultKind {
+    /// The controller refused to fly on, or a neighbour's state was non-finite (eq. 46).
+    Control,
+    /// A member reported a fault of its own (its wire code is in the message).
+    AgentFault,
+    /// A member published a non-finite state and no reader reported it.
+    NonFiniteState,
+    /// A member sent nothing for the next tick before the deadline.
+    AgentSilent,
+    /// A member was lost (`--lose`) and the policy is `--on-loss stop`.
+    Lost,
+    /// A spawned member process exited before the end.
+    AgentExited,
+    /// A member process could not be started.
+    SpawnFailed,
+    /// Members did not join the team before the deadline.
+    JoinTimeout,
+    /// The shared-memory transport failed.
+    Transport,
+    /// Writing the run directory failed.
+    Io,
+    /// SIGINT, SIGTERM, SIGHUP or SIGQUIT.
+    Interrupted,
+    /// The orchestrator itself did not run for a while (stopped or starved): its clock stalled
+    /// and the members stopped by themselves.
+    OrchestratorStalled,
+}
+
+impl FaultKind {
+    /// The text audit.json carries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FaultKind::Control => "control",
+            FaultKind::AgentFault => "agent-fault",
+            FaultKind::NonFiniteState => "non-finite-state",
+            FaultKind::AgentSilent => "agent-silent",
+            FaultKind::Lost => "lost",
+            FaultKind::AgentExited => "agent-exited",
+            FaultKind::SpawnFailed => "spawn-failed",
+            FaultKind::JoinTimeout => "join-timeout",
+            FaultKind::Transport => "transport",
+            FaultKind::Io => "io",
+            FaultKind::Interrupted => "interrupted",
+            FaultKind::OrchestratorStalled => "orchestrator-stalled",
+        }
+    }
+}
+
+impl fmt::Display for FaultKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const KINDS: [FaultKind; 12] = [
+        FaultKind::Control,
+        FaultKind::AgentFault,
+        FaultKind::NonFiniteState,
+        FaultKind::AgentSilent,
+        FaultKind::AgentExited,
+        FaultKind::SpawnFailed,
+        FaultKind::JoinTimeout,
+        FaultKind::Transport,
+        FaultKind::Io,
+        FaultKind::Interrupted,
+        FaultKind::OrchestratorStalled,
+        FaultKind::Lost,
+    ];
+
+    #[test]
+    fn serialised_text_is_the_display_text() {
+        for k in KINDS {
+            assert_eq!(
+                serde_json::to_string(&k).unwrap(),
+                format!("\"{}\"", k.as_str())
+            );
+        }
+        for v in [Verdict::Safe, Verdict::Unsafe, Verdict::Fault] {
+            assert_eq!(
+                serde_json::to_string(&v).unwrap(),
+                format!("\"{}\"", v.as_str())
+            );
+        }
+    }
+
+    #[test]
+    fn audit_json_strings_are_unchanged() {
+        // The strings audit.json had before the enums (readers and tests match on them).
+        let text: Vec<&str> = KINDS.iter().map(|k| k.as_str()).collect();
+        assert_eq!(
+            text,
+            [
+                "control",
+                "agent-fault",
+                "non-finite-state",
+                "agent-silent",
+                "agent-exited",
+                "spawn-failed",
+                "join-timeout",
+                "transport",
+                "io",
+                "interrupted",
+                "orchestrator-stalled",
+                "lost"
+            ]
+        );
+        assert_eq!(
+            serde_json::to_string(&Verdict::Unsafe).unwrap(),
+            "\"UNSAFE\""
+        );
+    }
+}

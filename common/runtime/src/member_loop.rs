@@ -1,0 +1,112 @@
+//! The loop around a [`MemberCore`]: it only moves messages between the core and a transport,
+//! reads the clock, and sleeps. Generic over the transport, the vehicle and both clocks, so the
+//! hot path has no dynamic dispatch.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use crate::fault_inject::Injection;
+use crate::member_core::{Action, Finished, MemberCore, MemberFault, ALIVE_CHECK};
+use crate::messages::ClockCommand;
+use crate::seams::{Clock, MemberTransport, TickClock, Vehicle};
+
+/// Why the loop stopped without the orchestrator's stop.
+#[derive(Debug)]
+pub enum LoopError<E> {
+    /// The transport failed.
+    Transport(E),
+    /// The protocol found a fault (already reported to the team when it has a report).
+    Fault(MemberFault),
+    /// SIGINT or SIGTERM at this tick.
+    Interrupted { tick: u64 },
+}
+
+/// Flies `core` over `transport` until the orchestrator stops the team, a fault, or a signal.
+/// `inject` (tests only) alters a state just before it is published.
+pub fn fly<T, V, C, K>(
+    core: &mut MemberCore<V, C>,
+    transport: &mut T,
+    clock: &K,
+    interrupted: &AtomicBool,
+    inject: Option<&Injection>,
+) -> Result<Finished, LoopError<T::Error>>
+where
+    T: MemberTransport,
+    V: Vehicle,
+    C: TickClock,
+    K: Clock,
+{
+    loop {
+        if interrupted.load(Ordering::Relaxed) {
+            return Err(LoopError::Interrupted { tick: core.tick() });
+        }
+        if let Some(c) = transport.latest_clock().map_err(LoopError::Transport)? {
+            if let Some(done) = core.on_clock(&c).map_err(LoopError::Fault)? {
+                return Ok(done);
+            }
+        }
+        transport
+            .receive_neighbors(|m| core.on_neighbor(&m))
+            .map_err(LoopError::Transport)?;
+        loop {
+            match core.poll(clock.now()) {
+                Action::Publish(mut msg) => {
+                    if let Some(i) = inject {
+                        i.apply(msg.tick, &mut msg);
+                    }
+                    transport
+                        .publish_quietly(msg)
+                        .map_err(LoopError::Transport)?;
+                }
+                Action::CheckOrchestrator => {
+                    core.on_orchestrator_alive(transport.orchestrator_alive());
+                }
+                Action::NotifyReaders => {
+                    transport.notify_readers().map_err(LoopError::Transport)?;
+                    break;
+                }
+                Action::Poll => break,
+                Action::Wait(d) => {
+                    transport.wait(d).map_err(LoopError::Transport)?;
+                    break;
+                }
+                Action::Fail { report, fault } => {
+                    if let Some(r) = report {
+                        let _ = transport.publish(r);
+                        linger(transport, clock, interrupted);
+                    }
+                    return Err(LoopError::Fault(fault));
+                }
+            }
+        }
+    }
+}
+
+/// How long a member that reported a fault keeps its ports open for the orchestrator's stop.
+pub const LINGER: Duration = Duration::from_secs(5);
+
+/// After a fault report: keep the process (and so its published states) alive until the
+/// orchestrator stops the team, it is gone, or [`LINGER`] passes. iceoryx2 drops the samples a
+/// subscriber has not yet taken when their publisher's process exits, so a member that ran ahead
+/// (a large window) and exited at once could take its fault report, and the states before it,
+/// with it; the orchestrator would then see only an exited process.
+fn linger<T: MemberTransport, K: Clock>(transport: &mut T, clock: &K, interrupted: &AtomicBool) {
+    let start = clock.now();
+    let mut last_alive_check = start;
+    while clock.now().saturating_sub(start) < LINGER && !interrupted.load(Ordering::Relaxed) {
+        match transport.latest_clock() {
+            Ok(Some(c)) if matches!(c.command(), ClockCommand::Stop(_)) => return,
+            Ok(_) => {}
+            Err(_) => return,
+        }
+        if clock.now().saturating_sub(last_alive_check) >= ALIVE_CHECK {
+            last_alive_check = clock.now();
+            if !transport.orchestrator_alive() {
+                return;
+            }
+        }
+        if transport.wait(Duration::from_millis(100)).is_err() {
+            return;
+        }
+    }
+}
