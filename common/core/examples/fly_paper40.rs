@@ -21,6 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         every: 1,
         stop_on_violation: false,
         max_ticks: None,
+        ..SimulateOptions::default()
     };
     let report = simulate(&s, &dir, opts, |_, _| {})?;
     println!(
