@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
+use common::loss::{OnLoss, ScriptedLoss};
 use common::telemetry::TelemetryFormat;
 
 /// Safe continuum deformation of quadcopter teams: plan, simulate and launch a team.
@@ -47,6 +48,11 @@ pub enum Command {
         /// Where the sweep's figure and data go.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
+        /// Also certify the loss of every single member: fly the plan with each one lost at the
+        /// nominal peak deviation (graph repaired) and list the members the team cannot lose
+        /// (exit 1 when there is one).
+        #[arg(long)]
+        losses: bool,
     },
     /// Fly the team with the deterministic in-process engine into a run directory. Exit 0 safe
     /// and complete, 1 violation, 2 bad input, 3 runtime fault (a control fault, a full disk).
@@ -257,6 +263,14 @@ pub struct RunOptions {
     /// Telemetry file format: telemetry.csv or telemetry.parquet (same columns and values).
     #[arg(long, value_name = "FORMAT", default_value = "csv", value_parser = telemetry_format())]
     pub telemetry: TelemetryFormat,
+    /// Lose member ID once it has published its state of time SECONDS (repeatable). With
+    /// `--on-loss repair` its readers switch to new triangles and the team flies on.
+    #[arg(long, value_name = "ID@SECONDS")]
+    pub lose: Vec<ScriptedLoss>,
+    /// What losing a member does: repair the graph and fly on, or stop the run as a fault
+    /// (exit 3).
+    #[arg(long, value_enum, default_value_t = OnLossArg::Repair)]
+    pub on_loss: OnLossArg,
 }
 
 /// `--telemetry csv|parquet` (the format type lives in cdm-core, which has no clap).
@@ -266,4 +280,20 @@ fn telemetry_format() -> impl clap::builder::TypedValueParser<Value = TelemetryF
         "parquet" => TelemetryFormat::Parquet,
         _ => TelemetryFormat::Csv,
     })
+}
+
+/// `--on-loss`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnLossArg {
+    Repair,
+    Stop,
+}
+
+impl From<OnLossArg> for OnLoss {
+    fn from(a: OnLossArg) -> Self {
+        match a {
+            OnLossArg::Repair => OnLoss::Repair,
+            OnLossArg::Stop => OnLoss::Stop,
+        }
+    }
 }

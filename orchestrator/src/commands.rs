@@ -4,6 +4,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use common::audit::AuditReport;
+use common::loss::LossSchedule;
+use common::losscert::{certify_losses, LossCertificate};
 use common::outcome::Verdict;
 use common::rundir::RunDir;
 use common::scenario::{Checks, Scenario};
@@ -26,12 +28,13 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             json,
             sweep,
             out,
+            losses,
         } => {
             let sweep = match (sweep, out) {
                 (Some(text), Some(dir)) => Some((parse_sweep(&text)?, dir)),
                 _ => None,
             };
-            plan(&source, json.as_deref(), sweep, cli.quiet)
+            plan(&source, json.as_deref(), sweep, losses, cli.quiet)
         }
         Command::Simulate { source, out, run } => {
             crate::telemetry::check_available(run.telemetry)?;
@@ -44,6 +47,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 stop_on_violation: run.stop_on_violation,
                 max_ticks: run.max_ticks,
                 telemetry: run.telemetry,
+                losses: LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?,
+                on_loss: run.on_loss.into(),
             };
             let mut tel = crate::telemetry::open(&dir, run.telemetry, out.every)
                 .map_err(Failure::bad_input)?;
@@ -98,6 +103,13 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             crate::telemetry::check_available(run.telemetry)?;
             let s = load(&source)?;
             check_follow(&s, run.follow)?;
+            if !run.lose.is_empty() {
+                // Killing a member process and re-opening its readers' services needs the
+                // sans-I/O member loop (issue 16, process side); until then, simulate it.
+                return Err(Failure::bad_input(
+                    "--lose is not supported by launch yet: use simulate --lose",
+                ));
+            }
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
             let team = TeamName::new(&team_name)
                 .map_err(|e| Failure::bad_input(format!("--team: {e}")))?;
@@ -349,6 +361,7 @@ fn plan(
     source: &Source,
     json: Option<&Path>,
     sweep: Option<(Vec<f64>, PathBuf)>,
+    losses: bool,
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let s = load(source)?;
@@ -361,8 +374,23 @@ fn plan(
         "certifying: E_max at several travel times for T_threshold",
         quiet,
     );
-    let c = certify(&s);
+    let mut c = certify(&s);
     spinner.finish();
+    if losses {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let spinner = Spinner::new(
+            &format!("loss certificate: losing each of {} members", c.agents),
+            quiet,
+        );
+        let started = Instant::now();
+        c.losses = Some(certify_losses(&s, threads));
+        spinner.finish();
+        tracing::info!(
+            seconds = started.elapsed().as_secs_f64(),
+            threads,
+            "loss certificate"
+        );
+    }
     if let Some((times, dir)) = sweep {
         std::fs::create_dir_all(&dir)
             .map_err(|e| Failure::bad_input(format!("--out {}: {e}", dir.display())))?;
@@ -391,6 +419,9 @@ fn plan(
     }
     if !quiet {
         print_certificate(&c);
+        if let Some(l) = &c.losses {
+            print_loss_certificate(l);
+        }
     } else {
         out!("{}", c.verdict);
     }
@@ -398,7 +429,11 @@ fn plan(
         let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
         common::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
     }
-    Ok(if c.verdict == Verdict::Safe {
+    let loses = c
+        .losses
+        .as_ref()
+        .is_some_and(|l| !l.survives_any_single_loss);
+    Ok(if c.verdict == Verdict::Safe && !loses {
         Exit::Safe
     } else {
         Exit::Unsafe
@@ -439,6 +474,46 @@ pub fn print_certificate(c: &Certificate) {
     for r in &c.reasons {
         out!("  - {r}");
     }
+}
+
+fn print_loss_certificate(l: &LossCertificate) {
+    println!(
+        "loss certificate: each member lost after tick {} (t = {:.2} s, the nominal peak follower deviation {:.4} m)",
+        l.loss_last_tick, l.loss_t_s, l.nominal_max_follower_deviation_m
+    );
+    println!("  id  role       verdict  switched  degraded  affected  max repaired dev  max shift");
+    for m in &l.members {
+        println!(
+            "  {:<3} {:<10} {:<8} {:>8}  {:>8}  {:>8}  {:>14.4} m  {:>7.4} m",
+            m.id,
+            m.role,
+            m.verdict.as_str(),
+            m.retriangulated.len(),
+            m.degraded.len(),
+            m.affected,
+            m.max_repaired_deviation_m,
+            m.max_shift_m
+        );
+        for r in &m.reasons {
+            println!("      - {r}");
+        }
+    }
+    let worst = l.members.iter().max_by(|a, b| {
+        a.max_repaired_deviation_m
+            .total_cmp(&b.max_repaired_deviation_m)
+    });
+    if let Some(w) = worst {
+        println!(
+            "  worst repair transient: losing {} ({}), follower {} deviates {:.4} m at t = {:.2} s (delta {:.4} m)",
+            w.id,
+            w.role,
+            w.worst_id.map_or("-".into(), |id| id.to_string()),
+            w.max_repaired_deviation_m, w.worst_t_s, l.delta_m
+        );
+    }
+    let degraded: usize = l.members.iter().filter(|m| !m.degraded.is_empty()).count();
+    println!("  losses that leave a follower flying its plan: {degraded}");
+    println!("loss verdict: {}", l.verdict);
 }
 
 /// Exit code of a finished run.
@@ -492,6 +567,20 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
     }
     if let Some(f) = &r.fault {
         out!("  fault: {}", f.message);
+    }
+    if !r.losses.is_empty() {
+        let ids: Vec<String> = r
+            .losses
+            .iter()
+            .map(|l| format!("{} from tick {}", l.id, l.tick))
+            .collect();
+        let switched: usize = r.losses.iter().map(|l| l.retriangulated.len()).sum();
+        let degraded: usize = r.losses.iter().map(|l| l.degraded.len()).sum();
+        out!(
+            "  lost {} member(s) ({}): {switched} follower(s) re-triangulated, {degraded} degraded to the plan",
+            r.losses.len(),
+            ids.join(", ")
+        );
     }
     out!("  run directory: {}", dir.display());
 }

@@ -21,7 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         every: 1,
         stop_on_violation: false,
         max_ticks: None,
-        telemetry: Default::default(),
+        ..SimulateOptions::default()
     };
     let mut tel = dir.telemetry(opts.every)?;
     let report = simulate(&s, &dir, opts, &mut tel, |_, _| {})?;

@@ -12,6 +12,7 @@ use crate::frame::deformation_eigenvalues;
 use crate::math::{Real, Vec3};
 use crate::outcome::{FaultKind, Verdict};
 use crate::plan::Segment;
+use crate::repair::Retriangulation;
 use crate::safety::{self, Prism};
 use crate::scenario::Scenario;
 
@@ -91,6 +92,26 @@ pub struct FaultRecord {
     pub message: String,
 }
 
+/// A member lost in flight and what the repair did (`repair`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LossRecord {
+    pub id: u32,
+    /// `primary`, `secondary` or `follower`.
+    pub role: &'static str,
+    /// Why it was lost: `scripted` (`--lose`).
+    pub cause: &'static str,
+    /// The tick of its last published state.
+    pub last_tick: u64,
+    /// The repair applies, and its body is out of the audit (separation, tracking,
+    /// containment), from this tick: last_tick + 1.
+    pub tick: u64,
+    pub t_s: Real,
+    /// Followers that switched triangles, with old and new in-neighbours.
+    pub retriangulated: Vec<Retriangulation>,
+    /// Followers left with no valid triangle: they fly their own plan from this tick.
+    pub degraded: Vec<u32>,
+}
+
 /// audit.json.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct AuditReport {
@@ -122,6 +143,10 @@ pub struct AuditReport {
     /// The run was ended at its first violation (`--stop-on-violation`).
     pub stopped_on_violation: bool,
     pub fault: Option<FaultRecord>,
+    /// Members lost in flight, in order (absent when none: runs without a loss keep the
+    /// audit.json they always had).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub losses: Vec<LossRecord>,
 }
 
 /// Which conditions are failing right now: a violation is recorded when one starts.
@@ -142,6 +167,8 @@ pub struct Auditor {
     ids: Vec<u32>,
     followers: Vec<usize>,
     polygon: Vec<usize>,
+    /// Member order: false from the tick a member's loss applies (its body leaves the audit).
+    alive: Vec<bool>,
     failing: Failing,
     report: AuditReport,
 }
@@ -159,6 +186,7 @@ impl Auditor {
                 .filter(|&k| f.members[k].role == Role::Follower)
                 .collect(),
             polygon: f.polygon.clone(),
+            alive: vec![true; f.members.len()],
             failing: Failing {
                 tracking: vec![false; f.members.len()],
                 containment: vec![false; f.members.len()],
@@ -183,6 +211,7 @@ impl Auditor {
                 violations_dropped: 0,
                 stopped_on_violation: false,
                 fault: None,
+                losses: Vec::new(),
             },
         }
     }
@@ -206,6 +235,17 @@ impl Auditor {
     /// UNSAFE, not complete, and not a fault.
     pub fn stop_on_violation(&mut self) {
         self.report.stopped_on_violation = true;
+    }
+
+    /// A member is lost: from `loss.tick` on its body is out of the audit.
+    pub fn lose(&mut self, loss: LossRecord) {
+        if let Some(k) = self.ids.iter().position(|&id| id == loss.id) {
+            self.alive[k] = false;
+            self.failing.tracking[k] = false;
+            self.failing.containment[k] = false;
+        }
+        tracing::warn!(id = loss.id, tick = loss.tick, retriangulated = loss.retriangulated.len(), degraded = ?loss.degraded, "member lost, graph repaired");
+        self.report.losses.push(loss);
     }
 
     /// Record a violation that starts at this tick (allocates only then).
@@ -240,6 +280,9 @@ impl Auditor {
         self.report.ticks = self.report.ticks.max(tick + 1);
         // Tracking (eq. 34), 2-norm and inf-norm (ERRATA 11).
         for (k, (p, h)) in pos.iter().zip(ht).enumerate() {
+            if !self.alive[k] {
+                continue;
+            }
             let e = p - h;
             let d2 = e.norm();
             let r = &mut self.report;
@@ -252,23 +295,13 @@ impl Auditor {
             self.failing.tracking[k] = bad;
         }
         for &k in &self.followers {
+            if !self.alive[k] {
+                continue;
+            }
             let d2 = (pos[k] - ht[k]).norm();
             self.report.max_follower_deviation_m = self.report.max_follower_deviation_m.max(d2);
         }
-        // Collisions: every pair closer than 2 eps.
-        let (sep, _, _) = safety::min_separation(pos);
-        self.report.min_separation_m = self.report.min_separation_m.min(sep);
-        let mut close: BTreeMap<(u32, u32), Real> = BTreeMap::new();
-        for (i, j, d) in close_pairs(pos, 2.0 * n.eps_m) {
-            let (a, b) = (self.ids[i], self.ids[j]);
-            close.insert((a.min(b), a.max(b)), d);
-        }
-        for (&(a, b), &d) in &close {
-            if !self.failing.collisions.contains(&(a, b)) {
-                self.record("collision", &[a, b], at, d, 2.0 * n.eps_m);
-            }
-        }
-        self.failing.collisions = close.into_keys().collect();
+        self.observe_collisions(at, pos);
         // Containment (Theorem 3): the prism over the leaders' desired polygon.
         let verts: Vec<Vec3> = self.polygon.iter().map(|&k| ht[k]).collect();
         if verts.len() >= 3 {
@@ -278,6 +311,9 @@ impl Auditor {
             let prism = Prism::new(verts, normal, n.delta_m + n.eps_m);
             for fi in 0..self.followers.len() {
                 let k = self.followers[fi];
+                if !self.alive[k] {
+                    continue;
+                }
                 let side = prism.side_distance(&pos[k]);
                 let height = prism.height(&pos[k]).abs();
                 self.report.min_boundary_distance_m = self.report.min_boundary_distance_m.min(side);
@@ -311,6 +347,38 @@ impl Auditor {
             self.record("deformation", &primaries, at, l1, n.lambda_cd_min);
         }
         self.failing.deformation = bad;
+    }
+
+    /// Collisions (every pair of living bodies closer than 2 eps) and the smallest separation.
+    fn observe_collisions(&mut self, at: (u64, Real), pos: &[Vec3]) {
+        let n = self.numbers;
+        let (living, idx): (Vec<Vec3>, Vec<usize>) = if self.report.losses.is_empty() {
+            (Vec::new(), Vec::new())
+        } else {
+            (0..pos.len())
+                .filter(|&k| self.alive[k])
+                .map(|k| (pos[k], k))
+                .unzip()
+        };
+        let bodies = if self.report.losses.is_empty() {
+            pos
+        } else {
+            &living
+        };
+        let id_of = |i: usize| self.ids[if idx.is_empty() { i } else { idx[i] }];
+        let (sep, _, _) = safety::min_separation(bodies);
+        self.report.min_separation_m = self.report.min_separation_m.min(sep);
+        let mut close: BTreeMap<(u32, u32), Real> = BTreeMap::new();
+        for (i, j, d) in close_pairs(bodies, 2.0 * n.eps_m) {
+            let (a, b) = (id_of(i), id_of(j));
+            close.insert((a.min(b), a.max(b)), d);
+        }
+        for (&(a, b), &d) in &close {
+            if !self.failing.collisions.contains(&(a, b)) {
+                self.record("collision", &[a, b], at, d, 2.0 * n.eps_m);
+            }
+        }
+        self.failing.collisions = close.into_keys().collect();
     }
 
     /// Record a runtime fault (the run did not complete).

@@ -6,6 +6,7 @@ use crate::dynamics::{Chain, Flat, Plant, QuadState};
 use crate::formation::Role;
 use crate::math::{Real, Vec3};
 use crate::plan::Segment;
+use crate::repair::Repair;
 use crate::scenario::Scenario;
 use crate::step::{law_for, step, tick_time, Law, NeighborModel, StepConfig, StepFault};
 
@@ -43,7 +44,8 @@ pub fn desired_positions(s: &Scenario, t: Real, out: &mut Vec<Vec3>) {
     }
 }
 
-/// The whole team in one process.
+/// The whole team in one process (cloned to fly variants of one flight from a shared prefix).
+#[derive(Clone)]
 pub struct Engine<P: Plant> {
     cfg: StepConfig,
     scenario: Scenario,
@@ -52,6 +54,8 @@ pub struct Engine<P: Plant> {
     neighbor_ids: Vec<[u32; 3]>,
     states: Vec<P>,
     flats: Vec<Flat>,
+    /// Member order: false once a member is lost (it no longer steps).
+    alive: Vec<bool>,
     tick: u64,
 }
 
@@ -78,8 +82,31 @@ impl<P: Plant> Engine<P> {
             neighbor_ids,
             states,
             flats,
+            alive: vec![true; f.members.len()],
             tick: 0,
         }
+    }
+
+    /// From the next `advance` on, fly the survivors of `repair`: lost members stop stepping
+    /// (their state is frozen and must not be read), every survivor takes the law of its
+    /// repaired link (a degraded follower tracks its own r_HT, like a leader).
+    pub fn apply_repair(&mut self, repair: &Repair) {
+        let f = &repair.formation;
+        for (k, m) in f.members.iter().enumerate() {
+            if repair.lost.contains(&m.id) {
+                self.alive[k] = false;
+                continue;
+            }
+            let (law, ids) = law_for(m);
+            self.laws[k] = law;
+            self.neighbor_idx[k] = ids.map(|id| f.index_of(id).unwrap_or(k));
+            self.neighbor_ids[k] = ids;
+        }
+    }
+
+    /// Whether each member (member order) still flies.
+    pub fn alive(&self) -> &[bool] {
+        &self.alive
     }
 
     /// The current tick.
@@ -103,6 +130,9 @@ impl<P: Plant> Engine<P> {
             *f = p.flat();
         }
         for k in 0..self.states.len() {
+            if !self.alive[k] {
+                continue;
+            }
             let nb = self.neighbor_idx[k].map(|j| self.flats[j]);
             let next = step(
                 &self.cfg,

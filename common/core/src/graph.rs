@@ -47,6 +47,7 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
         .filter(|m| m.role.is_leader())
         .map(|m| (m.id, m.planar))
         .collect();
+    let leader_ids: Vec<u32> = leaders.iter().map(|(l, _)| *l).collect();
     let mut placed = leaders.clone();
     for (id, p) in farthest_point_order(formation, &leaders) {
         if formation.member(id).is_some_and(|m| m.link.is_some()) {
@@ -54,70 +55,74 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
             placed.push((id, p));
             continue;
         }
-        let near = nearest(&placed, &p);
-        let mut best: Option<([u32; 3], Real)> = None;
-        let mut best_any = Real::NEG_INFINITY;
-        // The k nearest agents placed before this follower; at last also every leader: the
-        // outermost followers along a straight edge of the polygon have nothing but the edge's
-        // ends (leaders) beyond them, which is why leaders have the most readers (N = 1000: 36).
-        let passes = CANDIDATES
-            .iter()
-            .map(|&k| (k, false))
-            .chain([(CANDIDATES[1], true)]);
-        for (k, with_leaders) in passes {
-            let cand: Vec<&(Real, u32, Vec2)> = near
-                .iter()
-                .enumerate()
-                .filter(|(rank, (_, j, _))| {
-                    *rank < k || (with_leaders && leaders.iter().any(|(l, _)| l == j))
-                })
-                .map(|(_, c)| c)
-                .collect();
-            let kc = cand.len();
-            best = None;
-            for a in 0..kc {
-                for b in a + 1..kc {
-                    for c in b + 1..kc {
-                        let tri = [cand[a].2, cand[b].2, cand[c].2];
-                        let Some(w) = triangle_weights(&p, &tri) else {
-                            continue;
-                        };
-                        let min_w = w[0].min(w[1]).min(w[2]);
-                        best_any = best_any.max(min_w);
-                        if min_w >= floor && best.is_none_or(|(_, m)| min_w > m) {
-                            let mut ids = [cand[a].1, cand[b].1, cand[c].1];
-                            ids.sort_unstable();
-                            best = Some((ids, min_w));
-                        }
-                    }
-                }
-            }
-            if best.is_some() {
-                break;
-            }
-        }
-        let Some((ids, _)) = best else {
-            return Err(SynthesisError {
-                id,
-                floor,
-                best: best_any,
-            });
-        };
+        let ids = best_triangle(&p, &nearest(&placed, &p), &leader_ids, floor)
+            .map_err(|best| SynthesisError { id, floor, best })?;
+        // best_triangle only returns weights >= floor > 0, which set_link accepts.
         formation
             .set_link(id, ids)
             .map_err(|_: FormationError| SynthesisError {
                 id,
                 floor,
-                best: best_any,
+                best: Real::NAN,
             })?;
         placed.push((id, p));
     }
     Ok(())
 }
 
+/// Among `near` (candidates sorted by distance, then id), the triangle around `p` that maximises
+/// the smallest weight (eq. 18), subject to weight >= floor: first among the k nearest for each k
+/// of `CANDIDATES`, at last among the 16 nearest and every agent of `leader_ids`. The outermost
+/// followers along a straight edge of the polygon have nothing but the edge's ends (leaders)
+/// beyond them, which is why leaders have the most readers (N = 1000: 36). Deterministic; the
+/// ids come sorted. Err: the best smallest weight seen (for the message).
+pub fn best_triangle(
+    p: &Vec2,
+    near: &[(Real, u32, Vec2)],
+    leader_ids: &[u32],
+    floor: Real,
+) -> Result<[u32; 3], Real> {
+    let mut best_any = Real::NEG_INFINITY;
+    let passes = CANDIDATES
+        .iter()
+        .map(|&k| (k, false))
+        .chain([(CANDIDATES[1], true)]);
+    for (k, with_leaders) in passes {
+        let cand: Vec<&(Real, u32, Vec2)> = near
+            .iter()
+            .enumerate()
+            .filter(|(rank, (_, j, _))| *rank < k || (with_leaders && leader_ids.contains(j)))
+            .map(|(_, c)| c)
+            .collect();
+        let kc = cand.len();
+        let mut best: Option<([u32; 3], Real)> = None;
+        for a in 0..kc {
+            for b in a + 1..kc {
+                for c in b + 1..kc {
+                    let tri = [cand[a].2, cand[b].2, cand[c].2];
+                    let Some(w) = triangle_weights(p, &tri) else {
+                        continue;
+                    };
+                    let min_w = w[0].min(w[1]).min(w[2]);
+                    best_any = best_any.max(min_w);
+                    if min_w >= floor && best.is_none_or(|(_, m)| min_w > m) {
+                        let mut ids = [cand[a].1, cand[b].1, cand[c].1];
+                        ids.sort_unstable();
+                        best = Some((ids, min_w));
+                    }
+                }
+            }
+        }
+        if let Some((ids, _)) = best {
+            return Ok(ids);
+        }
+    }
+    Err(best_any)
+}
+
 /// The followers in farthest-point order: each next one is the follower farthest from the
 /// leaders and the followers before it (ties: the smaller id). O(N^2), deterministic.
-fn farthest_point_order(formation: &Formation, leaders: &[(u32, Vec2)]) -> Vec<(u32, Vec2)> {
+pub fn farthest_point_order(formation: &Formation, leaders: &[(u32, Vec2)]) -> Vec<(u32, Vec2)> {
     let mut left: Vec<(u32, Vec2, Real)> = formation
         .members
         .iter()
@@ -149,7 +154,7 @@ fn farthest_point_order(formation: &Formation, leaders: &[(u32, Vec2)]) -> Vec<(
 }
 
 /// `pts` by distance from `p`, then id.
-fn nearest(pts: &[(u32, Vec2)], p: &Vec2) -> Vec<(Real, u32, Vec2)> {
+pub fn nearest(pts: &[(u32, Vec2)], p: &Vec2) -> Vec<(Real, u32, Vec2)> {
     let mut near: Vec<(Real, u32, Vec2)> =
         pts.iter().map(|(j, q)| ((q - p).norm(), *j, *q)).collect();
     near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));

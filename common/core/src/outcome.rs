@@ -49,6 +49,8 @@ pub enum FaultKind {
     NonFiniteState,
     /// A member sent nothing for the next tick before the deadline.
     AgentSilent,
+    /// A member was lost (`--lose`) and the policy is `--on-loss stop`.
+    Lost,
     /// A spawned member process exited before the end.
     AgentExited,
     /// A member process could not be started.
@@ -74,6 +76,7 @@ impl FaultKind {
             FaultKind::AgentFault => "agent-fault",
             FaultKind::NonFiniteState => "non-finite-state",
             FaultKind::AgentSilent => "agent-silent",
+            FaultKind::Lost => "lost",
             FaultKind::AgentExited => "agent-exited",
             FaultKind::SpawnFailed => "spawn-failed",
             FaultKind::JoinTimeout => "join-timeout",
@@ -95,7 +98,7 @@ impl fmt::Display for FaultKind {
 mod tests {
     use super::*;
 
-    const KINDS: [FaultKind; 11] = [
+    const KINDS: [FaultKind; 12] = [
         FaultKind::Control,
         FaultKind::AgentFault,
         FaultKind::NonFiniteState,
@@ -107,6 +110,7 @@ mod tests {
         FaultKind::Io,
         FaultKind::Interrupted,
         FaultKind::OrchestratorStalled,
+        FaultKind::Lost,
     ];
 
     #[test]
@@ -142,7 +146,8 @@ mod tests {
                 "transport",
                 "io",
                 "interrupted",
-                "orchestrator-stalled"
+                "orchestrator-stalled",
+                "lost"
             ]
         );
         assert_eq!(

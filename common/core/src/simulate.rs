@@ -4,8 +4,10 @@
 use serde::Serialize;
 
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
-use crate::engine::{desired_positions, max_follower_deviation, quad_engine};
+use crate::engine::{desired_positions, max_follower_deviation, quad_engine, AgentFault};
 use crate::linear_certificate::LinearTeam;
+use crate::loss::{LossSchedule, LossState, OnLoss};
+use crate::losscert::LossCertificate;
 use crate::math::{Real, Vec3};
 use crate::outcome::{FaultKind, Verdict};
 use crate::rundir::{RunDir, RunDirError};
@@ -14,7 +16,7 @@ use crate::step::tick_time;
 use crate::telemetry::{Row, TelemetryFormat, TelemetrySink};
 
 /// How `simulate` runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct SimulateOptions {
     /// Write every K-th tick to telemetry.csv.
     pub every: u64,
@@ -24,11 +26,17 @@ pub struct SimulateOptions {
     pub max_ticks: Option<u64>,
     /// The format `tel` writes (names the file in errors).
     pub telemetry: TelemetryFormat,
+    /// Members lost in flight (`--lose`), validated against the scenario.
+    pub losses: LossSchedule,
+    /// What a loss does (`--on-loss`).
+    pub on_loss: OnLoss,
 }
 
 /// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
 /// `on_tick` sees each tick and the audit so far (for progress). A control fault ends the run
-/// with the fault recorded; every complete tick stays in telemetry.csv.
+/// with the fault recorded; every complete tick stays in telemetry.csv. Scripted losses repair
+/// the graph (or end the run as a fault with `OnLoss::Stop`); a lost member's rows leave
+/// telemetry from the tick its loss applies.
 /// `tel` is the run's telemetry file (`RunDir::telemetry` for CSV), opened with `opts.every`.
 pub fn simulate(
     s: &Scenario,
@@ -40,6 +48,7 @@ pub fn simulate(
     dir.write_scenario(s)?;
     let mut audit = Auditor::new(s);
     let mut e = quad_engine(s);
+    let mut losses = LossState::new(s, opts.losses.clone());
     let mut ht = Vec::new();
     let mut pos: Vec<Vec3> = Vec::new();
     let mut rows: Vec<Row> = Vec::with_capacity(s.formation.members.len());
@@ -50,13 +59,20 @@ pub fn simulate(
     let complete = loop {
         let tick = e.tick();
         let t = tick_time(tick, s.dt_s());
+        if let Some(ids) = losses.due(tick) {
+            if opts.on_loss == OnLoss::Stop {
+                audit.fault(lost_fault(tick, &ids));
+                break false;
+            }
+            losses.apply(s, tick, &ids, &mut e, &mut audit);
+        }
         desired_positions(s, t, &mut ht);
         pos.clear();
         pos.extend(e.states().iter().map(|q| q.position()));
         audit.observe(tick, t, &pos, &ht);
         if tel.keeps(tick) {
             rows.clear();
-            for &k in &order {
+            for &k in order.iter().filter(|&&k| e.alive()[k]) {
                 let m = &s.formation.members[k];
                 let q = &e.states()[k];
                 rows.push(Row {
@@ -83,16 +99,7 @@ pub fn simulate(
             break true;
         }
         if let Err(f) = e.advance() {
-            audit.fault(FaultRecord {
-                kind: FaultKind::Control,
-                agent: Some(f.id),
-                peer: match f.fault {
-                    crate::step::StepFault::NeighborNonFinite { peer } => Some(peer),
-                    _ => None,
-                },
-                tick: f.tick,
-                message: f.to_string(),
-            });
+            audit.fault(control_fault(&f));
             break false;
         }
     };
@@ -121,6 +128,33 @@ fn write_fault(tick: u64, e: &std::io::Error) -> FaultRecord {
     }
 }
 
+fn control_fault(f: &AgentFault) -> FaultRecord {
+    FaultRecord {
+        kind: FaultKind::Control,
+        agent: Some(f.id),
+        peer: match f.fault {
+            crate::step::StepFault::NeighborNonFinite { peer } => Some(peer),
+            _ => None,
+        },
+        tick: f.tick,
+        message: f.to_string(),
+    }
+}
+
+/// `--on-loss stop`: a lost member is a fault, as when losses were not survivable.
+fn lost_fault(tick: u64, ids: &[u32]) -> FaultRecord {
+    FaultRecord {
+        kind: FaultKind::Lost,
+        agent: ids.first().copied(),
+        peer: None,
+        tick,
+        message: format!(
+            "agent(s) {ids:?} lost after tick {} (--on-loss stop)",
+            tick.saturating_sub(1)
+        ),
+    }
+}
+
 /// Member indices sorted by id (telemetry order).
 pub fn id_order(s: &Scenario) -> Vec<usize> {
     let mut order: Vec<usize> = (0..s.formation.members.len()).collect();
@@ -145,6 +179,9 @@ pub struct Certificate {
     pub max_follower_deviation_m: Real,
     pub gains_stability_margin: Real,
     pub notes: Vec<String>,
+    /// `plan --losses`: the loss of every single member, certified (`losscert`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub losses: Option<LossCertificate>,
 }
 
 /// Max follower deviation at a given travel time (infinite when the flight faults).
@@ -254,5 +291,6 @@ pub fn certify(s: &Scenario) -> Certificate {
         max_follower_deviation_m: e,
         gains_stability_margin: margin,
         notes: s.notes.clone(),
+        losses: None,
     }
 }

@@ -52,7 +52,7 @@ fn next_line(r: &mut impl BufRead, line: &mut String) -> std::io::Result<Option<
 }
 
 /// The safety numbers the audit used (audit.json).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct AuditNumbers {
     pub lambda_cd_min: Real,
     pub lambda1_min_run: Real,
@@ -62,6 +62,8 @@ pub struct AuditNumbers {
     pub verdict_safe: bool,
     /// The first violation's kind and time, if any.
     pub first_violation: Option<(&'static str, Real)>,
+    /// Members lost in flight: (id, the first tick without its row in telemetry.csv).
+    pub losses: Vec<(u32, u64)>,
 }
 
 /// One tick of the run, as drawn.
@@ -139,6 +141,18 @@ pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
                 };
                 Some((kind, f.get("t_s")?.as_f64()?))
             }),
+        losses: v
+            .get("losses")
+            .and_then(|x| x.as_array())
+            .map(|a| {
+                a.iter()
+                    .filter_map(|l| {
+                        let id = u32::try_from(l.get("id")?.as_u64()?).ok()?;
+                        Some((id, l.get("tick")?.as_u64()?))
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
     })
 }
 
@@ -224,10 +238,10 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     };
     let expected_ticks = scenario.last_tick() + 1;
     let path_stride = (expected_ticks / 400).max(1);
-    stream_ticks(dir, &scenario, |tp| {
+    stream_ticks(dir, &scenario, &data.audit.losses.clone(), |tp| {
         let (tick, t, pos, ht) = (tp.tick, tp.t_s, tp.pos, tp.ht);
-        let (sep, _, _) = min_separation(pos);
-        let boundary = boundary_distance(&scenario, &followers, eps_half, pos, ht);
+        let (sep, _, _) = living_separation(pos, tp.alive);
+        let boundary = boundary_distance(&scenario, &followers, eps_half, pos, ht, tp.alive);
         if data.first.is_empty() {
             data.first = pos.to_vec();
         }
@@ -253,13 +267,14 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
 
 /// D_S(t): the smallest signed distance of a follower (member indices `followers`) to the sides
 /// of Theorem 3's prism over the leaders' desired polygon, as the audit builds it (infinite
-/// without a polygon).
+/// without a polygon). Only living members (`alive`) count: a lost one has left the team.
 pub fn boundary_distance(
     s: &Scenario,
     followers: &[usize],
     half_height_m: Real,
     pos: &[Vec3],
     ht: &[Vec3],
+    alive: &[bool],
 ) -> Real {
     let verts: Vec<Vec3> = s.formation.polygon.iter().map(|&k| ht[k]).collect();
     if verts.len() < 3 {
@@ -271,6 +286,7 @@ pub fn boundary_distance(
     let prism = Prism::new(verts, normal, half_height_m);
     followers
         .iter()
+        .filter(|&&k| alive[k])
         .map(|&k| prism.side_distance(&pos[k]))
         .fold(Real::INFINITY, Real::min)
 }
@@ -283,6 +299,23 @@ pub struct TickPositions<'a> {
     pub pos: &'a [Vec3],
     /// Desired positions r_i,HT.
     pub ht: &'a [Vec3],
+    /// Members still flying at this tick; a lost member's `pos`/`ht` hold its last row.
+    pub alive: &'a [bool],
+}
+
+/// D_B(t) over the living members only (a lost member has no rows after its loss).
+pub fn living_separation(pos: &[Vec3], alive: &[bool]) -> (Real, usize, usize) {
+    if alive.iter().all(|&a| a) {
+        return min_separation(pos);
+    }
+    let living: Vec<usize> = (0..pos.len()).filter(|&k| alive[k]).collect();
+    let at: Vec<Vec3> = living.iter().map(|&k| pos[k]).collect();
+    let (d, a, b) = min_separation(&at);
+    (
+        d,
+        living.get(a).copied().unwrap_or(a),
+        living.get(b).copied().unwrap_or(b),
+    )
 }
 
 /// The telemetry of a run directory, row by row in file order (tick, then id), in whichever
@@ -359,10 +392,12 @@ fn read_parquet(
 }
 
 /// Stream a run directory's telemetry one complete tick at a time (paper40 is 800k rows, so
-/// nothing but one tick is held). Every reader of telemetry goes through here.
+/// nothing but one tick is held). Every reader of telemetry goes through here. `losses` are
+/// audit.json's (id, first tick without its row): from that tick a tick has fewer rows.
 pub fn stream_ticks(
     dir: &Path,
     scenario: &Scenario,
+    losses: &[(u32, u64)],
     mut on_tick: impl FnMut(TickPositions<'_>),
 ) -> Result<(), ReadError> {
     let members = &scenario.formation.members;
@@ -372,12 +407,25 @@ pub fn stream_ticks(
     let mut ht = vec![Vec3::zeros(); n];
     let mut seen = 0usize;
     let mut current: Option<(u64, Real)> = None;
+    let lost_from: Vec<(usize, u64)> = losses
+        .iter()
+        .filter_map(|(id, tick)| Some((*index.get(id)?, *tick)))
+        .collect();
+    let mut alive = vec![true; n];
+    // The members flying at `tick` (into `alive`) and how many rows that tick has.
+    let expected_rows = |tick: u64, alive: &mut [bool]| {
+        for (k, a) in alive.iter_mut().enumerate() {
+            *a = lost_from.iter().all(|&(j, t)| j != k || tick < t);
+        }
+        alive.iter().filter(|&&a| a).count()
+    };
     let tel_path = read_telemetry(dir, |row| {
         let Some(&k) = index.get(&row.id) else {
             return Err(format!("agent {} is not in scenario.toml", row.id));
         };
         if let Some((ct, t)) = current {
             if ct != row.tick {
+                let n = expected_rows(ct, &mut alive);
                 if seen != n {
                     return Err(format!("tick {ct} has {seen} rows, expected {n}"));
                 }
@@ -386,6 +434,7 @@ pub fn stream_ticks(
                     t_s: t,
                     pos: &pos,
                     ht: &ht,
+                    alive: &alive,
                 });
                 seen = 0;
             }
@@ -397,16 +446,20 @@ pub fn stream_ticks(
         Ok(())
     })?;
     match current {
-        Some((ct, t)) if seen == n => on_tick(TickPositions {
+        Some((ct, t)) if seen == expected_rows(ct, &mut alive) => on_tick(TickPositions {
             tick: ct,
             t_s: t,
             pos: &pos,
             ht: &ht,
+            alive: &alive,
         }),
         Some((ct, _)) => {
             return Err(invalid(
                 &tel_path,
-                format!("last tick {ct} has {seen} rows, expected {n}"),
+                format!(
+                    "last tick {ct} has {seen} rows, expected {}",
+                    expected_rows(ct, &mut alive)
+                ),
             ))
         }
         None => return Err(invalid(&tel_path, "no rows")),

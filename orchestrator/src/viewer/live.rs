@@ -11,6 +11,7 @@ use common::scenario::Scenario;
 
 use super::scene::{FrameMaker, Scene};
 use super::serve::{serve_page, Hub, ServeError, Server};
+use crate::report::data::TickPositions;
 
 /// Frames sent per second of wall time (the rest of the ticks are skipped).
 pub const FRAMES_PER_S: u32 = 10;
@@ -57,7 +58,16 @@ impl LiveView {
         if !due && tick != self.scenario.last_tick() {
             return;
         }
-        let mut frame = self.maker.frame(&self.scenario, tick, t, pos, ht);
+        // `launch` loses no member (it refuses `--lose`), so every member is alive.
+        let alive = vec![true; pos.len()];
+        let tp = TickPositions {
+            tick,
+            t_s: t,
+            pos,
+            ht,
+            alive: &alive,
+        };
+        let mut frame = self.maker.frame(&self.scenario, &tp);
         if let Some((at, k)) = self.last_sent {
             let wall = now.duration_since(at).as_secs_f64();
             frame.rate = Some(tick.saturating_sub(k) as f64 / wall.max(1e-9));

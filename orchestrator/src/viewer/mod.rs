@@ -61,14 +61,12 @@ pub fn replay_scene(dir: &Path) -> Result<Scene, ViewerError> {
     let maker = FrameMaker::new(&scenario, scene.half_height_m);
     let mut seen = 0u64;
     let mut last = None;
-    stream_ticks(dir, &scenario, |tp| {
+    stream_ticks(dir, &scenario, &numbers.losses, |tp| {
         if seen.is_multiple_of(scene.stride) {
-            scene
-                .frames
-                .push(maker.frame(&scenario, tp.tick, tp.t_s, tp.pos, tp.ht));
+            scene.frames.push(maker.frame(&scenario, &tp));
             last = None;
         } else {
-            last = Some(maker.frame(&scenario, tp.tick, tp.t_s, tp.pos, tp.ht));
+            last = Some(maker.frame(&scenario, &tp));
         }
         seen += 1;
     })?;

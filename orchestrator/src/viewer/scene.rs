@@ -5,11 +5,12 @@
 use serde::Serialize;
 
 use common::formation::Role;
-use common::math::{Real, Vec3};
-use common::safety::min_separation;
+use common::math::Real;
 use common::scenario::Scenario;
 
-use crate::report::data::{boundary_distance, lambdas_at, ViolationMark};
+use crate::report::data::{
+    boundary_distance, lambdas_at, living_separation, TickPositions, ViolationMark,
+};
 
 /// One agent as the viewer lists it.
 #[derive(Debug, Clone, Serialize)]
@@ -121,11 +122,14 @@ impl FrameMaker {
         }
     }
 
-    /// The frame of one tick from actual (`pos`) and desired (`ht`) positions in member order.
-    pub fn frame(&self, s: &Scenario, tick: u64, t: Real, pos: &[Vec3], ht: &[Vec3]) -> Frame {
+    /// The frame of one tick from actual (`pos`) and desired (`ht`) positions in member order;
+    /// only living members (`alive`) count for deviation, separation and containment.
+    pub fn frame(&self, s: &Scenario, tp: &TickPositions<'_>) -> Frame {
+        let (tick, t, pos, ht, alive) = (tp.tick, tp.t_s, tp.pos, tp.ht, tp.alive);
         let dev = self
             .followers
             .iter()
+            .filter(|&&k| alive[k])
             .map(|&k| (pos[k] - ht[k]).norm())
             .fold(0.0, Real::max);
         Frame {
@@ -136,10 +140,10 @@ impl FrameMaker {
                 .flat_map(|r| [r.x, r.y, r.z])
                 .map(|v| (v * 1000.0).round() as i64)
                 .collect(),
-            sep: finite_or(min_separation(pos).0, -1.0),
+            sep: finite_or(living_separation(pos, alive).0, -1.0),
             dev,
             bnd: finite_or(
-                boundary_distance(s, &self.followers, self.half_height_m, pos, ht),
+                boundary_distance(s, &self.followers, self.half_height_m, pos, ht, alive),
                 -1.0,
             ),
             l1: lambdas_at(s, t)[0],

@@ -1,0 +1,289 @@
+//! Graph repair after a loss: every follower that read a lost member picks a new enclosing
+//! triangle among the survivors, with the rules of synthesis (`graph::best_triangle`).
+//!
+//! Why this keeps the team's desired configuration: the weights of eq. 18 depend only on the
+//! t0 positions, and r_HT is an affine function of them (eq. 13), so for any triangle that
+//! strictly contains follower i at t0, r_i,HT(t) = sum_j w_ij r_j,HT(t) at every t. Theorem 1
+//! therefore still holds for the survivors with the new weights: only the tracking transient
+//! changes, bounded by the new in-neighbours' own tracking errors.
+//!
+//! The result is a deterministic function of (formation, floor, set of lost members): the
+//! affected followers are taken in synthesis order (farthest-point, `graph`), candidates sorted
+//! by distance then id. A follower first looks among the survivors that do not read it, directly
+//! or through others (no cycle: the acyclic graph stays acyclic), then among every survivor.
+//! Reachability from the leaders (Assumption 2) follows from strict containment as in `graph`,
+//! and is checked. A follower with no valid triangle is "degraded": it drops its link and tracks
+//! its own r_HT from Q(t), d(t) open-loop, exactly as a leader does (`step::law_for`), so it
+//! stays a valid in-neighbour for others.
+
+use std::collections::BTreeSet;
+
+use serde::Serialize;
+
+use crate::formation::{Formation, Role};
+use crate::graph::{best_triangle, farthest_point_order, nearest};
+use crate::math::{Real, Vec2};
+
+/// A follower that switched to a new triangle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Retriangulation {
+    pub id: u32,
+    /// In-neighbours before the repair (one or more of them lost).
+    pub old: [u32; 3],
+    /// The new in-neighbours, all survivors, sorted.
+    pub new: [u32; 3],
+}
+
+/// The survivors' graph after a set of members was lost.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Repair {
+    /// The formation with the repaired links: re-triangulated followers carry their new link
+    /// (weights of eq. 18), degraded ones none; lost members keep theirs (they no longer fly).
+    pub formation: Formation,
+    pub lost: BTreeSet<u32>,
+    /// Followers that switched triangles, by id.
+    pub retriangulated: Vec<Retriangulation>,
+    /// Followers with no valid triangle left: they fly their own plan (sorted ids).
+    pub degraded: Vec<u32>,
+}
+
+/// Repair `formation` for the loss of `lost` (ids that are not members are ignored).
+pub fn repair(formation: &Formation, floor: Real, lost: &BTreeSet<u32>) -> Repair {
+    let mut f = formation.clone();
+    let leaders: Vec<(u32, Vec2)> = f
+        .members
+        .iter()
+        .filter(|m| m.role.is_leader())
+        .map(|m| (m.id, m.planar))
+        .collect();
+    let leader_ids: Vec<u32> = leaders
+        .iter()
+        .map(|(id, _)| *id)
+        .filter(|id| !lost.contains(id))
+        .collect();
+    let mut retriangulated = Vec::new();
+    let mut degraded = Vec::new();
+    for (id, p) in farthest_point_order(&f, &leaders) {
+        let Some(old) = f.member(id).and_then(|m| m.link) else {
+            continue;
+        };
+        if lost.contains(&id) || !old.in_neighbors.iter().any(|j| lost.contains(j)) {
+            continue;
+        }
+        let downstream = readers_of(&f, id, lost);
+        let survivors: Vec<(u32, Vec2)> = f
+            .members
+            .iter()
+            .filter(|m| m.id != id && !lost.contains(&m.id))
+            .map(|m| (m.id, m.planar))
+            .collect();
+        let acyclic: Vec<(u32, Vec2)> = survivors
+            .iter()
+            .filter(|(j, _)| !downstream.contains(j))
+            .copied()
+            .collect();
+        let pick = best_triangle(&p, &nearest(&acyclic, &p), &leader_ids, floor)
+            .or_else(|_| best_triangle(&p, &nearest(&survivors, &p), &leader_ids, floor));
+        let set = pick
+            .ok()
+            .and_then(|new| f.set_link(id, new).ok().map(|()| new));
+        match set {
+            Some(new) => retriangulated.push(Retriangulation {
+                id,
+                old: old.in_neighbors,
+                new,
+            }),
+            None => {
+                degrade(&mut f, id);
+                degraded.push(id);
+            }
+        }
+    }
+    // Strict containment makes every survivor reachable (see `graph`); should that ever fail,
+    // the unreachable ones fly their plan rather than follow nobody.
+    for id in unreachable(&f, lost) {
+        degrade(&mut f, id);
+        degraded.push(id);
+    }
+    degraded.sort_unstable();
+    retriangulated.sort_by_key(|x| x.id);
+    Repair {
+        formation: f,
+        lost: lost.clone(),
+        retriangulated,
+        degraded,
+    }
+}
+
+fn degrade(f: &mut Formation, id: u32) {
+    if let Some(k) = f.index_of(id) {
+        f.members[k].link = None;
+    }
+}
+
+/// Survivors that read `id`, directly or through other survivors.
+fn readers_of(f: &Formation, id: u32, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
+    let out = f.out_neighbors();
+    let mut seen = BTreeSet::new();
+    let mut stack = vec![id];
+    while let Some(j) = stack.pop() {
+        for &k in out.get(&j).into_iter().flatten() {
+            if !lost.contains(&k) && seen.insert(k) {
+                stack.push(k);
+            }
+        }
+    }
+    seen
+}
+
+/// Surviving followers not reachable from a surviving leader or a degraded follower through
+/// survivors' links (Assumption 2).
+pub fn unreachable(f: &Formation, lost: &BTreeSet<u32>) -> Vec<u32> {
+    let out = f.out_neighbors();
+    let roots = f
+        .members
+        .iter()
+        .filter(|m| !lost.contains(&m.id) && (m.role.is_leader() || m.link.is_none()));
+    let mut seen: BTreeSet<u32> = roots.map(|m| m.id).collect();
+    let mut stack: Vec<u32> = seen.iter().copied().collect();
+    while let Some(j) = stack.pop() {
+        for &k in out.get(&j).into_iter().flatten() {
+            let links_alive = f
+                .member(k)
+                .and_then(|m| m.link)
+                .is_some_and(|l| l.in_neighbors.iter().all(|n| !lost.contains(n)));
+            if !lost.contains(&k) && links_alive && seen.insert(k) {
+                stack.push(k);
+            }
+        }
+    }
+    f.members
+        .iter()
+        .filter(|m| m.role == Role::Follower && !lost.contains(&m.id) && !seen.contains(&m.id))
+        .map(|m| m.id)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::desired_positions;
+    use crate::graph::DEFAULT_WEIGHT_FLOOR;
+    use crate::scenario::Scenario;
+
+    fn lose(s: &Scenario, ids: &[u32]) -> Repair {
+        repair(
+            &s.formation,
+            DEFAULT_WEIGHT_FLOOR,
+            &ids.iter().copied().collect(),
+        )
+    }
+
+    /// eq. 18: the new weights reproduce the follower's t0 position from its new in-neighbours'.
+    /// Theorem 1: with them r_i,HT(t) = sum_j w_ij r_j,HT(t) at every t, i.e. the survivors'
+    /// desired configuration is the fixed point of the repaired graph, unchanged.
+    fn check_repaired(s: &Scenario, r: &Repair) {
+        let f = &r.formation;
+        assert!(unreachable(f, &r.lost).is_empty());
+        let mut ht = Vec::new();
+        for m in &f.members {
+            let Some(link) = m.link else { continue };
+            if r.lost.contains(&m.id) {
+                continue;
+            }
+            assert!(
+                link.in_neighbors.iter().all(|j| !r.lost.contains(j)),
+                "follower {} still reads a lost member",
+                m.id
+            );
+            let sum: Real = link.weights.iter().sum();
+            assert!((sum - 1.0).abs() < 1e-12);
+            let mut p0 = crate::math::Vec3::zeros();
+            for (j, w) in link.in_neighbors.iter().zip(link.weights) {
+                p0 += f.member(*j).map(|n| n.position).unwrap_or_default() * w;
+            }
+            assert!((p0 - m.position).norm() < 1e-9, "eq. 18 for {}", m.id);
+        }
+        for t in [0.0, 0.3, 0.5, 0.9, 1.2].map(|x| x * s.file.t_total_s) {
+            desired_positions(s, t, &mut ht);
+            for (k, m) in f.members.iter().enumerate() {
+                let Some(link) = m.link else { continue };
+                if r.lost.contains(&m.id) {
+                    continue;
+                }
+                let mut rd = crate::math::Vec3::zeros();
+                for (j, w) in link.in_neighbors.iter().zip(link.weights) {
+                    rd += ht[f.index_of(*j).unwrap()] * w;
+                }
+                assert!(
+                    (rd - ht[k]).norm() < 1e-7,
+                    "Theorem 1 for {} at t={t}",
+                    m.id
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn every_single_loss_of_paper40_repairs_with_eq18_and_theorem1() {
+        let s = Scenario::builtin("paper40").unwrap();
+        for m in &s.formation.members {
+            let r = lose(&s, &[m.id]);
+            check_repaired(&s, &r);
+            let readers = s.formation.out_neighbors()[&m.id].len();
+            assert_eq!(
+                r.retriangulated.len() + r.degraded.len(),
+                readers,
+                "loss of {}",
+                m.id
+            );
+            for x in &r.retriangulated {
+                assert!(x.old.contains(&m.id) && !x.new.contains(&m.id));
+                let w = r.formation.member(x.id).unwrap().link.unwrap().weights;
+                assert!(w.iter().all(|w| *w >= DEFAULT_WEIGHT_FLOOR));
+            }
+        }
+    }
+
+    #[test]
+    fn repair_is_deterministic_and_keeps_unaffected_links() {
+        let s = Scenario::generated(120).unwrap();
+        let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+        let lost = [ids[1], ids[40], ids[77]];
+        let a = lose(&s, &lost);
+        let b = lose(&s, &[lost[2], lost[0], lost[1]]);
+        assert_eq!(a, b);
+        check_repaired(&s, &a);
+        let changed: BTreeSet<u32> = a
+            .retriangulated
+            .iter()
+            .map(|x| x.id)
+            .chain(a.degraded.iter().copied())
+            .collect();
+        for (m, before) in a.formation.members.iter().zip(&s.formation.members) {
+            if !changed.contains(&m.id) {
+                assert_eq!(m.link, before.link, "follower {} changed", m.id);
+            }
+        }
+    }
+
+    #[test]
+    fn follower_without_a_valid_triangle_degrades_to_its_plan() {
+        let s = Scenario::builtin("paper40").unwrap();
+        // The smallest of three weights summing to 1 is at most 1/3: no triangle meets 0.34.
+        let r = repair(&s.formation, 0.34, &[s.formation.members[0].id].into());
+        check_repaired(&s, &r);
+        assert!(!r.degraded.is_empty());
+        for id in &r.degraded {
+            assert!(r.formation.member(*id).unwrap().link.is_none());
+        }
+    }
+
+    #[test]
+    fn no_loss_no_change() {
+        let s = Scenario::builtin("paper40").unwrap();
+        let r = lose(&s, &[]);
+        assert_eq!(r.formation, s.formation);
+        assert!(r.retriangulated.is_empty() && r.degraded.is_empty());
+    }
+}
