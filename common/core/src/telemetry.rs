@@ -211,6 +211,24 @@ impl<W: Rewind> Drop for TelemetryWriter<W> {
     }
 }
 
+impl<W: Rewind> TelemetrySink for TelemetryWriter<W> {
+    fn keeps(&self, tick: u64) -> bool {
+        TelemetryWriter::keeps(self, tick)
+    }
+
+    fn write_tick(&mut self, rows: &[Row]) -> io::Result<()> {
+        TelemetryWriter::write_tick(self, rows)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        TelemetryWriter::flush(self)
+    }
+
+    fn finish(&mut self) -> io::Result<()> {
+        TelemetryWriter::flush(self)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -274,23 +292,5 @@ mod tests {
         assert!(text.ends_with('\n'), "{text:?}");
         assert_eq!(text.len() as u64, w.committed_len());
         assert!(text.lines().all(|l| l.split(',').count() == 13));
-    }
-}
-
-impl<W: Rewind> TelemetrySink for TelemetryWriter<W> {
-    fn keeps(&self, tick: u64) -> bool {
-        TelemetryWriter::keeps(self, tick)
-    }
-
-    fn write_tick(&mut self, rows: &[Row]) -> io::Result<()> {
-        TelemetryWriter::write_tick(self, rows)
-    }
-
-    fn flush(&mut self) -> io::Result<()> {
-        TelemetryWriter::flush(self)
-    }
-
-    fn finish(&mut self) -> io::Result<()> {
-        TelemetryWriter::flush(self)
     }
 }
