@@ -288,7 +288,7 @@ fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
 fn replay_after_run(dir: &Path, quiet: bool) {
     let started = Instant::now();
     match crate::viewer::write_replay(dir) {
-        Ok(path) if !quiet => println!(
+        Ok(path) if !quiet => out!(
             "  replay: {} ({:.2} s; orchestrator view redraws it)",
             path.display(),
             started.elapsed().as_secs_f64()
@@ -309,7 +309,7 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     let path = dir.join("replay.html");
     common::rundir::write_atomic(&path, page.as_bytes()).map_err(Failure::bad_input)?;
     if !quiet {
-        println!(
+        out!(
             "view: {} ({} frames, every {} tick(s) of telemetry, {:.1} MB)",
             path.display(),
             scene.frames.len(),

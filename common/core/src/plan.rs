@@ -183,7 +183,7 @@ pub fn combine(alpha: &[Real; 3], d: &[Derivs; 3]) -> Derivs {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     pub(crate) fn paper_plan(t_total_s: Real) -> TeamPlan {

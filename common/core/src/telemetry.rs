@@ -202,6 +202,15 @@ impl<W: Rewind> TelemetryWriter<W> {
     }
 }
 
+/// A writer dropped on any path (a fault, an interrupt) still hands its whole buffered ticks to
+/// the file: telemetry keeps every complete tick (best effort; a failing output keeps its last
+/// whole tick, as in `flush`).
+impl<W: Rewind> Drop for TelemetryWriter<W> {
+    fn drop(&mut self) {
+        let _ = self.flush();
+    }
+}
+
 impl<W: Rewind> TelemetrySink for TelemetryWriter<W> {
     fn keeps(&self, tick: u64) -> bool {
         TelemetryWriter::keeps(self, tick)

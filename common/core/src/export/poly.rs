@@ -133,21 +133,9 @@ mod tests {
     use super::*;
     use crate::plan::Segment;
 
+    /// The paper's Sec. VII leaders over a 200 s plan (the plan tests' own team).
     fn paper_plan() -> TeamPlan {
-        TeamPlan::new(
-            200.0,
-            [
-                Vec3::new(360.0, 0.0, 900.0),
-                Vec3::new(72.0, 108.0, 1008.0),
-                Vec3::new(108.0, -72.0, 1080.0),
-            ],
-            [
-                Vec3::new(224.0, 434.0, 560.0),
-                Vec3::new(126.0, 224.0, 560.0),
-                Vec3::new(322.0, 224.0, 560.0),
-            ],
-        )
-        .unwrap()
+        crate::plan::tests::paper_plan(200.0)
     }
 
     #[test]
