@@ -324,7 +324,7 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     let server =
         crate::viewer::serve_page(&addr.to_string(), page, None).map_err(Failure::bad_input)?;
     // Only the final line goes to stdout in quiet mode: tools read the address from it.
-    println!("serving http://{}/ (Ctrl-C stops)", server.addr);
+    out!("serving http://{}/ (Ctrl-C stops)", server.addr);
     while !interrupted.load(std::sync::atomic::Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(100));
     }
@@ -477,13 +477,13 @@ pub fn print_certificate(c: &Certificate) {
 }
 
 fn print_loss_certificate(l: &LossCertificate) {
-    println!(
+    out!(
         "loss certificate: each member lost after tick {} (t = {:.2} s, the nominal peak follower deviation {:.4} m)",
         l.loss_last_tick, l.loss_t_s, l.nominal_max_follower_deviation_m
     );
-    println!("  id  role       verdict  switched  degraded  affected  max repaired dev  max shift");
+    out!("  id  role       verdict  switched  degraded  affected  max repaired dev  max shift");
     for m in &l.members {
-        println!(
+        out!(
             "  {:<3} {:<10} {:<8} {:>8}  {:>8}  {:>8}  {:>14.4} m  {:>7.4} m",
             m.id,
             m.role,
@@ -495,7 +495,7 @@ fn print_loss_certificate(l: &LossCertificate) {
             m.max_shift_m
         );
         for r in &m.reasons {
-            println!("      - {r}");
+            out!("      - {r}");
         }
     }
     let worst = l.members.iter().max_by(|a, b| {
@@ -503,7 +503,7 @@ fn print_loss_certificate(l: &LossCertificate) {
             .total_cmp(&b.max_repaired_deviation_m)
     });
     if let Some(w) = worst {
-        println!(
+        out!(
             "  worst repair transient: losing {} ({}), follower {} deviates {:.4} m at t = {:.2} s (delta {:.4} m)",
             w.id,
             w.role,
@@ -512,8 +512,8 @@ fn print_loss_certificate(l: &LossCertificate) {
         );
     }
     let degraded: usize = l.members.iter().filter(|m| !m.degraded.is_empty()).count();
-    println!("  losses that leave a follower flying its plan: {degraded}");
-    println!("loss verdict: {}", l.verdict);
+    out!("  losses that leave a follower flying its plan: {degraded}");
+    out!("loss verdict: {}", l.verdict);
 }
 
 /// Exit code of a finished run.

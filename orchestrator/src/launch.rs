@@ -79,7 +79,7 @@ struct Watchers<'a> {
 fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure> {
     let view = LiveView::start(addr, s, Auditor::new(s).numbers()).map_err(Failure::bad_input)?;
     if !quiet {
-        println!("live view: http://{}/", view.addr());
+        out!("live view: http://{}/", view.addr());
     }
     Ok(view)
 }
