@@ -25,7 +25,8 @@ use common::transport::{
 };
 
 use crate::team::{
-    check_children, fault, member_binaries_present, spawn_member, stop_team, Spawned, Stop,
+    check_children, exited_fault, fault, first_exited, member_binaries_present, spawn_member,
+    stop_team, Spawned, Stop,
 };
 use crate::Failure;
 
@@ -339,6 +340,8 @@ fn run_team(
     // ticks 0..=k are complete as soon as every state is in (as in `simulate`). The team stops
     // then, or after the grace when tick k cannot complete (a non-finite state is never used).
     let mut stopping: Option<(FaultRecord, Instant, FaultRank)> = None;
+    // A member process seen exited: its id, how, and when it was seen.
+    let mut exited: Option<(u32, String, Instant)> = None;
     let mut stall = crate::stall::StallWatch::new(Instant::now());
     loop {
         if interrupted.load(Ordering::Relaxed) {
@@ -518,10 +521,21 @@ fn run_team(
             continue;
         }
         // While stopping on a reported fault, the reporter's own exit is not a second fault.
-        if stopping.is_none() && last_child_check.elapsed() > Duration::from_millis(100) {
+        if exited.is_none()
+            && stopping.is_none()
+            && last_child_check.elapsed() > Duration::from_millis(100)
+        {
             last_child_check = Instant::now();
-            if let Err((f, reason)) = check_children(children, next_tick) {
+            exited = first_exited(children).map(|(id, how)| (id, how, Instant::now()));
+        }
+        // Members run up to a window ahead of the audit: the states a dead member published
+        // are audited and written first, and its fault is the first tick it never sent.
+        if let Some((id, how, since)) = exited.as_ref().filter(|_| stopping.is_none()) {
+            let k = index[id];
+            let lacks = pending.get(&next_tick).is_none_or(|(v, _)| v[k].is_none());
+            if lacks && since.elapsed() >= FAULT_GRACE {
                 let _ = tel.flush();
+                let (f, reason) = exited_fault(*id, how, next_tick);
                 return Err((stall.explain(f, Instant::now()), reason));
             }
         }

@@ -77,29 +77,41 @@ pub fn spawn_member(
         .spawn()
 }
 
+/// The first spawned member that has exited: its id and how (`exited with code 1`, `was killed
+/// by signal 9`).
+pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, String)> {
+    use std::os::unix::process::ExitStatusExt;
+    children.iter_mut().find_map(|c| {
+        let status = c.child.try_wait().ok()??;
+        let how = match (status.code(), status.signal()) {
+            (_, Some(sig)) => format!("was killed by signal {sig}"),
+            (Some(code), _) => format!("exited with code {code}"),
+            _ => "exited".into(),
+        };
+        Some((c.id, how))
+    })
+}
+
+/// The fault of a member that exited before the end, named with its id and `tick`.
+pub fn exited_fault(id: u32, how: &str, tick: u64) -> Stop {
+    (
+        fault(
+            FaultKind::AgentExited,
+            Some(id),
+            None,
+            tick,
+            format!("agent {id} {how} at tick {tick}"),
+        ),
+        StopReason::AgentFault,
+    )
+}
+
 /// A spawned member that exited before the end is a fault, named with its id and the tick.
 pub fn check_children(children: &mut [Spawned], tick: u64) -> Result<(), Stop> {
-    for c in children.iter_mut() {
-        if let Ok(Some(status)) = c.child.try_wait() {
-            use std::os::unix::process::ExitStatusExt;
-            let how = match (status.code(), status.signal()) {
-                (_, Some(sig)) => format!("was killed by signal {sig}"),
-                (Some(code), _) => format!("exited with code {code}"),
-                _ => "exited".into(),
-            };
-            return Err((
-                fault(
-                    FaultKind::AgentExited,
-                    Some(c.id),
-                    None,
-                    tick,
-                    format!("agent {} {how} at tick {tick}", c.id),
-                ),
-                StopReason::AgentFault,
-            ));
-        }
+    match first_exited(children) {
+        Some((id, how)) => Err(exited_fault(id, &how, tick)),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// Stop message, then SIGTERM, then SIGKILL for a process that does not stop; then remove the
