@@ -19,3 +19,4 @@ pub use cdm_runtime::{
 pub mod member;
 pub mod member_cli;
 pub mod options;
+pub mod vehicles;

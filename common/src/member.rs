@@ -6,15 +6,18 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
+use cdm_mavlink::udp::UdpError;
+use cdm_mavlink::PlantError;
 use cdm_runtime::member_core::MemberCore;
 use cdm_runtime::member_loop::{fly, LoopError};
-use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
+use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock, Vehicle};
 
 use crate::engine::step_config;
-use crate::formation::Role;
+use crate::formation::{Member, Role};
 use crate::scenario::{Checks, Scenario, ScenarioError};
 use crate::step::StepFault;
 use crate::transport::{MemberPorts, TeamName, TransportError};
+use crate::vehicles::Vehicles;
 
 pub use cdm_runtime::member_core::{Deadlines, Finished, MemberFault};
 
@@ -58,6 +61,9 @@ pub enum MemberError {
     },
     #[error(transparent)]
     Transport(#[from] TransportError),
+    /// The MAVLink vehicle could not be reached or armed before the team started.
+    #[error(transparent)]
+    VehicleLink(#[from] PlantError),
     #[error("agent {id}: the orchestrator of team {team} is gone (at tick {tick}); stopping")]
     OrchestratorLost { id: u32, team: String, tick: u64 },
     #[error("agent {id}: nothing happened for {waited:?} at tick {tick} (waiting for {waiting_for}); stopping")]
@@ -73,6 +79,9 @@ pub enum MemberError {
         tick: u64,
         fault: StepFault,
     },
+    /// `what` names the agent already (the vehicle link's message).
+    #[error("{what} (at tick {tick})")]
+    Vehicle { id: u32, tick: u64, what: String },
     #[error("agent {id} at tick {tick}: in-neighbour {peer} {what}")]
     Neighbor {
         id: u32,
@@ -98,18 +107,23 @@ impl MemberError {
                 | TransportError::AgentAlreadyRunning { .. }
                 | TransportError::InvalidTeamName { .. },
             ) => 2,
+            // A port that cannot be bound or does not exist is the operator's input.
+            MemberError::VehicleLink(PlantError::Udp(
+                UdpError::Bind { .. } | UdpError::PortOutOfRange { .. },
+            )) => 2,
             _ => 3,
         }
     }
 }
 
-/// Run one member until the orchestrator stops the team.
+/// Run one member until the orchestrator stops the team, flying `vehicles`.
 pub fn run_member(
     kind: Kind,
     scenario_path: &Path,
     team: &TeamName,
     id: u32,
     deadlines: Deadlines,
+    vehicles: &Vehicles,
     interrupted: &AtomicBool,
 ) -> Result<Finished, MemberError> {
     let s = Scenario::load(scenario_path, Checks::Member)?;
@@ -132,27 +146,64 @@ pub fn run_member(
             origin: s.origin.clone(),
         });
     }
-    let hash = s.content_hash();
-    let ins = MemberCore::<ModelVehicle, LockstepClock>::subscriptions(&me);
-    let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
-    let mut ports = MemberPorts::open(team, id, hash, &ins, &outs)?;
-    tracing::info!(
-        id,
-        role = me.role.as_str(),
-        team = %team,
-        subscribes = ?ins,
-        notifies = ?outs,
-        "joined: subscribed to state services of {:?}",
-        ins
-    );
-    // The deadlines start once the ports are open (opening takes seconds at N = 1000).
-    let clock = MonotonicClock::start();
-    let vehicle = ModelVehicle::new(step_config(&s), &s.plan, &me);
-    let parts = (vehicle, LockstepClock::default());
-    let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now());
-    let inject = crate::fault_inject::from_env(id);
-    fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
-        .map_err(|e| MemberError::from_loop(e, id, team))
+    let member = Joined {
+        s: &s,
+        me: &me,
+        team,
+        deadlines,
+    };
+    match vehicles {
+        Vehicles::Model => member.fly(
+            ModelVehicle::new(step_config(&s), &s.plan, &me),
+            interrupted,
+        ),
+        // The vehicle first: the team starts only once every member's vehicle is heard (and
+        // armed with --arm), since a member joins only then.
+        Vehicles::Mavlink(o) => {
+            let plant = crate::vehicles::connect(&s, &me, o, deadlines.join, interrupted)?;
+            member.fly(plant, interrupted)
+        }
+    }
+}
+
+/// A member about to join its team.
+struct Joined<'a> {
+    s: &'a Scenario,
+    me: &'a Member,
+    team: &'a TeamName,
+    deadlines: Deadlines,
+}
+
+impl Joined<'_> {
+    /// Opens the ports and flies `vehicle` until the team stops.
+    fn fly<V: Vehicle>(
+        &self,
+        vehicle: V,
+        interrupted: &AtomicBool,
+    ) -> Result<Finished, MemberError> {
+        let (s, me, team, id) = (self.s, self.me, self.team, self.me.id);
+        let hash = s.content_hash();
+        let ins = MemberCore::<ModelVehicle, LockstepClock>::subscriptions(me);
+        let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
+        let mut ports = MemberPorts::open(team, id, hash, &ins, &outs)?;
+        tracing::info!(
+            id,
+            role = me.role.as_str(),
+            team = %team,
+            subscribes = ?ins,
+            notifies = ?outs,
+            "joined: subscribed to state services of {:?}",
+            ins
+        );
+        // The deadlines start once the ports are open (opening takes seconds at N = 1000).
+        let clock = MonotonicClock::start();
+        let parts = (vehicle, LockstepClock::default());
+        let now = clock.now();
+        let mut core = MemberCore::new(me, hash, s.last_tick(), parts, self.deadlines, now);
+        let inject = crate::fault_inject::from_env(id);
+        fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
+            .map_err(|e| MemberError::from_loop(e, id, team))
+    }
 }
 
 impl MemberError {
@@ -187,6 +238,7 @@ impl MemberError {
                     waiting_for: waiting_for.to_string(),
                 },
                 MemberFault::Step { tick, fault } => MemberError::Step { id, tick, fault },
+                MemberFault::Vehicle { tick, what } => MemberError::Vehicle { id, tick, what },
                 MemberFault::ForeignState {
                     tick,
                     peer,

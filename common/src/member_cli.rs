@@ -36,6 +36,9 @@ pub struct MemberArgs {
         default_value_t = 10.0
     )]
     pub silence_timeout_s: f64,
+    /// What this member flies (the model, or a MAVLink vehicle).
+    #[command(flatten)]
+    pub vehicle: crate::vehicles::VehicleArgs,
 }
 
 /// The whole `main` of a member binary: parse arguments, initialise logging (`RUST_LOG`,
@@ -98,9 +101,25 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             return 2;
         }
     };
+    let vehicles = match args.vehicle.validate() {
+        Ok(v) => v,
+        Err(e) => {
+            say(&format!("error: {e}"));
+            return 2;
+        }
+    };
     let span = tracing::info_span!("agent", id = args.id);
     let _g = span.enter();
-    match run_member(kind, &args.scenario, &team, args.id, deadlines, interrupted) {
+    let outcome = run_member(
+        kind,
+        &args.scenario,
+        &team,
+        args.id,
+        deadlines,
+        &vehicles,
+        interrupted,
+    );
+    match outcome {
         Ok(f) => stopped(&team, args.id, f),
         Err(e) => {
             say(&format!("error: {e}"));

@@ -101,6 +101,10 @@ pub enum Command {
         /// --serve is 127.0.0.1:8080). Only loopback unless another address is given.
         #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_SERVE)]
         serve: Option<String>,
+        /// What the members fly (`--vehicles mavlink`: real or SITL vehicles over MAVLink;
+        /// README "Fly real vehicles").
+        #[command(flatten)]
+        vehicle: common::vehicles::VehicleArgs,
         #[command(flatten)]
         run: RunOptions,
     },

@@ -98,9 +98,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             agent_timeout,
             join_timeout,
             serve,
+            vehicle,
             run,
         } => {
             crate::telemetry::check_available(run.telemetry)?;
+            let vehicles = vehicle.validate().map_err(Failure::bad_input)?;
             let s = load(&source)?;
             check_follow(&s, run.follow)?;
             if !run.lose.is_empty() {
@@ -120,13 +122,20 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 force,
                 every,
                 telemetry: run.telemetry,
-                window,
+                // Vehicles pace their ticks on the wall clock; a member publishes quietly and wakes
+                // its readers when it blocks, so strict lockstep keeps every tick's states flowing.
+                window: if matches!(vehicles, common::vehicles::Vehicles::Mavlink(_)) {
+                    1
+                } else {
+                    window
+                },
                 spawn: !no_spawn,
                 agent_timeout: secs(agent_timeout, "--agent-timeout")?,
                 join_timeout: secs(join_timeout, "--join-timeout")?,
                 quiet: cli.quiet,
                 stop_on_violation: run.stop_on_violation,
                 max_ticks: run.max_ticks,
+                vehicles,
                 serve: serve
                     .as_deref()
                     .map(crate::cli::serve_addr)

@@ -49,6 +49,8 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// What the members fly (forwarded to the spawned members; printed for hand-started ones).
+    pub vehicles: common::vehicles::Vehicles,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -127,7 +129,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = Vec::new();
     if o.spawn {
         for m in &s.formation.members {
-            match spawn_member(&member_file, &o.team, m.id, m.role) {
+            match spawn_member(&member_file, &o.team, m.id, m.role, &o.vehicles) {
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
@@ -147,7 +149,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         }
     } else if !o.quiet {
         out!(
-            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{v}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{v}   (ids {:?})",
             o.team,
             ids.len(),
             scenario_file.display(),
@@ -156,6 +158,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             scenario_file.display(),
             o.team,
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
+            v = o.vehicles.member_args().iter().map(|a| format!(" {a}")).collect::<String>(),
         );
     }
     let mut audit = Auditor::new(s);
@@ -365,10 +368,10 @@ fn run_team(
                     };
                     if rank.outranks(bad.as_ref().map(|(_, r)| r)) {
                         // The same kind as `simulate` records for a controller fault.
-                        let kind = if code == FaultCode::Control {
-                            FaultKind::Control
-                        } else {
-                            FaultKind::AgentFault
+                        let kind = match code {
+                            FaultCode::Control => FaultKind::Control,
+                            FaultCode::VehicleLost => FaultKind::VehicleLost,
+                            _ => FaultKind::AgentFault,
                         };
                         let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
                         let what = format!(

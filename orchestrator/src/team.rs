@@ -62,6 +62,7 @@ pub fn spawn_member(
     team: &TeamName,
     id: u32,
     role: Role,
+    vehicles: &common::vehicles::Vehicles,
 ) -> std::io::Result<Child> {
     let exe = std::env::current_exe()?;
     let bin = exe.with_file_name(if role.is_leader() { "leader" } else { "agent" });
@@ -72,6 +73,7 @@ pub fn spawn_member(
         .arg(team.as_str())
         .arg("--id")
         .arg(id.to_string())
+        .args(vehicles.member_args())
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .spawn()

@@ -217,6 +217,9 @@ def main():
     conn = mavutil.mavlink_connection(f"udpout:{args.host}:{args.port}",
                                       source_system=args.sysid, source_component=1)
     vehicle = Vehicle(args)
+    # Tests start the team once every vehicle says this (Python starts slowly on a loaded host).
+    print(f"mavlink_vehicle {args.sysid}: sending to {args.host}:{args.port}",
+          file=sys.stderr, flush=True)
     dt = 1.0 / args.rate_hz
     start = time.monotonic()
     went_silent_at = None

@@ -63,6 +63,9 @@ pub enum FaultKind {
     Io,
     /// SIGINT, SIGTERM, SIGHUP or SIGQUIT.
     Interrupted,
+    /// A member lost its real vehicle (`--vehicles mavlink`: no HEARTBEAT for 1 s, no position
+    /// for 0.5 s, or it refused to arm).
+    VehicleLost,
     /// The orchestrator itself did not run for a while (stopped or starved): its clock stalled
     /// and the members stopped by themselves.
     OrchestratorStalled,
@@ -84,6 +87,7 @@ impl FaultKind {
             FaultKind::Io => "io",
             FaultKind::Interrupted => "interrupted",
             FaultKind::OrchestratorStalled => "orchestrator-stalled",
+            FaultKind::VehicleLost => "vehicle-lost",
         }
     }
 }
@@ -98,7 +102,7 @@ impl fmt::Display for FaultKind {
 mod tests {
     use super::*;
 
-    const KINDS: [FaultKind; 12] = [
+    const KINDS: [FaultKind; 13] = [
         FaultKind::Control,
         FaultKind::AgentFault,
         FaultKind::NonFiniteState,
@@ -111,6 +115,7 @@ mod tests {
         FaultKind::Interrupted,
         FaultKind::OrchestratorStalled,
         FaultKind::Lost,
+        FaultKind::VehicleLost,
     ];
 
     #[test]
@@ -147,7 +152,8 @@ mod tests {
                 "io",
                 "interrupted",
                 "orchestrator-stalled",
-                "lost"
+                "lost",
+                "vehicle-lost"
             ]
         );
         assert_eq!(

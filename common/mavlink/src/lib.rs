@@ -5,13 +5,16 @@
 //!
 //! Layers: `ned` (frame conversion), `health` (loss detection), `arming` (`--arm` sequence) and
 //! `messages` (what is sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
-//! without I/O, driven by the caller's clock; `udp` is the socket. The encoding is the `mavlink`
-//! crate's (MAVLink 2, common dialect).
+//! without I/O, driven by the caller's clock; `udp` is the socket. `setpoint` (pure) and `plant`
+//! put them behind the member's `Vehicle` seam (cdm-runtime): [`MavlinkPlant`]. The encoding is
+//! the `mavlink` crate's (MAVLink 2, common dialect).
 
 pub mod arming;
 pub mod health;
 pub mod messages;
 pub mod ned;
+pub mod plant;
+pub mod setpoint;
 pub mod udp;
 pub mod vehicle;
 
@@ -19,5 +22,6 @@ pub use arming::{ArmAction, ArmError, ArmStage, Autopilot};
 pub use health::LinkFault;
 pub use messages::Setpoint;
 pub use ned::VehicleOrigin;
+pub use plant::{MavlinkPlant, PlantConfig, PlantError};
 pub use udp::{member_addr, UdpError, UdpLink, DEFAULT_BASE_PORT};
 pub use vehicle::{MavlinkVehicle, MeasuredState, VehicleConfig, VehicleError};

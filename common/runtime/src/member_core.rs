@@ -17,7 +17,7 @@ use cdm_core::step::{law_for, Law, StepFault};
 
 use crate::inbox::Inbox;
 use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};
-use crate::seams::{TickClock, Vehicle};
+use crate::seams::{TickClock, Vehicle, VehicleFault};
 
 /// Deadlines of a member.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,6 +92,8 @@ pub enum MemberFault {
     },
     /// This member's own tick failed.
     Step { tick: u64, fault: StepFault },
+    /// This member's real vehicle failed (lost, never heard, refused to arm).
+    Vehicle { tick: u64, what: String },
     /// An in-neighbour sent a state of another scenario.
     ForeignState {
         tick: u64,
@@ -321,11 +323,7 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                 }
             };
             if let Err(fault) = self.vehicle.fly_tick(tick, &flats) {
-                let (code, peer) = match fault {
-                    StepFault::NeighborNonFinite { peer } => (FaultCode::NonFinite, peer),
-                    StepFault::Control(_) => (FaultCode::Control, NO_PEER),
-                };
-                return Some(self.fail(code, peer, MemberFault::Step { tick, fault }));
+                return Some(self.vehicle_failed(tick, fault));
             }
             self.tick += 1;
             for b in self.inbox.iter_mut() {
@@ -357,6 +355,24 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             }
         }
         Ok(ready.then_some(flats))
+    }
+
+    /// The report of a failed [`Vehicle::fly_tick`]: the wire code says which kind.
+    fn vehicle_failed(&self, tick: u64, fault: VehicleFault) -> Action {
+        match fault {
+            VehicleFault::Step(fault) => {
+                let (code, peer) = match fault {
+                    StepFault::NeighborNonFinite { peer } => (FaultCode::NonFinite, peer),
+                    StepFault::Control(_) => (FaultCode::Control, NO_PEER),
+                };
+                self.fail(code, peer, MemberFault::Step { tick, fault })
+            }
+            VehicleFault::Link { what } => self.fail(
+                FaultCode::VehicleLost,
+                NO_PEER,
+                MemberFault::Vehicle { tick, what },
+            ),
+        }
     }
 
     /// A fault that is reported to the team (this member's state flagged with `code`).

@@ -18,11 +18,13 @@ const HASH: u64 = 0xc0ffee;
 const LAST: u64 = 100;
 const ME: u32 = 10;
 
-/// A vehicle that stays put, or fails its tick `fail_at`.
+/// A vehicle that stays put, or fails its tick `fail_at` (its link is lost when `link_lost`,
+/// otherwise its controller fails).
 #[derive(Debug)]
 struct Still {
     ticks: u64,
     fail_at: Option<u64>,
+    link_lost: bool,
 }
 
 impl Vehicle for Still {
@@ -30,12 +32,18 @@ impl Vehicle for Still {
         [self.ticks as f64; 12]
     }
 
-    fn fly_tick(&mut self, tick: u64, _: &[Flat; 3]) -> Result<(), StepFault> {
+    fn fly_tick(&mut self, tick: u64, _: &[Flat; 3]) -> Result<(), VehicleFault> {
+        if self.fail_at == Some(tick) && self.link_lost {
+            let what = format!("agent {ME}: vehicle lost");
+            return Err(VehicleFault::Link { what });
+        }
         if self.fail_at == Some(tick) {
-            return Err(StepFault::Control(ControlFault::SingularThrust {
-                thrust_mps2: 0.0,
-                min_thrust_mps2: 1.0,
-            }));
+            return Err(VehicleFault::Step(StepFault::Control(
+                ControlFault::SingularThrust {
+                    thrust_mps2: 0.0,
+                    min_thrust_mps2: 1.0,
+                },
+            )));
         }
         self.ticks += 1;
         Ok(())
@@ -57,7 +65,11 @@ fn member(role: Role) -> Member {
 }
 
 fn core(role: Role, fail_at: Option<u64>) -> MemberCore<Still, LockstepClock> {
-    let v = Still { ticks: 0, fail_at };
+    let v = Still {
+        ticks: 0,
+        fail_at,
+        link_lost: false,
+    };
     let parts = (v, LockstepClock::default());
     MemberCore::new(
         &member(role),
@@ -317,6 +329,31 @@ fn own_step_fault_is_reported_with_the_state_before_it() {
             peer: None
         }
     );
+}
+
+#[test]
+fn a_lost_vehicle_is_reported_as_such_with_the_state_before_it() {
+    let v = Still {
+        ticks: 0,
+        fail_at: Some(2),
+        link_lost: true,
+    };
+    let parts = (v, LockstepClock::default());
+    let me = member(Role::Primary);
+    let mut c = MemberCore::new(&me, HASH, LAST, parts, Deadlines::default(), Duration::ZERO);
+    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    let (published, a) = run_until_blocked(&mut c, Duration::ZERO);
+    assert_eq!(published, [0, 1, 2]);
+    let (report, fault) = fault_of(&a);
+    let expected = MemberFault::Vehicle {
+        tick: 2,
+        what: format!("agent {ME}: vehicle lost"),
+    };
+    assert_eq!(fault, &expected);
+    let r = report.expect("reported");
+    assert_eq!((r.tick, r.id), (2, ME));
+    let code = FaultCode::VehicleLost;
+    assert_eq!(r.status(), AgentStatus::Fault { code, peer: None });
 }
 
 /// A clock the test moves; the fake transport's `wait` moves it by the timeout.

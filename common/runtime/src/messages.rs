@@ -34,6 +34,9 @@ pub const FAULT_ORCHESTRATOR_LOST: u32 = 7;
 /// `StateMsg::fault_code`: the controller refused to fly on (decoupling matrix M near singular:
 /// thrust near 0 or roll near 90 degrees, eq. 46).
 pub const FAULT_CONTROL: u32 = 8;
+/// `StateMsg::fault_code`: the member lost its real vehicle (`--vehicles mavlink`: no HEARTBEAT
+/// for 1 s or no position for 0.5 s, or the vehicle refused to arm).
+pub const FAULT_VEHICLE_LOST: u32 = 9;
 
 /// `StateMsg::fault_peer` when the fault involves no other agent.
 pub const NO_PEER: u32 = u32::MAX;
@@ -109,6 +112,8 @@ pub enum FaultCode {
     OrchestratorLost,
     /// [`FAULT_CONTROL`]
     Control,
+    /// [`FAULT_VEHICLE_LOST`]
+    VehicleLost,
     /// A code this build does not know (sent by a newer peer).
     Unknown(u32),
 }
@@ -125,6 +130,7 @@ impl FaultCode {
             FaultCode::Safety => FAULT_SAFETY,
             FaultCode::OrchestratorLost => FAULT_ORCHESTRATOR_LOST,
             FaultCode::Control => FAULT_CONTROL,
+            FaultCode::VehicleLost => FAULT_VEHICLE_LOST,
             FaultCode::Unknown(c) => c,
         }
     }
@@ -141,6 +147,7 @@ impl FaultCode {
             FAULT_SAFETY => FaultCode::Safety,
             FAULT_ORCHESTRATOR_LOST => FaultCode::OrchestratorLost,
             FAULT_CONTROL => FaultCode::Control,
+            FAULT_VEHICLE_LOST => FaultCode::VehicleLost,
             other => FaultCode::Unknown(other),
         })
     }

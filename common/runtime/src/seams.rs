@@ -2,6 +2,7 @@
 //! (the wall clock) and a second plant (a real vehicle) plug in under the same protocol core.
 //! Every method is generic (no `dyn`) and the hot path allocates nothing.
 
+use std::fmt;
 use std::time::{Duration, Instant};
 
 use cdm_core::dynamics::{Flat, QuadState};
@@ -86,13 +87,49 @@ impl TickClock for LockstepClock {
     }
 }
 
-/// What a member flies: today the 12-state quadcopter model; later a real vehicle that takes
-/// the same tick's inputs and reports its state.
+/// Why a vehicle could not fly a tick.
+#[derive(Debug, Clone, PartialEq)]
+pub enum VehicleFault {
+    /// The model's tick failed (controller, or a neighbour's non-finite state).
+    Step(StepFault),
+    /// The link to a real vehicle failed: lost (no HEARTBEAT for 1 s, no position for 0.5 s),
+    /// never heard, or it refused to arm. `what` is the link's own message, which names the
+    /// member (the link's typed error lives in its crate, which this one does not know).
+    Link { what: String },
+}
+
+impl fmt::Display for VehicleFault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            VehicleFault::Step(s) => s.fmt(f),
+            VehicleFault::Link { what } => f.write_str(what),
+        }
+    }
+}
+
+impl std::error::Error for VehicleFault {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            VehicleFault::Step(s) => Some(s),
+            VehicleFault::Link { .. } => None,
+        }
+    }
+}
+
+impl From<StepFault> for VehicleFault {
+    fn from(f: StepFault) -> Self {
+        VehicleFault::Step(f)
+    }
+}
+
+/// What a member flies: the 12-state quadcopter model ([`ModelVehicle`]), or a real vehicle
+/// (cdm-mavlink's `MavlinkPlant`) that takes the same tick's inputs and reports its measured
+/// state.
 pub trait Vehicle {
     /// The full state published on the wire (the dynamics module's layout).
     fn state(&self) -> [f64; 12];
     /// Flies from `tick` to `tick + 1`, given the in-neighbours' tick-`tick` outputs.
-    fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), StepFault>;
+    fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), VehicleFault>;
 }
 
 /// The 12-state model flown by `step::step` (the engine flies the very same function).
@@ -124,7 +161,7 @@ impl Vehicle for ModelVehicle<'_> {
         self.x.0
     }
 
-    fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), StepFault> {
+    fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
         let next = step(
             &self.cfg,
             self.plan,

@@ -1,0 +1,323 @@
+//! [`MavlinkPlant`]: the member's `Vehicle` seam (cdm-runtime) over a MAVLink vehicle. The
+//! member core calls `fly_tick` with the in-neighbours' states as it would for the model; the
+//! plant turns them into the tick's setpoint (`setpoint::setpoint_for`), waits for the tick's
+//! wall-clock time, and publishes the vehicle's measured state.
+//!
+//! One thread per member owns the socket: every `1 / comm_hz` it reads the vehicle's messages,
+//! checks the link (loss), and sends the current setpoint (and a HEARTBEAT each second, and the
+//! `--arm` commands). So the stream goes on, at comm_hz, while the member waits for its team or
+//! its neighbours: PX4 leaves OFFBOARD when setpoints stop for a moment.
+
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use cdm_core::dynamics::{Flat, QuadState};
+use cdm_core::formation::Member;
+use cdm_core::plan::TeamPlan;
+use cdm_core::step::{law_for, Law, StepConfig, StepFault};
+use cdm_runtime::seams::{Vehicle, VehicleFault};
+
+use crate::arming::ArmStage;
+use crate::messages::Setpoint;
+use crate::setpoint::{hold_at, measured_state, setpoint_for};
+use crate::udp::{UdpError, UdpLink};
+use crate::vehicle::{LinkCounters, MavlinkVehicle, VehicleConfig, VehicleError};
+
+/// How one member's plant is set up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlantConfig {
+    /// The link: agent id, `--vehicle-origin`, `--arm`, the connect deadline.
+    pub vehicle: VehicleConfig,
+    /// `H:(P + i)`.
+    pub bind: SocketAddr,
+    /// The setpoint period, 1 / comm_hz.
+    pub period: Duration,
+    /// Pace ticks on the wall clock here (tick k + 1 is not reported before (k + 1) dt after the
+    /// first tick). Off when the member's tick clock is already the wall clock.
+    pub pace: bool,
+}
+
+/// Why the plant could not start (or stopped).
+#[derive(Debug, thiserror::Error)]
+pub enum PlantError {
+    #[error(transparent)]
+    Udp(#[from] UdpError),
+    #[error(transparent)]
+    Vehicle(#[from] VehicleError),
+    #[error("agent {agent}: interrupted while waiting for its vehicle")]
+    Interrupted { agent: u32 },
+    #[error("agent {agent}: cannot start the vehicle link's thread")]
+    Thread {
+        agent: u32,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// What the streaming thread and the member share.
+#[derive(Debug)]
+struct Shared {
+    vehicle: MavlinkVehicle,
+    setpoint: Setpoint,
+    /// The link's first failure (the stream stopped with it).
+    fault: Option<PlantError>,
+    stop: bool,
+}
+
+fn lock(shared: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
+    // A panic in the other thread leaves plain data behind; the fault (if any) is in it.
+    shared.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Wall-clock deadlines of the ticks: tick k + 1's state is read at `origin + (k + 1) dt`, the
+/// origin being the first tick's start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pacer {
+    dt: Duration,
+    origin: Option<Duration>,
+}
+
+impl Pacer {
+    pub fn new(dt: Duration) -> Self {
+        Pacer { dt, origin: None }
+    }
+
+    /// Flying `tick` at `now`: when its end is due, and whether its setpoint is already late
+    /// (sent after the time it is for).
+    pub fn due(&mut self, tick: u64, now: Duration) -> (Duration, bool) {
+        let origin = *self.origin.get_or_insert_with(|| {
+            now.saturating_sub(self.dt.saturating_mul(u32::try_from(tick).unwrap_or(0)))
+        });
+        let ticks = u32::try_from(tick + 1).unwrap_or(u32::MAX);
+        let due = origin + self.dt.saturating_mul(ticks);
+        (due, now > due)
+    }
+}
+
+/// A member's MAVLink vehicle behind the `Vehicle` seam.
+#[derive(Debug)]
+pub struct MavlinkPlant<'a> {
+    agent: u32,
+    step: StepConfig,
+    plan: &'a TeamPlan,
+    law: Law,
+    neighbor_ids: [u32; 3],
+    shared: Arc<Mutex<Shared>>,
+    streamer: Option<JoinHandle<()>>,
+    clock: Instant,
+    pacer: Option<Pacer>,
+    x: QuadState,
+    late: u64,
+}
+
+impl<'a> MavlinkPlant<'a> {
+    /// Binds the member's port, starts streaming a hold at its initial position, and returns
+    /// once the vehicle is heard (and, with `--arm`, in OFFBOARD/GUIDED and armed). Bounded by
+    /// the link's connect deadline and the arming retries.
+    pub fn connect(
+        config: PlantConfig,
+        step: StepConfig,
+        plan: &'a TeamPlan,
+        member: &Member,
+        interrupted: &AtomicBool,
+    ) -> Result<Self, PlantError> {
+        let agent = config.vehicle.agent;
+        let link = UdpLink::bind(agent, config.bind)?;
+        tracing::info!(agent, listen = %link.local_addr(), "waiting for the vehicle");
+        let clock = Instant::now();
+        let shared = Arc::new(Mutex::new(Shared {
+            vehicle: MavlinkVehicle::new(config.vehicle),
+            setpoint: hold_at(member.position),
+            fault: None,
+            stop: false,
+        }));
+        let for_thread = Arc::clone(&shared);
+        let streamer = std::thread::Builder::new()
+            .name(format!("mavlink-{agent}"))
+            .spawn(move || stream(link, &for_thread, config.period, clock))
+            .map_err(|source| PlantError::Thread { agent, source })?;
+        let (law, neighbor_ids) = law_for(member);
+        let mut plant = MavlinkPlant {
+            agent,
+            step,
+            plan,
+            law,
+            neighbor_ids,
+            shared,
+            streamer: Some(streamer),
+            clock,
+            pacer: config.pace.then(|| Pacer::new(config.period)),
+            x: QuadState::hover(member.position),
+            late: 0,
+        };
+        plant.wait_ready(config.vehicle.arm, interrupted)?;
+        Ok(plant)
+    }
+
+    fn wait_ready(&mut self, arm: bool, interrupted: &AtomicBool) -> Result<(), PlantError> {
+        loop {
+            if interrupted.load(Ordering::Relaxed) {
+                return Err(PlantError::Interrupted { agent: self.agent });
+            }
+            {
+                let mut g = lock(&self.shared);
+                if let Some(f) = g.fault.take() {
+                    return Err(f);
+                }
+                let armed = !arm || g.vehicle.arm_stage() == ArmStage::Armed;
+                if let (true, Some(m)) = (g.vehicle.ready() && armed, g.vehicle.state()) {
+                    self.x = measured_state(m.position, m.velocity);
+                    tracing::info!(agent = self.agent, position = ?m.position, "vehicle ready");
+                    return Ok(());
+                }
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Ticks whose setpoint was sent after the time it was for (behind the wall clock).
+    pub fn late_setpoints(&self) -> u64 {
+        self.late
+    }
+
+    /// The link's message counts so far.
+    pub fn counters(&self) -> LinkCounters {
+        *lock(&self.shared).vehicle.counters()
+    }
+
+    /// The link's failure as the member reports it (the message names the agent).
+    fn link_fault(f: &PlantError) -> VehicleFault {
+        VehicleFault::Link {
+            what: f.to_string(),
+        }
+    }
+}
+
+impl Vehicle for MavlinkPlant<'_> {
+    fn state(&self) -> [f64; 12] {
+        self.x.0
+    }
+
+    fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
+        if let Law::Follower { .. } = self.law {
+            for (f, &peer) in neighbors.iter().zip(&self.neighbor_ids) {
+                if !f.is_finite() {
+                    return Err(StepFault::NeighborNonFinite { peer }.into());
+                }
+            }
+        }
+        let sp = setpoint_for(&self.step, self.plan, &self.law, tick, neighbors);
+        {
+            let mut g = lock(&self.shared);
+            if let Some(f) = &g.fault {
+                return Err(Self::link_fault(f));
+            }
+            g.setpoint = sp;
+        }
+        if let Some(p) = self.pacer.as_mut() {
+            let now = self.clock.elapsed();
+            let (due, late) = p.due(tick, now);
+            self.late += u64::from(late);
+            if let Some(wait) = due.checked_sub(now) {
+                std::thread::sleep(wait);
+            }
+        }
+        let g = lock(&self.shared);
+        if let Some(f) = &g.fault {
+            return Err(Self::link_fault(f));
+        }
+        if let Some(m) = g.vehicle.state() {
+            self.x = measured_state(m.position, m.velocity);
+        }
+        Ok(())
+    }
+}
+
+impl Drop for MavlinkPlant<'_> {
+    fn drop(&mut self) {
+        lock(&self.shared).stop = true;
+        if let Some(h) = self.streamer.take() {
+            let _ = h.join();
+        }
+        let c = self.counters();
+        tracing::info!(
+            agent = self.agent,
+            setpoints_sent = c.setpoints_sent,
+            late_setpoints = self.late,
+            heartbeats_received = c.heartbeats_received,
+            positions_received = c.positions_received,
+            "vehicle link closed"
+        );
+    }
+}
+
+/// The streaming thread: every `period`, read, check, send. Ends on `stop` or the first fault
+/// (kept in `shared` for the member).
+fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: Instant) {
+    let mut next = clock.elapsed();
+    loop {
+        let now = clock.elapsed();
+        let out = {
+            let mut g = lock(shared);
+            if g.stop {
+                return;
+            }
+            let sp = g.setpoint;
+            let g = &mut *g;
+            let r = link
+                .receive(now, &mut g.vehicle)
+                .map_err(PlantError::from)
+                .and_then(|_| Ok(g.vehicle.on_tick(now, Some(&sp), true)?));
+            match r {
+                Ok(out) => out,
+                Err(e) => {
+                    tracing::warn!("{e}");
+                    g.fault = Some(e);
+                    return;
+                }
+            }
+        };
+        if let Err(e) = link.send(&out) {
+            tracing::warn!("{e}");
+            lock(shared).fault = Some(e.into());
+            return;
+        }
+        // Fixed-rate schedule (the average rate is comm_hz); after a long stall, no burst.
+        next += period;
+        let now = clock.elapsed();
+        match next.checked_sub(now) {
+            Some(wait) => std::thread::sleep(wait),
+            None if now - next > period * 5 => next = now,
+            None => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(v: u64) -> Duration {
+        Duration::from_millis(v)
+    }
+
+    #[test]
+    fn ticks_are_due_on_the_wall_clock_from_the_first_one() {
+        let mut p = Pacer::new(ms(20));
+        assert_eq!(p.due(0, ms(1000)), (ms(1020), false));
+        assert_eq!(p.due(1, ms(1021)), (ms(1040), false));
+        // A tick started after its end was due is late; the schedule does not move.
+        assert_eq!(p.due(5, ms(1130)), (ms(1120), true));
+        assert_eq!(p.due(6, ms(1131)), (ms(1140), false));
+    }
+
+    #[test]
+    fn a_plant_that_starts_mid_plan_keeps_the_team_schedule() {
+        let mut p = Pacer::new(ms(10));
+        assert_eq!(p.due(3, ms(500)), (ms(510), false));
+        assert_eq!(p.due(4, ms(505)), (ms(520), false));
+    }
+}

@@ -1,0 +1,231 @@
+//! `--vehicles model|mavlink` and the MAVLink options, shared by `orchestrator launch` (which
+//! forwards them to the members it spawns) and the hand-started `leader`/`agent`; and the start
+//! of a member's MAVLink plant (cdm-mavlink).
+
+use std::net::{IpAddr, Ipv4Addr};
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use cdm_mavlink::{
+    member_addr, MavlinkPlant, PlantConfig, PlantError, VehicleConfig, VehicleOrigin,
+};
+
+use crate::engine::step_config;
+use crate::formation::Member;
+use crate::math::Vec3;
+use crate::scenario::Scenario;
+
+pub use cdm_mavlink::DEFAULT_BASE_PORT;
+
+/// What each member flies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum VehicleKind {
+    /// The 12-state quadcopter model (simulation; deterministic).
+    #[default]
+    Model,
+    /// A PX4 or ArduPilot vehicle over MAVLink (UDP): member i listens on H:(P + i).
+    Mavlink,
+}
+
+/// The command-line options (flattened into the member binaries and `orchestrator launch`).
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct VehicleArgs {
+    /// What each member flies: `model` (simulated) or `mavlink` (a real or SITL vehicle; needs
+    /// the wall clock: `orchestrator launch --realtime`).
+    #[arg(long, value_enum, default_value_t = VehicleKind::Model)]
+    pub vehicles: VehicleKind,
+    /// MAVLink: member i (scenario order, from 0) listens on UDP port P + i (PX4 multi-vehicle
+    /// SITL's offboard ports start at 14540).
+    #[arg(long, value_name = "P", default_value_t = DEFAULT_BASE_PORT)]
+    pub mavlink_base_port: u16,
+    /// MAVLink: the address the members listen on.
+    #[arg(long, value_name = "H", default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
+    pub mavlink_host: IpAddr,
+    /// MAVLink: the scenario point (ENU, m) of the vehicles' NED origin, `x,y,z`.
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        default_value = "0,0,0",
+        allow_hyphen_values = true
+    )]
+    pub vehicle_origin: String,
+    /// MAVLink: switch each vehicle to OFFBOARD (PX4) / GUIDED (ArduPilot) and arm it once it
+    /// is heard; without it the members only stream setpoints and the operator arms.
+    #[arg(long)]
+    pub arm: bool,
+}
+
+impl Default for VehicleArgs {
+    fn default() -> Self {
+        VehicleArgs {
+            vehicles: VehicleKind::Model,
+            mavlink_base_port: DEFAULT_BASE_PORT,
+            mavlink_host: IpAddr::V4(Ipv4Addr::LOCALHOST),
+            vehicle_origin: "0,0,0".into(),
+            arm: false,
+        }
+    }
+}
+
+/// The MAVLink options, validated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MavlinkOptions {
+    pub base_port: u16,
+    pub host: IpAddr,
+    pub origin: Vec3,
+    pub arm: bool,
+}
+
+/// What each member flies, validated.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Vehicles {
+    #[default]
+    Model,
+    Mavlink(MavlinkOptions),
+}
+
+impl VehicleArgs {
+    /// Checks the options; the error names the option. MAVLink options without
+    /// `--vehicles mavlink` are refused (they would silently do nothing).
+    pub fn validate(&self) -> Result<Vehicles, String> {
+        let origin = parse_origin(&self.vehicle_origin)?;
+        match self.vehicles {
+            VehicleKind::Model => {
+                if *self != (VehicleArgs::default()) {
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin and --arm need --vehicles mavlink".into());
+                }
+                Ok(Vehicles::Model)
+            }
+            VehicleKind::Mavlink => Ok(Vehicles::Mavlink(MavlinkOptions {
+                base_port: self.mavlink_base_port,
+                host: self.mavlink_host,
+                origin,
+                arm: self.arm,
+            })),
+        }
+    }
+}
+
+impl Vehicles {
+    /// The options a spawned member needs to fly the same vehicles (none for the model).
+    pub fn member_args(&self) -> Vec<String> {
+        let Vehicles::Mavlink(o) = self else {
+            return Vec::new();
+        };
+        let mut a = vec![
+            "--vehicles".into(),
+            "mavlink".into(),
+            "--mavlink-base-port".into(),
+            o.base_port.to_string(),
+            "--mavlink-host".into(),
+            o.host.to_string(),
+            "--vehicle-origin".into(),
+            format!("{},{},{}", o.origin.x, o.origin.y, o.origin.z),
+        ];
+        if o.arm {
+            a.push("--arm".into());
+        }
+        a
+    }
+}
+
+/// `x,y,z` in metres, finite.
+fn parse_origin(text: &str) -> Result<Vec3, String> {
+    let bad = || format!("--vehicle-origin {text:?}: expected three finite numbers x,y,z (m)");
+    let parts: Vec<f64> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|_| bad()))
+        .collect::<Result<_, _>>()?;
+    match parts.as_slice() {
+        [x, y, z] if parts.iter().all(|v| v.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(bad()),
+    }
+}
+
+/// Binds member `me`'s port (`H:(P + i)`, i its index in scenario order) and waits for its
+/// vehicle (and, with `--arm`, for it to be armed), within `connect` (the member's join
+/// timeout).
+pub fn connect<'a>(
+    s: &'a Scenario,
+    me: &Member,
+    o: &MavlinkOptions,
+    connect: Duration,
+    interrupted: &AtomicBool,
+) -> Result<MavlinkPlant<'a>, PlantError> {
+    let index = s
+        .formation
+        .members
+        .iter()
+        .position(|m| m.id == me.id)
+        .unwrap_or(0);
+    let index = u32::try_from(index).unwrap_or(u32::MAX);
+    let config = PlantConfig {
+        vehicle: VehicleConfig {
+            agent: me.id,
+            origin: VehicleOrigin(o.origin),
+            arm: o.arm,
+            connect_deadline: connect,
+        },
+        bind: member_addr(me.id, o.host, o.base_port, index)?,
+        period: Duration::from_secs_f64(s.dt_s()),
+        pace: true,
+    };
+    MavlinkPlant::connect(config, step_config(s), &s.plan, me, interrupted)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(extra: &[&str]) -> VehicleArgs {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct A {
+            #[command(flatten)]
+            v: VehicleArgs,
+        }
+        let mut argv = vec!["x"];
+        argv.extend_from_slice(extra);
+        A::try_parse_from(argv).expect("parses").v
+    }
+
+    #[test]
+    fn the_model_is_the_default_and_mavlink_options_need_mavlink() {
+        assert_eq!(args(&[]).validate(), Ok(Vehicles::Model));
+        let e = args(&["--arm"]).validate().unwrap_err();
+        assert!(e.contains("need --vehicles mavlink"), "{e}");
+    }
+
+    #[test]
+    fn mavlink_options_round_trip_through_a_spawned_members_arguments() {
+        let v = args(&[
+            "--vehicles",
+            "mavlink",
+            "--mavlink-base-port",
+            "15000",
+            "--vehicle-origin",
+            "-1.5,2,0.25",
+            "--arm",
+        ])
+        .validate()
+        .expect("valid");
+        let Vehicles::Mavlink(o) = v else {
+            panic!("{v:?}")
+        };
+        assert_eq!(o.origin, Vec3::new(-1.5, 2.0, 0.25));
+        assert_eq!((o.base_port, o.arm), (15000, true));
+        let forwarded: Vec<String> = v.member_args();
+        let forwarded: Vec<&str> = forwarded.iter().map(String::as_str).collect();
+        assert_eq!(args(&forwarded).validate(), Ok(v));
+    }
+
+    #[test]
+    fn a_bad_origin_is_named() {
+        for bad in ["1,2", "1,2,x", "1,2,inf", ""] {
+            let e = args(&["--vehicles", "mavlink", "--vehicle-origin", bad])
+                .validate()
+                .unwrap_err();
+            assert!(e.starts_with("--vehicle-origin"), "{e}");
+        }
+    }
+}
