@@ -210,3 +210,42 @@ fn a_vehicle_that_stops_sending_is_named() {
     );
     assert_no_team_resources(&team_name);
 }
+
+#[test]
+fn bad_vehicle_options_exit_2_naming_them() {
+    let dir = TempDir::new();
+    let file = team(3.0);
+    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+    let path = scenario.to_str().expect("utf-8 path");
+    let cases: [(&[&str], &str); 3] = [
+        (&["--arm"], "need --vehicles mavlink"),
+        (
+            &["--vehicles", "mavlink", "--vehicle-origin", "1,x,3"],
+            "--vehicle-origin \"1,x,3\"",
+        ),
+        (
+            &["--vehicles", "mavlink", "--mavlink-host", "nowhere"],
+            "--mavlink-host",
+        ),
+    ];
+    for (args, needle) in cases {
+        let team_name = unique_team("mavbad");
+        let out = integration_tests::run(
+            launch(&team_name, &dir.path().join("run"), &["--scenario", path]).args(args),
+            DEADLINE,
+        );
+        support::assert_exit(&out, 2, needle);
+        support::assert_stderr_has(&out, needle, &[needle]);
+    }
+    // A hand-started member whose port P + i does not exist (member index 9 above 65535).
+    let last = file.agents.last().expect("ten agents");
+    let mut agent = support::member("agent", &scenario, &unique_team("mavbad"), last.id);
+    agent.args(["--vehicles", "mavlink", "--mavlink-base-port", "65530"]);
+    let out = integration_tests::run(&mut agent, DEADLINE);
+    support::assert_exit(&out, 2, "port out of range");
+    let needle = format!(
+        "agent {}: --mavlink-base-port 65530 + member index 9",
+        last.id
+    );
+    support::assert_stderr_has(&out, "port out of range", &[&needle]);
+}
