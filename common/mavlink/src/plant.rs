@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
 use cdm_core::plan::TeamPlan;
-use cdm_core::step::{law_for, Law, StepConfig, StepFault};
+use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault};
 use cdm_runtime::seams::{Vehicle, VehicleFault};
 
 use crate::arming::ArmStage;
@@ -209,7 +209,8 @@ impl Vehicle for MavlinkPlant<'_> {
                 }
             }
         }
-        let sp = setpoint_for(&self.step, self.plan, &self.law, tick, neighbors);
+        let t_k = tick_time(tick, self.step.dt_s);
+        let sp = setpoint_for(&self.step, self.plan, &self.law, t_k, neighbors);
         {
             let mut g = lock(&self.shared);
             if let Some(f) = &g.fault {

@@ -4,13 +4,14 @@
 
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::plan::{Segment, TeamPlan};
-use cdm_core::step::{extrapolate, tick_time, Law, StepConfig};
-use cdm_math::{Vec3, GRAVITY_MPS2};
+use cdm_core::step::{extrapolate, Law, StepConfig};
+use cdm_math::{Real, Vec3, GRAVITY_MPS2};
 
 use crate::messages::Setpoint;
 
-/// The setpoint of tick `tick`: where the member must be at t_{k+1} = (k + 1) dt, the end of the
-/// tick it flies now, with velocity and acceleration feed-forward.
+/// The setpoint of the tick that starts at `t_k_s` (k dt in lockstep; plus the member's phase in
+/// real time): where the member must be at t_k + dt, the end of the tick it flies now, with
+/// velocity and acceleration feed-forward. `neighbors` are the in-neighbours' states at t_k.
 /// - Leader: r_HT and its derivatives of its own plan (eq. 13, ERRATA "useful identities").
 /// - Follower: r_d = sum_j w_j r_j (eq. 18) of its in-neighbours' tick-k states, carried to
 ///   t_{k+1} as the model's tick carries them (`step::extrapolate`); the acceleration is the
@@ -20,12 +21,12 @@ pub fn setpoint_for(
     cfg: &StepConfig,
     plan: &TeamPlan,
     law: &Law,
-    tick: u64,
+    t_k_s: Real,
     neighbors: &[Flat; 3],
 ) -> Setpoint {
     match law {
         Law::Leader { alpha } => {
-            let t = tick_time(tick + 1, cfg.dt_s);
+            let t = t_k_s + cfg.dt_s;
             let seg = if t <= plan.quintic.t_total_s {
                 Segment::Motion
             } else {
@@ -112,7 +113,7 @@ mod tests {
         };
         let neighbors = [nb(0.0, 1.0), nb(4.0, 0.0), nb(8.0, 2.0)];
         let plan = paper_plan();
-        let sp = setpoint_for(&cfg(), &plan, &law, 7, &neighbors);
+        let sp = setpoint_for(&cfg(), &plan, &law, 0.7, &neighbors);
         // r = 0.5 (0 + 0.1) + 0.25 (4) + 0.25 (8 + 0.2); v = 0.5 + 0.5.
         assert!(
             (sp.position - Vec3::new(3.1, 1.0, 2.0)).norm() < 1e-12,
@@ -131,14 +132,14 @@ mod tests {
         let alpha = [1.0, 0.0, 0.0];
         let law = Law::Leader { alpha };
         let c = cfg();
-        let sp = setpoint_for(&c, &plan, &law, 9, &[Flat::rest(Vec3::zeros()); 3]);
+        let sp = setpoint_for(&c, &plan, &law, 0.9, &[Flat::rest(Vec3::zeros()); 3]);
         let d = plan.agent_derivs(&alpha, 1.0, Segment::Motion);
         assert_eq!(
             (sp.position, sp.velocity, sp.acceleration),
             (d[0], d[1], d[2])
         );
         // Past T_total the leader holds its goal.
-        let end = (plan.quintic.t_total_s / c.dt_s) as u64 + 10;
+        let end = plan.quintic.t_total_s + 1.0;
         let sp = setpoint_for(&c, &plan, &law, end, &[Flat::rest(Vec3::zeros()); 3]);
         let goal = plan.agent_derivs(&alpha, plan.quintic.t_total_s, Segment::Hold);
         assert_eq!(sp.position, goal[0]);
