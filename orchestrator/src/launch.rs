@@ -277,7 +277,9 @@ fn gather(
     interrupted: &AtomicBool,
 ) -> Result<(), Stop> {
     let n = s.formation.members.len();
-    let join_deadline = if o.spawn {
+    // Members of real vehicles join once their vehicle is heard (and armed): as long as
+    // --join-timeout allows, like hand-started ones.
+    let join_deadline = if o.spawn && o.vehicles == common::vehicles::Vehicles::Model {
         Duration::from_secs(30) + Duration::from_millis(60 * n as u64)
     } else {
         o.join_timeout

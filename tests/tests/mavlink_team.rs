@@ -74,8 +74,14 @@ fn csv(p: [f64; 3]) -> String {
 }
 
 /// One vehicle per member, in scenario order (member i on `base + i`), each starting where its
-/// member starts; `silent` = (index, seconds) makes one vehicle stop sending.
-fn start_vehicles(s: &ScenarioFile, base: u16, silent: Option<(usize, f64)>) -> Vec<Running> {
+/// member starts; `silent` = (index, seconds) makes one vehicle stop sending; `extra` goes to
+/// every vehicle.
+fn start_vehicles(
+    s: &ScenarioFile,
+    base: u16,
+    silent: Option<(usize, f64)>,
+    extra: &[&str],
+) -> Vec<Running> {
     let mut vehicles: Vec<Running> = s
         .agents
         .iter()
@@ -86,7 +92,8 @@ fn start_vehicles(s: &ScenarioFile, base: u16, silent: Option<(usize, f64)>) -> 
                 .args(["--port", &(base + i as u16).to_string()])
                 .args(["--sysid", &(i + 1).to_string()])
                 .arg(format!("--start-ned={}", csv(to_ned(a.position))))
-                .args(["--max-s", "100"]);
+                .args(["--max-s", "100"])
+                .args(extra);
             if let Some((_, after)) = silent.filter(|(k, _)| *k == i) {
                 c.args(["--silent-after", &format!("{after}"), "--mute", "position"]);
             }
@@ -99,12 +106,13 @@ fn start_vehicles(s: &ScenarioFile, base: u16, silent: Option<(usize, f64)>) -> 
     vehicles
 }
 
-fn launch_team(dir: &Path, team: &str, scenario: &Path, base: u16) -> Running {
+fn launch_team(dir: &Path, team: &str, scenario: &Path, base: u16, extra: &[&str]) -> Running {
     let path = scenario.to_str().expect("utf-8 path");
     let mut c = launch(team, &dir.join("run"), &["--scenario", path]);
     c.args(["--vehicles", "mavlink"])
         .args(["--mavlink-base-port", &base.to_string()])
-        .args(["--vehicle-origin", &csv(ORIGIN)]);
+        .args(["--vehicle-origin", &csv(ORIGIN)])
+        .args(extra);
     spawn(&mut c)
 }
 
@@ -130,14 +138,16 @@ fn goals(file: &ScenarioFile) -> Vec<[f64; 3]> {
 }
 
 #[test]
-fn ten_members_fly_ten_mavlink_vehicles_to_their_goals() {
+fn ten_members_arm_and_fly_ten_mavlink_vehicles_to_their_goals() {
     let dir = TempDir::new();
     let file = team(3.0);
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
     let base = free_base_port();
     let team_name = unique_team("mav10");
-    let vehicles = start_vehicles(&file, base, None);
-    let orch = launch_team(dir.path(), &team_name, &scenario, base);
+    // Vehicles that move only in OFFBOARD and armed, and refuse OFFBOARD without a setpoint
+    // stream (like PX4): the members stream, switch and arm them before the team starts.
+    let vehicles = start_vehicles(&file, base, None, &["--require-arm"]);
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &["--arm"]);
     let o = orch.finish(DEADLINE);
     // (A failed launch drops, so kills, the vehicles.)
     assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
@@ -152,6 +162,7 @@ fn ten_members_fly_ten_mavlink_vehicles_to_their_goals() {
             assert_eq!(num(&v, key), 0.0, "vehicle {i} {key}: {v}");
         }
         assert_eq!(v["type_masks"], serde_json::json!([3072]), "{v}");
+        assert_eq!(v["armed"], true, "vehicle {i} was not armed: {v}");
         // Setpoints at comm_hz within 10 %, on the member's stamps (the vehicle's own arrival
         // times jitter with this machine's load).
         let rate = num(&v, "setpoint_rate_by_stamp_hz");
@@ -188,8 +199,8 @@ fn a_vehicle_that_stops_sending_is_named() {
     let team_name = unique_team("mav10lost");
     const SILENT: usize = 6;
     let silent_id = file.agents[SILENT].id;
-    let vehicles = start_vehicles(&file, base, Some((SILENT, 12.0)));
-    let orch = launch_team(dir.path(), &team_name, &scenario, base);
+    let vehicles = start_vehicles(&file, base, Some((SILENT, 12.0)), &[]);
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &[]);
     let o = orch.finish(DEADLINE);
     assert_eq!(o.status.code(), Some(3), "{}", describe(&o));
     for v in vehicles {

@@ -47,8 +47,8 @@ pub enum PlantError {
     Udp(#[from] UdpError),
     #[error(transparent)]
     Vehicle(#[from] VehicleError),
-    #[error("agent {agent}: interrupted while waiting for its vehicle")]
-    Interrupted { agent: u32 },
+    #[error("agent {agent}: interrupted while waiting for its vehicle ({waiting})")]
+    Interrupted { agent: u32, waiting: String },
     #[error("agent {agent}: cannot start the vehicle link's thread")]
     Thread {
         agent: u32,
@@ -159,13 +159,21 @@ impl<'a> MavlinkPlant<'a> {
 
     fn wait_ready(&mut self, arm: bool, interrupted: &AtomicBool) -> Result<(), PlantError> {
         loop {
-            if interrupted.load(Ordering::Relaxed) {
-                return Err(PlantError::Interrupted { agent: self.agent });
-            }
             {
                 let mut g = lock(&self.shared);
                 if let Some(f) = g.fault.take() {
                     return Err(f);
+                }
+                if interrupted.load(Ordering::Relaxed) {
+                    let waiting = if g.vehicle.ready() {
+                        format!("heard; --arm at {:?}", g.vehicle.arm_stage())
+                    } else {
+                        format!("not heard: {:?}", g.vehicle.counters())
+                    };
+                    return Err(PlantError::Interrupted {
+                        agent: self.agent,
+                        waiting,
+                    });
                 }
                 let armed = !arm || g.vehicle.arm_stage() == ArmStage::Armed;
                 if let (true, Some(m)) = (g.vehicle.ready() && armed, g.vehicle.state()) {
