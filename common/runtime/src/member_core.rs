@@ -357,22 +357,10 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
         Ok(ready.then_some(flats))
     }
 
-    /// The report of a failed [`Vehicle::fly_tick`]: the wire code says which kind.
+    /// The report of a failed [`Vehicle::fly_tick`].
     fn vehicle_failed(&self, tick: u64, fault: VehicleFault) -> Action {
-        match fault {
-            VehicleFault::Step(fault) => {
-                let (code, peer) = match fault {
-                    StepFault::NeighborNonFinite { peer } => (FaultCode::NonFinite, peer),
-                    StepFault::Control(_) => (FaultCode::Control, NO_PEER),
-                };
-                self.fail(code, peer, MemberFault::Step { tick, fault })
-            }
-            VehicleFault::Link { what } => self.fail(
-                FaultCode::VehicleLost,
-                NO_PEER,
-                MemberFault::Vehicle { tick, what },
-            ),
-        }
+        let (code, peer, fault) = report_of(tick, fault);
+        self.fail(code, peer, fault)
     }
 
     /// A fault that is reported to the team (this member's state flagged with `code`).
@@ -398,6 +386,25 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                     .collect(),
             },
         }
+    }
+}
+
+/// How a failed tick is reported (lockstep and real time alike): the wire code, the peer it is
+/// about ([`NO_PEER`] when none), and the member's own fault.
+pub(crate) fn report_of(tick: u64, fault: VehicleFault) -> (FaultCode, u32, MemberFault) {
+    match fault {
+        VehicleFault::Step(fault) => {
+            let (code, peer) = match fault {
+                StepFault::NeighborNonFinite { peer } => (FaultCode::NonFinite, peer),
+                StepFault::Control(_) => (FaultCode::Control, NO_PEER),
+            };
+            (code, peer, MemberFault::Step { tick, fault })
+        }
+        VehicleFault::Link { what } => (
+            FaultCode::VehicleLost,
+            NO_PEER,
+            MemberFault::Vehicle { tick, what },
+        ),
     }
 }
 
