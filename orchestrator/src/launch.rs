@@ -49,6 +49,8 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
+    pub realtime: Option<crate::realtime::RealtimeOptions>,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -127,7 +129,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = Vec::new();
     if o.spawn {
         for m in &s.formation.members {
-            match spawn_member(&member_file, &o.team, m.id, m.role) {
+            let flags = crate::realtime::member_flags(o);
+            match spawn_member(&member_file, &o.team, m.id, m.role, &flags) {
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
@@ -159,18 +162,23 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         );
     }
     let mut audit = Auditor::new(s);
-    let result = run_team(
-        s,
-        o,
-        &dir,
-        &mut ports,
-        &mut children,
-        Watchers {
-            audit: &mut audit,
-            live: &mut live,
-        },
-        interrupted,
-    );
+    let result = if let Some(rt) = &o.realtime {
+        let team = (&mut ports, children.as_mut_slice());
+        crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
+    } else {
+        run_team(
+            s,
+            o,
+            &dir,
+            &mut ports,
+            &mut children,
+            Watchers {
+                audit: &mut audit,
+                live: &mut live,
+            },
+            interrupted,
+        )
+    };
     let ended = Instant::now();
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
@@ -208,7 +216,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
 const FAULT_GRACE: Duration = Duration::from_millis(500);
 
 /// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT.
-fn interrupted_at(tick: u64, when: &str) -> Stop {
+pub(crate) fn interrupted_at(tick: u64, when: &str) -> Stop {
     (
         fault(
             FaultKind::Interrupted,
@@ -248,19 +256,16 @@ fn join_timeout(r: &common::transport::Readiness, team: &TeamName, within: Durat
     )
 }
 
-/// Wait for every process to open its ports, record the subscription graph, then tick; returns
-/// when ticking began and whether every tick of the plan was completed.
-fn run_team(
+/// Wait for every process to open its ports (with a deadline) and record the subscription
+/// graph (both modes).
+pub(crate) fn gather(
     s: &Scenario,
     o: &LaunchOptions,
     dir: &RunDir,
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],
-    watchers: Watchers<'_>,
     interrupted: &std::sync::atomic::AtomicBool,
-) -> Result<(Instant, bool), Stop> {
-    let Watchers { audit, live } = watchers;
-    let hash = s.content_hash();
+) -> Result<(), Stop> {
     let n = s.formation.members.len();
     // 1. Readiness, with a deadline.
     let join_deadline = if o.spawn {
@@ -296,6 +301,24 @@ fn run_team(
     }
     let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
     let _ = common::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
+    Ok(())
+}
+
+/// Gather the team, then tick; returns when ticking began and whether every tick of the plan
+/// was completed.
+fn run_team(
+    s: &Scenario,
+    o: &LaunchOptions,
+    dir: &RunDir,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    watchers: Watchers<'_>,
+    interrupted: &std::sync::atomic::AtomicBool,
+) -> Result<(Instant, bool), Stop> {
+    let Watchers { audit, live } = watchers;
+    let hash = s.content_hash();
+    let n = s.formation.members.len();
+    gather(s, o, dir, ports, children, interrupted)?;
 
     // 3. Tick.
     let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
