@@ -18,7 +18,6 @@ mod launch;
 mod progress;
 mod realtime;
 mod report;
-mod stall;
 mod team;
 mod telemetry;
 mod viewer;

@@ -118,7 +118,8 @@ pub fn run(
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
     let (ports, children) = team;
-    crate::launch::gather(s, o, dir, ports, children, interrupted)?;
+    crate::launch::gather(s, o, ports, children, interrupted)?;
+    crate::launch::write_subscriptions(s, ports, dir);
     let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
         let f = fault(FaultKind::Io, None, None, 0, e.to_string());
         (f, StopReason::AgentFault)
@@ -274,8 +275,11 @@ impl Monitor<'_> {
         let mut last_flush = Instant::now();
         loop {
             if interrupted.load(Ordering::Relaxed) {
-                let what = format!("at t = {:.3} s", self.audits as f64 * period);
-                return Err(crate::launch::interrupted_at(self.audits, &what));
+                let t = self.audits as f64 * period;
+                let signal = common::signals::received();
+                let what = format!("interrupted by {signal} at t = {t:.3} s");
+                let f = fault(FaultKind::Interrupted, None, None, self.audits, what);
+                return Err((f, StopReason::Interrupted));
             }
             self.drain(ports)?;
             let now_s = self.now_s();

@@ -13,4 +13,5 @@ pub mod realtime_loop;
 pub mod realtime_monitor;
 pub mod seams;
 pub mod signals;
+pub mod stall;
 pub mod team_core;
