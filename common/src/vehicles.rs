@@ -86,8 +86,9 @@ pub enum Vehicles {
 
 impl VehicleArgs {
     /// Checks the options; the error names the option. MAVLink options without
-    /// `--vehicles mavlink` are refused (they would silently do nothing).
-    pub fn validate(&self) -> Result<Vehicles, String> {
+    /// `--vehicles mavlink` are refused (they would silently do nothing), and so is
+    /// `--vehicles mavlink` without real time (`realtime`): vehicles fly on the wall clock.
+    pub fn validate(&self, realtime: bool) -> Result<Vehicles, String> {
         let origin = parse_origin(&self.vehicle_origin)?;
         match self.vehicles {
             VehicleKind::Model => {
@@ -95,6 +96,9 @@ impl VehicleArgs {
                     return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin and --arm need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
+            }
+            VehicleKind::Mavlink if !realtime => {
+                Err("--vehicles mavlink needs --realtime (vehicles fly on the wall clock)".into())
             }
             VehicleKind::Mavlink => Ok(Vehicles::Mavlink(MavlinkOptions {
                 base_port: self.mavlink_base_port,
@@ -168,7 +172,6 @@ pub fn connect<'a>(
         },
         bind: member_addr(me.id, o.host, o.base_port, index)?,
         period: Duration::from_secs_f64(s.dt_s()),
-        pace: true,
     };
     MavlinkPlant::connect(config, step_config(s), &s.plan, me, interrupted)
 }
@@ -191,9 +194,13 @@ mod tests {
 
     #[test]
     fn the_model_is_the_default_and_mavlink_options_need_mavlink() {
-        assert_eq!(args(&[]).validate(), Ok(Vehicles::Model));
-        let e = args(&["--arm"]).validate().unwrap_err();
+        assert_eq!(args(&[]).validate(false), Ok(Vehicles::Model));
+        let e = args(&["--arm"]).validate(true).unwrap_err();
         assert!(e.contains("need --vehicles mavlink"), "{e}");
+        let e = args(&["--vehicles", "mavlink"])
+            .validate(false)
+            .unwrap_err();
+        assert!(e.contains("needs --realtime"), "{e}");
     }
 
     #[test]
@@ -207,7 +214,7 @@ mod tests {
             "-1.5,2,0.25",
             "--arm",
         ])
-        .validate()
+        .validate(true)
         .expect("valid");
         let Vehicles::Mavlink(o) = v else {
             panic!("{v:?}")
@@ -216,14 +223,14 @@ mod tests {
         assert_eq!((o.base_port, o.arm), (15000, true));
         let forwarded: Vec<String> = v.member_args();
         let forwarded: Vec<&str> = forwarded.iter().map(String::as_str).collect();
-        assert_eq!(args(&forwarded).validate(), Ok(v));
+        assert_eq!(args(&forwarded).validate(true), Ok(v));
     }
 
     #[test]
     fn a_bad_origin_is_named() {
         for bad in ["1,2", "1,2,x", "1,2,inf", ""] {
             let e = args(&["--vehicles", "mavlink", "--vehicle-origin", bad])
-                .validate()
+                .validate(true)
                 .unwrap_err();
             assert!(e.starts_with("--vehicle-origin"), "{e}");
         }

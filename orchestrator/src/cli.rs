@@ -106,6 +106,8 @@ pub enum Command {
         #[command(flatten)]
         vehicle: common::vehicles::VehicleArgs,
         #[command(flatten)]
+        realtime: crate::realtime::RealtimeArgs,
+        #[command(flatten)]
         run: RunOptions,
     },
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained

@@ -99,11 +99,15 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             join_timeout,
             serve,
             vehicle,
+            realtime,
             run,
         } => {
             crate::telemetry::check_available(run.telemetry)?;
-            let vehicles = vehicle.validate().map_err(Failure::bad_input)?;
+            let vehicles = vehicle
+                .validate(realtime.realtime)
+                .map_err(Failure::bad_input)?;
             let s = load(&source)?;
+            let realtime = realtime.options(&s)?;
             check_follow(&s, run.follow)?;
             if !run.lose.is_empty() {
                 // Killing a member process and re-opening its readers' services needs the
@@ -122,10 +126,9 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 force,
                 every,
                 telemetry: run.telemetry,
-                // Vehicles pace their ticks on the wall clock; a member publishes quietly and wakes
-                // its readers when it blocks, so strict lockstep keeps every tick's states flowing.
-                window: if matches!(vehicles, common::vehicles::Vehicles::Mavlink(_)) {
-                    1
+                // Real time reads the newest states: a short buffer is enough.
+                window: if realtime.is_some() {
+                    crate::realtime::REALTIME_WINDOW
                 } else {
                     window
                 },
@@ -141,6 +144,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     .map(crate::cli::serve_addr)
                     .transpose()
                     .map_err(Failure::bad_input)?,
+                realtime,
             };
             let started = Instant::now();
             let crate::launch::Launched {

@@ -50,6 +50,8 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
+    pub realtime: Option<crate::realtime::RealtimeOptions>,
     /// What the members fly (forwarded to the spawned members; printed for hand-started ones).
     pub vehicles: common::vehicles::Vehicles,
 }
@@ -130,7 +132,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = Vec::new();
     if o.spawn {
         for m in &s.formation.members {
-            match spawn_member(&member_file, &o.team, m.id, m.role, &o.vehicles) {
+            let mut flags = crate::realtime::member_flags(o);
+            flags.extend(o.vehicles.member_args());
+            match spawn_member(&member_file, &o.team, m.id, m.role, &flags) {
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
@@ -159,22 +163,27 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             scenario_file.display(),
             o.team,
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
-            v = o.vehicles.member_args().iter().map(|a| format!(" {a}")).collect::<String>(),
+            v = crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|a| format!(" {a}")).collect::<String>(),
         );
     }
     let mut audit = Auditor::new(s);
-    let result = run_team(
-        s,
-        o,
-        &dir,
-        &mut ports,
-        &mut children,
-        Watchers {
-            audit: &mut audit,
-            live: &mut live,
-        },
-        interrupted,
-    );
+    let result = if let Some(rt) = &o.realtime {
+        let team = (&mut ports, children.as_mut_slice());
+        crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
+    } else {
+        run_team(
+            s,
+            o,
+            &dir,
+            &mut ports,
+            &mut children,
+            Watchers {
+                audit: &mut audit,
+                live: &mut live,
+            },
+            interrupted,
+        )
+    };
     let ended = Instant::now();
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
@@ -269,7 +278,7 @@ fn run_team(
 }
 
 /// Readiness: every process opened its ports, within a deadline.
-fn gather(
+pub(crate) fn gather(
     s: &Scenario,
     o: &LaunchOptions,
     ports: &mut OrchestratorPorts,
@@ -308,7 +317,7 @@ fn gather(
 }
 
 /// The subscription graph as iceoryx2 sees it (subscriptions.json, best effort).
-fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
+pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
     let mut subs = BTreeMap::new();
     for m in &s.formation.members {
         let nodes = ports.subscriber_nodes(m.id).unwrap_or_default();

@@ -109,7 +109,7 @@ fn start_vehicles(
 fn launch_team(dir: &Path, team: &str, scenario: &Path, base: u16, extra: &[&str]) -> Running {
     let path = scenario.to_str().expect("utf-8 path");
     let mut c = launch(team, &dir.join("run"), &["--scenario", path]);
-    c.args(["--vehicles", "mavlink"])
+    c.args(["--realtime", "--vehicles", "mavlink"])
         .args(["--mavlink-base-port", &base.to_string()])
         .args(["--vehicle-origin", &csv(ORIGIN)])
         .args(extra);
@@ -193,13 +193,13 @@ fn ten_members_arm_and_fly_ten_mavlink_vehicles_to_their_goals() {
 fn a_vehicle_that_stops_sending_is_named() {
     let dir = TempDir::new();
     // Long enough that the vehicle goes silent mid-flight even on a loaded machine.
-    let file = team(60.0);
+    let file = team(20.0);
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
     let base = free_base_port();
     let team_name = unique_team("mav10lost");
     const SILENT: usize = 6;
     let silent_id = file.agents[SILENT].id;
-    let vehicles = start_vehicles(&file, base, Some((SILENT, 12.0)), &[]);
+    let vehicles = start_vehicles(&file, base, Some((SILENT, 8.0)), &[]);
     let orch = launch_team(dir.path(), &team_name, &scenario, base, &[]);
     let o = orch.finish(DEADLINE);
     assert_eq!(o.status.code(), Some(3), "{}", describe(&o));
@@ -228,10 +228,20 @@ fn bad_vehicle_options_exit_2_naming_them() {
     let file = team(3.0);
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
     let path = scenario.to_str().expect("utf-8 path");
-    let cases: [(&[&str], &str); 3] = [
+    let cases: [(&[&str], &str); 4] = [
         (&["--arm"], "need --vehicles mavlink"),
         (
-            &["--vehicles", "mavlink", "--vehicle-origin", "1,x,3"],
+            &["--vehicles", "mavlink"],
+            "--vehicles mavlink needs --realtime",
+        ),
+        (
+            &[
+                "--realtime",
+                "--vehicles",
+                "mavlink",
+                "--vehicle-origin",
+                "1,x,3",
+            ],
             "--vehicle-origin \"1,x,3\"",
         ),
         (
@@ -251,7 +261,13 @@ fn bad_vehicle_options_exit_2_naming_them() {
     // A hand-started member whose port P + i does not exist (member index 9 above 65535).
     let last = file.agents.last().expect("ten agents");
     let mut agent = support::member("agent", &scenario, &unique_team("mavbad"), last.id);
-    agent.args(["--vehicles", "mavlink", "--mavlink-base-port", "65530"]);
+    agent.args([
+        "--realtime",
+        "--vehicles",
+        "mavlink",
+        "--mavlink-base-port",
+        "65530",
+    ]);
     let out = integration_tests::run(&mut agent, DEADLINE);
     support::assert_exit(&out, 2, "port out of range");
     let needle = format!(

@@ -1,7 +1,8 @@
 //! [`MavlinkPlant`]: the member's `Vehicle` seam (cdm-runtime) over a MAVLink vehicle. The
-//! member core calls `fly_tick` with the in-neighbours' states as it would for the model; the
-//! plant turns them into the tick's setpoint (`setpoint::setpoint_for`), waits for the tick's
-//! wall-clock time, and publishes the vehicle's measured state.
+//! real-time member core (`--realtime`: it paces the ticks on the wall clock and counts the late
+//! ones) calls `fly_tick_at` with the in-neighbours' states as it would for the model; the plant
+//! turns them into the tick's setpoint (`setpoint::setpoint_for`), and its state is the
+//! vehicle's newest measurement.
 //!
 //! One thread per member owns the socket: every `1 / comm_hz` it reads the vehicle's messages,
 //! checks the link (loss), and sends the current setpoint (and a HEARTBEAT each second, and the
@@ -17,7 +18,7 @@ use std::time::{Duration, Instant};
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
 use cdm_core::plan::TeamPlan;
-use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault};
+use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
 use cdm_runtime::seams::{Vehicle, VehicleFault};
 
 use crate::arming::ArmStage;
@@ -35,9 +36,6 @@ pub struct PlantConfig {
     pub bind: SocketAddr,
     /// The setpoint period, 1 / comm_hz.
     pub period: Duration,
-    /// Pace ticks on the wall clock here (tick k + 1 is not reported before (k + 1) dt after the
-    /// first tick). Off when the member's tick clock is already the wall clock.
-    pub pace: bool,
 }
 
 /// Why the plant could not start (or stopped).
@@ -72,31 +70,6 @@ fn lock(shared: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
     shared.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Wall-clock deadlines of the ticks: tick k + 1's state is read at `origin + (k + 1) dt`, the
-/// origin being the first tick's start.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Pacer {
-    dt: Duration,
-    origin: Option<Duration>,
-}
-
-impl Pacer {
-    pub fn new(dt: Duration) -> Self {
-        Pacer { dt, origin: None }
-    }
-
-    /// Flying `tick` at `now`: when its end is due, and whether its setpoint is already late
-    /// (sent after the time it is for).
-    pub fn due(&mut self, tick: u64, now: Duration) -> (Duration, bool) {
-        let origin = *self.origin.get_or_insert_with(|| {
-            now.saturating_sub(self.dt.saturating_mul(u32::try_from(tick).unwrap_or(0)))
-        });
-        let ticks = u32::try_from(tick + 1).unwrap_or(u32::MAX);
-        let due = origin + self.dt.saturating_mul(ticks);
-        (due, now > due)
-    }
-}
-
 /// A member's MAVLink vehicle behind the `Vehicle` seam.
 #[derive(Debug)]
 pub struct MavlinkPlant<'a> {
@@ -107,10 +80,8 @@ pub struct MavlinkPlant<'a> {
     neighbor_ids: [u32; 3],
     shared: Arc<Mutex<Shared>>,
     streamer: Option<JoinHandle<()>>,
-    clock: Instant,
-    pacer: Option<Pacer>,
-    x: QuadState,
-    late: u64,
+    /// The state before the first measurement (the scenario start, hovering).
+    x0: QuadState,
 }
 
 impl<'a> MavlinkPlant<'a> {
@@ -148,10 +119,7 @@ impl<'a> MavlinkPlant<'a> {
             neighbor_ids,
             shared,
             streamer: Some(streamer),
-            clock,
-            pacer: config.pace.then(|| Pacer::new(config.period)),
-            x: QuadState::hover(member.position),
-            late: 0,
+            x0: QuadState::hover(member.position),
         };
         plant.wait_ready(config.vehicle.arm, interrupted)?;
         Ok(plant)
@@ -177,18 +145,12 @@ impl<'a> MavlinkPlant<'a> {
                 }
                 let armed = !arm || g.vehicle.arm_stage() == ArmStage::Armed;
                 if let (true, Some(m)) = (g.vehicle.ready() && armed, g.vehicle.state()) {
-                    self.x = measured_state(m.position, m.velocity);
                     tracing::info!(agent = self.agent, position = ?m.position, "vehicle ready");
                     return Ok(());
                 }
             }
             std::thread::sleep(Duration::from_millis(10));
         }
-    }
-
-    /// Ticks whose setpoint was sent after the time it was for (behind the wall clock).
-    pub fn late_setpoints(&self) -> u64 {
-        self.late
     }
 
     /// The link's message counts so far.
@@ -205,11 +167,27 @@ impl<'a> MavlinkPlant<'a> {
 }
 
 impl Vehicle for MavlinkPlant<'_> {
+    /// The newest measurement (one streaming period old at most), in the wire layout.
     fn state(&self) -> [f64; 12] {
-        self.x.0
+        let g = lock(&self.shared);
+        let x = g
+            .vehicle
+            .state()
+            .map_or(self.x0, |m| measured_state(m.position, m.velocity));
+        x.0
     }
 
     fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
+        let at = TickAt {
+            tick,
+            offset_s: 0.0,
+        };
+        self.fly_tick_at(at, neighbors)
+    }
+
+    /// Sets the setpoint of the tick that starts now and returns at once: the vehicle flies the
+    /// tick on its own; the streaming thread sends the setpoint.
+    fn fly_tick_at(&mut self, at: TickAt, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
         if let Law::Follower { .. } = self.law {
             for (f, &peer) in neighbors.iter().zip(&self.neighbor_ids) {
                 if !f.is_finite() {
@@ -217,30 +195,13 @@ impl Vehicle for MavlinkPlant<'_> {
                 }
             }
         }
-        let t_k = tick_time(tick, self.step.dt_s);
+        let t_k = tick_time(at.tick, self.step.dt_s) + at.offset_s;
         let sp = setpoint_for(&self.step, self.plan, &self.law, t_k, neighbors);
-        {
-            let mut g = lock(&self.shared);
-            if let Some(f) = &g.fault {
-                return Err(Self::link_fault(f));
-            }
-            g.setpoint = sp;
-        }
-        if let Some(p) = self.pacer.as_mut() {
-            let now = self.clock.elapsed();
-            let (due, late) = p.due(tick, now);
-            self.late += u64::from(late);
-            if let Some(wait) = due.checked_sub(now) {
-                std::thread::sleep(wait);
-            }
-        }
-        let g = lock(&self.shared);
+        let mut g = lock(&self.shared);
         if let Some(f) = &g.fault {
             return Err(Self::link_fault(f));
         }
-        if let Some(m) = g.vehicle.state() {
-            self.x = measured_state(m.position, m.velocity);
-        }
+        g.setpoint = sp;
         Ok(())
     }
 }
@@ -255,7 +216,6 @@ impl Drop for MavlinkPlant<'_> {
         tracing::info!(
             agent = self.agent,
             setpoints_sent = c.setpoints_sent,
-            late_setpoints = self.late,
             heartbeats_received = c.heartbeats_received,
             positions_received = c.positions_received,
             "vehicle link closed"
@@ -302,31 +262,5 @@ fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: In
             None if now - next > period * 5 => next = now,
             None => {}
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn ms(v: u64) -> Duration {
-        Duration::from_millis(v)
-    }
-
-    #[test]
-    fn ticks_are_due_on_the_wall_clock_from_the_first_one() {
-        let mut p = Pacer::new(ms(20));
-        assert_eq!(p.due(0, ms(1000)), (ms(1020), false));
-        assert_eq!(p.due(1, ms(1021)), (ms(1040), false));
-        // A tick started after its end was due is late; the schedule does not move.
-        assert_eq!(p.due(5, ms(1130)), (ms(1120), true));
-        assert_eq!(p.due(6, ms(1131)), (ms(1140), false));
-    }
-
-    #[test]
-    fn a_plant_that_starts_mid_plan_keeps_the_team_schedule() {
-        let mut p = Pacer::new(ms(10));
-        assert_eq!(p.due(3, ms(500)), (ms(510), false));
-        assert_eq!(p.due(4, ms(505)), (ms(520), false));
     }
 }

@@ -211,12 +211,7 @@ impl TeamCore {
         if !rank.outranks(self.stopping.as_ref().map(|s| &s.rank)) {
             return;
         }
-        // The same kind as `simulate` records for a controller fault.
-        let kind = match code {
-            FaultCode::Control => FaultKind::Control,
-            FaultCode::VehicleLost => FaultKind::VehicleLost,
-            _ => FaultKind::AgentFault,
-        };
+        let kind = code.kind();
         let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
         let what = format!(
             "agent {} reported {code:?} at tick {}{on}",
