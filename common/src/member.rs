@@ -137,17 +137,28 @@ impl MemberError {
     }
 }
 
-/// Run one member until the orchestrator stops the team, flying `vehicles`.
+/// How a member flies: its deadlines, lockstep or real time, and what it flies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Flight {
+    pub deadlines: Deadlines,
+    pub mode: Mode,
+    pub vehicles: Vehicles,
+}
+
+/// Run one member until the orchestrator stops the team.
 pub fn run_member(
     kind: Kind,
     scenario_path: &Path,
     team: &TeamName,
     id: u32,
-    deadlines: Deadlines,
-    mode: Mode,
-    vehicles: &Vehicles,
+    flight: &Flight,
     interrupted: &AtomicBool,
 ) -> Result<Finished, MemberError> {
+    let Flight {
+        deadlines,
+        mode,
+        vehicles,
+    } = *flight;
     let s = Scenario::load(scenario_path, Checks::Member)?;
     let Some(me) = s.formation.member(id).cloned() else {
         return Err(MemberError::NotInScenario {
@@ -175,7 +186,7 @@ pub fn run_member(
         deadlines,
         mode,
     };
-    match vehicles {
+    match &vehicles {
         Vehicles::Model => member.fly(
             ModelVehicle::new(step_config(&s), &s.plan, &me),
             interrupted,

@@ -1,6 +1,6 @@
 //! The command line shared by the `agent` and `leader` binaries.
 
-use crate::member::{run_member, Deadlines, Kind, Mode};
+use crate::member::{run_member, Deadlines, Flight, Kind, Mode};
 use crate::options::timeout;
 use crate::transport::TeamName;
 use std::path::PathBuf;
@@ -131,16 +131,12 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
     };
     let span = tracing::info_span!("agent", id = args.id);
     let _g = span.enter();
-    let run = run_member(
-        kind,
-        &args.scenario,
-        &team,
-        args.id,
+    let flight = Flight {
         deadlines,
         mode,
-        &vehicles,
-        interrupted,
-    );
+        vehicles,
+    };
+    let run = run_member(kind, &args.scenario, &team, args.id, &flight, interrupted);
     match run {
         Ok(f) => stopped(&team, args.id, f),
         Err(e) => {
