@@ -151,14 +151,16 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         }
     } else if !o.quiet {
         out!(
-            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
             o.team,
             ids.len(),
             scenario_file.display(),
             o.team,
+            crate::realtime::member_flags(o).iter().map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
             scenario_file.display(),
             o.team,
+            crate::realtime::member_flags(o).iter().map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
         );
     }
