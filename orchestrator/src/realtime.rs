@@ -162,15 +162,12 @@ pub fn run(
     core.stopping();
     let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
     collect_final_reports(&mut core, ports, children);
-    let wall_s = Instant::now()
-        .saturating_duration_since(start)
-        .as_secs_f64();
     let figures = core.figures(RunFigures {
         audits,
         audit_hz: rt.audit_hz,
         phase_seed: rt.phase_seed,
         stale_after_s: rt.stale_after.as_secs_f64(),
-        wall_s,
+        wall_s: flight_s,
         team_cpu_cores: (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s),
     });
     if !o.quiet {
