@@ -148,8 +148,13 @@ pub fn run(
         tel: tel.as_mut(),
         audits: 0,
     };
+    let cpu_at_start = team_cpu_s(children);
     let result = m.fly(ports, children, interrupted);
     let audits = m.audits;
+    let cpu_s = team_cpu_s(children) - cpu_at_start;
+    let flight_s = Instant::now()
+        .saturating_duration_since(start)
+        .as_secs_f64();
     // Whatever ended the flight: tell the members, and take their final pacing reports.
     let reason = result
         .as_ref()
@@ -157,15 +162,13 @@ pub fn run(
     core.stopping();
     let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
     collect_final_reports(&mut core, ports, children);
-    let wall_s = Instant::now()
-        .saturating_duration_since(start)
-        .as_secs_f64();
     let figures = core.figures(RunFigures {
         audits,
         audit_hz: rt.audit_hz,
         phase_seed: rt.phase_seed,
         stale_after_s: rt.stale_after.as_secs_f64(),
-        wall_s,
+        wall_s: flight_s,
+        team_cpu_cores: (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s),
     });
     if !o.quiet {
         out!(
@@ -227,6 +230,34 @@ fn collect_final_reports(
         }
         let _ = ports.wait(Duration::from_millis(20));
     }
+}
+
+/// CPU seconds (user + system) used so far by this process and its running members, from
+/// /proc/<pid>/stat (fields 14 and 15, in clock ticks). The difference over the flight is the
+/// team's CPU (members that exit meanwhile drop out: a faulted flight reads low).
+fn team_cpu_s(children: &[Spawned]) -> f64 {
+    // SAFETY: sysconf takes no pointers.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
+    let ticks = |path: String| -> u64 {
+        let Ok(text) = std::fs::read_to_string(path) else {
+            return 0;
+        };
+        // The command name (field 2) may hold spaces: count fields after its closing ')'.
+        let rest = text.rsplit_once(')').map_or("", |(_, r)| r);
+        let f: Vec<u64> = rest
+            .split_whitespace()
+            .skip(11)
+            .take(2)
+            .filter_map(|v| v.parse().ok())
+            .collect();
+        f.iter().sum()
+    };
+    let own = ticks("/proc/self/stat".into());
+    let members: u64 = children
+        .iter()
+        .map(|c| ticks(format!("/proc/{}/stat", c.child.id())))
+        .sum();
+    (own + members) as f64 / hz
 }
 
 fn transport(e: impl std::fmt::Display, tick: u64) -> Stop {

@@ -202,6 +202,9 @@ pub struct RealtimeFigures {
     pub stale_after_s: Real,
     /// From the start instant to the last audit (s): a plan of T s takes about T s.
     pub wall_s: Real,
+    /// CPU of the whole team over the flight (orchestrator and spawned members, user + system,
+    /// from /proc), in cores; absent for hand-started members.
+    pub team_cpu_cores: Option<Real>,
 }
 
 /// The slowest member of a real-time flight.

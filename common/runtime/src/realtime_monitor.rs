@@ -216,6 +216,7 @@ impl MonitorCore {
             phase_seed: run.phase_seed,
             stale_after_s: run.stale_after_s,
             wall_s: run.wall_s,
+            team_cpu_cores: run.team_cpu_cores,
         }
     }
 }
@@ -228,4 +229,5 @@ pub struct RunFigures {
     pub phase_seed: u32,
     pub stale_after_s: f64,
     pub wall_s: f64,
+    pub team_cpu_cores: Option<f64>,
 }

@@ -349,6 +349,7 @@ fn the_monitor_sums_the_members_pacing_reports() {
         phase_seed: 0,
         stale_after_s: 0.5,
         wall_s: 1.0,
+        team_cpu_cores: None,
     };
     let f = m.figures(run);
     assert_eq!((f.ticks, f.late_ticks, f.members_reported), (200, 1, 2));
