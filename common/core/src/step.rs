@@ -214,3 +214,29 @@ pub fn law_for(member: &crate::formation::Member) -> (Law, [u32; 3]) {
         ),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::vec3;
+
+    /// Real time brings a neighbour to the follower's time with `extrapolate_flat`, then the
+    /// tick extrapolates again from there: both moves together must stay on the neighbour's one
+    /// cubic, as if extrapolated once.
+    #[test]
+    fn moving_a_flat_along_its_cubic_composes() {
+        let f = Flat {
+            r: vec3([1.0, -2.0, 3.0]),
+            v: vec3([0.5, 0.25, -1.0]),
+            a: vec3([-0.3, 0.2, 0.1]),
+            j: vec3([0.05, -0.04, 0.02]),
+        };
+        let (a, b) = (0.007, 0.0031);
+        let moved = extrapolate_flat(&f, a, NeighborModel::Taylor);
+        let (r2, v2) = extrapolate(&moved, b, NeighborModel::Taylor);
+        let (r1, v1) = extrapolate(&f, a + b, NeighborModel::Taylor);
+        assert!((r2 - r1).norm() < 1e-14 && (v2 - v1).norm() < 1e-14);
+        assert_eq!(extrapolate_flat(&f, 0.0, NeighborModel::Taylor), f);
+        assert_eq!(extrapolate_flat(&f, a, NeighborModel::Hold), f);
+    }
+}
