@@ -5,7 +5,8 @@
 //!
 //! - A real-time run of a short plan is SAFE, its `realtime` figures are present and sane, its
 //!   telemetry has a row per agent at every audit instant, and it tracks like `simulate`.
-//! - A member stopped with SIGSTOP is named (agent-silent) and the team stopped, nothing left.
+//! - A member stopped with SIGSTOP is named (agent-silent) and the team stopped, nothing left;
+//!   a killed member is named (agent-exited) the same way.
 //! - SIGINT to the orchestrator stops the team, nothing left.
 //! - A member started by hand in the other mode is refused with exit 2.
 
@@ -129,6 +130,32 @@ fn a_stopped_member_is_named_and_the_team_stopped() {
     let message = fault["message"].as_str().unwrap_or_default();
     assert!(message.contains("agent 9 sent no state"), "{fault:#}");
     assert!(audit["realtime"]["members_reported"].as_u64() >= Some(9));
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
+}
+
+/// SIGKILL of follower 8 in real time: the orchestrator sees its process exit and names it
+/// (`agent-exited`, the signal), stops the team, exit 3, nothing left.
+#[test]
+fn a_killed_member_is_named_and_the_team_stopped() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_kill");
+    let out = dir.path().join("run");
+    let mut orch = spawn(&mut realtime_launch(&team, &out, &[]));
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
+    let procs = team_processes(&team);
+    assert_eq!(procs.len(), 11, "{procs:#?}");
+    let fp = Footprint::record(&team, procs.keys().copied());
+    let pid = member_pid(&team, 8).expect("agent 8 runs");
+    signal(pid, libc::SIGKILL);
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 3, "launch --realtime after SIGKILL of a member");
+    let audit = read_json(&out.join("audit.json"));
+    let fault = &audit["fault"];
+    assert_eq!(fault["kind"], "agent-exited", "{audit:#}");
+    assert_eq!(fault["agent"], 8, "{audit:#}");
+    let message = fault["message"].as_str().unwrap_or_default();
+    assert!(message.contains("killed by signal 9"), "{fault:#}");
     assert_no_process_of(&team);
     fp.assert_nothing_left();
 }
