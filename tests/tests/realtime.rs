@@ -35,6 +35,16 @@ fn realtime_launch(team: &str, out: &Path, extra: &[&str]) -> Command {
     launch(team, out, &args)
 }
 
+/// A real-time team of 10 flying a long plan, seen with its 11 processes: the orchestrator and
+/// the team's footprint (for the "nothing left" check).
+fn flying(team: &str, out: &Path) -> (integration_tests::Running, Footprint) {
+    let mut orch = spawn(&mut realtime_launch(team, out, &[]));
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
+    let procs = team_processes(team);
+    assert_eq!(procs.len(), 11, "{procs:#?}");
+    (orch, Footprint::record(team, procs.keys().copied()))
+}
+
 fn ids(n: u32) -> BTreeSet<u32> {
     (1..=n).collect()
 }
@@ -111,11 +121,7 @@ fn a_stopped_member_is_named_and_the_team_stopped() {
     let dir = TempDir::new();
     let team = unique_team("rt_sigstop");
     let out = dir.path().join("run");
-    let mut orch = spawn(&mut realtime_launch(&team, &out, &[]));
-    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
-    let procs = team_processes(&team);
-    assert_eq!(procs.len(), 11, "{procs:#?}");
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let (orch, fp) = flying(&team, &out);
     let victim = 9;
     let pid = member_pid(&team, victim).expect("agent 9 runs");
     let _guard = Stopped(pid);
@@ -141,11 +147,7 @@ fn a_killed_member_is_named_and_the_team_stopped() {
     let dir = TempDir::new();
     let team = unique_team("rt_kill");
     let out = dir.path().join("run");
-    let mut orch = spawn(&mut realtime_launch(&team, &out, &[]));
-    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
-    let procs = team_processes(&team);
-    assert_eq!(procs.len(), 11, "{procs:#?}");
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let (orch, fp) = flying(&team, &out);
     let pid = member_pid(&team, 8).expect("agent 8 runs");
     signal(pid, libc::SIGKILL);
     let o = orch.finish(DEADLINE);
@@ -167,11 +169,7 @@ fn sigint_in_real_time_leaves_nothing_behind() {
     let dir = TempDir::new();
     let team = unique_team("rt_sigint");
     let out = dir.path().join("run");
-    let mut orch = spawn(&mut realtime_launch(&team, &out, &[]));
-    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
-    let procs = team_processes(&team);
-    assert_eq!(procs.len(), 11, "{procs:#?}");
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let (mut orch, fp) = flying(&team, &out);
     signal(orch.id(), libc::SIGINT);
     let o = orch.finish(DEADLINE);
     assert_exit(&o, 3, "launch --realtime after SIGINT");
@@ -245,19 +243,4 @@ fn wait_for_file(
     }
     std::thread::sleep(Duration::from_millis(100));
     flown_scenario_file(path)
-}
-
-/// Resumes and kills a stopped process if the test fails before the orchestrator did.
-struct Stopped(u32);
-
-impl Drop for Stopped {
-    fn drop(&mut self) {
-        if let Ok(pid) = libc::pid_t::try_from(self.0) {
-            // SAFETY: kill(2) takes no pointers; at worst the pid is already gone.
-            unsafe {
-                libc::kill(pid, libc::SIGCONT);
-                libc::kill(pid, libc::SIGKILL);
-            }
-        }
-    }
 }
