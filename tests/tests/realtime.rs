@@ -5,7 +5,8 @@
 //!
 //! - A real-time run of a short plan is SAFE, its `realtime` figures are present and sane, its
 //!   telemetry has a row per agent at every audit instant, and it tracks like `simulate`.
-//! - A member stopped with SIGSTOP is named (agent-silent) and the team stopped, nothing left.
+//! - A member stopped with SIGSTOP is named (agent-silent) and the team stopped, nothing left;
+//!   a killed member is named (agent-exited) the same way.
 //! - SIGINT to the orchestrator stops the team, nothing left.
 //! - A member started by hand in the other mode is refused with exit 2.
 
@@ -32,6 +33,16 @@ fn realtime_launch(team: &str, out: &Path, extra: &[&str]) -> Command {
     args.extend(["--realtime", "--no-figures"]);
     args.extend(extra);
     launch(team, out, &args)
+}
+
+/// A real-time team of 10 flying a long plan, seen with its 11 processes: the orchestrator and
+/// the team's footprint (for the "nothing left" check).
+fn flying(team: &str, out: &Path) -> (integration_tests::Running, Footprint) {
+    let mut orch = spawn(&mut realtime_launch(team, out, &[]));
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
+    let procs = team_processes(team);
+    assert_eq!(procs.len(), 11, "{procs:#?}");
+    (orch, Footprint::record(team, procs.keys().copied()))
 }
 
 fn ids(n: u32) -> BTreeSet<u32> {
@@ -110,11 +121,7 @@ fn a_stopped_member_is_named_and_the_team_stopped() {
     let dir = TempDir::new();
     let team = unique_team("rt_sigstop");
     let out = dir.path().join("run");
-    let mut orch = spawn(&mut realtime_launch(&team, &out, &[]));
-    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
-    let procs = team_processes(&team);
-    assert_eq!(procs.len(), 11, "{procs:#?}");
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let (orch, fp) = flying(&team, &out);
     let victim = 9;
     let pid = member_pid(&team, victim).expect("agent 9 runs");
     let _guard = Stopped(pid);
@@ -133,6 +140,28 @@ fn a_stopped_member_is_named_and_the_team_stopped() {
     fp.assert_nothing_left();
 }
 
+/// SIGKILL of follower 8 in real time: the orchestrator sees its process exit and names it
+/// (`agent-exited`, the signal), stops the team, exit 3, nothing left.
+#[test]
+fn a_killed_member_is_named_and_the_team_stopped() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_kill");
+    let out = dir.path().join("run");
+    let (orch, fp) = flying(&team, &out);
+    let pid = member_pid(&team, 8).expect("agent 8 runs");
+    signal(pid, libc::SIGKILL);
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 3, "launch --realtime after SIGKILL of a member");
+    let audit = read_json(&out.join("audit.json"));
+    let fault = &audit["fault"];
+    assert_eq!(fault["kind"], "agent-exited", "{audit:#}");
+    assert_eq!(fault["agent"], 8, "{audit:#}");
+    let message = fault["message"].as_str().unwrap_or_default();
+    assert!(message.contains("killed by signal 9"), "{fault:#}");
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
+}
+
 /// SIGINT to the orchestrator in real time: the stop sequence, exit 3, `interrupted`, no
 /// process and nothing in /dev/shm left.
 #[test]
@@ -140,11 +169,7 @@ fn sigint_in_real_time_leaves_nothing_behind() {
     let dir = TempDir::new();
     let team = unique_team("rt_sigint");
     let out = dir.path().join("run");
-    let mut orch = spawn(&mut realtime_launch(&team, &out, &[]));
-    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
-    let procs = team_processes(&team);
-    assert_eq!(procs.len(), 11, "{procs:#?}");
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let (mut orch, fp) = flying(&team, &out);
     signal(orch.id(), libc::SIGINT);
     let o = orch.finish(DEADLINE);
     assert_exit(&o, 3, "launch --realtime after SIGINT");
@@ -218,19 +243,4 @@ fn wait_for_file(
     }
     std::thread::sleep(Duration::from_millis(100));
     flown_scenario_file(path)
-}
-
-/// Resumes and kills a stopped process if the test fails before the orchestrator did.
-struct Stopped(u32);
-
-impl Drop for Stopped {
-    fn drop(&mut self) {
-        if let Ok(pid) = libc::pid_t::try_from(self.0) {
-            // SAFETY: kill(2) takes no pointers; at worst the pid is already gone.
-            unsafe {
-                libc::kill(pid, libc::SIGCONT);
-                libc::kill(pid, libc::SIGKILL);
-            }
-        }
-    }
 }
