@@ -24,6 +24,13 @@
 //! plus one coefficient vector per follower and depth, and E_max is the largest norm of a
 //! follower's combination over the ticks, found exactly (every tick counts) by a coarse pass with
 //! a curvature bound ([`max_norm`]). The coarse pass runs in parallel over followers.
+//!
+//! Link delay (issue 11, `link.rs`) keeps all of this: a follower whose neighbours' states
+//! arrive d ticks late flies tick k with their tick-h states, h = max(k - d, 0), brought to t_k
+//! by the cubic Taylor shift S(k - h) (`Heard::at_tick`), so the neighbour term of the tick map
+//! becomes psi S(k - h) applied to the tick-h input. H is still linear and acts on time only, so
+//! it still commutes with W: only the scalar chains change (`chains` with a delay), and E_max at
+//! a delay costs what it costs without one.
 
 use crate::formation::Role;
 use crate::math::{Mat4, Mat8, Real, Vec3, Vec4};
@@ -194,8 +201,15 @@ impl LinearTeam {
     /// Largest follower deviation ||r_i - r_i,HT||_2 over ticks 0..=last tick of a plan of
     /// `t_total_s` (eq. 34): what `engine::max_follower_deviation` measures by flying.
     pub fn max_follower_deviation(&self, t_total_s: Real) -> Real {
+        self.max_follower_deviation_delayed(t_total_s, 0)
+    }
+
+    /// [`Self::max_follower_deviation`] with every state between agents `delay_ticks` late
+    /// (what the engine flies with `[link] delay_ms` = delay_ticks / comm_hz and no jitter or
+    /// loss). Not finite when the delayed team diverges.
+    pub fn max_follower_deviation_delayed(&self, t_total_s: Real, delay_ticks: u64) -> Real {
         let last = crate::scenario::last_tick_of(t_total_s, self.comm_hz) as usize;
-        let chains = self.chains(t_total_s, last);
+        let chains = self.chains(t_total_s, last, delay_ticks as usize);
         let followers = self.start.len() - 1;
         let threads = std::thread::available_parallelism()
             .map_or(1, |n| n.get())
@@ -223,8 +237,8 @@ impl LinearTeam {
     }
 
     /// Run the scalar chains over ticks 0..=last (see the module text): g_0 = phi + H Lam,
-    /// g_l = H^l psi.
-    fn chains(&self, t_total_s: Real, last: usize) -> Chains {
+    /// g_l = H^l psi, with H's input `delay` ticks late.
+    fn chains(&self, t_total_s: Real, last: usize, delay: usize) -> Chains {
         let TickMaps { a, phi, psi } = self.maps;
         let q = Quintic { t_total_s };
         let dt = self.dt_s;
@@ -246,10 +260,17 @@ impl LinearTeam {
         let x0 = -Vec4::new(0.0, 0.0, 0.0, s_at(0)[3]);
         let (mut phi_x, mut lam, mut chi) = (x0, x0, Vec4::zeros());
         let mut y = vec![Vec4::zeros(); levels];
-        let follow = phi + psi;
         let mut s_k = s_at(0);
+        // The last delay + 1 ticks of what H reads (s, Lam, g_0 .. g_D), slot k mod (delay + 1).
+        let width = levels + 2;
+        let mut past = vec![Vec4::zeros(); (delay + 1) * width];
+        let psi_delay = psi * taylor_shift(delay as Real * dt);
         for k in 0..=last {
             y[0] = phi_x + chi;
+            let slot = (k % (delay + 1)) * width;
+            past[slot] = s_k;
+            past[slot + 1] = lam;
+            past[slot + 2..slot + width].copy_from_slice(&y);
             for (l, g) in y.iter().enumerate() {
                 pos.push(g[0]);
                 // |g''| between ticks is at most |g''(t_k)| + dt |g'''| (+ O(dt^2)).
@@ -268,14 +289,30 @@ impl LinearTeam {
             if k == last {
                 break;
             }
-            let psi_k = phi_x + chi - lam;
+            // The neighbours' states heard at tick k are those of tick h (link.rs: before the
+            // first arrives, the start), brought to t_k.
+            let h = k.saturating_sub(delay);
+            let psi_h = if delay == 0 {
+                psi
+            } else if k - h == delay {
+                psi_delay
+            } else {
+                psi * taylor_shift((k - h) as Real * dt)
+            };
+            let at_h = &past[(h % (delay + 1)) * width..][..width];
+            let (s_h, lam_h, y_h) = (at_h[0], at_h[1], &at_h[2..]);
             for l in (1..levels).rev() {
-                let input = if l == 1 { psi_k } else { y[l - 1] };
-                y[l] = phi * y[l] + psi * input;
+                let input = if l == 1 { y_h[0] - lam_h } else { y_h[l - 1] };
+                y[l] = phi * y[l] + psi_h * input;
             }
             let s_next = s_at(k + 1);
-            chi = phi * chi + psi * lam;
-            phi_x = phi * phi_x + follow * s_k - s_next;
+            chi = phi * chi + psi_h * lam_h;
+            phi_x = if delay == 0 {
+                // The same operations as before delays existed: the same bits.
+                phi * phi_x + (phi + psi) * s_k - s_next
+            } else {
+                phi * phi_x + phi * s_k + psi_h * s_h - s_next
+            };
             lam = phi * lam;
             let t_next = tick_time(k as u64 + 1, dt);
             if t_next > t_total_s && tick_time(k as u64, dt) < t_total_s {
@@ -292,6 +329,18 @@ impl LinearTeam {
             last_tick: last,
         }
     }
+}
+
+/// The cubic Taylor shift by `tau` seconds of a (position, velocity, acceleration, jerk) state:
+/// `Heard::at_tick` as a matrix.
+fn taylor_shift(tau: Real) -> Mat4 {
+    let (t2, t3) = (tau * tau / 2.0, tau * tau * tau / 6.0);
+    Mat4::new(
+        1.0, tau, t2, t3, //
+        0.0, 1.0, tau, t2, //
+        0.0, 0.0, 1.0, tau, //
+        0.0, 0.0, 0.0, 1.0,
+    )
 }
 
 /// Followers in topological order with their depth (longest chain of follower in-neighbours).
