@@ -10,8 +10,10 @@ use cdm_runtime::member_core::MemberCore;
 use cdm_runtime::member_loop::{fly, LoopError};
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 
+use crate::dynamics::QuadState;
 use crate::engine::step_config;
 use crate::formation::Role;
+use crate::options::LinkArgs;
 use crate::scenario::{Checks, Scenario, ScenarioError};
 use crate::step::StepFault;
 use crate::transport::{MemberPorts, TeamName, TransportError};
@@ -46,6 +48,9 @@ impl Kind {
 pub enum MemberError {
     #[error(transparent)]
     Scenario(#[from] ScenarioError),
+    /// A bad `--link-*` or `--seed` value (the message names the flag).
+    #[error("{0}")]
+    Link(String),
     #[error("agent {id} is not in scenario {origin}")]
     NotInScenario { id: u32, origin: String },
     #[error("agent {id} is a {role} in {origin}; the `{binary}` binary flies {flies}")]
@@ -89,6 +94,7 @@ impl MemberError {
     pub fn exit_code(&self) -> i32 {
         match self {
             MemberError::Scenario(_)
+            | MemberError::Link(_)
             | MemberError::NotInScenario { .. }
             | MemberError::WrongRole { .. } => 2,
             MemberError::Transport(
@@ -108,11 +114,12 @@ pub fn run_member(
     kind: Kind,
     scenario_path: &Path,
     team: &TeamName,
-    id: u32,
+    (id, link): (u32, &LinkArgs),
     deadlines: Deadlines,
     interrupted: &AtomicBool,
 ) -> Result<Finished, MemberError> {
     let s = Scenario::load(scenario_path, Checks::Member)?;
+    let s = link.apply(&s).map_err(MemberError::Link)?;
     let Some(me) = s.formation.member(id).cloned() else {
         return Err(MemberError::NotInScenario {
             id,
@@ -149,7 +156,11 @@ pub fn run_member(
     let clock = MonotonicClock::start();
     let vehicle = ModelVehicle::new(step_config(&s), &s.plan, &me);
     let parts = (vehicle, LockstepClock::default());
-    let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now());
+    let starts = MemberCore::<ModelVehicle, LockstepClock>::in_neighbors(&me).map(|n| {
+        QuadState::hover(s.formation.member(n).map_or(me.position, |m| m.position)).flat()
+    });
+    let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now())
+        .with_links(s.link_model(), &step_config(&s), starts);
     let inject = crate::fault_inject::from_env(id);
     fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
         .map_err(|e| MemberError::from_loop(e, id, team))

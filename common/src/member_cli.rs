@@ -1,7 +1,7 @@
 //! The command line shared by the `agent` and `leader` binaries.
 
 use crate::member::{run_member, Deadlines, Kind};
-use crate::options::timeout;
+use crate::options::{timeout, LinkArgs};
 use crate::transport::TeamName;
 use std::path::PathBuf;
 
@@ -36,6 +36,8 @@ pub struct MemberArgs {
         default_value_t = 10.0
     )]
     pub silence_timeout_s: f64,
+    #[command(flatten)]
+    pub link: LinkArgs,
 }
 
 /// The whole `main` of a member binary: parse arguments, initialise logging (`RUST_LOG`,
@@ -100,7 +102,8 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
     };
     let span = tracing::info_span!("agent", id = args.id);
     let _g = span.enter();
-    match run_member(kind, &args.scenario, &team, args.id, deadlines, interrupted) {
+    let member = (args.id, &args.link);
+    match run_member(kind, &args.scenario, &team, member, deadlines, interrupted) {
         Ok(f) => stopped(&team, args.id, f),
         Err(e) => {
             say(&format!("error: {e}"));
