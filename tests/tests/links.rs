@@ -17,7 +17,7 @@ use integration_tests::{bin, describe, run, spawn, unique_team, write_scenario, 
 mod support;
 use support::*;
 
-/// A 40-agent team of 600 ticks as processes takes a few seconds; the rest is slack.
+/// A 10-agent team of 400 ticks as processes takes about a second; the rest is slack.
 const DEADLINE: Duration = Duration::from_secs(120);
 /// A refused member exits as soon as it has read the scenario and looked at the team.
 const REFUSE_DEADLINE: Duration = Duration::from_secs(30);
@@ -36,19 +36,19 @@ const IMPAIRED: [&str; 8] = [
 #[test]
 fn lockstep_launch_equals_simulate_with_delay_jitter_and_loss() {
     let dir = TempDir::new();
-    let base = ["--n", "40", "--max-ticks", "600", "--no-figures"];
+    let base = ["--n", "10", "--max-ticks", "400", "--no-figures"];
     let source: Vec<&str> = base.iter().chain(&IMPAIRED).copied().collect();
     let sim = dir.path().join("sim");
     assert_exit(
         &run(&mut simulate(&sim, &source), DEADLINE),
         0,
-        "simulate --n 40 impaired",
+        "simulate --n 10 impaired",
     );
     let perfect = dir.path().join("perfect");
     assert_exit(
         &run(&mut simulate(&perfect, &base), DEADLINE),
         0,
-        "simulate --n 40",
+        "simulate --n 10",
     );
     let impaired = std::fs::read(sim.join("telemetry.csv")).expect("impaired telemetry");
     let clean = std::fs::read(perfect.join("telemetry.csv")).expect("perfect telemetry");
@@ -216,17 +216,55 @@ fn plan_certifies_the_largest_link_delay_and_sweeps_it() {
     }
 }
 
+/// A bad link value is bad input (exit 2) naming its flag, on every command that takes it.
 #[test]
-fn bad_link_flags_are_refused_naming_the_field() {
+fn bad_link_flags_are_refused_naming_the_flag() {
     let dir = TempDir::new();
-    for (flag, value, field) in [
-        ("--link-loss", "1.5", "link.loss"),
-        ("--link-delay-ms", "-3", "link.delay_ms"),
-        ("--link-jitter-ms", "nan", "link.jitter_ms"),
+    for (flag, value) in [
+        ("--link-loss", "1.5"),
+        ("--link-delay-ms", "-3"),
+        ("--link-jitter-ms", "nan"),
+        ("--seed", "18446744073709551615"),
     ] {
-        let out = dir.path().join(field);
+        let what = format!("simulate {flag} {value}");
+        let out = dir.path().join(flag.trim_start_matches('-'));
         let o = run(&mut simulate(&out, &["--n", "4", flag, value]), DEADLINE);
-        assert_exit(&o, 2, &format!("simulate {flag} {value}"));
-        assert_stderr_has(&o, &format!("simulate {flag} {value}"), &[field]);
+        assert_exit(&o, 2, &what);
+        assert_stderr_has(&o, &what, &[&format!("{flag} "), "must be"]);
     }
+    let team = unique_team("badlink");
+    let o = run(
+        &mut launch(
+            &team,
+            &dir.path().join("l"),
+            &["--n", "4", "--link-loss", "-0.5"],
+        ),
+        DEADLINE,
+    );
+    assert_exit(&o, 2, "launch --link-loss -0.5");
+    assert_stderr_has(
+        &o,
+        "launch --link-loss -0.5",
+        &["--link-loss -0.5", "[0, 1)"],
+    );
+    assert_no_process_of(&team);
+    // A member binary refuses it before it looks for its team.
+    let scenario = dir.path().join("paper40.toml");
+    let o = run(
+        Command::new(bin("orchestrator"))
+            .args(["scenario", "export", "--out"])
+            .arg(&scenario),
+        DEADLINE,
+    );
+    assert_exit(&o, 0, "scenario export");
+    let o = run(
+        member("agent", &scenario, &team, 10).args(["--link-delay-ms", "1e9"]),
+        REFUSE_DEADLINE,
+    );
+    assert_exit(&o, 2, "agent --link-delay-ms 1e9");
+    assert_stderr_has(
+        &o,
+        "agent --link-delay-ms 1e9",
+        &["--link-delay-ms 1000000000"],
+    );
 }
