@@ -17,7 +17,6 @@ mod export;
 mod launch;
 mod progress;
 mod report;
-mod stall;
 mod team;
 mod telemetry;
 mod viewer;
