@@ -137,3 +137,20 @@ fn the_linear_team_with_a_delay_matches_the_engine_flying_it() {
         team.max_follower_deviation(60.0)
     );
 }
+
+/// `meets`, the delay search's question, agrees with the full E_max on both sides of delta.
+#[test]
+fn the_cheap_question_agrees_with_the_full_answer() {
+    let s = paper40_with(60.0);
+    let team = LinearTeam::new(&s).unwrap();
+    for ticks in [0u64, 40, 100, 120, 150, 400] {
+        let e = team.max_follower_deviation_delayed(60.0, ticks);
+        for limit in [3.0, 4.0, 9.0276, 100.0] {
+            assert_eq!(
+                team.meets(60.0, ticks, limit),
+                e <= limit,
+                "delay {ticks} ticks, E_max {e}, limit {limit}"
+            );
+        }
+    }
+}

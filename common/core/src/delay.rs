@@ -96,7 +96,18 @@ pub fn max_link_delay(s: &Scenario, delta_m: Real, linear: Option<&LinearTeam>) 
     let cap = s.last_tick().min((MAX_DELAY_MS / dt_ms) as u64);
     let t = s.file.t_total_s;
     match linear {
-        Some(team) => max_delay_ticks(|d| team.max_follower_deviation_delayed(t, d), delta_m, cap),
+        // Only "E_max <= delta?" is asked: `meets` answers it without computing E_max.
+        Some(team) => max_delay_ticks(
+            |d| {
+                if team.meets(t, d, delta_m) {
+                    0.0
+                } else {
+                    Real::INFINITY
+                }
+            },
+            delta_m,
+            cap,
+        ),
         None => max_delay_ticks(
             |d| deviation_at_delay(s, d as Real * dt_ms, delta_m),
             delta_m,

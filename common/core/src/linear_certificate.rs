@@ -208,6 +208,18 @@ impl LinearTeam {
     /// (what the engine flies with `[link] delay_ms` = delay_ticks / comm_hz and no jitter or
     /// loss). Not finite when the delayed team diverges.
     pub fn max_follower_deviation_delayed(&self, t_total_s: Real, delay_ticks: u64) -> Real {
+        self.deviation_over(t_total_s, delay_ticks, 0.0, Real::INFINITY)
+    }
+
+    /// Whether E_max <= `limit_m` with every state `delay_ticks` late: the question the delay
+    /// search asks, answered with the coarse pass alone (no interval is refined unless its
+    /// bound reaches the limit) and stopped at the first point beyond it.
+    pub fn meets(&self, t_total_s: Real, delay_ticks: u64, limit_m: Real) -> bool {
+        self.deviation_over(t_total_s, delay_ticks, limit_m, limit_m) <= limit_m
+    }
+
+    /// max(floor, E_max), or the first value found above `stop` (infinite when not finite).
+    fn deviation_over(&self, t_total_s: Real, delay_ticks: u64, floor: Real, stop: Real) -> Real {
         let last = crate::scenario::last_tick_of(t_total_s, self.comm_hz) as usize;
         let chains = self.chains(t_total_s, last, delay_ticks as usize);
         let followers = self.start.len() - 1;
@@ -215,15 +227,23 @@ impl LinearTeam {
             .map_or(1, |n| n.get())
             .clamp(1, followers.max(1));
         let per = followers.div_ceil(threads);
+        let stopped = std::sync::atomic::AtomicBool::new(false);
         std::thread::scope(|scope| {
             let handles: Vec<_> = (0..threads)
                 .map(|t| {
-                    let chains = &chains;
+                    let (chains, stopped) = (&chains, &stopped);
                     scope.spawn(move || {
-                        let mut best: Real = 0.0;
+                        let mut best: Real = floor;
                         for i in t * per..((t + 1) * per).min(followers) {
+                            if stopped.load(std::sync::atomic::Ordering::Relaxed) {
+                                break;
+                            }
                             let c = &self.coef[self.start[i]..self.start[i + 1]];
-                            best = max_norm(chains, c, self.dt_s, best);
+                            best = max_norm(chains, c, self.dt_s, best, stop);
+                            if !(best <= stop) {
+                                stopped.store(true, std::sync::atomic::Ordering::Relaxed);
+                                return best;
+                            }
                         }
                         best
                     })
@@ -231,8 +251,8 @@ impl LinearTeam {
                 .collect();
             handles
                 .into_iter()
-                .map(|h| h.join().unwrap_or(Real::NAN))
-                .fold(0.0, Real::max)
+                .map(|h| h.join().unwrap_or(Real::INFINITY))
+                .fold(floor, Real::max)
         })
     }
 
@@ -413,7 +433,8 @@ fn follower_order(s: &Scenario) -> Result<Vec<(usize, usize)>, NotLinear> {
 /// Coarse points every [`COARSE_TICKS`] ticks; an interval is refined tick by tick only when its
 /// bound max(ends) + h^2 / 8 max||e''|| can exceed the best so far (e is within h^2/8 max||e''||
 /// of the chord between its ends), so the result is the maximum over every tick.
-fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> Real {
+/// Returns early, with a value above `stop` (infinite for a non-finite one), once one is found.
+fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real, stop: Real) -> Real {
     let at = |k: usize| -> Real {
         let g = &ch.pos[k * ch.levels..k * ch.levels + c.len()];
         let mut e = [0.0; 3];
@@ -430,9 +451,15 @@ fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> Real {
         .collect();
     let last = ch.last_tick;
     let intervals = last.div_ceil(COARSE_TICKS).max(1);
-    let ends: Vec<Real> = (0..=intervals)
-        .map(|j| at((j * COARSE_TICKS).min(last)))
-        .collect();
+    let mut ends = Vec::with_capacity(intervals + 1);
+    for j in 0..=intervals {
+        let e = at((j * COARSE_TICKS).min(last));
+        if !(e <= stop) {
+            // A diverging team overflows to inf and NaN, which `max` would skip.
+            return if e.is_finite() { e } else { Real::INFINITY };
+        }
+        ends.push(e);
+    }
     let mut best = ends.iter().copied().fold(floor, Real::max);
     for j in 0..intervals {
         let (a, b) = (j * COARSE_TICKS, ((j + 1) * COARSE_TICKS).min(last));
@@ -444,7 +471,11 @@ fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> Real {
             .sum();
         if ends[j].max(ends[j + 1]) + h * h / 8.0 * curv * 1.01 > best {
             for k in a + 1..b {
-                best = best.max(at(k));
+                let e = at(k);
+                if !(e <= stop) {
+                    return if e.is_finite() { e } else { Real::INFINITY };
+                }
+                best = best.max(e);
             }
         }
     }
