@@ -248,6 +248,14 @@ fn bad_link_flags_are_refused_naming_the_flag() {
         &["--link-loss -0.5", "[0, 1)"],
     );
     assert_no_process_of(&team);
+    let o = run(
+        Command::new(bin("orchestrator"))
+            .args(["plan", "--n", "4", "--sweep-delay", "5:1:1", "--out"])
+            .arg(dir.path().join("sw")),
+        DEADLINE,
+    );
+    assert_exit(&o, 2, "plan --sweep-delay 5:1:1");
+    assert_stderr_has(&o, "plan --sweep-delay 5:1:1", &["--sweep-delay 5:1:1"]);
     // A member binary refuses it before it looks for its team.
     let scenario = dir.path().join("paper40.toml");
     let o = run(

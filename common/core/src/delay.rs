@@ -30,13 +30,14 @@ pub enum DelayBound {
     AtLeast(u64),
 }
 
-/// The largest whole-tick delay d in [0, cap_ticks] with `fly(d) <= delta_m`: doubling from one
-/// tick to the first failure, then bisection. It assumes E_max grows with the delay (true in
+/// The largest whole-tick delay d in [0, cap_ticks] with `fly(d) <= delta_m`: doubling from
+/// `first` ticks (at least one) to the first failure, then bisection. It assumes E_max grows with the delay (true in
 /// every flight measured, BENCHMARKS.md); a non-finite E_max (a faulted flight) fails.
 pub fn max_delay_ticks(
     mut fly: impl FnMut(u64) -> Real,
     delta_m: Real,
     cap_ticks: u64,
+    first: u64,
 ) -> DelayBound {
     let mut ok = |d: u64| {
         let e = fly(d);
@@ -45,7 +46,7 @@ pub fn max_delay_ticks(
     if !ok(0) {
         return DelayBound::None;
     }
-    let (mut lo, mut hi) = (0u64, 1u64);
+    let (mut lo, mut hi) = (0u64, first.max(1));
     loop {
         if hi >= cap_ticks {
             if ok(cap_ticks) {
@@ -90,28 +91,39 @@ pub fn deviation_at_delay(s: &Scenario, delay_ms: Real, limit_m: Real) -> Real {
 
 /// The largest link delay (whole ticks at the scenario's comm_hz) at which `s` still meets
 /// E_max <= delta_m, searched up to the plan's length (or a minute): on `linear`, the scenario's
-/// linear team, when there is one, else by flying.
-pub fn max_link_delay(s: &Scenario, delta_m: Real, linear: Option<&LinearTeam>) -> DelayBound {
+/// linear team, when there is one, else by flying. `e0_m` is E_max without delay (known).
+pub fn max_link_delay(
+    s: &Scenario,
+    delta_m: Real,
+    e0_m: Real,
+    linear: Option<&LinearTeam>,
+) -> DelayBound {
     let dt_ms = s.dt_s() * 1000.0;
     let cap = s.last_tick().min((MAX_DELAY_MS / dt_ms) as u64);
     let t = s.file.t_total_s;
+    // Delays below a quarter of a second pass on every team measured (BENCHMARKS.md): starting
+    // the doubling there saves the flights of 1, 2, 4, .. ticks.
+    let first = (0.25 / s.dt_s()).round() as u64;
     match linear {
         // Only "E_max <= delta?" is asked: `meets` answers it without computing E_max.
         Some(team) => max_delay_ticks(
-            |d| {
-                if team.meets(t, d, delta_m) {
-                    0.0
-                } else {
-                    Real::INFINITY
-                }
+            |d| match d {
+                0 => e0_m,
+                _ if team.meets(t, d, delta_m) => 0.0,
+                _ => Real::INFINITY,
             },
             delta_m,
             cap,
+            first,
         ),
         None => max_delay_ticks(
-            |d| deviation_at_delay(s, d as Real * dt_ms, delta_m),
+            |d| match d {
+                0 => e0_m,
+                _ => deviation_at_delay(s, d as Real * dt_ms, delta_m),
+            },
             delta_m,
             cap,
+            first,
         ),
     }
 }
@@ -131,6 +143,10 @@ mod tests {
     use super::*;
 
     fn search(breaks_at: u64, cap: u64) -> (DelayBound, usize) {
+        search_from(breaks_at, cap, 1)
+    }
+
+    fn search_from(breaks_at: u64, cap: u64, first: u64) -> (DelayBound, usize) {
         let mut flights = 0;
         let b = max_delay_ticks(
             |d| {
@@ -143,6 +159,7 @@ mod tests {
             },
             1.5,
             cap,
+            first,
         );
         (b, flights)
     }
@@ -160,6 +177,18 @@ mod tests {
     }
 
     #[test]
+    fn any_first_guess_finds_the_same_tick() {
+        for first in [1, 3, 25, 64, 1000] {
+            for breaks_at in [1, 2, 30, 91, 144, 513] {
+                let (b, flights) = search_from(breaks_at, 10_000, first);
+                assert_eq!(b, DelayBound::Ticks(breaks_at - 1), "first {first}");
+                assert!(flights <= 2 * 14 + 1, "{flights} flights");
+            }
+        }
+        assert_eq!(search_from(1000, 100, 25).0, DelayBound::AtLeast(100));
+    }
+
+    #[test]
     fn reports_none_and_the_cap() {
         assert_eq!(search(0, 100).0, DelayBound::None);
         assert_eq!(search(1000, 100).0, DelayBound::AtLeast(100));
@@ -169,9 +198,9 @@ mod tests {
 
     #[test]
     fn a_faulted_flight_fails() {
-        let b = max_delay_ticks(|d| if d >= 5 { Real::INFINITY } else { 0.0 }, 1.0, 50);
+        let b = max_delay_ticks(|d| if d >= 5 { Real::INFINITY } else { 0.0 }, 1.0, 50, 1);
         assert_eq!(b, DelayBound::Ticks(4));
-        let nan = max_delay_ticks(|d| if d >= 3 { Real::NAN } else { 0.0 }, 1.0, 50);
+        let nan = max_delay_ticks(|d| if d >= 3 { Real::NAN } else { 0.0 }, 1.0, 50, 2);
         assert_eq!(nan, DelayBound::Ticks(2));
     }
 }

@@ -212,7 +212,7 @@ impl<P: Plant> Engine<P> {
         l.history.push_back(self.flats.clone());
         let members = &self.scenario.formation.members;
         let upto = l.model.needed(tick);
-        for k in 0..self.states.len() {
+        for (k, member) in members.iter().enumerate() {
             if !self.alive[k] {
                 continue;
             }
@@ -230,7 +230,7 @@ impl<P: Plant> Engine<P> {
                         })
                 };
                 let ids = &self.neighbor_ids[k];
-                let to = members[k].id;
+                let to = member.id;
                 let cfg = &self.cfg;
                 let held = &mut l.held[k];
                 nb = l.model.hear(
@@ -253,7 +253,7 @@ impl<P: Plant> Engine<P> {
                 &self.neighbor_ids[k],
             )
             .map_err(|fault| AgentFault {
-                id: members[k].id,
+                id: member.id,
                 tick,
                 fault,
             })?;

@@ -240,7 +240,7 @@ impl LinearTeam {
                             }
                             let c = &self.coef[self.start[i]..self.start[i + 1]];
                             best = max_norm(chains, c, self.dt_s, best, stop);
-                            if !(best <= stop) {
+                            if best.is_nan() || best > stop {
                                 stopped.store(true, std::sync::atomic::Ordering::Relaxed);
                                 return best;
                             }
@@ -454,7 +454,7 @@ fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real, stop: Real) -
     let mut ends = Vec::with_capacity(intervals + 1);
     for j in 0..=intervals {
         let e = at((j * COARSE_TICKS).min(last));
-        if !(e <= stop) {
+        if e.is_nan() || e > stop {
             // A diverging team overflows to inf and NaN, which `max` would skip.
             return if e.is_finite() { e } else { Real::INFINITY };
         }
@@ -472,7 +472,7 @@ fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real, stop: Real) -
         if ends[j].max(ends[j + 1]) + h * h / 8.0 * curv * 1.01 > best {
             for k in a + 1..b {
                 let e = at(k);
-                if !(e <= stop) {
+                if e.is_nan() || e > stop {
                     return if e.is_finite() { e } else { Real::INFINITY };
                 }
                 best = best.max(e);

@@ -259,7 +259,7 @@ pub fn certify(s: &Scenario) -> Certificate {
     let t_thr = t_threshold(s, n.delta_m, e, deviation);
     let margin = s.gains_margin.unwrap_or(Real::NAN);
     let (max_link_delay_ms, max_link_delay_at_least) =
-        bound_ms(max_link_delay(s, n.delta_m, linear.as_ref()), s.dt_s());
+        bound_ms(max_link_delay(s, n.delta_m, e, linear.as_ref()), s.dt_s());
     let mut reasons = Vec::new();
     if n.delta_m.is_nan() || n.delta_m <= 0.0 {
         reasons.push(format!(
