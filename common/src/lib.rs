@@ -7,9 +7,9 @@
 //! fault injection; no iceoryx2) -> `cdm-iox` (the only library crate that names iceoryx2).
 
 pub use cdm_core::{
-    audit, control, dynamics, engine, export, files, formation, frame, gains, geometry, graph,
-    linear_certificate, loss, losscert, math, outcome, plan, repair, rundir, safety, scenario,
-    simulate, step, telemetry,
+    audit, control, delay, dynamics, engine, export, files, formation, frame, gains, geometry,
+    graph, linear_certificate, link, loss, losscert, math, outcome, plan, repair, rundir, safety,
+    scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
 pub use cdm_runtime::{

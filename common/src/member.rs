@@ -14,8 +14,10 @@ use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
 use cdm_runtime::realtime_loop::fly_realtime;
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock, Vehicle};
 
+use crate::dynamics::QuadState;
 use crate::engine::step_config;
 use crate::formation::{Member, Role};
+use crate::options::LinkArgs;
 use crate::scenario::{Checks, Scenario, ScenarioError};
 use crate::step::StepFault;
 use crate::transport::{MemberPorts, TeamName, TransportError};
@@ -61,6 +63,9 @@ pub enum Mode {
 pub enum MemberError {
     #[error(transparent)]
     Scenario(#[from] ScenarioError),
+    /// A bad `--link-*` or `--seed` value (the message names the flag).
+    #[error("{0}")]
+    Link(String),
     #[error("agent {id} is not in scenario {origin}")]
     NotInScenario { id: u32, origin: String },
     #[error("agent {id} is a {role} in {origin}; the `{binary}` binary flies {flies}")]
@@ -118,6 +123,7 @@ impl MemberError {
     pub fn exit_code(&self) -> i32 {
         match self {
             MemberError::Scenario(_)
+            | MemberError::Link(_)
             | MemberError::NotInScenario { .. }
             | MemberError::WrongRole { .. }
             | MemberError::ModeMismatch { .. } => 2,
@@ -150,7 +156,7 @@ pub fn run_member(
     kind: Kind,
     scenario_path: &Path,
     team: &TeamName,
-    id: u32,
+    (id, link): (u32, &LinkArgs),
     flight: &Flight,
     interrupted: &AtomicBool,
 ) -> Result<Finished, MemberError> {
@@ -160,6 +166,13 @@ pub fn run_member(
         vehicles,
     } = *flight;
     let s = Scenario::load(scenario_path, Checks::Member)?;
+    let s = link.apply(&s).map_err(MemberError::Link)?;
+    if let Some(why) = matches!(mode, Mode::Realtime { .. })
+        .then(|| crate::options::realtime_links_refusal(&s))
+        .flatten()
+    {
+        return Err(MemberError::Link(why));
+    }
     let Some(me) = s.formation.member(id).cloned() else {
         return Err(MemberError::NotInScenario {
             id,
@@ -247,7 +260,11 @@ impl Joined<'_> {
                 .map_err(|e| MemberError::from_loop(e, id, team));
         }
         let parts = (vehicle, LockstepClock::default());
-        let mut core = MemberCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now());
+        let starts = MemberCore::<ModelVehicle, LockstepClock>::in_neighbors(me).map(|n| {
+            QuadState::hover(s.formation.member(n).map_or(me.position, |m| m.position)).flat()
+        });
+        let mut core = MemberCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
+            .with_links(s.link_model(), &step_config(s), starts);
         let inject = crate::fault_inject::from_env(id);
         fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
             .map_err(|e| MemberError::from_loop(e, id, team))

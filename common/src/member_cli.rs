@@ -1,7 +1,7 @@
 //! The command line shared by the `agent` and `leader` binaries.
 
 use crate::member::{run_member, Deadlines, Flight, Kind, Mode};
-use crate::options::timeout;
+use crate::options::{timeout, LinkArgs};
 use crate::transport::TeamName;
 use std::path::PathBuf;
 
@@ -36,6 +36,8 @@ pub struct MemberArgs {
         default_value_t = 10.0
     )]
     pub silence_timeout_s: f64,
+    #[command(flatten)]
+    pub link: LinkArgs,
     /// Fly in real time on this process's own clock, from the start instant the orchestrator
     /// announces (its `launch --realtime`), with no grant and no barrier.
     #[arg(long)]
@@ -136,7 +138,14 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
         mode,
         vehicles,
     };
-    let run = run_member(kind, &args.scenario, &team, args.id, &flight, interrupted);
+    let run = run_member(
+        kind,
+        &args.scenario,
+        &team,
+        (args.id, &args.link),
+        &flight,
+        interrupted,
+    );
     match run {
         Ok(f) => stopped(&team, args.id, f),
         Err(e) => {

@@ -44,3 +44,70 @@ mod tests {
         }
     }
 }
+
+/// `--link-delay-ms`, `--link-jitter-ms`, `--link-loss` and `--seed`: imperfect links as part
+/// of the model (`link.rs`), on `simulate`, lockstep `launch` and the member binaries. Each flag
+/// given overrides that key of the scenario's `[link]` table. A member started by hand needs the
+/// flags its team was launched with (or the run directory's scenario.toml, which has them): the
+/// links are part of the scenario's hash, so a member with other links is refused.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct LinkArgs {
+    /// Delay of every state between agents, milliseconds (rounded to whole ticks).
+    #[arg(long, value_name = "MS", allow_negative_numbers = true)]
+    pub link_delay_ms: Option<f64>,
+    /// Extra delay per state, drawn uniformly in [0, MS) per (link, tick) from --seed.
+    #[arg(long, value_name = "MS", allow_negative_numbers = true)]
+    pub link_jitter_ms: Option<f64>,
+    /// Probability in [0, 1) that a state is lost, drawn per (link, tick) from --seed; a
+    /// follower extrapolates from the newest state it has.
+    #[arg(long, value_name = "P", allow_negative_numbers = true)]
+    pub link_loss: Option<f64>,
+    /// Seed of the link draws (0 ..= 2^63 - 1; default 0).
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+}
+
+impl LinkArgs {
+    /// `s` with the flags given applied to its `[link]` table (unchanged when none is given).
+    /// A bad value is refused naming its flag (or the scenario's field, when it came from there).
+    pub fn apply(
+        &self,
+        s: &crate::scenario::Scenario,
+    ) -> Result<crate::scenario::Scenario, String> {
+        let flags = [
+            ("link.delay_ms", "--link-delay-ms", self.link_delay_ms),
+            ("link.jitter_ms", "--link-jitter-ms", self.link_jitter_ms),
+            ("link.loss", "--link-loss", self.link_loss),
+            ("link.seed", "--seed", self.seed.map(|v| v as f64)),
+        ];
+        if flags.iter().all(|f| f.2.is_none()) {
+            return Ok(s.clone());
+        }
+        let old = s.file.link.unwrap_or_default();
+        let spec = crate::link::LinkSpec {
+            delay_ms: self.link_delay_ms.unwrap_or(old.delay_ms),
+            jitter_ms: self.link_jitter_ms.unwrap_or(old.jitter_ms),
+            loss: self.link_loss.unwrap_or(old.loss),
+            seed: self.seed.unwrap_or(old.seed),
+        };
+        if let Some((field, reason)) = spec.problem() {
+            if let Some((_, flag, Some(v))) = flags.iter().find(|f| f.0 == field) {
+                let shown = if field == "link.seed" {
+                    spec.seed.to_string()
+                } else {
+                    v.to_string()
+                };
+                return Err(format!("{flag} {shown}: {reason}"));
+            }
+        }
+        s.with_link(Some(spec)).map_err(|e| e.to_string())
+    }
+}
+
+/// Real-time mode does not apply link impairments to its deliveries yet (issue 11): a scenario
+/// whose links are not perfect is refused in real time rather than flown as if they were.
+pub fn realtime_links_refusal(s: &crate::scenario::Scenario) -> Option<String> {
+    (!s.link_model().is_perfect()).then(|| {
+        "--realtime does not apply --link-delay-ms/--link-jitter-ms/--link-loss (or the scenario's [link] table) yet: use them with simulate or lockstep launch".to_string()
+    })
+}

@@ -328,6 +328,7 @@ proptest! {
                 substeps,
                 weight_floor: floor,
                 plane_tolerance_m: tolerance,
+                link: None,
                 agents: own,
             }
         };

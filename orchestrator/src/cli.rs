@@ -45,6 +45,10 @@ pub enum Command {
         /// (fig_deviation_sweep in --out; the paper's Fig. 10).
         #[arg(long, value_name = "LO:HI:STEP", requires = "out")]
         sweep: Option<String>,
+        /// Fly the plan at link delays LO, LO+STEP, .., HI milliseconds (rounded to whole
+        /// ticks) and draw E_max versus the delay (fig_delay_sweep in --out).
+        #[arg(long, value_name = "LO:HI:STEP", requires = "out")]
+        sweep_delay: Option<String>,
         /// Where the sweep's figure and data go.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
@@ -252,6 +256,8 @@ pub struct OutDir {
 /// Options shared by `simulate` and `launch`.
 #[derive(Debug, Args, Clone)]
 pub struct RunOptions {
+    #[command(flatten)]
+    pub link: common::options::LinkArgs,
     /// End the run at the tick of its first safety violation (telemetry kept, exit 1).
     #[arg(long)]
     pub stop_on_violation: bool,

@@ -4,6 +4,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use common::audit::AuditReport;
+use common::delay::deviation_at_delay;
+use common::link::MAX_DELAY_MS;
 use common::loss::LossSchedule;
 use common::losscert::{certify_losses, LossCertificate};
 use common::outcome::Verdict;
@@ -27,18 +29,27 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             source,
             json,
             sweep,
+            sweep_delay,
             out,
             losses,
         } => {
-            let sweep = match (sweep, out) {
-                (Some(text), Some(dir)) => Some((parse_sweep(&text)?, dir)),
-                _ => None,
+            let sweeps = Sweeps {
+                travel_s: sweep
+                    .map(|t| parse_sweep(&t, "--sweep", "seconds", false, "40:200:20"))
+                    .transpose()?,
+                delay_ms: sweep_delay
+                    .map(|t| parse_sweep(&t, "--sweep-delay", "milliseconds", true, "0:200:10"))
+                    .transpose()?,
+                out,
             };
-            plan(&source, json.as_deref(), sweep, losses, cli.quiet)
+            plan(&source, json.as_deref(), sweeps, losses, cli.quiet)
         }
         Command::Simulate { source, out, run } => {
             crate::telemetry::check_available(run.telemetry)?;
-            let s = load(&source)?;
+            let s = run
+                .link
+                .apply(&load(&source)?)
+                .map_err(Failure::bad_input)?;
             check_follow(&s, run.follow)?;
             let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
             let started = Instant::now();
@@ -106,8 +117,18 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             let vehicles = vehicle
                 .validate(realtime.realtime)
                 .map_err(Failure::bad_input)?;
-            let s = load(&source)?;
+            let s = run
+                .link
+                .apply(&load(&source)?)
+                .map_err(Failure::bad_input)?;
             let realtime = realtime.options(&s)?;
+            if let Some(why) = realtime
+                .is_some()
+                .then(|| common::options::realtime_links_refusal(&s))
+                .flatten()
+            {
+                return Err(Failure::bad_input(why));
+            }
             check_follow(&s, run.follow)?;
             if !run.lose.is_empty() {
                 // Killing a member process and re-opening its readers' services needs the
@@ -344,10 +365,26 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     Ok(Exit::Safe)
 }
 
-/// `--sweep LO:HI:STEP`: the travel times LO, LO + STEP, .. up to HI.
-fn parse_sweep(text: &str) -> Result<Vec<f64>, Failure> {
+/// `plan`'s sweeps (`--sweep`, `--sweep-delay`) and where they go (`--out`, required by both).
+struct Sweeps {
+    travel_s: Option<Vec<f64>>,
+    delay_ms: Option<Vec<f64>>,
+    out: Option<PathBuf>,
+}
+
+/// `FLAG LO:HI:STEP`: the values LO, LO + STEP, .. up to HI (LO may be 0 when `zero_ok`).
+fn parse_sweep(
+    text: &str,
+    flag: &str,
+    unit: &str,
+    zero_ok: bool,
+    example: &str,
+) -> Result<Vec<f64>, Failure> {
+    let lowest = if zero_ok { "0 <= LO" } else { "0 < LO" };
     let bad = || {
-        Failure::bad_input(format!("--sweep {text}: expected LO:HI:STEP in seconds with 0 < LO <= HI and STEP > 0, e.g. 40:200:20"))
+        Failure::bad_input(format!(
+            "{flag} {text}: expected LO:HI:STEP in {unit} with {lowest} <= HI and STEP > 0, e.g. {example}"
+        ))
     };
     let parts: Vec<f64> = text
         .split(':')
@@ -357,34 +394,99 @@ fn parse_sweep(text: &str) -> Result<Vec<f64>, Failure> {
     let [lo, hi, step] = parts[..] else {
         return Err(bad());
     };
-    if !(lo.is_finite() && hi.is_finite() && step.is_finite() && lo > 0.0 && hi >= lo && step > 0.0)
-    {
+    let lo_ok = lo > 0.0 || (zero_ok && lo == 0.0);
+    if !(lo.is_finite() && hi.is_finite() && step.is_finite() && lo_ok && hi >= lo && step > 0.0) {
         return Err(bad());
+    }
+    if zero_ok && hi > MAX_DELAY_MS {
+        return Err(Failure::bad_input(format!(
+            "{flag} {text}: delays up to {MAX_DELAY_MS} ms"
+        )));
     }
     let n = ((hi - lo) / step + 1e-9).floor() as usize + 1;
     if n > 1000 {
         return Err(Failure::bad_input(format!(
-            "--sweep {text}: {n} travel times, at most 1000"
+            "{flag} {text}: {n} values, at most 1000"
         )));
     }
     Ok((0..n).map(|k| lo + step * k as f64).collect())
 }
 
+/// Fly the plan once per value with `fly` (E_max of one flight) behind a spinner.
+fn sweep_flights(
+    values: &[f64],
+    what: &str,
+    quiet: bool,
+    fly: impl Fn(f64) -> f64,
+) -> Vec<(f64, f64)> {
+    let spinner = Spinner::new("sweep", quiet);
+    let mut points = Vec::with_capacity(values.len());
+    for (k, &v) in values.iter().enumerate() {
+        spinner.set_message(format!(
+            "sweep: flight {}/{} at {what} {v}",
+            k + 1,
+            values.len()
+        ));
+        points.push((v, fly(v)));
+    }
+    spinner.finish();
+    points
+}
+
+/// `plan --sweep` and `--sweep-delay`: the figures and data into `--out`.
+fn write_sweeps(
+    s: &Scenario,
+    c: &Certificate,
+    sweeps: &Sweeps,
+    quiet: bool,
+) -> Result<(), Failure> {
+    let Some(dir) = &sweeps.out else {
+        return Ok(());
+    };
+    if sweeps.travel_s.is_none() && sweeps.delay_ms.is_none() {
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Failure::bad_input(format!("--out {}: {e}", dir.display())))?;
+    let mut files = Vec::new();
+    if let Some(times) = &sweeps.travel_s {
+        let points = sweep_flights(times, "T_total =", quiet, |t| deviation_at(s, t));
+        files.extend(
+            crate::report::deviation_sweep(dir, &points, c.numbers.delta_m, c.t_threshold_s)
+                .map_err(Failure::fault)?,
+        );
+    }
+    if let Some(delays) = &sweeps.delay_ms {
+        let points = sweep_flights(delays, "link delay (ms)", quiet, |ms| {
+            deviation_at_delay(s, ms, f64::INFINITY)
+        });
+        let bound = c.max_link_delay_ms.filter(|_| !c.max_link_delay_at_least);
+        files.extend(
+            crate::report::delay_sweep(dir, &points, c.numbers.delta_m, bound)
+                .map_err(Failure::fault)?,
+        );
+    }
+    if !quiet {
+        out!("sweep: {} files in {}", files.len(), dir.display());
+    }
+    Ok(())
+}
+
 fn plan(
     source: &Source,
     json: Option<&Path>,
-    sweep: Option<(Vec<f64>, PathBuf)>,
+    sweeps: Sweeps,
     losses: bool,
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let s = load(source)?;
-    if let Some((times, _)) = &sweep {
+    if let Some(times) = &sweeps.travel_s {
         for t in [times.first(), times.last()].into_iter().flatten() {
             check_travel_time(&s, *t, "--sweep")?;
         }
     }
     let spinner = Spinner::new(
-        "certifying: E_max at several travel times for T_threshold",
+        "certifying: E_max at several travel times for T_threshold and link delays",
         quiet,
     );
     let mut c = certify(&s);
@@ -404,32 +506,7 @@ fn plan(
             "loss certificate"
         );
     }
-    if let Some((times, dir)) = sweep {
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| Failure::bad_input(format!("--out {}: {e}", dir.display())))?;
-        let spinner = Spinner::new("sweep", quiet);
-        let mut points = Vec::with_capacity(times.len());
-        for (k, &t) in times.iter().enumerate() {
-            spinner.set_message(format!(
-                "sweep: flight {}/{} at T_total = {t} s",
-                k + 1,
-                times.len()
-            ));
-            points.push((t, deviation_at(&s, t)));
-        }
-        spinner.finish();
-        let files =
-            crate::report::deviation_sweep(&dir, &points, c.numbers.delta_m, c.t_threshold_s)
-                .map_err(Failure::fault)?;
-        if !quiet {
-            out!(
-                "sweep: {} travel times, {} files in {}",
-                points.len(),
-                files.len(),
-                dir.display()
-            );
-        }
-    }
+    write_sweeps(&s, &c, &sweeps, quiet)?;
     if !quiet {
         print_certificate(&c);
         if let Some(l) = &c.losses {
@@ -483,6 +560,15 @@ pub fn print_certificate(c: &Certificate) {
         c.max_follower_deviation_m
     );
     out!("  T_threshold             {:.2} s", c.t_threshold_s);
+    match (c.max_link_delay_ms, c.max_link_delay_at_least) {
+        (Some(ms), false) => {
+            out!("  max link delay          {ms} ms (E_max <= delta, every state that late)")
+        }
+        (Some(ms), true) => out!(
+            "  max link delay          at least {ms} ms (E_max <= delta at every delay searched)"
+        ),
+        (None, _) => out!("  max link delay          none (E_max > delta even without delay)"),
+    }
     out!("verdict: {}", c.verdict);
     for r in &c.reasons {
         out!("  - {r}");

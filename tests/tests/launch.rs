@@ -433,17 +433,14 @@ fn every_window_gives_the_telemetry_of_simulate() {
         0,
         "simulate --n 40",
     );
-    for window in ["1", "4", "64"] {
-        let out = dir.path().join(format!("w{window}"));
-        let mut args = source.to_vec();
-        args.extend(["--window", window]);
-        let l = run(
-            &mut launch(&unique_team(&format!("w{window}")), &out, &args),
-            SMALL_DEADLINE,
-        );
-        assert_exit(&l, 0, &format!("launch --n 40 --window {window}"));
-        assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
-    }
+    assert_windows_match_simulate(
+        dir.path(),
+        &source,
+        &sim,
+        &["1", "4", "64"],
+        "w",
+        SMALL_DEADLINE,
+    );
 }
 
 /// Scale regression: 250 processes start, fly a few ticks of their plan, and match the engine.

@@ -4,6 +4,7 @@
 
 use crate::dynamics::{Chain, Flat, Plant, QuadState};
 use crate::formation::Role;
+use crate::link::{Heard, LinkModel};
 use crate::math::{Real, Vec3};
 use crate::plan::Segment;
 use crate::repair::Repair;
@@ -57,6 +58,39 @@ pub struct Engine<P: Plant> {
     /// Member order: false once a member is lost (it no longer steps).
     alive: Vec<bool>,
     tick: u64,
+    links: Links,
+}
+
+/// What the engine keeps for imperfect links (`link.rs`): the newest state each follower has
+/// heard of each in-neighbour, and every agent's recent states, from tick `history_from` on
+/// (the candidates still in flight).
+#[derive(Clone)]
+struct Links {
+    model: LinkModel,
+    held: Vec<[Heard; 3]>,
+    history: std::collections::VecDeque<Vec<Flat>>,
+    history_from: u64,
+}
+
+impl Links {
+    /// Before anything arrives a follower knows where its neighbours start (link.rs).
+    fn new(model: LinkModel, neighbor_idx: &[[usize; 3]], flats: &[Flat]) -> Self {
+        let held = neighbor_idx
+            .iter()
+            .map(|idx| {
+                idx.map(|j| Heard {
+                    tick: 0,
+                    flat: flats[j],
+                })
+            })
+            .collect();
+        Links {
+            model,
+            held,
+            history: Default::default(),
+            history_from: 0,
+        }
+    }
 }
 
 impl<P: Plant> Engine<P> {
@@ -73,7 +107,8 @@ impl<P: Plant> Engine<P> {
             neighbor_ids.push(ids);
         }
         let states: Vec<P> = f.members.iter().map(|m| init(m.position)).collect();
-        let flats = states.iter().map(|p| p.flat()).collect();
+        let flats: Vec<Flat> = states.iter().map(|p| p.flat()).collect();
+        let links = Links::new(scenario.link_model(), &neighbor_idx, &flats);
         Engine {
             cfg: step_config(scenario),
             scenario: scenario.clone(),
@@ -84,6 +119,7 @@ impl<P: Plant> Engine<P> {
             flats,
             alive: vec![true; f.members.len()],
             tick: 0,
+            links,
         }
     }
 
@@ -99,7 +135,16 @@ impl<P: Plant> Engine<P> {
             }
             let (law, ids) = law_for(m);
             self.laws[k] = law;
-            self.neighbor_idx[k] = ids.map(|id| f.index_of(id).unwrap_or(k));
+            let idx = ids.map(|id| f.index_of(id).unwrap_or(k));
+            // A new in-neighbour over imperfect links: known, until its states arrive, where
+            // it started (as at tick 0).
+            for (slot, &j) in idx.iter().enumerate() {
+                if idx[slot] != self.neighbor_idx[k][slot] {
+                    let flat = Flat::rest(self.scenario.formation.members[j].position);
+                    self.links.held[k][slot] = Heard { tick: 0, flat };
+                }
+            }
+            self.neighbor_idx[k] = idx;
             self.neighbor_ids[k] = ids;
         }
     }
@@ -129,6 +174,9 @@ impl<P: Plant> Engine<P> {
         for (f, p) in self.flats.iter_mut().zip(&self.states) {
             *f = p.flat();
         }
+        if !self.links.model.is_perfect() {
+            return self.advance_over_links();
+        }
         for k in 0..self.states.len() {
             if !self.alive[k] {
                 continue;
@@ -155,6 +203,72 @@ impl<P: Plant> Engine<P> {
     }
 }
 
+impl<P: Plant> Engine<P> {
+    /// `advance` over imperfect links: each follower steps from the newest state it has heard
+    /// of each in-neighbour, brought to this tick (`LinkModel::hear`, as the members do).
+    fn advance_over_links(&mut self) -> Result<(), AgentFault> {
+        let tick = self.tick;
+        let l = &mut self.links;
+        l.history.push_back(self.flats.clone());
+        let members = &self.scenario.formation.members;
+        let upto = l.model.needed(tick);
+        for (k, member) in members.iter().enumerate() {
+            if !self.alive[k] {
+                continue;
+            }
+            let mut nb = self.neighbor_idx[k].map(|j| self.flats[j]);
+            if let Law::Follower { .. } = self.laws[k] {
+                let (from, hist) = (l.history_from, &l.history);
+                let idx = self.neighbor_idx[k];
+                let candidates = |slot: usize| {
+                    let j = idx[slot];
+                    upto.into_iter()
+                        .flat_map(move |hi| from..=hi)
+                        .map(move |m| Heard {
+                            tick: m,
+                            flat: hist[(m - from) as usize][j],
+                        })
+                };
+                let ids = &self.neighbor_ids[k];
+                let to = member.id;
+                let cfg = &self.cfg;
+                let held = &mut l.held[k];
+                nb = l.model.hear(
+                    to,
+                    ids,
+                    tick,
+                    held,
+                    candidates,
+                    cfg.dt_s,
+                    cfg.neighbor_model,
+                );
+            }
+            let next = step(
+                &self.cfg,
+                &self.scenario.plan,
+                &self.laws[k],
+                tick,
+                &self.states[k],
+                &nb,
+                &self.neighbor_ids[k],
+            )
+            .map_err(|fault| AgentFault {
+                id: member.id,
+                tick,
+                fault,
+            })?;
+            self.states[k] = next;
+        }
+        self.tick += 1;
+        // States older than the oldest candidate of the next tick have been seen for good.
+        while l.history_from < l.model.oldest_candidate(self.tick) {
+            l.history.pop_front();
+            l.history_from += 1;
+        }
+        Ok(())
+    }
+}
+
 /// The nonlinear team (the product's plant).
 pub fn quad_engine(s: &Scenario) -> Engine<QuadState> {
     Engine::new(s, QuadState::hover)
@@ -168,6 +282,12 @@ pub fn chain_engine(s: &Scenario) -> Engine<Chain> {
 /// Largest follower deviation ||r_i - r_i,HT||_2 over the whole plan (eq. 34), flown by the
 /// nonlinear engine. Used to find T_threshold.
 pub fn max_follower_deviation(s: &Scenario) -> Result<Real, AgentFault> {
+    max_follower_deviation_within(s, Real::INFINITY)
+}
+
+/// [`max_follower_deviation`], ending the flight as soon as the deviation exceeds `limit_m`
+/// (it is a running maximum, so the answer "more than the limit" is then known).
+pub fn max_follower_deviation_within(s: &Scenario, limit_m: Real) -> Result<Real, AgentFault> {
     let mut e = quad_engine(s);
     let mut ht = Vec::new();
     let followers: Vec<usize> = s
@@ -185,7 +305,7 @@ pub fn max_follower_deviation(s: &Scenario) -> Result<Real, AgentFault> {
         for &k in &followers {
             worst = worst.max((e.states()[k].position() - ht[k]).norm());
         }
-        if e.tick() >= last {
+        if e.tick() >= last || worst > limit_m {
             return Ok(worst);
         }
         e.advance()?;

@@ -4,15 +4,17 @@
 //! library on its own.
 //!
 //! Layers, bottom to top: `math` (the cdm-math crate) -> `frame`, `plan`, `formation`, `graph`,
-//! `gains`, `safety`, `dynamics`, `control` (pure) -> `step` (one member's tick) -> `scenario`
-//! (files, validation, built-ins) -> `engine`, `telemetry`, `audit`, `simulate`, `rundir`;
-//! `export` (pure: the plan's exact pieces for Crazyswarm2 and Skybrush).
+//! `gains`, `safety`, `dynamics`, `control` (pure) -> `step` (one member's tick), `link` (imperfect
+//! links) -> `scenario` (files, validation, built-ins) -> `engine`, `telemetry`, `audit`,
+//! `simulate`, `delay` (the certificate against link delay), `rundir`; `export` (pure: the plan's
+//! exact pieces for Crazyswarm2 and Skybrush).
 
 /// The numeric facade, re-exported so `crate::math::Vec3` reads as before the split.
 pub use cdm_math as math;
 
 pub mod audit;
 pub mod control;
+pub mod delay;
 pub mod dynamics;
 pub mod engine;
 pub mod export;
@@ -23,6 +25,7 @@ pub mod gains;
 pub mod geometry;
 pub mod graph;
 pub mod linear_certificate;
+pub mod link;
 pub mod loss;
 pub mod losscert;
 pub mod outcome;

@@ -24,6 +24,13 @@
 //! plus one coefficient vector per follower and depth, and E_max is the largest norm of a
 //! follower's combination over the ticks, found exactly (every tick counts) by a coarse pass with
 //! a curvature bound ([`max_norm`]). The coarse pass runs in parallel over followers.
+//!
+//! Link delay (issue 11, `link.rs`) keeps all of this: a follower whose neighbours' states
+//! arrive d ticks late flies tick k with their tick-h states, h = max(k - d, 0), brought to t_k
+//! by the cubic Taylor shift S(k - h) (`Heard::at_tick`), so the neighbour term of the tick map
+//! becomes psi S(k - h) applied to the tick-h input. H is still linear and acts on time only, so
+//! it still commutes with W: only the scalar chains change (`chains` with a delay), and E_max at
+//! a delay costs what it costs without one.
 
 use crate::formation::Role;
 use crate::math::{Mat4, Mat8, Real, Vec3, Vec4};
@@ -194,22 +201,49 @@ impl LinearTeam {
     /// Largest follower deviation ||r_i - r_i,HT||_2 over ticks 0..=last tick of a plan of
     /// `t_total_s` (eq. 34): what `engine::max_follower_deviation` measures by flying.
     pub fn max_follower_deviation(&self, t_total_s: Real) -> Real {
+        self.max_follower_deviation_delayed(t_total_s, 0)
+    }
+
+    /// [`Self::max_follower_deviation`] with every state between agents `delay_ticks` late
+    /// (what the engine flies with `[link] delay_ms` = delay_ticks / comm_hz and no jitter or
+    /// loss). Not finite when the delayed team diverges.
+    pub fn max_follower_deviation_delayed(&self, t_total_s: Real, delay_ticks: u64) -> Real {
+        self.deviation_over(t_total_s, delay_ticks, 0.0, Real::INFINITY)
+    }
+
+    /// Whether E_max <= `limit_m` with every state `delay_ticks` late: the question the delay
+    /// search asks, answered with the coarse pass alone (no interval is refined unless its
+    /// bound reaches the limit) and stopped at the first point beyond it.
+    pub fn meets(&self, t_total_s: Real, delay_ticks: u64, limit_m: Real) -> bool {
+        self.deviation_over(t_total_s, delay_ticks, limit_m, limit_m) <= limit_m
+    }
+
+    /// max(floor, E_max), or the first value found above `stop` (infinite when not finite).
+    fn deviation_over(&self, t_total_s: Real, delay_ticks: u64, floor: Real, stop: Real) -> Real {
         let last = crate::scenario::last_tick_of(t_total_s, self.comm_hz) as usize;
-        let chains = self.chains(t_total_s, last);
+        let chains = self.chains(t_total_s, last, delay_ticks as usize);
         let followers = self.start.len() - 1;
         let threads = std::thread::available_parallelism()
             .map_or(1, |n| n.get())
             .clamp(1, followers.max(1));
         let per = followers.div_ceil(threads);
+        let stopped = std::sync::atomic::AtomicBool::new(false);
         std::thread::scope(|scope| {
             let handles: Vec<_> = (0..threads)
                 .map(|t| {
-                    let chains = &chains;
+                    let (chains, stopped) = (&chains, &stopped);
                     scope.spawn(move || {
-                        let mut best: Real = 0.0;
+                        let mut best: Real = floor;
                         for i in t * per..((t + 1) * per).min(followers) {
+                            if stopped.load(std::sync::atomic::Ordering::Relaxed) {
+                                break;
+                            }
                             let c = &self.coef[self.start[i]..self.start[i + 1]];
-                            best = max_norm(chains, c, self.dt_s, best);
+                            best = max_norm(chains, c, self.dt_s, best, stop);
+                            if best.is_nan() || best > stop {
+                                stopped.store(true, std::sync::atomic::Ordering::Relaxed);
+                                return best;
+                            }
                         }
                         best
                     })
@@ -217,14 +251,14 @@ impl LinearTeam {
                 .collect();
             handles
                 .into_iter()
-                .map(|h| h.join().unwrap_or(Real::NAN))
-                .fold(0.0, Real::max)
+                .map(|h| h.join().unwrap_or(Real::INFINITY))
+                .fold(floor, Real::max)
         })
     }
 
     /// Run the scalar chains over ticks 0..=last (see the module text): g_0 = phi + H Lam,
-    /// g_l = H^l psi.
-    fn chains(&self, t_total_s: Real, last: usize) -> Chains {
+    /// g_l = H^l psi, with H's input `delay` ticks late.
+    fn chains(&self, t_total_s: Real, last: usize, delay: usize) -> Chains {
         let TickMaps { a, phi, psi } = self.maps;
         let q = Quintic { t_total_s };
         let dt = self.dt_s;
@@ -246,10 +280,17 @@ impl LinearTeam {
         let x0 = -Vec4::new(0.0, 0.0, 0.0, s_at(0)[3]);
         let (mut phi_x, mut lam, mut chi) = (x0, x0, Vec4::zeros());
         let mut y = vec![Vec4::zeros(); levels];
-        let follow = phi + psi;
         let mut s_k = s_at(0);
+        // The last delay + 1 ticks of what H reads (s, Lam, g_0 .. g_D), slot k mod (delay + 1).
+        let width = levels + 2;
+        let mut past = vec![Vec4::zeros(); (delay + 1) * width];
+        let psi_delay = psi * taylor_shift(delay as Real * dt);
         for k in 0..=last {
             y[0] = phi_x + chi;
+            let slot = (k % (delay + 1)) * width;
+            past[slot] = s_k;
+            past[slot + 1] = lam;
+            past[slot + 2..slot + width].copy_from_slice(&y);
             for (l, g) in y.iter().enumerate() {
                 pos.push(g[0]);
                 // |g''| between ticks is at most |g''(t_k)| + dt |g'''| (+ O(dt^2)).
@@ -268,14 +309,30 @@ impl LinearTeam {
             if k == last {
                 break;
             }
-            let psi_k = phi_x + chi - lam;
+            // The neighbours' states heard at tick k are those of tick h (link.rs: before the
+            // first arrives, the start), brought to t_k.
+            let h = k.saturating_sub(delay);
+            let psi_h = if delay == 0 {
+                psi
+            } else if k - h == delay {
+                psi_delay
+            } else {
+                psi * taylor_shift((k - h) as Real * dt)
+            };
+            let at_h = &past[(h % (delay + 1)) * width..][..width];
+            let (s_h, lam_h, y_h) = (at_h[0], at_h[1], &at_h[2..]);
             for l in (1..levels).rev() {
-                let input = if l == 1 { psi_k } else { y[l - 1] };
-                y[l] = phi * y[l] + psi * input;
+                let input = if l == 1 { y_h[0] - lam_h } else { y_h[l - 1] };
+                y[l] = phi * y[l] + psi_h * input;
             }
             let s_next = s_at(k + 1);
-            chi = phi * chi + psi * lam;
-            phi_x = phi * phi_x + follow * s_k - s_next;
+            chi = phi * chi + psi_h * lam_h;
+            phi_x = if delay == 0 {
+                // The same operations as before delays existed: the same bits.
+                phi * phi_x + (phi + psi) * s_k - s_next
+            } else {
+                phi * phi_x + phi * s_k + psi_h * s_h - s_next
+            };
             lam = phi * lam;
             let t_next = tick_time(k as u64 + 1, dt);
             if t_next > t_total_s && tick_time(k as u64, dt) < t_total_s {
@@ -292,6 +349,18 @@ impl LinearTeam {
             last_tick: last,
         }
     }
+}
+
+/// The cubic Taylor shift by `tau` seconds of a (position, velocity, acceleration, jerk) state:
+/// `Heard::at_tick` as a matrix.
+fn taylor_shift(tau: Real) -> Mat4 {
+    let (t2, t3) = (tau * tau / 2.0, tau * tau * tau / 6.0);
+    Mat4::new(
+        1.0, tau, t2, t3, //
+        0.0, 1.0, tau, t2, //
+        0.0, 0.0, 1.0, tau, //
+        0.0, 0.0, 0.0, 1.0,
+    )
 }
 
 /// Followers in topological order with their depth (longest chain of follower in-neighbours).
@@ -364,7 +433,8 @@ fn follower_order(s: &Scenario) -> Result<Vec<(usize, usize)>, NotLinear> {
 /// Coarse points every [`COARSE_TICKS`] ticks; an interval is refined tick by tick only when its
 /// bound max(ends) + h^2 / 8 max||e''|| can exceed the best so far (e is within h^2/8 max||e''||
 /// of the chord between its ends), so the result is the maximum over every tick.
-fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> Real {
+/// Returns early, with a value above `stop` (infinite for a non-finite one), once one is found.
+fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real, stop: Real) -> Real {
     let at = |k: usize| -> Real {
         let g = &ch.pos[k * ch.levels..k * ch.levels + c.len()];
         let mut e = [0.0; 3];
@@ -381,9 +451,15 @@ fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> Real {
         .collect();
     let last = ch.last_tick;
     let intervals = last.div_ceil(COARSE_TICKS).max(1);
-    let ends: Vec<Real> = (0..=intervals)
-        .map(|j| at((j * COARSE_TICKS).min(last)))
-        .collect();
+    let mut ends = Vec::with_capacity(intervals + 1);
+    for j in 0..=intervals {
+        let e = at((j * COARSE_TICKS).min(last));
+        if e.is_nan() || e > stop {
+            // A diverging team overflows to inf and NaN, which `max` would skip.
+            return if e.is_finite() { e } else { Real::INFINITY };
+        }
+        ends.push(e);
+    }
     let mut best = ends.iter().copied().fold(floor, Real::max);
     for j in 0..intervals {
         let (a, b) = (j * COARSE_TICKS, ((j + 1) * COARSE_TICKS).min(last));
@@ -395,7 +471,11 @@ fn max_norm(ch: &Chains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> Real {
             .sum();
         if ends[j].max(ends[j + 1]) + h * h / 8.0 * curv * 1.01 > best {
             for k in a + 1..b {
-                best = best.max(at(k));
+                let e = at(k);
+                if e.is_nan() || e > stop {
+                    return if e.is_finite() { e } else { Real::INFINITY };
+                }
+                best = best.max(e);
             }
         }
     }

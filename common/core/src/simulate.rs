@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
+use crate::delay::{bound_ms, max_link_delay};
 use crate::engine::{desired_positions, max_follower_deviation, quad_engine, AgentFault};
 use crate::linear_certificate::LinearTeam;
 use crate::loss::{LossSchedule, LossState, OnLoss};
@@ -178,6 +179,11 @@ pub struct Certificate {
     /// Simulated max follower deviation at the scenario's own t_total_s.
     pub max_follower_deviation_m: Real,
     pub gains_stability_margin: Real,
+    /// The largest link delay (ms, whole ticks at comm_hz) at which the plan still meets
+    /// E_max <= delta, every state that late (`delay.rs`); `None` when it fails even without.
+    pub max_link_delay_ms: Option<Real>,
+    /// True when `max_link_delay_ms` is only the largest delay searched (the plan held there).
+    pub max_link_delay_at_least: bool,
     pub notes: Vec<String>,
     /// `plan --losses`: the loss of every single member, certified (`losscert`).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -252,6 +258,8 @@ pub fn certify(s: &Scenario) -> Certificate {
     let e = deviation(s.file.t_total_s);
     let t_thr = t_threshold(s, n.delta_m, e, deviation);
     let margin = s.gains_margin.unwrap_or(Real::NAN);
+    let (max_link_delay_ms, max_link_delay_at_least) =
+        bound_ms(max_link_delay(s, n.delta_m, e, linear.as_ref()), s.dt_s());
     let mut reasons = Vec::new();
     if n.delta_m.is_nan() || n.delta_m <= 0.0 {
         reasons.push(format!(
@@ -290,6 +298,8 @@ pub fn certify(s: &Scenario) -> Certificate {
         t_total_s: s.file.t_total_s,
         max_follower_deviation_m: e,
         gains_stability_margin: margin,
+        max_link_delay_ms,
+        max_link_delay_at_least,
         notes: s.notes.clone(),
         losses: None,
     }

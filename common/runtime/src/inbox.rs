@@ -31,6 +31,16 @@ impl Inbox {
             .map(|e| &e.1)
     }
 
+    /// The states of ticks up to `tick`, oldest first.
+    pub fn upto(&self, tick: u64) -> impl Iterator<Item = (u64, Flat)> + '_ {
+        self.0.iter().take_while(move |e| e.0 <= tick).copied()
+    }
+
+    /// The newest tick held.
+    pub fn last_tick(&self) -> Option<u64> {
+        self.0.back().map(|e| e.0)
+    }
+
     /// The oldest tick held.
     pub fn first_tick(&self) -> Option<u64> {
         self.0.front().map(|e| e.0)

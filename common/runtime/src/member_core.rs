@@ -7,13 +7,20 @@
 //! publishes its tick-k state once tick k is granted, and computes tick k + 1 once k + 1 is
 //! granted and its three in-neighbours' tick-k states are in. Every state carries its tick, so a
 //! neighbour that runs ahead is buffered, never confused. Every wait has a deadline.
+//!
+//! Over imperfect links (`cdm_core::link`, set by [`MemberCore::with_links`]) tick k + 1 waits
+//! only for the in-neighbours' states that may be usable at k (those of tick k - min delay),
+//! and the follower flies on the newest state of each that the link model delivered, brought to
+//! t_k: the same [`LinkModel::hear`] the engine calls, so both fly the same bits.
 
 use std::fmt;
 use std::time::Duration;
 
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
-use cdm_core::step::{law_for, Law, StepFault};
+use cdm_core::link::{Heard, LinkModel};
+use cdm_core::math::Real;
+use cdm_core::step::{law_for, Law, NeighborModel, StepConfig, StepFault};
 
 use crate::inbox::Inbox;
 use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};
@@ -152,6 +159,18 @@ pub struct MemberCore<V, C> {
     progress: bool,
     unnotified: bool,
     pending: Option<Action>,
+    links: Links,
+}
+
+/// A member's side of the link model: perfect links unless [`MemberCore::with_links`] said
+/// otherwise.
+#[derive(Debug)]
+struct Links {
+    model: LinkModel,
+    /// The newest state heard of each in-neighbour (link.rs).
+    held: [Heard; 3],
+    dt_s: Real,
+    neighbor_model: NeighborModel,
 }
 
 impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
@@ -185,7 +204,28 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             progress: false,
             unnotified: false,
             pending: None,
+            links: Links {
+                model: LinkModel::perfect(1.0),
+                held: [Heard {
+                    tick: 0,
+                    flat: Flat::rest(member.position),
+                }; 3],
+                dt_s: 1.0,
+                neighbor_model: NeighborModel::default(),
+            },
         }
+    }
+
+    /// Fly over the imperfect links of `model` with ticks of `cfg`: `starts` are the
+    /// in-neighbours' tick-0 states (in the order of [`law_for`]), known before anything arrives.
+    pub fn with_links(mut self, model: LinkModel, cfg: &StepConfig, starts: [Flat; 3]) -> Self {
+        self.links = Links {
+            model,
+            held: starts.map(|flat| Heard { tick: 0, flat }),
+            dt_s: cfg.dt_s,
+            neighbor_model: cfg.neighbor_model,
+        };
+        self
     }
 
     /// The tick this member computes next (its last published one once it has published).
@@ -196,6 +236,12 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
     /// The vehicle flown.
     pub fn vehicle(&self) -> &V {
         &self.vehicle
+    }
+
+    /// The in-neighbours of `member` in the order of its weights (itself, for a leader): the
+    /// order of [`Self::with_links`]'s `starts`.
+    pub fn in_neighbors(member: &Member) -> [u32; 3] {
+        law_for(member).1
     }
 
     /// The in-neighbours `member` subscribes to (sorted), empty for a leader.
@@ -250,7 +296,7 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             };
             self.pending = Some(self.fail(FaultCode::NeighborFault, msg.id, fault));
         }
-        if msg.tick >= self.tick {
+        if msg.tick >= self.links.model.oldest_candidate(self.tick) {
             self.inbox[slot].insert(msg.tick, QuadState(msg.state).flat());
             self.progress = true;
         }
@@ -338,8 +384,9 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                 return Some(self.vehicle_failed(tick, fault));
             }
             self.tick += 1;
+            let oldest = self.links.model.oldest_candidate(self.tick);
             for b in self.inbox.iter_mut() {
-                b.drop_before(self.tick);
+                b.drop_before(oldest);
             }
             self.progress = true;
         }
@@ -348,10 +395,13 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
 
     /// The in-neighbours' states of this tick; `None` while one is missing; `Err((peer, later))`
     /// when a later tick of `peer` arrived without this one (a sample was lost).
-    fn neighbor_flats(&self) -> Result<Option<[Flat; 3]>, (u32, u64)> {
+    fn neighbor_flats(&mut self) -> Result<Option<[Flat; 3]>, (u32, u64)> {
         let mut flats = [self.rest; 3];
         if !self.is_follower {
             return Ok(Some(flats));
+        }
+        if !self.links.model.is_perfect() {
+            return self.heard_flats();
         }
         let tick = self.tick;
         let mut ready = true;
@@ -375,6 +425,48 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
         self.fail(code, peer, fault)
     }
 
+    /// [`Self::neighbor_flats`] over imperfect links: once every state that may be usable at
+    /// this tick is in (the one of tick `needed`, and in order those before it), the newest
+    /// delivered state of each in-neighbour, brought to this tick.
+    fn heard_flats(&mut self) -> Result<Option<[Flat; 3]>, (u32, u64)> {
+        let tick = self.tick;
+        let l = &mut self.links;
+        let need = l.model.needed(tick);
+        if let Some(n) = need {
+            let mut ready = true;
+            for (slot, b) in self.inbox.iter().enumerate() {
+                if b.get(n).is_none() {
+                    if let Some(later) = b.last_tick().filter(|&l| l > n) {
+                        return Err((self.neighbor_ids[slot], later));
+                    }
+                    ready = false;
+                }
+            }
+            if !ready {
+                return Ok(None);
+            }
+        }
+        let inbox = &self.inbox;
+        let candidates = |slot: usize| {
+            let arrived = need.map(|n| inbox[slot].upto(n));
+            arrived
+                .into_iter()
+                .flatten()
+                .map(|(tick, flat)| Heard { tick, flat })
+        };
+        let (to, from) = (self.id, &self.neighbor_ids);
+        let (dt, nm) = (l.dt_s, l.neighbor_model);
+        Ok(Some(l.model.hear(
+            to,
+            from,
+            tick,
+            &mut l.held,
+            candidates,
+            dt,
+            nm,
+        )))
+    }
+
     /// A fault that is reported to the team (this member's state flagged with `code`).
     fn fail(&self, code: FaultCode, peer: u32, fault: MemberFault) -> Action {
         let msg = StateMsg::ok(self.tick, self.hash, self.id, self.vehicle.state());
@@ -390,13 +482,17 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
         match self.clock.allowed() {
             None => WaitingFor::Start,
             Some(g) if g < tick + 1 || self.published != Some(tick) => WaitingFor::Grant(tick + 1),
-            Some(_) => WaitingFor::States {
-                tick,
-                missing: (0..3)
-                    .filter(|&k| self.inbox[k].get(tick).is_none())
-                    .map(|k| self.neighbor_ids[k])
-                    .collect(),
-            },
+            Some(_) => {
+                // Over delayed links tick k waits for the states of tick k - min delay.
+                let need = self.links.model.needed(tick).unwrap_or(0);
+                WaitingFor::States {
+                    tick: need,
+                    missing: (0..3)
+                        .filter(|&k| self.inbox[k].get(need).is_none())
+                        .map(|k| self.neighbor_ids[k])
+                        .collect(),
+                }
+            }
         }
     }
 }

@@ -441,3 +441,49 @@ fn the_loop_flies_a_leader_to_the_stop_and_notices_a_lost_orchestrator() {
         other => panic!("{other:?}"),
     }
 }
+
+/// Over links 2 ticks late (link.rs) tick k waits only for the states of tick k - 2: the first
+/// two ticks fly on the neighbours' known starts, and a state of a later tick is kept (it is
+/// still in flight), not taken for a gap.
+#[test]
+fn delayed_links_wait_only_for_the_states_usable_at_the_tick() {
+    use cdm_core::link::{LinkModel, LinkSpec};
+    let spec = LinkSpec {
+        delay_ms: 20.0,
+        ..LinkSpec::default()
+    };
+    let cfg = StepConfig {
+        gains: [8.0, 24.0, 51.5625, 23.4375],
+        dt_s: 0.01,
+        substeps: 1,
+        neighbor_model: NeighborModel::Taylor,
+    };
+    let start = Flat::rest(Vec3::zeros());
+    let mut c = core(Role::Follower, None).with_links(LinkModel::new(spec, 0.01), &cfg, [start; 3]);
+    c.on_clock(&ClockMsg::run(10, HASH)).unwrap();
+    let (published, a) = run_until_blocked(&mut c, Duration::ZERO);
+    assert_eq!(
+        published,
+        [0, 1, 2],
+        "ticks 0 and 1 need no neighbour state"
+    );
+    assert!(matches!(a, Action::Wait(_)), "{a:?}");
+    for id in [1, 2, 3] {
+        c.on_neighbor(&state(id, 0));
+    }
+    c.on_neighbor(&state(1, 1));
+    assert_eq!(run_until_blocked(&mut c, Duration::ZERO).0, [3]);
+    match run_until_blocked(&mut c, Duration::from_secs(60)).1 {
+        Action::Fail {
+            fault: MemberFault::Silent { waiting_for, .. },
+            ..
+        } => assert_eq!(
+            waiting_for,
+            WaitingFor::States {
+                tick: 1,
+                missing: vec![2, 3]
+            }
+        ),
+        other => panic!("expected a silence naming the missing states, got {other:?}"),
+    }
+}

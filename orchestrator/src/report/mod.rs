@@ -253,21 +253,70 @@ pub fn deviation_sweep(
     delta_m: Real,
     t_threshold_s: Real,
 ) -> Result<Vec<PathBuf>, String> {
-    let mut text = String::from("t_total_s,max_follower_deviation_m\n");
+    let sweep = Sweep {
+        stem: "fig_deviation_sweep",
+        x_column: "t_total_s",
+        title: "Largest follower deviation versus travel time (Fig. 10)",
+        x_desc: "T_total (s)",
+        marker: t_threshold_s
+            .is_finite()
+            .then(|| (format!("T_threshold = {t_threshold_s:.2} s"), t_threshold_s)),
+    };
+    sweep_figure(dir, &sweep, points, delta_m)
+}
+
+/// Fig. 10's twin for link delay (issue 11): E_max versus the delay of every state, with delta
+/// and the certificate's largest safe delay. `points` are (delay ms, E_max) pairs.
+pub fn delay_sweep(
+    dir: &Path,
+    points: &[(Real, Real)],
+    delta_m: Real,
+    max_link_delay_ms: Option<Real>,
+) -> Result<Vec<PathBuf>, String> {
+    let sweep = Sweep {
+        stem: "fig_delay_sweep",
+        x_column: "link_delay_ms",
+        title: "Largest follower deviation versus link delay (in the style of Fig. 10)",
+        x_desc: "link delay (ms, whole ticks)",
+        marker: max_link_delay_ms.map(|ms| (format!("max link delay = {ms} ms"), ms)),
+    };
+    sweep_figure(dir, &sweep, points, delta_m)
+}
+
+/// What a Fig. 10-style sweep varies.
+struct Sweep<'a> {
+    /// File stem of the CSV and the figure.
+    stem: &'a str,
+    /// CSV header of the varied quantity.
+    x_column: &'a str,
+    title: &'a str,
+    x_desc: &'a str,
+    /// A vertical rule (label, x): the certified limit.
+    marker: Option<(String, Real)>,
+}
+
+/// E_max against one varied quantity: `<stem>.csv` and the figure, with delta (eq. 38).
+fn sweep_figure(
+    dir: &Path,
+    sweep: &Sweep,
+    points: &[(Real, Real)],
+    delta_m: Real,
+) -> Result<Vec<PathBuf>, String> {
+    let mut text = format!("{},max_follower_deviation_m\n", sweep.x_column);
     for (t, e) in points {
         let _ = writeln!(text, "{t},{e}");
     }
-    let mut files = vec![csv(dir, "fig_deviation_sweep.csv", &text)?];
+    let mut files = vec![csv(dir, &format!("{}.csv", sweep.stem), &text)?];
     let mut rules = vec![Rule {
         label: format!("δ = {delta_m:.4} m (eq. 38)"),
         at: delta_m,
         vertical: false,
         color: LIMIT,
     }];
-    if t_threshold_s.is_finite() {
+    if let Some((label, at)) = &sweep.marker {
         rules.push(Rule {
-            label: format!("T_threshold = {t_threshold_s:.2} s"),
-            at: t_threshold_s,
+            label: label.clone(),
+            at: *at,
             vertical: true,
             color: GREY,
         });
@@ -276,8 +325,8 @@ pub fn deviation_sweep(
         width: 900,
         panel_height: 520,
         panels: vec![Panel {
-            title: "Largest follower deviation versus travel time (Fig. 10)".into(),
-            x_desc: "T_total (s)".into(),
+            title: sweep.title.into(),
+            x_desc: sweep.x_desc.into(),
             y_desc: "E_max = max ||r - r_HT||_2 (m, log)".into(),
             lines: vec![Line {
                 label: "E_max (simulated)".into(),
@@ -290,6 +339,6 @@ pub fn deviation_sweep(
             legend: SeriesLabelPosition::UpperRight,
         }],
     };
-    files.extend(write_figure(dir, "fig_deviation_sweep", &fig)?);
+    files.extend(write_figure(dir, sweep.stem, &fig)?);
     Ok(files)
 }

@@ -112,6 +112,27 @@ pub fn flown_scenario_file(path: &Path) -> ScenarioFile {
     toml::from_str(&text).unwrap_or_else(|e| panic!("{} does not parse: {e}", path.display()))
 }
 
+/// `launch SOURCE --window W` writes exactly `sim`'s telemetry for every window in `windows`
+/// (each run in `dir/<tag><W>` under its own team, within `deadline`).
+pub fn assert_windows_match_simulate(
+    dir: &Path,
+    source: &[&str],
+    sim: &Path,
+    windows: &[&str],
+    tag: &str,
+    deadline: std::time::Duration,
+) {
+    for window in windows {
+        let out = dir.join(format!("{tag}{window}"));
+        let mut args = source.to_vec();
+        args.extend(["--window", window]);
+        let team = integration_tests::unique_team(&format!("{tag}{window}"));
+        let l = integration_tests::run(&mut launch(&team, &out, &args), deadline);
+        assert_exit(&l, 0, &format!("launch {args:?}"));
+        assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+    }
+}
+
 /// Asserts two files are byte-identical; on a difference, names the first differing line.
 pub fn assert_same_file(a: &Path, b: &Path) {
     let read =

@@ -138,6 +138,7 @@ fn generated_unchecked(n: usize) -> ScenarioFile {
         substeps: None,
         weight_floor: None,
         plane_tolerance_m: None,
+        link: None,
         agents,
     }
 }

@@ -15,6 +15,7 @@ use sha2::{Digest, Sha256};
 
 use crate::formation::{Formation, FormationError, Role};
 use crate::graph::SynthesisError;
+use crate::link::{LinkModel, LinkSpec};
 use crate::math::Real;
 use crate::plan::TeamPlan;
 
@@ -54,6 +55,11 @@ pub struct ScenarioFile {
     /// Largest distance off the leaders' plane that is projected rather than refused (default 1 m).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plane_tolerance_m: Option<Real>,
+    /// Imperfect links between the agents (delay, jitter, loss; default perfect). Set by
+    /// `--link-*` flags; `launch` hands it to its members inside the scenario, so that its
+    /// content hash covers it and a member with other links is refused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<LinkSpec>,
     pub agents: Vec<AgentSpec>,
 }
 
@@ -266,6 +272,29 @@ impl Scenario {
     /// The last tick of the plan: ceil(T_total * comm_hz). Ticks run 0..=last_tick.
     pub fn last_tick(&self) -> u64 {
         last_tick_of(self.file.t_total_s, self.file.comm_hz)
+    }
+
+    /// The links at this scenario's tick length (perfect unless `[link]` says otherwise).
+    pub fn link_model(&self) -> LinkModel {
+        LinkModel::new(self.file.link.unwrap_or_default(), self.dt_s())
+    }
+
+    /// The same scenario over other links (`None` or a perfect spec: the paper's model). The
+    /// formation and plan do not depend on the links, so nothing is validated again.
+    pub fn with_link(&self, spec: Option<LinkSpec>) -> Result<Self, ScenarioError> {
+        if let Some((field, reason)) = spec.and_then(|l| l.problem()) {
+            return Err(ScenarioError {
+                origin: self.origin.clone(),
+                kind: ScenarioErrorKind::Invalid {
+                    field: field.into(),
+                    reason,
+                },
+            });
+        }
+        let mut s = self.clone();
+        // Without impairments the seed changes nothing: leave the scenario (and its hash) as is.
+        s.file.link = spec.filter(|l| !l.is_perfect());
+        Ok(s)
     }
 
     /// RK4 substeps per tick.

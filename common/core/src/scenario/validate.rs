@@ -70,6 +70,12 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
     if let Some(d) = f.delta_m {
         positive("delta_m", d)?;
     }
+    if let Some((field, reason)) = f.link.and_then(|l| l.problem()) {
+        return Err(E::Invalid {
+            field: field.into(),
+            reason,
+        });
+    }
     if let Some(s) = f.substeps {
         if !(1..=1000).contains(&s) {
             return Err(E::Invalid {
