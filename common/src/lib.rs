@@ -8,12 +8,13 @@
 
 pub use cdm_core::{
     audit, control, dynamics, engine, export, files, formation, frame, gains, geometry, graph,
-    linear_certificate, loss, losscert, math, outcome, plan, repair, rundir, safety, scenario,
-    simulate, step, telemetry,
+    linear_certificate, loss, loss_log, losscert, math, outcome, plan, repair, rundir, safety,
+    scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
 pub use cdm_runtime::{
-    fault_inject, member_core, member_loop, messages, seams, signals, team_core,
+    fault_inject, member_core, member_loop, member_loss, messages, seams, signals, team_core,
+    team_loss,
 };
 
 pub mod member;

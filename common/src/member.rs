@@ -8,10 +8,12 @@ use std::time::Duration;
 
 use cdm_runtime::member_core::MemberCore;
 use cdm_runtime::member_loop::{fly, LoopError};
+use cdm_runtime::member_loss::{LossFault, MemberLosses};
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 
 use crate::engine::step_config;
 use crate::formation::Role;
+use crate::loss_log::LossLog;
 use crate::scenario::{Checks, Scenario, ScenarioError};
 use crate::step::StepFault;
 use crate::transport::{MemberPorts, TeamName, TransportError};
@@ -80,6 +82,8 @@ pub enum MemberError {
         peer: u32,
         what: String,
     },
+    #[error("agent {id} at tick {tick}: cannot follow the loss notices: {what}")]
+    Loss { id: u32, tick: u64, what: String },
     #[error("agent {id}: interrupted at tick {tick}")]
     Interrupted { id: u32, tick: u64 },
 }
@@ -149,7 +153,9 @@ pub fn run_member(
     let clock = MonotonicClock::start();
     let vehicle = ModelVehicle::new(step_config(&s), &s.plan, &me);
     let parts = (vehicle, LockstepClock::default());
-    let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now());
+    let losses = MemberLosses::new(&me, LossLog::new(&s), &ins, &outs);
+    let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now())
+        .with_losses(losses);
     let inject = crate::fault_inject::from_env(id);
     fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
         .map_err(|e| MemberError::from_loop(e, id, team))
@@ -196,6 +202,26 @@ impl MemberError {
                     tick,
                     peer,
                     what: format!("sent a state of another scenario (tick {peer_tick})"),
+                },
+                MemberFault::Loss(f) => {
+                    let (tick, what) = match f {
+                        LossFault::Missed { seen, got } => {
+                            (0, format!("notice {got} arrived after notice {seen}: one was missed"))
+                        }
+                        LossFault::SelfLost { tick } => {
+                            (tick, "the orchestrator declared this agent lost".into())
+                        }
+                        LossFault::Late { tick, at } => (
+                            tick,
+                            format!("the repair changes this agent's link from tick {at}, already flown"),
+                        ),
+                    };
+                    MemberError::Loss { id, tick, what }
+                }
+                MemberFault::RepairUnsupported { tick } => MemberError::Loss {
+                    id,
+                    tick,
+                    what: "this vehicle or transport cannot switch links in flight".into(),
                 },
                 MemberFault::TickGap { tick, peer, later } => MemberError::Neighbor {
                     id,

@@ -24,6 +24,7 @@ use common::transport::{
     describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName,
 };
 
+use crate::loss::{LaunchLosses, Turn};
 use crate::team::{
     check_children, exited_fault, fault, first_exited, member_binaries_present, spawn_member,
     stop_team, Spawned, Stop,
@@ -49,6 +50,10 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// Members to kill once they have published a tick (`--lose`, validated).
+    pub losses: common::loss::LossSchedule,
+    /// What a lost member does to the run (`--on-loss`).
+    pub on_loss: common::loss::OnLoss,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -106,9 +111,12 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         .iter()
         .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
         .collect();
-    let layout = TeamLayout::new(ids.clone(), ins, o.window)
+    let mut layout = TeamLayout::new(ids.clone(), ins, o.window)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
+    if o.on_loss == common::loss::OnLoss::Repair {
+        layout = layout.with_repair_room(crate::loss::repair_room(s, o.window));
+    }
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
@@ -306,6 +314,7 @@ fn run_team(
     })?;
     let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let order = id_order(s);
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let index: BTreeMap<u32, usize> = s
         .formation
         .members
@@ -317,9 +326,12 @@ fn run_team(
     let mut pending: BTreeMap<u64, (Vec<Option<StateMsg>>, usize)> = BTreeMap::new();
     let mut spare: Vec<Vec<Option<StateMsg>>> = Vec::new();
     let mut next_tick: u64 = 0; // the next tick to complete
-    let mut grant = first_grant(window, last);
-    let send = |ports: &mut OrchestratorPorts, g: u64| ports.publish_clock(ClockMsg::run(g, hash));
-    send(ports, grant).map_err(|e| {
+    let mut losses = LaunchLosses::new(s, &o.losses, o.on_loss);
+    let mut grant = first_grant(window, losses.cap(last));
+    let send = |ports: &mut OrchestratorPorts, g: u64, losses: &LaunchLosses| {
+        ports.publish_clock(ClockMsg::run(g, hash).with_loss(losses.notice()))
+    };
+    send(ports, grant, &losses).map_err(|e| {
         (
             fault(FaultKind::Transport, None, None, 0, e.to_string()),
             StopReason::AgentFault,
@@ -379,6 +391,7 @@ fn run_team(
                     }
                     return;
                 }
+                losses.saw(k, msg.tick);
                 if msg.tick < next_tick || msg.tick > grant {
                     return;
                 }
@@ -420,13 +433,34 @@ fn run_team(
         // Grant before auditing and writing: members go on while the orchestrator does its share.
         // Grant in steps of half a window (at least 1): every grant wakes members, so fewer,
         // larger grants mean fewer wake-ups per tick; members keep up to a window queued.
+        let blamed = stall.blames(Instant::now());
+        match losses.turn(ports, children, (o.agent_timeout, blamed))? {
+            Turn::Quiet => {}
+            Turn::Publish => {
+                last_progress = Instant::now();
+                send(ports, grant, &losses).map_err(|e| {
+                    (
+                        fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
+                        StopReason::AgentFault,
+                    )
+                })?;
+            }
+            Turn::Stop((f, _), rank) => {
+                if rank.outranks(stopping.as_ref().map(|(_, _, r)| r)) {
+                    stopping = Some((f, Instant::now(), rank));
+                }
+            }
+        }
         let mut complete = next_tick;
-        while pending.get(&complete).is_some_and(|(_, c)| *c == n) {
+        while pending
+            .get(&complete)
+            .is_some_and(|(_, c)| *c == losses.expected(complete))
+        {
             complete += 1;
         }
-        if let Some(want) = next_grant(complete, grant, window, last) {
+        if let Some(want) = next_grant(complete, grant, window, losses.cap(last)) {
             grant = want;
-            send(ports, grant).map_err(|e| {
+            send(ports, grant, &losses).map_err(|e| {
                 (
                     fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
                     StopReason::AgentFault,
@@ -440,6 +474,7 @@ fn run_team(
             };
             let tick = next_tick;
             let t = tick_time(tick, s.dt_s());
+            losses.record(s, tick, audit);
             desired_positions(s, t, &mut ht);
             for (k, st) in states.iter().enumerate() {
                 if let Some(m) = st {
@@ -453,7 +488,7 @@ fn run_team(
             progress.tick(tick, audit.report());
             if tel.keeps(tick) {
                 rows.clear();
-                for &k in &order {
+                for &k in order.iter().filter(|&&k| !losses.gone(ids[k], tick)) {
                     let m = &s.formation.members[k];
                     let st = states[k].map(|x| x.state).unwrap_or([f64::NAN; 12]);
                     rows.push(Row {
@@ -522,6 +557,7 @@ fn run_team(
         }
         // While stopping on a reported fault, the reporter's own exit is not a second fault.
         if exited.is_none()
+            && (!losses.repairs() || blamed)
             && stopping.is_none()
             && last_child_check.elapsed() > Duration::from_millis(100)
         {
@@ -549,7 +585,12 @@ fn run_team(
                 .enumerate()
                 .filter(|(k, _)| have.is_none_or(|(v, _)| v[*k].is_none()))
                 .map(|(_, m)| m.id)
+                .filter(|id| !losses.gone(*id, next_tick))
                 .collect();
+            if !blamed && losses.silent(&missing, children) {
+                last_progress = Instant::now();
+                continue;
+            }
             let f = fault(
                 FaultKind::AgentSilent,
                 missing.first().copied(),

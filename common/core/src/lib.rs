@@ -24,6 +24,7 @@ pub mod geometry;
 pub mod graph;
 pub mod linear_certificate;
 pub mod loss;
+pub mod loss_log;
 pub mod losscert;
 pub mod outcome;
 pub mod plan;
