@@ -9,7 +9,8 @@
 //!   a secondary and a primary leader: exit 0, the loss recorded with cause `killed` and its
 //!   last tick, the survivors' separation above 2 eps, nothing of the team left; and
 //!   `simulate --lose ID@(last tick x dt)` replays the run byte for byte.
-//! - A member that hangs (SIGSTOP) is killed after `--agent-timeout` and repaired around.
+//! - A member that hangs (SIGSTOP at a chosen tick) is killed after `--agent-timeout`, repaired
+//!   around, and replays the same way.
 //! - `--lose` with `--no-spawn` is refused (exit 2).
 //!
 //! `--on-loss stop` keeping the old behaviour is `faults.rs` (killed leaders, hung agent).
@@ -20,11 +21,10 @@ use std::path::Path;
 use std::process::Output;
 use std::time::Duration;
 
-use integration_tests::{describe, run, spawn, unique_team, TempDir};
+use integration_tests::{describe, run, unique_team, TempDir};
 use serde_json::Value;
 use support::{
-    assert_exit, assert_no_process_of, assert_no_team_resources, launch, member_pid, read_json,
-    signal, simulate, wait_for_rows, PROGRESS_DEADLINE,
+    assert_exit, assert_no_process_of, assert_no_team_resources, launch, read_json, simulate,
 };
 
 /// A 801- to 1501-tick paper40 flight of 41 processes takes about a second; the rest is slack
@@ -134,25 +134,22 @@ fn launch_lose_kills_three_members_and_equals_simulate_byte_for_byte() {
     assert_safe(&b, "launch --lose");
 }
 
-/// A member killed at tick `at` (it dies instead of publishing it): lost after tick at - 1,
-/// repaired, and `simulate --lose` of that tick replays the run.
-fn killed_unannounced(id: u32, at: u64) {
+/// A member that dies (`kill`) or hangs (`stop`, then killed after `--agent-timeout`) at tick
+/// `at` instead of publishing it: lost after tick at - 1 with `cause`, repaired, and
+/// `simulate --lose` of that tick replays the run byte for byte.
+fn lost_unannounced(id: u32, (how, at): (&str, u64), cause: &str) {
     let tmp = TempDir::new();
-    let team = unique_team(&format!("killed{id}"));
+    let team = unique_team(&format!("{how}{id}"));
     let lau = tmp.path().join("launch");
-    let cut = ["--max-ticks", "1500"];
-    let o = launched(&team, &lau, &cut, Some(format!("{id}:kill@{at}")));
-    assert_exit(
-        &o,
-        0,
-        &format!("launch with agent {id} killed at tick {at}"),
-    );
+    let cut = ["--max-ticks", "1200", "--agent-timeout", "1.5"];
+    let o = launched(&team, &lau, &cut, Some(format!("{id}:{how}@{at}")));
+    assert_exit(&o, 0, &format!("launch with agent {id} {how} at tick {at}"));
     let audit = read_json(&lau.join("audit.json"));
     let l = losses(&audit);
     assert_eq!(l.len(), 1, "{:#}", audit["losses"]);
     assert_eq!(
         (l[0].0, l[0].1.as_str(), l[0].2, l[0].3),
-        (id as u64, "killed", at - 1, at)
+        (id as u64, cause, at - 1, at)
     );
     let repaired = l[0].4.as_array().unwrap().len() + l[0].5.as_array().unwrap().len();
     assert!(
@@ -160,64 +157,41 @@ fn killed_unannounced(id: u32, at: u64) {
         "nobody repaired around {id}: {:#}",
         audit["losses"]
     );
-    assert_safe(&audit, &format!("agent {id} killed"));
+    assert_safe(&audit, &format!("agent {id} {how}"));
     let sim = tmp.path().join("replay");
     let when = format!("{id}@{}", (at - 1) as f64 * DT_S);
-    let mut replay = cut.to_vec();
-    replay.extend(["--lose", &when]);
-    let o = run(&mut simulate(&sim, &args(&replay)), DEADLINE);
+    let o = run(
+        &mut simulate(&sim, &args(&["--max-ticks", "1200", "--lose", &when])),
+        DEADLINE,
+    );
     assert_exit(&o, 0, &format!("simulate --lose {when}"));
     same_bytes(
         &sim.join("telemetry.csv"),
         &lau.join("telemetry.csv"),
-        &format!("replay of agent {id} killed at tick {at}"),
+        &format!("replay of agent {id} {how} at tick {at}"),
     );
 }
 
 #[test]
 fn a_killed_follower_is_repaired_and_replays_in_simulate() {
-    killed_unannounced(20, 700);
+    lost_unannounced(20, ("kill", 700), "killed");
 }
 
 #[test]
 fn a_killed_secondary_leader_is_repaired_and_replays_in_simulate() {
-    killed_unannounced(5, 650);
+    lost_unannounced(5, ("kill", 650), "killed");
 }
 
 #[test]
 fn a_killed_primary_leader_is_repaired_and_replays_in_simulate() {
-    killed_unannounced(1, 600);
+    lost_unannounced(1, ("kill", 600), "killed");
 }
 
-/// SIGSTOP of follower 20 (alive, silent): after `--agent-timeout 1.5` it is killed and lost
-/// (`silent`), its reader repairs, the team completes (exit 0).
+/// Follower 20 hangs (SIGSTOP, alive and silent): after `--agent-timeout 1.5` the orchestrator
+/// kills it and repairs around it (`silent`); its reader 29 switches triangles.
 #[test]
 fn a_hung_member_is_killed_after_the_agent_timeout_and_repaired_around() {
-    let tmp = TempDir::new();
-    let team = unique_team("hung");
-    let out = tmp.path().join("run");
-    let extra = [
-        "--agent-timeout",
-        "1.5",
-        "--t-total",
-        "600",
-        "--max-ticks",
-        "20000",
-    ];
-    let mut orch = spawn(&mut launch(&team, &out, &args(&extra)));
-    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 40 * 50);
-    let pid = member_pid(&team, 20).expect("agent 20 runs");
-    signal(pid, libc::SIGSTOP);
-    let o = orch.finish(DEADLINE.max(PROGRESS_DEADLINE));
-    assert_exit(&o, 0, "launch after an agent hung");
-    let audit = read_json(&out.join("audit.json"));
-    let l = losses(&audit);
-    assert_eq!(l.len(), 1, "{:#}", audit["losses"]);
-    assert_eq!((l[0].0, l[0].1.as_str()), (20, "silent"));
-    assert_eq!(l[0].4[0]["id"], 29, "{:#}", audit["losses"]);
-    assert_safe(&audit, "hung member");
-    assert_no_process_of(&team);
-    assert_no_team_resources(&team);
+    lost_unannounced(20, ("stop", 500), "silent");
 }
 
 #[test]
