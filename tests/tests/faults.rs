@@ -554,7 +554,7 @@ fn a_non_finite_state_nobody_reads_is_reported_by_the_orchestrator() {
         .filter(|id| !read.contains(id))
         .max()
         .expect("an agent without readers");
-    let o = launch_injected(&team, &out, leaf, "nan");
+    let o = launch_injected(&team, &out, (leaf, "nan"), &[]);
     assert_exit(&o, 3, &format!("launch with a NaN state of agent {leaf}"));
     assert_eq!(
         flown_scenario(&out).agents,
