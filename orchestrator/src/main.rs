@@ -18,7 +18,6 @@ mod launch;
 mod loss;
 mod progress;
 mod report;
-mod stall;
 mod team;
 mod telemetry;
 mod viewer;

@@ -20,8 +20,7 @@ pub struct Spawned {
     pub child: Child,
 }
 
-/// Why a run stops early: the fault to record and the reason sent to the members.
-pub type Stop = (FaultRecord, StopReason);
+pub use common::team_core::{exited_fault, Stop};
 
 /// A fault record.
 pub fn fault(
@@ -31,13 +30,7 @@ pub fn fault(
     tick: u64,
     message: String,
 ) -> FaultRecord {
-    FaultRecord {
-        kind,
-        agent,
-        peer,
-        tick,
-        message,
-    }
+    FaultRecord::new(kind, agent, peer, tick, message)
 }
 
 /// The `leader` and `agent` binaries must sit next to this one (`cargo build --release` builds
@@ -80,8 +73,16 @@ pub fn spawn_member(
 /// The first spawned member that has exited: its id and how (`exited with code 1`, `was killed
 /// by signal 9`).
 pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, String)> {
+    first_exited_but(children, |_| false)
+}
+
+/// [`first_exited`] among the members `known` does not hold (lost members already reaped).
+pub fn first_exited_but(
+    children: &mut [Spawned],
+    known: impl Fn(u32) -> bool,
+) -> Option<(u32, String)> {
     use std::os::unix::process::ExitStatusExt;
-    children.iter_mut().find_map(|c| {
+    children.iter_mut().filter(|c| !known(c.id)).find_map(|c| {
         let status = c.child.try_wait().ok()??;
         let how = match (status.code(), status.signal()) {
             (_, Some(sig)) => format!("was killed by signal {sig}"),
@@ -90,20 +91,6 @@ pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, String)> {
         };
         Some((c.id, how))
     })
-}
-
-/// The fault of a member that exited before the end, named with its id and `tick`.
-pub fn exited_fault(id: u32, how: &str, tick: u64) -> Stop {
-    (
-        fault(
-            FaultKind::AgentExited,
-            Some(id),
-            None,
-            tick,
-            format!("agent {id} {how} at tick {tick}"),
-        ),
-        StopReason::AgentFault,
-    )
 }
 
 /// A spawned member that exited before the end is a fault, named with its id and the tick.

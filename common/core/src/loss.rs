@@ -171,7 +171,9 @@ impl LossState {
         audit: &mut Auditor,
     ) -> Repair {
         self.lost.extend(ids.iter().copied());
-        let r = repair(&s.formation, self.floor, &self.lost);
+        // Incremental: the graph in force is repaired, so only the readers of the members lost
+        // now switch (a process that ran ahead never has to change a link it already flew).
+        let r = repair(&self.current, self.floor, &self.lost);
         for rec in records(s, (tick, cause), ids, &self.current, &r) {
             audit.lose(rec);
         }

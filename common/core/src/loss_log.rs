@@ -56,19 +56,42 @@ impl LossLog {
 
     /// The repair in force at `tick` (the original graph before any loss).
     pub fn repair_at(&self, tick: u64) -> Repair {
-        repair(&self.original, self.floor, &self.lost_at(tick))
+        let mut r = repair(&self.original, self.floor, &BTreeSet::new());
+        for (t, e) in self.epochs() {
+            if t <= tick {
+                r = e;
+            }
+        }
+        r
     }
 
-    /// The ticks at which the graph changes, each with the repair in force from it.
+    /// The ticks at which the graph changes, each with the repair in force from it. Repairs are
+    /// incremental, as `simulate` flies them (`loss::LossState`): each epoch repairs the graph
+    /// of the one before for everyone lost so far, so only the readers of the members lost at
+    /// that tick switch.
     pub fn epochs(&self) -> Vec<(u64, Repair)> {
         let mut ticks: Vec<u64> = self.losses.iter().map(|&(t, _)| t).collect();
         ticks.dedup();
-        ticks.into_iter().map(|t| (t, self.repair_at(t))).collect()
+        let mut current = self.original.clone();
+        let mut out = Vec::with_capacity(ticks.len());
+        for t in ticks {
+            let r = repair(&current, self.floor, &self.lost_at(t));
+            current = r.formation.clone();
+            out.push((t, r));
+        }
+        out
     }
 
     /// Member `id`'s link in `f` (`None` for a leader or a degraded follower).
     pub fn link_in(f: &Formation, id: u32) -> Option<Link> {
         f.member(id).and_then(|m| m.link)
+    }
+
+    /// The same log without the losses of `ids` (those not announced yet, say).
+    pub fn without(&self, ids: &BTreeSet<u32>) -> LossLog {
+        let mut log = self.clone();
+        log.losses.retain(|(_, id)| !ids.contains(id));
+        log
     }
 
     /// Every reader-writer pair (reader, writer) of any epoch that the original graph lacks:
@@ -111,13 +134,29 @@ mod tests {
         assert_eq!(e[0].1.lost, [ids[5]].into());
         assert_eq!(e[1].1.lost, [ids[5], ids[20]].into());
         assert_eq!(log.repair_at(29).formation, s.formation);
-        // The same function as simulate: repair over the lost set.
+        // The same function as simulate: the graph in force repaired for the lost set.
+        let first = repair(&s.formation, DEFAULT_WEIGHT_FLOOR, &[ids[5]].into());
+        assert_eq!(e[0].1, first);
         let direct = repair(
-            &s.formation,
+            &first.formation,
             DEFAULT_WEIGHT_FLOOR,
             &[ids[5], ids[20]].into(),
         );
         assert_eq!(e[1].1, direct);
+        // Incremental: a follower that read neither loses nothing at the second.
+        for (m, before) in direct
+            .formation
+            .members
+            .iter()
+            .zip(&first.formation.members)
+        {
+            let read = |l: Option<crate::formation::Link>| {
+                l.is_some_and(|l| l.in_neighbors.contains(&ids[20]))
+            };
+            if !read(before.link) && !direct.lost.contains(&m.id) {
+                assert_eq!(m.link, before.link, "{} switched again", m.id);
+            }
+        }
         let new = log.new_links();
         for x in &direct.retriangulated {
             for j in x.new {

@@ -11,5 +11,6 @@ pub mod member_loss;
 pub mod messages;
 pub mod seams;
 pub mod signals;
+pub mod stall;
 pub mod team_core;
 pub mod team_loss;

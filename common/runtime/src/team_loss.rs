@@ -70,6 +70,8 @@ pub struct TeamLosses {
     linking: Option<Linking>,
     /// Links already connected (the original graph's and earlier repairs').
     connected: BTreeSet<(u32, u32)>,
+    /// The highest tick received from each member (`ids` order).
+    seen: Vec<Option<u64>>,
 }
 
 impl TeamLosses {
@@ -86,7 +88,22 @@ impl TeamLosses {
             linked: 0,
             linking: None,
             connected: cdm_core::loss_log::links(&s.formation, &BTreeSet::new()),
+            seen: vec![None; s.formation.members.len()],
         }
+    }
+
+    /// A state of member `id` at `tick` arrived.
+    pub fn saw(&mut self, id: u32, tick: u64) {
+        if let Some(k) = self.ids.iter().position(|&j| j == id) {
+            let s = &mut self.seen[k];
+            *s = Some(s.map_or(tick, |t| t.max(tick)));
+        }
+    }
+
+    /// The highest tick received from `id`.
+    pub fn seen(&self, id: u32) -> Option<u64> {
+        let k = self.ids.iter().position(|&j| j == id)?;
+        self.seen[k]
     }
 
     /// The highest tick that may be granted: a scripted loss's member must publish its tick L
@@ -191,8 +208,11 @@ impl TeamLosses {
         }
         self.announced += 1;
         let dead: BTreeSet<u32> = self.lost.iter().map(|&(_, id, _)| id).collect();
+        // Members know the announced losses only: their links are the ones to wait for.
+        let unknown: BTreeSet<u32> = self.lost[self.announced..].iter().map(|l| l.1).collect();
         let links: BTreeSet<(u32, u32)> = self
             .log
+            .without(&unknown)
             .new_links()
             .into_iter()
             .filter(|(r, w)| !dead.contains(r) && !dead.contains(w))
@@ -201,6 +221,18 @@ impl TeamLosses {
         self.connected.extend(&links);
         self.linking = Some(Linking { links, since: now });
         Ok(true)
+    }
+
+    /// The links of the announced repair not seen connected yet (reader, writer).
+    pub fn awaited(&self) -> Vec<(u32, u32)> {
+        self.linking
+            .as_ref()
+            .map_or_else(Vec::new, |l| l.links.iter().copied().collect())
+    }
+
+    /// True while an announced repair waits for its links, or a loss waits to be announced.
+    pub fn busy(&self) -> bool {
+        self.linking.is_some() || self.announced < self.lost.len()
     }
 
     /// Every loss so far: (first tick without it, id, cause).
@@ -264,6 +296,21 @@ mod tests {
         assert!(asked
             .iter()
             .all(|&(r, w)| r != readers[0] && w != readers[0]));
+        // A third loss found meanwhile: its links are not awaited before it is announced.
+        let third = s
+            .formation
+            .members
+            .iter()
+            .map(|m| m.id)
+            .find(|id| !readers.contains(id));
+        let third = third.unwrap();
+        t.lose(third, Some(14), LossCause::Scripted);
+        let mut asked_now = BTreeSet::new();
+        let _ = t.poll(sec(1), sec(5), |r, w| {
+            asked_now.insert((r, w));
+            false
+        });
+        assert_eq!(asked, asked_now, "links of an unannounced loss awaited");
         let err = t.poll(sec(9), sec(5), |_, _| false).unwrap_err();
         assert_eq!(err.id, readers[0]);
         assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
@@ -272,7 +319,10 @@ mod tests {
         let n = t.notice().unwrap();
         assert_eq!((n.seq, n.id, n.tick, n.linked), (2, readers[1], 13, 1));
         assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
-        assert!(!t.poll(sec(9), sec(5), |_, _| true).unwrap());
         assert_eq!(t.notice().unwrap().linked, 2);
+        assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert!(!t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert_eq!(t.notice().unwrap().linked, 3);
     }
 }
