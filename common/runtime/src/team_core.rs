@@ -48,7 +48,7 @@ pub struct TeamConfig {
     pub agent_timeout: Duration,
 }
 
-/// One complete tick's states, in formation order: every slot is `Some`. Hand the vector back
+/// One complete tick's states, in formation order: every slot is `Some` but a lost member's. Hand the vector back
 /// with [`TeamCore::recycle`] so the next tick reuses it (no allocation per tick).
 pub type TickStates = Vec<Option<StateMsg>>;
 

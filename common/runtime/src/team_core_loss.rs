@@ -100,7 +100,10 @@ impl TeamCore {
                 return Some(TeamAction::Kill(vec![id]));
             }
         }
-        if l.book.busy() && now.saturating_sub(l.last_link_check) >= WAIT_SLICE {
+        // A loss to announce (or a repair with no new link) goes at once; awaited links are
+        // asked about every wait slice.
+        let at_once = l.book.awaited().is_empty();
+        if l.book.busy() && (at_once || now.saturating_sub(l.last_link_check) >= WAIT_SLICE) {
             l.last_link_check = now;
             return Some(TeamAction::CheckLinks);
         }
@@ -170,5 +173,154 @@ impl TeamCore {
             .extend(missing.iter().map(|&id| (id, LossCause::Silent, false)));
         self.last_progress = now;
         Some(TeamAction::Kill(missing))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::messages::StateMsg;
+    use crate::team_core::TeamConfig;
+    use cdm_core::scenario::Scenario;
+
+    fn ms(t: u64) -> Duration {
+        Duration::from_millis(t)
+    }
+
+    /// The actions of one turn at `now`, up to a wait or a poll (`linked` answers link checks).
+    fn turn(c: &mut TeamCore, now: Duration, linked: bool) -> Vec<TeamAction> {
+        c.on_turn(now);
+        let mut out = Vec::new();
+        loop {
+            let a = c.next_action(now);
+            match &a {
+                TeamAction::CheckLinks => c.on_links(now, |_, _| linked),
+                TeamAction::Complete { states, .. } => c.recycle(states.clone()),
+                TeamAction::Wait(_) | TeamAction::Poll | TeamAction::Kill(_) => {
+                    out.push(a);
+                    return out;
+                }
+                TeamAction::Stop(..) | TeamAction::Finished => {
+                    out.push(a);
+                    return out;
+                }
+                _ => {}
+            }
+            out.push(a);
+        }
+    }
+
+    fn send(c: &mut TeamCore, ids: &[u32], ticks: std::ops::RangeInclusive<u64>) {
+        for tick in ticks {
+            for &id in ids {
+                c.on_state(StateMsg::ok(tick, 7, id, [0.0; 12]), ms(0));
+            }
+        }
+    }
+
+    fn paper_core(scripted: &[(u32, u64)], repairs: bool) -> (TeamCore, Vec<u32>) {
+        let s = Scenario::builtin("paper40").unwrap();
+        let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+        let cfg = TeamConfig {
+            ids: ids.clone(),
+            window: 4,
+            last_tick: 30,
+            agent_timeout: Duration::from_secs(10),
+        };
+        let core = TeamCore::new(cfg, ms(0)).with_losses(TeamLosses::new(&s, scripted), repairs);
+        (core, ids)
+    }
+
+    #[test]
+    fn a_scripted_loss_is_killed_at_its_tick_then_announced_linked_and_flown_around() {
+        let (mut c, ids) = paper_core(&[(20, 5)], true);
+        let grants = |a: &[TeamAction]| -> Vec<u64> {
+            a.iter()
+                .filter_map(|x| match x {
+                    TeamAction::Grant(g) => Some(*g),
+                    _ => None,
+                })
+                .collect()
+        };
+        assert_eq!(grants(&turn(&mut c, ms(1), false)), [3]);
+        send(&mut c, &ids, 0..=3);
+        // Grants stop at the scripted tick 5 (not 3 + 4).
+        assert_eq!(grants(&turn(&mut c, ms(2), false)), [5]);
+        send(&mut c, &ids, 4..=5);
+        let a = turn(&mut c, ms(3), false);
+        assert_eq!(a.last(), Some(&TeamAction::Kill(vec![20])));
+        // After one more drain the loss is lost from tick 6 and announced on the clock.
+        let a = turn(&mut c, ms(4), false);
+        assert!(!grants(&a).is_empty(), "{a:?}");
+        let n = c.losses().unwrap().notice().unwrap();
+        assert_eq!((n.seq, n.id, n.tick, n.linked), (1, 20, 6, 0));
+        let others: Vec<u32> = ids.iter().copied().filter(|&i| i != 20).collect();
+        send(&mut c, &others, 6..=8);
+        let a = turn(&mut c, ms(30), true);
+        let done: Vec<u64> = a
+            .iter()
+            .filter_map(|x| match x {
+                TeamAction::Complete { tick, states } => {
+                    let k = ids.iter().position(|&i| i == 20).unwrap();
+                    assert_eq!(states[k].is_none(), *tick >= 6);
+                    Some(*tick)
+                }
+                _ => None,
+            })
+            .collect();
+        assert_eq!(done, [6, 7, 8], "ticks 0-5 completed before the kill");
+        assert_eq!(c.losses().unwrap().notice().unwrap().linked, 1);
+        assert_eq!(
+            c.losses().unwrap().due_at(6),
+            [(LossCause::Scripted, vec![20])]
+        );
+    }
+
+    #[test]
+    fn with_on_loss_stop_a_scripted_loss_is_a_fault_after_its_last_tick() {
+        let (mut c, ids) = paper_core(&[(20, 5)], false);
+        turn(&mut c, ms(1), false);
+        send(&mut c, &ids, 0..=3);
+        turn(&mut c, ms(2), false);
+        send(&mut c, &ids, 4..=5);
+        let a = turn(&mut c, ms(3), false);
+        assert_eq!(a.last(), Some(&TeamAction::Kill(vec![20])));
+        turn(&mut c, ms(4), false);
+        let a = turn(&mut c, ms(600), false);
+        match a.last() {
+            Some(TeamAction::Stop(f, StopReason::AgentFault)) => {
+                assert_eq!((f.kind, f.agent, f.tick), (FaultKind::Lost, Some(20), 6));
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_dead_or_silent_member_is_lost_when_repairs_are_on() {
+        let (mut c, ids) = paper_core(&[], true);
+        turn(&mut c, ms(1), false);
+        send(&mut c, &ids, 0..=2);
+        turn(&mut c, ms(2), false);
+        c.on_exited(20, "was killed by signal 9".into(), ms(3));
+        turn(&mut c, ms(4), false);
+        assert_eq!(c.losses().unwrap().losses(), [(3, 20, LossCause::Killed)]);
+        // Member 29 goes silent at tick 3: killed and lost after the agent timeout.
+        let others: Vec<u32> = ids
+            .iter()
+            .copied()
+            .filter(|&i| i != 20 && i != 29)
+            .collect();
+        send(&mut c, &others, 3..=3);
+        turn(&mut c, ms(40), true);
+        assert_eq!(c.losses().unwrap().notice().unwrap().linked, 1);
+        // Turns a second apart (a longer gap is a stall of the orchestrator itself).
+        let mut a = Vec::new();
+        for t in 1..=12 {
+            a.extend(turn(&mut c, ms(40 + 1000 * t), true));
+        }
+        assert!(a.contains(&TeamAction::Kill(vec![29])), "{a:?}");
+        turn(&mut c, ms(12_100), true);
+        let l = c.losses().unwrap().losses();
+        assert_eq!(l[1], (3, 29, LossCause::Silent));
     }
 }
