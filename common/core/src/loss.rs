@@ -183,9 +183,8 @@ impl LossState {
 }
 
 /// One record per id lost at `tick`; a follower whose link changed is told under the lost
-/// member it read (under the first id when it read none of them: a knock-on switch, when a
-/// follower repaired for an earlier loss picks again because the repair is a function of the
-/// whole lost set, the same in every process whatever order the losses were seen in).
+/// member it read (under the first id when it read none of them: a follower degraded because
+/// it was left unreachable).
 fn records(
     s: &Scenario,
     (tick, cause): (u64, &'static str),

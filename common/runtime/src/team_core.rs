@@ -48,8 +48,9 @@ pub struct TeamConfig {
     pub agent_timeout: Duration,
 }
 
-/// One complete tick's states, in formation order: every slot is `Some` but a lost member's. Hand the vector back
-/// with [`TeamCore::recycle`] so the next tick reuses it (no allocation per tick).
+/// One complete tick's states, in formation order: every slot is `Some` but a lost member's.
+/// Hand the vector back with [`TeamCore::recycle`] so the next tick reuses it (no allocation
+/// per tick).
 pub type TickStates = Vec<Option<StateMsg>>;
 
 /// What the loop must do next.
