@@ -143,22 +143,28 @@ impl MemberLosses {
     fn replan(&mut self, tick: u64) -> Result<(), LossFault> {
         let epochs = self.log.epochs();
         let own = |f: &Formation| f.member(self.id).cloned();
-        // The link flown for the ticks already computed must not change.
-        if tick > 0 {
-            let before = epochs
+        // The link flown for the steps already computed must not change: the link in force at
+        // `tick` is either the one applied, or (changing exactly at `tick`, not applied yet) the
+        // one in force before it.
+        let in_force = |x: u64| {
+            epochs
+                .iter()
+                .rev()
+                .find(|(t, _)| *t <= x)
+                .and_then(|(_, r)| own(&r.formation))
+                .unwrap_or_else(|| self.applied.clone())
+        };
+        let now_link = in_force(tick).link;
+        let ok = now_link == self.applied.link
+            || (tick > 0 && in_force(tick - 1).link == self.applied.link)
+            || tick == 0;
+        if !ok {
+            let at = epochs
                 .iter()
                 .rev()
                 .find(|(t, _)| *t < tick)
-                .and_then(|(_, r)| own(&r.formation));
-            let flown = before.is_none_or(|m| m.link == self.applied.link);
-            if !flown {
-                let at = epochs
-                    .iter()
-                    .rev()
-                    .find(|(t, _)| *t < tick)
-                    .map_or(0, |e| e.0);
-                return Err(LossFault::Late { tick, at });
-            }
+                .map_or(0, |e| e.0);
+            return Err(LossFault::Late { tick, at });
         }
         let mut last = self.applied.clone();
         self.schedule.clear();
@@ -309,5 +315,36 @@ mod tests {
             me.on_notice(LossNotice { seq: 1, ..n }, 9),
             Err(LossFault::SelfLost { tick: 9 })
         );
+    }
+}
+
+#[cfg(test)]
+mod sequence_tests {
+    use super::*;
+    use cdm_core::scenario::Scenario;
+
+    #[test]
+    fn a_reader_of_the_second_loss_is_not_late_because_of_the_first() {
+        let s = Scenario::builtin("paper40").unwrap();
+        for id in [12u32, 28] {
+            let me = s.formation.member(id).unwrap();
+            let ins: Vec<u32> = me.link.map(|l| l.in_neighbors.to_vec()).unwrap_or_default();
+            let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
+            let mut m = MemberLosses::new(me, LossLog::new(&s), &ins, &outs);
+            let n1 = LossNotice {
+                seq: 1,
+                id: 20,
+                tick: 301,
+                linked: 0,
+            };
+            m.on_notice(n1, 320).unwrap();
+            let n2 = LossNotice {
+                seq: 2,
+                id: 5,
+                tick: 451,
+                linked: 1,
+            };
+            m.on_notice(n2, 451).unwrap();
+        }
     }
 }
