@@ -60,13 +60,18 @@ class StateMsg(ctypes.Structure):
 
 
 class ClockMsg(ctypes.Structure):
-    """The orchestrator's grant (`common::messages::ClockMsg`, 24 bytes)."""
+    """The orchestrator's grant (`common::messages::ClockMsg`, 48 bytes)."""
 
     _fields_ = [
         ("grant_tick", ctypes.c_uint64),
         ("scenario_hash", ctypes.c_uint64),
         ("command", ctypes.c_uint32),
         ("reason", ctypes.c_uint32),
+        ("loss_tick", ctypes.c_uint64),
+        ("loss_seq", ctypes.c_uint32),
+        ("loss_id", ctypes.c_uint32),
+        ("loss_linked", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
     ]
 
     @staticmethod

@@ -8,13 +8,13 @@
 
 pub use cdm_core::{
     audit, control, delay, dynamics, engine, export, files, formation, frame, gains, geometry,
-    graph, linear_certificate, link, loss, losscert, math, outcome, plan, repair, rundir, safety,
-    scenario, simulate, step, telemetry,
+    graph, linear_certificate, link, loss, loss_log, losscert, math, outcome, plan, repair, rundir,
+    safety, scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
 pub use cdm_runtime::{
-    fault_inject, member_core, member_loop, messages, realtime, realtime_loop, realtime_monitor,
-    seams, signals, team_core,
+    fault_inject, member_core, member_loop, member_loss, messages, realtime, realtime_loop,
+    realtime_monitor, seams, signals, team_core, team_loss,
 };
 
 pub mod member;

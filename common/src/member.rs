@@ -10,6 +10,7 @@ use cdm_mavlink::udp::UdpError;
 use cdm_mavlink::PlantError;
 use cdm_runtime::member_core::MemberCore;
 use cdm_runtime::member_loop::{fly, LoopError};
+use cdm_runtime::member_loss::{LossFault, MemberLosses};
 use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
 use cdm_runtime::realtime_loop::fly_realtime;
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock, Vehicle};
@@ -17,6 +18,7 @@ use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock, Veh
 use crate::dynamics::QuadState;
 use crate::engine::step_config;
 use crate::formation::{Member, Role};
+use crate::loss_log::LossLog;
 use crate::options::LinkArgs;
 use crate::scenario::{Checks, Scenario, ScenarioError};
 use crate::step::StepFault;
@@ -106,6 +108,8 @@ pub enum MemberError {
         peer: u32,
         what: String,
     },
+    #[error("agent {id} at tick {tick}: cannot follow the loss notices: {what}")]
+    Loss { id: u32, tick: u64, what: String },
     #[error("agent {id}: interrupted at tick {tick}")]
     Interrupted { id: u32, tick: u64 },
     #[error("agent {id}: team {team} flies {team_mode} and this member {mode}: start it {fix}")]
@@ -264,7 +268,8 @@ impl Joined<'_> {
             QuadState::hover(s.formation.member(n).map_or(me.position, |m| m.position)).flat()
         });
         let mut core = MemberCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
-            .with_links(s.link_model(), &step_config(s), starts);
+            .with_links(s.link_model(), &step_config(s), starts)
+            .with_losses(MemberLosses::new(me, LossLog::new(s), &ins, &outs));
         let inject = crate::fault_inject::from_env(id);
         fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
             .map_err(|e| MemberError::from_loop(e, id, team))
@@ -327,6 +332,26 @@ impl MemberError {
                     tick,
                     peer,
                     what: format!("sent a state of another scenario (tick {peer_tick})"),
+                },
+                MemberFault::Loss(f) => {
+                    let (tick, what) = match f {
+                        LossFault::Missed { seen, got } => {
+                            (0, format!("notice {got} arrived after notice {seen}: one was missed"))
+                        }
+                        LossFault::SelfLost { tick } => {
+                            (tick, "the orchestrator declared this agent lost".into())
+                        }
+                        LossFault::Late { tick, at } => (
+                            tick,
+                            format!("the repair changes this agent's link from tick {at}, already flown"),
+                        ),
+                    };
+                    MemberError::Loss { id, tick, what }
+                }
+                MemberFault::RepairUnsupported { tick } => MemberError::Loss {
+                    id,
+                    tick,
+                    what: "this vehicle or transport cannot switch links in flight".into(),
                 },
                 MemberFault::TickGap { tick, peer, later } => MemberError::Neighbor {
                     id,

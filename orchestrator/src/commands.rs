@@ -130,11 +130,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 return Err(Failure::bad_input(why));
             }
             check_follow(&s, run.follow)?;
-            if !run.lose.is_empty() {
-                // Killing a member process and re-opening its readers' services needs the
-                // sans-I/O member loop (issue 16, process side); until then, simulate it.
+            let losses = LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?;
+            if no_spawn && !run.lose.is_empty() {
+                // The orchestrator carries out a scripted loss by killing the member's process.
                 return Err(Failure::bad_input(
-                    "--lose is not supported by launch yet: use simulate --lose",
+                    "--lose needs members spawned by launch (not --no-spawn)",
                 ));
             }
             let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
@@ -166,6 +166,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     .transpose()
                     .map_err(Failure::bad_input)?,
                 realtime,
+                losses,
+                on_loss: run.on_loss.into(),
             };
             let started = Instant::now();
             let crate::launch::Launched {

@@ -11,6 +11,7 @@ use common::audit::{AuditReport, Auditor};
 use crate::viewer::live::LiveView;
 use common::engine::desired_positions;
 use common::formation::Role;
+use common::loss::{LossSchedule, LossState};
 use common::math::{vec3, Vec3};
 use common::messages::{ClockMsg, StateMsg, StopReason};
 use common::outcome::FaultKind;
@@ -20,14 +21,15 @@ use common::seams::{Clock, MonotonicClock};
 use common::simulate::id_order;
 use common::step::tick_time;
 use common::team_core::{TeamAction, TeamConfig, TeamCore};
+use common::team_loss::TeamLosses;
 use common::telemetry::{Row, TelemetrySink};
 use common::transport::{
     describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName,
 };
 
 use crate::team::{
-    check_children, fault, first_exited, member_binaries_present, spawn_member, stop_team, Spawned,
-    Stop,
+    check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
+    Spawned, Stop,
 };
 use crate::Failure;
 
@@ -54,6 +56,10 @@ pub struct LaunchOptions {
     pub realtime: Option<crate::realtime::RealtimeOptions>,
     /// What the members fly (forwarded to the spawned members; printed for hand-started ones).
     pub vehicles: common::vehicles::Vehicles,
+    /// Members to kill once they have published a tick (`--lose`, validated).
+    pub losses: common::loss::LossSchedule,
+    /// What a lost member does to the run (`--on-loss`).
+    pub on_loss: common::loss::OnLoss,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -111,9 +117,12 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         .iter()
         .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
         .collect();
-    let layout = TeamLayout::new(ids.clone(), ins, o.window)
+    let mut layout = TeamLayout::new(ids.clone(), ins, o.window)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
+    if o.on_loss == common::loss::OnLoss::Repair {
+        layout = layout.with_repair_room(crate::loss::repair_room(s, o.window));
+    }
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
@@ -370,7 +379,9 @@ fn fly_team(
         last_tick: last,
         agent_timeout: o.agent_timeout,
     };
-    let mut core = TeamCore::new(cfg, clock.now());
+    let repairs = o.on_loss == common::loss::OnLoss::Repair && o.spawn;
+    let book = TeamLosses::new(s, &crate::loss::scripted_kills(&o.losses));
+    let mut core = TeamCore::new(cfg, clock.now()).with_losses(book, repairs);
     let mut rec = Recorder::new(s, last, o.quiet);
     let mut ticking = None;
     let mut last_flush = Instant::now();
@@ -386,12 +397,14 @@ fn fly_team(
         loop {
             match core.next_action(clock.now()) {
                 TeamAction::Grant(g) => {
+                    let notice = core.losses().and_then(|l| l.notice());
                     ports
-                        .publish_clock(ClockMsg::run(g, hash))
+                        .publish_clock(ClockMsg::run(g, hash).with_loss(notice))
                         .map_err(transport_stop(core.next_tick()))?;
                     ticking.get_or_insert_with(Instant::now);
                 }
                 TeamAction::Complete { tick, states } => {
+                    rec.lose(s, tick, core.losses(), audit);
                     rec.record(s, tick, &states, audit, live, tel)?;
                     core.recycle(states);
                     if o.stop_on_violation && audit.violation_count() > 0 {
@@ -402,9 +415,19 @@ fn fly_team(
                     }
                 }
                 TeamAction::CheckExited => {
-                    if let Some((id, how)) = first_exited(children) {
+                    let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
+                    if let Some((id, how)) = first_exited_but(children, lost) {
                         core.on_exited(id, how, clock.now());
                     }
+                }
+                TeamAction::Kill(ids) => {
+                    for id in ids {
+                        crate::loss::kill_and_reap(children, id);
+                    }
+                    break;
+                }
+                TeamAction::CheckLinks => {
+                    core.on_links(clock.now(), |r, w| ports.linked(r, w).unwrap_or(false));
                 }
                 TeamAction::Poll => {
                     // Complete ticks reach the file at least every 100 ms (and at every stop).
@@ -440,6 +463,8 @@ struct Recorder {
     pos: Vec<Vec3>,
     rows: Vec<Row>,
     progress: crate::progress::Progress,
+    /// The losses' audit records (as `simulate` writes them).
+    losses: LossState,
 }
 
 impl Recorder {
@@ -451,6 +476,15 @@ impl Recorder {
             pos: vec![Vec3::zeros(); n],
             rows: Vec::with_capacity(n),
             progress: crate::progress::Progress::new("launch", last, s.dt_s(), quiet),
+            losses: LossState::new(s, LossSchedule::default()),
+        }
+    }
+
+    /// Before tick `tick` is audited: record the losses whose repair applies from it (their
+    /// bodies leave the audit; their rows leave telemetry, having no state).
+    fn lose(&mut self, s: &Scenario, tick: u64, book: Option<&TeamLosses>, audit: &mut Auditor) {
+        for (cause, ids) in book.map(|b| b.due_at(tick)).unwrap_or_default() {
+            self.losses.record(s, tick, &ids, cause.as_str(), audit);
         }
     }
 
@@ -479,7 +513,8 @@ impl Recorder {
             return Ok(());
         }
         self.rows.clear();
-        for &k in &self.order {
+        // A complete tick has every state but the lost members'.
+        for &k in self.order.iter().filter(|&&k| states[k].is_some()) {
             let m = &s.formation.members[k];
             let st = states[k].map(|x| x.state).unwrap_or([f64::NAN; 12]);
             self.rows.push(Row {

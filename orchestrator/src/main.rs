@@ -15,6 +15,7 @@ mod cli;
 mod commands;
 mod export;
 mod launch;
+mod loss;
 mod progress;
 mod realtime;
 mod report;

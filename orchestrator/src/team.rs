@@ -76,8 +76,16 @@ pub fn spawn_member(
 /// The first spawned member that has exited: its id and how (`exited with code 1`, `was killed
 /// by signal 9`).
 pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, String)> {
+    first_exited_but(children, |_| false)
+}
+
+/// [`first_exited`] among the members `known` does not hold (lost members already reaped).
+pub fn first_exited_but(
+    children: &mut [Spawned],
+    known: impl Fn(u32) -> bool,
+) -> Option<(u32, String)> {
     use std::os::unix::process::ExitStatusExt;
-    children.iter_mut().find_map(|c| {
+    children.iter_mut().filter(|c| !known(c.id)).find_map(|c| {
         let status = c.child.try_wait().ok()??;
         let how = match (status.code(), status.signal()) {
             (_, Some(sig)) => format!("was killed by signal {sig}"),

@@ -3,7 +3,8 @@
 //! team alive, nothing of the team in /dev/shm or /dev/shm/cdm-iceoryx2-<uid>, telemetry.csv holding only
 //! whole ticks (every one before the fault), and audit.json saying what happened.
 //!
-//! - A primary or a secondary leader dies (SIGKILL) at a chosen tick.
+//! - A primary or a secondary leader dies (SIGKILL) at a chosen tick (`--on-loss stop`; the
+//!   default repair is tested in `loss_launch.rs`).
 //! - An agent hangs without dying (SIGSTOP): named by `--agent-timeout`.
 //! - The orchestrator gets SIGTERM; or SIGKILL, after which its members stop by themselves and
 //!   a new launch of the same team removes what the dead orchestrator left and flies.
@@ -89,8 +90,13 @@ fn message(fault: &Value) -> String {
 }
 
 /// Launches the team with `CDM_FAULT_INJECT=<id>:<kind>@FAULT_TICK` and waits for its end.
-fn launch_injected(team: &str, out: &Path, id: u32, kind: &str) -> std::process::Output {
-    let mut cmd = launch_team(team, out, "600", &[]);
+fn launch_injected(
+    team: &str,
+    out: &Path,
+    (id, kind): (u32, &str),
+    extra: &[&str],
+) -> std::process::Output {
+    let mut cmd = launch_team(team, out, "600", extra);
     cmd.env(
         common::fault_inject::ENV,
         format!("{id}:{kind}@{FAULT_TICK}"),
@@ -121,7 +127,8 @@ fn a_killed_leader(id: u32, role: Role) {
     let dir = TempDir::new();
     let team = unique_team(&format!("kill_{}", role.as_str()));
     let out = dir.path().join("run");
-    let o = launch_injected(&team, &out, id, "kill");
+    // A dead member is a fault with `--on-loss stop` (the default repairs: `loss_launch.rs`).
+    let o = launch_injected(&team, &out, (id, "kill"), &["--on-loss", "stop"]);
     assert_exit(&o, 3, &format!("launch after {} {id} died", role.as_str()));
     let s = flown_scenario(&out);
     assert_eq!(
@@ -163,7 +170,8 @@ fn a_hung_agent_is_named_within_the_agent_timeout_and_the_team_stopped() {
     let dir = TempDir::new();
     let team = unique_team("sigstop");
     let out = dir.path().join("run");
-    let (orch, s, fp) = running(&team, &out, &["--agent-timeout", "1.5"]);
+    let stop = ["--agent-timeout", "1.5", "--on-loss", "stop"];
+    let (orch, s, fp) = running(&team, &out, &stop);
     let victim = 9;
     let pid = member_pid(&team, victim).expect("agent 9 runs");
     let _guard = Stopped(pid);
@@ -471,7 +479,7 @@ fn a_bad_state_of_agent_1(kind: &str, code: &str) {
     let dir = TempDir::new();
     let team = unique_team(&format!("bad_{kind}"));
     let out = dir.path().join("run");
-    let o = launch_injected(&team, &out, 1, kind);
+    let o = launch_injected(&team, &out, (1, kind), &[]);
     assert_exit(&o, 3, &format!("launch with a {kind} state of agent 1"));
     let s = flown_scenario(&out);
     let fault = assert_fault(&out, &s, "agent-fault");
@@ -531,7 +539,7 @@ fn a_non_finite_state_nobody_reads_is_reported_by_the_orchestrator() {
         .filter(|id| !read.contains(id))
         .max()
         .expect("an agent without readers");
-    let o = launch_injected(&team, &out, leaf, "nan");
+    let o = launch_injected(&team, &out, (leaf, "nan"), &[]);
     assert_exit(&o, 3, &format!("launch with a NaN state of agent {leaf}"));
     assert_eq!(
         flown_scenario(&out).agents,

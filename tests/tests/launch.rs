@@ -188,7 +188,9 @@ fn two_teams_fly_at_once_without_seeing_each_other() {
 /// Starts a 10-agent team and lets it write some ticks; returns the orchestrator, the flown
 /// scenario and the team's footprint (checked to be visible: 11 processes).
 fn running_team(team: &str, out: &Path) -> (Running, ScenarioFile, Footprint) {
-    let mut orch = spawn(&mut launch(team, out, &["--n", "10", "--t-total", "600"]));
+    // `--on-loss stop`: a dead member is a fault (the default repairs: `loss_launch.rs`).
+    let args = ["--n", "10", "--t-total", "600", "--on-loss", "stop"];
+    let mut orch = spawn(&mut launch(team, out, &args));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), ROWS_BEFORE_FAULT);
     let s = flown_scenario(out);
     let procs = team_processes(team);
@@ -224,7 +226,7 @@ fn assert_stopped_with(out: &Path, s: &ScenarioFile, kind: &str) -> Value {
     fault.clone()
 }
 
-/// SIGKILL of one follower mid-run: the orchestrator stops the team with a fault naming the
+/// SIGKILL of one follower mid-run (`--on-loss stop`): the orchestrator stops the team with a fault naming the
 /// agent and the tick, keeps only whole ticks, and leaves no process and no shared memory.
 #[test]
 fn a_killed_follower_stops_the_team_and_leaves_nothing_behind() {

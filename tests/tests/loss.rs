@@ -257,19 +257,3 @@ fn plan_losses_certifies_every_member_and_matches_simulate() {
         "simulate measures {dev}, the certificate says {certified}"
     );
 }
-
-#[test]
-fn launch_refuses_lose_until_processes_can_lose_members() {
-    let tmp = TempDir::new();
-    let dir = tmp.path().join("launch");
-    let out = orchestrator(&[
-        "launch",
-        "--out",
-        dir.to_str().unwrap(),
-        "--lose",
-        "20@3",
-        "--no-figures",
-    ]);
-    assert_eq!(out.status.code(), Some(2), "{}", describe(&out));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--lose is not supported by launch"));
-}

@@ -117,7 +117,8 @@ pub struct LossRecord {
     pub id: u32,
     /// `primary`, `secondary` or `follower`.
     pub role: &'static str,
-    /// Why it was lost: `scripted` (`--lose`).
+    /// Why it was lost: `scripted` (`--lose`); in `launch` also `killed` (a signal from
+    /// outside), `exited` (the process ended by itself) or `silent` (past `--agent-timeout`).
     pub cause: &'static str,
     /// The tick of its last published state.
     pub last_tick: u64,

@@ -27,6 +27,7 @@ pub mod graph;
 pub mod linear_certificate;
 pub mod link;
 pub mod loss;
+pub mod loss_log;
 pub mod losscert;
 pub mod outcome;
 pub mod plan;

@@ -154,10 +154,27 @@ impl LossState {
         engine: &mut Engine<P>,
         audit: &mut Auditor,
     ) -> Repair {
-        self.lost.extend(ids.iter().copied());
-        let r = repair(&s.formation, self.floor, &self.lost);
+        let r = self.record(s, tick, ids, "scripted", audit);
         engine.apply_repair(&r);
-        for rec in records(s, tick, ids, &self.current, &r) {
+        r
+    }
+
+    /// Lose `ids` from `tick` on in the audit only (`launch`: the members repair themselves):
+    /// repair the graph for every member lost so far and record why (`cause`: `scripted`,
+    /// `killed`, `exited`, `silent`). Returns the repair.
+    pub fn record(
+        &mut self,
+        s: &Scenario,
+        tick: u64,
+        ids: &[u32],
+        cause: &'static str,
+        audit: &mut Auditor,
+    ) -> Repair {
+        self.lost.extend(ids.iter().copied());
+        // Incremental: the graph in force is repaired, so only the readers of the members lost
+        // now switch (a process that ran ahead never has to change a link it already flew).
+        let r = repair(&self.current, self.floor, &self.lost);
+        for rec in records(s, (tick, cause), ids, &self.current, &r) {
             audit.lose(rec);
         }
         self.current = r.formation.clone();
@@ -166,12 +183,11 @@ impl LossState {
 }
 
 /// One record per id lost at `tick`; a follower whose link changed is told under the lost
-/// member it read (under the first id when it read none of them: a knock-on switch, when a
-/// follower repaired for an earlier loss picks again because the repair is a function of the
-/// whole lost set, the same in every process whatever order the losses were seen in).
+/// member it read (under the first id when it read none of them: a follower degraded because
+/// it was left unreachable).
 fn records(
     s: &Scenario,
-    tick: u64,
+    (tick, cause): (u64, &'static str),
     ids: &[u32],
     before: &Formation,
     r: &Repair,
@@ -181,7 +197,7 @@ fn records(
         .map(|&id| LossRecord {
             id,
             role: s.role_of(id).map_or("unknown", |role| role.as_str()),
-            cause: "scripted",
+            cause,
             last_tick: tick - 1,
             tick,
             t_s: tick_time(tick, s.dt_s()),

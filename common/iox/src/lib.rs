@@ -83,7 +83,7 @@ pub use error::TransportError;
 pub use limits::describe_spawn_error;
 pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
-pub use team::{scenario_hash_value, TeamLayout, TeamName, SCENARIO_HASH_KEY};
+pub use team::{scenario_hash_value, RepairRoom, TeamLayout, TeamName, SCENARIO_HASH_KEY};
 pub use wire::{ClockWire, StateWire, Wire, CLOCK_TYPE_NAME, STATE_TYPE_NAME};
 
 /// The runtime's wire messages, at the path the backend's modules name them.
@@ -108,8 +108,9 @@ const SPARE_NODES: usize = 2;
 /// publishers never wait for it (safe overflow: a slow observer loses its oldest samples).
 const OBSERVER_SLOTS: usize = 1;
 
-/// Grants a subscriber of the clock keeps; agents only act on the newest one.
-const CLOCK_BUFFER: usize = 2;
+/// Clock messages a subscriber keeps: agents read every one (a loss notice must not be
+/// overwritten by the grants after it), and lag at most a few grants behind (window).
+const CLOCK_BUFFER: usize = 16;
 
 /// How long a stale-resource cleanup waits for another process that is cleaning the same node.
 const CLEANUP_TIMEOUT: Duration = Duration::from_secs(2);

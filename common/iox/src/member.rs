@@ -270,6 +270,66 @@ impl MemberPorts {
         Ok(newest)
     }
 
+    /// Drains the clock, every message oldest first (loss notices must not be skipped).
+    pub fn receive_clock(&mut self, mut f: impl FnMut(ClockMsg)) -> Result<usize, TransportError> {
+        let mut count = 0;
+        while let Some(sample) = self
+            .clock_subscriber
+            .receive()
+            .map_err(|e| self.error(&self.team.clock_service(), "receive", e))?
+        {
+            f(sample.payload().0);
+            count += 1;
+        }
+        Ok(count)
+    }
+
+    /// After a loss: subscribes to `subscribe`'s states (a new subscriber gets the states its
+    /// publisher still holds in its history once the publisher updates its connections, see
+    /// [`Self::hand_over`]) and opens notifiers on `notify`'s wake events. The orchestrator sized
+    /// the services for the repairs (`TeamLayout::with_repair_links`).
+    pub fn connect(&mut self, subscribe: &[u32], notify: &[u32]) -> Result<(), TransportError> {
+        let who = Role::Agent(self.id);
+        for &peer in subscribe {
+            if self.neighbors.contains_key(&peer) {
+                continue;
+            }
+            let name = self.team.state_service(peer);
+            let service = open_state(&self._node, &self.team, who, peer)?;
+            let subscriber = service.subscriber_builder().create().map_err(|e| match e {
+                SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
+                    not_a_neighbor(&self.team, self.id, peer, &name, "subscriber")
+                }
+                e => self.error(&name, "create subscriber", e),
+            })?;
+            let reader = NeighborReader {
+                _service: service,
+                subscriber,
+            };
+            self.neighbors.insert(peer, reader);
+        }
+        for &peer in notify {
+            if self.out_wakes.contains_key(&peer) {
+                continue;
+            }
+            let name = self.team.wake_service(peer);
+            let writer = open_wake_writer(&self._node, &self.team, who, &name, peer)?;
+            self.out_wakes.insert(peer, writer);
+        }
+        Ok(())
+    }
+
+    /// Every new link of a repair is connected: the publisher delivers its history to its new
+    /// subscribers (iceoryx2 does so when it updates its connections), then every reader is
+    /// woken.
+    pub fn hand_over(&mut self) -> Result<(), TransportError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        self.publisher
+            .update_connections()
+            .map_err(|e| self.error(&self.team.state_service(self.id), "update connections", e))?;
+        self.notify_readers()
+    }
+
     /// Blocks until a neighbour or the orchestrator notifies `wake/<id>` or `timeout` passes;
     /// true when woken. Then drain both the clock and the neighbours: notifications merge.
     pub fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
@@ -440,5 +500,17 @@ impl cdm_runtime::seams::MemberTransport for MemberPorts {
 
     fn orchestrator_alive(&self) -> bool {
         MemberPorts::orchestrator_alive(self)
+    }
+
+    fn receive_clock(&mut self, f: impl FnMut(ClockMsg)) -> Result<usize, TransportError> {
+        MemberPorts::receive_clock(self, f)
+    }
+
+    fn connect(&mut self, subscribe: &[u32], notify: &[u32]) -> Result<bool, TransportError> {
+        MemberPorts::connect(self, subscribe, notify).map(|()| true)
+    }
+
+    fn hand_over(&mut self) -> Result<bool, TransportError> {
+        MemberPorts::hand_over(self).map(|()| true)
     }
 }

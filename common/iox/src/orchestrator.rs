@@ -289,25 +289,58 @@ impl OrchestratorPorts {
             node_ids.push(s.node_id);
             CallbackProgression::Continue
         });
+        self.node_names(&node_ids, |f| reader.service.nodes(f).map(|_| ()))
+    }
+
+    /// Names of the nodes notifying `wake/<id>`, sorted (the orchestrator's own included).
+    pub fn notifier_nodes(&self, id: u32) -> Result<Vec<String>, TransportError> {
+        let Some(wake) = self.ports().wakes.get(&id) else {
+            return Ok(vec![]);
+        };
+        let mut node_ids = vec![];
+        wake.service.dynamic_config().list_notifiers(|n| {
+            node_ids.push(n.node_id);
+            CallbackProgression::Continue
+        });
+        self.node_names(&node_ids, |f| wake.service.nodes(f).map(|_| ()))
+    }
+
+    /// True when agent `reader` subscribes to `state/<writer>` and `writer` notifies
+    /// `wake/<reader>`: a link a repair opened is connected.
+    pub fn linked(&self, reader: u32, writer: u32) -> Result<bool, TransportError> {
+        let r = self.team.node_name(Role::Agent(reader));
+        let w = self.team.node_name(Role::Agent(writer));
+        Ok(
+            self.subscriber_nodes(writer)?.contains(&r)
+                && self.notifier_nodes(reader)?.contains(&w),
+        )
+    }
+
+    /// The names of the nodes of `node_ids` (one entry per port), listed by `nodes`.
+    fn node_names<E: std::fmt::Debug>(
+        &self,
+        node_ids: &[iceoryx2::identifiers::UniqueNodeId],
+        nodes: impl FnOnce(
+            &mut dyn FnMut(NodeState<ipc::Service>) -> CallbackProgression,
+        ) -> Result<(), E>,
+    ) -> Result<Vec<String>, TransportError> {
         let mut names = vec![];
-        reader
-            .service
-            .nodes(|state| {
-                let (node_id, name) = match &state {
-                    NodeState::Alive(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
-                    NodeState::Dead(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
-                    NodeState::Inaccessible(i) | NodeState::Undefined(i) => (*i, None),
-                };
-                // A node with several subscribers on one service would be listed once per port.
-                let ports = node_ids.iter().filter(|&&n| n == node_id).count();
-                let name = name.map_or_else(|| format!("<node {node_id}>"), |n| n.to_string());
-                names.extend(std::iter::repeat_n(name, ports));
-                CallbackProgression::Continue
-            })
-            .map_err(|e| TransportError::NodeList {
-                team: self.team.clone(),
-                detail: format!("{e:?}"),
-            })?;
+        nodes(&mut |state| {
+            let (node_id, name) = match &state {
+                NodeState::Alive(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
+                NodeState::Dead(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
+                NodeState::Inaccessible(i) | NodeState::Undefined(i) => (*i, None),
+            };
+            // A node with several subscribers on one service would be listed once per port.
+            let ports = node_ids.iter().filter(|&&n| n == node_id).count();
+            let name = name.map_or_else(|| format!("<node {node_id}>"), |n| n.to_string());
+            names.extend(std::iter::repeat_n(name, ports));
+            CallbackProgression::Continue
+        })
+        .map_err(|e| TransportError::NodeList {
+            team: self.team.clone(),
+            detail: format!("{e:?}"),
+        })?;
         names.sort();
         Ok(names)
     }
@@ -355,7 +388,8 @@ impl Ports {
         let mut states = BTreeMap::new();
         let mut wakes = BTreeMap::new();
         for &id in layout.ids() {
-            let outs = layout.out_neighbors(id).len();
+            let (extra_readers, extra_writers) = layout.repair_slots(id);
+            let outs = layout.out_neighbors(id).len() + extra_readers;
             let name = team.state_service(id);
             let service = node
                 .service_builder(&service_name(team, WHO, &name)?)
@@ -365,7 +399,8 @@ impl Ports {
                 .max_nodes(outs + 2 + SPARE_NODES + OBSERVER_SLOTS)
                 .subscriber_max_buffer_size(buffer)
                 .subscriber_max_borrowed_samples(1)
-                .history_size(0)
+                // A repair's new reader gets the states published before it subscribed.
+                .history_size(layout.history().min(buffer))
                 .enable_safe_overflow(true)
                 .create()
                 .map_err(|e| pubsub_create_error(team, &name, e))?;
@@ -382,7 +417,7 @@ impl Ports {
                 },
             );
 
-            let ins = layout.in_neighbors(id).len();
+            let ins = layout.in_neighbors(id).len() + extra_writers;
             let name = team.wake_service(id);
             let service = node
                 .service_builder(&service_name(team, WHO, &name)?)

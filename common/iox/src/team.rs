@@ -98,6 +98,19 @@ pub struct TeamLayout {
     out_neighbors: BTreeMap<u32, Vec<u32>>,
     window: u32,
     scenario_hash: u64,
+    repair: Option<RepairRoom>,
+}
+
+/// Room the services keep for repairs after losses: readers a member may gain, and how many
+/// states a new reader receives from its new in-neighbour's history.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RepairRoom {
+    /// Extra subscribers (and nodes) on `state/<id>`, by id; ids not listed get none.
+    pub readers: BTreeMap<u32, usize>,
+    /// Extra notifiers (and nodes) on every `wake/<id>`: the new in-neighbours of a follower.
+    pub writers: usize,
+    /// States every state service keeps for a late subscriber.
+    pub history: usize,
 }
 
 /// The clock service's attribute that carries the team's scenario hash.
@@ -158,6 +171,7 @@ impl TeamLayout {
             out_neighbors: outs,
             window,
             scenario_hash: 0,
+            repair: None,
         })
     }
 
@@ -166,6 +180,24 @@ impl TeamLayout {
     pub fn with_scenario_hash(mut self, hash: u64) -> Self {
         self.scenario_hash = hash;
         self
+    }
+
+    /// The same layout with room for repairs after losses (`launch --on-loss repair`).
+    pub fn with_repair_room(mut self, room: RepairRoom) -> Self {
+        self.repair = Some(room);
+        self
+    }
+
+    /// Extra (subscribers on `state/<id>`, notifiers on `wake/<id>`) for repairs.
+    pub fn repair_slots(&self, id: u32) -> (usize, usize) {
+        self.repair.as_ref().map_or((0, 0), |r| {
+            (r.readers.get(&id).copied().unwrap_or(0), r.writers)
+        })
+    }
+
+    /// States a state service keeps for late subscribers (0 without repairs).
+    pub fn history(&self) -> usize {
+        self.repair.as_ref().map_or(0, |r| r.history)
     }
 
     /// The team's scenario hash.

@@ -27,7 +27,7 @@ pub type ClockWire = Wire<ClockMsg>;
 
 // The sizes other languages mirror; a field added to a message must fail here first.
 const _: () = assert!(core::mem::size_of::<StateMsg>() == 128);
-const _: () = assert!(core::mem::size_of::<ClockMsg>() == 24);
+const _: () = assert!(core::mem::size_of::<ClockMsg>() == 48);
 
 // SAFETY: `StateMsg` is `#[repr(C)]` with only `u64`, `u32` and `[f64; 12]` fields (no pointers,
 // no references, no heap), so its bytes mean the same in every process that maps them; `Wire` is

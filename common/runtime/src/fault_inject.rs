@@ -10,6 +10,7 @@
 //! | `nan` | its state with x = NaN |
 //! | `tick` | its state labelled tick `<tick> + 1` (a state from the wrong step) |
 //! | `kill` | nothing: it kills itself with SIGKILL instead (a crash at a chosen tick) |
+//! | `stop` | nothing: it stops itself with SIGSTOP instead (a hang at a chosen tick) |
 //!
 //! Nothing else changes: the member's own integration goes on with its true state. Never set
 //! this variable outside tests; a member that acts on it says so with a warning.
@@ -26,6 +27,8 @@ pub enum Kind {
     WrongTick,
     /// Die by SIGKILL instead of publishing.
     Kill,
+    /// Hang (SIGSTOP) instead of publishing.
+    Stop,
 }
 
 /// One injected fault for this process.
@@ -48,6 +51,7 @@ pub fn parse(spec: &str, my_id: u32) -> Option<Injection> {
         "nan" => Kind::Nan,
         "tick" => Kind::WrongTick,
         "kill" => Kind::Kill,
+        "stop" => Kind::Stop,
         _ => return None,
     };
     Some(Injection {
@@ -85,6 +89,12 @@ impl Injection {
                     libc::raise(libc::SIGKILL);
                 }
             }
+            Kind::Stop => {
+                // SAFETY: raise(2) takes no pointers; the process hangs here until SIGCONT.
+                unsafe {
+                    libc::raise(libc::SIGSTOP);
+                }
+            }
         }
     }
 }
@@ -104,6 +114,7 @@ mod tests {
         );
         assert_eq!(parse("7:tick@3", 7).map(|i| i.kind), Some(Kind::WrongTick));
         assert_eq!(parse("1:kill@9", 1).map(|i| i.kind), Some(Kind::Kill));
+        assert_eq!(parse("1:stop@9", 1).map(|i| i.kind), Some(Kind::Stop));
         for bad in ["7:nan@50", "7:nan", "x:nan@1", "7:inf@1", "7:nan@-1", ""] {
             assert_eq!(parse(bad, 8), None, "{bad}");
         }

@@ -23,6 +23,7 @@ use cdm_core::math::Real;
 use cdm_core::step::{law_for, Law, NeighborModel, StepConfig, StepFault};
 
 use crate::inbox::Inbox;
+use crate::member_loss::{LossFault, LossWork, MemberLosses};
 use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};
 use crate::seams::{TickClock, Vehicle, VehicleFault};
 
@@ -117,6 +118,10 @@ pub enum MemberFault {
     /// Real time: an in-neighbour's newest state was `age` old at this member's tick (older
     /// than the bound); the member reported it and holds.
     NeighborStale { tick: u64, peer: u32, age: Duration },
+    /// A loss notice this member cannot follow (missed, too late, or about itself).
+    Loss(LossFault),
+    /// The vehicle or the transport cannot switch to a repaired link.
+    RepairUnsupported { tick: u64 },
 }
 
 /// What the loop must do next.
@@ -132,6 +137,9 @@ pub enum Action {
     Poll,
     /// Sleep until woken or this long passes, then read the inputs again.
     Wait(Duration),
+    /// Open ports for a repaired graph, or hand new readers their missed states
+    /// ([`LossWork`]), then poll again.
+    Repair(LossWork),
     /// Stop: publish `report` (a fault notice) if any, linger for the stop, then exit.
     Fail {
         report: Option<StateMsg>,
@@ -159,6 +167,8 @@ pub struct MemberCore<V, C> {
     progress: bool,
     unnotified: bool,
     pending: Option<Action>,
+    /// Loss notices and repairs (`None`: a loss notice is a fault).
+    losses: Option<Box<MemberLosses>>,
     links: Links,
 }
 
@@ -204,6 +214,7 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             progress: false,
             unnotified: false,
             pending: None,
+            losses: None,
             links: Links {
                 model: LinkModel::perfect(1.0),
                 held: [Heard {
@@ -225,6 +236,13 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             dt_s: cfg.dt_s,
             neighbor_model: cfg.neighbor_model,
         };
+        self
+    }
+
+    /// The same core, following the orchestrator's loss notices with `losses` (repair in
+    /// flight); without it a notice is a fault.
+    pub fn with_losses(mut self, losses: MemberLosses) -> Self {
+        self.losses = Some(Box::new(losses));
         self
     }
 
@@ -262,6 +280,21 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                 team: c.scenario_hash,
             });
         }
+        if let Some(n) = c.loss() {
+            let taken = match self.losses.as_mut() {
+                Some(l) => l.on_notice(n, self.tick).map_err(MemberFault::Loss),
+                None => Err(MemberFault::RepairUnsupported { tick: self.tick }),
+            };
+            if let Err(fault) = taken {
+                if self.pending.is_none() {
+                    self.pending = Some(Action::Fail {
+                        report: None,
+                        fault,
+                    });
+                }
+            }
+            self.progress = true;
+        }
         match c.command() {
             ClockCommand::Run => {
                 self.progress |= self.clock.on_grant(c.grant_tick);
@@ -283,6 +316,17 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
     /// every tick before the fault is complete (as the engine would have flown them).
     pub fn on_neighbor(&mut self, msg: &StateMsg) {
         let Some(slot) = self.neighbor_ids.iter().position(|n| *n == msg.id) else {
+            // A repair's future in-neighbour: kept until its link applies.
+            if let Some(l) = self
+                .losses
+                .as_mut()
+                .filter(|l| l.is_future_neighbor(msg.id))
+            {
+                if msg.status() == AgentStatus::Ok && msg.scenario_hash == self.hash {
+                    l.keep(msg.id, msg.tick, QuadState(msg.state).flat());
+                    self.progress = true;
+                }
+            }
             return;
         };
         if msg.status() != AgentStatus::Ok {
@@ -318,6 +362,9 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
     pub fn poll(&mut self, now: Duration) -> Action {
         if let Some(a) = self.pending.take() {
             return a;
+        }
+        if let Some(w) = self.losses.as_mut().and_then(|l| l.next_work()) {
+            return Action::Repair(w);
         }
         if let Some(a) = self.advance() {
             return a;
@@ -372,6 +419,9 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             if self.published != Some(tick) || tick >= self.last || g < tick + 1 {
                 return None;
             }
+            if let Some(a) = self.relink_if_due(tick) {
+                return Some(a);
+            }
             let flats = match self.neighbor_flats() {
                 Ok(Some(f)) => f,
                 Ok(None) => return None,
@@ -390,6 +440,37 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             }
             self.progress = true;
         }
+        None
+    }
+
+    /// A repaired link that applies from `tick` (a loss notice's tick): the vehicle flies it
+    /// and the in-neighbours' states come from the new neighbours, from this tick's step on.
+    fn relink_if_due(&mut self, tick: u64) -> Option<Action> {
+        let m = self.losses.as_mut()?.due(tick)?;
+        if self.vehicle.relink(&m).is_err() {
+            let fault = MemberFault::RepairUnsupported { tick };
+            return Some(Action::Fail {
+                report: None,
+                fault,
+            });
+        }
+        let (law, ids) = law_for(&m);
+        self.is_follower = matches!(law, Law::Follower { .. });
+        let mut old = std::mem::take(&mut self.inbox);
+        for (slot, id) in ids.iter().enumerate() {
+            let kept = match self.neighbor_ids.iter().position(|j| j == id) {
+                Some(k) => std::mem::take(&mut old[k]),
+                None => self
+                    .losses
+                    .as_mut()
+                    .map(|l| l.take_kept(*id))
+                    .unwrap_or_default(),
+            };
+            self.inbox[slot] = kept;
+            self.inbox[slot].drop_before(tick);
+        }
+        self.neighbor_ids = ids;
+        tracing::info!(id = self.id, tick, in_neighbors = ?ids, "flying the repaired link");
         None
     }
 

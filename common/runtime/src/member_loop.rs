@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use crate::fault_inject::Injection;
 use crate::member_core::{Action, Finished, MemberCore, MemberFault, ALIVE_CHECK};
+use crate::member_loss::LossWork;
 use crate::messages::ClockCommand;
 use crate::seams::{Clock, MemberTransport, TickClock, Vehicle};
 
@@ -40,10 +41,16 @@ where
         if interrupted.load(Ordering::Relaxed) {
             return Err(LoopError::Interrupted { tick: core.tick() });
         }
-        if let Some(c) = transport.latest_clock().map_err(LoopError::Transport)? {
-            if let Some(done) = core.on_clock(&c).map_err(LoopError::Fault)? {
-                return Ok(done);
-            }
+        let mut outcome = Ok(None);
+        transport
+            .receive_clock(|c| {
+                if matches!(outcome, Ok(None)) {
+                    outcome = core.on_clock(&c);
+                }
+            })
+            .map_err(LoopError::Transport)?;
+        if let Some(done) = outcome.map_err(LoopError::Fault)? {
+            return Ok(done);
         }
         transport
             .receive_neighbors(|m| core.on_neighbor(&m))
@@ -64,6 +71,18 @@ where
                 Action::NotifyReaders => {
                     transport.notify_readers().map_err(LoopError::Transport)?;
                     break;
+                }
+                Action::Repair(work) => {
+                    let done = match work {
+                        LossWork::Connect { subscribe, notify } => {
+                            transport.connect(&subscribe, &notify)
+                        }
+                        LossWork::HandOver => transport.hand_over(),
+                    };
+                    if !done.map_err(LoopError::Transport)? {
+                        let tick = core.tick();
+                        return Err(LoopError::Fault(MemberFault::RepairUnsupported { tick }));
+                    }
                 }
                 Action::Poll => break,
                 Action::Wait(d) => {

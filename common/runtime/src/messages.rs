@@ -103,6 +103,33 @@ pub struct ClockMsg {
     pub command: u32,
     /// One of the `REASON_*` codes; [`REASON_NONE`] with [`COMMAND_RUN`].
     pub reason: u32,
+    /// The latest loss announced: the tick from which its repair applies (the tick after the
+    /// lost member's last published state). Meaningless while `loss_seq` is 0.
+    pub loss_tick: u64,
+    /// How many losses were announced so far (0: none). Every later clock message repeats the
+    /// latest loss, so a member that drains the clock sees each loss at least once, and a jump
+    /// of more than one tells it that it missed one.
+    pub loss_seq: u32,
+    /// The member lost in loss number `loss_seq`.
+    pub loss_id: u32,
+    /// How many of the announced losses have every new link of their repair connected: the
+    /// new in-neighbours then hand their readers the states these missed (iceoryx2 history).
+    pub loss_linked: u32,
+    /// Zero (keeps the layout free of implicit padding).
+    pub reserved: u32,
+}
+
+/// The latest loss a clock message announces (the Rust view of the `loss_*` fields).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LossNotice {
+    /// Losses announced so far; this is number `seq` (1-based).
+    pub seq: u32,
+    /// The lost member.
+    pub id: u32,
+    /// The repair applies from this tick.
+    pub tick: u64,
+    /// Losses whose new links are all connected.
+    pub linked: u32,
 }
 
 /// Why an agent is faulty (the Rust view of `StateMsg::fault_code`).
@@ -298,7 +325,34 @@ impl ClockMsg {
             scenario_hash,
             command: COMMAND_RUN,
             reason: REASON_NONE,
+            loss_tick: 0,
+            loss_seq: 0,
+            loss_id: 0,
+            loss_linked: 0,
+            reserved: 0,
         }
+    }
+
+    /// The same message carrying `notice` (the latest loss announced, repeated by every later
+    /// clock message).
+    pub fn with_loss(mut self, notice: Option<LossNotice>) -> Self {
+        if let Some(n) = notice {
+            self.loss_seq = n.seq;
+            self.loss_id = n.id;
+            self.loss_tick = n.tick;
+            self.loss_linked = n.linked;
+        }
+        self
+    }
+
+    /// The latest loss announced, if any.
+    pub fn loss(&self) -> Option<LossNotice> {
+        (self.loss_seq > 0).then_some(LossNotice {
+            seq: self.loss_seq,
+            id: self.loss_id,
+            tick: self.loss_tick,
+            linked: self.loss_linked.min(self.loss_seq),
+        })
     }
 
     /// An order to stop, sent with the last granted tick.
@@ -308,6 +362,7 @@ impl ClockMsg {
             scenario_hash,
             command: COMMAND_STOP,
             reason: reason.code(),
+            ..Self::run(grant_tick, scenario_hash)
         }
     }
 
@@ -319,6 +374,7 @@ impl ClockMsg {
             scenario_hash,
             command: COMMAND_REALTIME,
             reason: phase_seed,
+            ..Self::run(0, scenario_hash)
         }
     }
 
@@ -345,7 +401,7 @@ mod tests {
     fn wire_sizes_are_stable() {
         // Every process of a team must agree on the layout; pin it.
         assert_eq!(core::mem::size_of::<StateMsg>(), 8 + 8 + 4 * 4 + 12 * 8);
-        assert_eq!(core::mem::size_of::<ClockMsg>(), 8 + 8 + 4 + 4);
+        assert_eq!(core::mem::size_of::<ClockMsg>(), 8 + 8 + 4 + 4 + 8 + 4 * 4);
     }
 
     #[test]
@@ -381,6 +437,14 @@ mod tests {
         assert_eq!((s.command, s.reason), (COMMAND_STOP, REASON_AGENT_FAULT));
         assert_eq!(s.command(), ClockCommand::Stop(StopReason::AgentFault));
         let odd = ClockMsg { command: 42, ..s };
+        assert_eq!(s.loss(), None);
+        let n = LossNotice {
+            seq: 2,
+            id: 7,
+            tick: 40,
+            linked: 1,
+        };
+        assert_eq!(ClockMsg::run(5, 1).with_loss(Some(n)).loss(), Some(n));
         assert_eq!(odd.command(), ClockCommand::Stop(StopReason::AgentFault));
         assert_eq!(
             ClockMsg::realtime(1_700_000_000_000_000_000, 1, 7).command(),

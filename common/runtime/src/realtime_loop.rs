@@ -61,7 +61,9 @@ where
                     core.on_orchestrator_alive(transport.orchestrator_alive());
                 }
                 // Flew a tick: read the clock and the neighbours again before the next one.
-                Action::Poll | Action::NotifyReaders => break,
+                // The real-time core never asks for a repair: losses are repaired in lockstep only
+                // (a real-time team stops on a lost member).
+                Action::Poll | Action::NotifyReaders | Action::Repair(_) => break,
                 Action::Wait(d) => {
                     pause(transport, d).map_err(LoopError::Transport)?;
                     break;

@@ -32,6 +32,24 @@ pub trait MemberTransport {
     fn wait(&mut self, timeout: Duration) -> Result<bool, Self::Error>;
     /// False once the orchestrator is known to be gone.
     fn orchestrator_alive(&self) -> bool;
+    /// Every message of the clock channel since the last call, oldest first (loss notices must
+    /// not be skipped). The default hands over only the newest ([`Self::latest_clock`]).
+    fn receive_clock(&mut self, mut f: impl FnMut(ClockMsg)) -> Result<usize, Self::Error> {
+        Ok(self.latest_clock()?.map(&mut f).map_or(0, |()| 1))
+    }
+    /// After a loss: subscribe to these members' states and notify these members' wake-ups
+    /// (the repaired graph's new links). Ok(false) when this transport cannot (the default):
+    /// the member then stops with a fault rather than fly without its new neighbours.
+    fn connect(&mut self, subscribe: &[u32], notify: &[u32]) -> Result<bool, Self::Error> {
+        let _ = (subscribe, notify);
+        Ok(false)
+    }
+    /// Every new link of a repair is connected: deliver to new readers the states they missed
+    /// (published before they subscribed), then wake every reader. Ok(false) when this
+    /// transport cannot (the default).
+    fn hand_over(&mut self) -> Result<bool, Self::Error> {
+        Ok(false)
+    }
 }
 
 /// Where "now" comes from for deadlines. Simulation time is never read from it (it is
@@ -136,7 +154,18 @@ pub trait Vehicle {
     fn fly_tick_at(&mut self, at: TickAt, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
         self.fly_tick(at.tick, neighbors)
     }
+    /// Flies `member`'s link from now on (a repair after a loss: new in-neighbours and eq. 18
+    /// weights, or none for a follower degraded to its plan). The default refuses: a vehicle
+    /// that computes its own law must say how it switches.
+    fn relink(&mut self, member: &Member) -> Result<(), RelinkUnsupported> {
+        let _ = member;
+        Err(RelinkUnsupported)
+    }
 }
+
+/// A vehicle that cannot switch links in flight.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RelinkUnsupported;
 
 /// The 12-state model flown by `step::step` (the engine flies the very same function).
 #[derive(Debug, Clone)]
@@ -192,6 +221,11 @@ impl Vehicle for ModelVehicle<'_> {
             &self.neighbor_ids,
         )?;
         self.x = next;
+        Ok(())
+    }
+
+    fn relink(&mut self, member: &Member) -> Result<(), RelinkUnsupported> {
+        (self.law, self.neighbor_ids) = law_for(member);
         Ok(())
     }
 }

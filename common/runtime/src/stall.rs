@@ -62,6 +62,13 @@ impl StallWatch {
         true
     }
 
+    /// True when a stall ended less than [`BLAME_WINDOW`] before `now`: a member's exit or
+    /// silence then is the stall's consequence (a fault), not a loss to repair.
+    pub fn blames(&self, now: Duration) -> bool {
+        self.stall
+            .is_some_and(|s| now.saturating_sub(s.ended) <= BLAME_WINDOW)
+    }
+
     /// The fault to record for a member `fault` found at `now`: an `orchestrator-stalled` record
     /// naming the stall (and keeping the member's own message and tick) when a stall ended less than
     /// [`BLAME_WINDOW`] before; `fault` itself otherwise.

@@ -19,6 +19,7 @@ use cdm_core::outcome::FaultKind;
 
 use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
 use crate::stall::StallWatch;
+use crate::team_loss::{LossCause, TeamLosses};
 
 /// Why a run stops early: the fault to record and the reason sent to the members.
 pub type Stop = (FaultRecord, StopReason);
@@ -47,8 +48,9 @@ pub struct TeamConfig {
     pub agent_timeout: Duration,
 }
 
-/// One complete tick's states, in formation order: every slot is `Some`. Hand the vector back
-/// with [`TeamCore::recycle`] so the next tick reuses it (no allocation per tick).
+/// One complete tick's states, in formation order: every slot is `Some` but a lost member's.
+/// Hand the vector back with [`TeamCore::recycle`] so the next tick reuses it (no allocation
+/// per tick).
 pub type TickStates = Vec<Option<StateMsg>>;
 
 /// What the loop must do next.
@@ -64,6 +66,12 @@ pub enum TeamAction {
     Poll,
     /// Sleep until woken or this long passes, then receive again.
     Wait(Duration),
+    /// SIGKILL these members and reap them (a scripted loss, or silent past the timeout),
+    /// then receive again: their last states are drained before their loss is announced.
+    Kill(Vec<u32>),
+    /// Ask the transport which of the awaited links of a repair are connected: answer with
+    /// [`TeamCore::on_links`].
+    CheckLinks,
     /// Every tick of the plan is complete: finish the files and stop the team.
     Finished,
     /// Stop the team: record the fault and send the reason.
@@ -116,6 +124,21 @@ pub struct TeamCore {
     exited: Option<Exited>,
     interrupt: Option<Stop>,
     stall: StallWatch,
+    /// Losses (`with_losses`): `None` keeps every dead member a fault.
+    losses: Option<LossEvents>,
+}
+
+/// The losses of a run as the team core handles them (`team_core_loss.rs`).
+#[derive(Debug)]
+struct LossEvents {
+    book: TeamLosses,
+    /// Dead or silent members are lost and repaired around (`--on-loss repair`, spawned team).
+    repairs: bool,
+    /// Killed or found dead: (id, cause, drained once since).
+    dying: Vec<(u32, LossCause, bool)>,
+    last_link_check: Duration,
+    /// The loss notice changed: grant again so the clock carries it.
+    republish: bool,
 }
 
 impl TeamCore {
@@ -142,6 +165,7 @@ impl TeamCore {
             exited: None,
             interrupt: None,
             stall: StallWatch::new(now),
+            losses: None,
         }
     }
 
@@ -162,6 +186,9 @@ impl TeamCore {
         if self.stall.turn(now, self.next_tick) {
             self.last_progress = now;
         }
+        if let Some(l) = &mut self.losses {
+            l.dying.iter_mut().for_each(|d| d.2 = true);
+        }
     }
 
     /// A received state or fault report. States outside the granted window are ignored (stale
@@ -173,6 +200,9 @@ impl TeamCore {
         if let AgentStatus::Fault { code, peer } = msg.status() {
             self.on_report(&msg, k, code, peer, now);
             return;
+        }
+        if let Some(l) = &mut self.losses {
+            l.book.saw(msg.id, msg.tick);
         }
         if !self.started || msg.tick < self.next_tick || msg.tick > self.grant {
             return;
@@ -229,6 +259,9 @@ impl TeamCore {
     /// signal 9"). Its published states are still audited; its fault is the first tick it never
     /// sent. Ignored while the team stops on a reported fault (the reporter's own exit).
     pub fn on_exited(&mut self, id: u32, how: String, now: Duration) {
+        if self.lost_on_exit(id, &how, now) {
+            return;
+        }
         if self.exited.is_none() && self.stopping.is_none() && self.index.contains_key(&id) {
             self.exited = Some(Exited { id, how, seen: now });
         }
@@ -260,15 +293,17 @@ impl TeamCore {
             return TeamAction::Grant(self.grant);
         }
         self.expire_non_finite(now);
-        let n = self.cfg.ids.len();
+        if let Some(a) = self.loss_action(now) {
+            return a;
+        }
         while self
             .pending
             .get(&self.complete)
-            .is_some_and(|s| s.count == n)
+            .is_some_and(|s| s.count == self.expected(self.complete))
         {
             self.complete += 1;
         }
-        if let Some(want) = next_grant(self.complete, self.grant, self.window, self.cfg.last_tick) {
+        if let Some(want) = next_grant(self.complete, self.grant, self.window, self.cap()) {
             self.grant = want;
             return TeamAction::Grant(want);
         }
@@ -350,20 +385,30 @@ impl TeamCore {
             }
         }
         if now.saturating_sub(self.last_progress) > self.cfg.agent_timeout {
+            if let Some(a) = self.kill_silent(now) {
+                return a;
+            }
             let f = self.silent_fault();
             return TeamAction::Stop(self.stall.explain(f, now), StopReason::AgentSilent);
         }
         TeamAction::Wait(WAIT_SLICE)
     }
 
+    /// The members that sent no state for the next tick (lost ones aside), in formation order.
+    fn missing(&self) -> Vec<u32> {
+        let tick = self.next_tick;
+        let have = self.pending.get(&tick);
+        (self.cfg.ids.iter().enumerate())
+            .filter(|(k, _)| have.is_none_or(|s| s.states[*k].is_none()))
+            .map(|(_, &id)| id)
+            .filter(|&id| !self.is_lost(id, tick))
+            .collect()
+    }
+
     /// The members that sent no state for the next tick, named in formation order.
     fn silent_fault(&self) -> FaultRecord {
         let tick = self.next_tick;
-        let have = self.pending.get(&tick);
-        let missing: Vec<u32> = (self.cfg.ids.iter().enumerate())
-            .filter(|(k, _)| have.is_none_or(|s| s.states[*k].is_none()))
-            .map(|(_, &id)| id)
-            .collect();
+        let missing = self.missing();
         let what = format!(
             "agents {missing:?} sent no state for tick {tick} within {:?}",
             self.cfg.agent_timeout
@@ -423,6 +468,9 @@ impl FaultRank {
         current.is_none_or(|c| self < c)
     }
 }
+
+#[path = "team_core_loss.rs"]
+mod loss_events;
 
 #[cfg(test)]
 #[path = "team_core_tests.rs"]

@@ -1,0 +1,350 @@
+//! A member's side of losing a team-mate, with no I/O: it takes the orchestrator's loss notices
+//! (on the clock channel), keeps the run's [`LossLog`], and says which ports to open and from
+//! which tick to fly which link. The repair is computed here, locally, by the same function as
+//! `simulate` (`cdm_core::repair::repair` over the whole lost set), so no link travels on the wire.
+//!
+//! Timing (as `simulate`): member k lost after its tick-L state; its readers use that state for
+//! their tick-L step and fly the repaired link from tick L + 1 = the notice's tick.
+
+use std::collections::BTreeSet;
+
+use cdm_core::formation::{Formation, Member};
+use cdm_core::loss_log::LossLog;
+
+use crate::inbox::Inbox;
+use crate::messages::LossNotice;
+
+/// What taking a loss notice asks of the member's loop.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LossWork {
+    /// Open subscriptions on these members' states and notifiers on these members' wake events
+    /// (the new in- and out-neighbours of the repaired graph).
+    Connect {
+        subscribe: Vec<u32>,
+        notify: Vec<u32>,
+    },
+    /// Every new link is connected: hand new readers the states they missed and wake them.
+    HandOver,
+}
+
+/// Why a loss notice cannot be followed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LossFault {
+    /// The notices jumped from `seen` to `got` (a notice was lost).
+    Missed { seen: u32, got: u32 },
+    /// This member itself was declared lost (it went silent): it must stop.
+    SelfLost { tick: u64 },
+    /// The repair changes this member's link from `tick`, which it has already flown past.
+    Late { tick: u64, at: u64 },
+}
+
+/// The losses as this member knows them, and what follows for it.
+#[derive(Debug)]
+pub struct MemberLosses {
+    id: u32,
+    log: LossLog,
+    seen: u32,
+    linked: u32,
+    /// The member (its link) the vehicle flies now.
+    applied: Member,
+    /// Later links: (first tick, member with that link), ascending.
+    schedule: Vec<(u64, Member)>,
+    subscribed: BTreeSet<u32>,
+    notifying: BTreeSet<u32>,
+    /// States of future in-neighbours, kept until their link applies.
+    ahead: Vec<(u32, Inbox)>,
+    work: Vec<LossWork>,
+}
+
+impl MemberLosses {
+    /// Member `me` of a team with no loss yet; `log` is the run's empty loss log.
+    pub fn new(me: &Member, log: LossLog, subscribed: &[u32], notifying: &[u32]) -> Self {
+        MemberLosses {
+            id: me.id,
+            log,
+            seen: 0,
+            linked: 0,
+            applied: me.clone(),
+            schedule: Vec::new(),
+            subscribed: subscribed.iter().copied().collect(),
+            notifying: notifying.iter().copied().collect(),
+            ahead: Vec::new(),
+            work: Vec::new(),
+        }
+    }
+
+    /// The notice of a clock message, this member being at `tick` (its next step). A repeat
+    /// changes nothing.
+    pub fn on_notice(&mut self, n: LossNotice, tick: u64) -> Result<(), LossFault> {
+        if n.seq > self.seen + 1 {
+            return Err(LossFault::Missed {
+                seen: self.seen,
+                got: n.seq,
+            });
+        }
+        if n.seq == self.seen + 1 {
+            if n.id == self.id {
+                return Err(LossFault::SelfLost { tick });
+            }
+            self.seen = n.seq;
+            self.log.add(n.id, n.tick);
+            self.replan(tick)?;
+        }
+        if n.linked > self.linked {
+            self.linked = n.linked;
+            self.work.push(LossWork::HandOver);
+        }
+        Ok(())
+    }
+
+    /// The next piece of port work, oldest first.
+    pub fn next_work(&mut self) -> Option<LossWork> {
+        (!self.work.is_empty()).then(|| self.work.remove(0))
+    }
+
+    /// The member to fly from `tick` on, when its link changes there.
+    pub fn due(&mut self, tick: u64) -> Option<Member> {
+        if self.schedule.first().is_some_and(|(t, _)| *t == tick) {
+            let (_, m) = self.schedule.remove(0);
+            self.applied = m.clone();
+            return Some(m);
+        }
+        None
+    }
+
+    /// True when `id` is an in-neighbour of a link still to come (its states are kept).
+    pub fn is_future_neighbor(&self, id: u32) -> bool {
+        self.schedule
+            .iter()
+            .any(|(_, m)| m.link.is_some_and(|l| l.in_neighbors.contains(&id)))
+    }
+
+    /// Keeps a future in-neighbour's state.
+    pub(crate) fn keep(&mut self, id: u32, tick: u64, state: cdm_core::dynamics::Flat) {
+        match self.ahead.iter_mut().find(|(j, _)| *j == id) {
+            Some((_, inbox)) => inbox.insert(tick, state),
+            None => {
+                let mut inbox = Inbox::default();
+                inbox.insert(tick, state);
+                self.ahead.push((id, inbox));
+            }
+        }
+    }
+
+    /// The kept states of `id` (empty when none arrived), taken.
+    pub(crate) fn take_kept(&mut self, id: u32) -> Inbox {
+        match self.ahead.iter().position(|(j, _)| *j == id) {
+            Some(k) => self.ahead.swap_remove(k).1,
+            None => Inbox::default(),
+        }
+    }
+
+    /// Recomputes this member's future links and the ports it lacks after a new loss.
+    fn replan(&mut self, tick: u64) -> Result<(), LossFault> {
+        let epochs = self.log.epochs();
+        let own = |f: &Formation| f.member(self.id).cloned();
+        // The link flown for the steps already computed must not change: the link in force at
+        // `tick` is either the one applied, or (changing exactly at `tick`, not applied yet) the
+        // one in force before it.
+        let in_force = |x: u64| {
+            epochs
+                .iter()
+                .rev()
+                .find(|(t, _)| *t <= x)
+                .and_then(|(_, r)| own(&r.formation))
+                .unwrap_or_else(|| self.applied.clone())
+        };
+        let now_link = in_force(tick).link;
+        let ok = now_link == self.applied.link
+            || (tick > 0 && in_force(tick - 1).link == self.applied.link)
+            || tick == 0;
+        if !ok {
+            let at = epochs
+                .iter()
+                .rev()
+                .find(|(t, _)| *t < tick)
+                .map_or(0, |e| e.0);
+            return Err(LossFault::Late { tick, at });
+        }
+        let mut last = self.applied.clone();
+        self.schedule.clear();
+        let mut readers = BTreeSet::new();
+        // Readers from the epoch in force now on: a member that runs ahead of a loss's tick
+        // still writes to the followers that switched to it there.
+        let now = epochs.iter().rposition(|(t, _)| *t <= tick).unwrap_or(0);
+        for (t, r) in epochs.iter().skip(now) {
+            if let Some(m) = own(&r.formation).filter(|m| *t >= tick && m.link != last.link) {
+                last = m.clone();
+                self.schedule.push((*t, m));
+            }
+            readers.extend(
+                r.formation
+                    .members
+                    .iter()
+                    .filter(|m| !r.lost.contains(&m.id))
+                    .filter(|m| m.link.is_some_and(|l| l.in_neighbors.contains(&self.id)))
+                    .map(|m| m.id),
+            );
+        }
+        let ins: BTreeSet<u32> = self
+            .schedule
+            .iter()
+            .filter_map(|(_, m)| m.link)
+            .flat_map(|l| l.in_neighbors)
+            .collect();
+        let subscribe: Vec<u32> = ins.difference(&self.subscribed).copied().collect();
+        let notify: Vec<u32> = readers.difference(&self.notifying).copied().collect();
+        self.subscribed.extend(&subscribe);
+        self.notifying.extend(&notify);
+        if !subscribe.is_empty() || !notify.is_empty() {
+            self.work.push(LossWork::Connect { subscribe, notify });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cdm_core::scenario::Scenario;
+
+    fn setup(s: &Scenario, id: u32) -> MemberLosses {
+        let me = s.formation.member(id).unwrap();
+        let ins: Vec<u32> = me.link.map(|l| l.in_neighbors.to_vec()).unwrap_or_default();
+        let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
+        MemberLosses::new(me, LossLog::new(s), &ins, &outs)
+    }
+
+    #[test]
+    fn a_reader_of_the_lost_member_connects_and_switches_at_the_notice_tick() {
+        let s = Scenario::builtin("paper40").unwrap();
+        let outs = s.formation.out_neighbors();
+        let (&lost, readers) = outs.iter().find(|(_, r)| !r.is_empty()).unwrap();
+        let reader = readers[0];
+        let mut m = setup(&s, reader);
+        let n = LossNotice {
+            seq: 1,
+            id: lost,
+            tick: 20,
+            linked: 0,
+        };
+        m.on_notice(n, 12).unwrap();
+        m.on_notice(n, 13).unwrap(); // a repeat
+        let Some(LossWork::Connect { subscribe, .. }) = m.next_work() else {
+            panic!("no connect");
+        };
+        let r = cdm_core::repair::repair(
+            &s.formation,
+            cdm_core::graph::DEFAULT_WEIGHT_FLOOR,
+            &[lost].into(),
+        );
+        let new = r.formation.member(reader).unwrap().clone();
+        let old = s
+            .formation
+            .member(reader)
+            .unwrap()
+            .link
+            .unwrap()
+            .in_neighbors;
+        let fresh: Vec<u32> = new
+            .link
+            .map(|l| {
+                l.in_neighbors
+                    .into_iter()
+                    .filter(|j| !old.contains(j))
+                    .collect()
+            })
+            .unwrap_or_default();
+        assert_eq!(subscribe, fresh);
+        assert_eq!(m.next_work(), None);
+        assert_eq!(m.due(19), None);
+        assert_eq!(m.due(20), Some(new));
+        m.on_notice(LossNotice { linked: 1, ..n }, 20).unwrap();
+        assert_eq!(m.next_work(), Some(LossWork::HandOver));
+    }
+
+    #[test]
+    fn a_new_in_neighbour_running_ahead_of_the_loss_still_notifies_its_new_reader() {
+        let s = Scenario::builtin("paper40").unwrap();
+        let lost = s.formation.members[0].id;
+        let r = cdm_core::repair::repair(
+            &s.formation,
+            cdm_core::graph::DEFAULT_WEIGHT_FLOOR,
+            &[lost].into(),
+        );
+        let x = r.retriangulated[0];
+        let writer = *x.new.iter().find(|j| !x.old.contains(j)).unwrap();
+        let mut m = setup(&s, writer);
+        let n = LossNotice {
+            seq: 1,
+            id: lost,
+            tick: 600,
+            linked: 0,
+        };
+        // The writer is already at tick 650: its own link did not change, it must notify.
+        m.on_notice(n, 650).unwrap();
+        match m.next_work() {
+            Some(LossWork::Connect { notify, .. }) => assert!(notify.contains(&x.id)),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn notices_that_cannot_be_followed_are_faults() {
+        let s = Scenario::builtin("paper40").unwrap();
+        let outs = s.formation.out_neighbors();
+        let (&lost, readers) = outs.iter().find(|(_, r)| !r.is_empty()).unwrap();
+        let mut m = setup(&s, readers[0]);
+        let n = LossNotice {
+            seq: 2,
+            id: lost,
+            tick: 20,
+            linked: 0,
+        };
+        assert_eq!(
+            m.on_notice(n, 5),
+            Err(LossFault::Missed { seen: 0, got: 2 })
+        );
+        let late = LossNotice { seq: 1, ..n };
+        assert_eq!(
+            m.on_notice(late, 25),
+            Err(LossFault::Late { tick: 25, at: 20 })
+        );
+        let mut me = setup(&s, lost);
+        assert_eq!(
+            me.on_notice(LossNotice { seq: 1, ..n }, 9),
+            Err(LossFault::SelfLost { tick: 9 })
+        );
+    }
+}
+
+#[cfg(test)]
+mod sequence_tests {
+    use super::*;
+    use cdm_core::scenario::Scenario;
+
+    #[test]
+    fn a_reader_of_the_second_loss_is_not_late_because_of_the_first() {
+        let s = Scenario::builtin("paper40").unwrap();
+        for id in [12u32, 28] {
+            let me = s.formation.member(id).unwrap();
+            let ins: Vec<u32> = me.link.map(|l| l.in_neighbors.to_vec()).unwrap_or_default();
+            let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
+            let mut m = MemberLosses::new(me, LossLog::new(&s), &ins, &outs);
+            let n1 = LossNotice {
+                seq: 1,
+                id: 20,
+                tick: 301,
+                linked: 0,
+            };
+            m.on_notice(n1, 320).unwrap();
+            let n2 = LossNotice {
+                seq: 2,
+                id: 5,
+                tick: 451,
+                linked: 1,
+            };
+            m.on_notice(n2, 451).unwrap();
+        }
+    }
+}

@@ -1,0 +1,328 @@
+//! The orchestrator's side of losing members, with no I/O: which scripted loss is due, how far
+//! grants may go meanwhile, the notices to announce one at a time, when every new link of a
+//! repair is connected, how many states complete a tick, and which losses the audit records at
+//! which tick. The orchestrator's loop (`launch`) kills, reaps, drains and publishes around it.
+//!
+//! A lost member's last published state is tick L; its repair applies from L + 1 (the notice's
+//! tick), exactly as `simulate --lose ID@(L dt)` flies it.
+
+use std::collections::BTreeSet;
+use std::time::Duration;
+
+use cdm_core::loss_log::LossLog;
+use cdm_core::scenario::Scenario;
+
+use crate::messages::LossNotice;
+
+/// Why a member was lost (the `cause` of its audit record).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum LossCause {
+    /// `--lose ID@SECONDS`: the orchestrator killed it once it had published that tick.
+    Scripted,
+    /// Killed by a signal from outside the team.
+    Killed,
+    /// Its process ended by itself.
+    Exited,
+    /// It sent nothing for `--agent-timeout`; the orchestrator killed it.
+    Silent,
+}
+
+impl LossCause {
+    /// The audit's spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LossCause::Scripted => "scripted",
+            LossCause::Killed => "killed",
+            LossCause::Exited => "exited",
+            LossCause::Silent => "silent",
+        }
+    }
+}
+
+/// A repair whose new links did not all connect in time.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LinksTimedOut {
+    /// The loss being repaired.
+    pub id: u32,
+    /// Links (reader, writer) still missing.
+    pub missing: Vec<(u32, u32)>,
+}
+
+/// A loss announced whose new links are awaited.
+#[derive(Debug, Clone)]
+struct Linking {
+    links: BTreeSet<(u32, u32)>,
+    since: Duration,
+}
+
+/// The team's losses.
+#[derive(Debug, Clone)]
+pub struct TeamLosses {
+    log: LossLog,
+    ids: Vec<u32>,
+    /// Scripted losses not yet carried out: (last tick L, id), sorted.
+    scripted: Vec<(u64, u32)>,
+    /// Every loss: (first tick without it, id, cause), in the order they were found.
+    lost: Vec<(u64, u32, LossCause)>,
+    /// Losses announced so far (a prefix of `lost`) and how many have their links connected.
+    announced: usize,
+    linked: usize,
+    linking: Option<Linking>,
+    /// Links already connected (the original graph's and earlier repairs').
+    connected: BTreeSet<(u32, u32)>,
+    /// The highest tick received from each member (`ids` order).
+    seen: Vec<Option<u64>>,
+}
+
+impl TeamLosses {
+    /// No loss yet; `scripted` are the (id, last tick) of `--lose`.
+    pub fn new(s: &Scenario, scripted: &[(u32, u64)]) -> Self {
+        let mut sorted: Vec<(u64, u32)> = scripted.iter().map(|&(id, l)| (l, id)).collect();
+        sorted.sort_unstable();
+        TeamLosses {
+            log: LossLog::new(s),
+            ids: s.formation.members.iter().map(|m| m.id).collect(),
+            scripted: sorted,
+            lost: Vec::new(),
+            announced: 0,
+            linked: 0,
+            linking: None,
+            connected: cdm_core::loss_log::links(&s.formation, &BTreeSet::new()),
+            seen: vec![None; s.formation.members.len()],
+        }
+    }
+
+    /// A state of member `id` at `tick` arrived.
+    pub fn saw(&mut self, id: u32, tick: u64) {
+        if let Some(k) = self.ids.iter().position(|&j| j == id) {
+            let s = &mut self.seen[k];
+            *s = Some(s.map_or(tick, |t| t.max(tick)));
+        }
+    }
+
+    /// The highest tick received from `id`.
+    pub fn seen(&self, id: u32) -> Option<u64> {
+        let k = self.ids.iter().position(|&j| j == id)?;
+        self.seen[k]
+    }
+
+    /// The highest tick that may be granted: a scripted loss's member must publish its tick L
+    /// and nothing after it, so grants stop at L until it is carried out.
+    pub fn cap(&self, last: u64) -> u64 {
+        self.scripted.first().map_or(last, |&(l, _)| l.min(last))
+    }
+
+    /// The scripted loss to carry out now: its member has published its tick L (`seen` gives
+    /// a member's highest tick received).
+    pub fn scripted_due(&self, seen: impl Fn(u32) -> Option<u64>) -> Option<u32> {
+        let &(l, id) = self.scripted.first()?;
+        seen(id).is_some_and(|t| t >= l).then_some(id)
+    }
+
+    /// Member `id` is lost after its tick-`last_tick` state (`None`: it published nothing).
+    /// Returns the tick from which its repair applies.
+    pub fn lose(&mut self, id: u32, last_tick: Option<u64>, cause: LossCause) -> u64 {
+        self.scripted.retain(|&(_, j)| j != id);
+        let from = last_tick.map_or(0, |t| t + 1);
+        if self.is_lost(id) {
+            return from;
+        }
+        self.log.add(id, from);
+        self.lost.push((from, id, cause));
+        from
+    }
+
+    /// True once `id` was lost (at any tick).
+    pub fn is_lost(&self, id: u32) -> bool {
+        self.lost.iter().any(|&(_, j, _)| j == id)
+    }
+
+    /// True when `id` has no state at `tick` because it was lost.
+    pub fn lost_at(&self, id: u32, tick: u64) -> bool {
+        self.lost.iter().any(|&(t, j, _)| j == id && t <= tick)
+    }
+
+    /// How many states complete `tick`.
+    pub fn expected(&self, tick: u64) -> usize {
+        self.ids.len() - self.lost.iter().filter(|&&(t, _, _)| t <= tick).count()
+    }
+
+    /// Losses whose repair applies from `tick`, grouped by cause (the audit records them before
+    /// it observes `tick`).
+    pub fn due_at(&self, tick: u64) -> Vec<(LossCause, Vec<u32>)> {
+        let mut out: Vec<(LossCause, Vec<u32>)> = Vec::new();
+        let mut at: Vec<(LossCause, u32)> = self
+            .lost
+            .iter()
+            .filter(|&&(t, _, _)| t == tick)
+            .map(|&(_, id, c)| (c, id))
+            .collect();
+        at.sort_unstable();
+        for (c, id) in at {
+            match out.last_mut() {
+                Some((k, v)) if *k == c => v.push(id),
+                _ => out.push((c, vec![id])),
+            }
+        }
+        out
+    }
+
+    /// The notice every clock message carries (the latest loss announced), if any.
+    pub fn notice(&self) -> Option<LossNotice> {
+        let k = self.announced.checked_sub(1)?;
+        let (tick, id, _) = self.lost[k];
+        Some(LossNotice {
+            seq: self.announced as u32,
+            id,
+            tick,
+            linked: self.linked as u32,
+        })
+    }
+
+    /// Moves the announcements on at `now`: the next loss is announced once the previous one's
+    /// links are connected (`linked(reader, writer)`). True when the notice changed (publish a
+    /// clock message). Fails when a repair's links are not connected within `timeout`.
+    pub fn poll(
+        &mut self,
+        now: Duration,
+        timeout: Duration,
+        mut linked: impl FnMut(u32, u32) -> bool,
+    ) -> Result<bool, LinksTimedOut> {
+        if let Some(l) = &mut self.linking {
+            l.links.retain(|&(r, w)| !linked(r, w));
+            if !l.links.is_empty() {
+                if now.saturating_sub(l.since) > timeout {
+                    return Err(LinksTimedOut {
+                        id: self.lost[self.announced - 1].1,
+                        missing: l.links.iter().copied().collect(),
+                    });
+                }
+                return Ok(false);
+            }
+            self.linking = None;
+            self.linked = self.announced;
+            return Ok(true);
+        }
+        if self.announced == self.lost.len() {
+            return Ok(false);
+        }
+        self.announced += 1;
+        let dead: BTreeSet<u32> = self.lost.iter().map(|&(_, id, _)| id).collect();
+        // Members know the announced losses only: their links are the ones to wait for.
+        let unknown: BTreeSet<u32> = self.lost[self.announced..].iter().map(|l| l.1).collect();
+        let links: BTreeSet<(u32, u32)> = self
+            .log
+            .without(&unknown)
+            .new_links()
+            .into_iter()
+            .filter(|(r, w)| !dead.contains(r) && !dead.contains(w))
+            .filter(|l| !self.connected.contains(l))
+            .collect();
+        self.connected.extend(&links);
+        self.linking = Some(Linking { links, since: now });
+        Ok(true)
+    }
+
+    /// The links of the announced repair not seen connected yet (reader, writer).
+    pub fn awaited(&self) -> Vec<(u32, u32)> {
+        self.linking
+            .as_ref()
+            .map_or_else(Vec::new, |l| l.links.iter().copied().collect())
+    }
+
+    /// True while an announced repair waits for its links, or a loss waits to be announced.
+    pub fn busy(&self) -> bool {
+        self.linking.is_some() || self.announced < self.lost.len()
+    }
+
+    /// Every loss so far: (first tick without it, id, cause).
+    pub fn losses(&self) -> &[(u64, u32, LossCause)] {
+        &self.lost
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paper() -> Scenario {
+        Scenario::builtin("paper40").unwrap()
+    }
+
+    #[test]
+    fn a_scripted_loss_caps_grants_until_its_member_published_its_tick() {
+        let s = paper();
+        let id = s.formation.members[7].id;
+        let mut t = TeamLosses::new(&s, &[(id, 30)]);
+        assert_eq!(t.cap(1000), 30);
+        assert_eq!(t.scripted_due(|_| Some(29)), None);
+        assert_eq!(t.scripted_due(|j| (j == id).then_some(30)), Some(id));
+        assert_eq!(t.lose(id, Some(30), LossCause::Scripted), 31);
+        assert_eq!(t.cap(1000), 1000);
+        assert_eq!(t.expected(30), 40);
+        assert_eq!(t.expected(31), 39);
+        assert!(t.lost_at(id, 31) && !t.lost_at(id, 30));
+        assert_eq!(t.due_at(31), vec![(LossCause::Scripted, vec![id])]);
+        assert!(t.due_at(30).is_empty());
+    }
+
+    #[test]
+    fn losses_are_announced_one_at_a_time_and_linked_when_every_new_link_is_in() {
+        let s = paper();
+        let outs = s.formation.out_neighbors();
+        let readers: Vec<u32> = outs
+            .iter()
+            .filter(|(_, r)| !r.is_empty())
+            .map(|(&id, _)| id)
+            .take(2)
+            .collect();
+        let mut t = TeamLosses::new(&s, &[]);
+        assert_eq!(t.notice(), None);
+        t.lose(readers[0], Some(10), LossCause::Killed);
+        t.lose(readers[1], Some(12), LossCause::Exited);
+        let sec = Duration::from_secs;
+        assert!(t.poll(sec(0), sec(5), |_, _| false).unwrap());
+        let n = t.notice().unwrap();
+        assert_eq!((n.seq, n.id, n.tick, n.linked), (1, readers[0], 11, 0));
+        // Waiting for the links: the second loss is not announced yet.
+        let mut asked = BTreeSet::new();
+        assert!(!t
+            .poll(sec(1), sec(5), |r, w| {
+                asked.insert((r, w));
+                false
+            })
+            .unwrap());
+        assert!(!asked.is_empty(), "a repair opens links");
+        assert!(asked
+            .iter()
+            .all(|&(r, w)| r != readers[0] && w != readers[0]));
+        // A third loss found meanwhile: its links are not awaited before it is announced.
+        let third = s
+            .formation
+            .members
+            .iter()
+            .map(|m| m.id)
+            .find(|id| !readers.contains(id));
+        let third = third.unwrap();
+        t.lose(third, Some(14), LossCause::Scripted);
+        let mut asked_now = BTreeSet::new();
+        let _ = t.poll(sec(1), sec(5), |r, w| {
+            asked_now.insert((r, w));
+            false
+        });
+        assert_eq!(asked, asked_now, "links of an unannounced loss awaited");
+        let err = t.poll(sec(9), sec(5), |_, _| false).unwrap_err();
+        assert_eq!(err.id, readers[0]);
+        assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert_eq!(t.notice().unwrap().linked, 1);
+        assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        let n = t.notice().unwrap();
+        assert_eq!((n.seq, n.id, n.tick, n.linked), (2, readers[1], 13, 1));
+        assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert_eq!(t.notice().unwrap().linked, 2);
+        assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert!(t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert!(!t.poll(sec(9), sec(5), |_, _| true).unwrap());
+        assert_eq!(t.notice().unwrap().linked, 3);
+    }
+}
