@@ -10,7 +10,6 @@ use cdm_runtime::member_core::MemberCore;
 use cdm_runtime::member_loop::{fly, LoopError};
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 
-use crate::engine::step_config;
 use crate::formation::Role;
 use crate::scenario::{Checks, Scenario, ScenarioError};
 use crate::step::StepFault;
@@ -147,7 +146,7 @@ pub fn run_member(
     );
     // The deadlines start once the ports are open (opening takes seconds at N = 1000).
     let clock = MonotonicClock::start();
-    let vehicle = ModelVehicle::new(step_config(&s), &s.plan, &me);
+    let vehicle = ModelVehicle::new(s.step_config(), &s.plan, &me);
     let parts = (vehicle, LockstepClock::default());
     let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now());
     let inject = crate::fault_inject::from_env(id);

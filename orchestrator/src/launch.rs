@@ -9,7 +9,6 @@ use std::time::{Duration, Instant};
 use common::audit::{AuditReport, Auditor};
 
 use crate::viewer::live::LiveView;
-use common::engine::desired_positions;
 use common::formation::Role;
 use common::math::{vec3, Vec3};
 use common::messages::{ClockMsg, StateMsg, StopReason};
@@ -17,7 +16,6 @@ use common::outcome::FaultKind;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::seams::{Clock, MonotonicClock};
-use common::simulate::id_order;
 use common::step::tick_time;
 use common::team_core::{TeamAction, TeamConfig, TeamCore};
 use common::telemetry::{Row, TelemetrySink};
@@ -432,7 +430,7 @@ impl Recorder {
     fn new(s: &Scenario, last: u64, quiet: bool) -> Self {
         let n = s.formation.members.len();
         Recorder {
-            order: id_order(s),
+            order: s.id_order(),
             ht: Vec::new(),
             pos: vec![Vec3::zeros(); n],
             rows: Vec::with_capacity(n),
@@ -450,7 +448,7 @@ impl Recorder {
         tel: &mut dyn TelemetrySink,
     ) -> Result<(), Stop> {
         let t = tick_time(tick, s.dt_s());
-        desired_positions(s, t, &mut self.ht);
+        s.desired_positions(t, &mut self.ht);
         for (k, st) in states.iter().enumerate() {
             if let Some(m) = st {
                 self.pos[k] = vec3([m.state[0], m.state[1], m.state[2]]);

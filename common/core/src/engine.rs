@@ -19,31 +19,6 @@ pub struct AgentFault {
     pub fault: StepFault,
 }
 
-/// The step configuration of a scenario.
-pub fn step_config(s: &Scenario) -> StepConfig {
-    StepConfig {
-        gains: s.file.gains,
-        dt_s: s.dt_s(),
-        substeps: s.substeps(),
-        neighbor_model: NeighborModel::default(),
-    }
-}
-
-/// The desired position r_HT of every member at time t (eqs. 13, 23), in member order.
-pub fn desired_positions(s: &Scenario, t: Real, out: &mut Vec<Vec3>) {
-    let seg = if t <= s.plan.quintic.t_total_s {
-        Segment::Motion
-    } else {
-        Segment::Hold
-    };
-    let prim = s.plan.primary_derivs(t, seg);
-    out.clear();
-    for m in &s.formation.members {
-        let a = m.alpha;
-        out.push(prim[0][0] * a[0] + prim[1][0] * a[1] + prim[2][0] * a[2]);
-    }
-}
-
 /// The whole team in one process (cloned to fly variants of one flight from a shared prefix).
 #[derive(Clone)]
 pub struct Engine<P: Plant> {
@@ -75,7 +50,7 @@ impl<P: Plant> Engine<P> {
         let states: Vec<P> = f.members.iter().map(|m| init(m.position)).collect();
         let flats = states.iter().map(|p| p.flat()).collect();
         Engine {
-            cfg: step_config(scenario),
+            cfg: scenario.step_config(),
             scenario: scenario.clone(),
             laws,
             neighbor_idx,
@@ -181,7 +156,7 @@ pub fn max_follower_deviation(s: &Scenario) -> Result<Real, AgentFault> {
     let mut worst: Real = 0.0;
     let last = s.last_tick();
     loop {
-        desired_positions(s, tick_time(e.tick(), s.dt_s()), &mut ht);
+        s.desired_positions(tick_time(e.tick(), s.dt_s()), &mut ht);
         for &k in &followers {
             worst = worst.max((e.states()[k].position() - ht[k]).norm());
         }

@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
-use crate::engine::{desired_positions, max_follower_deviation, quad_engine, AgentFault};
+use crate::engine::{max_follower_deviation, quad_engine, AgentFault};
 use crate::linear_certificate::LinearTeam;
 use crate::loss::{LossSchedule, LossState, OnLoss};
 use crate::losscert::LossCertificate;
@@ -52,7 +52,7 @@ pub fn simulate(
     let mut ht = Vec::new();
     let mut pos: Vec<Vec3> = Vec::new();
     let mut rows: Vec<Row> = Vec::with_capacity(s.formation.members.len());
-    let order = id_order(s);
+    let order = s.id_order();
     let last = opts
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
@@ -66,7 +66,7 @@ pub fn simulate(
             }
             losses.apply(s, tick, &ids, &mut e, &mut audit);
         }
-        desired_positions(s, t, &mut ht);
+        s.desired_positions(t, &mut ht);
         pos.clear();
         pos.extend(e.states().iter().map(|q| q.position()));
         audit.observe(tick, t, &pos, &ht);
@@ -153,13 +153,6 @@ fn lost_fault(tick: u64, ids: &[u32]) -> FaultRecord {
             tick.saturating_sub(1)
         ),
     }
-}
-
-/// Member indices sorted by id (telemetry order).
-pub fn id_order(s: &Scenario) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..s.formation.members.len()).collect();
-    order.sort_by_key(|&k| s.formation.members[k].id);
-    order
 }
 
 /// The pre-flight certificate printed by `orchestrator plan`.
