@@ -10,15 +10,15 @@ use common::audit::{AuditReport, Auditor};
 
 use crate::viewer::live::LiveView;
 use common::formation::Role;
-use common::math::{vec3, Vec3};
+use common::math::vec3;
 use common::messages::{ClockMsg, StateMsg, StopReason};
 use common::outcome::FaultKind;
+use common::record::TickRecorder;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::seams::{Clock, MonotonicClock};
-use common::step::tick_time;
 use common::team_core::{TeamAction, TeamConfig, TeamCore};
-use common::telemetry::{Row, TelemetrySink};
+use common::telemetry::TelemetrySink;
 use common::transport::{
     describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName,
 };
@@ -416,24 +416,17 @@ fn fly_team(
     }
 }
 
-/// What every complete tick gets: its desired positions, the audit, the live view, progress and
-/// its telemetry rows (sorted by id), with buffers reused from tick to tick.
+/// What every complete tick gets: the shared audit and telemetry of `simulate`
+/// (`TickRecorder`), then the live view and the progress line.
 struct Recorder {
-    order: Vec<usize>,
-    ht: Vec<Vec3>,
-    pos: Vec<Vec3>,
-    rows: Vec<Row>,
+    tick: TickRecorder,
     progress: crate::progress::Progress,
 }
 
 impl Recorder {
     fn new(s: &Scenario, last: u64, quiet: bool) -> Self {
-        let n = s.formation.members.len();
         Recorder {
-            order: s.id_order(),
-            ht: Vec::new(),
-            pos: vec![Vec3::zeros(); n],
-            rows: Vec::with_capacity(n),
+            tick: TickRecorder::new(s),
             progress: crate::progress::Progress::new("launch", last, s.dt_s(), quiet),
         }
     }
@@ -447,35 +440,21 @@ impl Recorder {
         live: &mut Option<LiveView>,
         tel: &mut dyn TelemetrySink,
     ) -> Result<(), Stop> {
-        let t = tick_time(tick, s.dt_s());
-        s.desired_positions(t, &mut self.ht);
-        for (k, st) in states.iter().enumerate() {
-            if let Some(m) = st {
-                self.pos[k] = vec3([m.state[0], m.state[1], m.state[2]]);
-            }
-        }
-        audit.observe(tick, t, &self.pos, &self.ht);
+        let member = |k: usize| {
+            states[k].map(|m| {
+                let x = m.state;
+                (vec3([x[0], x[1], x[2]]), vec3([x[3], x[4], x[5]]))
+            })
+        };
+        let t = self
+            .tick
+            .record(s, tick, audit, tel, member)
+            .map_err(|f| (f, StopReason::AgentFault))?;
         if let Some(v) = live.as_mut() {
-            v.tick(tick, t, &self.pos, &self.ht, audit.report());
+            let (pos, ht) = (self.tick.positions(), self.tick.desired());
+            v.tick(tick, t, pos, ht, audit.report());
         }
         self.progress.tick(tick, audit.report());
-        if !tel.keeps(tick) {
-            return Ok(());
-        }
-        self.rows.clear();
-        for &k in &self.order {
-            let m = &s.formation.members[k];
-            let st = states[k].map(|x| x.state).unwrap_or([f64::NAN; 12]);
-            self.rows.push(Row {
-                tick,
-                t_s: t,
-                id: m.id,
-                role: m.role,
-                r: vec3([st[0], st[1], st[2]]),
-                v: vec3([st[3], st[4], st[5]]),
-                ht: self.ht[k],
-            });
-        }
-        tel.write_tick(&self.rows).map_err(io_stop(tick))
+        Ok(())
     }
 }

@@ -27,6 +27,7 @@ pub mod loss;
 pub mod losscert;
 pub mod outcome;
 pub mod plan;
+pub mod record;
 pub mod repair;
 pub mod rundir;
 pub mod safety;
