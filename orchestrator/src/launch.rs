@@ -123,40 +123,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             o.team
         );
     }
-    let mut children = Vec::new();
-    if o.spawn {
-        for m in &s.formation.members {
-            match spawn_member(&member_file, &o.team, m.id, m.role) {
-                Ok(c) => children.push(Spawned { id: m.id, child: c }),
-                Err(e) => {
-                    stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
-                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
-                    let mut audit = Auditor::new(s);
-                    audit.fault(fault(
-                        FaultKind::SpawnFailed,
-                        Some(m.id),
-                        None,
-                        0,
-                        what.clone(),
-                    ));
-                    let _ = dir.write_audit(&audit.finish(false));
-                    return Err(Failure::fault(what));
-                }
-            }
-        }
-    } else if !o.quiet {
-        out!(
-            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
-            o.team,
-            ids.len(),
-            scenario_file.display(),
-            o.team,
-            s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
-            scenario_file.display(),
-            o.team,
-            s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
-        );
-    }
+    let mut children = start_members(s, o, &dir, &mut ports, &member_file, &scenario_file)?;
     let mut audit = Auditor::new(s);
     let result = run_team(
         s,
@@ -200,6 +167,53 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         member_peak_rss,
         live,
     })
+}
+
+/// Spawns one process per member (`--spawn`), or tells how to start them by hand.
+fn start_members(
+    s: &Scenario,
+    o: &LaunchOptions,
+    dir: &RunDir,
+    ports: &mut OrchestratorPorts,
+    member_file: &std::path::Path,
+    scenario_file: &std::path::Path,
+) -> Result<Vec<Spawned>, Failure> {
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+    let mut children = Vec::new();
+    if o.spawn {
+        for m in &s.formation.members {
+            match spawn_member(member_file, &o.team, m.id, m.role) {
+                Ok(c) => children.push(Spawned { id: m.id, child: c }),
+                Err(e) => {
+                    stop_team(ports, &mut children, s, StopReason::AgentFault);
+                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
+                    let mut audit = Auditor::new(s);
+                    audit.fault(fault(
+                        FaultKind::SpawnFailed,
+                        Some(m.id),
+                        None,
+                        0,
+                        what.clone(),
+                    ));
+                    let _ = dir.write_audit(&audit.finish(false));
+                    return Err(Failure::fault(what));
+                }
+            }
+        }
+    } else if !o.quiet {
+        out!(
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
+            o.team,
+            ids.len(),
+            scenario_file.display(),
+            o.team,
+            s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
+            scenario_file.display(),
+            o.team,
+            s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
+        );
+    }
+    Ok(children)
 }
 
 /// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT before it started.
