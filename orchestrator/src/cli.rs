@@ -102,6 +102,8 @@ pub enum Command {
         #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_SERVE)]
         serve: Option<String>,
         #[command(flatten)]
+        realtime: crate::realtime::RealtimeArgs,
+        #[command(flatten)]
         run: RunOptions,
     },
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained

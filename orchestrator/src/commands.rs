@@ -98,10 +98,12 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             agent_timeout,
             join_timeout,
             serve,
+            realtime,
             run,
         } => {
             crate::telemetry::check_available(run.telemetry)?;
             let s = load(&source)?;
+            let realtime = realtime.options(&s)?;
             check_follow(&s, run.follow)?;
             if !run.lose.is_empty() {
                 // Killing a member process and re-opening its readers' services needs the
@@ -120,7 +122,12 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 force,
                 every,
                 telemetry: run.telemetry,
-                window,
+                // Real time reads the newest states: a short buffer is enough.
+                window: if realtime.is_some() {
+                    crate::realtime::REALTIME_WINDOW
+                } else {
+                    window
+                },
                 spawn: !no_spawn,
                 agent_timeout: secs(agent_timeout, "--agent-timeout")?,
                 join_timeout: secs(join_timeout, "--join-timeout")?,
@@ -132,6 +139,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     .map(crate::cli::serve_addr)
                     .transpose()
                     .map_err(Failure::bad_input)?,
+                realtime,
             };
             let started = Instant::now();
             let crate::launch::Launched {

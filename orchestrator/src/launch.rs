@@ -48,6 +48,8 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
+    pub realtime: Option<crate::realtime::RealtimeOptions>,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -125,18 +127,23 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     let mut children = start_members(s, o, &dir, &mut ports, &member_file, &scenario_file)?;
     let mut audit = Auditor::new(s);
-    let result = run_team(
-        s,
-        o,
-        &dir,
-        &mut ports,
-        &mut children,
-        Watchers {
-            audit: &mut audit,
-            live: &mut live,
-        },
-        interrupted,
-    );
+    let result = if let Some(rt) = &o.realtime {
+        let team = (&mut ports, children.as_mut_slice());
+        crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
+    } else {
+        run_team(
+            s,
+            o,
+            &dir,
+            &mut ports,
+            &mut children,
+            Watchers {
+                audit: &mut audit,
+                live: &mut live,
+            },
+            interrupted,
+        )
+    };
     let ended = Instant::now();
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
@@ -182,7 +189,8 @@ fn start_members(
     let mut children = Vec::new();
     if o.spawn {
         for m in &s.formation.members {
-            match spawn_member(member_file, &o.team, m.id, m.role) {
+            let flags = crate::realtime::member_flags(o);
+            match spawn_member(member_file, &o.team, m.id, m.role, &flags) {
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(ports, &mut children, s, StopReason::AgentFault);
@@ -202,14 +210,16 @@ fn start_members(
         }
     } else if !o.quiet {
         out!(
-            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
             o.team,
             ids.len(),
             scenario_file.display(),
             o.team,
+            crate::realtime::member_flags(o).iter().map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
             scenario_file.display(),
             o.team,
+            crate::realtime::member_flags(o).iter().map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
         );
     }
@@ -278,7 +288,7 @@ fn run_team(
 }
 
 /// Readiness: every process opened its ports, within a deadline.
-fn gather(
+pub(crate) fn gather(
     s: &Scenario,
     o: &LaunchOptions,
     ports: &mut OrchestratorPorts,
@@ -315,7 +325,7 @@ fn gather(
 }
 
 /// The subscription graph as iceoryx2 sees it (subscriptions.json, best effort).
-fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
+pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
     let mut subs = BTreeMap::new();
     for m in &s.formation.members {
         let nodes = ports.subscriber_nodes(m.id).unwrap_or_default();

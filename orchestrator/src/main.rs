@@ -16,6 +16,7 @@ mod commands;
 mod export;
 mod launch;
 mod progress;
+mod realtime;
 mod report;
 mod team;
 mod telemetry;
