@@ -5,7 +5,7 @@ use std::hint::black_box;
 
 use common::audit::Auditor;
 use common::dynamics::QuadState;
-use common::engine::{desired_positions, quad_engine, step_config};
+use common::engine::quad_engine;
 use common::frame::deformation_eigenvalues;
 use common::scenario::Scenario;
 use common::step::{law_for, step};
@@ -13,7 +13,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 
 fn hot_math(c: &mut Criterion) {
     let s = Scenario::builtin("paper40").expect("paper40");
-    let cfg = step_config(&s);
+    let cfg = s.step_config();
     // A follower mid-plan: advance the engine a while so states are non-trivial.
     let mut e = quad_engine(&s);
     for _ in 0..5000 {
@@ -49,7 +49,7 @@ fn hot_math(c: &mut Criterion) {
     });
     let pos: Vec<_> = e.states().iter().map(|q| q.position()).collect();
     let mut ht = Vec::new();
-    desired_positions(&s, 50.0, &mut ht);
+    s.desired_positions(50.0, &mut ht);
     let mut audit = Auditor::new(&s);
     c.bench_function("audit of one tick, 40 agents", |b| {
         b.iter(|| audit.observe(black_box(5000), 50.0, &pos, &ht))

@@ -8,8 +8,8 @@
 
 pub use cdm_core::{
     audit, control, delay, dynamics, engine, export, files, formation, frame, gains, geometry,
-    graph, linear_certificate, link, loss, loss_log, losscert, math, outcome, plan, repair, rundir,
-    safety, scenario, simulate, step, telemetry,
+    graph, linear_certificate, link, loss, loss_log, losscert, math, outcome, plan, record, repair,
+    rundir, safety, scenario, simulate, step, telemetry,
 };
 pub use cdm_iox as transport;
 pub use cdm_runtime::{

@@ -16,7 +16,6 @@ use cdm_runtime::realtime_loop::fly_realtime;
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock, Vehicle};
 
 use crate::dynamics::QuadState;
-use crate::engine::step_config;
 use crate::formation::{Member, Role};
 use crate::loss_log::LossLog;
 use crate::options::LinkArgs;
@@ -205,7 +204,7 @@ pub fn run_member(
     };
     match &vehicles {
         Vehicles::Model => member.fly(
-            ModelVehicle::new(step_config(&s), &s.plan, &me),
+            ModelVehicle::new(s.step_config(), &s.plan, &me),
             interrupted,
         ),
         // The vehicle first: the team starts only once every member's vehicle is heard (and
@@ -268,7 +267,7 @@ impl Joined<'_> {
             QuadState::hover(s.formation.member(n).map_or(me.position, |m| m.position)).flat()
         });
         let mut core = MemberCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
-            .with_links(s.link_model(), &step_config(s), starts)
+            .with_links(s.link_model(), &s.step_config(), starts)
             .with_losses(MemberLosses::new(me, LossLog::new(s), &ins, &outs));
         let inject = crate::fault_inject::from_env(id);
         fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())

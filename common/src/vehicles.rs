@@ -10,7 +10,6 @@ use cdm_mavlink::{
     member_addr, MavlinkPlant, PlantConfig, PlantError, VehicleConfig, VehicleOrigin,
 };
 
-use crate::engine::step_config;
 use crate::formation::Member;
 use crate::math::Vec3;
 use crate::scenario::Scenario;
@@ -173,7 +172,7 @@ pub fn connect<'a>(
         bind: member_addr(me.id, o.host, o.base_port, index)?,
         period: Duration::from_secs_f64(s.dt_s()),
     };
-    MavlinkPlant::connect(config, step_config(s), &s.plan, me, interrupted)
+    MavlinkPlant::connect(config, s.step_config(), &s.plan, me, interrupted)
 }
 
 #[cfg(test)]

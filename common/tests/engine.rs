@@ -1,10 +1,12 @@
 //! The in-process engine: the nonlinear team equals the linear model (feedback linearisation,
 //! eqs. 43-46), determinism, and the error of exchanging states once per tick.
 
-use common::dynamics::Plant;
-use common::engine::{chain_engine, exchange_error, max_follower_deviation, quad_engine};
+use common::dynamics::{Flat, Plant};
+use common::engine::{chain_engine, max_follower_deviation, quad_engine, AgentFault};
+use common::math::{Real, Vec3};
+use common::plan::Segment;
 use common::scenario::{Checks, Scenario};
-use common::step::NeighborModel;
+use common::step::{law_for, Law, NeighborModel};
 
 fn paper40_with(t_total_s: f64) -> Scenario {
     let mut f = common::scenario::paper40();
@@ -69,4 +71,107 @@ fn deviation_falls_as_travel_time_grows() {
         assert!(d < last);
         last = d;
     }
+}
+
+/// The continuously coupled linear team of eqs. 24-25: one RK4 over all agents at once, every
+/// stage seeing every neighbour's current state (no exchange, no extrapolation). Returns the
+/// largest position difference against the engine's linear team with the given neighbour model,
+/// i.e. the error that exchanging states once per tick adds.
+fn exchange_error(s: &Scenario, model: NeighborModel) -> Result<Real, AgentFault> {
+    let mut e = chain_engine(s).with_neighbor_model(model);
+    let n = s.formation.members.len();
+    let mut x: Vec<Flat> = s
+        .formation
+        .members
+        .iter()
+        .map(|m| Flat::rest(m.position))
+        .collect();
+    let f = &s.formation;
+    let laws: Vec<Law> = f.members.iter().map(|m| law_for(m).0).collect();
+    let nbr: Vec<[usize; 3]> = (f.members.iter().enumerate())
+        .map(|(k, m)| law_for(m).1.map(|id| f.index_of(id).unwrap_or(k)))
+        .collect();
+    let [k1, k2, k3, k4] = s.file.gains;
+    let plan = s.plan;
+    let deriv = |t: Real, seg: Segment, x: &[Flat]| -> Vec<Flat> {
+        (0..n)
+            .map(|k| {
+                let f = &x[k];
+                let snap = match &laws[k] {
+                    Law::Leader { alpha } => {
+                        let d = plan.agent_derivs(alpha, t, seg);
+                        d[4] + (d[3] - f.j) * k1
+                            + (d[2] - f.a) * k2
+                            + (d[1] - f.v) * k3
+                            + (d[0] - f.r) * k4
+                    }
+                    Law::Follower { weights } => {
+                        let mut rd = Vec3::zeros();
+                        let mut vd = Vec3::zeros();
+                        for (j, w) in nbr[k].iter().zip(weights) {
+                            rd += x[*j].r * *w;
+                            vd += x[*j].v * *w;
+                        }
+                        (rd - f.r) * k4 + (vd - f.v) * k3 - f.a * k2 - f.j * k1
+                    }
+                };
+                Flat {
+                    r: f.v,
+                    v: f.a,
+                    a: f.j,
+                    j: snap,
+                }
+            })
+            .collect()
+    };
+    let axpy = |x: &[Flat], d: &[Flat], h: Real| -> Vec<Flat> {
+        x.iter()
+            .zip(d)
+            .map(|(a, b)| Flat {
+                r: a.r + b.r * h,
+                v: a.v + b.v * h,
+                a: a.a + b.a * h,
+                j: a.j + b.j * h,
+            })
+            .collect()
+    };
+    let dt = s.dt_s();
+    let sub = s.substeps();
+    let mut worst: Real = 0.0;
+    for tick in 0..s.last_tick() {
+        for i in 0..sub {
+            let ts = (tick as Real + i as Real / sub as Real) * dt;
+            let te = (tick as Real + (i + 1) as Real / sub as Real) * dt;
+            let pieces: Vec<(Real, Real, Segment)> = match plan.quintic.segment_of(ts, te) {
+                Some(seg) => vec![(ts, te, seg)],
+                None => {
+                    let tt = plan.quintic.t_total_s;
+                    vec![(ts, tt, Segment::Motion), (tt, te, Segment::Hold)]
+                }
+            };
+            for (a, b, seg) in pieces {
+                let h = b - a;
+                let d1 = deriv(a, seg, &x);
+                let d2 = deriv(a + h / 2.0, seg, &axpy(&x, &d1, h / 2.0));
+                let d3 = deriv(a + h / 2.0, seg, &axpy(&x, &d2, h / 2.0));
+                let d4 = deriv(b, seg, &axpy(&x, &d3, h));
+                for k in 0..n {
+                    let c = |f: fn(&Flat) -> Vec3| {
+                        (f(&d1[k]) + f(&d2[k]) * 2.0 + f(&d3[k]) * 2.0 + f(&d4[k])) * (h / 6.0)
+                    };
+                    x[k] = Flat {
+                        r: x[k].r + c(|f| f.r),
+                        v: x[k].v + c(|f| f.v),
+                        a: x[k].a + c(|f| f.a),
+                        j: x[k].j + c(|f| f.j),
+                    };
+                }
+            }
+        }
+        e.advance()?;
+        for (st, xk) in e.states().iter().zip(&x) {
+            worst = worst.max((st.0.r - xk.r).norm());
+        }
+    }
+    Ok(worst)
 }

@@ -9,20 +9,18 @@ use std::time::{Duration, Instant};
 use common::audit::{AuditReport, Auditor};
 
 use crate::viewer::live::LiveView;
-use common::engine::desired_positions;
 use common::formation::Role;
 use common::loss::{LossSchedule, LossState};
-use common::math::{vec3, Vec3};
+use common::math::vec3;
 use common::messages::{ClockMsg, StateMsg, StopReason};
 use common::outcome::FaultKind;
+use common::record::TickRecorder;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::seams::{Clock, MonotonicClock};
-use common::simulate::id_order;
-use common::step::tick_time;
 use common::team_core::{TeamAction, TeamConfig, TeamCore};
 use common::team_loss::TeamLosses;
-use common::telemetry::{Row, TelemetrySink};
+use common::telemetry::TelemetrySink;
 use common::transport::{
     describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName,
 };
@@ -138,43 +136,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             o.team
         );
     }
-    let mut children = Vec::new();
-    if o.spawn {
-        for m in &s.formation.members {
-            let mut flags = crate::realtime::member_flags(o);
-            flags.extend(o.vehicles.member_args());
-            match spawn_member(&member_file, &o.team, m.id, m.role, &flags) {
-                Ok(c) => children.push(Spawned { id: m.id, child: c }),
-                Err(e) => {
-                    stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
-                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
-                    let mut audit = Auditor::new(s);
-                    audit.fault(fault(
-                        FaultKind::SpawnFailed,
-                        Some(m.id),
-                        None,
-                        0,
-                        what.clone(),
-                    ));
-                    let _ = dir.write_audit(&audit.finish(false));
-                    return Err(Failure::fault(what));
-                }
-            }
-        }
-    } else if !o.quiet {
-        out!(
-            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{v}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{v}   (ids {:?})",
-            o.team,
-            ids.len(),
-            scenario_file.display(),
-            o.team,
-            s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
-            scenario_file.display(),
-            o.team,
-            s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
-            v = crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|a| format!(" {a}")).collect::<String>(),
-        );
-    }
+    let mut children = start_members(s, o, &dir, &mut ports, &member_file, &scenario_file)?;
     let mut audit = Auditor::new(s);
     let result = if let Some(rt) = &o.realtime {
         let team = (&mut ports, children.as_mut_slice());
@@ -223,6 +185,57 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         member_peak_rss,
         live,
     })
+}
+
+/// Spawns one process per member (`--spawn`), or tells how to start them by hand.
+fn start_members(
+    s: &Scenario,
+    o: &LaunchOptions,
+    dir: &RunDir,
+    ports: &mut OrchestratorPorts,
+    member_file: &std::path::Path,
+    scenario_file: &std::path::Path,
+) -> Result<Vec<Spawned>, Failure> {
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+    let mut children = Vec::new();
+    if o.spawn {
+        for m in &s.formation.members {
+            let mut flags = crate::realtime::member_flags(o);
+            flags.extend(o.vehicles.member_args());
+            match spawn_member(member_file, &o.team, m.id, m.role, &flags) {
+                Ok(c) => children.push(Spawned { id: m.id, child: c }),
+                Err(e) => {
+                    stop_team(ports, &mut children, s, StopReason::AgentFault);
+                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
+                    let mut audit = Auditor::new(s);
+                    audit.fault(fault(
+                        FaultKind::SpawnFailed,
+                        Some(m.id),
+                        None,
+                        0,
+                        what.clone(),
+                    ));
+                    let _ = dir.write_audit(&audit.finish(false));
+                    return Err(Failure::fault(what));
+                }
+            }
+        }
+    } else if !o.quiet {
+        out!(
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
+            o.team,
+            ids.len(),
+            scenario_file.display(),
+            o.team,
+            crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
+            s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
+            scenario_file.display(),
+            o.team,
+            crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
+            s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
+        );
+    }
+    Ok(children)
 }
 
 /// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT before it started.
@@ -455,13 +468,10 @@ fn fly_team(
     }
 }
 
-/// What every complete tick gets: its desired positions, the audit, the live view, progress and
-/// its telemetry rows (sorted by id), with buffers reused from tick to tick.
+/// What every complete tick gets: the shared audit and telemetry of `simulate`
+/// (`TickRecorder`), then the live view and the progress line.
 struct Recorder {
-    order: Vec<usize>,
-    ht: Vec<Vec3>,
-    pos: Vec<Vec3>,
-    rows: Vec<Row>,
+    tick: TickRecorder,
     progress: crate::progress::Progress,
     /// The losses' audit records (as `simulate` writes them).
     losses: LossState,
@@ -469,12 +479,8 @@ struct Recorder {
 
 impl Recorder {
     fn new(s: &Scenario, last: u64, quiet: bool) -> Self {
-        let n = s.formation.members.len();
         Recorder {
-            order: id_order(s),
-            ht: Vec::new(),
-            pos: vec![Vec3::zeros(); n],
-            rows: Vec::with_capacity(n),
+            tick: TickRecorder::new(s),
             progress: crate::progress::Progress::new("launch", last, s.dt_s(), quiet),
             losses: LossState::new(s, LossSchedule::default()),
         }
@@ -497,36 +503,21 @@ impl Recorder {
         live: &mut Option<LiveView>,
         tel: &mut dyn TelemetrySink,
     ) -> Result<(), Stop> {
-        let t = tick_time(tick, s.dt_s());
-        desired_positions(s, t, &mut self.ht);
-        for (k, st) in states.iter().enumerate() {
-            if let Some(m) = st {
-                self.pos[k] = vec3([m.state[0], m.state[1], m.state[2]]);
-            }
-        }
-        audit.observe(tick, t, &self.pos, &self.ht);
+        let member = |k: usize| {
+            states[k].map(|m| {
+                let x = m.state;
+                (vec3([x[0], x[1], x[2]]), vec3([x[3], x[4], x[5]]))
+            })
+        };
+        let t = self
+            .tick
+            .record(s, tick, audit, tel, member)
+            .map_err(|f| (f, StopReason::AgentFault))?;
         if let Some(v) = live.as_mut() {
-            v.tick(tick, t, &self.pos, &self.ht, audit.report());
+            let (pos, ht) = (self.tick.positions(), self.tick.desired());
+            v.tick(tick, t, pos, ht, audit.report());
         }
         self.progress.tick(tick, audit.report());
-        if !tel.keeps(tick) {
-            return Ok(());
-        }
-        self.rows.clear();
-        // A complete tick has every state but the lost members'.
-        for &k in self.order.iter().filter(|&&k| states[k].is_some()) {
-            let m = &s.formation.members[k];
-            let st = states[k].map(|x| x.state).unwrap_or([f64::NAN; 12]);
-            self.rows.push(Row {
-                tick,
-                t_s: t,
-                id: m.id,
-                role: m.role,
-                r: vec3([st[0], st[1], st[2]]),
-                v: vec3([st[3], st[4], st[5]]),
-                ht: self.ht[k],
-            });
-        }
-        tel.write_tick(&self.rows).map_err(io_stop(tick))
+        Ok(())
     }
 }

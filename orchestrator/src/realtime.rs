@@ -9,7 +9,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use common::audit::Auditor;
-use common::engine::desired_positions;
 use common::formation::Role;
 use common::messages::{ClockMsg, FaultCode, StopReason};
 use common::outcome::FaultKind;
@@ -17,7 +16,6 @@ use common::realtime_loop::unix_now_ns;
 use common::realtime_monitor::{Heard, MonitorCore, RunFigures};
 use common::rundir::RunDir;
 use common::scenario::Scenario;
-use common::simulate::id_order;
 use common::telemetry::{Row, TelemetrySink};
 use common::transport::OrchestratorPorts;
 
@@ -387,7 +385,7 @@ impl Monitor<'_> {
         let s = self.s;
         let n = s.formation.members.len();
         let mut ht = Vec::with_capacity(n);
-        desired_positions(s, t_s, &mut ht);
+        s.desired_positions(t_s, &mut ht);
         let at: Vec<_> = (0..n).map(|k| self.core.state_at(k, t_s)).collect();
         let pos: Vec<_> = at.iter().map(|(r, _)| *r).collect();
         let tick = self.audits;
@@ -395,7 +393,8 @@ impl Monitor<'_> {
         if !self.tel.keeps(tick) {
             return Ok(());
         }
-        let rows: Vec<Row> = id_order(s)
+        let rows: Vec<Row> = s
+            .id_order()
             .into_iter()
             .map(|k| {
                 let m = &s.formation.members[k];

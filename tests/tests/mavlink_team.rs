@@ -133,7 +133,7 @@ fn num(v: &Value, key: &str) -> f64 {
 fn goals(file: &ScenarioFile) -> Vec<[f64; 3]> {
     let s = Scenario::from_file(file.clone(), "mavlink10", Checks::Full).expect("valid");
     let mut out = Vec::new();
-    common::engine::desired_positions(&s, s.file.t_total_s, &mut out);
+    s.desired_positions(s.file.t_total_s, &mut out);
     out.iter().map(|p| [p.x, p.y, p.z]).collect()
 }
 

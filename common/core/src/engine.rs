@@ -6,7 +6,6 @@ use crate::dynamics::{Chain, Flat, Plant, QuadState};
 use crate::formation::Role;
 use crate::link::{Heard, LinkModel};
 use crate::math::{Real, Vec3};
-use crate::plan::Segment;
 use crate::repair::Repair;
 use crate::scenario::Scenario;
 use crate::step::{law_for, step, tick_time, Law, NeighborModel, StepConfig, StepFault};
@@ -18,31 +17,6 @@ pub struct AgentFault {
     pub id: u32,
     pub tick: u64,
     pub fault: StepFault,
-}
-
-/// The step configuration of a scenario.
-pub fn step_config(s: &Scenario) -> StepConfig {
-    StepConfig {
-        gains: s.file.gains,
-        dt_s: s.dt_s(),
-        substeps: s.substeps(),
-        neighbor_model: NeighborModel::default(),
-    }
-}
-
-/// The desired position r_HT of every member at time t (eqs. 13, 23), in member order.
-pub fn desired_positions(s: &Scenario, t: Real, out: &mut Vec<Vec3>) {
-    let seg = if t <= s.plan.quintic.t_total_s {
-        Segment::Motion
-    } else {
-        Segment::Hold
-    };
-    let prim = s.plan.primary_derivs(t, seg);
-    out.clear();
-    for m in &s.formation.members {
-        let a = m.alpha;
-        out.push(prim[0][0] * a[0] + prim[1][0] * a[1] + prim[2][0] * a[2]);
-    }
 }
 
 /// The whole team in one process (cloned to fly variants of one flight from a shared prefix).
@@ -110,7 +84,7 @@ impl<P: Plant> Engine<P> {
         let flats: Vec<Flat> = states.iter().map(|p| p.flat()).collect();
         let links = Links::new(scenario.link_model(), &neighbor_idx, &flats);
         Engine {
-            cfg: step_config(scenario),
+            cfg: scenario.step_config(),
             scenario: scenario.clone(),
             laws,
             neighbor_idx,
@@ -147,6 +121,13 @@ impl<P: Plant> Engine<P> {
             self.neighbor_idx[k] = idx;
             self.neighbor_ids[k] = ids;
         }
+    }
+
+    /// The same team with followers extrapolating their neighbours by `model` inside a tick
+    /// (the product flies the default; the exchange-error test compares models).
+    pub fn with_neighbor_model(mut self, model: NeighborModel) -> Self {
+        self.cfg.neighbor_model = model;
+        self
     }
 
     /// Whether each member (member order) still flies.
@@ -301,7 +282,7 @@ pub fn max_follower_deviation_within(s: &Scenario, limit_m: Real) -> Result<Real
     let mut worst: Real = 0.0;
     let last = s.last_tick();
     loop {
-        desired_positions(s, tick_time(e.tick(), s.dt_s()), &mut ht);
+        s.desired_positions(tick_time(e.tick(), s.dt_s()), &mut ht);
         for &k in &followers {
             worst = worst.max((e.states()[k].position() - ht[k]).norm());
         }
@@ -310,105 +291,4 @@ pub fn max_follower_deviation_within(s: &Scenario, limit_m: Real) -> Result<Real
         }
         e.advance()?;
     }
-}
-
-/// The continuously coupled linear team of eqs. 24-25: one RK4 over all agents at once, every
-/// stage seeing every neighbour's current state (no exchange, no extrapolation). Returns the
-/// largest position difference against the engine's linear team with the given neighbour model,
-/// i.e. the error that exchanging states once per tick adds.
-pub fn exchange_error(s: &Scenario, model: NeighborModel) -> Result<Real, AgentFault> {
-    let mut e = chain_engine(s);
-    e.cfg.neighbor_model = model;
-    let n = s.formation.members.len();
-    let mut x: Vec<Flat> = s
-        .formation
-        .members
-        .iter()
-        .map(|m| Flat::rest(m.position))
-        .collect();
-    let laws = e.laws.clone();
-    let nbr = e.neighbor_idx.clone();
-    let [k1, k2, k3, k4] = s.file.gains;
-    let plan = s.plan;
-    let deriv = |t: Real, seg: Segment, x: &[Flat]| -> Vec<Flat> {
-        (0..n)
-            .map(|k| {
-                let f = &x[k];
-                let snap = match &laws[k] {
-                    Law::Leader { alpha } => {
-                        let d = plan.agent_derivs(alpha, t, seg);
-                        d[4] + (d[3] - f.j) * k1
-                            + (d[2] - f.a) * k2
-                            + (d[1] - f.v) * k3
-                            + (d[0] - f.r) * k4
-                    }
-                    Law::Follower { weights } => {
-                        let mut rd = Vec3::zeros();
-                        let mut vd = Vec3::zeros();
-                        for (j, w) in nbr[k].iter().zip(weights) {
-                            rd += x[*j].r * *w;
-                            vd += x[*j].v * *w;
-                        }
-                        (rd - f.r) * k4 + (vd - f.v) * k3 - f.a * k2 - f.j * k1
-                    }
-                };
-                Flat {
-                    r: f.v,
-                    v: f.a,
-                    a: f.j,
-                    j: snap,
-                }
-            })
-            .collect()
-    };
-    let axpy = |x: &[Flat], d: &[Flat], h: Real| -> Vec<Flat> {
-        x.iter()
-            .zip(d)
-            .map(|(a, b)| Flat {
-                r: a.r + b.r * h,
-                v: a.v + b.v * h,
-                a: a.a + b.a * h,
-                j: a.j + b.j * h,
-            })
-            .collect()
-    };
-    let dt = s.dt_s();
-    let sub = s.substeps();
-    let mut worst: Real = 0.0;
-    for tick in 0..s.last_tick() {
-        for i in 0..sub {
-            let ts = (tick as Real + i as Real / sub as Real) * dt;
-            let te = (tick as Real + (i + 1) as Real / sub as Real) * dt;
-            let pieces: Vec<(Real, Real, Segment)> = match plan.quintic.segment_of(ts, te) {
-                Some(seg) => vec![(ts, te, seg)],
-                None => {
-                    let tt = plan.quintic.t_total_s;
-                    vec![(ts, tt, Segment::Motion), (tt, te, Segment::Hold)]
-                }
-            };
-            for (a, b, seg) in pieces {
-                let h = b - a;
-                let d1 = deriv(a, seg, &x);
-                let d2 = deriv(a + h / 2.0, seg, &axpy(&x, &d1, h / 2.0));
-                let d3 = deriv(a + h / 2.0, seg, &axpy(&x, &d2, h / 2.0));
-                let d4 = deriv(b, seg, &axpy(&x, &d3, h));
-                for k in 0..n {
-                    let c = |f: fn(&Flat) -> Vec3| {
-                        (f(&d1[k]) + f(&d2[k]) * 2.0 + f(&d3[k]) * 2.0 + f(&d4[k])) * (h / 6.0)
-                    };
-                    x[k] = Flat {
-                        r: x[k].r + c(|f| f.r),
-                        v: x[k].v + c(|f| f.v),
-                        a: x[k].a + c(|f| f.a),
-                        j: x[k].j + c(|f| f.j),
-                    };
-                }
-            }
-        }
-        e.advance()?;
-        for (st, xk) in e.states().iter().zip(&x) {
-            worst = worst.max((st.0.r - xk.r).norm());
-        }
-    }
-    Ok(worst)
 }

@@ -31,6 +31,7 @@ pub mod loss_log;
 pub mod losscert;
 pub mod outcome;
 pub mod plan;
+pub mod record;
 pub mod repair;
 pub mod rundir;
 pub mod safety;

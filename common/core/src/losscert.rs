@@ -22,7 +22,7 @@ use serde::Serialize;
 
 use crate::audit::Auditor;
 use crate::dynamics::{Flat, QuadState};
-use crate::engine::{desired_positions, quad_engine, step_config, Engine};
+use crate::engine::{quad_engine, Engine};
 use crate::formation::{Formation, Role};
 use crate::graph::DEFAULT_WEIGHT_FLOOR;
 use crate::math::{Real, Vec3};
@@ -151,7 +151,7 @@ fn nominal_flight(s: &Scenario) -> (Engine<QuadState>, Nominal) {
     let complete = loop {
         let tick = e.tick();
         let t = tick_time(tick, s.dt_s());
-        desired_positions(s, t, &mut ht);
+        s.desired_positions(t, &mut ht);
         pos.clear();
         pos.extend(e.states().iter().map(|q| q.position()));
         audit.observe(tick, t, &pos, &ht);
@@ -354,7 +354,7 @@ fn fly_branches(
     ids: &[u32],
     nominal: &Nominal,
 ) -> Vec<MemberLoss> {
-    let cfg = step_config(s);
+    let cfg = s.step_config();
     let floor = s.file.weight_floor.unwrap_or(DEFAULT_WEIGHT_FLOOR);
     let last = s.last_tick();
     if e.advance().is_err() {
@@ -369,7 +369,7 @@ fn fly_branches(
     loop {
         let tick = e.tick();
         let t = tick_time(tick, s.dt_s());
-        desired_positions(s, t, &mut ht);
+        s.desired_positions(t, &mut ht);
         pos.clear();
         pos.extend(e.states().iter().map(|q| q.position()));
         let prism = prism_at(&s.formation, &ht, half);
@@ -455,7 +455,7 @@ mod tests {
                 changed.extend(r.retriangulated.iter().map(|x| x.id));
                 changed.extend(r.degraded.iter().copied());
             }
-            desired_positions(s, tick_time(tick, s.dt_s()), &mut ht);
+            s.desired_positions(tick_time(tick, s.dt_s()), &mut ht);
             if tick > last_tick {
                 for (k, m) in s.formation.members.iter().enumerate() {
                     if m.id == id {

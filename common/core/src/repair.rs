@@ -167,7 +167,6 @@ pub fn unreachable(f: &Formation, lost: &BTreeSet<u32>) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::desired_positions;
     use crate::graph::DEFAULT_WEIGHT_FLOOR;
     use crate::scenario::Scenario;
 
@@ -205,7 +204,7 @@ mod tests {
             assert!((p0 - m.position).norm() < 1e-9, "eq. 18 for {}", m.id);
         }
         for t in [0.0, 0.3, 0.5, 0.9, 1.2].map(|x| x * s.file.t_total_s) {
-            desired_positions(s, t, &mut ht);
+            s.desired_positions(t, &mut ht);
             for (k, m) in f.members.iter().enumerate() {
                 let Some(link) = m.link else { continue };
                 if r.lost.contains(&m.id) {

@@ -5,16 +5,16 @@ use serde::Serialize;
 
 use crate::audit::{AuditReport, Auditor, FaultRecord, SafetyNumbers};
 use crate::delay::{bound_ms, max_link_delay};
-use crate::engine::{desired_positions, max_follower_deviation, quad_engine, AgentFault};
+use crate::engine::{max_follower_deviation, quad_engine, AgentFault};
 use crate::linear_certificate::LinearTeam;
 use crate::loss::{LossSchedule, LossState, OnLoss};
 use crate::losscert::LossCertificate;
-use crate::math::{Real, Vec3};
+use crate::math::Real;
 use crate::outcome::{FaultKind, Verdict};
+use crate::record::{write_fault, TickRecorder};
 use crate::rundir::{RunDir, RunDirError};
 use crate::scenario::{Checks, Scenario};
-use crate::step::tick_time;
-use crate::telemetry::{Row, TelemetryFormat, TelemetrySink};
+use crate::telemetry::{TelemetryFormat, TelemetrySink};
 
 /// How `simulate` runs.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -50,16 +50,12 @@ pub fn simulate(
     let mut audit = Auditor::new(s);
     let mut e = quad_engine(s);
     let mut losses = LossState::new(s, opts.losses.clone());
-    let mut ht = Vec::new();
-    let mut pos: Vec<Vec3> = Vec::new();
-    let mut rows: Vec<Row> = Vec::with_capacity(s.formation.members.len());
-    let order = id_order(s);
+    let mut rec = TickRecorder::new(s);
     let last = opts
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let complete = loop {
         let tick = e.tick();
-        let t = tick_time(tick, s.dt_s());
         if let Some(ids) = losses.due(tick) {
             if opts.on_loss == OnLoss::Stop {
                 audit.fault(lost_fault(tick, &ids));
@@ -67,29 +63,13 @@ pub fn simulate(
             }
             losses.apply(s, tick, &ids, &mut e, &mut audit);
         }
-        desired_positions(s, t, &mut ht);
-        pos.clear();
-        pos.extend(e.states().iter().map(|q| q.position()));
-        audit.observe(tick, t, &pos, &ht);
-        if tel.keeps(tick) {
-            rows.clear();
-            for &k in order.iter().filter(|&&k| e.alive()[k]) {
-                let m = &s.formation.members[k];
-                let q = &e.states()[k];
-                rows.push(Row {
-                    tick,
-                    t_s: t,
-                    id: m.id,
-                    role: m.role,
-                    r: q.position(),
-                    v: q.velocity(),
-                    ht: ht[k],
-                });
-            }
-            if let Err(e) = tel.write_tick(&rows) {
-                audit.fault(write_fault(tick, &e));
-                break false;
-            }
+        let member = |k: usize| {
+            let q = &e.states()[k];
+            e.alive()[k].then(|| (q.position(), q.velocity()))
+        };
+        if let Err(f) = rec.record(s, tick, &mut audit, tel, member) {
+            audit.fault(f);
+            break false;
         }
         on_tick(tick, &audit);
         if opts.stop_on_violation && audit.violation_count() > 0 {
@@ -117,18 +97,6 @@ pub fn simulate(
     Ok(report)
 }
 
-/// A telemetry write that failed (a full disk): the run stops there, its audit is still
-/// written (into the room reserved for it) and names the file.
-fn write_fault(tick: u64, e: &std::io::Error) -> FaultRecord {
-    FaultRecord {
-        kind: crate::outcome::FaultKind::Io,
-        agent: None,
-        peer: None,
-        tick,
-        message: format!("cannot write telemetry: {e}"),
-    }
-}
-
 fn control_fault(f: &AgentFault) -> FaultRecord {
     FaultRecord {
         kind: FaultKind::Control,
@@ -154,13 +122,6 @@ fn lost_fault(tick: u64, ids: &[u32]) -> FaultRecord {
             tick.saturating_sub(1)
         ),
     }
-}
-
-/// Member indices sorted by id (telemetry order).
-pub fn id_order(s: &Scenario) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..s.formation.members.len()).collect();
-    order.sort_by_key(|&k| s.formation.members[k].id);
-    order
 }
 
 /// The pre-flight certificate printed by `orchestrator plan`.

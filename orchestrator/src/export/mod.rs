@@ -20,7 +20,7 @@ use common::math::{Real, Vec3};
 use common::outcome::Verdict;
 use common::rundir::write_atomic;
 use common::scenario::{Checks, Scenario};
-use common::simulate::{certify, id_order, Certificate};
+use common::simulate::{certify, Certificate};
 
 use crate::cli::{ExportFrame, ExportTarget, Source};
 use crate::commands::{load, print_certificate};
@@ -156,7 +156,8 @@ fn scaled(source: &Source, frame: &ExportFrame) -> Result<Scaled, Failure> {
     let what = format!("{} at scale {} + origin {origin:?}", base.origin, tf.scale);
     let scenario = Scenario::from_file(file, &what, Checks::Full).map_err(Failure::bad_input)?;
     let trajs = team_trajectories(&scenario);
-    let roles = id_order(&scenario)
+    let roles = scenario
+        .id_order()
         .into_iter()
         .map(|k| scenario.formation.members[k].role)
         .collect();

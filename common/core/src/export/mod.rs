@@ -14,7 +14,6 @@ pub use scale::{FrameError, TargetFrame};
 
 use crate::math::Real;
 use crate::scenario::Scenario;
-use crate::simulate::id_order;
 
 /// The longest segment a Skybrush show may have: its server refuses segments over 65.5 s
 /// (skybrush-server `TrajectorySpecification.segments`); 60 s keeps a margin.
@@ -22,7 +21,7 @@ pub const SKYBRUSH_MAX_SEGMENT_S: Real = 60.0;
 
 /// Every agent's desired trajectory r_HT(t), in id order (the order of telemetry.csv).
 pub fn team_trajectories(s: &Scenario) -> Vec<AgentTrajectory> {
-    id_order(s)
+    s.id_order()
         .into_iter()
         .map(|k| {
             let m = &s.formation.members[k];
@@ -39,7 +38,6 @@ pub fn skybrush_piece_count(t_total_s: Real) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::desired_positions;
     use crate::scenario::{paper40, Checks};
 
     /// The exported polynomials are the engine's own r_HT, agent by agent.
@@ -47,10 +45,10 @@ mod tests {
     fn team_trajectories_match_the_engine() {
         let s = Scenario::from_file(paper40(), "paper40", Checks::Member).unwrap();
         let trajs = team_trajectories(&s);
-        let order = id_order(&s);
+        let order = s.id_order();
         let mut ht = Vec::new();
         for t in [0.0, 13.7, 100.0, 199.99, 200.0] {
-            desired_positions(&s, t, &mut ht);
+            s.desired_positions(t, &mut ht);
             for (tr, &k) in trajs.iter().zip(&order) {
                 assert!(
                     (tr.position(t) - ht[k]).norm() < 1e-9,

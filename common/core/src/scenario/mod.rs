@@ -5,6 +5,7 @@
 //! `Scenario::file` back out gives the scenario actually flown (`scenario.toml`).
 
 mod builtin;
+mod flight;
 mod locate;
 mod validate;
 
