@@ -98,6 +98,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             agent_timeout,
             join_timeout,
             serve,
+            hosts,
             run,
         } => {
             crate::telemetry::check_available(run.telemetry)?;
@@ -132,6 +133,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     .map(crate::cli::serve_addr)
                     .transpose()
                     .map_err(Failure::bad_input)?,
+                hosts: crate::host::HostOptions {
+                    hosts: hosts.hosts,
+                    listen: hosts.listen,
+                    link_timeout: secs(hosts.link_timeout, "--link-timeout")?,
+                },
             };
             let started = Instant::now();
             let crate::launch::Launched {
@@ -168,6 +174,13 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         }
         Command::View { dir, serve } => view(&dir, serve.as_deref(), cli.quiet),
         Command::Clean => clean(cli.quiet),
+        Command::Host {
+            connect,
+            team,
+            host,
+            scenario,
+            join_timeout,
+        } => host_daemon(connect, team, host, scenario, join_timeout, cli.quiet),
         Command::Export { target } => export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
@@ -583,4 +596,43 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
         );
     }
     out!("  run directory: {}", dir.display());
+}
+
+/// `orchestrator host`: validates the options and runs the daemon.
+#[cfg(feature = "hosts")]
+fn host_daemon(
+    connect: String,
+    team: Option<String>,
+    host: Option<u32>,
+    scenario: Option<PathBuf>,
+    join_timeout: f64,
+    quiet: bool,
+) -> Result<Exit, Failure> {
+    let team = team
+        .map(|t| TeamName::new(&t).map_err(|e| Failure::bad_input(format!("--team: {e}"))))
+        .transpose()?;
+    let o = crate::host::daemon::DaemonOptions {
+        connect,
+        team,
+        host,
+        scenario,
+        join_timeout: timeout("--join-timeout", join_timeout).map_err(Failure::bad_input)?,
+        quiet,
+    };
+    crate::host::daemon::run(&o)
+}
+
+/// Without the `hosts` feature there is no daemon.
+#[cfg(not(feature = "hosts"))]
+fn host_daemon(
+    _connect: String,
+    _team: Option<String>,
+    _host: Option<u32>,
+    _scenario: Option<PathBuf>,
+    _join_timeout: f64,
+    _quiet: bool,
+) -> Result<Exit, Failure> {
+    Err(Failure::bad_input(
+        "host: this orchestrator was built without the `hosts` feature (zenoh)",
+    ))
 }

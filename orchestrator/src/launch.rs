@@ -49,6 +49,8 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// Across hosts (`--hosts`, `--listen`; issue 12).
+    pub hosts: crate::host::HostOptions,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -106,10 +108,13 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         .iter()
         .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
         .collect();
+    let hosts = crate::host::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
     let layout = TeamLayout::new(ids.clone(), ins, o.window)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
+    let layout = hosts.hide_remote_edges(layout);
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
+    let bridge = hosts.start_bridge(s, &o.team, o.window)?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
     let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
@@ -126,7 +131,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     let mut children = Vec::new();
     if o.spawn {
-        for m in &s.formation.members {
+        for m in s.formation.members.iter().filter(|m| hosts.runs_here(m.id)) {
             match spawn_member(&member_file, &o.team, m.id, m.role) {
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
@@ -186,6 +191,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         tracing::warn!("{e}");
     }
     let report = audit.finish(complete);
+    if let Some(b) = bridge {
+        b.finish(&dir, report.ticks, o.quiet);
+    }
     dir.write_audit(&report).map_err(Failure::fault)?;
     if let Some(v) = &live {
         v.finish(&report);

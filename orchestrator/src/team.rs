@@ -80,16 +80,20 @@ pub fn spawn_member(
 /// The first spawned member that has exited: its id and how (`exited with code 1`, `was killed
 /// by signal 9`).
 pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, String)> {
-    use std::os::unix::process::ExitStatusExt;
     children.iter_mut().find_map(|c| {
         let status = c.child.try_wait().ok()??;
-        let how = match (status.code(), status.signal()) {
-            (_, Some(sig)) => format!("was killed by signal {sig}"),
-            (Some(code), _) => format!("exited with code {code}"),
-            _ => "exited".into(),
-        };
-        Some((c.id, how))
+        Some((c.id, describe_exit(status)))
     })
+}
+
+/// How a process ended: `exited with code 1`, `was killed by signal 9`.
+pub fn describe_exit(status: std::process::ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    match (status.code(), status.signal()) {
+        (_, Some(sig)) => format!("was killed by signal {sig}"),
+        (Some(code), _) => format!("exited with code {code}"),
+        _ => "exited".into(),
+    }
 }
 
 /// The fault of a member that exited before the end, named with its id and `tick`.

@@ -34,6 +34,13 @@ pub const FAULT_ORCHESTRATOR_LOST: u32 = 7;
 /// `StateMsg::fault_code`: the controller refused to fly on (decoupling matrix M near singular:
 /// thrust near 0 or roll near 90 degrees, eq. 46).
 pub const FAULT_CONTROL: u32 = 8;
+/// `StateMsg::fault_code`: the agent runs on another host whose daemon can no longer be heard
+/// (a network partition or a dead daemon); published on the agent's behalf by the orchestrator's
+/// bridge (issue 12).
+pub const FAULT_HOST_LOST: u32 = 9;
+/// `StateMsg::fault_code`: the agent's process on another host exited before the stop; its
+/// host's daemon saw it and the orchestrator's bridge publishes this on its behalf.
+pub const FAULT_REMOTE_EXITED: u32 = 10;
 
 /// `StateMsg::fault_peer` when the fault involves no other agent.
 pub const NO_PEER: u32 = u32::MAX;
@@ -109,6 +116,10 @@ pub enum FaultCode {
     OrchestratorLost,
     /// [`FAULT_CONTROL`]
     Control,
+    /// [`FAULT_HOST_LOST`]
+    HostLost,
+    /// [`FAULT_REMOTE_EXITED`]
+    RemoteExited,
     /// A code this build does not know (sent by a newer peer).
     Unknown(u32),
 }
@@ -125,6 +136,8 @@ impl FaultCode {
             FaultCode::Safety => FAULT_SAFETY,
             FaultCode::OrchestratorLost => FAULT_ORCHESTRATOR_LOST,
             FaultCode::Control => FAULT_CONTROL,
+            FaultCode::HostLost => FAULT_HOST_LOST,
+            FaultCode::RemoteExited => FAULT_REMOTE_EXITED,
             FaultCode::Unknown(c) => c,
         }
     }
@@ -141,6 +154,8 @@ impl FaultCode {
             FAULT_SAFETY => FaultCode::Safety,
             FAULT_ORCHESTRATOR_LOST => FaultCode::OrchestratorLost,
             FAULT_CONTROL => FaultCode::Control,
+            FAULT_HOST_LOST => FaultCode::HostLost,
+            FAULT_REMOTE_EXITED => FaultCode::RemoteExited,
             other => FaultCode::Unknown(other),
         })
     }
