@@ -3,30 +3,31 @@
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use common::audit::{AuditReport, Auditor, FaultRecord};
+use common::audit::{AuditReport, Auditor};
 
 use crate::viewer::live::LiveView;
 use common::engine::desired_positions;
 use common::formation::Role;
 use common::math::{vec3, Vec3};
-use common::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason};
+use common::messages::{ClockMsg, StateMsg, StopReason};
 use common::outcome::FaultKind;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
+use common::seams::{Clock, MonotonicClock};
 use common::simulate::id_order;
 use common::step::tick_time;
-use common::team_core::{first_grant, next_grant, FaultRank};
-use common::telemetry::Row;
+use common::team_core::{TeamAction, TeamConfig, TeamCore};
+use common::telemetry::{Row, TelemetrySink};
 use common::transport::{
     describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName,
 };
 
 use crate::team::{
-    check_children, exited_fault, fault, first_exited, member_binaries_present, spawn_member,
-    stop_team, Spawned, Stop,
+    check_children, fault, first_exited, member_binaries_present, spawn_member, stop_team, Spawned,
+    Stop,
 };
 use crate::Failure;
 
@@ -211,20 +212,14 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     })
 }
 
-/// How long a non-finite state waits for a reader's fault report (which names both agents),
-/// and a reported fault for the complete ticks before it.
-const FAULT_GRACE: Duration = Duration::from_millis(500);
-
-/// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT.
-fn interrupted_at(tick: u64, when: &str) -> Stop {
+/// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT before it started.
+fn interrupted_before_start() -> Stop {
+    let what = format!(
+        "interrupted by {} before the start",
+        common::signals::received()
+    );
     (
-        fault(
-            FaultKind::Interrupted,
-            None,
-            None,
-            tick,
-            format!("interrupted by {} {when}", common::signals::received()),
-        ),
+        fault(FaultKind::Interrupted, None, None, 0, what),
         StopReason::Interrupted,
     )
 }
@@ -265,12 +260,28 @@ fn run_team(
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],
     watchers: Watchers<'_>,
-    interrupted: &std::sync::atomic::AtomicBool,
+    interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
-    let Watchers { audit, live } = watchers;
-    let hash = s.content_hash();
+    gather(s, o, ports, children, interrupted)?;
+    write_subscriptions(s, ports, dir);
+    let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
+        (
+            fault(FaultKind::Io, None, None, 0, e.to_string()),
+            StopReason::AgentFault,
+        )
+    })?;
+    fly_team(s, o, ports, children, tel.as_mut(), watchers, interrupted)
+}
+
+/// Readiness: every process opened its ports, within a deadline.
+fn gather(
+    s: &Scenario,
+    o: &LaunchOptions,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    interrupted: &AtomicBool,
+) -> Result<(), Stop> {
     let n = s.formation.members.len();
-    // 1. Readiness, with a deadline.
     let join_deadline = if o.spawn {
         Duration::from_secs(30) + Duration::from_millis(60 * n as u64)
     } else {
@@ -279,7 +290,7 @@ fn run_team(
     let started = Instant::now();
     loop {
         if interrupted.load(Ordering::Relaxed) {
-            return Err(interrupted_at(0, "before the start"));
+            return Err(interrupted_before_start());
         }
         if ports.readiness().is_complete() {
             break;
@@ -296,7 +307,11 @@ fn run_team(
         "team {} ready",
         o.team
     );
-    // 2. The subscription graph as iceoryx2 sees it.
+    Ok(())
+}
+
+/// The subscription graph as iceoryx2 sees it (subscriptions.json, best effort).
+fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
     let mut subs = BTreeMap::new();
     for m in &s.formation.members {
         let nodes = ports.subscriber_nodes(m.id).unwrap_or_default();
@@ -304,272 +319,173 @@ fn run_team(
     }
     let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
     let _ = common::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
+}
 
-    // 3. Tick.
-    let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
+/// A telemetry write or flush that failed (a full disk) at `tick`: a fault, the file keeps its
+/// whole ticks and no later tick may follow a gap.
+fn io_stop(tick: u64) -> impl Fn(std::io::Error) -> Stop {
+    move |e| {
+        let what = format!("cannot write telemetry: {e}");
         (
-            fault(FaultKind::Io, None, None, 0, e.to_string()),
+            fault(FaultKind::Io, None, None, tick, what),
             StopReason::AgentFault,
         )
-    })?;
+    }
+}
+
+/// A transport error of the orchestrator's ports at `tick`.
+fn transport_stop<E: std::fmt::Display>(tick: u64) -> impl Fn(E) -> Stop {
+    move |e| {
+        (
+            fault(FaultKind::Transport, None, None, tick, e.to_string()),
+            StopReason::AgentFault,
+        )
+    }
+}
+
+/// The tick loop: I/O only. The team core (`common::team_core`) decides what to grant, which
+/// tick is complete and when to stop; this loop receives, publishes, audits, writes and waits.
+fn fly_team(
+    s: &Scenario,
+    o: &LaunchOptions,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    tel: &mut dyn TelemetrySink,
+    watchers: Watchers<'_>,
+    interrupted: &AtomicBool,
+) -> Result<(Instant, bool), Stop> {
+    let Watchers { audit, live } = watchers;
+    let hash = s.content_hash();
     let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
-    let order = id_order(s);
-    let index: BTreeMap<u32, usize> = s
-        .formation
-        .members
-        .iter()
-        .enumerate()
-        .map(|(k, m)| (m.id, k))
-        .collect();
-    let window = u64::from(o.window.max(1));
-    let mut pending: BTreeMap<u64, (Vec<Option<StateMsg>>, usize)> = BTreeMap::new();
-    let mut spare: Vec<Vec<Option<StateMsg>>> = Vec::new();
-    let mut next_tick: u64 = 0; // the next tick to complete
-    let mut grant = first_grant(window, last);
-    let send = |ports: &mut OrchestratorPorts, g: u64| ports.publish_clock(ClockMsg::run(g, hash));
-    send(ports, grant).map_err(|e| {
-        (
-            fault(FaultKind::Transport, None, None, 0, e.to_string()),
-            StopReason::AgentFault,
-        )
-    })?;
-    let ticking = Instant::now();
-    let mut progress = crate::progress::Progress::new("launch", last, s.dt_s(), o.quiet);
-    let mut last_progress = Instant::now();
-    let mut last_child_check = Instant::now();
+    let clock = MonotonicClock::start();
+    let cfg = TeamConfig {
+        ids: s.formation.members.iter().map(|m| m.id).collect(),
+        window: o.window,
+        last_tick: last,
+        agent_timeout: o.agent_timeout,
+    };
+    let mut core = TeamCore::new(cfg, clock.now());
+    let mut rec = Recorder::new(s, last, o.quiet);
+    let mut ticking = None;
     let mut last_flush = Instant::now();
-    let mut ht = Vec::new();
-    let mut pos: Vec<Vec3> = vec![Vec3::zeros(); n];
-    let mut rows: Vec<Row> = Vec::with_capacity(n);
-    // A non-finite state is never audited or written: its readers report it with both ids; if
-    // none does within the grace (the sender has no out-neighbours), the orchestrator does.
-    let mut non_finite: Option<(u32, u64, Instant)> = None;
-    // A fault reported at tick k: the reporter published tick k and failed computing k + 1, so
-    // ticks 0..=k are complete as soon as every state is in (as in `simulate`). The team stops
-    // then, or after the grace when tick k cannot complete (a non-finite state is never used).
-    let mut stopping: Option<(FaultRecord, Instant, FaultRank)> = None;
-    // A member process seen exited: its id, how, and when it was seen.
-    let mut exited: Option<(u32, String, Instant)> = None;
-    let mut stall = crate::stall::StallWatch::new(Instant::now());
     loop {
+        let now = clock.now();
         if interrupted.load(Ordering::Relaxed) {
-            return Err(interrupted_at(next_tick, &format!("at tick {next_tick}")));
+            core.on_interrupt(common::signals::received());
         }
-        // The orchestrator itself did not run for a while: its members get a fresh timeout, and
-        // a member that stopped meanwhile is blamed on the stall (`stall.explain`).
-        if stall.turn(Instant::now(), next_tick) {
-            last_progress = Instant::now();
-        }
-        // The best fault report met in this drain, and its rank.
-        let mut bad: Option<(FaultRecord, FaultRank)> = None;
+        core.on_turn(now);
         ports
-            .receive_states(|msg| {
-                let Some(&k) = index.get(&msg.id) else { return };
-                if let AgentStatus::Fault { code, peer } = msg.status() {
-                    let rank = FaultRank {
-                        echo: code == FaultCode::NeighborFault,
-                        tick: msg.tick,
-                        member: k,
-                    };
-                    if rank.outranks(bad.as_ref().map(|(_, r)| r)) {
-                        // The same kind as `simulate` records for a controller fault.
-                        let kind = if code == FaultCode::Control {
-                            FaultKind::Control
-                        } else {
-                            FaultKind::AgentFault
-                        };
-                        let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
-                        let what = format!(
-                            "agent {} reported {code:?} at tick {}{on}",
-                            msg.id, msg.tick
-                        );
-                        bad = Some((fault(kind, Some(msg.id), peer, msg.tick, what), rank));
+            .receive_states(|msg| core.on_state(msg, now))
+            .map_err(transport_stop(core.next_tick()))?;
+        loop {
+            match core.next_action(clock.now()) {
+                TeamAction::Grant(g) => {
+                    ports
+                        .publish_clock(ClockMsg::run(g, hash))
+                        .map_err(transport_stop(core.next_tick()))?;
+                    ticking.get_or_insert_with(Instant::now);
+                }
+                TeamAction::Complete { tick, states } => {
+                    rec.record(s, tick, &states, audit, live, tel)?;
+                    core.recycle(states);
+                    if o.stop_on_violation && audit.violation_count() > 0 {
+                        audit.stop_on_violation();
+                        rec.progress.finish();
+                        let _ = tel.flush();
+                        return Ok((ticking.unwrap_or_else(Instant::now), tick >= last));
                     }
-                    return;
                 }
-                if msg.tick < next_tick || msg.tick > grant {
-                    return;
+                TeamAction::CheckExited => {
+                    if let Some((id, how)) = first_exited(children) {
+                        core.on_exited(id, how, clock.now());
+                    }
                 }
-                if msg.state.iter().any(|v| !v.is_finite()) {
-                    non_finite.get_or_insert((msg.id, msg.tick, Instant::now()));
-                    return;
+                TeamAction::Poll => {
+                    // Complete ticks reach the file at least every 100 ms (and at every stop).
+                    if last_flush.elapsed() > Duration::from_millis(100) {
+                        tel.flush().map_err(io_stop(core.next_tick()))?;
+                        last_flush = Instant::now();
+                    }
+                    break;
                 }
-                let slot = pending
-                    .entry(msg.tick)
-                    .or_insert_with(|| (spare.pop().unwrap_or_else(|| vec![None; n]), 0));
-                if slot.0[k].is_none() {
-                    slot.1 += 1;
+                TeamAction::Wait(d) => {
+                    let _ = ports.wait(d);
+                    break;
                 }
-                slot.0[k] = Some(msg);
-            })
-            .map_err(|e| {
-                (
-                    fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
-                    StopReason::AgentFault,
-                )
-            })?;
-        if let Some((f, rank)) = bad {
-            if rank.outranks(stopping.as_ref().map(|(_, _, r)| r)) {
-                let since = stopping.as_ref().map_or_else(Instant::now, |(_, t, _)| *t);
-                stopping = Some((f, since, rank));
+                TeamAction::Finished => {
+                    rec.progress.finish();
+                    tel.finish().map_err(io_stop(core.next_tick()))?;
+                    return Ok((ticking.unwrap_or_else(Instant::now), true));
+                }
+                TeamAction::Stop(f, reason) => {
+                    let _ = tel.flush();
+                    return Err((f, reason));
+                }
             }
         }
-        if let Some((id, tick, _)) = non_finite.filter(|(_, _, t)| t.elapsed() > FAULT_GRACE) {
-            let what = format!("agent {id} published a non-finite state at tick {tick}");
-            let f = fault(FaultKind::NonFiniteState, Some(id), None, tick, what);
-            let since = Instant::now().checked_sub(FAULT_GRACE);
-            let rank = FaultRank {
-                echo: false,
+    }
+}
+
+/// What every complete tick gets: its desired positions, the audit, the live view, progress and
+/// its telemetry rows (sorted by id), with buffers reused from tick to tick.
+struct Recorder {
+    order: Vec<usize>,
+    ht: Vec<Vec3>,
+    pos: Vec<Vec3>,
+    rows: Vec<Row>,
+    progress: crate::progress::Progress,
+}
+
+impl Recorder {
+    fn new(s: &Scenario, last: u64, quiet: bool) -> Self {
+        let n = s.formation.members.len();
+        Recorder {
+            order: id_order(s),
+            ht: Vec::new(),
+            pos: vec![Vec3::zeros(); n],
+            rows: Vec::with_capacity(n),
+            progress: crate::progress::Progress::new("launch", last, s.dt_s(), quiet),
+        }
+    }
+
+    fn record(
+        &mut self,
+        s: &Scenario,
+        tick: u64,
+        states: &[Option<StateMsg>],
+        audit: &mut Auditor,
+        live: &mut Option<LiveView>,
+        tel: &mut dyn TelemetrySink,
+    ) -> Result<(), Stop> {
+        let t = tick_time(tick, s.dt_s());
+        desired_positions(s, t, &mut self.ht);
+        for (k, st) in states.iter().enumerate() {
+            if let Some(m) = st {
+                self.pos[k] = vec3([m.state[0], m.state[1], m.state[2]]);
+            }
+        }
+        audit.observe(tick, t, &self.pos, &self.ht);
+        if let Some(v) = live.as_mut() {
+            v.tick(tick, t, &self.pos, &self.ht, audit.report());
+        }
+        self.progress.tick(tick, audit.report());
+        if !tel.keeps(tick) {
+            return Ok(());
+        }
+        self.rows.clear();
+        for &k in &self.order {
+            let m = &s.formation.members[k];
+            let st = states[k].map(|x| x.state).unwrap_or([f64::NAN; 12]);
+            self.rows.push(Row {
                 tick,
-                member: usize::MAX,
-            };
-            stopping.get_or_insert((f, since.unwrap_or_else(Instant::now), rank));
+                t_s: t,
+                id: m.id,
+                role: m.role,
+                r: vec3([st[0], st[1], st[2]]),
+                v: vec3([st[3], st[4], st[5]]),
+                ht: self.ht[k],
+            });
         }
-        // Grant before auditing and writing: members go on while the orchestrator does its share.
-        // Grant in steps of half a window (at least 1): every grant wakes members, so fewer,
-        // larger grants mean fewer wake-ups per tick; members keep up to a window queued.
-        let mut complete = next_tick;
-        while pending.get(&complete).is_some_and(|(_, c)| *c == n) {
-            complete += 1;
-        }
-        if let Some(want) = next_grant(complete, grant, window, last) {
-            grant = want;
-            send(ports, grant).map_err(|e| {
-                (
-                    fault(FaultKind::Transport, None, None, next_tick, e.to_string()),
-                    StopReason::AgentFault,
-                )
-            })?;
-        }
-        let mut progressed = false;
-        while next_tick < complete && stopping.as_ref().is_none_or(|(f, ..)| next_tick <= f.tick) {
-            let Some((mut states, _)) = pending.remove(&next_tick) else {
-                break;
-            };
-            let tick = next_tick;
-            let t = tick_time(tick, s.dt_s());
-            desired_positions(s, t, &mut ht);
-            for (k, st) in states.iter().enumerate() {
-                if let Some(m) = st {
-                    pos[k] = vec3([m.state[0], m.state[1], m.state[2]]);
-                }
-            }
-            audit.observe(tick, t, &pos, &ht);
-            if let Some(v) = live.as_mut() {
-                v.tick(tick, t, &pos, &ht, audit.report());
-            }
-            progress.tick(tick, audit.report());
-            if tel.keeps(tick) {
-                rows.clear();
-                for &k in &order {
-                    let m = &s.formation.members[k];
-                    let st = states[k].map(|x| x.state).unwrap_or([f64::NAN; 12]);
-                    rows.push(Row {
-                        tick,
-                        t_s: t,
-                        id: m.id,
-                        role: m.role,
-                        r: vec3([st[0], st[1], st[2]]),
-                        v: vec3([st[3], st[4], st[5]]),
-                        ht: ht[k],
-                    });
-                }
-                tel.write_tick(&rows).map_err(|e| {
-                    (
-                        fault(
-                            FaultKind::Io,
-                            None,
-                            None,
-                            tick,
-                            format!("cannot write telemetry: {e}"),
-                        ),
-                        StopReason::AgentFault,
-                    )
-                })?;
-            }
-            // The slot vector serves a later tick (no allocation per tick).
-            states.fill(None);
-            spare.push(states);
-            next_tick += 1;
-            progressed = true;
-            if o.stop_on_violation && audit.violation_count() > 0 {
-                audit.stop_on_violation();
-                progress.finish();
-                let _ = tel.flush();
-                return Ok((ticking, next_tick > last));
-            }
-        }
-        if let Some((f, since, rank)) = stopping.take() {
-            if next_tick > f.tick || since.elapsed() >= FAULT_GRACE {
-                return Err((f, StopReason::AgentFault));
-            }
-            stopping = Some((f, since, rank));
-        }
-        // A failed flush (a full disk) is a fault: the file keeps its whole ticks, no later
-        // tick may follow a gap.
-        let io = |e: std::io::Error| {
-            let what = format!("cannot write telemetry: {e}");
-            (
-                fault(FaultKind::Io, None, None, next_tick, what),
-                StopReason::AgentFault,
-            )
-        };
-        if next_tick > last {
-            progress.finish();
-            tel.finish().map_err(io)?;
-            return Ok((ticking, true));
-        }
-        if progressed {
-            last_progress = Instant::now();
-            // Complete ticks reach the file at least every 100 ms (and at every stop).
-            if last_flush.elapsed() > Duration::from_millis(100) {
-                tel.flush().map_err(io)?;
-                last_flush = Instant::now();
-            }
-            continue;
-        }
-        // While stopping on a reported fault, the reporter's own exit is not a second fault.
-        if exited.is_none()
-            && stopping.is_none()
-            && last_child_check.elapsed() > Duration::from_millis(100)
-        {
-            last_child_check = Instant::now();
-            exited = first_exited(children).map(|(id, how)| (id, how, Instant::now()));
-        }
-        // Members run up to a window ahead of the audit: the states a dead member published
-        // are audited and written first, and its fault is the first tick it never sent.
-        if let Some((id, how, since)) = exited.as_ref().filter(|_| stopping.is_none()) {
-            let k = index[id];
-            let lacks = pending.get(&next_tick).is_none_or(|(v, _)| v[k].is_none());
-            if lacks && since.elapsed() >= FAULT_GRACE {
-                let _ = tel.flush();
-                let (f, reason) = exited_fault(*id, how, next_tick);
-                return Err((stall.explain(f, Instant::now()), reason));
-            }
-        }
-        if stopping.is_none() && last_progress.elapsed() > o.agent_timeout {
-            let _ = tel.flush();
-            let have = pending.get(&next_tick);
-            let missing: Vec<u32> = s
-                .formation
-                .members
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| have.is_none_or(|(v, _)| v[*k].is_none()))
-                .map(|(_, m)| m.id)
-                .collect();
-            let f = fault(
-                FaultKind::AgentSilent,
-                missing.first().copied(),
-                None,
-                next_tick,
-                format!(
-                    "agents {missing:?} sent no state for tick {next_tick} within {:?}",
-                    o.agent_timeout
-                ),
-            );
-            return Err((stall.explain(f, Instant::now()), StopReason::AgentSilent));
-        }
-        let _ = ports.wait(Duration::from_millis(20));
+        tel.write_tick(&self.rows).map_err(io_stop(tick))
     }
 }

@@ -18,7 +18,6 @@ mod host;
 mod launch;
 mod progress;
 mod report;
-mod stall;
 mod team;
 mod telemetry;
 mod viewer;

@@ -20,8 +20,7 @@ pub struct Spawned {
     pub child: Child,
 }
 
-/// Why a run stops early: the fault to record and the reason sent to the members.
-pub type Stop = (FaultRecord, StopReason);
+pub use common::team_core::{exited_fault, Stop};
 
 /// A fault record.
 pub fn fault(
@@ -31,13 +30,7 @@ pub fn fault(
     tick: u64,
     message: String,
 ) -> FaultRecord {
-    FaultRecord {
-        kind,
-        agent,
-        peer,
-        tick,
-        message,
-    }
+    FaultRecord::new(kind, agent, peer, tick, message)
 }
 
 /// The `leader` and `agent` binaries must sit next to this one (`cargo build --release` builds
@@ -94,20 +87,6 @@ pub fn describe_exit(status: std::process::ExitStatus) -> String {
         (Some(code), _) => format!("exited with code {code}"),
         _ => "exited".into(),
     }
-}
-
-/// The fault of a member that exited before the end, named with its id and `tick`.
-pub fn exited_fault(id: u32, how: &str, tick: u64) -> Stop {
-    (
-        fault(
-            FaultKind::AgentExited,
-            Some(id),
-            None,
-            tick,
-            format!("agent {id} {how} at tick {tick}"),
-        ),
-        StopReason::AgentFault,
-    )
 }
 
 /// A spawned member that exited before the end is a fault, named with its id and the tick.

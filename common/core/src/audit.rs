@@ -92,6 +92,25 @@ pub struct FaultRecord {
     pub message: String,
 }
 
+impl FaultRecord {
+    /// A fault of `kind` at `tick`, about member `agent` (and `peer`), explained by `message`.
+    pub fn new(
+        kind: FaultKind,
+        agent: Option<u32>,
+        peer: Option<u32>,
+        tick: u64,
+        message: String,
+    ) -> Self {
+        FaultRecord {
+            kind,
+            agent,
+            peer,
+            tick,
+            message,
+        }
+    }
+}
+
 /// A member lost in flight and what the repair did (`repair`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LossRecord {

@@ -21,6 +21,7 @@ use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
 use parquet::errors::ParquetError;
 use parquet::file::properties::WriterProperties;
+use parquet::schema::types::ColumnPath;
 
 /// Rows per row group: 65,536 rows of 13 columns are about 6 MiB before encoding.
 pub const ROW_GROUP_ROWS: usize = 1 << 16;
@@ -85,6 +86,11 @@ impl ParquetTelemetryWriter {
         let props = WriterProperties::builder()
             .set_compression(Compression::SNAPPY)
             .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+            // Dictionary encoding pays only where values repeat: `role` (three values). On the
+            // f64 columns, whose values barely repeat, it cost a quarter of a whole run in
+            // the interner and its hash table (BENCHMARKS.md, issue 17).
+            .set_dictionary_enabled(false)
+            .set_column_dictionary_enabled(ColumnPath::from("role"), true)
             .build();
         let writer = ArrowWriter::try_new(file, schema(), Some(props))?;
         Ok(ParquetTelemetryWriter {

@@ -10,4 +10,5 @@ pub mod member_loop;
 pub mod messages;
 pub mod seams;
 pub mod signals;
+pub mod stall;
 pub mod team_core;

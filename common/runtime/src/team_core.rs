@@ -1,6 +1,396 @@
-//! The orchestrator's protocol decisions as pure functions and plain types: how far to grant,
-//! and which fault report names the root cause. The orchestrator's loop (`launch`) does the I/O
-//! around them.
+//! The orchestrator's side of the team protocol as a plain type, with no I/O: events in (a
+//! member's state or fault report, a member process seen exited, an interrupt, "now" from a
+//! clock the caller drives), actions out (grant up to tick g, a complete tick to audit and
+//! write, check the processes, poll again, wait, finish, stop with a fault). The loop around it
+//! (`orchestrator/src/launch.rs`) owns the iceoryx2 ports, the processes and the files, and
+//! nothing else: every decision below is unit-tested with a fake clock (`team_core_tests.rs`).
+//!
+//! What it decides: the grant window (members run up to `window` ticks ahead of the last tick
+//! completely received), which ticks are complete (one slot per tick and member), which fault
+//! report names the root cause ([`FaultRank`]), how long a non-finite state or a reported fault
+//! waits for the ticks before it ([`FAULT_GRACE`]), the tick an exited member is blamed for,
+//! the silence deadline, and whether the orchestrator itself stalled ([`StallWatch`]).
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use cdm_core::audit::FaultRecord;
+use cdm_core::outcome::FaultKind;
+
+use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
+use crate::stall::StallWatch;
+
+/// Why a run stops early: the fault to record and the reason sent to the members.
+pub type Stop = (FaultRecord, StopReason);
+
+/// How long a non-finite state waits for a reader's fault report (which names both members),
+/// and a reported fault for the complete ticks before it.
+pub const FAULT_GRACE: Duration = Duration::from_millis(500);
+
+/// How often the loop is asked to look for an exited member process while the team is stuck.
+pub const EXIT_CHECK: Duration = Duration::from_millis(100);
+
+/// The longest wait of the orchestrator's loop: it bounds how late the deadlines run (states
+/// and fault reports wake it at once).
+pub const WAIT_SLICE: Duration = Duration::from_millis(20);
+
+/// What the team core needs to know of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TeamConfig {
+    /// Member ids in formation order (the order of a complete tick's states).
+    pub ids: Vec<u32>,
+    /// How many ticks members may run ahead of the last complete tick (1 is strict lockstep).
+    pub window: u32,
+    /// The last tick to fly.
+    pub last_tick: u64,
+    /// How long without a complete tick before the missing members are declared silent.
+    pub agent_timeout: Duration,
+}
+
+/// One complete tick's states, in formation order: every slot is `Some`. Hand the vector back
+/// with [`TeamCore::recycle`] so the next tick reuses it (no allocation per tick).
+pub type TickStates = Vec<Option<StateMsg>>;
+
+/// What the loop must do next.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TeamAction {
+    /// Publish a grant of ticks up to this one on the clock channel (and wake the members).
+    Grant(u64),
+    /// Tick `tick` is complete: audit it and write its telemetry, then [`TeamCore::recycle`].
+    Complete { tick: u64, states: TickStates },
+    /// Look for an exited member process and tell [`TeamCore::on_exited`] (if one is found).
+    CheckExited,
+    /// The team progressed: receive again without sleeping.
+    Poll,
+    /// Sleep until woken or this long passes, then receive again.
+    Wait(Duration),
+    /// Every tick of the plan is complete: finish the files and stop the team.
+    Finished,
+    /// Stop the team: record the fault and send the reason.
+    Stop(FaultRecord, StopReason),
+}
+
+/// The tick slots not complete yet.
+#[derive(Debug)]
+struct Slot {
+    states: TickStates,
+    count: usize,
+}
+
+/// The fault the team stops on once the ticks before it are complete, or its grace is over.
+#[derive(Debug)]
+struct Stopping {
+    record: FaultRecord,
+    since: Duration,
+    rank: FaultRank,
+}
+
+/// A member process seen exited.
+#[derive(Debug)]
+struct Exited {
+    id: u32,
+    how: String,
+    seen: Duration,
+}
+
+/// The orchestrator's protocol state (see the module doc).
+#[derive(Debug)]
+pub struct TeamCore {
+    cfg: TeamConfig,
+    index: BTreeMap<u32, usize>,
+    window: u64,
+    pending: BTreeMap<u64, Slot>,
+    spare: Vec<TickStates>,
+    /// The next tick to hand out as complete.
+    next_tick: u64,
+    /// Every tick before this one has all its states.
+    complete: u64,
+    grant: u64,
+    started: bool,
+    progressed: bool,
+    last_progress: Duration,
+    last_exit_check: Duration,
+    /// A non-finite state: who sent it, its tick, when it was seen. It is never audited.
+    non_finite: Option<(u32, u64, Duration)>,
+    stopping: Option<Stopping>,
+    exited: Option<Exited>,
+    interrupt: Option<Stop>,
+    stall: StallWatch,
+}
+
+impl TeamCore {
+    /// A team about to start at `now` (time since the caller's clock started).
+    pub fn new(cfg: TeamConfig, now: Duration) -> Self {
+        let index = cfg.ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
+        let window = u64::from(cfg.window.max(1));
+        let grant = first_grant(window, cfg.last_tick);
+        TeamCore {
+            cfg,
+            index,
+            window,
+            pending: BTreeMap::new(),
+            spare: Vec::new(),
+            next_tick: 0,
+            complete: 0,
+            grant,
+            started: false,
+            progressed: false,
+            last_progress: now,
+            last_exit_check: now,
+            non_finite: None,
+            stopping: None,
+            exited: None,
+            interrupt: None,
+            stall: StallWatch::new(now),
+        }
+    }
+
+    /// The next tick to complete (the first tick the team has not completed).
+    pub fn next_tick(&self) -> u64 {
+        self.next_tick
+    }
+
+    /// The highest tick granted so far.
+    pub fn granted(&self) -> u64 {
+        self.grant
+    }
+
+    /// A new turn of the loop at `now`, before it receives. A long gap since the last turn
+    /// means the orchestrator itself did not run: its members get a fresh silence timeout, and
+    /// a member that stopped meanwhile is blamed on the stall.
+    pub fn on_turn(&mut self, now: Duration) {
+        if self.stall.turn(now, self.next_tick) {
+            self.last_progress = now;
+        }
+    }
+
+    /// A received state or fault report. States outside the granted window are ignored (stale
+    /// or foreign); a non-finite one is never used.
+    pub fn on_state(&mut self, msg: StateMsg, now: Duration) {
+        let Some(&k) = self.index.get(&msg.id) else {
+            return;
+        };
+        if let AgentStatus::Fault { code, peer } = msg.status() {
+            self.on_report(&msg, k, code, peer, now);
+            return;
+        }
+        if !self.started || msg.tick < self.next_tick || msg.tick > self.grant {
+            return;
+        }
+        if msg.state.iter().any(|v| !v.is_finite()) {
+            self.non_finite.get_or_insert((msg.id, msg.tick, now));
+            return;
+        }
+        let n = self.cfg.ids.len();
+        let spare = &mut self.spare;
+        let slot = self.pending.entry(msg.tick).or_insert_with(|| Slot {
+            states: spare.pop().unwrap_or_else(|| vec![None; n]),
+            count: 0,
+        });
+        if slot.states[k].is_none() {
+            slot.count += 1;
+        }
+        slot.states[k] = Some(msg);
+    }
+
+    /// A fault report of member `k`: kept when it names the root cause better than the one
+    /// kept so far (whose grace started earlier and goes on).
+    fn on_report(
+        &mut self,
+        msg: &StateMsg,
+        k: usize,
+        code: FaultCode,
+        peer: Option<u32>,
+        now: Duration,
+    ) {
+        let rank = FaultRank {
+            echo: code == FaultCode::NeighborFault,
+            tick: msg.tick,
+            member: k,
+        };
+        if !rank.outranks(self.stopping.as_ref().map(|s| &s.rank)) {
+            return;
+        }
+        // The same kind as `simulate` records for a controller fault.
+        let kind = if code == FaultCode::Control {
+            FaultKind::Control
+        } else {
+            FaultKind::AgentFault
+        };
+        let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
+        let what = format!(
+            "agent {} reported {code:?} at tick {}{on}",
+            msg.id, msg.tick
+        );
+        let since = self.stopping.as_ref().map_or(now, |s| s.since);
+        self.stopping = Some(Stopping {
+            record: FaultRecord::new(kind, Some(msg.id), peer, msg.tick, what),
+            since,
+            rank,
+        });
+    }
+
+    /// Member `id`'s process was seen exited (`how`: "exited with code 1", "was killed by
+    /// signal 9"). Its published states are still audited; its fault is the first tick it never
+    /// sent. Ignored while the team stops on a reported fault (the reporter's own exit).
+    pub fn on_exited(&mut self, id: u32, how: String, now: Duration) {
+        if self.exited.is_none() && self.stopping.is_none() && self.index.contains_key(&id) {
+            self.exited = Some(Exited { id, how, seen: now });
+        }
+    }
+
+    /// The run was interrupted by `signal` (SIGINT, ...): the next action stops the team.
+    pub fn on_interrupt(&mut self, signal: &str) {
+        let tick = self.next_tick;
+        let what = format!("interrupted by {signal} at tick {tick}");
+        let f = FaultRecord::new(FaultKind::Interrupted, None, None, tick, what);
+        self.interrupt.get_or_insert((f, StopReason::Interrupted));
+    }
+
+    /// Hands back a complete tick's states for a later tick.
+    pub fn recycle(&mut self, mut states: TickStates) {
+        states.fill(None);
+        self.spare.push(states);
+    }
+
+    /// The next action at `now`. Grants go out before complete ticks (members go on while the
+    /// orchestrator audits and writes); a fault at tick k stops the team once ticks 0..=k are
+    /// complete (as `simulate` keeps them) or its grace is over.
+    pub fn next_action(&mut self, now: Duration) -> TeamAction {
+        if let Some((f, reason)) = self.interrupt.take() {
+            return TeamAction::Stop(f, reason);
+        }
+        if !self.started {
+            self.started = true;
+            return TeamAction::Grant(self.grant);
+        }
+        self.expire_non_finite(now);
+        let n = self.cfg.ids.len();
+        while self
+            .pending
+            .get(&self.complete)
+            .is_some_and(|s| s.count == n)
+        {
+            self.complete += 1;
+        }
+        if let Some(want) = next_grant(self.complete, self.grant, self.window, self.cfg.last_tick) {
+            self.grant = want;
+            return TeamAction::Grant(want);
+        }
+        if let Some(done) = self.take_complete() {
+            return done;
+        }
+        if let Some(s) = self.stopping.take() {
+            if self.next_tick > s.record.tick || now.saturating_sub(s.since) >= FAULT_GRACE {
+                return TeamAction::Stop(s.record, StopReason::AgentFault);
+            }
+            self.stopping = Some(s);
+        }
+        if self.next_tick > self.cfg.last_tick {
+            return TeamAction::Finished;
+        }
+        if std::mem::take(&mut self.progressed) {
+            self.last_progress = now;
+            return TeamAction::Poll;
+        }
+        self.when_stuck(now)
+    }
+
+    /// The next complete tick, unless the team stops at an earlier fault.
+    fn take_complete(&mut self) -> Option<TeamAction> {
+        let tick = self.next_tick;
+        if tick >= self.complete || self.stopping.as_ref().is_some_and(|s| tick > s.record.tick) {
+            return None;
+        }
+        let slot = self.pending.remove(&tick)?;
+        self.next_tick += 1;
+        self.progressed = true;
+        Some(TeamAction::Complete {
+            tick,
+            states: slot.states,
+        })
+    }
+
+    /// A non-finite state nobody reported within the grace: the orchestrator names its sender
+    /// (a member without out-neighbours has no reader to report it).
+    fn expire_non_finite(&mut self, now: Duration) {
+        let Some((id, tick, seen)) = self.non_finite else {
+            return;
+        };
+        if self.stopping.is_some() || now.saturating_sub(seen) <= FAULT_GRACE {
+            return;
+        }
+        let what = format!("agent {id} published a non-finite state at tick {tick}");
+        self.stopping = Some(Stopping {
+            record: FaultRecord::new(FaultKind::NonFiniteState, Some(id), None, tick, what),
+            since: now.checked_sub(FAULT_GRACE).unwrap_or(now),
+            rank: FaultRank {
+                echo: false,
+                tick,
+                member: usize::MAX,
+            },
+        });
+    }
+
+    /// No tick completed this turn: look for exited members, then the deadlines, then wait.
+    fn when_stuck(&mut self, now: Duration) -> TeamAction {
+        if self.stopping.is_some() {
+            return TeamAction::Wait(WAIT_SLICE);
+        }
+        if self.exited.is_none() && now.saturating_sub(self.last_exit_check) > EXIT_CHECK {
+            self.last_exit_check = now;
+            return TeamAction::CheckExited;
+        }
+        // Members run up to a window ahead of the audit: the states a dead member published
+        // are audited first, and its fault is the first tick it never sent.
+        if let Some(e) = &self.exited {
+            let k = self.index[&e.id];
+            let lacks = self
+                .pending
+                .get(&self.next_tick)
+                .is_none_or(|s| s.states[k].is_none());
+            if lacks && now.saturating_sub(e.seen) >= FAULT_GRACE {
+                let (f, reason) = exited_fault(e.id, &e.how, self.next_tick);
+                return TeamAction::Stop(self.stall.explain(f, now), reason);
+            }
+        }
+        if now.saturating_sub(self.last_progress) > self.cfg.agent_timeout {
+            let f = self.silent_fault();
+            return TeamAction::Stop(self.stall.explain(f, now), StopReason::AgentSilent);
+        }
+        TeamAction::Wait(WAIT_SLICE)
+    }
+
+    /// The members that sent no state for the next tick, named in formation order.
+    fn silent_fault(&self) -> FaultRecord {
+        let tick = self.next_tick;
+        let have = self.pending.get(&tick);
+        let missing: Vec<u32> = (self.cfg.ids.iter().enumerate())
+            .filter(|(k, _)| have.is_none_or(|s| s.states[*k].is_none()))
+            .map(|(_, &id)| id)
+            .collect();
+        let what = format!(
+            "agents {missing:?} sent no state for tick {tick} within {:?}",
+            self.cfg.agent_timeout
+        );
+        FaultRecord::new(
+            FaultKind::AgentSilent,
+            missing.first().copied(),
+            None,
+            tick,
+            what,
+        )
+    }
+}
+
+/// The fault of a member process that exited before the end, named with its id and `tick`.
+pub fn exited_fault(id: u32, how: &str, tick: u64) -> Stop {
+    let what = format!("agent {id} {how} at tick {tick}");
+    (
+        FaultRecord::new(FaultKind::AgentExited, Some(id), None, tick, what),
+        StopReason::AgentFault,
+    )
+}
 
 /// The first grant: a window of ticks (0..window), at most the last tick.
 pub fn first_grant(window: u64, last: u64) -> u64 {
@@ -38,6 +428,10 @@ impl FaultRank {
         current.is_none_or(|c| self < c)
     }
 }
+
+#[cfg(test)]
+#[path = "team_core_tests.rs"]
+mod core_tests;
 
 #[cfg(test)]
 mod tests {

@@ -3,12 +3,12 @@
 //! least every 20 ms; a much longer gap between two turns means the process did not run. Its
 //! members then see no grant for their silence timeout (10 s by default) and stop by
 //! themselves: their exits, or their silence, are consequences of the stall, not its cause.
-//! Pure logic: the caller passes "now".
+//! Pure logic: the caller passes "now" (time since its clock started); part of the team core.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use common::audit::FaultRecord;
-use common::outcome::FaultKind;
+use cdm_core::audit::FaultRecord;
+use cdm_core::outcome::FaultKind;
 
 /// A gap between two turns of the loop that counts as a stall of the orchestrator itself.
 pub const STALL_MIN: Duration = Duration::from_secs(2);
@@ -22,19 +22,19 @@ pub const BLAME_WINDOW: Duration = Duration::from_secs(15);
 struct Stall {
     gap: Duration,
     tick: u64,
-    ended: Instant,
+    ended: Duration,
 }
 
 /// Watches the gaps between the turns of the clock's loop.
 #[derive(Debug)]
 pub struct StallWatch {
-    last_turn: Instant,
+    last_turn: Duration,
     stall: Option<Stall>,
 }
 
 impl StallWatch {
     /// Starts watching at `now`.
-    pub fn new(now: Instant) -> Self {
+    pub fn new(now: Duration) -> Self {
         Self {
             last_turn: now,
             stall: None,
@@ -43,8 +43,8 @@ impl StallWatch {
 
     /// One turn of the loop at `now`, waiting for `tick`; true when the loop had stalled just
     /// before (the caller restarts the timeouts it keeps for its members).
-    pub fn turn(&mut self, now: Instant, tick: u64) -> bool {
-        let gap = now.saturating_duration_since(self.last_turn);
+    pub fn turn(&mut self, now: Duration, tick: u64) -> bool {
+        let gap = now.saturating_sub(self.last_turn);
         self.last_turn = now;
         if gap < STALL_MIN {
             return false;
@@ -65,9 +65,9 @@ impl StallWatch {
     /// The fault to record for a member `fault` found at `now`: an `orchestrator-stalled` record
     /// naming the stall (and keeping the member's own message and tick) when a stall ended less than
     /// [`BLAME_WINDOW`] before; `fault` itself otherwise.
-    pub fn explain(&self, fault: FaultRecord, now: Instant) -> FaultRecord {
+    pub fn explain(&self, fault: FaultRecord, now: Duration) -> FaultRecord {
         match self.stall {
-            Some(s) if now.saturating_duration_since(s.ended) <= BLAME_WINDOW => FaultRecord {
+            Some(s) if now.saturating_sub(s.ended) <= BLAME_WINDOW => FaultRecord {
                 kind: FaultKind::OrchestratorStalled,
                 agent: None,
                 peer: None,
@@ -103,7 +103,7 @@ mod tests {
 
     #[test]
     fn short_gaps_are_not_stalls_and_blame_stays_with_the_member() {
-        let t0 = Instant::now();
+        let t0 = Duration::from_secs(100);
         let mut w = StallWatch::new(t0);
         assert!(!w.turn(t0 + Duration::from_millis(900), 5));
         assert!(!w.turn(t0 + Duration::from_millis(2800), 6));
@@ -113,7 +113,7 @@ mod tests {
 
     #[test]
     fn a_member_exit_after_a_stall_is_blamed_on_the_stall() {
-        let t0 = Instant::now();
+        let t0 = Duration::from_secs(100);
         let mut w = StallWatch::new(t0);
         assert!(w.turn(t0 + Duration::from_secs(20), 42));
         let f = w.explain(exited(43), t0 + Duration::from_secs(21));
@@ -133,7 +133,7 @@ mod tests {
 
     #[test]
     fn a_member_fault_long_after_a_stall_is_the_members_own() {
-        let t0 = Instant::now();
+        let t0 = Duration::from_secs(100);
         let mut w = StallWatch::new(t0);
         assert!(w.turn(t0 + Duration::from_secs(3), 1));
         let later = t0 + Duration::from_secs(3) + BLAME_WINDOW + Duration::from_secs(1);
