@@ -76,6 +76,11 @@ class ClockMsg(ctypes.Structure):
 
 
 STATUS_OK = 0
+# A real-time member's pacing report, not a state (`common::messages::STATUS_PACING`).
+STATUS_PACING = 2
+# `ClockMsg.command` of a real-time team: `grant_tick` is the start instant (CLOCK_REALTIME ns),
+# `reason` the phase seed (`common::messages::COMMAND_REALTIME`).
+COMMAND_REALTIME = 2
 
 
 def state_service(team, agent_id):

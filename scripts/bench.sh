@@ -10,7 +10,15 @@
 # full-telemetry `simulate` in each format (file size, wall time, peak memory); writing cost =
 # that run's time minus the --every 1000 run's.
 #
-# Usage: [WINDOW=256] [QUICK=1] [FORMATS_N=1000] scripts/bench.sh [N ...]
+# Last, real time (issue 11): `launch --realtime` at comm_hz = 100 for REALTIME_NS (default
+# "10 40 100 250"; REALTIME_NS=0 skips it), REALTIME_S seconds of flight each (default 10): late
+# ticks, neighbour age p50/p99/max and the CPU of the whole team over the flight (orchestrator and
+# members, from /proc at the start instant and the last audit), all from audit.json's `realtime`.
+# REALTIME_ONLY=1 runs
+# only this section.
+#
+# Usage: [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
+#        [REALTIME_ONLY=1] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
@@ -28,6 +36,35 @@ echo "Machine: nproc $(nproc), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -
   "commit $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%dT%H:%MZ)."
 echo "Command: WINDOW=$window${QUICK:+ QUICK=$QUICK} scripts/bench.sh ${ns[*]}"
 echo
+
+# Real time: one `launch --realtime` per N, REALTIME_S seconds of a 60 s plan.
+realtime_section() {
+  local rns=(${REALTIME_NS:-10 40 100 250}) rs=${REALTIME_S:-10}
+  [ "${rns[0]}" != 0 ] || return 0
+  echo
+  echo "Real time (\`launch --n N --t-total 60 --max-ticks $((rs * 100)) --realtime\`, comm_hz 100, $rs s of flight):"
+  echo
+  echo "| N | member ticks | late ticks | late % | neighbour age p50 ms | p99 ms | max ms | slowest member (late ticks, max late ms) | wall s (start to last audit) | team CPU (cores) |"
+  echo "|---|---|---|---|---|---|---|---|---|---|"
+  for n in "${rns[@]}"; do
+    "$bin/orchestrator" launch --n "$n" --t-total 60 --max-ticks $((rs * 100)) --realtime \
+      --no-figures --quiet --out "$out/rt$n" >/dev/null 2>&1 || true
+    python3 - "$out/rt$n/audit.json" "$n" <<'PY'
+import json, sys
+a = json.load(open(sys.argv[1]))
+r = a["realtime"]
+s = r["slowest_member"] or {}
+cpu = r.get("team_cpu_cores")
+cpu = "?" if cpu is None else f"{cpu:.2f}"
+print(f"| {sys.argv[2]} | {r['ticks']} | {r['late_ticks']} | {r['late_ticks_pct']:.3f} | "
+      f"{r['neighbor_age_ms_p50']:.2f} | {r['neighbor_age_ms_p99']:.2f} | {r['neighbor_age_ms_max']:.2f} | "
+      f"{s.get('id')} ({s.get('late_ticks')}, {s.get('max_late_ms', 0):.1f}) | {r['wall_s']:.2f} | {cpu} "
+      f"(verdict {a['verdict']}, {r['members_reported']}/{a['agents']} reported) |")
+PY
+    rm -rf "$out/rt$n"
+  done
+}
+if [ -n "${REALTIME_ONLY:-}" ]; then realtime_section; exit 0; fi
 echo "| N | ticks flown | engine ticks/s | simulate ticks/s | launch ticks/s (window $window) | barrier ticks/s | launch/engine | launch/simulate | launch/barrier | start-up s | largest member RSS MiB | orchestrator RSS MiB |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
 rate() { sed -E 's/.*\(([0-9]+) ticks\/s\).*/\1/'; }
@@ -59,7 +96,7 @@ for n in "${ns[@]}"; do
 done
 
 fn=${FORMATS_N:-1000}
-[ "$fn" -gt 0 ] || exit 0
+[ "$fn" -gt 0 ] || { realtime_section; exit 0; }
 secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }
 echo
 echo "Certificate and telemetry formats at N = $fn (one after the other, full plan):"
@@ -78,3 +115,4 @@ for fmt in csv parquet; do
   echo "| \`simulate --n $fn --telemetry $fmt\` | $f_s | $(mib "$f_kb") | $(awk -v b="$size" 'BEGIN{printf "%.0f", b/1e6}') | $(awk -v a="$f_s" -v b="$base_s" 'BEGIN{printf "writing costs %.1f s (%.2f x the flight)", a-b, (a-b)/b}') |"
   rm -rf "$out/$fmt"
 done
+realtime_section

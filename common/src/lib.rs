@@ -13,7 +13,8 @@ pub use cdm_core::{
 };
 pub use cdm_iox as transport;
 pub use cdm_runtime::{
-    fault_inject, member_core, member_loop, messages, seams, signals, team_core,
+    fault_inject, member_core, member_loop, messages, realtime, realtime_loop, realtime_monitor,
+    seams, signals, team_core,
 };
 
 pub mod member;

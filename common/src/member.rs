@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use cdm_runtime::member_core::MemberCore;
 use cdm_runtime::member_loop::{fly, LoopError};
+use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
+use cdm_runtime::realtime_loop::fly_realtime;
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 
 use crate::engine::step_config;
@@ -39,6 +41,16 @@ impl Kind {
             Kind::Agent => "agent",
         }
     }
+}
+
+/// How the member flies: on the orchestrator's grants (the default) or on its own clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    Lockstep,
+    /// `--realtime`: a neighbour whose newest state is older than `stale_after` is a fault.
+    Realtime {
+        stale_after: Duration,
+    },
 }
 
 /// Why a member stopped without finishing.
@@ -82,6 +94,14 @@ pub enum MemberError {
     },
     #[error("agent {id}: interrupted at tick {tick}")]
     Interrupted { id: u32, tick: u64 },
+    #[error("agent {id}: team {team} flies {team_mode} and this member {mode}: start it {fix}")]
+    ModeMismatch {
+        id: u32,
+        team: String,
+        team_mode: &'static str,
+        mode: &'static str,
+        fix: &'static str,
+    },
 }
 
 impl MemberError {
@@ -90,7 +110,8 @@ impl MemberError {
         match self {
             MemberError::Scenario(_)
             | MemberError::NotInScenario { .. }
-            | MemberError::WrongRole { .. } => 2,
+            | MemberError::WrongRole { .. }
+            | MemberError::ModeMismatch { .. } => 2,
             MemberError::Transport(
                 TransportError::ScenarioMismatch { .. }
                 | TransportError::NotInTeam { .. }
@@ -110,6 +131,7 @@ pub fn run_member(
     team: &TeamName,
     id: u32,
     deadlines: Deadlines,
+    mode: Mode,
     interrupted: &AtomicBool,
 ) -> Result<Finished, MemberError> {
     let s = Scenario::load(scenario_path, Checks::Member)?;
@@ -148,11 +170,38 @@ pub fn run_member(
     // The deadlines start once the ports are open (opening takes seconds at N = 1000).
     let clock = MonotonicClock::start();
     let vehicle = ModelVehicle::new(step_config(&s), &s.plan, &me);
+    if let Mode::Realtime { stale_after } = mode {
+        let setup = RealtimeSetup {
+            hash,
+            last: s.last_tick(),
+            dt_s: s.dt_s(),
+            stale_after,
+            deadlines,
+        };
+        let at_rest = neighbor_positions(&s, &me);
+        let mut core = RealtimeCore::new(&me, at_rest, setup, vehicle, clock.now());
+        return fly_realtime(&mut core, &mut ports, &clock, interrupted)
+            .map_err(|e| MemberError::from_loop(e, id, team));
+    }
     let parts = (vehicle, LockstepClock::default());
     let mut core = MemberCore::new(&me, hash, s.last_tick(), parts, deadlines, clock.now());
     let inject = crate::fault_inject::from_env(id);
     fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
         .map_err(|e| MemberError::from_loop(e, id, team))
+}
+
+/// A follower's in-neighbours' initial positions, in the order of its law (a real-time follower
+/// assumes them at rest there until their first state arrives); zeros for a leader.
+fn neighbor_positions(s: &Scenario, me: &crate::formation::Member) -> [crate::math::Vec3; 3] {
+    let mut at = [crate::math::Vec3::zeros(); 3];
+    if let Some(link) = me.link.filter(|_| me.role == Role::Follower) {
+        for (p, j) in at.iter_mut().zip(link.in_neighbors) {
+            if let Some(m) = s.formation.member(j) {
+                *p = m.position;
+            }
+        }
+    }
+    at
 }
 
 impl MemberError {
@@ -202,6 +251,35 @@ impl MemberError {
                     tick,
                     peer,
                     what: format!("skipped from tick {tick} to {later}"),
+                },
+                MemberFault::NeighborStale { tick, peer, age } => MemberError::Neighbor {
+                    id,
+                    tick,
+                    peer,
+                    what: format!(
+                        "sent nothing for {:.0} ms (newest state older than the bound): \
+                         holding position",
+                        age.as_secs_f64() * 1e3
+                    ),
+                },
+                MemberFault::ModeMismatch { member_realtime } => MemberError::ModeMismatch {
+                    id,
+                    team: team.to_string(),
+                    team_mode: if member_realtime {
+                        "lockstep"
+                    } else {
+                        "in real time"
+                    },
+                    mode: if member_realtime {
+                        "in real time"
+                    } else {
+                        "lockstep"
+                    },
+                    fix: if member_realtime {
+                        "without --realtime"
+                    } else {
+                        "with --realtime"
+                    },
                 },
             },
         }

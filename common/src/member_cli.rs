@@ -1,6 +1,6 @@
 //! The command line shared by the `agent` and `leader` binaries.
 
-use crate::member::{run_member, Deadlines, Kind};
+use crate::member::{run_member, Deadlines, Kind, Mode};
 use crate::options::timeout;
 use crate::transport::TeamName;
 use std::path::PathBuf;
@@ -36,6 +36,19 @@ pub struct MemberArgs {
         default_value_t = 10.0
     )]
     pub silence_timeout_s: f64,
+    /// Fly in real time on this process's own clock, from the start instant the orchestrator
+    /// announces (its `launch --realtime`), with no grant and no barrier.
+    #[arg(long)]
+    pub realtime: bool,
+    /// With --realtime: seconds after which an in-neighbour's newest state is too old (a fault:
+    /// reported, and this member holds position).
+    #[arg(
+        long = "stale-after",
+        allow_negative_numbers = true,
+        default_value_t = 0.5,
+        value_name = "SECONDS"
+    )]
+    pub stale_after_s: f64,
 }
 
 /// The whole `main` of a member binary: parse arguments, initialise logging (`RUST_LOG`,
@@ -98,9 +111,26 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             return 2;
         }
     };
+    let mode = match (args.realtime, timeout("--stale-after", args.stale_after_s)) {
+        (false, _) => Mode::Lockstep,
+        (true, Ok(stale_after)) => Mode::Realtime { stale_after },
+        (true, Err(e)) => {
+            say(&format!("error: {e}"));
+            return 2;
+        }
+    };
     let span = tracing::info_span!("agent", id = args.id);
     let _g = span.enter();
-    match run_member(kind, &args.scenario, &team, args.id, deadlines, interrupted) {
+    let run = run_member(
+        kind,
+        &args.scenario,
+        &team,
+        args.id,
+        deadlines,
+        mode,
+        interrupted,
+    );
+    match run {
         Ok(f) => stopped(&team, args.id, f),
         Err(e) => {
             say(&format!("error: {e}"));

@@ -104,6 +104,8 @@ pub enum Command {
         #[command(flatten)]
         hosts: HostArgs,
         #[command(flatten)]
+        realtime: crate::realtime::RealtimeArgs,
+        #[command(flatten)]
         run: RunOptions,
     },
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained

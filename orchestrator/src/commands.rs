@@ -99,10 +99,12 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             join_timeout,
             serve,
             hosts,
+            realtime,
             run,
         } => {
             crate::telemetry::check_available(run.telemetry)?;
             let s = load(&source)?;
+            let realtime = realtime.options(&s)?;
             check_follow(&s, run.follow)?;
             if !run.lose.is_empty() {
                 // Killing a member process and re-opening its readers' services needs the
@@ -121,7 +123,12 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 force,
                 every,
                 telemetry: run.telemetry,
-                window,
+                // Real time reads the newest states: a short buffer is enough.
+                window: if realtime.is_some() {
+                    crate::realtime::REALTIME_WINDOW
+                } else {
+                    window
+                },
                 spawn: !no_spawn,
                 agent_timeout: secs(agent_timeout, "--agent-timeout")?,
                 join_timeout: secs(join_timeout, "--join-timeout")?,
@@ -138,7 +145,14 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     listen: hosts.listen,
                     link_timeout: secs(hosts.link_timeout, "--link-timeout")?,
                 },
+                realtime,
             };
+            if opts.realtime.is_some() && opts.hosts.hosts > 1 {
+                // Real time across hosts needs the daemons to pace their members (not yet).
+                return Err(Failure::bad_input(
+                    "--realtime with --hosts: real time across hosts is not supported yet",
+                ));
+            }
             let started = Instant::now();
             let crate::launch::Launched {
                 report,

@@ -52,6 +52,8 @@ pub struct LaunchOptions {
     pub serve: Option<std::net::SocketAddr>,
     /// Across hosts (`--hosts`, `--listen`; issue 12).
     pub hosts: crate::host::HostOptions,
+    /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
+    pub realtime: Option<crate::realtime::RealtimeOptions>,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -133,7 +135,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = Vec::new();
     if o.spawn {
         for m in s.formation.members.iter().filter(|m| hosts.runs_here(m.id)) {
-            match spawn_member(&member_file, &o.team, m.id, m.role) {
+            let flags = crate::realtime::member_flags(o);
+            match spawn_member(&member_file, &o.team, m.id, m.role, &flags) {
                 Ok(c) => children.push(Spawned { id: m.id, child: c }),
                 Err(e) => {
                     stop_team(&mut ports, &mut children, s, StopReason::AgentFault);
@@ -153,30 +156,37 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         }
     } else if !o.quiet {
         out!(
-            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID   (ids {:?})\n  agent  --scenario {} --team {} --id ID   (ids {:?})",
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
             o.team,
             ids.len(),
             scenario_file.display(),
             o.team,
+            crate::realtime::member_flags(o).iter().map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
             scenario_file.display(),
             o.team,
+            crate::realtime::member_flags(o).iter().map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
         );
     }
     let mut audit = Auditor::new(s);
-    let result = run_team(
-        s,
-        o,
-        &dir,
-        &mut ports,
-        &mut children,
-        Watchers {
-            audit: &mut audit,
-            live: &mut live,
-        },
-        interrupted,
-    );
+    let result = if let Some(rt) = &o.realtime {
+        let team = (&mut ports, children.as_mut_slice());
+        crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
+    } else {
+        run_team(
+            s,
+            o,
+            &dir,
+            &mut ports,
+            &mut children,
+            Watchers {
+                audit: &mut audit,
+                live: &mut live,
+            },
+            interrupted,
+        )
+    };
     let ended = Instant::now();
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
@@ -274,7 +284,7 @@ fn run_team(
 }
 
 /// Readiness: every process opened its ports, within a deadline.
-fn gather(
+pub(crate) fn gather(
     s: &Scenario,
     o: &LaunchOptions,
     ports: &mut OrchestratorPorts,
@@ -311,7 +321,7 @@ fn gather(
 }
 
 /// The subscription graph as iceoryx2 sees it (subscriptions.json, best effort).
-fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
+pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
     let mut subs = BTreeMap::new();
     for m in &s.formation.members {
         let nodes = ports.subscriber_nodes(m.id).unwrap_or_default();

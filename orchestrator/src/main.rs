@@ -17,6 +17,7 @@ mod export;
 mod host;
 mod launch;
 mod progress;
+mod realtime;
 mod report;
 mod team;
 mod telemetry;

@@ -50,11 +50,13 @@ pub fn member_binaries_present() -> Result<(), Failure> {
     Ok(())
 }
 
+/// Starts member `id`'s binary; `flags` are passed on (`--realtime`, ...).
 pub fn spawn_member(
     scenario: &Path,
     team: &TeamName,
     id: u32,
     role: Role,
+    flags: &[String],
 ) -> std::io::Result<Child> {
     let exe = std::env::current_exe()?;
     let bin = exe.with_file_name(if role.is_leader() { "leader" } else { "agent" });
@@ -65,6 +67,7 @@ pub fn spawn_member(
         .arg(team.as_str())
         .arg("--id")
         .arg(id.to_string())
+        .args(flags)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .spawn()

@@ -156,21 +156,6 @@ fn a_secondary_leader_killed_at_a_chosen_tick_stops_the_team() {
 // 2. An agent hangs
 // ---------------------------------------------------------------------------------------------
 
-/// Resumes and kills a stopped process if the test fails before the orchestrator did.
-struct Stopped(u32);
-
-impl Drop for Stopped {
-    fn drop(&mut self) {
-        if let Ok(pid) = libc::pid_t::try_from(self.0) {
-            // SAFETY: kill(2) takes no pointers; at worst the pid is already gone.
-            unsafe {
-                libc::kill(pid, libc::SIGCONT);
-                libc::kill(pid, libc::SIGKILL);
-            }
-        }
-    }
-}
-
 /// SIGSTOP of follower 9 (alive, silent): after `--agent-timeout 1.5` the orchestrator names
 /// it, stops the team (the stopped process is killed) and exits 3.
 #[test]

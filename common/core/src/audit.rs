@@ -166,6 +166,54 @@ pub struct AuditReport {
     /// audit.json they always had).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub losses: Vec<LossRecord>,
+    /// The pacing of a real-time flight (`launch --realtime`; absent otherwise, so lockstep and
+    /// `simulate` keep the audit.json they always had).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub realtime: Option<RealtimeFigures>,
+}
+
+/// The pacing figures of a real-time flight, from the members' own reports (their pacing
+/// messages) and the monitor's audits (README, "Real time and imperfect links").
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RealtimeFigures {
+    /// Ticks flown, every member together.
+    pub ticks: u64,
+    /// Ticks computed more than one period after their instant.
+    pub late_ticks: u64,
+    /// late_ticks / ticks, in percent.
+    pub late_ticks_pct: Real,
+    /// Median over the followers of their median neighbour age (own time minus the stamp of the
+    /// newest state used; ms, to 0.05 ms).
+    pub neighbor_age_ms_p50: Real,
+    /// The largest of the followers' 99th percentiles (the worst member's; ms).
+    pub neighbor_age_ms_p99: Real,
+    /// The oldest neighbour state any follower used (ms).
+    pub neighbor_age_ms_max: Real,
+    /// The member with the most late ticks (then the latest tick); absent when none reported.
+    pub slowest_member: Option<SlowMember>,
+    /// Members whose pacing report the monitor received (of `agents`).
+    pub members_reported: usize,
+    /// Audit instants (telemetry rows per agent) and their rate.
+    pub audits: u64,
+    pub audit_hz: Real,
+    /// The phase seed announced with the start (0: aligned, no offsets).
+    pub phase_seed: u32,
+    /// The bound on a neighbour's age (s).
+    pub stale_after_s: Real,
+    /// From the start instant to the last audit (s): a plan of T s takes about T s.
+    pub wall_s: Real,
+    /// CPU of the whole team over the flight (orchestrator and spawned members, user + system,
+    /// from /proc), in cores; absent for hand-started members.
+    pub team_cpu_cores: Option<Real>,
+}
+
+/// The slowest member of a real-time flight.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SlowMember {
+    pub id: u32,
+    pub late_ticks: u64,
+    /// The latest one of its ticks was computed after its instant (ms).
+    pub max_late_ms: Real,
 }
 
 /// Which conditions are failing right now: a violation is recorded when one starts.
@@ -231,6 +279,7 @@ impl Auditor {
                 stopped_on_violation: false,
                 fault: None,
                 losses: Vec::new(),
+                realtime: None,
             },
         }
     }
@@ -404,6 +453,11 @@ impl Auditor {
     pub fn fault(&mut self, fault: FaultRecord) {
         tracing::error!(kind = %fault.kind, agent = ?fault.agent, tick = fault.tick, "{}", fault.message);
         self.report.fault = Some(fault);
+    }
+
+    /// Adds the pacing figures of a real-time flight.
+    pub fn set_realtime(&mut self, figures: RealtimeFigures) {
+        self.report.realtime = Some(figures);
     }
 
     /// The finished report; `complete` when every tick of the plan was audited. A run stopped

@@ -77,6 +77,33 @@ pub fn extrapolate(f: &Flat, tau: Real, model: NeighborModel) -> (Vec3, Vec3) {
     }
 }
 
+/// The whole flat output of a neighbour `tau` seconds after its sampled state, on the cubic
+/// Taylor polynomial of [`extrapolate`] (a cubic moved along itself is the same cubic, so a
+/// follower that extrapolates this again inside its tick stays on the neighbour's polynomial).
+/// Real time uses it to bring a neighbour's newest state to the follower's own time.
+#[inline]
+pub fn extrapolate_flat(f: &Flat, tau: Real, model: NeighborModel) -> Flat {
+    let (r, v) = extrapolate(f, tau, model);
+    match model {
+        NeighborModel::Hold => *f,
+        NeighborModel::Taylor => Flat {
+            r,
+            v,
+            a: f.a + f.j * tau,
+            j: f.j,
+        },
+    }
+}
+
+/// Where a tick sits on the time axis: it starts at `tick * dt + offset_s`. Lockstep and the
+/// engine use offset 0 (`x + 0.0` is `x` exactly, so their results are unchanged bit for bit);
+/// a real-time member uses its phase offset (ARCHITECTURE.md, "How time flows").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickAt {
+    pub tick: u64,
+    pub offset_s: Real,
+}
+
 /// Advance one agent from tick `tick` to `tick + 1`. `neighbors` are the in-neighbours' tick-k
 /// flat outputs in the order of the follower's weights (ignored for leaders); `neighbor_ids`
 /// name them in faults.
@@ -89,6 +116,24 @@ pub fn step<P: Plant>(
     neighbors: &[Flat; 3],
     neighbor_ids: &[u32; 3],
 ) -> Result<P, StepFault> {
+    let at = TickAt {
+        tick,
+        offset_s: 0.0,
+    };
+    step_at(cfg, plan, law, at, own, neighbors, neighbor_ids)
+}
+
+/// [`step`] for a tick that starts at `at.tick * dt + at.offset_s` (a real-time member's phase):
+/// leaders evaluate their plan at those times, followers extrapolate from that tick start.
+pub fn step_at<P: Plant>(
+    cfg: &StepConfig,
+    plan: &TeamPlan,
+    law: &Law,
+    at: TickAt,
+    own: &P,
+    neighbors: &[Flat; 3],
+    neighbor_ids: &[u32; 3],
+) -> Result<P, StepFault> {
     if let Law::Follower { .. } = law {
         for (f, id) in neighbors.iter().zip(neighbor_ids) {
             if !f.is_finite() {
@@ -96,12 +141,13 @@ pub fn step<P: Plant>(
             }
         }
     }
-    let t_k = tick_time(tick, cfg.dt_s);
+    let TickAt { tick, offset_s } = at;
+    let t_k = tick_time(tick, cfg.dt_s) + offset_s;
     let sub = cfg.substeps.max(1);
     let mut x = *own;
     for i in 0..sub {
-        let ts = (tick as Real + i as Real / sub as Real) * cfg.dt_s;
-        let te = (tick as Real + (i + 1) as Real / sub as Real) * cfg.dt_s;
+        let ts = (tick as Real + i as Real / sub as Real) * cfg.dt_s + offset_s;
+        let te = (tick as Real + (i + 1) as Real / sub as Real) * cfg.dt_s + offset_s;
         match plan.quintic.segment_of(ts, te) {
             Some(seg) => x = substep(cfg, plan, law, t_k, &x, ts, te, seg, neighbors)?,
             None => {
@@ -166,5 +212,31 @@ pub fn law_for(member: &crate::formation::Member) -> (Law, [u32; 3]) {
             },
             [member.id; 3],
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::vec3;
+
+    /// Real time brings a neighbour to the follower's time with `extrapolate_flat`, then the
+    /// tick extrapolates again from there: both moves together must stay on the neighbour's one
+    /// cubic, as if extrapolated once.
+    #[test]
+    fn moving_a_flat_along_its_cubic_composes() {
+        let f = Flat {
+            r: vec3([1.0, -2.0, 3.0]),
+            v: vec3([0.5, 0.25, -1.0]),
+            a: vec3([-0.3, 0.2, 0.1]),
+            j: vec3([0.05, -0.04, 0.02]),
+        };
+        let (a, b) = (0.007, 0.0031);
+        let moved = extrapolate_flat(&f, a, NeighborModel::Taylor);
+        let (r2, v2) = extrapolate(&moved, b, NeighborModel::Taylor);
+        let (r1, v1) = extrapolate(&f, a + b, NeighborModel::Taylor);
+        assert!((r2 - r1).norm() < 1e-14 && (v2 - v1).norm() < 1e-14);
+        assert_eq!(extrapolate_flat(&f, 0.0, NeighborModel::Taylor), f);
+        assert_eq!(extrapolate_flat(&f, a, NeighborModel::Hold), f);
     }
 }

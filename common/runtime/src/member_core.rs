@@ -63,6 +63,8 @@ pub enum WaitingFor {
     Grant(u64),
     /// These in-neighbours' states of this tick.
     States { tick: u64, missing: Vec<u32> },
+    /// The orchestrator's stop after the last tick (real time).
+    Stop,
 }
 
 impl fmt::Display for WaitingFor {
@@ -70,6 +72,7 @@ impl fmt::Display for WaitingFor {
         match self {
             WaitingFor::Start => f.write_str("the team to start"),
             WaitingFor::Grant(t) => write!(f, "a grant of tick {t}"),
+            WaitingFor::Stop => f.write_str("the stop after the last tick"),
             WaitingFor::States { tick, missing } => {
                 write!(f, "tick-{tick} states of in-neighbours {missing:?}")
             }
@@ -84,6 +87,8 @@ pub enum MemberFault {
     ScenarioMismatch { mine: u64, team: u64 },
     /// The orchestrator is gone.
     OrchestratorLost { tick: u64 },
+    /// The team flies in the other mode (lockstep or real time) than this member.
+    ModeMismatch { member_realtime: bool },
     /// Nothing happened for `waited`.
     Silent {
         tick: u64,
@@ -100,6 +105,9 @@ pub enum MemberFault {
     },
     /// An in-neighbour's states skipped from `tick` to `later` (samples were lost).
     TickGap { tick: u64, peer: u32, later: u64 },
+    /// Real time: an in-neighbour's newest state was `age` old at this member's tick (older
+    /// than the bound); the member reported it and holds.
+    NeighborStale { tick: u64, peer: u32, age: Duration },
 }
 
 /// What the loop must do next.
@@ -211,6 +219,10 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                 self.progress |= self.clock.on_grant(c.grant_tick);
                 Ok(None)
             }
+            // A real-time team: this member was started without --realtime.
+            ClockCommand::Realtime { .. } => Err(MemberFault::ModeMismatch {
+                member_realtime: false,
+            }),
             ClockCommand::Stop(_) => Ok(Some(Finished {
                 tick: self.tick,
                 reason: c.reason,

@@ -90,7 +90,11 @@ pub const LINGER: Duration = Duration::from_secs(5);
 /// subscriber has not yet taken when their publisher's process exits, so a member that ran ahead
 /// (a large window) and exited at once could take its fault report, and the states before it,
 /// with it; the orchestrator would then see only an exited process.
-fn linger<T: MemberTransport, K: Clock>(transport: &mut T, clock: &K, interrupted: &AtomicBool) {
+pub(crate) fn linger<T: MemberTransport, K: Clock>(
+    transport: &mut T,
+    clock: &K,
+    interrupted: &AtomicBool,
+) {
     let start = clock.now();
     let mut last_alive_check = start;
     while clock.now().saturating_sub(start) < LINGER && !interrupted.load(Ordering::Relaxed) {

@@ -13,6 +13,10 @@
 pub const STATUS_OK: u32 = 0;
 /// `StateMsg::status`: the agent has detected a fault and is no longer following the plan.
 pub const STATUS_FAULT: u32 = 1;
+/// `StateMsg::status`: not a state but a real-time member's pacing report, sent once when the
+/// team stops (`tick`: ticks flown; `state`: the figures, see `cdm_runtime::realtime::Pacing`).
+/// [`StateMsg::status`] decodes it as a fault, so a reader that does not know it never audits it.
+pub const STATUS_PACING: u32 = 2;
 
 /// `StateMsg::fault_code`: no fault (always the value while `status == STATUS_OK`).
 pub const FAULT_NONE: u32 = 0;
@@ -49,6 +53,14 @@ pub const NO_PEER: u32 = u32::MAX;
 pub const COMMAND_RUN: u32 = 0;
 /// `ClockMsg::command`: agents stop; `reason` says why.
 pub const COMMAND_STOP: u32 = 1;
+/// `ClockMsg::command`: fly in real time (`--realtime`). `grant_tick` carries the start instant,
+/// tick 0's wall time as CLOCK_REALTIME nanoseconds since the Unix epoch, and `reason` the phase
+/// seed ([`PHASES_ALIGNED`]: no phase offsets). The message keeps its 24 bytes: other languages
+/// mirror the layout (`python/cdm_bus.py`).
+pub const COMMAND_REALTIME: u32 = 2;
+/// `ClockMsg::reason` with [`COMMAND_REALTIME`]: every member ticks at the start instant plus
+/// whole periods (no phase offsets).
+pub const PHASES_ALIGNED: u32 = 0;
 
 /// `ClockMsg::reason`: no reason (always the value with `COMMAND_RUN`).
 pub const REASON_NONE: u32 = 0;
@@ -206,6 +218,11 @@ impl StateMsg {
         self
     }
 
+    /// True for a real-time member's pacing report ([`STATUS_PACING`]), which is not a state.
+    pub fn is_pacing(&self) -> bool {
+        self.status == STATUS_PACING
+    }
+
     /// Decodes the status fields. Any status other than [`STATUS_OK`] counts as a fault, so a
     /// corrupted or unknown status is never mistaken for health; a fault without a code decodes
     /// as `Unknown(0)`.
@@ -264,6 +281,8 @@ impl StopReason {
 pub enum ClockCommand {
     /// Run up to and including the grant tick.
     Run,
+    /// Fly in real time from this start instant (CLOCK_REALTIME ns) with these phase offsets.
+    Realtime { start_unix_ns: u64, phase_seed: u32 },
     /// Stop now.
     Stop(StopReason),
 }
@@ -289,13 +308,28 @@ impl ClockMsg {
         }
     }
 
-    /// Decodes `command` and `reason`. Any command other than [`COMMAND_RUN`] stops: an agent
-    /// that cannot understand the orchestrator must not keep flying the plan.
+    /// The start of a real-time flight: tick 0 at `start_unix_ns` (CLOCK_REALTIME), phase
+    /// offsets drawn from `phase_seed` ([`PHASES_ALIGNED`]: none).
+    pub fn realtime(start_unix_ns: u64, scenario_hash: u64, phase_seed: u32) -> Self {
+        Self {
+            grant_tick: start_unix_ns,
+            scenario_hash,
+            command: COMMAND_REALTIME,
+            reason: phase_seed,
+        }
+    }
+
+    /// Decodes `command` and `reason`. Any command other than [`COMMAND_RUN`] and
+    /// [`COMMAND_REALTIME`] stops: an agent that cannot understand the orchestrator must not
+    /// keep flying the plan.
     pub fn command(&self) -> ClockCommand {
-        if self.command == COMMAND_RUN {
-            ClockCommand::Run
-        } else {
-            ClockCommand::Stop(StopReason::from_code(self.reason))
+        match self.command {
+            COMMAND_RUN => ClockCommand::Run,
+            COMMAND_REALTIME => ClockCommand::Realtime {
+                start_unix_ns: self.grant_tick,
+                phase_seed: self.reason,
+            },
+            _ => ClockCommand::Stop(StopReason::from_code(self.reason)),
         }
     }
 }
@@ -345,5 +379,12 @@ mod tests {
         assert_eq!(s.command(), ClockCommand::Stop(StopReason::AgentFault));
         let odd = ClockMsg { command: 42, ..s };
         assert_eq!(odd.command(), ClockCommand::Stop(StopReason::AgentFault));
+        assert_eq!(
+            ClockMsg::realtime(1_700_000_000_000_000_000, 1, 7).command(),
+            ClockCommand::Realtime {
+                start_unix_ns: 1_700_000_000_000_000_000,
+                phase_seed: 7
+            }
+        );
     }
 }

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
 use cdm_core::plan::TeamPlan;
-use cdm_core::step::{law_for, step, Law, StepConfig, StepFault};
+use cdm_core::step::{law_for, step, step_at, Law, StepConfig, StepFault, TickAt};
 
 use crate::messages::{ClockMsg, StateMsg};
 
@@ -93,6 +93,12 @@ pub trait Vehicle {
     fn state(&self) -> [f64; 12];
     /// Flies from `tick` to `tick + 1`, given the in-neighbours' tick-`tick` outputs.
     fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), StepFault>;
+    /// Flies the tick that starts at `at.tick * dt + at.offset_s` (a real-time member's phase),
+    /// given the in-neighbours' outputs at that time. A vehicle that keeps its own time (a real
+    /// one) has nothing to shift: by default this is [`Self::fly_tick`].
+    fn fly_tick_at(&mut self, at: TickAt, neighbors: &[Flat; 3]) -> Result<(), StepFault> {
+        self.fly_tick(at.tick, neighbors)
+    }
 }
 
 /// The 12-state model flown by `step::step` (the engine flies the very same function).
@@ -130,6 +136,20 @@ impl Vehicle for ModelVehicle<'_> {
             self.plan,
             &self.law,
             tick,
+            &self.x,
+            neighbors,
+            &self.neighbor_ids,
+        )?;
+        self.x = next;
+        Ok(())
+    }
+
+    fn fly_tick_at(&mut self, at: TickAt, neighbors: &[Flat; 3]) -> Result<(), StepFault> {
+        let next = step_at(
+            &self.cfg,
+            self.plan,
+            &self.law,
+            at,
             &self.x,
             neighbors,
             &self.neighbor_ids,

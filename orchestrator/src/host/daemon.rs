@@ -216,7 +216,7 @@ fn fly(
             .iter()
             .filter(|m| j.mine.contains(&m.id))
     {
-        match spawn_member(&file, &j.team, m.id, m.role) {
+        match spawn_member(&file, &j.team, m.id, m.role, &[]) {
             Ok(child) => children.push(Spawned { id: m.id, child }),
             Err(e) => {
                 stop_team(&mut ports, &mut children, &j.s, StopReason::AgentFault);

@@ -480,3 +480,18 @@ pub fn assert_no_process_of(team: &str) {
         "processes of team {team} survived: {procs:#?}"
     );
 }
+
+/// Resumes and kills a stopped process if the test fails before the orchestrator did.
+pub struct Stopped(pub u32);
+
+impl Drop for Stopped {
+    fn drop(&mut self) {
+        if let Ok(pid) = libc::pid_t::try_from(self.0) {
+            // SAFETY: kill(2) takes no pointers; at worst the pid is already gone.
+            unsafe {
+                libc::kill(pid, libc::SIGCONT);
+                libc::kill(pid, libc::SIGKILL);
+            }
+        }
+    }
+}

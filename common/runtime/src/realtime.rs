@@ -1,0 +1,466 @@
+//! A member in real time (`--realtime`) as a plain type with no I/O: events in (the clock
+//! channel's start or stop, a neighbour's state, whether the orchestrator lives, "now" from a
+//! clock the loop passes in), actions out (publish, ask about the orchestrator, wait, fail). The
+//! loop around it is [`crate::realtime_loop`].
+//!
+//! How time flows (ARCHITECTURE.md): the orchestrator announces the start instant S; member i
+//! has a phase offset phi_i in [0, dt) drawn from the announced seed, and its tick k is the
+//! interval of simulation time [phi_i + k dt, phi_i + (k + 1) dt] on the common time line
+//! t = wall - S. At the wall instant S + phi_i + k dt it publishes its state of that time (stamp
+//! phi_i + k dt, carried as its tick: every member derives a neighbour's phase from the seed)
+//! and flies the tick at once. No grant, no barrier: a follower never waits for a neighbour; it
+//! brings the newest state it has of each to its own time with the cubic Taylor model the
+//! lockstep tick uses inside a tick (`step::extrapolate_flat`). A neighbour whose newest state is
+//! older than the bound (`--stale-after`, default 0.5 s) is a fault: the member reports it (its
+//! state flagged `NeighborSilent` with the peer) and holds (it flies no further tick, so a real
+//! vehicle would hover where it is) until the orchestrator stops the team.
+
+use std::time::Duration;
+
+use cdm_core::dynamics::{Flat, QuadState};
+use cdm_core::formation::Member;
+use cdm_core::math::Vec3;
+use cdm_core::step::{extrapolate_flat, law_for, Law, NeighborModel, StepFault, TickAt};
+
+use crate::member_core::{
+    Action, Deadlines, Finished, MemberFault, WaitingFor, ALIVE_CHECK, WAIT_SLICE,
+};
+use crate::messages::{
+    AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER, PHASES_ALIGNED,
+    STATUS_PACING,
+};
+use crate::seams::Vehicle;
+
+/// The default bound on a neighbour's age before it is a fault.
+pub const STALE_AFTER: Duration = Duration::from_millis(500);
+
+/// The phase offset of member `id`, in [0, dt): SplitMix64 of (seed, id) scaled to the period, so
+/// members are not artificially aligned yet every process (and the monitor) derives the same
+/// offsets from the seed announced with the start. [`PHASES_ALIGNED`] gives 0 to everyone.
+pub fn phase_offset_s(seed: u32, id: u32, dt_s: f64) -> f64 {
+    if seed == PHASES_ALIGNED {
+        return 0.0;
+    }
+    let mut z = (u64::from(seed) << 32 | u64::from(id)).wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    dt_s * ((z >> 11) as f64 / (1u64 << 53) as f64)
+}
+
+/// The simulation time of member `id`'s tick `tick` (its state's stamp).
+pub fn stamp_s(tick: u64, phase_s: f64, dt_s: f64) -> f64 {
+    tick as f64 * dt_s + phase_s
+}
+
+/// A member's own pacing figures, published as a [`STATUS_PACING`] message every second of
+/// flight (so the monitor has them whatever stops the team) and when the stop arrives.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pacing {
+    /// Ticks flown.
+    pub ticks: u64,
+    /// Ticks computed more than one period after their instant.
+    pub late_ticks: u64,
+    /// The latest a tick was computed after its instant (ms).
+    pub max_late_ms: f64,
+    /// Neighbour ages (own time minus the stamp of the newest state used), a histogram of
+    /// [`AGE_BIN_MS`] bins; the last bin holds everything beyond.
+    age_bins: Vec<u32>,
+    /// The largest neighbour age (ms).
+    pub age_max_ms: f64,
+}
+
+/// Width of a neighbour-age histogram bin (ms): percentiles are reported to this resolution.
+pub const AGE_BIN_MS: f64 = 0.05;
+const AGE_BINS: usize = 20_000; // 0 .. 1 s
+
+/// The figures of a pacing message, as read back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PacingFigures {
+    pub id: u32,
+    pub ticks: u64,
+    pub late_ticks: u64,
+    pub max_late_ms: f64,
+    pub age_p50_ms: f64,
+    pub age_p99_ms: f64,
+    pub age_max_ms: f64,
+    /// How many neighbour ages were measured (0 for a leader).
+    pub age_samples: u64,
+}
+
+impl Default for Pacing {
+    fn default() -> Self {
+        Self {
+            ticks: 0,
+            late_ticks: 0,
+            max_late_ms: 0.0,
+            age_bins: vec![0; AGE_BINS],
+            age_max_ms: 0.0,
+        }
+    }
+}
+
+impl Pacing {
+    fn tick(&mut self, late_s: f64, dt_s: f64) {
+        self.ticks += 1;
+        if late_s > dt_s {
+            self.late_ticks += 1;
+        }
+        self.max_late_ms = self.max_late_ms.max(late_s * 1e3);
+    }
+
+    fn age(&mut self, age_s: f64) {
+        let ms = age_s.max(0.0) * 1e3;
+        let bin = ((ms / AGE_BIN_MS) as usize).min(AGE_BINS - 1);
+        self.age_bins[bin] += 1;
+        self.age_max_ms = self.age_max_ms.max(ms);
+    }
+
+    /// The `q`-quantile of the ages (upper edge of its bin), 0 without samples.
+    fn age_quantile_ms(&self, q: f64) -> f64 {
+        let n: u64 = self.age_bins.iter().map(|&c| u64::from(c)).sum();
+        if n == 0 {
+            return 0.0;
+        }
+        let want = (q * n as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (k, &c) in self.age_bins.iter().enumerate() {
+            seen += u64::from(c);
+            if seen >= want {
+                return ((k + 1) as f64 * AGE_BIN_MS).min(self.age_max_ms);
+            }
+        }
+        self.age_max_ms
+    }
+
+    /// The figures as a message: `tick` = ticks flown, `state` = [late ticks, max lateness ms,
+    /// age p50 ms, age p99 ms, age max ms, age samples, 0...].
+    pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
+        let samples: u64 = self.age_bins.iter().map(|&c| u64::from(c)).sum();
+        let mut f = [0.0; 12];
+        f[0] = self.late_ticks as f64;
+        f[1] = self.max_late_ms;
+        f[2] = self.age_quantile_ms(0.5);
+        f[3] = self.age_quantile_ms(0.99);
+        f[4] = self.age_max_ms;
+        f[5] = samples as f64;
+        let mut m = StateMsg::ok(self.ticks, hash, id, f);
+        m.status = STATUS_PACING;
+        m
+    }
+
+    /// Reads a pacing message back (`None` when it is not one).
+    pub fn from_msg(m: &StateMsg) -> Option<PacingFigures> {
+        m.is_pacing().then(|| PacingFigures {
+            id: m.id,
+            ticks: m.tick,
+            late_ticks: m.state[0] as u64,
+            max_late_ms: m.state[1],
+            age_p50_ms: m.state[2],
+            age_p99_ms: m.state[3],
+            age_max_ms: m.state[4],
+            age_samples: m.state[5] as u64,
+        })
+    }
+}
+
+/// The start as this member sees it.
+#[derive(Debug, Clone, Copy)]
+struct Start {
+    /// Tick 0's instant (phase 0) on this member's clock.
+    at: Duration,
+    phase_s: f64,
+    neighbor_phase_s: [f64; 3],
+}
+
+/// What the core needs of the scenario besides the member.
+#[derive(Debug, Clone, Copy)]
+pub struct RealtimeSetup {
+    /// The scenario's content hash.
+    pub hash: u64,
+    /// The last tick of the plan.
+    pub last: u64,
+    /// The period (s).
+    pub dt_s: f64,
+    /// A neighbour older than this is a fault.
+    pub stale_after: Duration,
+    /// The join and silence deadlines (silence bounds the wait for the stop after the last tick).
+    pub deadlines: Deadlines,
+}
+
+/// One member's real-time protocol state.
+#[derive(Debug)]
+pub struct RealtimeCore<V> {
+    id: u32,
+    setup: RealtimeSetup,
+    vehicle: V,
+    neighbor_ids: [u32; 3],
+    is_follower: bool,
+    /// The in-neighbours' initial positions at rest: their state before their first message.
+    initial: [Flat; 3],
+    /// The newest state heard of each in-neighbour: its tick and flat output.
+    heard: [Option<(u64, Flat)>; 3],
+    start: Option<Start>,
+    tick: u64,
+    published: Option<u64>,
+    pacing: Pacing,
+    created: Duration,
+    last_alive_check: Duration,
+    pending: Option<Action>,
+}
+
+impl<V: Vehicle> RealtimeCore<V> {
+    /// `member` flying `vehicle`; `neighbor_positions` are its in-neighbours' initial positions
+    /// in the order of its law (ignored for a leader); `now` starts the join deadline.
+    pub fn new(
+        member: &Member,
+        neighbor_positions: [Vec3; 3],
+        setup: RealtimeSetup,
+        vehicle: V,
+        now: Duration,
+    ) -> Self {
+        let (law, neighbor_ids) = law_for(member);
+        Self {
+            id: member.id,
+            setup,
+            vehicle,
+            neighbor_ids,
+            is_follower: matches!(law, Law::Follower { .. }),
+            initial: neighbor_positions.map(Flat::rest),
+            heard: [None; 3],
+            start: None,
+            tick: 0,
+            published: None,
+            pacing: Pacing::default(),
+            created: now,
+            last_alive_check: now,
+            pending: None,
+        }
+    }
+
+    /// This member's id.
+    pub fn id(&self) -> u32 {
+        self.id
+    }
+
+    /// The scenario's content hash.
+    pub fn hash(&self) -> u64 {
+        self.setup.hash
+    }
+
+    /// The tick this member flies next.
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+
+    /// The pacing figures so far.
+    pub fn pacing(&self) -> &Pacing {
+        &self.pacing
+    }
+
+    /// A clock message: the start (with this member's clock reading `now` while the system
+    /// clock reads `unix_now_ns`), or the stop. A lockstep grant is a mode mismatch.
+    pub fn on_clock(
+        &mut self,
+        c: &ClockMsg,
+        now: Duration,
+        unix_now_ns: u64,
+    ) -> Result<Option<Finished>, MemberFault> {
+        if c.scenario_hash != self.setup.hash {
+            return Err(MemberFault::ScenarioMismatch {
+                mine: self.setup.hash,
+                team: c.scenario_hash,
+            });
+        }
+        match c.command() {
+            ClockCommand::Run => Err(MemberFault::ModeMismatch {
+                member_realtime: true,
+            }),
+            ClockCommand::Realtime {
+                start_unix_ns,
+                phase_seed,
+            } => {
+                if self.start.is_none() {
+                    // The system clock is read once, here; from now on only the monotonic one.
+                    let ahead_ns = start_unix_ns as i128 - unix_now_ns as i128;
+                    let at = if ahead_ns >= 0 {
+                        now + Duration::from_nanos(ahead_ns as u64)
+                    } else {
+                        now.saturating_sub(Duration::from_nanos(ahead_ns.unsigned_abs() as u64))
+                    };
+                    let dt = self.setup.dt_s;
+                    self.start = Some(Start {
+                        at,
+                        phase_s: phase_offset_s(phase_seed, self.id, dt),
+                        neighbor_phase_s: self
+                            .neighbor_ids
+                            .map(|j| phase_offset_s(phase_seed, j, dt)),
+                    });
+                }
+                Ok(None)
+            }
+            ClockCommand::Stop(_) => Ok(Some(Finished {
+                tick: self.tick,
+                reason: c.reason,
+            })),
+        }
+    }
+
+    /// A state from the transport: kept when it is an in-neighbour's newest.
+    pub fn on_neighbor(&mut self, msg: &StateMsg) {
+        let Some(slot) = self.neighbor_ids.iter().position(|n| *n == msg.id) else {
+            return;
+        };
+        if msg.status() != AgentStatus::Ok {
+            return;
+        }
+        if msg.scenario_hash != self.setup.hash && self.pending.is_none() {
+            let fault = MemberFault::ForeignState {
+                tick: self.tick,
+                peer: msg.id,
+                peer_tick: msg.tick,
+            };
+            self.pending = Some(self.fail(FaultCode::NeighborFault, msg.id, fault));
+            return;
+        }
+        if self.heard[slot].is_none_or(|(t, _)| msg.tick > t) {
+            self.heard[slot] = Some((msg.tick, QuadState(msg.state).flat()));
+        }
+    }
+
+    /// The answer to [`Action::CheckOrchestrator`].
+    pub fn on_orchestrator_alive(&mut self, alive: bool) {
+        if !alive && self.pending.is_none() {
+            let fault = MemberFault::OrchestratorLost { tick: self.tick };
+            self.pending = Some(Action::Fail {
+                report: None,
+                fault,
+            });
+        }
+    }
+
+    /// The next action at time `now` (this member's monotonic clock). Call it until it returns
+    /// [`Action::Wait`] (then read the inputs) or [`Action::Fail`].
+    pub fn poll(&mut self, now: Duration) -> Action {
+        if let Some(a) = self.pending.take() {
+            return a;
+        }
+        let Some(start) = self.start else {
+            let join = self.created.saturating_add(self.setup.deadlines.join);
+            return self.idle(now, Some(join), None);
+        };
+        let dt = self.setup.dt_s;
+        let t_own = stamp_s(self.tick, start.phase_s, dt);
+        let due = start.at + Duration::from_secs_f64(t_own.max(0.0));
+        if now < due {
+            return self.idle(now, None, Some(due));
+        }
+        if self.published != Some(self.tick) {
+            self.published = Some(self.tick);
+            let (tick, hash) = (self.tick, self.setup.hash);
+            return Action::Publish(StateMsg::ok(tick, hash, self.id, self.vehicle.state()));
+        }
+        if self.tick >= self.setup.last {
+            // The plan is flown: wait for the stop (bounded).
+            let silence = due.saturating_add(self.setup.deadlines.silence);
+            return self.idle(now, Some(silence), None);
+        }
+        self.fly(start, t_own, (now - due).as_secs_f64())
+    }
+
+    /// Flies tick `self.tick` (own time `t_own`, computed `late_s` after its instant).
+    fn fly(&mut self, start: Start, t_own: f64, late_s: f64) -> Action {
+        let dt = self.setup.dt_s;
+        let mut flats = self.initial;
+        if self.is_follower {
+            for (slot, out) in flats.iter_mut().enumerate() {
+                let (stamp, flat) = match self.heard[slot] {
+                    Some((t, f)) => (stamp_s(t, start.neighbor_phase_s[slot], dt), f),
+                    None => (0.0, self.initial[slot]),
+                };
+                let age_s = t_own - stamp;
+                if age_s > self.setup.stale_after.as_secs_f64() {
+                    let peer = self.neighbor_ids[slot];
+                    let fault = MemberFault::NeighborStale {
+                        tick: self.tick,
+                        peer,
+                        age: Duration::from_secs_f64(age_s),
+                    };
+                    return self.fail(FaultCode::NeighborSilent, peer, fault);
+                }
+                self.pacing.age(age_s);
+                *out = extrapolate_flat(&flat, age_s, NeighborModel::Taylor);
+            }
+        }
+        let at = TickAt {
+            tick: self.tick,
+            offset_s: start.phase_s,
+        };
+        if let Err(fault) = self.vehicle.fly_tick_at(at, &flats) {
+            let (code, peer) = match fault {
+                StepFault::NeighborNonFinite { peer } => (FaultCode::NonFinite, peer),
+                StepFault::Control(_) => (FaultCode::Control, NO_PEER),
+            };
+            let tick = self.tick;
+            return self.fail(code, peer, MemberFault::Step { tick, fault });
+        }
+        self.pacing.tick(late_s, dt);
+        self.tick += 1;
+        // A pacing report every second of flight, so the monitor has one whatever stops the team.
+        let per_second = (1.0 / dt).round().max(1.0) as u64;
+        if self.tick.is_multiple_of(per_second) {
+            return Action::Publish(self.pacing.to_msg(self.id, self.setup.hash));
+        }
+        Action::Poll
+    }
+
+    /// Nothing to do before `until` (the next tick's instant), or at all: ask about the
+    /// orchestrator every [`ALIVE_CHECK`], give up at `deadline` (the start or the stop did not
+    /// come), else sleep at most a slice.
+    fn idle(
+        &mut self,
+        now: Duration,
+        deadline: Option<Duration>,
+        until: Option<Duration>,
+    ) -> Action {
+        if now.saturating_sub(self.last_alive_check) >= ALIVE_CHECK {
+            self.last_alive_check = now;
+            return Action::CheckOrchestrator;
+        }
+        let mut slice = WAIT_SLICE;
+        for t in [deadline, until].into_iter().flatten() {
+            slice = slice.min(t.saturating_sub(now));
+        }
+        if deadline.is_some_and(|d| now >= d) {
+            let waiting_for = if self.start.is_none() {
+                WaitingFor::Start
+            } else {
+                WaitingFor::Stop
+            };
+            let fault = MemberFault::Silent {
+                tick: self.tick,
+                waited: now.saturating_sub(self.created),
+                waiting_for,
+            };
+            return Action::Fail {
+                report: None,
+                fault,
+            };
+        }
+        Action::Wait(slice)
+    }
+
+    /// A fault reported to the team (this member's state flagged with `code`).
+    fn fail(&self, code: FaultCode, peer: u32, fault: MemberFault) -> Action {
+        let msg = StateMsg::ok(self.tick, self.setup.hash, self.id, self.vehicle.state());
+        let peer = (peer != NO_PEER).then_some(peer);
+        Action::Fail {
+            report: Some(msg.with_status(AgentStatus::Fault { code, peer })),
+            fault,
+        }
+    }
+}
+
+#[cfg(test)]
+#[path = "realtime_tests.rs"]
+mod tests;

@@ -1,0 +1,233 @@
+//! The orchestrator's side of a real-time flight as a plain type with no I/O: it keeps the
+//! newest states of every member, brings them to the monitor's audit instants, finds a member
+//! whose newest state is too old, and sums the members' pacing reports. The loop around it (the
+//! orchestrator's `realtime.rs`) owns the ports, the processes and the files.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use cdm_core::audit::{RealtimeFigures, SlowMember};
+use cdm_core::dynamics::{Flat, QuadState};
+use cdm_core::math::Vec3;
+use cdm_core::step::{extrapolate_flat, NeighborModel};
+
+use crate::messages::{AgentStatus, FaultCode, StateMsg};
+use crate::realtime::{phase_offset_s, stamp_s, Pacing, PacingFigures};
+
+/// States kept per member: enough to find the newest one at or before an audit instant that
+/// lags the wall clock by one period.
+const RING: usize = 8;
+
+/// What a message told the monitor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Heard {
+    /// A state, a pacing report, or nothing of interest.
+    Nothing,
+    /// A member reported a fault at its tick `tick` (`peer`: the agent it is about).
+    Fault {
+        id: u32,
+        tick: u64,
+        code: FaultCode,
+        peer: Option<u32>,
+    },
+    /// A member published a non-finite state (never audited).
+    NonFinite { id: u32, tick: u64 },
+}
+
+/// One member as the monitor sees it.
+#[derive(Debug, Clone)]
+struct Seen {
+    id: u32,
+    follower: bool,
+    phase_s: f64,
+    at_rest: Flat,
+    states: VecDeque<(u64, [f64; 12])>,
+    pacing: Option<PacingFigures>,
+    /// A pacing report arrived after the stop (its final figures).
+    final_report: bool,
+}
+
+/// The monitor's state.
+#[derive(Debug, Clone)]
+pub struct MonitorCore {
+    hash: u64,
+    dt_s: f64,
+    members: Vec<Seen>,
+    index: BTreeMap<u32, usize>,
+    stopped: bool,
+}
+
+impl MonitorCore {
+    /// `members` in formation order: (id, initial position, is a follower).
+    pub fn new(members: &[(u32, Vec3, bool)], hash: u64, dt_s: f64, phase_seed: u32) -> Self {
+        let members: Vec<Seen> = members
+            .iter()
+            .map(|&(id, p, follower)| Seen {
+                id,
+                follower,
+                phase_s: phase_offset_s(phase_seed, id, dt_s),
+                at_rest: Flat::rest(p),
+                states: VecDeque::with_capacity(RING),
+                pacing: None,
+                final_report: false,
+            })
+            .collect();
+        let index = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
+        Self {
+            hash,
+            dt_s,
+            members,
+            index,
+            stopped: false,
+        }
+    }
+
+    /// A message from a member's state service.
+    pub fn on_state(&mut self, msg: &StateMsg) -> Heard {
+        let Some(&k) = self.index.get(&msg.id) else {
+            return Heard::Nothing;
+        };
+        if msg.scenario_hash != self.hash {
+            return Heard::Nothing;
+        }
+        let stopped = self.stopped;
+        let m = &mut self.members[k];
+        if let Some(p) = Pacing::from_msg(msg) {
+            m.pacing = Some(p);
+            m.final_report |= stopped;
+            return Heard::Nothing;
+        }
+        if let AgentStatus::Fault { code, peer } = msg.status() {
+            return Heard::Fault {
+                id: msg.id,
+                tick: msg.tick,
+                code,
+                peer,
+            };
+        }
+        if msg.state.iter().any(|v| !v.is_finite()) {
+            return Heard::NonFinite {
+                id: msg.id,
+                tick: msg.tick,
+            };
+        }
+        if m.states.back().is_none_or(|(t, _)| msg.tick > *t) {
+            if m.states.len() == RING {
+                m.states.pop_front();
+            }
+            m.states.push_back((msg.tick, msg.state));
+        }
+        Heard::Nothing
+    }
+
+    /// The team was told to stop: pacing reports from now on are final.
+    pub fn stopping(&mut self) {
+        self.stopped = true;
+    }
+
+    /// True when every member in `alive` (formation order) sent its final pacing report.
+    pub fn final_reports_in(&self, alive: impl Fn(u32) -> bool) -> bool {
+        self.members.iter().all(|m| m.final_report || !alive(m.id))
+    }
+
+    /// The stamp of member `k`'s newest state (0, the start, before its first).
+    fn newest_stamp(&self, k: usize) -> f64 {
+        let m = &self.members[k];
+        m.states
+            .back()
+            .map_or(0.0, |(t, _)| stamp_s(*t, m.phase_s, self.dt_s))
+    }
+
+    /// The member whose newest state is the oldest, if older than `bound_s` at time `now_s` of
+    /// the common time line: its id and that age (s).
+    pub fn stale(&self, now_s: f64, bound_s: f64) -> Option<(u32, u64, f64)> {
+        (0..self.members.len())
+            .map(|k| (k, now_s - self.newest_stamp(k)))
+            .filter(|(_, age)| *age > bound_s)
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(k, age)| {
+                let m = &self.members[k];
+                (m.id, m.states.back().map_or(0, |(t, _)| *t), age)
+            })
+    }
+
+    /// Position and velocity of member `k` (formation order) at time `t_s`: its newest state
+    /// stamped at or before `t_s` (its rest before the first), moved to `t_s` on the cubic
+    /// Taylor model of a tick.
+    pub fn state_at(&self, k: usize, t_s: f64) -> (Vec3, Vec3) {
+        let m = &self.members[k];
+        let (stamp, flat) = m
+            .states
+            .iter()
+            .rev()
+            .map(|(t, x)| (stamp_s(*t, m.phase_s, self.dt_s), x))
+            .find(|(stamp, _)| *stamp <= t_s)
+            .map_or((0.0, m.at_rest), |(stamp, x)| (stamp, QuadState(*x).flat()));
+        let f = extrapolate_flat(&flat, t_s - stamp, NeighborModel::Taylor);
+        (f.r, f.v)
+    }
+
+    /// The team's pacing figures from the members' reports; `audits`, `audit_hz`, `phase_seed`,
+    /// `stale_after_s` and `wall_s` are the monitor's own.
+    pub fn figures(&self, run: RunFigures) -> RealtimeFigures {
+        let reports: Vec<&PacingFigures> = self
+            .members
+            .iter()
+            .filter_map(|m| m.pacing.as_ref())
+            .collect();
+        let ticks: u64 = reports.iter().map(|p| p.ticks).sum();
+        let late_ticks: u64 = reports.iter().map(|p| p.late_ticks).sum();
+        let followers: Vec<&PacingFigures> = self
+            .members
+            .iter()
+            .filter(|m| m.follower)
+            .filter_map(|m| m.pacing.as_ref())
+            .filter(|p| p.age_samples > 0)
+            .collect();
+        let mut p50s: Vec<f64> = followers.iter().map(|p| p.age_p50_ms).collect();
+        p50s.sort_by(f64::total_cmp);
+        let max = |f: fn(&PacingFigures) -> f64| followers.iter().map(|p| f(p)).fold(0.0, f64::max);
+        let slowest = reports
+            .iter()
+            .max_by(|a, b| {
+                (a.late_ticks, a.max_late_ms)
+                    .partial_cmp(&(b.late_ticks, b.max_late_ms))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            })
+            .map(|p| SlowMember {
+                id: p.id,
+                late_ticks: p.late_ticks,
+                max_late_ms: p.max_late_ms,
+            });
+        RealtimeFigures {
+            ticks,
+            late_ticks,
+            late_ticks_pct: if ticks == 0 {
+                0.0
+            } else {
+                100.0 * late_ticks as f64 / ticks as f64
+            },
+            neighbor_age_ms_p50: p50s.get(p50s.len() / 2).copied().unwrap_or(0.0),
+            neighbor_age_ms_p99: max(|p| p.age_p99_ms),
+            neighbor_age_ms_max: max(|p| p.age_max_ms),
+            slowest_member: slowest,
+            members_reported: reports.len(),
+            audits: run.audits,
+            audit_hz: run.audit_hz,
+            phase_seed: run.phase_seed,
+            stale_after_s: run.stale_after_s,
+            wall_s: run.wall_s,
+            team_cpu_cores: run.team_cpu_cores,
+        }
+    }
+}
+
+/// The monitor's own figures of a run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunFigures {
+    pub audits: u64,
+    pub audit_hz: f64,
+    pub phase_seed: u32,
+    pub stale_after_s: f64,
+    pub wall_s: f64,
+    pub team_cpu_cores: Option<f64>,
+}

@@ -1,0 +1,246 @@
+//! Real time (issue 11): `launch --realtime` with the real binaries over real iceoryx2 shared
+//! memory. Members tick on their own clocks from the announced start, with seeded phase
+//! offsets; the orchestrator monitors. Short plans (3 s of a 10-agent team) keep CI fast; no
+//! test asserts how fast anything ran (only that a paced flight cannot end before its plan).
+//!
+//! - A real-time run of a short plan is SAFE, its `realtime` figures are present and sane, its
+//!   telemetry has a row per agent at every audit instant, and it tracks like `simulate`.
+//! - A member stopped with SIGSTOP is named (agent-silent) and the team stopped, nothing left;
+//!   a killed member is named (agent-exited) the same way.
+//! - SIGINT to the orchestrator stops the team, nothing left.
+//! - A member started by hand in the other mode is refused with exit 2.
+
+mod support;
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use integration_tests::{run, spawn, unique_team, TempDir};
+use serde_json::Value;
+use support::*;
+
+/// A 10-agent team (leaders 1-6, followers 7-10) with a plan of 30 s.
+const TEAM: [&str; 4] = ["--n", "10", "--t-total", "30"];
+/// 3 s of that plan (301 ticks at comm_hz = 100).
+const SHORT: [&str; 2] = ["--max-ticks", "300"];
+/// Slack for a loaded machine around a few seconds of flight.
+const DEADLINE: Duration = Duration::from_secs(90);
+
+fn realtime_launch(team: &str, out: &Path, extra: &[&str]) -> Command {
+    let mut args: Vec<&str> = TEAM.to_vec();
+    args.extend(["--realtime", "--no-figures"]);
+    args.extend(extra);
+    launch(team, out, &args)
+}
+
+/// A real-time team of 10 flying a long plan, seen with its 11 processes: the orchestrator and
+/// the team's footprint (for the "nothing left" check).
+fn flying(team: &str, out: &Path) -> (integration_tests::Running, Footprint) {
+    let mut orch = spawn(&mut realtime_launch(team, out, &[]));
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
+    let procs = team_processes(team);
+    assert_eq!(procs.len(), 11, "{procs:#?}");
+    (orch, Footprint::record(team, procs.keys().copied()))
+}
+
+fn ids(n: u32) -> BTreeSet<u32> {
+    (1..=n).collect()
+}
+
+fn num(v: &Value, key: &str) -> f64 {
+    v[key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{key} is not a number: {v:#}"))
+}
+
+/// A short plan in real time: exit 0, SAFE and complete; the pacing figures are present and
+/// consistent (every member reported, each flew at least the plan's ticks, ages ordered and
+/// under the stale bound, the flight took at least the plan's 3 s); telemetry holds the 301
+/// audit instants; the largest deviation is within 10 % of `simulate`'s for the same plan (the
+/// phase offsets and extrapolated neighbours change it only slightly).
+#[test]
+fn a_short_plan_flies_safe_in_real_time_with_sane_pacing_figures() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_safe");
+    let out = dir.path().join("rt");
+    let o = run(&mut realtime_launch(&team, &out, &SHORT), DEADLINE);
+    assert_exit(&o, 0, "launch --realtime of a short plan");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    let rt = &audit["realtime"];
+    assert_eq!(rt["members_reported"], 10, "{rt:#}");
+    assert_eq!(rt["audits"], 301, "{rt:#}");
+    assert_eq!(rt["phase_seed"], 1, "{rt:#}");
+    let (ticks, late) = (num(rt, "ticks"), num(rt, "late_ticks"));
+    assert!(ticks >= 10.0 * 300.0, "every member flew the plan: {rt:#}");
+    assert!(late <= ticks, "{rt:#}");
+    assert!((num(rt, "late_ticks_pct") - 100.0 * late / ticks).abs() < 1e-9);
+    let (p50, p99, max) = (
+        num(rt, "neighbor_age_ms_p50"),
+        num(rt, "neighbor_age_ms_p99"),
+        num(rt, "neighbor_age_ms_max"),
+    );
+    assert!(
+        0.0 < p50 && p50 <= p99 && p99 <= max && max < 500.0,
+        "{rt:#}"
+    );
+    assert!(num(rt, "wall_s") >= 3.0, "a paced plan of 3 s: {rt:#}");
+    let slowest = rt["slowest_member"]["id"]
+        .as_u64()
+        .expect("a slowest member");
+    assert!((1..=10).contains(&slowest), "{rt:#}");
+    assert_eq!(complete_ticks(&out.join("telemetry.csv"), &ids(10)), 301);
+
+    let sim = dir.path().join("sim");
+    let mut args: Vec<&str> = TEAM.to_vec();
+    args.extend(SHORT);
+    args.push("--no-figures");
+    let so = run(&mut simulate(&sim, &args), DEADLINE);
+    assert_exit(&so, 0, "simulate of the same plan");
+    let sim_audit = read_json(&sim.join("audit.json"));
+    assert!(sim_audit.get("realtime").is_none(), "{sim_audit:#}");
+    let (a, b) = (
+        num(&audit, "max_deviation_m"),
+        num(&sim_audit, "max_deviation_m"),
+    );
+    assert!(b > 0.1, "the short plan moves the team: {sim_audit:#}");
+    assert!(
+        (a - b).abs() <= 0.1 * b,
+        "real time {a} m against simulate {b} m"
+    );
+}
+
+/// SIGSTOP of follower 9 in real time: its newest state ages past the bound (0.5 s), so the
+/// monitor (or a follower that reads it) names agent 9; the team is stopped (the stopped
+/// process killed), exit 3, nothing of the team left.
+#[test]
+fn a_stopped_member_is_named_and_the_team_stopped() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_sigstop");
+    let out = dir.path().join("run");
+    let (orch, fp) = flying(&team, &out);
+    let victim = 9;
+    let pid = member_pid(&team, victim).expect("agent 9 runs");
+    let _guard = Stopped(pid);
+    signal(pid, libc::SIGSTOP);
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 3, "launch --realtime after SIGSTOP of a member");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "FAULT", "{audit:#}");
+    let fault = &audit["fault"];
+    assert_eq!(fault["kind"], "agent-silent", "{audit:#}");
+    assert_eq!(fault["agent"], victim, "{audit:#}");
+    let message = fault["message"].as_str().unwrap_or_default();
+    assert!(message.contains("agent 9 sent no state"), "{fault:#}");
+    assert!(audit["realtime"]["members_reported"].as_u64() >= Some(9));
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
+}
+
+/// SIGKILL of follower 8 in real time: the orchestrator sees its process exit and names it
+/// (`agent-exited`, the signal), stops the team, exit 3, nothing left.
+#[test]
+fn a_killed_member_is_named_and_the_team_stopped() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_kill");
+    let out = dir.path().join("run");
+    let (orch, fp) = flying(&team, &out);
+    let pid = member_pid(&team, 8).expect("agent 8 runs");
+    signal(pid, libc::SIGKILL);
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 3, "launch --realtime after SIGKILL of a member");
+    let audit = read_json(&out.join("audit.json"));
+    let fault = &audit["fault"];
+    assert_eq!(fault["kind"], "agent-exited", "{audit:#}");
+    assert_eq!(fault["agent"], 8, "{audit:#}");
+    let message = fault["message"].as_str().unwrap_or_default();
+    assert!(message.contains("killed by signal 9"), "{fault:#}");
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
+}
+
+/// SIGINT to the orchestrator in real time: the stop sequence, exit 3, `interrupted`, no
+/// process and nothing in /dev/shm left.
+#[test]
+fn sigint_in_real_time_leaves_nothing_behind() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_sigint");
+    let out = dir.path().join("run");
+    let (mut orch, fp) = flying(&team, &out);
+    signal(orch.id(), libc::SIGINT);
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 3, "launch --realtime after SIGINT");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["fault"]["kind"], "interrupted", "{audit:#}");
+    assert!(
+        audit["fault"]["message"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("SIGINT"),
+        "{audit:#}"
+    );
+    assert_no_process_of(&team);
+    fp.assert_nothing_left();
+}
+
+/// A member started by hand without --realtime for a real-time team (and one with --realtime
+/// for a lockstep team) is refused with exit 2 and told which flag to use.
+#[test]
+fn a_member_in_the_other_mode_is_refused() {
+    for (team_flags, member_flag, fix) in [
+        (vec!["--realtime"], None, "with --realtime"),
+        (vec![], Some("--realtime"), "without --realtime"),
+    ] {
+        let dir = TempDir::new();
+        let team = unique_team("rt_mode");
+        let out = dir.path().join("run");
+        let mut args: Vec<&str> = TEAM.to_vec();
+        args.extend(["--no-spawn", "--join-timeout", "30"]);
+        args.extend(&team_flags);
+        let mut orch = spawn(&mut launch(&team, &out, &args));
+        let scenario = out.join("scenario.toml");
+        let s = wait_for_file(&mut orch, &scenario);
+        let mut members = Vec::new();
+        for a in &s.agents {
+            let mut c = member(binary_for(a.role), &scenario, &team, a.id);
+            c.args(["--join-timeout", "30"]);
+            if a.id == 10 {
+                c.args(member_flag);
+            } else {
+                c.args(&team_flags);
+            }
+            members.push((a.id, spawn(&mut c)));
+        }
+        for (id, m) in members {
+            let o = m.finish(DEADLINE);
+            if id == 10 {
+                assert_exit(&o, 2, "a member in the other mode");
+                assert_stderr_has(&o, "member 10", &["agent 10", fix]);
+            }
+        }
+        let _ = orch.finish(DEADLINE);
+        assert_no_process_of(&team);
+    }
+}
+
+/// Waits for the orchestrator to write the flown scenario (a --no-spawn team prints it first).
+fn wait_for_file(
+    orch: &mut integration_tests::Running,
+    path: &Path,
+) -> common::scenario::ScenarioFile {
+    let until = std::time::Instant::now() + DEADLINE;
+    while !path.exists() {
+        assert!(
+            !orch.has_exited(),
+            "the orchestrator exited before writing {}",
+            path.display()
+        );
+        assert!(std::time::Instant::now() < until, "no {}", path.display());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    flown_scenario_file(path)
+}
