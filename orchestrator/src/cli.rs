@@ -110,6 +110,8 @@ pub enum Command {
         #[command(flatten)]
         vehicle: common::vehicles::VehicleArgs,
         #[command(flatten)]
+        hosts: HostArgs,
+        #[command(flatten)]
         realtime: crate::realtime::RealtimeArgs,
         #[command(flatten)]
         run: RunOptions,
@@ -139,6 +141,26 @@ pub enum Command {
     /// crash): their iceoryx2 files in /dev/shm. Running teams are never touched. `launch` does
     /// the same before it starts.
     Clean,
+    /// Run this machine's share of a team whose orchestrator was started with `launch --hosts K
+    /// --listen ENDPOINT` (issue 12): join it over zenoh, spawn the members it assigns here, and
+    /// bridge them to the other hosts. Exit 0 when the team stopped, 2 refused, 3 link lost.
+    Host {
+        /// The orchestrator's endpoint, in zenoh's form (tcp/10.77.0.1:7447).
+        #[arg(long, value_name = "ENDPOINT")]
+        connect: String,
+        /// Join only this team.
+        #[arg(long)]
+        team: Option<String>,
+        /// Be this host of the team (1..K-1; default: the first free one).
+        #[arg(long, value_name = "K")]
+        host: Option<u32>,
+        /// Join only a team flying this scenario (compared by content hash).
+        #[arg(long, value_name = "FILE")]
+        scenario: Option<PathBuf>,
+        /// Seconds to wait for the orchestrator to answer (at most 86400).
+        #[arg(long, default_value_t = 60.0, allow_negative_numbers = true)]
+        join_timeout: f64,
+    },
     /// Export the plan to the stacks that fly real fleets (Crazyswarm2, Skybrush), scaled into
     /// the target volume and certified again there: exit 0 SAFE, 1 UNSAFE (files written only
     /// with --force), 2 bad input or a plan the target cannot hold.
@@ -251,6 +273,20 @@ pub struct OutDir {
     /// Reuse a non-empty --out directory.
     #[arg(long)]
     pub force: bool,
+}
+
+/// `launch` across hosts (issue 12).
+#[derive(Debug, Args, Clone)]
+pub struct HostArgs {
+    /// Split the team over K hosts: this one and K - 1 `orchestrator host` daemons.
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub hosts: u32,
+    /// Where the daemons connect, in zenoh's form (tcp/10.77.0.1:7447); needed with --hosts.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Option<String>,
+    /// Seconds of silence on a host link before it counts as lost (at most 86400).
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
+    pub link_timeout: f64,
 }
 
 /// Options shared by `simulate` and `launch`.

@@ -50,6 +50,8 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// Across hosts (`--hosts`, `--listen`; issue 12).
+    pub hosts: crate::host::HostOptions,
     /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
     pub realtime: Option<crate::realtime::RealtimeOptions>,
     /// What the members fly (forwarded to the spawned members; printed for hand-started ones).
@@ -115,13 +117,16 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         .iter()
         .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
         .collect();
+    let hosts = crate::host::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
     let mut layout = TeamLayout::new(ids.clone(), ins, o.window)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
     if o.on_loss == common::loss::OnLoss::Repair {
         layout = layout.with_repair_room(crate::loss::repair_room(s, o.window));
     }
+    let layout = hosts.hide_remote_edges(layout);
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
+    let bridge = hosts.start_bridge(s, &o.team, o.window)?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
     let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
@@ -136,7 +141,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             o.team
         );
     }
-    let mut children = start_members(s, o, &dir, &mut ports, &member_file, &scenario_file)?;
+    let here = |id: u32| hosts.runs_here(id);
+    let mut children = start_members(s, o, &dir, &mut ports, (&member_file, &scenario_file), here)?;
     let mut audit = Auditor::new(s);
     let result = if let Some(rt) = &o.realtime {
         let team = (&mut ports, children.as_mut_slice());
@@ -170,6 +176,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         tracing::warn!("{e}");
     }
     let report = audit.finish(complete);
+    if let Some(b) = bridge {
+        b.finish(&dir, report.ticks, o.quiet);
+    }
     dir.write_audit(&report).map_err(Failure::fault)?;
     if let Some(v) = &live {
         v.finish(&report);
@@ -193,13 +202,14 @@ fn start_members(
     o: &LaunchOptions,
     dir: &RunDir,
     ports: &mut OrchestratorPorts,
-    member_file: &std::path::Path,
-    scenario_file: &std::path::Path,
+    (member_file, scenario_file): (&std::path::Path, &std::path::Path),
+    runs_here: impl Fn(u32) -> bool,
 ) -> Result<Vec<Spawned>, Failure> {
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let mut children = Vec::new();
     if o.spawn {
-        for m in &s.formation.members {
+        // With --hosts K, the other hosts' daemons spawn theirs.
+        for m in s.formation.members.iter().filter(|m| runs_here(m.id)) {
             let mut flags = crate::realtime::member_flags(o);
             flags.extend(o.vehicles.member_args());
             match spawn_member(member_file, &o.team, m.id, m.role, &flags) {

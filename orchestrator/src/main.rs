@@ -14,6 +14,7 @@ macro_rules! out {
 mod cli;
 mod commands;
 mod export;
+mod host;
 mod launch;
 mod loss;
 mod progress;

@@ -84,16 +84,20 @@ pub fn first_exited_but(
     children: &mut [Spawned],
     known: impl Fn(u32) -> bool,
 ) -> Option<(u32, String)> {
-    use std::os::unix::process::ExitStatusExt;
     children.iter_mut().filter(|c| !known(c.id)).find_map(|c| {
         let status = c.child.try_wait().ok()??;
-        let how = match (status.code(), status.signal()) {
-            (_, Some(sig)) => format!("was killed by signal {sig}"),
-            (Some(code), _) => format!("exited with code {code}"),
-            _ => "exited".into(),
-        };
-        Some((c.id, how))
+        Some((c.id, describe_exit(status)))
     })
+}
+
+/// How a process ended: `exited with code 1`, `was killed by signal 9`.
+pub fn describe_exit(status: std::process::ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    match (status.code(), status.signal()) {
+        (_, Some(sig)) => format!("was killed by signal {sig}"),
+        (Some(code), _) => format!("exited with code {code}"),
+        _ => "exited".into(),
+    }
 }
 
 /// A spawned member that exited before the end is a fault, named with its id and the tick.

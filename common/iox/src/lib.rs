@@ -201,7 +201,15 @@ pub fn iceoryx2_config() -> Config {
 
 /// Creates the one node of a process.
 fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, TransportError> {
-    let name = team.node_name(who);
+    create_named_node(team, who, team.node_name(who))
+}
+
+/// Creates the node `name` for `who` (a bridge's relay nodes are named apart from the agents').
+fn create_named_node(
+    team: &TeamName,
+    who: Role,
+    name: String,
+) -> Result<Node<ipc::Service>, TransportError> {
     let err = |detail: String| TransportError::Node {
         team: team.clone(),
         who,

@@ -15,7 +15,7 @@ use iceoryx2::service::port_factory::event::PortFactory as EventService;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubService;
 
 use super::{
-    create_node, init_logging, service_error, service_name, wait_on, Role, TeamName,
+    create_named_node, init_logging, service_error, service_name, wait_on, Role, TeamName,
     TransportError, CLOCK_BUFFER,
 };
 use crate::messages::{ClockMsg, StateMsg};
@@ -67,9 +67,38 @@ impl MemberPorts {
         in_neighbors: &[u32],
         out_neighbors: &[u32],
     ) -> Result<Self, TransportError> {
+        let node = team.node_name(Role::Agent(id));
+        Self::open_as(team, id, node, scenario_hash, in_neighbors, out_neighbors)
+    }
+
+    /// Opens agent `id`'s ports on behalf of a member that runs on another host (`host`), for the
+    /// bridge that carries its states over the network (issue 12). The ports are an agent's
+    /// (so the team's layout and limits hold unchanged); only the node's name differs,
+    /// `cdm/<team>/host/<host>/agent/<id>`, so `subscriptions.json` shows which edges cross
+    /// hosts. `in_neighbors` and `out_neighbors` are the agent's neighbours on this host only.
+    pub fn open_relay(
+        team: &TeamName,
+        host: u32,
+        id: u32,
+        scenario_hash: u64,
+        in_neighbors: &[u32],
+        out_neighbors: &[u32],
+    ) -> Result<Self, TransportError> {
+        let node = team.relay_node_name(host, id);
+        Self::open_as(team, id, node, scenario_hash, in_neighbors, out_neighbors)
+    }
+
+    fn open_as(
+        team: &TeamName,
+        id: u32,
+        node_name: String,
+        scenario_hash: u64,
+        in_neighbors: &[u32],
+        out_neighbors: &[u32],
+    ) -> Result<Self, TransportError> {
         init_logging();
         let who = Role::Agent(id);
-        let node = create_node(team, who)?;
+        let node = create_named_node(team, who, node_name)?;
         let err =
             |service: &str, op, e: &dyn std::fmt::Debug| service_error(team, who, service, op, e);
 

@@ -70,13 +70,13 @@ pub struct AgentReadiness {
     pub state_publishers: usize,
     /// Subscribers on `state/<id>`, the orchestrator's included.
     pub state_subscribers: usize,
-    /// Out-degree + 1 (the orchestrator).
+    /// Out-degree on this host + 1 (the orchestrator).
     pub expected_state_subscribers: usize,
     /// Listeners on `wake/<id>` (1 when the agent is up).
     pub wake_listeners: usize,
     /// Notifiers on `wake/<id>`, the orchestrator's included.
     pub wake_notifiers: usize,
-    /// In-degree + 1 (the orchestrator).
+    /// In-degree on this host + 1 (the orchestrator).
     pub expected_wake_notifiers: usize,
 }
 
@@ -263,10 +263,10 @@ impl OrchestratorPorts {
                     id,
                     state_publishers: state.number_of_publishers(),
                     state_subscribers: state.number_of_subscribers(),
-                    expected_state_subscribers: self.layout.out_neighbors(id).len() + 1,
+                    expected_state_subscribers: self.layout.visible_out_degree(id) + 1,
                     wake_listeners: wake.number_of_listeners(),
                     wake_notifiers: wake.number_of_notifiers(),
-                    expected_wake_notifiers: self.layout.in_neighbors(id).len() + 1,
+                    expected_wake_notifiers: self.layout.visible_in_degree(id) + 1,
                 })
             })
             .collect();

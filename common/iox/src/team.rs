@@ -67,6 +67,12 @@ impl TeamName {
         }
     }
 
+    /// `cdm/<team>/host/<host>/agent/<id>`: the node through which host `host`'s bridge stands
+    /// in for agent `id`, which runs on another host.
+    pub fn relay_node_name(&self, host: u32, id: u32) -> String {
+        format!("cdm/{}/host/{host}/agent/{id}", self.0)
+    }
+
     /// True when `node_name` belongs to a process of this team.
     pub fn owns_node(&self, node_name: &str) -> bool {
         node_name
@@ -99,6 +105,9 @@ pub struct TeamLayout {
     window: u32,
     scenario_hash: u64,
     repair: Option<RepairRoom>,
+    /// Edges `(source, reader)` that this host's shared memory never carries (both ends run on
+    /// one other host: that host's daemon connects them). Readiness does not wait for them.
+    hidden: BTreeSet<(u32, u32)>,
 }
 
 /// Room the services keep for repairs after losses: readers a member may gain, and how many
@@ -172,6 +181,7 @@ impl TeamLayout {
             window,
             scenario_hash: 0,
             repair: None,
+            hidden: BTreeSet::new(),
         })
     }
 
@@ -198,6 +208,29 @@ impl TeamLayout {
     /// States a state service keeps for late subscribers (0 without repairs).
     pub fn history(&self) -> usize {
         self.repair.as_ref().map_or(0, |r| r.history)
+    }
+
+    /// The same layout with edges `(source, reader)` that run on another host entirely (issue
+    /// 12): services stay sized for the whole team, readiness expects none of their ports here.
+    pub fn with_hidden_edges(mut self, hidden: BTreeSet<(u32, u32)>) -> Self {
+        self.hidden = hidden;
+        self
+    }
+
+    /// How many readers of `id`'s states take a port on this host.
+    pub fn visible_out_degree(&self, id: u32) -> usize {
+        let outs = self.out_neighbors(id);
+        outs.iter()
+            .filter(|&&r| !self.hidden.contains(&(id, r)))
+            .count()
+    }
+
+    /// How many of `id`'s in-neighbours notify it on this host.
+    pub fn visible_in_degree(&self, id: u32) -> usize {
+        let ins = self.in_neighbors(id);
+        ins.iter()
+            .filter(|&&s| !self.hidden.contains(&(s, id)))
+            .count()
     }
 
     /// The team's scenario hash.

@@ -41,6 +41,13 @@ pub const FAULT_CONTROL: u32 = 8;
 /// `StateMsg::fault_code`: the member lost its real vehicle (`--vehicles mavlink`: no HEARTBEAT
 /// for 1 s or no position for 0.5 s, or the vehicle refused to arm).
 pub const FAULT_VEHICLE_LOST: u32 = 9;
+/// `StateMsg::fault_code`: the agent runs on another host whose daemon can no longer be heard
+/// (a network partition or a dead daemon); published on the agent's behalf by the orchestrator's
+/// bridge (issue 12).
+pub const FAULT_HOST_LOST: u32 = 10;
+/// `StateMsg::fault_code`: the agent's process on another host exited before the stop; its
+/// host's daemon saw it and the orchestrator's bridge publishes this on its behalf.
+pub const FAULT_REMOTE_EXITED: u32 = 11;
 
 /// `StateMsg::fault_peer` when the fault involves no other agent.
 pub const NO_PEER: u32 = u32::MAX;
@@ -153,6 +160,10 @@ pub enum FaultCode {
     Control,
     /// [`FAULT_VEHICLE_LOST`]
     VehicleLost,
+    /// [`FAULT_HOST_LOST`]
+    HostLost,
+    /// [`FAULT_REMOTE_EXITED`]
+    RemoteExited,
     /// A code this build does not know (sent by a newer peer).
     Unknown(u32),
 }
@@ -170,6 +181,8 @@ impl FaultCode {
             FaultCode::OrchestratorLost => FAULT_ORCHESTRATOR_LOST,
             FaultCode::Control => FAULT_CONTROL,
             FaultCode::VehicleLost => FAULT_VEHICLE_LOST,
+            FaultCode::HostLost => FAULT_HOST_LOST,
+            FaultCode::RemoteExited => FAULT_REMOTE_EXITED,
             FaultCode::Unknown(c) => c,
         }
     }
@@ -198,6 +211,8 @@ impl FaultCode {
             FAULT_ORCHESTRATOR_LOST => FaultCode::OrchestratorLost,
             FAULT_CONTROL => FaultCode::Control,
             FAULT_VEHICLE_LOST => FaultCode::VehicleLost,
+            FAULT_HOST_LOST => FaultCode::HostLost,
+            FAULT_REMOTE_EXITED => FaultCode::RemoteExited,
             other => FaultCode::Unknown(other),
         })
     }

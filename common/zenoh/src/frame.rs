@@ -1,0 +1,235 @@
+//! What travels between hosts, named by direction of travel: [`Down`] from the orchestrator's
+//! bridge to a host's daemon, [`Up`] back, [`JoinRequest`] / [`JoinReply`] once when a daemon
+//! joins. Every frame goes through the one codec pair [`encode`] / [`decode`] (postcard), so the
+//! codec can be swapped in one place.
+
+use std::collections::BTreeMap;
+
+use cdm_runtime::messages::{ClockMsg, StateMsg};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+/// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
+pub const PROTOCOL_VERSION: u32 = 2;
+
+/// A [`StateMsg`], field for field (the shared-memory type stays free of serde).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NetState {
+    pub tick: u64,
+    pub scenario_hash: u64,
+    pub id: u32,
+    pub status: u32,
+    pub fault_code: u32,
+    pub fault_peer: u32,
+    pub state: [f64; 12],
+}
+
+impl From<StateMsg> for NetState {
+    fn from(m: StateMsg) -> Self {
+        Self {
+            tick: m.tick,
+            scenario_hash: m.scenario_hash,
+            id: m.id,
+            status: m.status,
+            fault_code: m.fault_code,
+            fault_peer: m.fault_peer,
+            state: m.state,
+        }
+    }
+}
+
+impl From<NetState> for StateMsg {
+    fn from(m: NetState) -> Self {
+        Self {
+            tick: m.tick,
+            scenario_hash: m.scenario_hash,
+            id: m.id,
+            status: m.status,
+            fault_code: m.fault_code,
+            fault_peer: m.fault_peer,
+            state: m.state,
+        }
+    }
+}
+
+/// A [`ClockMsg`], field for field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NetClock {
+    pub grant_tick: u64,
+    pub scenario_hash: u64,
+    pub command: u32,
+    pub reason: u32,
+    pub loss_tick: u64,
+    pub loss_seq: u32,
+    pub loss_id: u32,
+    pub loss_linked: u32,
+}
+
+impl From<ClockMsg> for NetClock {
+    fn from(m: ClockMsg) -> Self {
+        Self {
+            grant_tick: m.grant_tick,
+            scenario_hash: m.scenario_hash,
+            command: m.command,
+            reason: m.reason,
+            loss_tick: m.loss_tick,
+            loss_seq: m.loss_seq,
+            loss_id: m.loss_id,
+            loss_linked: m.loss_linked,
+        }
+    }
+}
+
+impl From<NetClock> for ClockMsg {
+    fn from(m: NetClock) -> Self {
+        Self {
+            grant_tick: m.grant_tick,
+            scenario_hash: m.scenario_hash,
+            command: m.command,
+            reason: m.reason,
+            loss_tick: m.loss_tick,
+            loss_seq: m.loss_seq,
+            loss_id: m.loss_id,
+            loss_linked: m.loss_linked,
+            reserved: 0,
+        }
+    }
+}
+
+/// Orchestrator -> daemon.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Down {
+    /// The newest grant or the stop.
+    Clock(NetClock),
+    /// States of other hosts' members that this host's members read (crossing edges), in the
+    /// order they were published.
+    States(Vec<NetState>),
+    /// Nothing new; proves the link alive.
+    Heartbeat,
+}
+
+/// Daemon -> orchestrator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Up {
+    /// Every member of the host has opened its ports; the readers (node names) of each member's
+    /// state service on the host, for `hosts.json`.
+    Ready {
+        subscriptions: BTreeMap<u32, Vec<String>>,
+    },
+    /// States (and fault reports) of this host's members, in the order they were published.
+    States(Vec<NetState>),
+    /// A member process exited before the stop.
+    Exited { id: u32, how: String },
+    /// Nothing new; proves the link alive.
+    Heartbeat,
+    /// The daemon stopped its members after the orchestrator's stop and leaves.
+    Stopped,
+}
+
+/// A daemon asks to join. Every field it gives must match the team's.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JoinRequest {
+    pub version: u32,
+    /// `--team`, when given.
+    pub team: Option<String>,
+    /// `--host`, when given: which host of the team it wants to be (1..K).
+    pub host: Option<u32>,
+    /// The hash of `--scenario`, when given.
+    pub scenario_hash: Option<u64>,
+    /// Who asks (host name and process id), for messages.
+    pub who: String,
+}
+
+/// What a daemon is told to run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Assignment {
+    pub team: String,
+    /// This daemon's host number (the orchestrator's host is 0).
+    pub host: u32,
+    /// Every member's host, in formation order.
+    pub hosts_of: Vec<(u32, u32)>,
+    /// The scenario as JSON (the members' form, same hash).
+    pub scenario_json: String,
+    pub scenario_hash: u64,
+    pub window: u32,
+    /// No frame from the orchestrator for this long: the link is lost.
+    pub link_timeout_ms: u64,
+}
+
+/// The orchestrator's answer to a [`JoinRequest`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum JoinReply {
+    Accepted(Box<Assignment>),
+    /// Why not, naming the field at fault.
+    Refused(String),
+}
+
+/// A frame that could not be decoded (another version, a foreign peer, garbage).
+#[derive(Debug, thiserror::Error)]
+#[error("undecodable frame ({len} bytes): {source}")]
+pub struct DecodeError {
+    len: usize,
+    #[source]
+    source: postcard::Error,
+}
+
+/// Encodes a frame (the one place that names the codec).
+pub fn encode<T: Serialize>(frame: &T) -> Vec<u8> {
+    // postcard fails only on types serde cannot describe as data; ours are plain data.
+    postcard::to_stdvec(frame).unwrap_or_default()
+}
+
+/// Decodes a frame encoded by [`encode`].
+pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, DecodeError> {
+    postcard::from_bytes(bytes).map_err(|source| DecodeError {
+        len: bytes.len(),
+        source,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_round_trip_bit_for_bit() {
+        let s = StateMsg::ok(
+            7,
+            0xfeed,
+            3,
+            [
+                0.1,
+                -0.0,
+                1e-300,
+                f64::MAX,
+                5.0,
+                6.0,
+                7.0,
+                8.0,
+                9.0,
+                10.0,
+                11.0,
+                12.0,
+            ],
+        );
+        let f = Down::States(vec![s.into()]);
+        let back: Down = decode(&encode(&f)).unwrap();
+        let Down::States(v) = back else {
+            panic!("not states")
+        };
+        let m: StateMsg = v[0].into();
+        assert_eq!(m.tick, 7);
+        for (a, b) in m.state.iter().zip(s.state.iter()) {
+            assert_eq!(a.to_bits(), b.to_bits());
+        }
+        let c = ClockMsg::run(9, 1);
+        let back: Down = decode(&encode(&Down::Clock(c.into()))).unwrap();
+        assert_eq!(back, Down::Clock(c.into()));
+    }
+
+    #[test]
+    fn garbage_is_an_error_not_a_panic() {
+        assert!(decode::<Up>(&[0xff, 0xff, 0xff]).is_err());
+        assert!(decode::<JoinRequest>(&[]).is_err());
+    }
+}

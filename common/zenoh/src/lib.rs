@@ -1,0 +1,20 @@
+//! Across hosts (issue 12): the zenoh link between a team's orchestrator and the daemon of each
+//! other host. The only library crate that names zenoh; members never see it (a daemon re-publishes
+//! what crosses hosts into its host's iceoryx2 services, `orchestrator/src/host.rs`).
+//!
+//! | key | frames | from -> to |
+//! |---|---|---|
+//! | `cdm/<team>/join` | [`JoinRequest`] / [`JoinReply`] (a query) | daemon -> orchestrator |
+//! | `cdm/<team>/host/<k>/down` | [`Down`]: clock, crossing states, heartbeat | orchestrator -> daemon k |
+//! | `cdm/<team>/host/<k>/up` | [`Up`]: ready, every member's state, exits, heartbeat | daemon k -> orchestrator |
+
+pub mod frame;
+pub mod link;
+pub mod regions;
+
+pub use frame::{
+    decode, encode, Assignment, DecodeError, Down, JoinReply, JoinRequest, NetClock, NetState, Up,
+    PROTOCOL_VERSION,
+};
+pub use link::{down_key, join_key, up_key, Channel, JoinDesk, Net, NetError, PendingJoin};
+pub use regions::{Placed, Regions};

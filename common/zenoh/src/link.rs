@@ -1,0 +1,312 @@
+//! The zenoh session of a host and the two channels of a host pair (the only module that names
+//! zenoh). Synchronous: zenoh runs its own threads; callers poll with deadlines.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use zenoh::qos::CongestionControl;
+use zenoh::Wait;
+
+use crate::frame::{decode, encode, DecodeError, JoinReply, JoinRequest};
+
+/// What went wrong on the network side, naming the endpoint or key.
+#[derive(Debug, thiserror::Error)]
+pub enum NetError {
+    /// The endpoint is not of zenoh's form (`tcp/10.77.0.1:7447`).
+    #[error("endpoint {endpoint:?}: {detail} (expected zenoh's form, e.g. tcp/10.77.0.1:7447)")]
+    Endpoint { endpoint: String, detail: String },
+    /// zenoh refused to open the session (the address is not ours, the port is taken).
+    #[error("cannot open a zenoh session on {endpoint}: {detail}")]
+    Open { endpoint: String, detail: String },
+    /// Declaring a publisher, subscriber or queryable failed.
+    #[error("zenoh: cannot declare {what} on {key}: {detail}")]
+    Declare {
+        what: &'static str,
+        key: String,
+        detail: String,
+    },
+    /// A frame could not be sent.
+    #[error("zenoh: cannot send on {key}: {detail}")]
+    Send { key: String, detail: String },
+    /// A frame could not be decoded.
+    #[error("frame on {key}: {source}")]
+    Decode {
+        key: String,
+        #[source]
+        source: DecodeError,
+    },
+    /// Nobody answered a join request before the deadline.
+    #[error("no orchestrator answered on {endpoint} within {waited_s:.0} s")]
+    NoAnswer { endpoint: String, waited_s: f64 },
+}
+
+/// The zenoh key of the frames towards host `host`'s daemon.
+pub fn down_key(team: &str, host: u32) -> String {
+    format!("cdm/{team}/host/{host}/down")
+}
+
+/// The zenoh key of the frames from host `host`'s daemon.
+pub fn up_key(team: &str, host: u32) -> String {
+    format!("cdm/{team}/host/{host}/up")
+}
+
+/// The key a team's orchestrator answers join requests on (`*` for any team).
+pub fn join_key(team: Option<&str>) -> String {
+    format!("cdm/{}/join", team.unwrap_or("*"))
+}
+
+/// One zenoh session (peer mode, TCP, no multicast scouting: hosts find each other through the
+/// one endpoint given on the command line, nothing else).
+pub struct Net {
+    session: zenoh::Session,
+    endpoint: String,
+}
+
+impl Net {
+    /// The orchestrator's side: listen on `endpoint`.
+    pub fn listen(endpoint: &str) -> Result<Self, NetError> {
+        Self::open(endpoint, "listen/endpoints")
+    }
+
+    /// A daemon's side: connect to the orchestrator's `endpoint` (zenoh retries in the
+    /// background until it answers; [`Net::join`] bounds the wait).
+    pub fn connect(endpoint: &str) -> Result<Self, NetError> {
+        Self::open(endpoint, "connect/endpoints")
+    }
+
+    fn open(endpoint: &str, key: &str) -> Result<Self, NetError> {
+        let bad = |detail: String| NetError::Endpoint {
+            endpoint: endpoint.to_owned(),
+            detail,
+        };
+        let parsed: zenoh::config::EndPoint = endpoint.parse().map_err(|e| bad(format!("{e}")))?;
+        if parsed.protocol().as_str() != "tcp" {
+            return Err(bad("only tcp endpoints are supported".into()));
+        }
+        let mut cfg = zenoh::Config::default();
+        let set = |cfg: &mut zenoh::Config, k: &str, v: &str| {
+            cfg.insert_json5(k, v).map_err(|e| NetError::Open {
+                endpoint: endpoint.to_owned(),
+                detail: format!("config {k}: {e}"),
+            })
+        };
+        set(&mut cfg, "mode", "\"peer\"")?;
+        set(&mut cfg, key, &format!("[\"{endpoint}\"]"))?;
+        if key == "listen/endpoints" {
+            // Do not also listen on zenoh's default (every interface, a random port).
+            set(&mut cfg, "connect/endpoints", "[]")?;
+        } else {
+            // A peer keeps trying in the background while the orchestrator is not up yet
+            // (zenoh's default for peers); `Net::join` bounds the wait.
+            set(&mut cfg, "listen/endpoints", "[]")?;
+        }
+        set(&mut cfg, "scouting/multicast/enabled", "false")?;
+        set(&mut cfg, "scouting/gossip/enabled", "false")?;
+        set(&mut cfg, "adminspace/enabled", "false")?;
+        let session = zenoh::open(cfg).wait().map_err(|e| NetError::Open {
+            endpoint: endpoint.to_owned(),
+            detail: e.to_string(),
+        })?;
+        Ok(Self {
+            session,
+            endpoint: endpoint.to_owned(),
+        })
+    }
+
+    /// The endpoint given on the command line.
+    pub fn endpoint(&self) -> &str {
+        &self.endpoint
+    }
+
+    /// A channel that sends on `out_key` and receives what arrives on `in_key`.
+    pub fn channel(&self, out_key: &str, in_key: &str) -> Result<Channel, NetError> {
+        let declare = |what, key: &str, e: zenoh::Error| NetError::Declare {
+            what,
+            key: key.to_owned(),
+            detail: e.to_string(),
+        };
+        // Lockstep needs every frame: block (bounded by zenoh's own close timeout) rather than
+        // drop under congestion; one publisher per direction keeps the frames in order.
+        let publisher = self
+            .session
+            .declare_publisher(out_key.to_owned())
+            .congestion_control(CongestionControl::Block)
+            .wait()
+            .map_err(|e| declare("a publisher", out_key, e))?;
+        // An unbounded queue: zenoh's receiving thread never blocks on us, so two hosts that
+        // both send can never wait on each other (a window bounds what is in flight).
+        let (tx, rx) = mpsc::channel();
+        let received = Arc::new(AtomicU64::new(0));
+        let counter = received.clone();
+        let subscriber = self
+            .session
+            .declare_subscriber(in_key.to_owned())
+            .callback(move |sample| {
+                let bytes = sample.payload().to_bytes().into_owned();
+                counter.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+                let _ = tx.send(bytes);
+            })
+            .wait()
+            .map_err(|e| declare("a subscriber", in_key, e))?;
+        Ok(Channel {
+            publisher,
+            _subscriber: subscriber,
+            rx,
+            ahead: None,
+            out_key: out_key.to_owned(),
+            in_key: in_key.to_owned(),
+            sent: 0,
+            received,
+        })
+    }
+
+    /// Serves join requests for `team` (see [`JoinDesk`]).
+    pub fn join_desk(&self, team: &str) -> Result<JoinDesk, NetError> {
+        let key = join_key(Some(team));
+        let queryable = self
+            .session
+            .declare_queryable(key.clone())
+            .wait()
+            .map_err(|e| NetError::Declare {
+                what: "a queryable",
+                key: key.clone(),
+                detail: e.to_string(),
+            })?;
+        Ok(JoinDesk { queryable, key })
+    }
+
+    /// Asks to join, retrying every half second until an orchestrator answers or `within`
+    /// passes. The request goes to any team's orchestrator at the endpoint, so that one of
+    /// another team answers with a refusal naming both teams rather than with silence.
+    pub fn join(&self, request: &JoinRequest, within: Duration) -> Result<JoinReply, NetError> {
+        let key = join_key(None);
+        let until = Instant::now() + within;
+        let payload = encode(request);
+        while Instant::now() < until {
+            let replies = self
+                .session
+                .get(key.clone())
+                .payload(payload.clone())
+                .timeout(Duration::from_millis(500))
+                .wait()
+                .map_err(|e| NetError::Declare {
+                    what: "a query",
+                    key: key.clone(),
+                    detail: e.to_string(),
+                })?;
+            while let Ok(reply) = replies.recv() {
+                if let Ok(sample) = reply.result() {
+                    let bytes = sample.payload().to_bytes();
+                    return decode(&bytes).map_err(|source| NetError::Decode {
+                        key: key.clone(),
+                        source,
+                    });
+                }
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        Err(NetError::NoAnswer {
+            endpoint: self.endpoint.clone(),
+            waited_s: within.as_secs_f64(),
+        })
+    }
+}
+
+/// One direction pair between the orchestrator and one daemon: frames out on one key, frames in
+/// from the other, both counted in bytes (for BENCHMARKS).
+pub struct Channel {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    rx: mpsc::Receiver<Vec<u8>>,
+    /// A frame taken by [`Channel::wait`], returned by the next receive.
+    ahead: Option<Vec<u8>>,
+    out_key: String,
+    in_key: String,
+    sent: u64,
+    received: Arc<AtomicU64>,
+}
+
+impl Channel {
+    /// Sends one frame.
+    pub fn send<T: Serialize>(&mut self, frame: &T) -> Result<(), NetError> {
+        let bytes = encode(frame);
+        self.sent += bytes.len() as u64;
+        self.publisher
+            .put(bytes)
+            .wait()
+            .map_err(|e| NetError::Send {
+                key: self.out_key.clone(),
+                detail: e.to_string(),
+            })
+    }
+
+    /// The next frame received, if any (never blocks).
+    pub fn try_recv<T: DeserializeOwned>(&mut self) -> Result<Option<T>, NetError> {
+        match self.ahead.take().or_else(|| self.rx.try_recv().ok()) {
+            Some(bytes) => self.decode(&bytes).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// Sleeps until a frame arrives or `timeout` passes (the frame stays for the next receive).
+    pub fn wait(&mut self, timeout: Duration) {
+        if self.ahead.is_none() {
+            self.ahead = self.rx.recv_timeout(timeout).ok();
+        }
+    }
+
+    fn decode<T: DeserializeOwned>(&self, bytes: &[u8]) -> Result<T, NetError> {
+        decode(bytes).map_err(|source| NetError::Decode {
+            key: self.in_key.clone(),
+            source,
+        })
+    }
+
+    /// Payload bytes sent and received so far.
+    pub fn bytes(&self) -> (u64, u64) {
+        (self.sent, self.received.load(Ordering::Relaxed))
+    }
+}
+
+/// The orchestrator's join desk: a zenoh queryable on `cdm/<team>/join`.
+pub struct JoinDesk {
+    queryable: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+    key: String,
+}
+
+/// A join request waiting for its answer.
+pub struct PendingJoin {
+    query: zenoh::query::Query,
+    /// What the daemon asked (an undecodable request is answered with a refusal at once).
+    pub request: JoinRequest,
+}
+
+impl JoinDesk {
+    /// The next join request, if any; an undecodable one is refused here (a foreign peer).
+    pub fn poll(&self) -> Option<PendingJoin> {
+        while let Ok(Some(query)) = self.queryable.try_recv() {
+            let bytes = query.payload().map(|p| p.to_bytes().into_owned());
+            match decode::<JoinRequest>(&bytes.unwrap_or_default()) {
+                Ok(request) => return Some(PendingJoin { query, request }),
+                Err(e) => {
+                    let no = JoinReply::Refused(format!("undecodable join request: {e}"));
+                    let _ = query.reply(self.key.clone(), encode(&no)).wait();
+                }
+            }
+        }
+        None
+    }
+}
+
+impl PendingJoin {
+    /// Answers the request.
+    pub fn answer(self, reply: &JoinReply, key: &str) {
+        if let Err(e) = self.query.reply(key.to_owned(), encode(reply)).wait() {
+            tracing::warn!(error = %e, "cannot answer a join request");
+        }
+    }
+}

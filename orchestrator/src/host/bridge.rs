@@ -1,0 +1,522 @@
+//! The orchestrator's bridge: a thread that admits daemons, stands in for their members on this
+//! host's shared memory (relay ports), and carries the clock and the crossing states to them.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use cdm_zenoh::{
+    down_key, up_key, Assignment, Channel, Down, JoinDesk, JoinReply, Net, PendingJoin, Regions,
+    Up, PROTOCOL_VERSION,
+};
+use common::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg};
+use common::scenario::Scenario;
+use common::transport::{MemberPorts, TeamName};
+use serde::Serialize;
+
+use super::plan::placed;
+use super::HostOptions;
+use crate::Failure;
+
+/// How often a quiet link says it is alive.
+pub const HEARTBEAT: Duration = Duration::from_millis(200);
+/// How long the bridge waits, after the team's stop, for every daemon to stop its members.
+const STOP_DEADLINE: Duration = Duration::from_secs(8);
+
+/// What the bridge thread needs, owned.
+struct Ctx {
+    team: TeamName,
+    hash: u64,
+    window: u32,
+    scenario_json: String,
+    regions: Regions,
+    ins: BTreeMap<u32, Vec<u32>>,
+    outs: BTreeMap<u32, Vec<u32>>,
+    link_timeout: Duration,
+    quiet: bool,
+}
+
+/// The bridge thread and its stop flag.
+pub struct Bridge {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<Vec<HostReport>>>,
+    crossing: Vec<(u32, u32)>,
+}
+
+/// One host as `hosts.json` records it.
+#[derive(Debug, Clone, Serialize)]
+pub struct HostReport {
+    pub host: u32,
+    /// The daemon (host name and pid), empty when none joined.
+    pub daemon: String,
+    pub agents: Vec<u32>,
+    /// Readers (node names) of each of its members' states, as the daemon's host saw them.
+    pub subscriptions: BTreeMap<u32, Vec<String>>,
+    pub bytes_sent: u64,
+    pub bytes_received: u64,
+    /// `stopped`, `lost: ...`, or `never joined`.
+    pub outcome: String,
+}
+
+/// Where one daemon's link is.
+#[derive(Debug, Clone, PartialEq)]
+enum Phase {
+    Joined,
+    Ready,
+    Lost(String),
+    Stopped,
+}
+
+/// One joined daemon.
+struct Remote {
+    host: u32,
+    who: String,
+    members: Vec<u32>,
+    chan: Channel,
+    phase: Phase,
+    relays: BTreeMap<u32, MemberPorts>,
+    /// For each source read on that host, the one relay that forwards it (several may read it).
+    forwarder: BTreeMap<u32, u32>,
+    last_tick: BTreeMap<u32, u64>,
+    last_heard: Instant,
+    last_sent: Instant,
+    stop_sent: bool,
+    subscriptions: BTreeMap<u32, Vec<String>>,
+}
+
+impl Bridge {
+    /// Starts the bridge thread on an open session.
+    pub fn start(
+        net: Net,
+        s: &Scenario,
+        team: &TeamName,
+        regions: &Regions,
+        h: &HostOptions,
+        window: u32,
+        quiet: bool,
+    ) -> Result<Self, Failure> {
+        let desk = net
+            .join_desk(team.as_str())
+            .map_err(|e| Failure::fault(format!("--listen: {e}")))?;
+        let placed = placed(s);
+        let crossing = regions.crossing(&placed);
+        let mut ins = BTreeMap::new();
+        let mut outs: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+        for p in &placed {
+            ins.insert(p.id, p.in_neighbors.clone());
+            for &j in &p.in_neighbors {
+                outs.entry(j).or_default().push(p.id);
+            }
+        }
+        let ctx = Ctx {
+            team: team.clone(),
+            hash: s.content_hash(),
+            window,
+            scenario_json: s.to_json(),
+            regions: regions.clone(),
+            ins,
+            outs,
+            link_timeout: h.link_timeout,
+            quiet,
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = std::thread::Builder::new()
+            .name("bridge".into())
+            .spawn(move || run(net, desk, ctx, &flag))
+            .map_err(|e| Failure::fault(format!("cannot start the bridge thread: {e}")))?;
+        Ok(Self {
+            stop,
+            thread: Some(thread),
+            crossing,
+        })
+    }
+
+    /// After the team's stop: lets the daemons stop their members (bounded), then writes
+    /// `hosts.json` and says how many bytes a tick cost on the wire.
+    pub fn finish(mut self, dir: &common::rundir::RunDir, ticks: u64, quiet: bool) {
+        let hosts = self.join();
+        let (sent, received) = hosts
+            .iter()
+            .fold((0, 0), |(a, b), h| (a + h.bytes_sent, b + h.bytes_received));
+        let per_tick = (sent + received) as f64 / ticks.max(1) as f64;
+        let doc = serde_json::json!({
+            "crossing_edges": self.crossing,
+            "hosts": hosts,
+            "bytes_per_tick": per_tick,
+        });
+        let text = serde_json::to_string_pretty(&doc).unwrap_or_default();
+        let _ = common::rundir::write_atomic(&dir.path().join("hosts.json"), text.as_bytes());
+        if !quiet {
+            out!(
+                "  hosts: {} crossing edges, {:.0} bytes per tick on the network ({} sent, {} received)",
+                self.crossing.len(),
+                per_tick,
+                sent,
+                received
+            );
+        }
+    }
+
+    fn join(&mut self) -> Vec<HostReport> {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread
+            .take()
+            .and_then(|t| t.join().ok())
+            .unwrap_or_default()
+    }
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        if self.thread.is_some() {
+            let _ = self.join();
+        }
+    }
+}
+
+/// The bridge thread: admit daemons, pump frames both ways, until stopped.
+fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport> {
+    let mut remotes: BTreeMap<u32, Remote> = BTreeMap::new();
+    let mut stopping_since: Option<Instant> = None;
+    loop {
+        while let Some(p) = desk.poll() {
+            admit(&net, &ctx, &mut remotes, p);
+        }
+        let mut busy = false;
+        for r in remotes.values_mut() {
+            busy |= pump(r, &ctx);
+        }
+        if stop.load(Ordering::Relaxed) {
+            let since = *stopping_since.get_or_insert_with(Instant::now);
+            for r in remotes.values_mut() {
+                stop_fallback(r, &ctx);
+            }
+            let done = remotes
+                .values()
+                .all(|r| matches!(r.phase, Phase::Lost(_) | Phase::Stopped));
+            if done || since.elapsed() > STOP_DEADLINE {
+                break;
+            }
+        }
+        if !busy {
+            match remotes.values_mut().next() {
+                Some(r) => r.chan.wait(Duration::from_micros(500)),
+                None => std::thread::sleep(Duration::from_millis(5)),
+            }
+        }
+    }
+    report(&ctx, remotes)
+}
+
+/// Answers one join request: refused with the reason, or accepted with the host's share.
+fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJoin) {
+    let key = cdm_zenoh::join_key(Some(ctx.team.as_str()));
+    let q = p.request.clone();
+    let hosts = ctx.regions.hosts();
+    let refuse = |p: PendingJoin, why: String| {
+        tracing::warn!(daemon = %q.who, "refused a daemon: {why}");
+        p.answer(&JoinReply::Refused(why), &key);
+    };
+    if q.version != PROTOCOL_VERSION {
+        let why = format!(
+            "the daemon speaks host protocol {} and this orchestrator {PROTOCOL_VERSION}",
+            q.version
+        );
+        return refuse(p, why);
+    }
+    if let Some(t) = q.team.as_deref().filter(|t| *t != ctx.team.as_str()) {
+        let why = format!(
+            "the daemon asks for team {t}; this orchestrator runs team {}",
+            ctx.team
+        );
+        return refuse(p, why);
+    }
+    if let Some(h) = q.scenario_hash.filter(|&h| h != ctx.hash) {
+        let why = format!(
+            "the daemon's scenario has hash {h:016x}; team {} flies {:016x}",
+            ctx.team, ctx.hash
+        );
+        return refuse(p, why);
+    }
+    let host = match q.host {
+        Some(h) if h == 0 || h >= hosts => {
+            let why = format!("--host {h}: team {} has hosts 1..={}", ctx.team, hosts - 1);
+            return refuse(p, why);
+        }
+        Some(h) => match remotes.get(&h) {
+            Some(r) => {
+                let why = format!(
+                    "host {h} of team {} is already taken by {}",
+                    ctx.team, r.who
+                );
+                return refuse(p, why);
+            }
+            None => h,
+        },
+        None => match (1..hosts).find(|h| !remotes.contains_key(h)) {
+            Some(h) => h,
+            None => {
+                let why = format!(
+                    "all {} other hosts of team {} are taken",
+                    hosts - 1,
+                    ctx.team
+                );
+                return refuse(p, why);
+            }
+        },
+    };
+    let chan = match net.channel(
+        &down_key(ctx.team.as_str(), host),
+        &up_key(ctx.team.as_str(), host),
+    ) {
+        Ok(c) => c,
+        Err(e) => {
+            return refuse(
+                p,
+                format!("the orchestrator cannot open host {host}'s link: {e}"),
+            )
+        }
+    };
+    let members = ctx.regions.members(host);
+    let assignment = Assignment {
+        team: ctx.team.as_str().to_owned(),
+        host,
+        hosts_of: ctx.regions.pairs(),
+        scenario_json: ctx.scenario_json.clone(),
+        scenario_hash: ctx.hash,
+        window: ctx.window,
+        link_timeout_ms: ctx.link_timeout.as_millis() as u64,
+    };
+    p.answer(&JoinReply::Accepted(Box::new(assignment)), &key);
+    if !ctx.quiet {
+        out!("host {host} joined: {} (agents {members:?})", q.who);
+    }
+    let now = Instant::now();
+    remotes.insert(
+        host,
+        Remote {
+            host,
+            who: q.who,
+            members,
+            chan,
+            phase: Phase::Joined,
+            relays: BTreeMap::new(),
+            forwarder: BTreeMap::new(),
+            last_tick: BTreeMap::new(),
+            last_heard: now,
+            last_sent: now,
+            stop_sent: false,
+            subscriptions: BTreeMap::new(),
+        },
+    );
+}
+
+/// One round for one daemon: its frames in, the clock and the crossing states out, the
+/// heartbeat, the silence deadline. True when anything moved.
+fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
+    if matches!(r.phase, Phase::Lost(_) | Phase::Stopped) {
+        return false;
+    }
+    let mut busy = false;
+    loop {
+        let frame = match r.chan.try_recv::<Up>() {
+            Ok(Some(f)) => f,
+            Ok(None) => break,
+            Err(e) => {
+                lose(r, ctx, format!("{e}"));
+                return true;
+            }
+        };
+        busy = true;
+        r.last_heard = Instant::now();
+        if let Err(why) = on_frame(r, ctx, frame) {
+            lose(r, ctx, why);
+            return true;
+        }
+    }
+    if r.phase == Phase::Ready {
+        if let Err(why) = forward(r) {
+            lose(r, ctx, why);
+            return true;
+        }
+    }
+    if r.last_sent.elapsed() >= HEARTBEAT {
+        let _ = r.chan.send(&Down::Heartbeat);
+        r.last_sent = Instant::now();
+    }
+    if r.last_heard.elapsed() > ctx.link_timeout {
+        let why = format!(
+            "nothing heard from host {} ({}) for {:.1} s: network partition or daemon gone",
+            r.host,
+            r.who,
+            ctx.link_timeout.as_secs_f64()
+        );
+        lose(r, ctx, why);
+        busy = true;
+    }
+    busy
+}
+
+/// One frame from a daemon.
+fn on_frame(r: &mut Remote, ctx: &Ctx, frame: Up) -> Result<(), String> {
+    match frame {
+        Up::Ready { subscriptions } => {
+            r.subscriptions = subscriptions;
+            open_relays(r, ctx)?;
+            r.phase = Phase::Ready;
+        }
+        Up::States(states) => {
+            let mut touched = vec![];
+            for st in states {
+                let Some(relay) = r.relays.get_mut(&st.id) else {
+                    continue;
+                };
+                relay
+                    .publish_quietly(st.into())
+                    .map_err(|e| e.to_string())?;
+                r.last_tick.insert(st.id, st.tick);
+                touched.push(st.id);
+            }
+            touched.dedup();
+            for id in touched {
+                if let Some(relay) = r.relays.get_mut(&id) {
+                    relay.notify_readers().map_err(|e| e.to_string())?;
+                }
+            }
+        }
+        Up::Exited { id, how } => {
+            tracing::warn!(host = r.host, id, "agent {id} on host {} {how}", r.host);
+            report_fault(r, ctx, id, FaultCode::RemoteExited);
+        }
+        Up::Heartbeat => {}
+        Up::Stopped => r.phase = Phase::Stopped,
+    }
+    Ok(())
+}
+
+/// The relay ports of a ready host's members: each reads (and forwards) its in-neighbours on
+/// other hosts and wakes its out-neighbours on other hosts.
+fn open_relays(r: &mut Remote, ctx: &Ctx) -> Result<(), String> {
+    let elsewhere = |ids: Option<&Vec<u32>>| -> Vec<u32> {
+        let ids = ids.map_or(&[][..], Vec::as_slice);
+        ids.iter()
+            .copied()
+            .filter(|&j| ctx.regions.host_of(j) != r.host)
+            .collect()
+    };
+    for &g in &r.members {
+        let ins = elsewhere(ctx.ins.get(&g));
+        let outs = elsewhere(ctx.outs.get(&g));
+        for &j in &ins {
+            r.forwarder.entry(j).or_insert(g);
+        }
+        let ports = MemberPorts::open_relay(&ctx.team, r.host, g, ctx.hash, &ins, &outs)
+            .map_err(|e| format!("cannot stand in for agent {g} of host {}: {e}", r.host))?;
+        r.relays.insert(g, ports);
+    }
+    Ok(())
+}
+
+/// The clock and the crossing states towards a ready host.
+fn forward(r: &mut Remote) -> Result<(), String> {
+    let mut clock = None;
+    let mut batch = vec![];
+    for (&g, relay) in r.relays.iter_mut() {
+        if let Some(c) = relay.latest_clock().map_err(|e| e.to_string())? {
+            clock = Some(c);
+        }
+        let forwarder = &r.forwarder;
+        relay
+            .receive_neighbors(|m| {
+                if forwarder.get(&m.id) == Some(&g) {
+                    batch.push(m.into());
+                }
+            })
+            .map_err(|e| e.to_string())?;
+    }
+    // States first: a grant must never reach members before the states it lets them use.
+    if !batch.is_empty() {
+        r.chan
+            .send(&Down::States(batch))
+            .map_err(|e| e.to_string())?;
+        r.last_sent = Instant::now();
+    }
+    if let Some(c) = clock {
+        r.stop_sent |= matches!(c.command(), ClockCommand::Stop(_));
+        r.chan
+            .send(&Down::Clock(c.into()))
+            .map_err(|e| e.to_string())?;
+        r.last_sent = Instant::now();
+    }
+    Ok(())
+}
+
+/// Publishes a fault report for `id` through its relay: the orchestrator stops the team with it
+/// as it does for a member's own report (telemetry keeps every complete tick).
+fn report_fault(r: &mut Remote, ctx: &Ctx, id: u32, code: FaultCode) {
+    let tick = r.last_tick.get(&id).copied().unwrap_or(0);
+    let msg = StateMsg::ok(tick, ctx.hash, id, [0.0; 12])
+        .with_status(AgentStatus::Fault { code, peer: None });
+    if let Some(relay) = r.relays.get_mut(&id) {
+        if let Err(e) = relay.publish(msg) {
+            tracing::warn!(id, error = %e, "cannot report a remote agent's fault");
+        }
+    }
+}
+
+/// The link to a daemon is gone: every member of that host is reported lost.
+fn lose(r: &mut Remote, ctx: &Ctx, why: String) {
+    tracing::error!(host = r.host, "host {} lost: {why}", r.host);
+    for id in r.members.clone() {
+        report_fault(r, ctx, id, FaultCode::HostLost);
+    }
+    r.phase = Phase::Lost(why);
+}
+
+/// At the end, a daemon that never received the stop (the team failed before its first grant)
+/// gets one.
+fn stop_fallback(r: &mut Remote, ctx: &Ctx) {
+    if r.stop_sent || matches!(r.phase, Phase::Lost(_) | Phase::Stopped) {
+        return;
+    }
+    let reason = common::messages::StopReason::AgentFault;
+    let stop = ClockMsg::stop(0, ctx.hash, reason);
+    let _ = r.chan.send(&Down::Clock(stop.into()));
+    r.stop_sent = true;
+}
+
+/// Every host's record for `hosts.json`.
+fn report(ctx: &Ctx, mut remotes: BTreeMap<u32, Remote>) -> Vec<HostReport> {
+    (1..ctx.regions.hosts())
+        .map(|host| match remotes.remove(&host) {
+            Some(r) => {
+                let (bytes_sent, bytes_received) = r.chan.bytes();
+                HostReport {
+                    host,
+                    daemon: r.who,
+                    agents: r.members,
+                    subscriptions: r.subscriptions,
+                    bytes_sent,
+                    bytes_received,
+                    outcome: match r.phase {
+                        Phase::Lost(why) => format!("lost: {why}"),
+                        Phase::Stopped => "stopped".into(),
+                        _ => "did not stop in time".into(),
+                    },
+                }
+            }
+            None => HostReport {
+                host,
+                daemon: String::new(),
+                agents: ctx.regions.members(host),
+                subscriptions: BTreeMap::new(),
+                bytes_sent: 0,
+                bytes_received: 0,
+                outcome: "never joined".into(),
+            },
+        })
+        .collect()
+}

@@ -1,0 +1,96 @@
+//! One team on several machines (issue 12). `launch --hosts K --listen ENDPOINT` keeps host 0's
+//! share of the formation on this machine and serves the others to `orchestrator host --connect
+//! ENDPOINT` daemons over zenoh (crate cdm-zenoh, behind the default `hosts` feature).
+//!
+//! Members never see the network: every host runs the team's iceoryx2 services, and a bridge
+//! re-publishes what crosses hosts into them through relay ports (`MemberPorts::open_relay`,
+//! node `cdm/<team>/host/<k>/agent/<id>`): on the orchestrator's host the bridge stands in for
+//! every remote member (its states, for the audit and for local readers); on host k the daemon
+//! stands in for the other hosts' members that host k's members read, and publishes the clock.
+//! `--hosts 1` (the default) opens no socket and changes nothing.
+
+#[cfg(feature = "hosts")]
+mod bridge;
+#[cfg(feature = "hosts")]
+pub mod daemon;
+#[cfg(feature = "hosts")]
+mod plan;
+
+#[cfg(feature = "hosts")]
+pub use plan::Plan;
+
+use std::time::Duration;
+
+/// `launch`'s host options, validated.
+#[derive(Debug, Clone)]
+#[cfg_attr(not(feature = "hosts"), allow(dead_code))]
+pub struct HostOptions {
+    /// How many hosts share the team (1: this one only).
+    pub hosts: u32,
+    /// The zenoh endpoint daemons connect to (required when `hosts > 1`).
+    pub listen: Option<String>,
+    /// Silence on a host link for this long means the link is lost (a partition, a dead peer).
+    pub link_timeout: Duration,
+}
+
+impl Default for HostOptions {
+    fn default() -> Self {
+        Self {
+            hosts: 1,
+            listen: None,
+            link_timeout: Duration::from_secs(3),
+        }
+    }
+}
+
+/// Without the `hosts` feature: one host only, said clearly.
+#[cfg(not(feature = "hosts"))]
+mod single {
+    use common::scenario::Scenario;
+    use common::transport::TeamLayout;
+
+    use super::HostOptions;
+    use crate::Failure;
+
+    /// Every member runs here.
+    pub struct Plan;
+
+    /// Never built: no bridge without the feature.
+    pub struct Bridge;
+
+    impl Plan {
+        pub fn new(
+            _s: &Scenario,
+            h: &HostOptions,
+            _team: &common::transport::TeamName,
+            _quiet: bool,
+        ) -> Result<Self, Failure> {
+            if h.hosts > 1 {
+                return Err(Failure::bad_input(
+                    "--hosts: this orchestrator was built without the `hosts` feature (zenoh)",
+                ));
+            }
+            Ok(Plan)
+        }
+        pub fn hide_remote_edges(&self, layout: TeamLayout) -> TeamLayout {
+            layout
+        }
+        pub fn runs_here(&self, _id: u32) -> bool {
+            true
+        }
+        pub fn start_bridge(
+            &self,
+            _s: &Scenario,
+            _team: &common::transport::TeamName,
+            _window: u32,
+        ) -> Result<Option<Bridge>, Failure> {
+            Ok(None)
+        }
+    }
+
+    impl Bridge {
+        pub fn finish(self, _dir: &common::rundir::RunDir, _ticks: u64, _quiet: bool) {}
+    }
+}
+#[cfg(not(feature = "hosts"))]
+pub use single::Plan;

@@ -1,0 +1,386 @@
+//! One team over two "hosts" (issue 12): two network namespaces joined by a veth pair
+//! (10.77.0.1/24 and 10.77.0.2/24). Host A runs the orchestrator and its share of the members;
+//! host B runs `orchestrator host` and the other share with its own /dev/shm (a tmpfs mounted in
+//! a private mount namespace), so only the network joins them.
+//!
+//! - Lockstep over zenoh writes exactly `simulate`'s telemetry; the subscription graph, read on
+//!   both hosts, is the communication graph, and the edges that cross hosts are recorded.
+//! - A partition (the veth link down) stops both sides within the link deadline, named; the
+//!   orchestrator keeps every complete tick.
+//! - A daemon killed with SIGKILL: its members exit by themselves, the orchestrator stops the
+//!   team naming them.
+//! - Foreign daemons (another scenario, another team, a host already taken) are refused; the
+//!   orchestrator killed with SIGKILL: the daemon and every member exit by themselves.
+//! - Nothing is left in /dev/shm on either side.
+//!
+//! Needs root (CI runs as root). Each test names its namespaces uniquely and deletes them on
+//! drop; only when namespaces cannot be created does a test skip, printing why.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
+use serde_json::Value;
+
+mod support;
+use support::*;
+
+/// A 10-agent team over two hosts runs a few thousand ticks in seconds; the rest is slack.
+const RUN_DEADLINE: Duration = Duration::from_secs(90);
+/// The link deadline given to the orchestrator (`--link-timeout`), in seconds.
+const LINK_TIMEOUT_S: &str = "2";
+/// From a fault (partition, kill) to every process of the team gone: the link deadline, the
+/// team's bounded stop, and slack for a loaded machine.
+const STOP_DEADLINE: Duration = Duration::from_secs(30);
+const ENDPOINT: &str = "tcp/10.77.0.1:7447";
+/// A daemon exits at once when it is refused.
+const REFUSE_DEADLINE: Duration = Duration::from_secs(30);
+
+/// Two network namespaces joined by a veth pair; deleted on drop (processes inside were killed
+/// by their own guards first: fields drop after the test body's guards).
+struct Hosts {
+    a: String,
+    b: String,
+}
+
+fn ip(args: &[&str]) -> Result<(), String> {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .map_err(|e| format!("ip {}: {e}", args.join(" ")))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    }
+}
+
+impl Hosts {
+    /// The pair, or `None` (printed) when this machine cannot create namespaces.
+    fn create(tag: &str) -> Option<Self> {
+        let stem = format!("cdm{tag}{}", std::process::id());
+        let h = Self {
+            a: format!("{stem}a"),
+            b: format!("{stem}b"),
+        };
+        if let Err(e) = ip(&["netns", "add", &h.a]) {
+            eprintln!("SKIPPED: cannot create network namespaces here (needs root): {e}");
+            return None;
+        }
+        let setup = || -> Result<(), String> {
+            ip(&["netns", "add", &h.b])?;
+            let (a, b) = (h.a.as_str(), h.b.as_str());
+            ip(&[
+                "-n", a, "link", "add", "veth0", "type", "veth", "peer", "name", "veth1", "netns",
+                b,
+            ])?;
+            ip(&["-n", a, "addr", "add", "10.77.0.1/24", "dev", "veth0"])?;
+            ip(&["-n", b, "addr", "add", "10.77.0.2/24", "dev", "veth1"])?;
+            for (ns, dev) in [(a, "veth0"), (b, "veth1"), (a, "lo"), (b, "lo")] {
+                ip(&["-n", ns, "link", "set", dev, "up"])?;
+            }
+            Ok(())
+        };
+        // Once one namespace exists, failing to build the rest is a failure, not a skip.
+        setup().unwrap_or_else(|e| panic!("network namespaces: {e}"));
+        Some(h)
+    }
+
+    /// `orchestrator ARGS` on host A.
+    fn on_a(&self, args: &[&str]) -> Command {
+        let mut c = Command::new("ip");
+        c.args(["netns", "exec", &self.a])
+            .arg(bin("orchestrator"))
+            .args(args);
+        c
+    }
+
+    /// `orchestrator ARGS` on host B, with B's own /dev/shm; once the daemon exits, the shell
+    /// lists what is left in that /dev/shm after `LEFT:` (files only).
+    fn on_b(&self, args: &[&str]) -> Command {
+        let script = r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm || exit 97
+"$0" "$@"; rc=$?
+echo "LEFT:$(find /dev/shm -type f | tr '\n' ' ')"
+exit $rc"#;
+        let mut c = Command::new("ip");
+        c.args([
+            "netns", "exec", &self.b, "unshare", "--mount", "sh", "-c", script,
+        ])
+        .arg(bin("orchestrator"))
+        .args(args);
+        c
+    }
+
+    /// The veth link down: a partition.
+    fn cut(&self) {
+        ip(&["-n", &self.a, "link", "set", "veth0", "down"]).expect("cut the link");
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        let _ = ip(&["netns", "del", &self.a]);
+        let _ = ip(&["netns", "del", &self.b]);
+    }
+}
+
+/// The orchestrator's `launch` on two hosts.
+fn launch_args<'a>(team: &'a str, out: &'a str, source: &[&'a str]) -> Vec<&'a str> {
+    let mut v = vec!["launch"];
+    v.extend_from_slice(source);
+    v.extend_from_slice(&[
+        "--team",
+        team,
+        "--out",
+        out,
+        "--quiet",
+        "--hosts",
+        "2",
+        "--listen",
+        ENDPOINT,
+        "--link-timeout",
+        LINK_TIMEOUT_S,
+    ]);
+    v
+}
+
+/// B's files left in its private /dev/shm, from the wrapper's `LEFT:` line. iceoryx2's global
+/// management segment (`<prefix>..._node.0_10_0.global_mgmt`) is per user, not per team: it stays.
+fn left_on_b(out: &Output) -> Vec<String> {
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix("LEFT:"))
+        .unwrap_or_else(|| panic!("host B's wrapper printed no LEFT: line\n{}", describe(out)));
+    line.split_whitespace()
+        .filter(|f| !f.ends_with(".global_mgmt"))
+        .map(str::to_owned)
+        .collect()
+}
+
+/// Waits until no process names `team` (bounded).
+fn wait_no_process_of(team: &str, deadline: Duration) {
+    let until = Instant::now() + deadline;
+    while !team_processes(team).is_empty() && Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert_no_process_of(team);
+}
+
+fn host_agents(hosts: &Value, k: usize) -> BTreeSet<u32> {
+    hosts["hosts"][k - 1]["agents"]
+        .as_array()
+        .unwrap_or_else(|| panic!("hosts.json: no agents for host {k}: {hosts:#}"))
+        .iter()
+        .filter_map(Value::as_u64)
+        .map(|v| v as u32)
+        .collect()
+}
+
+fn names(v: &Value) -> Vec<String> {
+    v.as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+        .map(str::to_owned)
+        .collect()
+}
+
+/// N = 10 over two hosts in lockstep: byte-identical to `simulate`; every edge is subscribed on
+/// the host(s) that carry it; nothing left on either host.
+#[test]
+fn two_hosts_fly_lockstep_exactly_as_simulate() {
+    let Some(h) = Hosts::create("ls") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("hosts");
+    let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
+    let source = ["--n", "10", "--t-total", "20"];
+    let out_s = out.to_string_lossy().into_owned();
+    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
+    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", &team]));
+    let s = run(&mut simulate(&sim, &source), RUN_DEADLINE);
+    assert_exit(&s, 0, "simulate");
+    let o = orch.finish(RUN_DEADLINE);
+    let d = daemon.finish(RUN_DEADLINE);
+    assert_exit(&o, 0, "launch --hosts 2");
+    assert_exit(&d, 0, "orchestrator host");
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+
+    let hosts = read_json(&out.join("hosts.json"));
+    assert_eq!(hosts["hosts"][0]["outcome"], "stopped", "{hosts:#}");
+    let on_b = host_agents(&hosts, 1);
+    assert_eq!(on_b.len(), 5, "{hosts:#}");
+    let flown = flown_scenario(&out);
+    let subs_a = read_json(&out.join("subscriptions.json"));
+    let subs_b = &hosts["hosts"][0]["subscriptions"];
+    let mut crossing = vec![];
+    for a in &flown.agents {
+        for &j in a.in_neighbors.iter().flatten() {
+            let (i, reader) = (a.id, format!("cdm/{team}/agent/{}", a.id));
+            let (src_b, dst_b) = (on_b.contains(&j), on_b.contains(&i));
+            let (seen_a, seen_b) = (names(&subs_a[j.to_string()]), names(&subs_b[j.to_string()]));
+            match (src_b, dst_b) {
+                (false, false) => assert!(seen_a.contains(&reader), "{j}->{i} on A: {seen_a:?}"),
+                (true, true) => assert!(seen_b.contains(&reader), "{j}->{i} on B: {seen_b:?}"),
+                (false, true) => {
+                    // Read on A by host 1's relay of agent i.
+                    let relay = format!("cdm/{team}/host/1/agent/{i}");
+                    assert!(seen_a.contains(&relay), "{j}->{i} crosses: {seen_a:?}");
+                    crossing.push((j, i));
+                }
+                (true, false) => {
+                    assert!(seen_a.contains(&reader), "{j}->{i} crosses: {seen_a:?}");
+                    crossing.push((j, i));
+                }
+            }
+        }
+    }
+    crossing.sort_unstable();
+    let recorded: Vec<(u32, u32)> = serde_json::from_value(hosts["crossing_edges"].clone())
+        .unwrap_or_else(|e| panic!("hosts.json crossing_edges: {e}: {hosts:#}"));
+    assert_eq!(recorded, crossing, "{hosts:#}");
+    assert!(!crossing.is_empty(), "a split team has crossing edges");
+    assert_no_team_resources(&team);
+    assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+}
+
+/// Starts the team on both hosts and waits for some ticks of telemetry. Strict lockstep
+/// (`--window 1`: a round trip over the network per tick) keeps the team flying for far longer
+/// than any test needs; a fault test ends it long before its 60,000 ticks.
+fn running(h: &Hosts, team: &str, out: &Path) -> (Running, Running) {
+    let out_s = out.to_string_lossy().into_owned();
+    let source = ["--n", "10", "--t-total", "600", "--window", "1"];
+    let mut orch = spawn(&mut h.on_a(&launch_args(team, &out_s, &source)));
+    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", team]));
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 200);
+    (orch, daemon)
+}
+
+/// The orchestrator's fault after losing host B: an agent of host B, reported lost.
+fn assert_lost_host_b(out: &Path, code: &str) {
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "FAULT", "{audit:#}");
+    let hosts = read_json(&out.join("hosts.json"));
+    let on_b = host_agents(&hosts, 1);
+    let agent = audit["fault"]["agent"].as_u64().unwrap_or(u64::MAX) as u32;
+    assert!(
+        on_b.contains(&agent),
+        "fault names agent {agent}, not one of host B's {on_b:?}: {audit:#}"
+    );
+    let message = audit["fault"]["message"].as_str().unwrap_or_default();
+    assert!(message.contains(code), "{audit:#}");
+    let flown = flown_scenario(out);
+    let ids: BTreeSet<u32> = flown.agents.iter().map(|a| a.id).collect();
+    let ticks = complete_ticks(&out.join("telemetry.csv"), &ids);
+    assert!(ticks > 20, "only {ticks} complete ticks kept");
+}
+
+/// The link goes down mid-run: both sides stop within the link deadline, each naming the
+/// other; the orchestrator keeps every complete tick; nothing is left on either host.
+#[test]
+fn a_partition_stops_both_sides_named() {
+    let Some(h) = Hosts::create("pt") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("part");
+    let out = dir.path().join("run");
+    let (orch, daemon) = running(&h, &team, &out);
+    h.cut();
+    let o = orch.finish(STOP_DEADLINE);
+    let d = daemon.finish(STOP_DEADLINE);
+    assert_exit(&o, 3, "launch after a partition");
+    assert_exit(&d, 3, "orchestrator host after a partition");
+    assert_stderr_has(&o, "launch", &["host 1 lost", "network partition"]);
+    assert_stderr_has(
+        &d,
+        "host",
+        &[
+            "nothing heard from the orchestrator",
+            "its members were stopped",
+        ],
+    );
+    assert_lost_host_b(&out, "HostLost");
+    wait_no_process_of(&team, STOP_DEADLINE);
+    assert_no_team_resources(&team);
+    assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+}
+
+/// The daemon is killed with SIGKILL: its members stop by themselves (their clock's publisher is
+/// gone), the orchestrator stops the team naming an agent of host B.
+#[test]
+fn a_killed_daemon_is_like_killed_members() {
+    let Some(h) = Hosts::create("kd") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("kdaemon");
+    let out = dir.path().join("run");
+    let (orch, mut daemon) = running(&h, &team, &out);
+    let pid = team_processes(&team)
+        .into_iter()
+        .find(|(_, args)| {
+            let daemon = args.first().is_some_and(|a| a.ends_with("orchestrator"));
+            daemon && args.iter().any(|a| a == "--connect")
+        })
+        .map(|(pid, _)| pid)
+        .expect("the daemon's process");
+    signal(pid, libc::SIGKILL);
+    let o = orch.finish(STOP_DEADLINE);
+    assert_exit(&o, 3, "launch after the daemon was killed");
+    assert_lost_host_b(&out, "HostLost");
+    wait_no_process_of(&team, STOP_DEADLINE);
+    assert_no_team_resources(&team);
+    let _ = daemon.kill();
+}
+
+/// Foreign daemons are refused by name (another scenario, another team, a host already taken);
+/// then the orchestrator is killed with SIGKILL: the daemon and every member exit by themselves.
+#[test]
+fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
+    let Some(h) = Hosts::create("rf") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("refuse");
+    let out = dir.path().join("run");
+    let other = dir.path().join("other.toml");
+    let exported = run(
+        Command::new(bin("orchestrator"))
+            .args(["scenario", "export", "--n", "12", "--out"])
+            .arg(&other),
+        REFUSE_DEADLINE,
+    );
+    assert_exit(&exported, 0, "scenario export");
+    let other_s = other.to_string_lossy().into_owned();
+    let (mut orch, daemon) = running(&h, &team, &out);
+    let refusals: [(&[&str], &str); 3] = [
+        (
+            &["--team", &team, "--scenario", &other_s],
+            "the daemon's scenario has hash",
+        ),
+        (&["--team", "someone_else"], "asks for team someone_else"),
+        (&["--team", &team, "--host", "1"], "host 1 of team"),
+    ];
+    for (extra, needle) in refusals {
+        let mut args = vec!["host", "--connect", ENDPOINT, "--join-timeout", "20"];
+        args.extend_from_slice(extra);
+        let r = run(&mut h.on_b(&args), REFUSE_DEADLINE);
+        assert_exit(&r, 2, &format!("host {extra:?}"));
+        assert_stderr_has(&r, "host", &["refused by the orchestrator", needle]);
+    }
+    signal(orch.id(), libc::SIGKILL);
+    let d = daemon.finish(STOP_DEADLINE);
+    assert_exit(&d, 3, "orchestrator host after the orchestrator was killed");
+    assert_stderr_has(&d, "host", &["nothing heard from the orchestrator"]);
+    wait_no_process_of(&team, STOP_DEADLINE);
+    assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+    let _ = orch.kill();
+    // Host A's leftovers of a SIGKILLed orchestrator are removed by the next launch or `clean`.
+    let c = run(
+        Command::new(bin("orchestrator")).arg("clean"),
+        REFUSE_DEADLINE,
+    );
+    assert_exit(&c, 0, "clean");
+    assert_no_team_resources(&team);
+}
