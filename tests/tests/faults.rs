@@ -400,7 +400,10 @@ fn a_foreign_process_cannot_publish_into_a_team() {
     let dir = TempDir::new();
     let team = unique_team("foreign");
     let out = dir.path().join("run");
-    let mut orch = spawn(&mut launch_team(&team, &out, "60", &[]));
+    // `--on-loss repair` (the default) sizes every state service with spare subscriber slots for
+    // the readers a repair may add: those are open to a reader of this user. Without repairs
+    // the only spare slot is the observer's.
+    let mut orch = spawn(&mut launch_team(&team, &out, "60", &["--on-loss", "stop"]));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), ROWS_BEFORE_FAULT);
 
     let t = TeamName::new(&team).expect("team name");

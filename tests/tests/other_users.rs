@@ -311,6 +311,7 @@ fn a_squatted_or_open_iceoryx2_root_is_refused_naming_owner_and_mode() {
 /// good (the user's root directory and management segment). Before the fix, only a later launch
 /// of the same team name removed anything, and iceoryx2 itself could not remove what a kill in
 /// the middle of a service's creation left (it even waited forever on an empty segment).
+/// `--on-loss stop` because sizing for repairs delays the creation of services past the kill.
 #[test]
 fn a_team_killed_during_start_up_is_removed_by_the_next_launch_of_another_team() {
     let probe = Command::new("unshare").args(["-m", "true"]).output();
@@ -330,7 +331,7 @@ O="$0"; D="$1"; KILLED="$2"; OTHER="$3"
 mount -t tmpfs -o size=1g tmpfs /dev/shm
 timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --quiet --team warmup --out "$D/w" >/dev/null
 find /dev/shm | sort > "$D/before.txt"
-"$O" launch --n 200 --quiet --no-figures --team "$KILLED" --out "$D/k" >/dev/null 2>&1 &
+"$O" launch --n 200 --on-loss stop --quiet --no-figures --team "$KILLED" --out "$D/k" >/dev/null 2>&1 &
 PID=$!
 sleep 0.05
 kill -9 "$PID"

@@ -248,7 +248,9 @@ fn a_bus_error_in_a_member_is_reported_as_shared_memory_full() {
     let dir = TempDir::new();
     let team = unique_team("sigbus");
     let out = dir.path().join("run");
-    let mut orch = spawn(&mut launch(&team, &out, &["--n", "10", "--t-total", "600"]));
+    // `--on-loss stop`: the fault is the subject here (with repair the team flies on).
+    let args = ["--n", "10", "--t-total", "600", "--on-loss", "stop"];
+    let mut orch = spawn(&mut launch(&team, &out, &args));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
     let procs = team_processes(&team);
     assert_eq!(procs.len(), 11, "{procs:#?}");
