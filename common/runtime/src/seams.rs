@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
 use cdm_core::plan::TeamPlan;
-use cdm_core::step::{law_for, step, step_at, Law, StepConfig, StepFault, TickAt};
+use cdm_core::step::{law_for, step_at, Law, StepConfig, StepFault, TickAt};
 
 use crate::messages::{ClockMsg, StateMsg};
 
@@ -197,17 +197,12 @@ impl Vehicle for ModelVehicle<'_> {
     }
 
     fn fly_tick(&mut self, tick: u64, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
-        let next = step(
-            &self.cfg,
-            self.plan,
-            &self.law,
+        // A lockstep tick is a tick with no phase offset (as `step` is `step_at`).
+        let at = TickAt {
             tick,
-            &self.x,
-            neighbors,
-            &self.neighbor_ids,
-        )?;
-        self.x = next;
-        Ok(())
+            offset_s: 0.0,
+        };
+        self.fly_tick_at(at, neighbors)
     }
 
     fn fly_tick_at(&mut self, at: TickAt, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
