@@ -525,7 +525,7 @@ impl Recorder {
             .map_err(|f| (f, StopReason::AgentFault))?;
         if let Some(v) = live.as_mut() {
             let (pos, ht) = (self.tick.positions(), self.tick.desired());
-            v.tick(tick, t, pos, ht, audit.report());
+            v.tick(tick, t, (pos, ht), |k| states[k].is_some(), audit.report());
         }
         self.progress.tick(tick, audit.report());
         Ok(())

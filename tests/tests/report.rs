@@ -100,6 +100,10 @@ fn report_redraws_every_figure_and_fig8_has_the_audits_lambda1_minimum() {
     for stem in ["fig_eigenvalues", "fig_separation", "fig_formation", &agent] {
         assert_figure(&run_dir, stem);
     }
+    assert!(
+        !files.iter().any(|n| n.starts_with("fig_loss_transient")),
+        "a run without losses drew a repair transient: {files:?}"
+    );
     // The default follower is one of paper40's followers (ids 7-40).
     let id: u32 = agent["fig_agent_".len()..].parse().expect("agent id");
     assert!((7..=40).contains(&id), "{agent}");
@@ -208,4 +212,81 @@ fn plan_sweep_draws_the_deviation_figure() {
     let out = run(&mut c, DEADLINE);
     assert_eq!(out.status.code(), Some(2), "{}", describe(&out));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--sweep"));
+}
+
+/// A run that lost a primary leader: `report` draws the repaired followers' deviation
+/// (fig_loss_transient) for exactly the followers audit.json says were re-triangulated or left
+/// flying their plan, from the same telemetry the audit measured.
+#[test]
+fn report_of_a_run_with_a_loss_draws_the_repair_transient() {
+    let dir = TempDir::new();
+    let run_dir = dir.path().join("run");
+    let mut c = orchestrator(&[
+        "simulate",
+        "--quiet",
+        "--no-figures",
+        "--max-ticks",
+        "3000",
+        "--lose",
+        "1@10",
+    ]);
+    c.arg("--out").arg(&run_dir);
+    ok(&run(&mut c, DEADLINE));
+    let mut c = orchestrator(&["report"]);
+    c.arg(&run_dir);
+    ok(&run(&mut c, DEADLINE));
+    assert_figure(&run_dir, "fig_loss_transient");
+
+    let audit: Value = serde_json::from_str(
+        &std::fs::read_to_string(run_dir.join("audit.json")).expect("audit.json"),
+    )
+    .expect("json");
+    let loss = &audit["losses"][0];
+    assert_eq!(loss["id"], 1, "{loss}");
+    let mut expected: Vec<u64> = loss["retriangulated"]
+        .as_array()
+        .expect("retriangulated")
+        .iter()
+        .map(|r| r["id"].as_u64().expect("id"))
+        .chain(
+            loss["degraded"]
+                .as_array()
+                .expect("degraded")
+                .iter()
+                .map(|x| x.as_u64().expect("id")),
+        )
+        .collect();
+    expected.sort_unstable();
+    assert!(
+        !expected.is_empty(),
+        "losing leader 1 repaired nobody: {loss}"
+    );
+
+    let text = std::fs::read_to_string(run_dir.join("fig_loss_transient.csv")).expect("csv");
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("id,t,deviation_m"));
+    let mut ids = Vec::new();
+    let mut peak = 0.0f64;
+    for l in lines {
+        let f: Vec<&str> = l.split(',').collect();
+        let id: u64 = f[0].parse().expect("id");
+        let dev: f64 = f[2].parse().expect("deviation");
+        assert!(dev.is_finite() && dev >= 0.0, "{l}");
+        peak = peak.max(dev);
+        if ids.last() != Some(&id) {
+            ids.push(id);
+        }
+    }
+    ids.sort_unstable();
+    ids.dedup();
+    assert_eq!(
+        ids, expected,
+        "followers drawn against audit.json's repairs"
+    );
+    // Every drawn deviation is one the audit measured: none exceeds its largest.
+    let max_dev = audit["max_follower_deviation_m"].as_f64().expect("max");
+    assert!(
+        peak > 0.0 && peak <= max_dev + 1e-9,
+        "peak {peak}, audit {max_dev}"
+    );
 }

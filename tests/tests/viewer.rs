@@ -108,6 +108,7 @@ fn status(url: &str, dir: &Path, offline: bool) -> Status {
             .contains("data-first-tick")
             .then(|| num("data-first-tick")),
         verdict: attr("data-verdict"),
+        lost: num("data-lost"),
     }
 }
 
@@ -117,6 +118,8 @@ struct Status {
     tick: i64,
     first_tick: Option<i64>,
     verdict: String,
+    /// Members lost by the shown tick.
+    lost: i64,
 }
 
 /// Takes a screenshot and asserts it is not blank: several colours, and the agents drawn (many
@@ -169,21 +172,20 @@ fn screenshot(url: &str, dir: &Path, offline: bool) -> PathBuf {
     path
 }
 
-/// A finished paper40 run (2,000 ticks) in a fresh directory.
-fn paper40_run(tmp: &TempDir) -> (PathBuf, Value) {
+/// A finished paper40 run (2,000 ticks) in a fresh directory; `extra` are more simulate flags.
+fn paper40_run(tmp: &TempDir, extra: &[&str]) -> (PathBuf, Value) {
     let out = tmp.path().join("run");
     let o = out.to_str().unwrap_or_default();
-    ok(&run(
-        &mut orchestrator(&[
-            "simulate",
-            "--out",
-            o,
-            "--no-figures",
-            "--max-ticks",
-            "2000",
-        ]),
-        RUN_DEADLINE,
-    ));
+    let mut args = vec![
+        "simulate",
+        "--out",
+        o,
+        "--no-figures",
+        "--max-ticks",
+        "2000",
+    ];
+    args.extend_from_slice(extra);
+    ok(&run(&mut orchestrator(&args), RUN_DEADLINE));
     let audit = read_json(&out.join("audit.json"));
     (out, audit)
 }
@@ -196,7 +198,7 @@ fn file_url(path: &Path) -> String {
 #[test]
 fn replay_html_works_from_file_with_the_network_disabled() {
     let tmp = TempDir::new();
-    let (out, audit) = paper40_run(&tmp);
+    let (out, audit) = paper40_run(&tmp, &[]);
     let replay = out.join("replay.html");
     let page = std::fs::read_to_string(&replay).unwrap_or_else(|e| panic!("{e}"));
     // Self-contained: nothing is loaded from anywhere else.
@@ -208,13 +210,17 @@ fn replay_html_works_from_file_with_the_network_disabled() {
     // The replay opens on the run's last tick.
     assert_eq!(s.tick, 2000, "{s:?}");
     assert_eq!(s.verdict, audit["verdict"].as_str().unwrap_or("?"), "{s:?}");
+    assert_eq!(s.lost, 0, "{s:?}");
     screenshot(&file_url(&replay), tmp.path(), true);
 }
 
+/// The served run lost follower 20 at t = 5 s: the page shows it lost, with the repaired graph
+/// drawn (`?graph=1`), and no page error.
 #[test]
 fn view_serves_the_replay_of_a_finished_run() {
     let tmp = TempDir::new();
-    let (out, audit) = paper40_run(&tmp);
+    let (out, audit) = paper40_run(&tmp, &["--lose", "20@5"]);
+    assert_eq!(audit["losses"][0]["id"], 20, "{audit}");
     std::fs::remove_file(out.join("replay.html")).unwrap_or_else(|e| panic!("{e}"));
     let o = out.to_str().unwrap_or_default();
     let mut view = spawn(&mut orchestrator(&["view", o, "--serve", "127.0.0.1:0"]));
@@ -224,10 +230,10 @@ fn view_serves_the_replay_of_a_finished_run() {
         out.join("replay.html").is_file(),
         "view rewrites replay.html"
     );
-    let s = status(&url, tmp.path(), false);
+    let s = status(&format!("{url}?graph=1"), tmp.path(), false);
     assert_eq!(
-        (s.agents, s.tick, s.verdict.as_str()),
-        (40, 2000, audit["verdict"].as_str().unwrap_or("?")),
+        (s.agents, s.tick, s.verdict.as_str(), s.lost),
+        (40, 2000, audit["verdict"].as_str().unwrap_or("?"), 1),
         "{s:?}"
     );
     let done = view.kill();

@@ -1,6 +1,7 @@
 // The cdm viewer: a team of quadcopters in 3-D (three.js), its four safety margins, the live
 // curves of Figs. 8 and 11, and either a replay timeline or a live Server-Sent Events stream.
-// DOM contract for tests: #cdm-status carries data-agents, data-tick and data-verdict.
+// DOM contract for tests: #cdm-status carries data-agents, data-tick, data-verdict and data-lost
+// (members lost by the shown tick: hidden, and the graph drawn is the repaired one).
 import * as THREE from 'three';
 import { OrbitControls } from 'orbit';
 
@@ -48,7 +49,10 @@ function lines(count, colour, opacity, loop) {
 const poly = scene.polygon.length;
 const polygon = lines(poly, 0x7cf29a, 1, true);
 const prism = lines(poly * 6, 0x7cf29a, 0.45, false); // two bases and the side edges
-const graph = lines(scene.edges.length * 2, 0x9aa7b8, 0.35, false);
+// The graph in force at a tick: the t0 graph, then each loss's repair (`scene.graphs`).
+const graphs = [{ tick: 0, edges: scene.edges }].concat(scene.graphs ?? []);
+const edges_at = (tick) => graphs.filter((g) => g.tick <= tick).pop().edges;
+const graph = lines(Math.max(...graphs.map((g) => g.edges.length)) * 2, 0x9aa7b8, 0.35, false);
 // `?graph=1` opens the page with the communication graph shown.
 graph.visible = new URLSearchParams(location.search).get('graph') === '1';
 $('graph').checked = graph.visible;
@@ -61,9 +65,11 @@ const pos = (f, k) => new THREE.Vector3(f.p[3 * k] / 1000, f.p[3 * k + 1] / 1000
 
 function frame_to_scene(f) {
   const m = new THREE.Matrix4();
+  const lost = new Set(f.lost ?? []);
   for (let k = 0; k < n; k++) {
     const r = pos(f, k);
-    m.makeScale(radius, radius, radius).setPosition(r);
+    const size = lost.has(k) ? 0 : radius; // a lost member leaves the scene
+    m.makeScale(size, size, size).setPosition(r);
     agents.setMatrixAt(k, m);
   }
   agents.instanceMatrix.needsUpdate = true;
@@ -92,11 +98,13 @@ function frame_to_scene(f) {
   }
   if (graph.visible) {
     const a = graph.geometry.attributes.position;
-    scene.edges.forEach(([from, to], i) => {
+    const edges = edges_at(f.tick);
+    edges.forEach(([from, to], i) => {
       const p = pos(f, from), q = pos(f, to);
       a.setXYZ(2 * i, p.x, p.y, p.z);
       a.setXYZ(2 * i + 1, q.x, q.y, q.z);
     });
+    graph.geometry.setDrawRange(0, 2 * edges.length);
     a.needsUpdate = true;
   }
 }
@@ -169,9 +177,12 @@ function status(f) {
   s.dataset.agents = String(n);
   s.dataset.tick = String(f.tick);
   s.dataset.verdict = verdict;
+  const lost = (f.lost ?? []).length;
+  s.dataset.lost = String(lost);
   const rate_text = rate === null ? '' : `   ${Math.round(rate)} ticks/s`;
   s.textContent = `${scene.scenario}: ${n} agents, ${live ? 'live' : 'replay'}\n` +
-    `tick ${f.tick} / ${scene.last_tick}   t = ${f.t.toFixed(2)} s${rate_text}\nverdict ${verdict}`;
+    `tick ${f.tick} / ${scene.last_tick}   t = ${f.t.toFixed(2)} s${rate_text}\nverdict ${verdict}` +
+    (lost > 0 ? `   lost ${lost}` : '');
 }
 
 // --- selection: click an agent for its track and numbers --------------------------------------

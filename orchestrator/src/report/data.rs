@@ -64,6 +64,55 @@ pub struct AuditNumbers {
     pub first_violation: Option<(&'static str, Real)>,
     /// Members lost in flight: (id, the first tick without its row in telemetry.csv).
     pub losses: Vec<(u32, u64)>,
+    /// What each loss changed, in loss order (audit.json `losses`).
+    pub repairs: Vec<Repair>,
+}
+
+/// One loss as audit.json records it: the followers that switched triangles (eq. 18 weights
+/// of the new triangle) and those left flying their plan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Repair {
+    pub id: u32,
+    /// The first tick the repair applies to.
+    pub tick: u64,
+    /// (follower, new in-neighbours).
+    pub retriangulated: Vec<(u32, [u32; 3])>,
+    pub degraded: Vec<u32>,
+}
+
+/// audit.json's `losses` list (absent in a run that lost nobody).
+fn read_repairs(v: &serde_json::Value) -> Vec<Repair> {
+    let ids = |x: &serde_json::Value| -> Vec<u32> {
+        x.as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|i| u32::try_from(i.as_u64()?).ok())
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let one = |l: &serde_json::Value| -> Option<Repair> {
+        let retriangulated = l
+            .get("retriangulated")?
+            .as_array()?
+            .iter()
+            .filter_map(|r| {
+                let id = u32::try_from(r.get("id")?.as_u64()?).ok()?;
+                let new: [u32; 3] = ids(r.get("new")?).try_into().ok()?;
+                Some((id, new))
+            })
+            .collect();
+        Some(Repair {
+            id: u32::try_from(l.get("id")?.as_u64()?).ok()?,
+            tick: l.get("tick")?.as_u64()?,
+            retriangulated,
+            degraded: l.get("degraded").map(ids).unwrap_or_default(),
+        })
+    };
+    v.get("losses")
+        .and_then(|x| x.as_array())
+        .map(|a| a.iter().filter_map(one).collect())
+        .unwrap_or_default()
 }
 
 /// One tick of the run, as drawn.
@@ -94,6 +143,16 @@ pub struct RunData {
     pub last: Vec<Vec3>,
     /// The primary leaders' actual paths, decimated (member order 0..3).
     pub primary_paths: [Vec<Vec3>; 3],
+    /// The deviation |r - r_HT| (eq. 13) over time of every follower a loss repaired or left
+    /// flying its plan, decimated like the primary paths: the repair transients.
+    pub transients: Vec<Transient>,
+}
+
+/// One repaired follower's deviation from its desired position, (t, |r - r_HT|) pairs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transient {
+    pub id: u32,
+    pub points: Vec<(Real, Real)>,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ReadError + '_ {
@@ -115,6 +174,7 @@ pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
     let text = common::files::read_input(path, common::files::MAX_INPUT_BYTES)?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
+    let repairs = read_repairs(&v);
     let num = |key: &str| {
         v.get(key)
             .and_then(serde_json::Value::as_f64)
@@ -141,18 +201,8 @@ pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
                 };
                 Some((kind, f.get("t_s")?.as_f64()?))
             }),
-        losses: v
-            .get("losses")
-            .and_then(|x| x.as_array())
-            .map(|a| {
-                a.iter()
-                    .filter_map(|l| {
-                        let id = u32::try_from(l.get("id")?.as_u64()?).ok()?;
-                        Some((id, l.get("tick")?.as_u64()?))
-                    })
-                    .collect()
-            })
-            .unwrap_or_default(),
+        losses: repairs.iter().map(|r| (r.id, r.tick)).collect(),
+        repairs,
     })
 }
 
@@ -235,9 +285,34 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         first: Vec::new(),
         last: Vec::new(),
         primary_paths: [Vec::new(), Vec::new(), Vec::new()],
+        transients: Vec::new(),
     };
+    let repaired: std::collections::BTreeSet<u32> = data
+        .audit
+        .repairs
+        .iter()
+        .flat_map(|r| {
+            r.retriangulated
+                .iter()
+                .map(|x| x.0)
+                .chain(r.degraded.clone())
+        })
+        .collect();
+    // An id audit.json names that the scenario lacks has no row to draw.
+    let repaired: Vec<(usize, u32)> = repaired
+        .into_iter()
+        .filter_map(|id| Some((*index.get(&id)?, id)))
+        .collect();
+    data.transients = repaired
+        .iter()
+        .map(|&(_, id)| Transient {
+            id,
+            points: Vec::new(),
+        })
+        .collect();
     let expected_ticks = scenario.last_tick() + 1;
     let path_stride = (expected_ticks / 400).max(1);
+    let transient_stride = (expected_ticks / 4000).max(1);
     stream_ticks(dir, &scenario, &data.audit.losses.clone(), |tp| {
         let (tick, t, pos, ht) = (tp.tick, tp.t_s, tp.pos, tp.ht);
         let (sep, _, _) = living_separation(pos, tp.alive);
@@ -252,6 +327,13 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         }
         data.last.clear();
         data.last.extend_from_slice(pos);
+        if tick.is_multiple_of(transient_stride) {
+            for (&(k, _), tr) in repaired.iter().zip(&mut data.transients) {
+                if tp.alive[k] {
+                    tr.points.push((t, (pos[k] - ht[k]).norm()));
+                }
+            }
+        }
         data.samples.push(TickSample {
             tick,
             t_s: t,

@@ -6,6 +6,7 @@ pub mod data;
 mod formation;
 mod plot;
 mod top_view;
+mod transient;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -44,6 +45,7 @@ fn draw_all(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
     files.extend(eigenvalues(dir, d)?);
     files.extend(agent(dir, d)?);
     files.extend(separation(dir, d)?);
+    files.extend(transient::loss_transient(dir, d)?);
     files.extend(write_figure(
         dir,
         "fig_formation",

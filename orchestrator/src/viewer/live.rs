@@ -49,8 +49,15 @@ impl LiveView {
     }
 
     /// One audited tick: sent when the last frame is at least an interval old (the first and
-    /// the last tick always are).
-    pub fn tick(&mut self, tick: u64, t: f64, pos: &[Vec3], ht: &[Vec3], report: &AuditReport) {
+    /// the last tick always are). `flying(k)` is false for a member lost by this tick.
+    pub fn tick(
+        &mut self,
+        tick: u64,
+        t: f64,
+        (pos, ht): (&[Vec3], &[Vec3]),
+        flying: impl Fn(usize) -> bool,
+        report: &AuditReport,
+    ) {
         let now = Instant::now();
         let due = self
             .last_sent
@@ -58,8 +65,7 @@ impl LiveView {
         if !due && tick != self.scenario.last_tick() {
             return;
         }
-        // `launch` loses no member (it refuses `--lose`), so every member is alive.
-        let alive = vec![true; pos.len()];
+        let alive: Vec<bool> = (0..pos.len()).map(flying).collect();
         let tp = TickPositions {
             tick,
             t_s: t,

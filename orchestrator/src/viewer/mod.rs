@@ -53,7 +53,8 @@ pub fn replay_scene(dir: &Path) -> Result<Scene, ViewerError> {
         numbers.delta_m,
         numbers.eps_m,
         numbers.lambda_cd_min,
-    );
+    )
+    .with_repairs(&scenario, &numbers.repairs);
     scene.verdict = timeline.verdict;
     scene.violations = timeline.violations;
     let n = scenario.formation.members.len();

@@ -9,7 +9,7 @@ use common::math::Real;
 use common::scenario::Scenario;
 
 use crate::report::data::{
-    boundary_distance, lambdas_at, living_separation, TickPositions, ViolationMark,
+    boundary_distance, lambdas_at, living_separation, Repair, TickPositions, ViolationMark,
 };
 
 /// One agent as the viewer lists it.
@@ -42,6 +42,16 @@ pub struct Scene {
     pub frames: Vec<Frame>,
     /// How many ticks one replay frame stands for (1 live).
     pub stride: u64,
+    /// The graph after each loss's repair, from the tick it applies (replay of a run with losses).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub graphs: Vec<GraphChange>,
+}
+
+/// The communication graph in force from `tick` on, as (in-neighbour, follower) member indices.
+#[derive(Debug, Clone, Serialize)]
+pub struct GraphChange {
+    pub tick: u64,
+    pub edges: Vec<[usize; 2]>,
 }
 
 /// One shown tick.
@@ -59,6 +69,9 @@ pub struct Frame {
     pub bnd: Real,
     /// lambda_1(U_D) (limit lambda_CD,min, Fig. 8).
     pub l1: Real,
+    /// Member indices no longer flying (lost) at this tick.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub lost: Vec<usize>,
     /// Ticks per second of wall time (live frames only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rate: Option<Real>,
@@ -101,7 +114,45 @@ impl Scene {
             violations: Vec::new(),
             frames: Vec::new(),
             stride: 1,
+            graphs: Vec::new(),
         }
+    }
+
+    /// Adds the graph each loss left (audit.json's repairs, in loss order): the lost member
+    /// reads nobody any more, a re-triangulated follower reads its new triangle (eq. 18) and a
+    /// degraded one, flying its plan, nobody. Ids the scenario lacks are skipped.
+    pub fn with_repairs(mut self, s: &Scenario, repairs: &[Repair]) -> Self {
+        let members = &s.formation.members;
+        let index = |id: u32| members.iter().position(|m| m.id == id);
+        let mut reads: Vec<Vec<usize>> = members
+            .iter()
+            .map(|m| {
+                m.link
+                    .map(|l| l.in_neighbors.into_iter().filter_map(index).collect())
+                    .unwrap_or_default()
+            })
+            .collect();
+        for r in repairs {
+            let emptied = std::iter::once(r.id).chain(r.degraded.iter().copied());
+            for k in emptied.filter_map(index) {
+                reads[k].clear();
+            }
+            for (id, new) in &r.retriangulated {
+                if let Some(k) = index(*id) {
+                    reads[k] = new.iter().copied().filter_map(index).collect();
+                }
+            }
+            let edges = reads
+                .iter()
+                .enumerate()
+                .flat_map(|(k, js)| js.iter().map(move |&j| [j, k]))
+                .collect();
+            self.graphs.push(GraphChange {
+                tick: r.tick,
+                edges,
+            });
+        }
+        self
     }
 }
 
@@ -147,6 +198,7 @@ impl FrameMaker {
                 -1.0,
             ),
             l1: lambdas_at(s, t)[0],
+            lost: (0..alive.len()).filter(|&k| !alive[k]).collect(),
             rate: None,
         }
     }
@@ -195,5 +247,39 @@ mod tests {
             .count();
         assert_eq!(scene.edges.len(), 3 * followers);
         assert_eq!(scene.agents.len(), 40);
+    }
+
+    #[test]
+    fn a_repair_replaces_the_switched_followers_edges_and_drops_the_lost_ones() {
+        let s = Scenario::builtin("paper40").expect("paper40");
+        let members = &s.formation.members;
+        let idx = |id: u32| members.iter().position(|m| m.id == id).expect("member");
+        // A follower that reads the lost member switches to another triangle; one degrades.
+        let reader = members
+            .iter()
+            .find(|m| m.link.is_some_and(|l| l.in_neighbors.contains(&1)))
+            .expect("a reader of 1");
+        let lost = members
+            .iter()
+            .find(|m| m.role == Role::Follower && m.id != reader.id)
+            .expect("another follower");
+        let repair = Repair {
+            id: lost.id,
+            tick: 77,
+            retriangulated: vec![(reader.id, [2, 3, 4])],
+            degraded: Vec::new(),
+        };
+        let scene = Scene::new(&s, 0.1, 0.2, 0.5).with_repairs(&s, &[repair]);
+        let g = &scene.graphs[0];
+        assert_eq!(g.tick, 77);
+        assert!(g.edges.iter().all(|e| e[1] != idx(lost.id)));
+        let reads: Vec<usize> = g
+            .edges
+            .iter()
+            .filter(|e| e[1] == idx(reader.id))
+            .map(|e| e[0])
+            .collect();
+        assert_eq!(reads, vec![idx(2), idx(3), idx(4)]);
+        assert_eq!(g.edges.len(), scene.edges.len() - 3);
     }
 }
