@@ -123,10 +123,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 .apply(&load(&source)?)
                 .map_err(Failure::bad_input)?;
             let realtime = realtime.options(&s)?;
-            if let Some(why) = realtime
-                .is_some()
-                .then(|| common::options::realtime_links_refusal(&s))
-                .flatten()
+            if let Some(why) =
+                realtime.and_then(|rt| common::options::realtime_links_refusal(&s, rt.stale_after))
             {
                 return Err(Failure::bad_input(why));
             }

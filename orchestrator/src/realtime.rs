@@ -10,13 +10,15 @@ use std::time::{Duration, Instant};
 
 use common::audit::Auditor;
 use common::formation::Role;
+use common::math::Vec3;
 use common::messages::{ClockMsg, FaultCode, StopReason};
 use common::outcome::FaultKind;
 use common::realtime_loop::unix_now_ns;
 use common::realtime_monitor::{Heard, MonitorCore, RunFigures};
+use common::record::TickRecorder;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
-use common::telemetry::{Row, TelemetrySink};
+use common::telemetry::TelemetrySink;
 use common::transport::OrchestratorPorts;
 
 use crate::launch::LaunchOptions;
@@ -145,6 +147,8 @@ pub fn run(
         audit,
         tel: tel.as_mut(),
         audits: 0,
+        rec: TickRecorder::new(s),
+        at: Vec::with_capacity(members.len()),
     };
     let cpu_at_start = team_cpu_s(children);
     let result = m.fly(ports, children, interrupted);
@@ -275,6 +279,10 @@ struct Monitor<'a> {
     tel: &'a mut dyn TelemetrySink,
     /// Audit instants done.
     audits: u64,
+    /// The shared per-tick audit and telemetry (`cdm_core::record`).
+    rec: TickRecorder,
+    /// Every member's position and velocity at the instant being audited (formation order).
+    at: Vec<(Vec3, Vec3)>,
 }
 
 impl Monitor<'_> {
@@ -380,42 +388,18 @@ impl Monitor<'_> {
         }
     }
 
-    /// Audits and writes the instant `t_s` (audit index `self.audits`).
+    /// Audits and writes the instant `t_s` (audit index `self.audits`) with the recorder
+    /// `simulate` and lockstep `launch` use: the same audit, the same columns.
     fn audit_once(&mut self, t_s: f64) -> Result<(), Stop> {
-        let s = self.s;
-        let n = s.formation.members.len();
-        let mut ht = Vec::with_capacity(n);
-        s.desired_positions(t_s, &mut ht);
-        let at: Vec<_> = (0..n).map(|k| self.core.state_at(k, t_s)).collect();
-        let pos: Vec<_> = at.iter().map(|(r, _)| *r).collect();
-        let tick = self.audits;
-        self.audit.observe(tick, t_s, &pos, &ht);
-        if !self.tel.keeps(tick) {
-            return Ok(());
-        }
-        let rows: Vec<Row> = s
-            .id_order()
-            .into_iter()
-            .map(|k| {
-                let m = &s.formation.members[k];
-                Row {
-                    tick,
-                    t_s,
-                    id: m.id,
-                    role: m.role,
-                    r: at[k].0,
-                    v: at[k].1,
-                    ht: ht[k],
-                }
+        let n = self.s.formation.members.len();
+        self.at.clear();
+        self.at.extend((0..n).map(|k| self.core.state_at(k, t_s)));
+        let at = &self.at;
+        self.rec
+            .record_at(self.s, (self.audits, t_s), self.audit, self.tel, |k| {
+                Some(at[k])
             })
-            .collect();
-        self.tel.write_tick(&rows).map_err(|e| {
-            let what = format!("cannot write telemetry: {e}");
-            (
-                fault(FaultKind::Io, None, None, tick, what),
-                StopReason::AgentFault,
-            )
-        })
+            .map_err(|f| (f, StopReason::AgentFault))
     }
 }
 
