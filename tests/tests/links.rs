@@ -87,7 +87,10 @@ fn lockstep_launch_equals_simulate_with_links_and_a_scripted_loss() {
     assert_eq!(losses.as_array().map(Vec::len), Some(1), "{audit:#}");
     assert_eq!(losses[0]["id"], 7, "{audit:#}");
     let rewired = losses[0]["retriangulated"].as_array().map_or(0, Vec::len);
-    assert!(rewired >= 1, "7 had readers that take new links: {losses:#}");
+    assert!(
+        rewired >= 1,
+        "7 had readers that take new links: {losses:#}"
+    );
     assert_windows_match_simulate(dir.path(), &source, &sim, &["1", "256"], "lkl", DEADLINE);
 }
 

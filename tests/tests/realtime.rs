@@ -136,14 +136,14 @@ fn impaired_links_hold_real_deliveries_back_and_drop_some() {
     let p50 = num(rt, "neighbor_age_ms_p50");
     assert!(p50 >= 20.0, "held back by the 20 ms delay: {rt:#}");
     assert!(num(rt, "neighbor_age_ms_max") < 500.0, "{rt:#}");
-    let (received, lost) = (
-        num(rt, "link_states_received"),
-        num(rt, "link_states_lost"),
-    );
+    let (received, lost) = (num(rt, "link_states_received"), num(rt, "link_states_lost"));
     // 4 followers x 3 in-neighbours x ~300 states.
     assert!(received >= 3000.0, "{rt:#}");
     let share = lost / received;
-    assert!((0.07..0.13).contains(&share), "lost {share} of the states: {rt:#}");
+    assert!(
+        (0.07..0.13).contains(&share),
+        "lost {share} of the states: {rt:#}"
+    );
     assert_no_process_of(&team);
 
     let team = unique_team("rt_links_bad");
