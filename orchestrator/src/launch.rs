@@ -165,7 +165,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
         Err((fault, reason)) => {
-            audit.fault(fault);
+            audit.fault(match &bridge {
+                Some(b) => b.explain(fault),
+                None => fault,
+            });
             (false, reason, None)
         }
     };

@@ -262,10 +262,12 @@ fn running(h: &Hosts, team: &str, out: &Path) -> (Running, Running) {
     (orch, daemon)
 }
 
-/// The orchestrator's fault after losing host B: an agent of host B, reported lost.
-fn assert_lost_host_b(out: &Path, code: &str) {
+/// The orchestrator's fault after losing host B: `host-lost`, naming host 1, `cause`, and every
+/// agent of host B; the fault's agent is one of them.
+fn assert_lost_host_b(out: &Path, cause: &str) {
     let audit = read_json(&out.join("audit.json"));
     assert_eq!(audit["verdict"], "FAULT", "{audit:#}");
+    assert_eq!(audit["fault"]["kind"], "host-lost", "{audit:#}");
     let hosts = read_json(&out.join("hosts.json"));
     let on_b = host_agents(&hosts, 1);
     let agent = audit["fault"]["agent"].as_u64().unwrap_or(u64::MAX) as u32;
@@ -274,7 +276,10 @@ fn assert_lost_host_b(out: &Path, code: &str) {
         "fault names agent {agent}, not one of host B's {on_b:?}: {audit:#}"
     );
     let message = audit["fault"]["message"].as_str().unwrap_or_default();
-    assert!(message.contains(code), "{audit:#}");
+    let members = format!("{:?}", on_b.iter().collect::<Vec<_>>());
+    for needle in ["host 1 ", cause, &members] {
+        assert!(message.contains(needle), "no {needle:?} in: {audit:#}");
+    }
     let flown = flown_scenario(out);
     let ids: BTreeSet<u32> = flown.agents.iter().map(|a| a.id).collect();
     let ticks = complete_ticks(&out.join("telemetry.csv"), &ids);
@@ -304,14 +309,15 @@ fn a_partition_stops_both_sides_named() {
             "its members were stopped",
         ],
     );
-    assert_lost_host_b(&out, "HostLost");
+    assert_lost_host_b(&out, "network partition");
     wait_no_process_of(&team, STOP_DEADLINE);
     assert_no_team_resources(&team);
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
 }
 
 /// The daemon is killed with SIGKILL: its members stop by themselves (their clock's publisher is
-/// gone), the orchestrator stops the team naming an agent of host B.
+/// gone); the orchestrator sees the daemon's zenoh session close and stops the team with
+/// `host-lost`, naming host B and its agents.
 #[test]
 fn a_killed_daemon_is_like_killed_members() {
     let Some(h) = Hosts::create("kd") else { return };
@@ -330,7 +336,8 @@ fn a_killed_daemon_is_like_killed_members() {
     signal(pid, libc::SIGKILL);
     let o = orch.finish(STOP_DEADLINE);
     assert_exit(&o, 3, "launch after the daemon was killed");
-    assert_lost_host_b(&out, "HostLost");
+    // Seen through zenoh's liveliness (the daemon's TCP connection closed), not by silence.
+    assert_lost_host_b(&out, "zenoh session closed");
     wait_no_process_of(&team, STOP_DEADLINE);
     assert_no_team_resources(&team);
     let _ = daemon.kill();
@@ -372,7 +379,11 @@ fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
     signal(orch.id(), libc::SIGKILL);
     let d = daemon.finish(STOP_DEADLINE);
     assert_exit(&d, 3, "orchestrator host after the orchestrator was killed");
-    assert_stderr_has(&d, "host", &["nothing heard from the orchestrator"]);
+    assert_stderr_has(
+        &d,
+        "host",
+        &["the orchestrator is gone", "zenoh session closed"],
+    );
     wait_no_process_of(&team, STOP_DEADLINE);
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
     let _ = orch.kill();

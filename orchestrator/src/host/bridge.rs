@@ -3,15 +3,17 @@
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use cdm_zenoh::{
-    down_key, up_key, Assignment, Channel, Down, JoinDesk, JoinReply, Net, PendingJoin, Regions,
-    Up, PROTOCOL_VERSION,
+    down_key, up_key, Assignment, Channel, Down, IdleBackoff, JoinDesk, JoinReply, Net, NetError,
+    PendingJoin, Regions, Up, PROTOCOL_VERSION,
 };
+use common::audit::FaultRecord;
 use common::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg};
+use common::outcome::FaultKind;
 use common::scenario::Scenario;
 use common::transport::{MemberPorts, TeamName};
 use serde::Serialize;
@@ -36,6 +38,18 @@ struct Ctx {
     outs: BTreeMap<u32, Vec<u32>>,
     link_timeout: Duration,
     quiet: bool,
+    lost: LostHosts,
+}
+
+/// Hosts the bridge lost, by host number: why, for the team's fault record.
+type LostHosts = Arc<Mutex<BTreeMap<u32, LostHost>>>;
+
+/// A host whose link was lost, and the members that went with it.
+#[derive(Debug, Clone)]
+struct LostHost {
+    who: String,
+    members: Vec<u32>,
+    why: String,
 }
 
 /// The bridge thread and its stop flag.
@@ -43,6 +57,7 @@ pub struct Bridge {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<Vec<HostReport>>>,
     crossing: Vec<(u32, u32)>,
+    lost: LostHosts,
 }
 
 /// One host as `hosts.json` records it.
@@ -120,7 +135,9 @@ impl Bridge {
             outs,
             link_timeout: h.link_timeout,
             quiet,
+            lost: LostHosts::default(),
         };
+        let lost = ctx.lost.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         let thread = std::thread::Builder::new()
@@ -131,7 +148,28 @@ impl Bridge {
             stop,
             thread: Some(thread),
             crossing,
+            lost,
         })
+    }
+
+    /// The team's fault, said in the terms of hosts: a member reported lost with its host
+    /// (`HostLost`) becomes the host's loss, naming the host, why, and every member it ran.
+    pub fn explain(&self, f: FaultRecord) -> FaultRecord {
+        if f.kind != FaultKind::HostLost {
+            return f;
+        }
+        let lost = self.lost.lock().map(|l| l.clone()).unwrap_or_default();
+        let Some((host, h)) = lost
+            .iter()
+            .find(|(_, h)| f.agent.is_some_and(|a| h.members.contains(&a)))
+        else {
+            return f;
+        };
+        let message = format!(
+            "host {host} ({}) lost at tick {}: {}; its agents {:?} were lost with it",
+            h.who, f.tick, h.why, h.members
+        );
+        FaultRecord { message, ..f }
     }
 
     /// After the team's stop: lets the daemons stop their members (bounded), then writes
@@ -181,6 +219,7 @@ impl Drop for Bridge {
 fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport> {
     let mut remotes: BTreeMap<u32, Remote> = BTreeMap::new();
     let mut stopping_since: Option<Instant> = None;
+    let mut idle = IdleBackoff::default();
     loop {
         while let Some(p) = desk.poll() {
             admit(&net, &ctx, &mut remotes, p);
@@ -201,10 +240,10 @@ fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport>
                 break;
             }
         }
-        if !busy {
+        if let Some(sleep) = idle.after(busy) {
             match remotes.values_mut().next() {
-                Some(r) => r.chan.wait(Duration::from_micros(500)),
-                None => std::thread::sleep(Duration::from_millis(5)),
+                Some(r) => r.chan.wait(sleep),
+                None => std::thread::sleep(sleep),
             }
         }
     }
@@ -325,6 +364,10 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         let frame = match r.chan.try_recv::<Up>() {
             Ok(Some(f)) => f,
             Ok(None) => break,
+            Err(e @ NetError::PeerGone { .. }) => {
+                lose(r, ctx, format!("the daemon is gone, {e}: killed or exited"));
+                return true;
+            }
             Err(e) => {
                 lose(r, ctx, format!("{e}"));
                 return true;
@@ -338,9 +381,12 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         }
     }
     if r.phase == Phase::Ready {
-        if let Err(why) = forward(r) {
-            lose(r, ctx, why);
-            return true;
+        match forward(r) {
+            Ok(sent) => busy |= sent,
+            Err(why) => {
+                lose(r, ctx, why);
+                return true;
+            }
         }
     }
     if r.last_sent.elapsed() >= HEARTBEAT {
@@ -420,8 +466,8 @@ fn open_relays(r: &mut Remote, ctx: &Ctx) -> Result<(), String> {
     Ok(())
 }
 
-/// The clock and the crossing states towards a ready host.
-fn forward(r: &mut Remote) -> Result<(), String> {
+/// The clock and the crossing states towards a ready host; true when anything went.
+fn forward(r: &mut Remote) -> Result<bool, String> {
     let mut clock = None;
     let mut batch = vec![];
     for (&g, relay) in r.relays.iter_mut() {
@@ -437,6 +483,7 @@ fn forward(r: &mut Remote) -> Result<(), String> {
             })
             .map_err(|e| e.to_string())?;
     }
+    let moved = clock.is_some() || !batch.is_empty();
     // States first: a grant must never reach members before the states it lets them use.
     if !batch.is_empty() {
         r.chan
@@ -451,7 +498,7 @@ fn forward(r: &mut Remote) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
         r.last_sent = Instant::now();
     }
-    Ok(())
+    Ok(moved)
 }
 
 /// Publishes a fault report for `id` through its relay: the orchestrator stops the team with it
@@ -470,6 +517,14 @@ fn report_fault(r: &mut Remote, ctx: &Ctx, id: u32, code: FaultCode) {
 /// The link to a daemon is gone: every member of that host is reported lost.
 fn lose(r: &mut Remote, ctx: &Ctx, why: String) {
     tracing::error!(host = r.host, "host {} lost: {why}", r.host);
+    let host = LostHost {
+        who: r.who.clone(),
+        members: r.members.clone(),
+        why: why.clone(),
+    };
+    if let Ok(mut lost) = ctx.lost.lock() {
+        lost.insert(r.host, host);
+    }
     for id in r.members.clone() {
         report_fault(r, ctx, id, FaultCode::HostLost);
     }

@@ -306,7 +306,7 @@ impl Link<'_> {
                 let late = ports.readiness().waiting_for();
                 return Err(format!("agents {late:?} did not start within {deadline:?}"));
             }
-            while let Some(f) = self.chan.try_recv::<Down>().map_err(|e| e.to_string())? {
+            while let Some(f) = self.chan.try_recv::<Down>().map_err(link_error)? {
                 self.last_heard = Instant::now();
                 if let Down::Clock(c) = f {
                     if matches!(ClockMsg::from(c).command(), ClockCommand::Stop(_)) {
@@ -333,12 +333,13 @@ impl Link<'_> {
         interrupted: &std::sync::atomic::AtomicBool,
     ) -> Result<StopReason, String> {
         let mut last_child_check = Instant::now();
+        let mut idle = cdm_zenoh::IdleBackoff::default();
         loop {
             if interrupted.load(Ordering::Relaxed) {
                 return Err(format!("interrupted by {}", common::signals::received()));
             }
             let mut busy = false;
-            while let Some(f) = self.chan.try_recv::<Down>().map_err(|e| e.to_string())? {
+            while let Some(f) = self.chan.try_recv::<Down>().map_err(link_error)? {
                 self.last_heard = Instant::now();
                 busy = true;
                 if let Some(reason) = down(f, ports, relays)? {
@@ -351,8 +352,8 @@ impl Link<'_> {
                 self.report_exits(ports, children)?;
             }
             self.keep_alive()?;
-            if !busy {
-                self.chan.wait(Duration::from_micros(500));
+            if let Some(sleep) = idle.after(busy) {
+                self.chan.wait(sleep);
             }
         }
     }
@@ -393,6 +394,16 @@ impl Link<'_> {
             }
         }
         Ok(())
+    }
+}
+
+/// A failed receive, said from the daemon's side.
+fn link_error(e: cdm_zenoh::NetError) -> String {
+    match e {
+        cdm_zenoh::NetError::PeerGone { .. } => {
+            format!("the orchestrator is gone, {e}: killed or exited")
+        }
+        e => e.to_string(),
     }
 }
 

@@ -90,6 +90,9 @@ mod single {
 
     impl Bridge {
         pub fn finish(self, _dir: &common::rundir::RunDir, _ticks: u64, _quiet: bool) {}
+        pub fn explain(&self, f: common::audit::FaultRecord) -> common::audit::FaultRecord {
+            f
+        }
     }
 }
 #[cfg(not(feature = "hosts"))]
