@@ -11,6 +11,7 @@
 //!   team naming them.
 //! - Foreign daemons (another scenario, another team, a host already taken) are refused; the
 //!   orchestrator killed with SIGKILL: the daemon and every member exit by themselves.
+//! - Real time: a short plan paced on one wall-clock start instant on both hosts is SAFE.
 //! - Nothing is left in /dev/shm on either side.
 //!
 //! Needs root (CI runs as root). Each test names its namespaces uniquely and deletes them on
@@ -246,6 +247,51 @@ fn two_hosts_fly_lockstep_exactly_as_simulate() {
         .unwrap_or_else(|e| panic!("hosts.json crossing_edges: {e}: {hosts:#}"));
     assert_eq!(recorded, crossing, "{hosts:#}");
     assert!(!crossing.is_empty(), "a split team has crossing edges");
+    assert_no_team_resources(&team);
+    assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+}
+
+/// Real time over two hosts: the start instant travels as a wall-clock time in the clock's
+/// message, members on both hosts pace on it and states cross as they come. A 3 s plan
+/// (301 audits) completes SAFE with its pacing figures; nothing left on either host.
+#[test]
+fn two_hosts_fly_in_real_time() {
+    let Some(h) = Hosts::create("rt") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("hostsrt");
+    let out = dir.path().join("rt");
+    let out_s = out.to_string_lossy().into_owned();
+    let source = [
+        "--n",
+        "10",
+        "--t-total",
+        "30",
+        "--max-ticks",
+        "300",
+        "--realtime",
+        "--no-figures",
+    ];
+    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
+    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", &team]));
+    let o = orch.finish(RUN_DEADLINE);
+    let d = daemon.finish(RUN_DEADLINE);
+    assert_exit(&o, 0, "launch --realtime --hosts 2");
+    assert_exit(&d, 0, "orchestrator host (real time)");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    let rt = &audit["realtime"];
+    assert_eq!(rt["audits"], 301, "{rt:#}");
+    let ticks = rt["ticks"].as_f64().unwrap_or_default();
+    assert!(
+        ticks >= 5.0 * 300.0,
+        "host A's members flew the plan: {rt:#}"
+    );
+    let flown = flown_scenario(&out);
+    let ids: BTreeSet<u32> = flown.agents.iter().map(|a| a.id).collect();
+    assert_eq!(complete_ticks(&out.join("telemetry.csv"), &ids), 301);
+    let hosts = read_json(&out.join("hosts.json"));
+    assert_eq!(hosts["hosts"][0]["outcome"], "stopped", "{hosts:#}");
     assert_no_team_resources(&team);
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
 }

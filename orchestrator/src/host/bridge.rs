@@ -8,8 +8,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use cdm_zenoh::{
-    down_key, up_key, Assignment, Channel, Down, IdleBackoff, JoinDesk, JoinReply, Net, NetError,
-    PendingJoin, Regions, Up, PROTOCOL_VERSION,
+    down_key, up_key, Assignment, Channel, Down, IdleBackoff, JoinDesk, JoinReply, JoinRequest,
+    Net, NetError, PendingJoin, Regions, Up, PROTOCOL_VERSION,
 };
 use common::audit::FaultRecord;
 use common::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg};
@@ -19,7 +19,7 @@ use common::transport::{MemberPorts, TeamName};
 use serde::Serialize;
 
 use super::plan::placed;
-use super::HostOptions;
+use super::{Flight, HostOptions};
 use crate::Failure;
 
 /// How often a quiet link says it is alive.
@@ -31,7 +31,7 @@ const STOP_DEADLINE: Duration = Duration::from_secs(8);
 struct Ctx {
     team: TeamName,
     hash: u64,
-    window: u32,
+    flight: Flight,
     scenario_json: String,
     regions: Regions,
     ins: BTreeMap<u32, Vec<u32>>,
@@ -109,7 +109,7 @@ impl Bridge {
         team: &TeamName,
         regions: &Regions,
         h: &HostOptions,
-        window: u32,
+        flight: Flight,
         quiet: bool,
     ) -> Result<Self, Failure> {
         let desk = net
@@ -128,7 +128,7 @@ impl Bridge {
         let ctx = Ctx {
             team: team.clone(),
             hash: s.content_hash(),
-            window,
+            flight,
             scenario_json: s.to_json(),
             regions: regions.clone(),
             ins,
@@ -254,58 +254,13 @@ fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport>
 fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJoin) {
     let key = cdm_zenoh::join_key(Some(ctx.team.as_str()));
     let q = p.request.clone();
-    let hosts = ctx.regions.hosts();
     let refuse = |p: PendingJoin, why: String| {
         tracing::warn!(daemon = %q.who, "refused a daemon: {why}");
         p.answer(&JoinReply::Refused(why), &key);
     };
-    if q.version != PROTOCOL_VERSION {
-        let why = format!(
-            "the daemon speaks host protocol {} and this orchestrator {PROTOCOL_VERSION}",
-            q.version
-        );
-        return refuse(p, why);
-    }
-    if let Some(t) = q.team.as_deref().filter(|t| *t != ctx.team.as_str()) {
-        let why = format!(
-            "the daemon asks for team {t}; this orchestrator runs team {}",
-            ctx.team
-        );
-        return refuse(p, why);
-    }
-    if let Some(h) = q.scenario_hash.filter(|&h| h != ctx.hash) {
-        let why = format!(
-            "the daemon's scenario has hash {h:016x}; team {} flies {:016x}",
-            ctx.team, ctx.hash
-        );
-        return refuse(p, why);
-    }
-    let host = match q.host {
-        Some(h) if h == 0 || h >= hosts => {
-            let why = format!("--host {h}: team {} has hosts 1..={}", ctx.team, hosts - 1);
-            return refuse(p, why);
-        }
-        Some(h) => match remotes.get(&h) {
-            Some(r) => {
-                let why = format!(
-                    "host {h} of team {} is already taken by {}",
-                    ctx.team, r.who
-                );
-                return refuse(p, why);
-            }
-            None => h,
-        },
-        None => match (1..hosts).find(|h| !remotes.contains_key(h)) {
-            Some(h) => h,
-            None => {
-                let why = format!(
-                    "all {} other hosts of team {} are taken",
-                    hosts - 1,
-                    ctx.team
-                );
-                return refuse(p, why);
-            }
-        },
+    let host = match which_host(ctx, remotes, &q) {
+        Ok(h) => h,
+        Err(why) => return refuse(p, why),
     };
     let chan = match net.channel(
         &down_key(ctx.team.as_str(), host),
@@ -326,8 +281,9 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
         hosts_of: ctx.regions.pairs(),
         scenario_json: ctx.scenario_json.clone(),
         scenario_hash: ctx.hash,
-        window: ctx.window,
+        window: ctx.flight.window,
         link_timeout_ms: ctx.link_timeout.as_millis() as u64,
+        realtime_stale_after_s: ctx.flight.realtime_stale_after.map(|d| d.as_secs_f64()),
     };
     p.answer(&JoinReply::Accepted(Box::new(assignment)), &key);
     if !ctx.quiet {
@@ -351,6 +307,60 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
             subscriptions: BTreeMap::new(),
         },
     );
+}
+
+/// The host a join request may take, or why it is refused (another protocol, team or
+/// scenario; a host number out of range or taken; no host left).
+fn which_host(ctx: &Ctx, remotes: &BTreeMap<u32, Remote>, q: &JoinRequest) -> Result<u32, String> {
+    if q.version != PROTOCOL_VERSION {
+        let why = format!(
+            "the daemon speaks host protocol {} and this orchestrator {PROTOCOL_VERSION}",
+            q.version
+        );
+        return Err(why);
+    }
+    if let Some(t) = q.team.as_deref().filter(|t| *t != ctx.team.as_str()) {
+        let why = format!(
+            "the daemon asks for team {t}; this orchestrator runs team {}",
+            ctx.team
+        );
+        return Err(why);
+    }
+    if let Some(h) = q.scenario_hash.filter(|&h| h != ctx.hash) {
+        let why = format!(
+            "the daemon's scenario has hash {h:016x}; team {} flies {:016x}",
+            ctx.team, ctx.hash
+        );
+        return Err(why);
+    }
+    let hosts = ctx.regions.hosts();
+    Ok(match q.host {
+        Some(h) if h == 0 || h >= hosts => {
+            let why = format!("--host {h}: team {} has hosts 1..={}", ctx.team, hosts - 1);
+            return Err(why);
+        }
+        Some(h) => match remotes.get(&h) {
+            Some(r) => {
+                let why = format!(
+                    "host {h} of team {} is already taken by {}",
+                    ctx.team, r.who
+                );
+                return Err(why);
+            }
+            None => h,
+        },
+        None => match (1..hosts).find(|h| !remotes.contains_key(h)) {
+            Some(h) => h,
+            None => {
+                let why = format!(
+                    "all {} other hosts of team {} are taken",
+                    hosts - 1,
+                    ctx.team
+                );
+                return Err(why);
+            }
+        },
+    })
 }
 
 /// One round for one daemon: its frames in, the clock and the crossing states out, the
@@ -393,7 +403,9 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         let _ = r.chan.send(&Down::Heartbeat);
         r.last_sent = Instant::now();
     }
-    if r.last_heard.elapsed() > ctx.link_timeout {
+    // Once the stop went, the daemon may stop its members quietly for a while (a bounded
+    // wait); the bridge's own stop deadline bounds it, and a killed daemon is still seen.
+    if !r.stop_sent && r.last_heard.elapsed() > ctx.link_timeout {
         let why = format!(
             "nothing heard from host {} ({}) for {:.1} s: network partition or daemon gone",
             r.host,

@@ -181,6 +181,19 @@ fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Fa
     Ok((layout, ghosts))
 }
 
+/// The members' flags for the team's mode: real time paces on the start instant the clock
+/// announces (a wall-clock time, the same on every host).
+fn member_flags(a: &Assignment) -> Vec<String> {
+    match a.realtime_stale_after_s {
+        Some(stale_s) => vec![
+            "--realtime".into(),
+            "--stale-after".into(),
+            stale_s.to_string(),
+        ],
+        None => Vec::new(),
+    }
+}
+
 /// A relayed agent's neighbours on this host.
 #[derive(Default)]
 struct Neighbours {
@@ -210,13 +223,14 @@ fn fly(
     common::rundir::write_atomic(&file, j.a.scenario_json.as_bytes())
         .map_err(|e| Failure::fault(format!("cannot write {}: {e}", file.display())))?;
     let mut children = Vec::new();
+    let flags = member_flags(&j.a);
     for m in
         j.s.formation
             .members
             .iter()
             .filter(|m| j.mine.contains(&m.id))
     {
-        match spawn_member(&file, &j.team, m.id, m.role, &[]) {
+        match spawn_member(&file, &j.team, m.id, m.role, &flags) {
             Ok(child) => children.push(Spawned { id: m.id, child }),
             Err(e) => {
                 stop_team(&mut ports, &mut children, &j.s, StopReason::AgentFault);
@@ -240,6 +254,8 @@ fn fly(
     };
     stop_team(&mut ports, &mut children, &j.s, reason);
     if outcome.is_ok() {
+        // What the members published as they stopped (real time: their pacing reports).
+        let _ = link.up(&mut ports);
         let _ = link.chan.send(&Up::Stopped);
     }
     drop(relays);
