@@ -1,0 +1,70 @@
+//! The examples run as their docs say: `two_members` of cdm-iox started as two processes (the
+//! leader side first, as Terminal 1, then the follower, as Terminal 2) over real iceoryx2 shared
+//! memory, each under a watchdog deadline; both exit 0 having exchanged every tick's state, and
+//! the team leaves nothing behind.
+
+use std::process::Command;
+use std::time::Duration;
+
+use integration_tests::{describe, example, spawn, unique_team};
+
+mod support;
+use support::Footprint;
+
+/// Generous: the machine is shared; the exchange itself takes milliseconds.
+const DEADLINE: Duration = Duration::from_secs(60);
+const TICKS: u64 = 5;
+
+fn side(role: &str, team: &str) -> Command {
+    let mut c = Command::new(example("cdm-iox", "two_members"));
+    c.args([role, "--team", team, "--ticks", &TICKS.to_string()]);
+    c
+}
+
+#[test]
+fn two_members_exchange_every_tick_and_leave_nothing() {
+    let team = unique_team("two_members");
+    let mut leader = spawn(&mut side("leader", &team));
+    leader.wait_for_output("waiting for member 1", DEADLINE);
+    let mut footprint = Footprint::record(&team, [leader.id()]);
+    let mut follower = spawn(&mut side("follower", &team));
+    footprint.absorb(Footprint::record(&team, [follower.id()]));
+    let (l, f) = (leader.finish(DEADLINE), follower.finish(DEADLINE));
+    assert!(l.status.success(), "leader side:\n{}", describe(&l));
+    assert!(f.status.success(), "follower side:\n{}", describe(&f));
+    let (l_out, f_out) = (
+        String::from_utf8_lossy(&l.stdout),
+        String::from_utf8_lossy(&f.stdout),
+    );
+    // The leader side read both members' states of every tick; the follower heard the leader's
+    // state of every tick before its last and flew on it (its gap to the leader shrinks).
+    for k in 0..=TICKS {
+        let x0 = format!(
+            "tick {k}: member 0 x = {:.3} m, member 1 x = ",
+            0.1 * k as f64
+        );
+        assert!(l_out.contains(&x0), "no `{x0}` in:\n{}", describe(&l));
+    }
+    for k in 1..=TICKS {
+        let heard = format!(
+            "tick {k}: heard member 0 at x = {:.3} m (tick {})",
+            0.1 * (k - 1) as f64,
+            k - 1
+        );
+        assert!(f_out.contains(&heard), "no `{heard}` in:\n{}", describe(&f));
+    }
+    let gaps: Vec<f64> = l_out
+        .lines()
+        .filter_map(|line| line.split("gap ").nth(1)?.strip_suffix(" m")?.parse().ok())
+        .collect();
+    assert_eq!(gaps.len() as u64, TICKS + 1, "{}", describe(&l));
+    assert!(gaps.windows(2).all(|w| w[1] < w[0]), "gaps {gaps:?}");
+    assert!(
+        f_out.contains(&format!(
+            "stopped by the team (Finished) after tick {TICKS}"
+        )),
+        "{}",
+        describe(&f)
+    );
+    footprint.assert_nothing_left();
+}
