@@ -244,12 +244,6 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
 /// What a team over several hosts cannot do yet: refused, or (repairs) flown with
 /// `--on-loss stop`.
 fn restrict_across_hosts(opts: &mut LaunchOptions, quiet: bool) -> Result<(), Failure> {
-    if opts.realtime.is_some() && opts.hosts.hosts > 1 {
-        // Real time across hosts needs the daemons to pace their members (not yet).
-        return Err(Failure::bad_input(
-            "--realtime with --hosts: real time across hosts is not supported yet",
-        ));
-    }
     if opts.hosts.hosts > 1 && !opts.losses.events.is_empty() {
         return Err(Failure::bad_input(
             "--lose with --hosts: losing members across hosts is not supported yet",
