@@ -67,6 +67,9 @@ pub enum MemberError {
     /// A bad `--link-*` or `--seed` value (the message names the flag).
     #[error("{0}")]
     Link(String),
+    /// A bad `--link-*` or `--seed` value, or a `[link]` table the scenario refuses.
+    #[error(transparent)]
+    LinkArgs(#[from] crate::options::LinkArgsError),
     #[error("agent {id} is not in scenario {origin}")]
     NotInScenario { id: u32, origin: String },
     #[error("agent {id} is a {role} in {origin}; the `{binary}` binary flies {flies}")]
@@ -127,6 +130,7 @@ impl MemberError {
         match self {
             MemberError::Scenario(_)
             | MemberError::Link(_)
+            | MemberError::LinkArgs(_)
             | MemberError::NotInScenario { .. }
             | MemberError::WrongRole { .. }
             | MemberError::ModeMismatch { .. } => 2,
@@ -169,7 +173,7 @@ pub fn run_member(
         vehicles,
     } = *flight;
     let s = Scenario::load(scenario_path, Checks::Member)?;
-    let s = link.apply(&s).map_err(MemberError::Link)?;
+    let s = link.apply(&s)?;
     if let Some(why) = match mode {
         Mode::Realtime { stale_after } => crate::options::realtime_links_refusal(&s, stale_after),
         Mode::Lockstep => None,
@@ -297,97 +301,113 @@ impl MemberError {
         match e {
             LoopError::Transport(e) => MemberError::Transport(e),
             LoopError::Interrupted { tick } => MemberError::Interrupted { id, tick },
-            LoopError::Fault(f) => match f {
-                MemberFault::ScenarioMismatch { mine, team: theirs } => {
-                    MemberError::Transport(TransportError::ScenarioMismatch {
-                        team: team.clone(),
-                        id,
-                        mine,
-                        team_hash: crate::transport::scenario_hash_value(theirs),
-                    })
-                }
-                MemberFault::OrchestratorLost { tick } => MemberError::OrchestratorLost {
+            LoopError::Fault(f) => Self::from_fault(f, id, team),
+        }
+    }
+
+    /// A fault the member's core reported, as this process reports it.
+    fn from_fault(f: MemberFault, id: u32, team: &TeamName) -> Self {
+        match f {
+            MemberFault::ScenarioMismatch { mine, team: theirs } => {
+                MemberError::Transport(TransportError::ScenarioMismatch {
+                    team: team.clone(),
                     id,
-                    team: team.to_string(),
-                    tick,
-                },
-                MemberFault::Silent {
-                    tick,
-                    waited,
-                    waiting_for,
-                } => MemberError::Silent {
-                    id,
-                    tick,
-                    waited,
-                    waiting_for: waiting_for.to_string(),
-                },
-                MemberFault::Step { tick, fault } => MemberError::Step { id, tick, fault },
-                MemberFault::Vehicle { tick, what } => MemberError::Vehicle { id, tick, what },
-                MemberFault::ForeignState {
-                    tick,
-                    peer,
-                    peer_tick,
-                } => MemberError::Neighbor {
-                    id,
-                    tick,
-                    peer,
-                    what: format!("sent a state of another scenario (tick {peer_tick})"),
-                },
-                MemberFault::Loss(f) => {
-                    let (tick, what) = match f {
-                        LossFault::Missed { seen, got } => {
-                            (0, format!("notice {got} arrived after notice {seen}: one was missed"))
-                        }
-                        LossFault::SelfLost { tick } => {
-                            (tick, "the orchestrator declared this agent lost".into())
-                        }
-                        LossFault::Late { tick, at } => (
-                            tick,
-                            format!("the repair changes this agent's link from tick {at}, already flown"),
-                        ),
-                    };
-                    MemberError::Loss { id, tick, what }
-                }
-                MemberFault::RepairUnsupported { tick } => MemberError::Loss {
-                    id,
-                    tick,
-                    what: "this vehicle or transport cannot switch links in flight".into(),
-                },
-                MemberFault::TickGap { tick, peer, later } => MemberError::Neighbor {
-                    id,
-                    tick,
-                    peer,
-                    what: format!("skipped from tick {tick} to {later}"),
-                },
-                MemberFault::NeighborStale { tick, peer, age } => MemberError::Neighbor {
-                    id,
-                    tick,
-                    peer,
-                    what: format!(
-                        "sent nothing for {:.0} ms (newest state older than the bound): \
+                    mine,
+                    team_hash: crate::transport::scenario_hash_value(theirs),
+                })
+            }
+            MemberFault::OrchestratorLost { tick } => MemberError::OrchestratorLost {
+                id,
+                team: team.to_string(),
+                tick,
+            },
+            MemberFault::Silent {
+                tick,
+                waited,
+                waiting_for,
+            } => MemberError::Silent {
+                id,
+                tick,
+                waited,
+                waiting_for: waiting_for.to_string(),
+            },
+            MemberFault::Step { tick, fault } => MemberError::Step { id, tick, fault },
+            MemberFault::Vehicle { tick, what } => MemberError::Vehicle { id, tick, what },
+            MemberFault::ForeignState {
+                tick,
+                peer,
+                peer_tick,
+            } => MemberError::Neighbor {
+                id,
+                tick,
+                peer,
+                what: format!("sent a state of another scenario (tick {peer_tick})"),
+            },
+            MemberFault::Loss(f) => Self::from_loss(f, id),
+            MemberFault::RepairUnsupported { tick } => MemberError::Loss {
+                id,
+                tick,
+                what: "this vehicle or transport cannot switch links in flight".into(),
+            },
+            MemberFault::TickGap { tick, peer, later } => MemberError::Neighbor {
+                id,
+                tick,
+                peer,
+                what: format!("skipped from tick {tick} to {later}"),
+            },
+            MemberFault::NeighborStale { tick, peer, age } => MemberError::Neighbor {
+                id,
+                tick,
+                peer,
+                what: format!(
+                    "sent nothing for {:.0} ms (newest state older than the bound): \
                          holding position",
-                        age.as_secs_f64() * 1e3
-                    ),
-                },
-                MemberFault::ModeMismatch { member_realtime } => MemberError::ModeMismatch {
-                    id,
-                    team: team.to_string(),
-                    team_mode: if member_realtime {
-                        "lockstep"
-                    } else {
-                        "in real time"
-                    },
-                    mode: if member_realtime {
-                        "in real time"
-                    } else {
-                        "lockstep"
-                    },
-                    fix: if member_realtime {
-                        "without --realtime"
-                    } else {
-                        "with --realtime"
-                    },
-                },
+                    age.as_secs_f64() * 1e3
+                ),
+            },
+            MemberFault::ModeMismatch { member_realtime } => {
+                Self::mode_mismatch(member_realtime, id, team)
+            }
+        }
+    }
+
+    /// A loss notice this member cannot act on.
+    fn from_loss(f: LossFault, id: u32) -> Self {
+        let (tick, what) = match f {
+            LossFault::Missed { seen, got } => (
+                0,
+                format!("notice {got} arrived after notice {seen}: one was missed"),
+            ),
+            LossFault::SelfLost { tick } => {
+                (tick, "the orchestrator declared this agent lost".into())
+            }
+            LossFault::Late { tick, at } => (
+                tick,
+                format!("the repair changes this agent's link from tick {at}, already flown"),
+            ),
+        };
+        MemberError::Loss { id, tick, what }
+    }
+
+    /// The member flies in real time and the team in lockstep, or the other way round.
+    fn mode_mismatch(member_realtime: bool, id: u32, team: &TeamName) -> Self {
+        MemberError::ModeMismatch {
+            id,
+            team: team.to_string(),
+            team_mode: if member_realtime {
+                "lockstep"
+            } else {
+                "in real time"
+            },
+            mode: if member_realtime {
+                "in real time"
+            } else {
+                "lockstep"
+            },
+            fix: if member_realtime {
+                "without --realtime"
+            } else {
+                "with --realtime"
             },
         }
     }

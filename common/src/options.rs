@@ -67,13 +67,28 @@ pub struct LinkArgs {
     pub seed: Option<u64>,
 }
 
+/// Why `--link-*` / `--seed` cannot be applied to a scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkArgsError {
+    /// A flag's value is out of range (names the flag and the value).
+    #[error("{flag} {value}: {reason}")]
+    Flag {
+        flag: &'static str,
+        value: String,
+        reason: String,
+    },
+    /// The scenario refused the resulting `[link]` table (names the scenario's field).
+    #[error(transparent)]
+    Scenario(#[from] crate::scenario::ScenarioError),
+}
+
 impl LinkArgs {
     /// `s` with the flags given applied to its `[link]` table (unchanged when none is given).
     /// A bad value is refused naming its flag (or the scenario's field, when it came from there).
     pub fn apply(
         &self,
         s: &crate::scenario::Scenario,
-    ) -> Result<crate::scenario::Scenario, String> {
+    ) -> Result<crate::scenario::Scenario, LinkArgsError> {
         let flags = [
             ("link.delay_ms", "--link-delay-ms", self.link_delay_ms),
             ("link.jitter_ms", "--link-jitter-ms", self.link_jitter_ms),
@@ -97,10 +112,14 @@ impl LinkArgs {
                 } else {
                     v.to_string()
                 };
-                return Err(format!("{flag} {shown}: {reason}"));
+                return Err(LinkArgsError::Flag {
+                    flag,
+                    value: shown,
+                    reason,
+                });
             }
         }
-        s.with_link(Some(spec)).map_err(|e| e.to_string())
+        Ok(s.with_link(Some(spec))?)
     }
 }
 

@@ -71,51 +71,7 @@ pub enum Command {
     /// Fly the team as processes: one per quadcopter over iceoryx2 shared memory, a shared
     /// lockstep clock, a live safety audit. Exit 0 safe and complete, 1 violation, 2 bad input,
     /// 3 runtime fault.
-    Launch {
-        #[command(flatten)]
-        source: Source,
-        /// The run directory (default: runs/<team>).
-        #[arg(long, value_name = "DIR")]
-        out: Option<PathBuf>,
-        /// Write every K-th tick to the telemetry file.
-        #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
-        every: u64,
-        /// Reuse a non-empty --out directory.
-        #[arg(long)]
-        force: bool,
-        /// The team's name: its services' prefix ([A-Za-z0-9_-], at most 48 characters;
-        /// default cdm<pid of the orchestrator>).
-        #[arg(long)]
-        team: Option<String>,
-        /// Do not start the processes: wait for them to be started by hand.
-        #[arg(long)]
-        no_spawn: bool,
-        /// How many ticks an agent may run ahead of the slowest (1 = strict lockstep). Larger
-        /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory.
-        #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
-        window: u32,
-        /// Seconds without any agent progress before the team is stopped as faulty (at most
-        /// 86400).
-        #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
-        agent_timeout: f64,
-        /// Seconds to wait for hand-started processes (--no-spawn) to join (at most 86400).
-        #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
-        join_timeout: f64,
-        /// Serve a live 3-D view of the team while it flies (ADDR: HOST:PORT or PORT; a bare
-        /// --serve is 127.0.0.1:8080). Only loopback unless another address is given.
-        #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_SERVE)]
-        serve: Option<String>,
-        /// What the members fly (`--vehicles mavlink`: real or SITL vehicles over MAVLink;
-        /// README "Fly real vehicles").
-        #[command(flatten)]
-        vehicle: common::vehicles::VehicleArgs,
-        #[command(flatten)]
-        hosts: HostArgs,
-        #[command(flatten)]
-        realtime: crate::realtime::RealtimeArgs,
-        #[command(flatten)]
-        run: RunOptions,
-    },
+    Launch(LaunchArgs),
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained
     /// page that works from file://; with --serve, also serves it until interrupted.
     View {
@@ -173,6 +129,54 @@ pub enum Command {
         #[command(subcommand)]
         command: ScenarioCommand,
     },
+}
+
+/// The options of `orchestrator launch` (see [`Command::Launch`]).
+#[derive(Debug, Args)]
+pub struct LaunchArgs {
+    #[command(flatten)]
+    pub source: Source,
+    /// The run directory (default: runs/<team>).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Write every K-th tick to the telemetry file.
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: u64,
+    /// Reuse a non-empty --out directory.
+    #[arg(long)]
+    pub force: bool,
+    /// The team's name: its services' prefix ([A-Za-z0-9_-], at most 48 characters;
+    /// default cdm<pid of the orchestrator>).
+    #[arg(long)]
+    pub team: Option<String>,
+    /// Do not start the processes: wait for them to be started by hand.
+    #[arg(long)]
+    pub no_spawn: bool,
+    /// How many ticks a member may run ahead of the slowest (1 = strict lockstep). Larger
+    /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub window: u32,
+    /// Seconds without any member progress before the team is stopped as faulty (at most
+    /// 86400).
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
+    pub agent_timeout: f64,
+    /// Seconds to wait for hand-started processes (--no-spawn) to join (at most 86400).
+    #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
+    pub join_timeout: f64,
+    /// Serve a live 3-D view of the team while it flies (ADDR: HOST:PORT or PORT; a bare
+    /// --serve is 127.0.0.1:8080). Only loopback unless another address is given.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_SERVE)]
+    pub serve: Option<String>,
+    /// What the members fly (`--vehicles mavlink`: real or SITL vehicles over MAVLink;
+    /// README "Fly real vehicles").
+    #[command(flatten)]
+    pub vehicle: common::vehicles::VehicleArgs,
+    #[command(flatten)]
+    pub hosts: HostArgs,
+    #[command(flatten)]
+    pub realtime: crate::realtime::RealtimeArgs,
+    #[command(flatten)]
+    pub run: RunOptions,
 }
 
 #[derive(Debug, Subcommand)]

@@ -16,7 +16,8 @@ use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOpt
 use common::options::timeout;
 use common::transport::TeamName;
 
-use crate::cli::{Cli, Command, RunOptions, ScenarioCommand, Source};
+use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand, Source};
+use crate::errors::CommandError;
 use crate::export;
 use crate::launch::{launch, LaunchOptions};
 use crate::progress::{Progress, Spinner};
@@ -44,181 +45,9 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             };
             plan(&source, json.as_deref(), sweeps, losses, cli.quiet)
         }
-        Command::Simulate { source, out, run } => {
-            crate::telemetry::check_available(run.telemetry)?;
-            let s = run
-                .link
-                .apply(&load(&source)?)
-                .map_err(Failure::bad_input)?;
-            check_follow(&s, run.follow)?;
-            let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
-            let started = Instant::now();
-            let opts = SimulateOptions {
-                every: out.every,
-                stop_on_violation: run.stop_on_violation,
-                max_ticks: run.max_ticks,
-                telemetry: run.telemetry,
-                losses: LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?,
-                on_loss: run.on_loss.into(),
-            };
-            let mut tel = crate::telemetry::open(&dir, run.telemetry, out.every)
-                .map_err(Failure::bad_input)?;
-            let last = run
-                .max_ticks
-                .map_or(s.last_tick(), |k| k.min(s.last_tick()));
-            let mut progress = Progress::new("simulate", last, s.dt_s(), cli.quiet);
-            let report = simulate(&s, &dir, opts, tel.as_mut(), |tick, audit| {
-                progress.tick(tick, audit.report())
-            })
-            .map_err(Failure::fault)?;
-            progress.finish();
-            summary("simulate", &report, started, dir.path(), cli.quiet);
-            figures_after_run(dir.path(), &run, cli.quiet);
-            if report.ticks > 0 {
-                replay_after_run(dir.path(), cli.quiet);
-            }
-            Ok(exit_of(&report))
-        }
-        Command::Report { dir, follow } => {
-            let started = Instant::now();
-            let files = report(&dir, follow).map_err(|e| match e {
-                ReportError::Read(_) => Failure::bad_input(e),
-                ReportError::Draw(_) => Failure::fault(e),
-            })?;
-            if !cli.quiet {
-                out!(
-                    "report: {} files in {} ({:.2} s)",
-                    files.len(),
-                    dir.display(),
-                    started.elapsed().as_secs_f64()
-                );
-                for f in &files {
-                    out!("  {}", f.display());
-                }
-            }
-            Ok(Exit::Safe)
-        }
-        Command::Launch {
-            source,
-            out,
-            every,
-            force,
-            team,
-            no_spawn,
-            window,
-            agent_timeout,
-            join_timeout,
-            serve,
-            vehicle,
-            hosts,
-            realtime,
-            run,
-        } => {
-            crate::telemetry::check_available(run.telemetry)?;
-            let vehicles = vehicle
-                .validate(realtime.realtime)
-                .map_err(Failure::bad_input)?;
-            let s = run
-                .link
-                .apply(&load(&source)?)
-                .map_err(Failure::bad_input)?;
-            let realtime = realtime.options(&s)?;
-            if let Some(why) =
-                realtime.and_then(|rt| common::options::realtime_links_refusal(&s, rt.stale_after))
-            {
-                return Err(Failure::bad_input(why));
-            }
-            check_follow(&s, run.follow)?;
-            let losses = LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?;
-            if no_spawn && !run.lose.is_empty() {
-                // The orchestrator carries out a scripted loss by killing the member's process.
-                return Err(Failure::bad_input(
-                    "--lose needs members spawned by launch (not --no-spawn)",
-                ));
-            }
-            let team_name = team.unwrap_or_else(|| format!("cdm{}", std::process::id()));
-            let team = TeamName::new(&team_name)
-                .map_err(|e| Failure::bad_input(format!("--team: {e}")))?;
-            let secs = |v: f64, what: &str| timeout(what, v).map_err(Failure::bad_input);
-            let mut opts = LaunchOptions {
-                out: out.unwrap_or_else(|| PathBuf::from("runs").join(team.as_str())),
-                team,
-                force,
-                every,
-                telemetry: run.telemetry,
-                // Real time reads the newest states: a short buffer is enough.
-                window: if realtime.is_some() {
-                    crate::realtime::REALTIME_WINDOW
-                } else {
-                    window
-                },
-                spawn: !no_spawn,
-                agent_timeout: secs(agent_timeout, "--agent-timeout")?,
-                join_timeout: secs(join_timeout, "--join-timeout")?,
-                quiet: cli.quiet,
-                stop_on_violation: run.stop_on_violation,
-                max_ticks: run.max_ticks,
-                vehicles,
-                serve: serve
-                    .as_deref()
-                    .map(crate::cli::serve_addr)
-                    .transpose()
-                    .map_err(Failure::bad_input)?,
-                hosts: crate::host::HostOptions {
-                    hosts: hosts.hosts,
-                    listen: hosts.listen,
-                    link_timeout: secs(hosts.link_timeout, "--link-timeout")?,
-                },
-                realtime,
-                losses,
-                on_loss: run.on_loss.into(),
-            };
-            if opts.hosts.hosts > 1 && !opts.losses.events.is_empty() {
-                return Err(Failure::bad_input(
-                    "--lose with --hosts: losing members across hosts is not supported yet",
-                ));
-            }
-            if opts.hosts.hosts > 1 && opts.on_loss == common::loss::OnLoss::Repair {
-                // Repairs re-open services on one host's shared memory; the bridges do not
-                // carry a repaired link yet, so a team over several hosts stops on a loss.
-                opts.on_loss = common::loss::OnLoss::Stop;
-                if !cli.quiet {
-                    out!("note: --hosts > 1 flies with --on-loss stop (repair across hosts is not supported yet)");
-                }
-            }
-            let started = Instant::now();
-            let crate::launch::Launched {
-                report,
-                ticking,
-                startup,
-                member_peak_rss,
-                live: _live,
-            } = launch(&s, &opts)?;
-            summary("launch", &report, started, &opts.out, cli.quiet);
-            if !cli.quiet && ticking > Duration::ZERO {
-                out!(
-                    "  ticking: {:.2} s ({:.0} ticks/s), start-up {:.2} s (command to first tick)",
-                    ticking.as_secs_f64(),
-                    report.ticks as f64 / ticking.as_secs_f64(),
-                    startup.as_secs_f64()
-                );
-                if let (Some((id, member)), Some(me)) =
-                    (member_peak_rss, crate::team::own_peak_rss())
-                {
-                    out!(
-                        "  peak resident memory: largest member {:.1} MiB (agent {id}), \
-                         orchestrator {:.1} MiB",
-                        member as f64 / 1024.0,
-                        me as f64 / 1024.0
-                    );
-                }
-            }
-            if report.ticks > 0 {
-                figures_after_run(&opts.out, &run, cli.quiet);
-                replay_after_run(&opts.out, cli.quiet);
-            }
-            Ok(exit_of(&report))
-        }
+        Command::Simulate { source, out, run } => simulate_command(&source, &out, &run, cli.quiet),
+        Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
+        Command::Launch(args) => launch_command(args, cli.quiet),
         Command::View { dir, serve } => view(&dir, serve.as_deref(), cli.quiet),
         Command::Clean => clean(cli.quiet),
         Command::Host {
@@ -231,23 +60,221 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         Command::Export { target } => export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
-        } => {
-            let source = Source {
-                scenario: None,
-                n,
-                builtin: name,
-                t_total: None,
-            };
-            let s = load(&source)?;
-            match out {
-                Some(p) => common::rundir::write_atomic(&p, s.to_toml().as_bytes())
-                    .map_err(Failure::bad_input)?,
-                None => {
-                    use std::io::Write as _;
-                    let _ = std::io::stdout().write_all(s.to_toml().as_bytes());
-                }
-            }
-            Ok(Exit::Safe)
+        } => scenario_export(name, n, out.as_deref()),
+    }
+}
+
+/// `orchestrator simulate`: the whole team in one process, audited and recorded.
+fn simulate_command(
+    source: &Source,
+    out: &OutDir,
+    run: &RunOptions,
+    quiet: bool,
+) -> Result<Exit, Failure> {
+    crate::telemetry::check_available(run.telemetry)?;
+    let s = run.link.apply(&load(source)?).map_err(Failure::bad_input)?;
+    check_follow(&s, run.follow)?;
+    let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
+    let started = Instant::now();
+    let opts = SimulateOptions {
+        every: out.every,
+        stop_on_violation: run.stop_on_violation,
+        max_ticks: run.max_ticks,
+        telemetry: run.telemetry,
+        losses: LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?,
+        on_loss: run.on_loss.into(),
+    };
+    let mut tel =
+        crate::telemetry::open(&dir, run.telemetry, out.every).map_err(Failure::bad_input)?;
+    let last = run
+        .max_ticks
+        .map_or(s.last_tick(), |k| k.min(s.last_tick()));
+    let mut progress = Progress::new("simulate", last, s.dt_s(), quiet);
+    let report = simulate(&s, &dir, opts, tel.as_mut(), |tick, audit| {
+        progress.tick(tick, audit.report())
+    })
+    .map_err(Failure::fault)?;
+    progress.finish();
+    summary("simulate", &report, started, dir.path(), quiet);
+    figures_after_run(dir.path(), run, quiet);
+    if report.ticks > 0 {
+        replay_after_run(dir.path(), quiet);
+    }
+    Ok(exit_of(&report))
+}
+
+/// `orchestrator report RUN_DIR`: the figures of a finished run.
+fn report_command(dir: &Path, follow: Option<u32>, quiet: bool) -> Result<Exit, Failure> {
+    let started = Instant::now();
+    let files = report(dir, follow).map_err(|e| match e {
+        ReportError::Read(_) => Failure::bad_input(e),
+        ReportError::Draw(_) => Failure::fault(e),
+    })?;
+    if !quiet {
+        out!(
+            "report: {} files in {} ({:.2} s)",
+            files.len(),
+            dir.display(),
+            started.elapsed().as_secs_f64()
+        );
+        for f in &files {
+            out!("  {}", f.display());
+        }
+    }
+    Ok(Exit::Safe)
+}
+
+/// `orchestrator scenario export`: a built-in or generated scenario as TOML.
+fn scenario_export(
+    name: Option<String>,
+    n: Option<usize>,
+    out: Option<&Path>,
+) -> Result<Exit, Failure> {
+    let source = Source {
+        scenario: None,
+        n,
+        builtin: name,
+        t_total: None,
+    };
+    let s = load(&source)?;
+    match out {
+        Some(p) => {
+            common::rundir::write_atomic(p, s.to_toml().as_bytes()).map_err(Failure::bad_input)?
+        }
+        None => {
+            use std::io::Write as _;
+            let _ = std::io::stdout().write_all(s.to_toml().as_bytes());
+        }
+    }
+    Ok(Exit::Safe)
+}
+
+/// `orchestrator launch`: the team as processes, then its summary, figures and replay.
+fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
+    let (s, mut opts) = launch_options(&a, quiet)?;
+    restrict_across_hosts(&mut opts, quiet)?;
+    let started = Instant::now();
+    let launched = launch(&s, &opts)?;
+    print_launched(&launched, started, &opts.out, quiet);
+    if launched.report.ticks > 0 {
+        figures_after_run(&opts.out, &a.run, quiet);
+        replay_after_run(&opts.out, quiet);
+    }
+    let exit = exit_of(&launched.report);
+    // The live view (`--serve`) served until the figures and the replay were written.
+    drop(launched.live);
+    Ok(exit)
+}
+
+/// The scenario and the launch options from the command line, every value checked.
+fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOptions), Failure> {
+    crate::telemetry::check_available(a.run.telemetry)?;
+    let vehicles = a
+        .vehicle
+        .validate(a.realtime.realtime)
+        .map_err(Failure::bad_input)?;
+    let s = a
+        .run
+        .link
+        .apply(&load(&a.source)?)
+        .map_err(Failure::bad_input)?;
+    let realtime = a.realtime.options(&s)?;
+    if let Some(why) =
+        realtime.and_then(|rt| common::options::realtime_links_refusal(&s, rt.stale_after))
+    {
+        return Err(Failure::bad_input(why));
+    }
+    check_follow(&s, a.run.follow)?;
+    let losses = LossSchedule::new(&s, &a.run.lose).map_err(Failure::bad_input)?;
+    if a.no_spawn && !a.run.lose.is_empty() {
+        // The orchestrator carries out a scripted loss by killing the member's process.
+        return Err(Failure::bad_input(
+            "--lose needs members spawned by launch (not --no-spawn)",
+        ));
+    }
+    let team_name = a
+        .team
+        .clone()
+        .unwrap_or_else(|| format!("cdm{}", std::process::id()));
+    let team = TeamName::new(&team_name)
+        .map_err(|e| Failure::bad_input(CommandError::option("--team")(e)))?;
+    let secs = |v: f64, what: &str| timeout(what, v).map_err(Failure::bad_input);
+    let opts = LaunchOptions {
+        out: a
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("runs").join(team.as_str())),
+        team,
+        force: a.force,
+        every: a.every,
+        telemetry: a.run.telemetry,
+        // Real time reads the newest states: a short buffer is enough.
+        window: if realtime.is_some() {
+            crate::realtime::REALTIME_WINDOW
+        } else {
+            a.window
+        },
+        spawn: !a.no_spawn,
+        agent_timeout: secs(a.agent_timeout, "--agent-timeout")?,
+        join_timeout: secs(a.join_timeout, "--join-timeout")?,
+        quiet,
+        stop_on_violation: a.run.stop_on_violation,
+        max_ticks: a.run.max_ticks,
+        vehicles,
+        serve: a
+            .serve
+            .as_deref()
+            .map(crate::cli::serve_addr)
+            .transpose()
+            .map_err(Failure::bad_input)?,
+        hosts: crate::host::HostOptions {
+            hosts: a.hosts.hosts,
+            listen: a.hosts.listen.clone(),
+            link_timeout: secs(a.hosts.link_timeout, "--link-timeout")?,
+        },
+        realtime,
+        losses,
+        on_loss: a.run.on_loss.into(),
+    };
+    Ok((s, opts))
+}
+
+/// What a team over several hosts cannot do yet: refused, or (repairs) flown with
+/// `--on-loss stop`.
+fn restrict_across_hosts(opts: &mut LaunchOptions, quiet: bool) -> Result<(), Failure> {
+    if opts.hosts.hosts > 1 && !opts.losses.events.is_empty() {
+        return Err(Failure::bad_input(
+            "--lose with --hosts: losing members across hosts is not supported yet",
+        ));
+    }
+    if opts.hosts.hosts > 1 && opts.on_loss == common::loss::OnLoss::Repair {
+        // Repairs re-open services on one host's shared memory; the bridges do not
+        // carry a repaired link yet, so a team over several hosts stops on a loss.
+        opts.on_loss = common::loss::OnLoss::Stop;
+        if !quiet {
+            out!("note: --hosts > 1 flies with --on-loss stop (repair across hosts is not supported yet)");
+        }
+    }
+    Ok(())
+}
+
+/// The launch's summary: the audit, the tick rate and start-up, the peak memory.
+fn print_launched(l: &crate::launch::Launched, started: Instant, out: &Path, quiet: bool) {
+    summary("launch", &l.report, started, out, quiet);
+    if !quiet && l.ticking > Duration::ZERO {
+        out!(
+            "  ticking: {:.2} s ({:.0} ticks/s), start-up {:.2} s (command to first tick)",
+            l.ticking.as_secs_f64(),
+            l.report.ticks as f64 / l.ticking.as_secs_f64(),
+            l.startup.as_secs_f64()
+        );
+        if let (Some((id, member)), Some(me)) = (l.member_peak_rss, crate::team::own_peak_rss()) {
+            out!(
+                "  peak resident memory: largest member {:.1} MiB (agent {id}), \
+                 orchestrator {:.1} MiB",
+                member as f64 / 1024.0,
+                me as f64 / 1024.0
+            );
         }
     }
 }
@@ -721,7 +748,9 @@ fn host_daemon(
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let team = team
-        .map(|t| TeamName::new(&t).map_err(|e| Failure::bad_input(format!("--team: {e}"))))
+        .map(|t| {
+            TeamName::new(&t).map_err(|e| Failure::bad_input(CommandError::option("--team")(e)))
+        })
         .transpose()?;
     let o = crate::host::daemon::DaemonOptions {
         connect,

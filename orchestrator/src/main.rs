@@ -13,6 +13,7 @@ macro_rules! out {
 
 mod cli;
 mod commands;
+mod errors;
 mod export;
 mod host;
 mod launch;
@@ -35,26 +36,45 @@ pub enum Exit {
     Fault = 3,
 }
 
-/// A failure with its exit code.
+/// Any error a command ends with, its source chain kept (see [`Failure::message`]).
+pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// A failure with its exit code. The error stays typed, with its sources, until `main` prints it.
 #[derive(Debug)]
 pub struct Failure {
     pub exit: Exit,
-    pub message: String,
+    pub error: BoxError,
 }
 
 impl Failure {
-    pub fn bad_input(message: impl std::fmt::Display) -> Self {
+    pub fn bad_input(error: impl Into<BoxError>) -> Self {
         Failure {
             exit: Exit::BadInput,
-            message: message.to_string(),
+            error: error.into(),
         }
     }
 
-    pub fn fault(message: impl std::fmt::Display) -> Self {
+    pub fn fault(error: impl Into<BoxError>) -> Self {
         Failure {
             exit: Exit::Fault,
-            message: message.to_string(),
+            error: error.into(),
         }
+    }
+
+    /// The error and its sources, `"...: caused by ..."`. A source whose text the message
+    /// already shows (most of our errors name their source in their own text) is not repeated.
+    pub fn message(&self) -> String {
+        let mut text = self.error.to_string();
+        let mut source = self.error.source();
+        while let Some(s) = source {
+            let more = s.to_string();
+            if !more.is_empty() && !text.contains(&more) {
+                text.push_str(": caused by ");
+                text.push_str(&more);
+            }
+            source = s.source();
+        }
+        text
     }
 }
 
@@ -96,7 +116,7 @@ fn main() {
         Ok(exit) => exit as i32,
         Err(f) => {
             use std::io::Write as _;
-            let _ = writeln!(std::io::stderr(), "error: {}", f.message);
+            let _ = writeln!(std::io::stderr(), "error: {}", f.message());
             f.exit as i32
         }
     };

@@ -37,7 +37,7 @@ pub fn fault(
 /// them; `cargo run --bin orchestrator` alone does not). Checked before anything is created.
 pub fn member_binaries_present() -> Result<(), Failure> {
     let exe = std::env::current_exe()
-        .map_err(|e| Failure::fault(format!("cannot locate the orchestrator binary: {e}")))?;
+        .map_err(|e| Failure::fault(crate::errors::CommandError::LocateBinary(e)))?;
     for name in ["leader", "agent"] {
         let bin = exe.with_file_name(name);
         if !bin.is_file() {

@@ -291,21 +291,7 @@ impl LinearTeam {
             past[slot] = s_k;
             past[slot + 1] = lam;
             past[slot + 2..slot + width].copy_from_slice(&y);
-            for (l, g) in y.iter().enumerate() {
-                pos.push(g[0]);
-                // |g''| between ticks is at most |g''(t_k)| + dt |g'''| (+ O(dt^2)).
-                let b = g[2].abs() + dt * g[3].abs();
-                let j = k / COARSE_TICKS;
-                // Interval j holds ticks j M ..= (j + 1) M: a boundary tick is in two.
-                for j in [Some(j), (k > 0 && k % COARSE_TICKS == 0).then(|| j - 1)]
-                    .into_iter()
-                    .flatten()
-                    .filter(|&j| j < intervals)
-                {
-                    let slot = &mut acc_bound[j * levels + l];
-                    *slot = slot.max(b);
-                }
-            }
+            record_tick(k, &y, dt, intervals, &mut pos, &mut acc_bound);
             if k == last {
                 break;
             }
@@ -347,6 +333,37 @@ impl LinearTeam {
             acc_bound,
             levels,
             last_tick: last,
+        }
+    }
+}
+
+/// Records tick `k` of every level `y` (its position) and raises the acceleration bound of the
+/// coarse intervals holding tick `k`.
+fn record_tick(
+    k: usize,
+    y: &[Vec4],
+    dt: Real,
+    intervals: usize,
+    pos: &mut Vec<Real>,
+    acc_bound: &mut [Real],
+) {
+    let levels = y.len();
+    for (l, g) in y.iter().enumerate() {
+        pos.push(g[0]);
+        // |g''| between ticks is at most |g''(t_k)| + dt |g'''| (+ O(dt^2)).
+        let b = g[2].abs() + dt * g[3].abs();
+        let j = k / COARSE_TICKS;
+        // Interval j holds ticks j M ..= (j + 1) M: a boundary tick is in two.
+        for j in [
+            Some(j),
+            (k > 0 && k.is_multiple_of(COARSE_TICKS)).then(|| j - 1),
+        ]
+        .into_iter()
+        .flatten()
+        .filter(|&j| j < intervals)
+        {
+            let slot = &mut acc_bound[j * levels + l];
+            *slot = slot.max(b);
         }
     }
 }

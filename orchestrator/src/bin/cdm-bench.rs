@@ -17,6 +17,9 @@ use common::engine::quad_engine;
 use common::messages::StateMsg;
 use common::scenario::Scenario;
 use common::transport::{StateWire, Wire};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
 #[derive(Parser)]
@@ -106,6 +109,164 @@ fn neighbours(n: usize, id: usize) -> [usize; 3] {
     [(id + 1) % n, (id + 2) % n, (id + 3) % n]
 }
 
+/// The barrier's coordinator side: one node with every member's state and wake services, a
+/// subscriber and a notifier per member, and the acknowledgement event. Fields drop in order.
+struct Coordinator {
+    states: Vec<(StateService, Subscriber<ipc::Service, StateWire, ()>)>,
+    wakes: Vec<(EventService, Notifier<ipc::Service>)>,
+    listener: Listener<ipc::Service>,
+    _ack: EventService,
+    _node: Node<ipc::Service>,
+}
+
+type StateService =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, StateWire, ()>;
+type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+
+impl Coordinator {
+    /// Creates the services of `n` members of `run`.
+    fn create(run: &str, n: usize) -> Result<Self, String> {
+        let node = node()?;
+        let mut states = Vec::with_capacity(n);
+        let mut wakes = Vec::with_capacity(n);
+        for id in 0..n {
+            let st = node
+                .service_builder(&service(run, &format!("state/{id}"))?)
+                .publish_subscribe::<StateWire>()
+                .max_publishers(1)
+                .max_subscribers(4)
+                .max_nodes(6)
+                .subscriber_max_buffer_size(2)
+                .history_size(0)
+                .enable_safe_overflow(true)
+                .create()
+                .map_err(|e| format!("state/{id}: {e:?}"))?;
+            let sub = st
+                .subscriber_builder()
+                .buffer_size(2)
+                .create()
+                .map_err(|e| format!("subscriber {id}: {e:?}"))?;
+            states.push((st, sub));
+            let w = node
+                .service_builder(&service(run, &format!("wake/{id}"))?)
+                .event()
+                .max_listeners(1)
+                .max_notifiers(1)
+                .max_nodes(3)
+                .create()
+                .map_err(|e| format!("wake/{id}: {e:?}"))?;
+            let notifier = w
+                .notifier_builder()
+                .create()
+                .map_err(|e| format!("notifier {id}: {e:?}"))?;
+            wakes.push((w, notifier));
+        }
+        let ack = node
+            .service_builder(&service(run, "ack")?)
+            .event()
+            .max_listeners(1)
+            .max_notifiers(n)
+            .max_nodes(n + 2)
+            .create()
+            .map_err(|e| format!("ack: {e:?}"))?;
+        let listener = ack
+            .listener_builder()
+            .create()
+            .map_err(|e| format!("ack listener: {e:?}"))?;
+        Ok(Self {
+            states,
+            wakes,
+            listener,
+            _ack: ack,
+            _node: node,
+        })
+    }
+
+    /// True when every member has its listener and its three subscribers.
+    fn joined(&self) -> bool {
+        let n = self.wakes.len();
+        let listeners: usize = self
+            .wakes
+            .iter()
+            .map(|(w, _)| w.dynamic_config().number_of_listeners())
+            .sum();
+        let subs: usize = self
+            .states
+            .iter()
+            .map(|(s, _)| s.dynamic_config().number_of_subscribers())
+            .sum();
+        listeners == n && subs == 4 * n
+    }
+
+    /// Ticks 1..=ticks: wake every member, wait for all their samples of the tick.
+    fn run_ticks(&self, ticks: u64) -> Result<(), String> {
+        let n = self.states.len();
+        for tick in 1..=ticks {
+            for (_, notifier) in &self.wakes {
+                notifier.notify().map_err(|e| format!("notify: {e:?}"))?;
+            }
+            let mut got = 0;
+            let mut last = Instant::now();
+            while got < n {
+                for (_, sub) in &self.states {
+                    while let Ok(Some(s)) = sub.receive() {
+                        if s.0.tick == tick {
+                            got += 1;
+                            last = Instant::now();
+                        }
+                    }
+                }
+                if got == n {
+                    break;
+                }
+                if last.elapsed() > DEADLINE {
+                    return Err(format!(
+                        "tick {tick}: {got} of {n} samples within {DEADLINE:?}"
+                    ));
+                }
+                let _ = self.listener.timed_wait(|_| {}, Duration::from_millis(20));
+            }
+        }
+        Ok(())
+    }
+
+    /// Event 1 tells members to leave.
+    fn dismiss(&self) {
+        for (_, notifier) in &self.wakes {
+            let _ = notifier.notify_with_custom_event_id(EventId::new(1));
+        }
+    }
+}
+
+/// Kills and reaps every child.
+fn stop_all(children: &mut [Child]) {
+    for c in children.iter_mut() {
+        let _ = c.kill();
+        let _ = c.wait();
+    }
+}
+
+/// Starts the `n` member processes of `run` (all stopped again if one cannot start).
+fn spawn_members(run: &str, n: usize) -> Result<Vec<Child>, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut children: Vec<Child> = Vec::with_capacity(n);
+    for id in 0..n {
+        let child = Command::new(&exe)
+            .args(["barrier-member", "--run", run, "--n", &n.to_string()])
+            .args(["--id", &id.to_string()])
+            .stdin(Stdio::null())
+            .spawn();
+        match child {
+            Ok(c) => children.push(c),
+            Err(e) => {
+                stop_all(&mut children);
+                return Err(format!("spawn member {id}: {e}"));
+            }
+        }
+    }
+    Ok(children)
+}
+
 fn barrier(n: usize, ticks: u64) -> Result<(), String> {
     if n < 4 {
         return Err("barrier needs --n 4 or more".into());
@@ -113,92 +274,12 @@ fn barrier(n: usize, ticks: u64) -> Result<(), String> {
     let run = format!("b{}", std::process::id());
     // The coordinator holds a subscriber and a notifier per member (~11 descriptors each).
     common::transport::raise_fd_limit().map_err(|e| e.to_string())?;
-    let node = node()?;
-    let mut states = Vec::with_capacity(n);
-    let mut wakes = Vec::with_capacity(n);
-    for id in 0..n {
-        let st = node
-            .service_builder(&service(&run, &format!("state/{id}"))?)
-            .publish_subscribe::<StateWire>()
-            .max_publishers(1)
-            .max_subscribers(4)
-            .max_nodes(6)
-            .subscriber_max_buffer_size(2)
-            .history_size(0)
-            .enable_safe_overflow(true)
-            .create()
-            .map_err(|e| format!("state/{id}: {e:?}"))?;
-        let sub = st
-            .subscriber_builder()
-            .buffer_size(2)
-            .create()
-            .map_err(|e| format!("subscriber {id}: {e:?}"))?;
-        states.push((st, sub));
-        let w = node
-            .service_builder(&service(&run, &format!("wake/{id}"))?)
-            .event()
-            .max_listeners(1)
-            .max_notifiers(1)
-            .max_nodes(3)
-            .create()
-            .map_err(|e| format!("wake/{id}: {e:?}"))?;
-        let notifier = w
-            .notifier_builder()
-            .create()
-            .map_err(|e| format!("notifier {id}: {e:?}"))?;
-        wakes.push((w, notifier));
-    }
-    let ack = node
-        .service_builder(&service(&run, "ack")?)
-        .event()
-        .max_listeners(1)
-        .max_notifiers(n)
-        .max_nodes(n + 2)
-        .create()
-        .map_err(|e| format!("ack: {e:?}"))?;
-    let listener = ack
-        .listener_builder()
-        .create()
-        .map_err(|e| format!("ack listener: {e:?}"))?;
-
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
-    let mut children: Vec<Child> = Vec::with_capacity(n);
-    let stop = |children: &mut Vec<Child>| {
-        for c in children.iter_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    };
-    for id in 0..n {
-        let child = Command::new(&exe)
-            .args(["barrier-member", "--run", &run, "--n", &n.to_string()])
-            .args(["--id", &id.to_string()])
-            .stdin(Stdio::null())
-            .spawn();
-        match child {
-            Ok(c) => children.push(c),
-            Err(e) => {
-                stop(&mut children);
-                return Err(format!("spawn member {id}: {e}"));
-            }
-        }
-    }
-    // Ready when every member has its listener and its three subscribers.
+    let coordinator = Coordinator::create(&run, n)?;
+    let mut children = spawn_members(&run, n)?;
     let started = Instant::now();
-    loop {
-        let listeners: usize = wakes
-            .iter()
-            .map(|(w, _)| w.dynamic_config().number_of_listeners())
-            .sum();
-        let subs: usize = states
-            .iter()
-            .map(|(s, _)| s.dynamic_config().number_of_subscribers())
-            .sum();
-        if listeners == n && subs == 4 * n {
-            break;
-        }
+    while !coordinator.joined() {
         if started.elapsed() > DEADLINE + Duration::from_millis(50 * n as u64) {
-            stop(&mut children);
+            stop_all(&mut children);
             return Err(format!(
                 "members did not join within {:?}",
                 started.elapsed()
@@ -208,51 +289,17 @@ fn barrier(n: usize, ticks: u64) -> Result<(), String> {
     }
     let startup = started.elapsed();
 
-    let mut result = Ok(());
     let start = Instant::now();
-    // Ticks 1..=ticks, all timed.
-    'ticks: for tick in 1..=ticks {
-        for (_, notifier) in &wakes {
-            if let Err(e) = notifier.notify() {
-                result = Err(format!("notify: {e:?}"));
-                break 'ticks;
-            }
-        }
-        let mut got = 0;
-        let mut last = Instant::now();
-        while got < n {
-            for (_, sub) in &states {
-                while let Ok(Some(s)) = sub.receive() {
-                    if s.0.tick == tick {
-                        got += 1;
-                        last = Instant::now();
-                    }
-                }
-            }
-            if got == n {
-                break;
-            }
-            if last.elapsed() > DEADLINE {
-                result = Err(format!(
-                    "tick {tick}: {got} of {n} samples within {DEADLINE:?}"
-                ));
-                break 'ticks;
-            }
-            let _ = listener.timed_wait(|_| {}, Duration::from_millis(20));
-        }
-    }
+    let result = coordinator.run_ticks(ticks);
     let secs = start.elapsed().as_secs_f64();
-    // Event 1 tells members to leave.
-    for (_, notifier) in &wakes {
-        let _ = notifier.notify_with_custom_event_id(EventId::new(1));
-    }
+    coordinator.dismiss();
     let deadline = Instant::now() + Duration::from_secs(5);
     for c in children.iter_mut() {
         while matches!(c.try_wait(), Ok(None)) && Instant::now() < deadline {
             std::thread::sleep(Duration::from_millis(5));
         }
     }
-    stop(&mut children);
+    stop_all(&mut children);
     result?;
     println!(
         "barrier: {n} agents, {ticks} ticks in {secs:.3} s ({:.0} ticks/s), start-up {:.2} s",

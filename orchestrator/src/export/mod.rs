@@ -24,6 +24,7 @@ use common::simulate::{certify, Certificate};
 
 use crate::cli::{ExportFrame, ExportTarget, Source};
 use crate::commands::{load, print_certificate};
+use crate::errors::CommandError;
 use crate::progress::Spinner;
 use crate::report::{top_view, TopPath};
 use crate::{Exit, Failure};
@@ -73,7 +74,7 @@ fn to_crazyswarm2(
 ) -> Result<Exit, Failure> {
     let sc = scaled(source, frame)?;
     let split = crazyflie_split(&sc.trajs, DEFAULT_TOLERANCE_M)
-        .map_err(|e| Failure::bad_input(format!("export crazyswarm2: {e}")))?;
+        .map_err(|e| Failure::bad_input(CommandError::Split(e)))?;
     let cert = certify_quietly(&sc.scenario, quiet);
     create_dir(out)?;
     let record = Record {
@@ -180,8 +181,12 @@ fn certify_quietly(s: &Scenario, quiet: bool) -> Certificate {
 }
 
 fn create_dir(dir: &Path) -> Result<(), Failure> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Failure::bad_input(format!("--out {}: cannot create: {e}", dir.display())))
+    std::fs::create_dir_all(dir).map_err(|source| {
+        Failure::bad_input(CommandError::CreateDir {
+            dir: dir.to_path_buf(),
+            source,
+        })
+    })
 }
 
 /// The directory and the file stem of `--out FILE`, the directory created.

@@ -178,10 +178,16 @@ pub fn write(out: &Path, sc: &Scaled, count: usize, cert: &Certificate) -> Resul
     let opts = SimpleFileOptions::default()
         .compression_method(zip::CompressionMethod::Stored)
         .unix_permissions(0o644);
-    let fail = |e: &dyn std::fmt::Display| Failure::fault(format!("{}: {e}", out.display()));
-    zip.start_file("show.json", opts).map_err(|e| fail(&e))?;
-    zip.write_all(&json).map_err(|e| fail(&e))?;
-    let bytes = zip.finish().map_err(|e| fail(&e))?.into_inner();
+    let fail = |source: zip::result::ZipError| {
+        Failure::fault(crate::errors::CommandError::Zip {
+            file: out.to_path_buf(),
+            source,
+        })
+    };
+    zip.start_file("show.json", opts).map_err(fail)?;
+    zip.write_all(&json)
+        .map_err(|e| fail(zip::result::ZipError::Io(e)))?;
+    let bytes = zip.finish().map_err(fail)?.into_inner();
     write_atomic(out, &bytes).map_err(Failure::bad_input)
 }
 

@@ -2,6 +2,7 @@
 //! on the primary leaders' plane, and a 3-D view, with the communication graph's edges
 //! (in-neighbour to follower, eq. 18) and the leaders marked.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -88,33 +89,15 @@ impl Formation {
         legend: bool,
     ) -> Result<(), String> {
         let p = project(pos);
-        let (mut x0, mut x1, mut y0, mut y1) = (
-            Real::INFINITY,
-            Real::NEG_INFINITY,
-            Real::INFINITY,
-            Real::NEG_INFINITY,
-        );
-        for &(x, y) in &p {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-        if !x0.is_finite() {
+        let Some((xs, ys)) = square_view(&p) else {
             return Ok(());
-        }
-        // Equal scales on both axes, with a margin.
-        let span = (x1 - x0).max(y1 - y0).max(1.0) * 1.12;
-        let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+        };
         let mut chart = ChartBuilder::on(area)
             .caption(title, (FAMILY, 18))
             .margin(12)
             .x_label_area_size(44)
             .y_label_area_size(64)
-            .build_cartesian_2d(
-                (cx - span / 2.0)..(cx + span / 2.0),
-                (cy - span / 2.0)..(cy + span / 2.0),
-            )
+            .build_cartesian_2d(xs, ys)
             .map_err(e)?;
         chart
             .configure_mesh()
@@ -155,6 +138,28 @@ impl Formation {
                 PathElement::new(vec![(x, y), (x + 20, y)], PALETTE[3].stroke_width(1))
             });
         }
+        self.role_dots(&mut chart, &p, legend)?;
+        if legend {
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::LowerLeft)
+                .label_font((FAMILY, 12))
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()
+                .map_err(e)?;
+        }
+        Ok(())
+    }
+
+    /// One dot per member at its in-plane position `p`, styled by role (with a legend entry
+    /// per role when `legend`).
+    fn role_dots<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Plane>,
+        p: &[(Real, Real)],
+        legend: bool,
+    ) -> Result<(), String> {
         for (role, name) in ROLE_NAMES {
             let (color, size) = style_of(role);
             let pts: Vec<(Real, Real)> = p
@@ -177,16 +182,6 @@ impl Formation {
                     .label(name)
                     .legend(move |(x, y)| Circle::new((x + 10, y), size, color.filled()));
             }
-        }
-        if legend {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::LowerLeft)
-                .label_font((FAMILY, 12))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(e)?;
         }
         Ok(())
     }
@@ -251,28 +246,8 @@ impl Formation {
                 });
             }
         }
-        for (pos, alpha) in [(&self.first, 1.0), (&self.last, 1.0)] {
-            let edge_style = GREY.mix(0.5 * alpha).stroke_width(1);
-            chart
-                .draw_series(
-                    self.edges.iter().map(|&(a, b)| {
-                        PathElement::new(vec![to3(&pos[a]), to3(&pos[b])], edge_style)
-                    }),
-                )
-                .map_err(e)?;
-            for role in [Role::Follower, Role::Secondary, Role::Primary] {
-                let (color, size) = style_of(role);
-                chart
-                    .draw_series(
-                        pos.iter()
-                            .zip(&self.roles)
-                            .filter(|(_, r)| **r == role)
-                            .map(|(q, _)| {
-                                Circle::new(to3(q), size.saturating_sub(2).max(2), color.filled())
-                            }),
-                    )
-                    .map_err(e)?;
-            }
+        for pos in [&self.first, &self.last] {
+            self.team_3d(&mut chart, pos)?;
         }
         chart
             .configure_series_labels()
@@ -283,6 +258,70 @@ impl Formation {
             .draw()
             .map_err(e)
     }
+}
+
+impl Formation {
+    /// The team at `pos` in the 3-D view: its graph's edges, then a dot per member by role.
+    fn team_3d<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Space>,
+        pos: &[Vec3],
+    ) -> Result<(), String> {
+        let to3 = |p: &Vec3| (p.x, p.z, p.y);
+        let edge_style = GREY.mix(0.5).stroke_width(1);
+        chart
+            .draw_series(
+                self.edges
+                    .iter()
+                    .map(|&(a, b)| PathElement::new(vec![to3(&pos[a]), to3(&pos[b])], edge_style)),
+            )
+            .map_err(e)?;
+        for role in [Role::Follower, Role::Secondary, Role::Primary] {
+            let (color, size) = style_of(role);
+            chart
+                .draw_series(
+                    pos.iter()
+                        .zip(&self.roles)
+                        .filter(|(_, r)| **r == role)
+                        .map(|(q, _)| {
+                            Circle::new(to3(q), size.saturating_sub(2).max(2), color.filled())
+                        }),
+                )
+                .map_err(e)?;
+        }
+        Ok(())
+    }
+}
+
+/// The planar chart's coordinates (metres on the leaders' plane).
+type Plane = Cartesian2d<RangedCoordf64, RangedCoordf64>;
+/// The 3-D chart's coordinates (x, z, y: altitude up).
+type Space = plotters::coord::ranged3d::Cartesian3d<RangedCoordf64, RangedCoordf64, RangedCoordf64>;
+
+/// A square window around the points `p` (equal scales on both axes, with a margin); `None`
+/// when there is no finite point.
+fn square_view(p: &[(Real, Real)]) -> Option<(std::ops::Range<Real>, std::ops::Range<Real>)> {
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        Real::INFINITY,
+        Real::NEG_INFINITY,
+        Real::INFINITY,
+        Real::NEG_INFINITY,
+    );
+    for &(x, y) in p {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if !x0.is_finite() {
+        return None;
+    }
+    let span = (x1 - x0).max(y1 - y0).max(1.0) * 1.12;
+    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    Some((
+        (cx - span / 2.0)..(cx + span / 2.0),
+        (cy - span / 2.0)..(cy + span / 2.0),
+    ))
 }
 
 impl Figure for Formation {

@@ -17,6 +17,7 @@ use common::math::Real;
 use common::rundir::write_atomic;
 
 pub use data::{read_run, ReadError, RunData};
+pub use plot::FigureError;
 use plot::{thin, thin_min, write_figure, Line, Panel, Rule, Stack, GREY, LIMIT, PALETTE};
 pub use top_view::{top_view, TopPath};
 
@@ -30,17 +31,17 @@ pub enum ReportError {
     #[error(transparent)]
     Read(#[from] ReadError),
     /// Drawing or writing a figure failed (names the file).
-    #[error("{0}")]
-    Draw(String),
+    #[error(transparent)]
+    Draw(#[from] FigureError),
 }
 
 /// Draw every figure of a run directory; returns the files written.
 pub fn report(dir: &Path, follow: Option<u32>) -> Result<Vec<PathBuf>, ReportError> {
     let d = read_run(dir, follow)?;
-    draw_all(dir, &d).map_err(ReportError::Draw)
+    Ok(draw_all(dir, &d)?)
 }
 
-fn draw_all(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
+fn draw_all(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
     let mut files = Vec::new();
     files.extend(eigenvalues(dir, d)?);
     files.extend(agent(dir, d)?);
@@ -64,14 +65,14 @@ fn first_violation(d: &RunData, scale: Real) -> Option<Rule> {
     })
 }
 
-fn csv(dir: &Path, name: &str, text: &str) -> Result<PathBuf, String> {
+fn csv(dir: &Path, name: &str, text: &str) -> Result<PathBuf, FigureError> {
     let p = dir.join(name);
-    write_atomic(&p, text.as_bytes()).map_err(|x| x.to_string())?;
+    write_atomic(&p, text.as_bytes())?;
     Ok(p)
 }
 
 /// Fig. 8: the eigenvalues of U_D versus t / T_total, with lambda_CD,min (eq. 37).
-fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
+fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
     let t_total = d.audit.t_total_s;
     let mut text = String::from("tick,t,t_over_t_total,lambda1,lambda2,lambda3\n");
     for s in &d.samples {
@@ -130,7 +131,7 @@ fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
 }
 
 /// Fig. 9: x, y, z of one follower versus time, actual against desired (r_HT, eq. 13).
-fn agent(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
+fn agent(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
     let axes = ["x", "y", "z"];
     let panels = (0..3)
         .map(|k| {
@@ -181,7 +182,7 @@ fn agent(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
 
 /// Fig. 11: the smallest separation D_B(t) against 2 eps and the smallest distance of a
 /// follower to the containment prism's sides D_S(t) against 0 (Theorem 3).
-fn separation(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
+fn separation(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
     let mut text = String::from("tick,t,min_separation_m,min_boundary_distance_m\n");
     for s in &d.samples {
         let _ = writeln!(
@@ -254,7 +255,7 @@ pub fn deviation_sweep(
     points: &[(Real, Real)],
     delta_m: Real,
     t_threshold_s: Real,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, FigureError> {
     let sweep = Sweep {
         stem: "fig_deviation_sweep",
         x_column: "t_total_s",
@@ -274,7 +275,7 @@ pub fn delay_sweep(
     points: &[(Real, Real)],
     delta_m: Real,
     max_link_delay_ms: Option<Real>,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, FigureError> {
     let sweep = Sweep {
         stem: "fig_delay_sweep",
         x_column: "link_delay_ms",
@@ -303,7 +304,7 @@ fn sweep_figure(
     sweep: &Sweep,
     points: &[(Real, Real)],
     delta_m: Real,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, FigureError> {
     let mut text = format!("{},max_follower_deviation_m\n", sweep.x_column);
     for (t, e) in points {
         let _ = writeln!(text, "{t},{e}");

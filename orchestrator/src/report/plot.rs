@@ -33,15 +33,36 @@ pub fn e(x: impl std::fmt::Display) -> String {
     x.to_string()
 }
 
+/// Why a figure could not be made (each variant names the file).
+#[derive(Debug, thiserror::Error)]
+pub enum FigureError {
+    /// The embedded font could not be registered with plotters.
+    #[error("the embedded font DejaVuSans.ttf could not be loaded")]
+    Font,
+    /// Drawing failed. plotters' errors are generic over the backend, so they travel as text.
+    #[error("{}: {detail}", file.display())]
+    Draw { file: PathBuf, detail: String },
+    /// The PNG encoder refused the image.
+    #[error("{}: {source}", file.display())]
+    Png {
+        file: PathBuf,
+        #[source]
+        source: png::EncodingError,
+    },
+    /// Writing the file failed (names the file).
+    #[error(transparent)]
+    Write(#[from] common::rundir::RunDirError),
+}
+
 /// Register the font once per process.
-pub fn ensure_font() -> Result<(), String> {
+pub fn ensure_font() -> Result<(), FigureError> {
     static OK: OnceLock<bool> = OnceLock::new();
     let ok =
         *OK.get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
     if ok {
         Ok(())
     } else {
-        Err("the embedded font DejaVuSans.ttf could not be loaded".into())
+        Err(FigureError::Font)
     }
 }
 
@@ -55,11 +76,18 @@ pub trait Figure {
 /// Write `<stem>.svg` and `<stem>.png` into `dir`; returns both paths. Both are drawn in memory
 /// and written atomically (`write_atomic`: never through a link, never half a file, the old
 /// figure kept when the disk is full).
-pub fn write_figure<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Result<Vec<PathBuf>, String> {
+pub fn write_figure<F: Figure>(
+    dir: &Path,
+    stem: &str,
+    fig: &F,
+) -> Result<Vec<PathBuf>, FigureError> {
     ensure_font()?;
     let svg = dir.join(format!("{stem}.svg"));
     let png = dir.join(format!("{stem}.png"));
-    let named = |p: &Path, x: String| format!("{}: {x}", p.display());
+    let named = |p: &Path, detail: String| FigureError::Draw {
+        file: p.to_path_buf(),
+        detail,
+    };
     let (w, h) = fig.size();
     let mut text = String::new();
     {
@@ -68,7 +96,7 @@ pub fn write_figure<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Result<Vec<Pa
         fig.draw(&root).map_err(|x| named(&svg, x))?;
         root.present().map_err(|x| named(&svg, e(x)))?;
     }
-    write_atomic(&svg, text.as_bytes()).map_err(|x| x.to_string())?;
+    write_atomic(&svg, text.as_bytes())?;
     let mut rgb = vec![0u8; w as usize * h as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
@@ -76,8 +104,11 @@ pub fn write_figure<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Result<Vec<Pa
         fig.draw(&root).map_err(|x| named(&png, x))?;
         root.present().map_err(|x| named(&png, e(x)))?;
     }
-    let bytes = encode_png(&rgb, w, h).map_err(|x| named(&png, x.to_string()))?;
-    write_atomic(&png, &bytes).map_err(|x| x.to_string())?;
+    let bytes = encode_png(&rgb, w, h).map_err(|source| FigureError::Png {
+        file: png.clone(),
+        source,
+    })?;
+    write_atomic(&png, &bytes)?;
     Ok(vec![svg, png])
 }
 

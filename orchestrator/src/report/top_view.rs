@@ -120,7 +120,7 @@ pub fn top_view(
     stem: &str,
     title: &str,
     paths: Vec<TopPath>,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, super::FigureError> {
     write_figure(
         dir,
         stem,

@@ -70,6 +70,31 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
     if let Some(d) = f.delta_m {
         positive("delta_m", d)?;
     }
+    check_optional(f)?;
+    if f.name.len() > MAX_NAME_BYTES {
+        return Err(E::Invalid {
+            field: "name".into(),
+            reason: format!(
+                "is {} bytes long; at most {MAX_NAME_BYTES} bytes are allowed",
+                f.name.len()
+            ),
+        });
+    }
+    check_resolution(f)?;
+    if f.comm_hz * f.t_total_s > 1e8 {
+        return Err(E::Invalid {
+            field: "t_total_s".into(),
+            reason: format!(
+                "times comm_hz gives {} ticks; at most 1e8 are supported",
+                f.comm_hz * f.t_total_s
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The optional tables and fields: `[link]`, `substeps`, `weight_floor`, `plane_tolerance_m`.
+fn check_optional(f: &ScenarioFile) -> Result<(), E> {
     if let Some((field, reason)) = f.link.and_then(|l| l.problem()) {
         return Err(E::Invalid {
             field: field.into(),
@@ -101,25 +126,6 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
                 reason: format!("must be >= 0, got {t}"),
             });
         }
-    }
-    if f.name.len() > MAX_NAME_BYTES {
-        return Err(E::Invalid {
-            field: "name".into(),
-            reason: format!(
-                "is {} bytes long; at most {MAX_NAME_BYTES} bytes are allowed",
-                f.name.len()
-            ),
-        });
-    }
-    check_resolution(f)?;
-    if f.comm_hz * f.t_total_s > 1e8 {
-        return Err(E::Invalid {
-            field: "t_total_s".into(),
-            reason: format!(
-                "times comm_hz gives {} ticks; at most 1e8 are supported",
-                f.comm_hz * f.t_total_s
-            ),
-        });
     }
     Ok(())
 }
@@ -177,6 +183,36 @@ fn check_resolution(f: &ScenarioFile) -> Result<(), E> {
 
 pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenario, E> {
     check_numbers(&file)?;
+    check_agents(&file)?;
+    check_roles(&file)?;
+    let (frame, plan) = leaders_plan(&file)?;
+    let notes = project_onto_plane(&mut file, &frame)?;
+    let formation = formation_of(&mut file, frame)?;
+    let gains_margin = match checks {
+        Checks::Member => None,
+        Checks::Full => {
+            let margin = stability_margin(&file.gains, &formation.l_block());
+            if margin.is_nan() || margin <= 0.0 {
+                return Err(E::UnstableGains {
+                    gains: file.gains,
+                    worst_real: -margin,
+                });
+            }
+            Some(margin)
+        }
+    };
+    Ok(Scenario {
+        origin: String::new(),
+        file,
+        formation,
+        plan,
+        notes,
+        gains_margin,
+    })
+}
+
+/// The team's size, unique ids, finite positions and goals.
+fn check_agents(file: &ScenarioFile) -> Result<(), E> {
     if file.agents.len() < 4 {
         return Err(E::Invalid {
             field: "agents".into(),
@@ -210,6 +246,12 @@ pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenari
             }
         }
     }
+    Ok(())
+}
+
+/// Exactly three primary leaders, each with a goal; goals only on primaries, neighbours only on
+/// followers.
+fn check_roles(file: &ScenarioFile) -> Result<(), E> {
     let primaries: Vec<u32> = file
         .agents
         .iter()
@@ -237,6 +279,12 @@ pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenari
             _ => {}
         }
     }
+    Ok(())
+}
+
+/// The primary leaders' frame at t0 and their plan, refused when the three leaders are
+/// collinear at t0, at their goals or anywhere along the plan.
+fn leaders_plan(file: &ScenarioFile) -> Result<(Frame, TeamPlan), E> {
     let prim: Vec<&super::AgentSpec> = file
         .agents
         .iter()
@@ -280,8 +328,12 @@ pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenari
             });
         }
     }
+    Ok((frame, plan))
+}
 
-    // Project onto the leaders' plane (ERRATA 10).
+/// Projects every non-primary member onto the primary leaders' plane (ERRATA 10); one note per
+/// member moved. A member farther than the tolerance is refused.
+fn project_onto_plane(file: &mut ScenarioFile, frame: &Frame) -> Result<Vec<String>, E> {
     let tol = file.plane_tolerance_m.unwrap_or(DEFAULT_PLANE_TOLERANCE_M);
     let mut notes = Vec::new();
     for a in file.agents.iter_mut() {
@@ -306,7 +358,11 @@ pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenari
             a.position = [q.x, q.y, q.z];
         }
     }
+    Ok(notes)
+}
 
+/// The formation (weights eq. 18, synthesised in-neighbours written back into the file).
+fn formation_of(file: &mut ScenarioFile, frame: Frame) -> Result<Formation, E> {
     let mut inputs = Vec::with_capacity(file.agents.len());
     for a in &file.agents {
         let in_neighbors = match &a.in_neighbors {
@@ -339,25 +395,5 @@ pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenari
             a.in_neighbors = Some(link.in_neighbors.to_vec());
         }
     }
-    let gains_margin = match checks {
-        Checks::Member => None,
-        Checks::Full => {
-            let margin = stability_margin(&file.gains, &formation.l_block());
-            if margin.is_nan() || margin <= 0.0 {
-                return Err(E::UnstableGains {
-                    gains: file.gains,
-                    worst_real: -margin,
-                });
-            }
-            Some(margin)
-        }
-    };
-    Ok(Scenario {
-        origin: String::new(),
-        file,
-        formation,
-        plan,
-        notes,
-        gains_margin,
-    })
+    Ok(formation)
 }
