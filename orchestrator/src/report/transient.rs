@@ -11,7 +11,7 @@ use plotters::prelude::SeriesLabelPosition;
 use common::math::Real;
 
 use super::data::{RunData, Transient};
-use super::plot::{thin, write_figure, Line, Panel, Rule, Stack, GREY, PALETTE};
+use super::plot::{thin, write_figure, FigureError, Line, Panel, Rule, Stack, GREY, PALETTE};
 use super::{csv, MAX_POINTS};
 
 /// Followers drawn (the largest transients); the CSV keeps them all.
@@ -21,7 +21,7 @@ const ZOOM_BEFORE_S: Real = 5.0;
 const ZOOM_AFTER_S: Real = 30.0;
 
 /// `fig_loss_transient.{csv,svg,png}` for a run with losses; nothing for a run without.
-pub fn loss_transient(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, String> {
+pub fn loss_transient(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
     if d.audit.repairs.is_empty() {
         return Ok(Vec::new());
     }
