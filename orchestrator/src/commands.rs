@@ -122,6 +122,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 .link
                 .apply(&load(&source)?)
                 .map_err(Failure::bad_input)?;
+            vehicles.check(&s).map_err(Failure::bad_input)?;
             let realtime = realtime.options(&s)?;
             if let Some(why) = realtime
                 .is_some()

@@ -21,6 +21,7 @@ use common::transport::OrchestratorPorts;
 
 use crate::launch::LaunchOptions;
 use crate::team::{exited_fault, fault, first_exited, Spawned, Stop};
+use crate::vehicle_reports::VehicleBook;
 use crate::Failure;
 
 /// The real-time options of `launch`.
@@ -117,6 +118,7 @@ pub fn run(
 ) -> Result<(Instant, bool), Stop> {
     let (ports, children) = team;
     crate::launch::gather(s, o, ports, children, interrupted)?;
+    crate::team_arm::arm_team(s, o, ports, children, interrupted)?;
     crate::launch::write_subscriptions(s, ports, dir);
     let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
         let f = fault(FaultKind::Io, None, None, 0, e.to_string());
@@ -145,10 +147,15 @@ pub fn run(
         audit,
         tel: tel.as_mut(),
         audits: 0,
+        vehicles: VehicleBook::new(hash),
     };
     let cpu_at_start = team_cpu_s(children);
     let result = m.fly(ports, children, interrupted);
-    let audits = m.audits;
+    let Monitor {
+        audits,
+        mut vehicles,
+        ..
+    } = m;
     let cpu_s = team_cpu_s(children) - cpu_at_start;
     let flight_s = Instant::now()
         .saturating_duration_since(start)
@@ -159,7 +166,8 @@ pub fn run(
         .map_or_else(|(_, r)| *r, |_| StopReason::Finished);
     core.stopping();
     let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
-    collect_final_reports(&mut core, ports, children);
+    collect_final_reports(&mut core, ports, children, &mut vehicles);
+    vehicles.record(audit);
     let figures = core.figures(RunFigures {
         audits,
         audit_hz: rt.audit_hz,
@@ -209,11 +217,14 @@ fn collect_final_reports(
     core: &mut MonitorCore,
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],
+    vehicles: &mut VehicleBook,
 ) {
     let until = Instant::now() + Duration::from_millis(1500);
     while Instant::now() < until {
         let _ = ports.receive_states(|msg| {
-            core.on_state(&msg);
+            if !vehicles.take(&msg) {
+                core.on_state(&msg);
+            }
         });
         let mut running = Vec::new();
         for c in children.iter_mut() {
@@ -275,6 +286,8 @@ struct Monitor<'a> {
     tel: &'a mut dyn TelemetrySink,
     /// Audit instants done.
     audits: u64,
+    /// The members' vehicle reports (MAVLink), kept out of the monitor.
+    vehicles: VehicleBook,
 }
 
 impl Monitor<'_> {
@@ -356,11 +369,17 @@ impl Monitor<'_> {
     fn drain(&mut self, ports: &mut OrchestratorPorts) -> Result<(), Stop> {
         let mut bad = None;
         let core = &mut *self.core;
+        let vehicles = &mut self.vehicles;
         ports
-            .receive_states(|msg| match core.on_state(&msg) {
-                Heard::Nothing => {}
-                h => {
-                    bad.get_or_insert(h);
+            .receive_states(|msg| {
+                if vehicles.take(&msg) {
+                    return;
+                }
+                match core.on_state(&msg) {
+                    Heard::Nothing => {}
+                    h => {
+                        bad.get_or_insert(h);
+                    }
                 }
             })
             .map_err(|e| transport(e, self.audits))?;
