@@ -287,7 +287,7 @@ mod tests {
         ])
         .validate(true)
         .expect("valid");
-        let Vehicles::Mavlink(o) = v else {
+        let Vehicles::Mavlink(o) = &v else {
             panic!("{v:?}")
         };
         assert_eq!(o.origin, Vec3::new(-1.5, 2.0, 0.25));
