@@ -176,12 +176,6 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 losses,
                 on_loss: run.on_loss.into(),
             };
-            if opts.realtime.is_some() && opts.hosts.hosts > 1 {
-                // Real time across hosts needs the daemons to pace their members (not yet).
-                return Err(Failure::bad_input(
-                    "--realtime with --hosts: real time across hosts is not supported yet",
-                ));
-            }
             if opts.hosts.hosts > 1 && !opts.losses.events.is_empty() {
                 return Err(Failure::bad_input(
                     "--lose with --hosts: losing members across hosts is not supported yet",

@@ -126,7 +126,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     let layout = hosts.hide_remote_edges(layout);
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
-    let bridge = hosts.start_bridge(s, &o.team, o.window)?;
+    let bridge = hosts.start_bridge(s, &o.team, crate::host::Flight::of(o))?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
     let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
@@ -165,7 +165,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
         Err((fault, reason)) => {
-            audit.fault(fault);
+            audit.fault(match &bridge {
+                Some(b) => b.explain(fault),
+                None => fault,
+            });
             (false, reason, None)
         }
     };
