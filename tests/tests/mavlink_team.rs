@@ -219,7 +219,7 @@ fn ten_members_arm_when_all_are_ready_and_fly_to_their_goals() {
     let arm = ["--require-arm"];
     let mut vehicles = start_vehicles(&file, (base, &origins), 0..N - 1, None, &arm);
     let origins_arg = origins_file.to_str().expect("utf-8 path");
-    let mut orch = launch_team(
+    let orch = launch_team(
         dir.path(),
         &team_name,
         &scenario,
@@ -234,7 +234,6 @@ fn ten_members_arm_when_all_are_ready_and_fly_to_their_goals() {
         None,
         &arm,
     ));
-    orch.wait_for_output("vehicles ready", DEADLINE);
     let o = orch.finish(DEADLINE);
     // (A failed launch drops, so kills, the vehicles.)
     assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
