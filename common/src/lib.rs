@@ -19,5 +19,7 @@ pub use cdm_runtime::{
 
 pub mod member;
 pub mod member_cli;
+mod member_vehicle;
 pub mod options;
+pub mod vehicle_origins;
 pub mod vehicles;

@@ -7,17 +7,17 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use cdm_mavlink::udp::UdpError;
-use cdm_mavlink::PlantError;
+use cdm_mavlink::{PlantError, TeamArmError};
 use cdm_runtime::member_core::MemberCore;
 use cdm_runtime::member_loop::{fly, LoopError};
 use cdm_runtime::member_loss::{LossFault, MemberLosses};
 use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
-use cdm_runtime::realtime_loop::fly_realtime;
-use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock, Vehicle};
+use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 
 use crate::dynamics::QuadState;
 use crate::formation::{Member, Role};
 use crate::loss_log::LossLog;
+use crate::member_vehicle::BeforeStart;
 use crate::options::LinkArgs;
 use crate::scenario::{Checks, Scenario, ScenarioError};
 use crate::step::StepFault;
@@ -85,6 +85,12 @@ pub enum MemberError {
     /// The MAVLink vehicle could not be reached or armed before the team started.
     #[error(transparent)]
     VehicleLink(#[from] PlantError),
+    /// A bad `--vehicle-origins` file (names the file, the line and the member).
+    #[error(transparent)]
+    VehicleOrigins(#[from] crate::vehicle_origins::OriginsError),
+    /// Waiting for the team's arm order failed (the vehicle, the orchestrator, a mismatch).
+    #[error(transparent)]
+    TeamArm(#[from] TeamArmError<TransportError>),
     #[error("agent {id}: the orchestrator of team {team} is gone (at tick {tick}); stopping")]
     OrchestratorLost { id: u32, team: String, tick: u64 },
     #[error("agent {id}: nothing happened for {waited:?} at tick {tick} (waiting for {waiting_for}); stopping")]
@@ -145,13 +151,16 @@ impl MemberError {
             MemberError::VehicleLink(PlantError::Udp(
                 UdpError::Bind { .. } | UdpError::PortOutOfRange { .. },
             )) => 2,
+            // --arm on a member of a team launched without it.
+            MemberError::TeamArm(TeamArmError::NotOrdered { .. }) => 2,
+            MemberError::VehicleOrigins(_) => 2,
             _ => 3,
         }
     }
 }
 
 /// How a member flies: its deadlines, lockstep or real time, and what it flies.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Flight {
     pub deadlines: Deadlines,
     pub mode: Mode,
@@ -170,7 +179,7 @@ pub fn run_member(
     let Flight {
         deadlines,
         mode,
-        vehicles,
+        ref vehicles,
     } = *flight;
     let s = Scenario::load(scenario_path, Checks::Member)?;
     let s = link.apply(&s)?;
@@ -206,7 +215,7 @@ pub fn run_member(
         deadlines,
         mode,
     };
-    match &vehicles {
+    match vehicles {
         Vehicles::Model => member.fly(
             ModelVehicle::new(s.step_config(), &s.plan, &me),
             interrupted,
@@ -231,7 +240,7 @@ struct Joined<'a> {
 
 impl Joined<'_> {
     /// Opens the ports and flies `vehicle` until the team stops.
-    fn fly<V: Vehicle>(
+    fn fly<V: BeforeStart>(
         &self,
         vehicle: V,
         interrupted: &AtomicBool,
@@ -262,10 +271,19 @@ impl Joined<'_> {
                 deadlines,
                 links: s.link_model(),
             };
+            let waits = (&clock, deadlines.join);
+            let first = vehicle.before_start(&mut ports, hash, waits, interrupted)?;
+            let link = vehicle.link();
             let at_rest = neighbor_positions(s, me);
             let mut core = RealtimeCore::new(me, at_rest, setup, vehicle, clock.now());
-            return fly_realtime(&mut core, &mut ports, &clock, interrupted)
-                .map_err(|e| MemberError::from_loop(e, id, team));
+            return crate::member_vehicle::fly(
+                &mut core,
+                &mut ports,
+                (first, link),
+                &clock,
+                interrupted,
+            )
+            .map_err(|e| MemberError::from_loop(e, id, team));
         }
         let parts = (vehicle, LockstepClock::default());
         let starts = MemberCore::<ModelVehicle, LockstepClock>::in_neighbors(me).map(|n| {

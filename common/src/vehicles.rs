@@ -3,6 +3,7 @@
 //! of a member's MAVLink plant (cdm-mavlink).
 
 use std::net::{IpAddr, Ipv4Addr};
+use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
@@ -12,9 +13,24 @@ use cdm_mavlink::{
 
 use crate::formation::Member;
 use crate::math::Vec3;
+use crate::member::MemberError;
 use crate::scenario::Scenario;
+use crate::vehicle_origins::{OriginsError, VehicleOrigins};
 
-pub use cdm_mavlink::DEFAULT_BASE_PORT;
+pub use cdm_mavlink::{VehicleReport, DEFAULT_BASE_PORT};
+
+/// A member's vehicle report as audit.json records it (angles in degrees).
+pub fn vehicle_figures(r: &VehicleReport) -> crate::audit::VehicleFigures {
+    crate::audit::VehicleFigures {
+        setpoints_sent: r.setpoints_sent,
+        late_setpoints: r.late_setpoints,
+        max_setpoint_late_ms: r.max_late_ms,
+        attitudes_received: r.attitudes,
+        max_abs_roll_deg: r.max_abs_roll_rad.to_degrees(),
+        max_abs_pitch_deg: r.max_abs_pitch_rad.to_degrees(),
+        last_attitude_deg: r.last_attitude_rad.map(|a| a.map(f64::to_degrees)),
+    }
+}
 
 /// What each member flies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -48,6 +64,11 @@ pub struct VehicleArgs {
         allow_hyphen_values = true
     )]
     pub vehicle_origin: String,
+    /// MAVLink: each vehicle's own NED origin (PX4 multi-vehicle SITL: its spawn point), from a
+    /// TOML file of `[[vehicle]]` tables with `id` and `origin = [x, y, z]` (scenario ENU, m),
+    /// one per member; instead of --vehicle-origin.
+    #[arg(long, value_name = "FILE", conflicts_with = "vehicle_origin")]
+    pub vehicle_origins: Option<PathBuf>,
     /// MAVLink: switch each vehicle to OFFBOARD (PX4) / GUIDED (ArduPilot) and arm it once it
     /// is heard; without it the members only stream setpoints and the operator arms.
     #[arg(long)]
@@ -61,22 +82,26 @@ impl Default for VehicleArgs {
             mavlink_base_port: DEFAULT_BASE_PORT,
             mavlink_host: IpAddr::V4(Ipv4Addr::LOCALHOST),
             vehicle_origin: "0,0,0".into(),
+            vehicle_origins: None,
             arm: false,
         }
     }
 }
 
 /// The MAVLink options, validated.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct MavlinkOptions {
     pub base_port: u16,
     pub host: IpAddr,
+    /// `--vehicle-origin`: one origin for every vehicle.
     pub origin: Vec3,
+    /// `--vehicle-origins`: each vehicle's own (an absolute path; read against the scenario).
+    pub origins: Option<PathBuf>,
     pub arm: bool,
 }
 
 /// What each member flies, validated.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub enum Vehicles {
     #[default]
     Model,
@@ -103,6 +128,13 @@ impl VehicleArgs {
                 base_port: self.mavlink_base_port,
                 host: self.mavlink_host,
                 origin,
+                // Absolute: spawned members may not share this process's working directory.
+                origins: self
+                    .vehicle_origins
+                    .as_deref()
+                    .map(std::path::absolute)
+                    .transpose()
+                    .map_err(|e| format!("--vehicle-origins: {e}"))?,
                 arm: self.arm,
             })),
         }
@@ -122,14 +154,47 @@ impl Vehicles {
             o.base_port.to_string(),
             "--mavlink-host".into(),
             o.host.to_string(),
-            "--vehicle-origin".into(),
-            format!("{},{},{}", o.origin.x, o.origin.y, o.origin.z),
         ];
+        match &o.origins {
+            Some(file) => a.extend(["--vehicle-origins".into(), file.display().to_string()]),
+            None => a.extend([
+                "--vehicle-origin".into(),
+                format!("{},{},{}", o.origin.x, o.origin.y, o.origin.z),
+            ]),
+        }
         if o.arm {
             a.push("--arm".into());
         }
         a
     }
+}
+
+impl Vehicles {
+    /// Checks the options against the scenario: `--vehicle-origins` must give every member an
+    /// origin (the error names the file, the line and the member).
+    pub fn check(&self, s: &Scenario) -> Result<(), OriginsError> {
+        if let Vehicles::Mavlink(MavlinkOptions {
+            origins: Some(file),
+            ..
+        }) = self
+        {
+            VehicleOrigins::load(file, &member_ids(s))?;
+        }
+        Ok(())
+    }
+}
+
+fn member_ids(s: &Scenario) -> Vec<u32> {
+    s.formation.members.iter().map(|m| m.id).collect()
+}
+
+/// Member `me`'s vehicle origin: its entry of `--vehicle-origins`, or `--vehicle-origin`.
+fn origin_of(s: &Scenario, me: &Member, o: &MavlinkOptions) -> Result<Vec3, OriginsError> {
+    let Some(file) = &o.origins else {
+        return Ok(o.origin);
+    };
+    let origins = VehicleOrigins::load(file, &member_ids(s))?;
+    Ok(origins.of(me.id).unwrap_or(o.origin))
 }
 
 /// `x,y,z` in metres, finite.
@@ -146,15 +211,16 @@ fn parse_origin(text: &str) -> Result<Vec3, String> {
 }
 
 /// Binds member `me`'s port (`H:(P + i)`, i its index in scenario order) and waits for its
-/// vehicle (and, with `--arm`, for it to be armed), within `connect` (the member's join
-/// timeout).
+/// vehicle to be heard, within `connect` (the member's join timeout). With `--arm` the vehicle
+/// is armed later, on the team's order (`cdm_mavlink::team_arm`).
 pub fn connect<'a>(
     s: &'a Scenario,
     me: &Member,
     o: &MavlinkOptions,
     connect: Duration,
     interrupted: &AtomicBool,
-) -> Result<MavlinkPlant<'a>, PlantError> {
+) -> Result<MavlinkPlant<'a>, MemberError> {
+    let origin = origin_of(s, me, o)?;
     let index = s
         .formation
         .members
@@ -165,14 +231,20 @@ pub fn connect<'a>(
     let config = PlantConfig {
         vehicle: VehicleConfig {
             agent: me.id,
-            origin: VehicleOrigin(o.origin),
+            origin: VehicleOrigin(origin),
             arm: o.arm,
             connect_deadline: connect,
         },
-        bind: member_addr(me.id, o.host, o.base_port, index)?,
+        bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
         period: Duration::from_secs_f64(s.dt_s()),
     };
-    MavlinkPlant::connect(config, s.step_config(), &s.plan, me, interrupted)
+    Ok(MavlinkPlant::connect(
+        config,
+        s.step_config(),
+        &s.plan,
+        me,
+        interrupted,
+    )?)
 }
 
 #[cfg(test)]
@@ -215,7 +287,7 @@ mod tests {
         ])
         .validate(true)
         .expect("valid");
-        let Vehicles::Mavlink(o) = v else {
+        let Vehicles::Mavlink(o) = &v else {
             panic!("{v:?}")
         };
         assert_eq!(o.origin, Vec3::new(-1.5, 2.0, 0.25));

@@ -178,6 +178,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         .link
         .apply(&load(&a.source)?)
         .map_err(Failure::bad_input)?;
+    vehicles.check(&s).map_err(Failure::bad_input)?;
     let realtime = a.realtime.options(&s)?;
     if let Some(why) =
         realtime.and_then(|rt| common::options::realtime_links_refusal(&s, rt.stale_after))

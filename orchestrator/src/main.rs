@@ -22,7 +22,9 @@ mod progress;
 mod realtime;
 mod report;
 mod team;
+mod team_arm;
 mod telemetry;
+mod vehicle_reports;
 mod viewer;
 
 use clap::Parser;

@@ -23,6 +23,7 @@ use common::transport::OrchestratorPorts;
 
 use crate::launch::LaunchOptions;
 use crate::team::{exited_fault, fault, first_exited, Spawned, Stop};
+use crate::vehicle_reports::VehicleBook;
 use crate::Failure;
 
 /// The real-time options of `launch`.
@@ -119,6 +120,7 @@ pub fn run(
 ) -> Result<(Instant, bool), Stop> {
     let (ports, children) = team;
     crate::launch::gather(s, o, ports, children, interrupted)?;
+    crate::team_arm::arm_team(s, o, ports, children, interrupted)?;
     crate::launch::write_subscriptions(s, ports, dir);
     let mut tel = crate::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
         let f = fault(FaultKind::Io, None, None, 0, e.to_string());
@@ -136,10 +138,15 @@ pub fn run(
         audits: 0,
         rec: TickRecorder::new(s),
         at: Vec::with_capacity(s.formation.members.len()),
+        vehicles: VehicleBook::new(hash),
     };
     let cpu_at_start = team_cpu_s(children);
     let result = m.fly(ports, children, interrupted);
-    let audits = m.audits;
+    let Monitor {
+        audits,
+        mut vehicles,
+        ..
+    } = m;
     let cpu_s = team_cpu_s(children) - cpu_at_start;
     let flight_s = Instant::now()
         .saturating_duration_since(start)
@@ -149,8 +156,9 @@ pub fn run(
         .as_ref()
         .map_or_else(|(_, r)| *r, |_| StopReason::Finished);
     core.stopping();
-    let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), s.content_hash(), reason));
-    collect_final_reports(&mut core, ports, children);
+    let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
+    collect_final_reports(&mut core, ports, children, &mut vehicles);
+    vehicles.record(audit);
     let figures = core.figures(RunFigures {
         audits,
         audit_hz: rt.audit_hz,
@@ -228,11 +236,14 @@ fn collect_final_reports(
     core: &mut MonitorCore,
     ports: &mut OrchestratorPorts,
     children: &mut [Spawned],
+    vehicles: &mut VehicleBook,
 ) {
     let until = Instant::now() + Duration::from_millis(1500);
     while Instant::now() < until {
         let _ = ports.receive_states(|msg| {
-            core.on_state(&msg);
+            if !vehicles.take(&msg) {
+                core.on_state(&msg);
+            }
         });
         let mut running = Vec::new();
         for c in children.iter_mut() {
@@ -298,6 +309,8 @@ struct Monitor<'a> {
     rec: TickRecorder,
     /// Every member's position and velocity at the instant being audited (formation order).
     at: Vec<(Vec3, Vec3)>,
+    /// The members' vehicle reports (MAVLink), kept out of the monitor.
+    vehicles: VehicleBook,
 }
 
 impl Monitor<'_> {
@@ -379,11 +392,17 @@ impl Monitor<'_> {
     fn drain(&mut self, ports: &mut OrchestratorPorts) -> Result<(), Stop> {
         let mut bad = None;
         let core = &mut *self.core;
+        let vehicles = &mut self.vehicles;
         ports
-            .receive_states(|msg| match core.on_state(&msg) {
-                Heard::Nothing => {}
-                h => {
-                    bad.get_or_insert(h);
+            .receive_states(|msg| {
+                if vehicles.take(&msg) {
+                    return;
+                }
+                match core.on_state(&msg) {
+                    Heard::Nothing => {}
+                    h => {
+                        bad.get_or_insert(h);
+                    }
                 }
             })
             .map_err(|e| transport(e, self.audits))?;

@@ -7,7 +7,8 @@ tracking the last SET_POSITION_TARGET_LOCAL_NED it received (position, velocity 
 feed-forward). It sends HEARTBEAT, LOCAL_POSITION_NED and ATTITUDE at --rate-hz from its own UDP
 socket to the member's port, answers DO_SET_MODE / COMPONENT_ARM_DISARM like a strict PX4
 (OFFBOARD only while setpoints stream; arming only in OFFBOARD), counts what it received and the
-frames that failed their checksum, can go silent after --silent-after seconds, and prints one
+frames that failed their checksum, stamps every command and its own readiness (its first
+HEARTBEAT and position) on the wall clock, can go silent after --silent-after seconds, and prints one
 JSON summary on stdout at exit.
 
 Every loop is bounded: the vehicle exits after --max-s seconds, or --idle-exit-s seconds after
@@ -89,6 +90,8 @@ class Vehicle:
         self.wrong_target = 0
         self.commands = []
         self.member_sysids = set()
+        # When this vehicle first sent HEARTBEAT and position (it is ready), on the wall clock.
+        self.ready_unix = None
 
     def guided(self):
         if self.args.autopilot == "px4":
@@ -129,8 +132,10 @@ class Vehicle:
         elif msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and self.guided():
             self.armed = msg.param1 == 1.0
             result = mavlink.MAV_RESULT_ACCEPTED
+        # The wall clock (not `now`, this process's own): tests compare it across vehicles.
         self.commands.append({"command": msg.command, "param1": msg.param1, "param2": msg.param2,
-                              "confirmation": msg.confirmation, "result": result})
+                              "confirmation": msg.confirmation, "result": result,
+                              "t_unix": time.time()})
         conn.mav.command_ack_send(msg.command, result)
 
     def step(self, dt, now):
@@ -150,6 +155,8 @@ class Vehicle:
         self.pos = [self.pos[k] + self.vel[k] * dt for k in range(3)]
 
     def send(self, conn, boot_ms, silent):
+        if self.ready_unix is None:
+            self.ready_unix = time.time()
         mute = self.args.mute
         if not (silent and mute in ("all", "heartbeat")):
             autopilot = (mavlink.MAV_AUTOPILOT_PX4 if self.args.autopilot == "px4"
@@ -195,6 +202,7 @@ class Vehicle:
             "custom_mode": self.custom_mode,
             "final_position_ned": self.pos,
             "last_setpoint_ned": self.setpoint[0] if self.setpoint else None,
+            "ready_unix": self.ready_unix,
             "went_silent_at_s": went_silent_at,
             "exit": exit_reason,
         }

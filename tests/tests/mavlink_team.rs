@@ -1,8 +1,10 @@
 //! A team flies MAVLink vehicles (issue 13): `orchestrator launch --vehicles mavlink` spawns ten
 //! members, each drives one `tests/python/mavlink_vehicle.py` (a pymavlink point mass, an
 //! implementation nobody here wrote) over loopback UDP on `P + i`, publishes the vehicle's
-//! measured state, and the orchestrator audits it. Real processes and sockets; every process
-//! runs under a watchdog deadline; a team name of its own.
+//! measured state, and the orchestrator audits it. `--arm` arms the vehicles only once all of
+//! them are ready; each vehicle may have its own NED origin (`--vehicle-origins`); audit.json
+//! records what the members measured on their vehicles. Real processes and sockets; every
+//! process runs under a watchdog deadline; a team name of its own.
 
 mod support;
 
@@ -64,34 +66,61 @@ fn vehicle_script() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("python/mavlink_vehicle.py")
 }
 
-/// ENU scenario point -> the vehicle's NED (origin subtracted; north = y, east = x, down = -z).
-fn to_ned(p: [f64; 3]) -> [f64; 3] {
-    [p[1] - ORIGIN[1], p[0] - ORIGIN[0], -(p[2] - ORIGIN[2])]
+/// ENU scenario point -> the NED of a vehicle whose origin is `origin` (subtracted; north = y,
+/// east = x, down = -z).
+fn to_ned(p: [f64; 3], origin: [f64; 3]) -> [f64; 3] {
+    [p[1] - origin[1], p[0] - origin[0], -(p[2] - origin[2])]
+}
+
+/// Each vehicle's own origin, as PX4's multi-vehicle SITL gives it: its spawn point, on the
+/// ground below where its member starts.
+fn spawn_point(p: [f64; 3]) -> [f64; 3] {
+    [p[0], p[1], 0.0]
+}
+
+/// The `--vehicle-origins` file of `origins` (one per member, in scenario order).
+fn write_origins(dir: &Path, file: &ScenarioFile, origins: &[[f64; 3]]) -> PathBuf {
+    let text: String = file
+        .agents
+        .iter()
+        .zip(origins)
+        .map(|(a, o)| {
+            format!(
+                "[[vehicle]]\nid = {}\norigin = [{}, {}, {}]\n\n",
+                a.id, o[0], o[1], o[2]
+            )
+        })
+        .collect();
+    let path = dir.join("origins.toml");
+    std::fs::write(&path, text).expect("write the origins file");
+    path
 }
 
 fn csv(p: [f64; 3]) -> String {
     format!("{},{},{}", p[0], p[1], p[2])
 }
 
-/// One vehicle per member, in scenario order (member i on `base + i`), each starting where its
-/// member starts; `silent` = (index, seconds) makes one vehicle stop sending; `extra` goes to
-/// every vehicle.
+/// The vehicles of members `which` (indices in scenario order; member i on `base + i`), each
+/// starting where its member starts, in the NED frame of its origin `origins[i]`; `silent` =
+/// (index, seconds) makes one vehicle stop sending; `extra` goes to every vehicle.
 fn start_vehicles(
     s: &ScenarioFile,
-    base: u16,
+    (base, origins): (u16, &[[f64; 3]]),
+    which: std::ops::Range<usize>,
     silent: Option<(usize, f64)>,
     extra: &[&str],
 ) -> Vec<Running> {
-    let mut vehicles: Vec<Running> = s
-        .agents
-        .iter()
-        .enumerate()
-        .map(|(i, a)| {
+    let mut vehicles: Vec<Running> = which
+        .map(|i| {
+            let a = &s.agents[i];
             let mut c = std::process::Command::new(venv_python());
             c.arg(vehicle_script())
                 .args(["--port", &(base + i as u16).to_string()])
                 .args(["--sysid", &(i + 1).to_string()])
-                .arg(format!("--start-ned={}", csv(to_ned(a.position))))
+                .arg(format!(
+                    "--start-ned={}",
+                    csv(to_ned(a.position, origins[i]))
+                ))
                 .args(["--max-s", "100"])
                 .args(extra);
             if let Some((_, after)) = silent.filter(|(k, _)| *k == i) {
@@ -106,12 +135,12 @@ fn start_vehicles(
     vehicles
 }
 
+/// `extra` says where the vehicles' origins are (`--vehicle-origin` or `--vehicle-origins`).
 fn launch_team(dir: &Path, team: &str, scenario: &Path, base: u16, extra: &[&str]) -> Running {
     let path = scenario.to_str().expect("utf-8 path");
     let mut c = launch(team, &dir.join("run"), &["--scenario", path]);
     c.args(["--realtime", "--vehicles", "mavlink"])
         .args(["--mavlink-base-port", &base.to_string()])
-        .args(["--vehicle-origin", &csv(ORIGIN)])
         .args(extra);
     spawn(&mut c)
 }
@@ -137,23 +166,82 @@ fn goals(file: &ScenarioFile) -> Vec<[f64; 3]> {
     out.iter().map(|p| [p.x, p.y, p.z]).collect()
 }
 
+/// The latest readiness of any vehicle, and the earliest command any vehicle received (wall
+/// clock, as the vehicles stamped them).
+fn last_ready_first_command(summaries: &[Value]) -> (f64, f64) {
+    let ready = summaries
+        .iter()
+        .map(|v| num(v, "ready_unix"))
+        .fold(f64::MIN, f64::max);
+    let first = summaries
+        .iter()
+        .flat_map(|v| v["commands"].as_array().cloned().unwrap_or_default())
+        .map(|c| num(&c, "t_unix"))
+        .fold(f64::MAX, f64::min);
+    (ready, first)
+}
+
+/// What audit.json records of each member's vehicle: present for all ten, and sane.
+fn check_vehicle_figures(audit: &Value, file: &ScenarioFile) {
+    let vehicles = &audit["vehicles"];
+    for a in &file.agents {
+        let v = &vehicles[a.id.to_string()];
+        let sent = num(v, "setpoints_sent");
+        let late = num(v, "late_setpoints");
+        assert!(sent > 100.0, "agent {}: {v}", a.id);
+        assert!((0.0..=sent).contains(&late), "agent {}: {v}", a.id);
+        assert!(num(v, "max_setpoint_late_ms") >= 0.0, "agent {}: {v}", a.id);
+        assert!(num(v, "attitudes_received") > 0.0, "agent {}: {v}", a.id);
+        // The point mass tilts with its commanded acceleration: some tilt, far from a flip.
+        let tilt = num(v, "max_abs_roll_deg").max(num(v, "max_abs_pitch_deg"));
+        assert!(tilt > 0.0 && tilt < 45.0, "agent {}: {v}", a.id);
+        let last = v["last_attitude_deg"].as_array().map_or(0, Vec::len);
+        assert_eq!(last, 3, "agent {}: {v}", a.id);
+    }
+}
+
 #[test]
-fn ten_members_arm_and_fly_ten_mavlink_vehicles_to_their_goals() {
+fn ten_members_arm_when_all_are_ready_and_fly_to_their_goals() {
     let dir = TempDir::new();
     let file = team(3.0);
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
     let base = free_base_port();
     let team_name = unique_team("mav10");
+    // Every vehicle has its own NED origin, its spawn point (PX4 multi-vehicle SITL).
+    let origins: Vec<[f64; 3]> = file
+        .agents
+        .iter()
+        .map(|a| spawn_point(a.position))
+        .collect();
+    let origins_file = write_origins(dir.path(), &file, &origins);
     // Vehicles that move only in OFFBOARD and armed, and refuse OFFBOARD without a setpoint
-    // stream (like PX4): the members stream, switch and arm them before the team starts.
-    let vehicles = start_vehicles(&file, base, None, &["--require-arm"]);
-    let orch = launch_team(dir.path(), &team_name, &scenario, base, &["--arm"]);
+    // stream (like PX4). The last one starts late: nobody may be armed before it is ready.
+    let arm = ["--require-arm"];
+    let mut vehicles = start_vehicles(&file, (base, &origins), 0..N - 1, None, &arm);
+    let origins_arg = origins_file.to_str().expect("utf-8 path");
+    let orch = launch_team(
+        dir.path(),
+        &team_name,
+        &scenario,
+        base,
+        &["--arm", "--vehicle-origins", origins_arg],
+    );
+    std::thread::sleep(Duration::from_secs(3));
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        N - 1..N,
+        None,
+        &arm,
+    ));
     let o = orch.finish(DEADLINE);
     // (A failed launch drops, so kills, the vehicles.)
     assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
     let outs: Vec<Output> = vehicles.into_iter().map(|v| v.finish(DEADLINE)).collect();
     let audit = read_json(&dir.path().join("run/audit.json"));
     assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    check_vehicle_figures(&audit, &file);
+    let mut summaries = Vec::new();
     for (i, (out, goal)) in outs.iter().zip(goals(&file)).enumerate() {
         assert_eq!(out.status.code(), Some(0), "vehicle {i}: {}", describe(out));
         let v = summary(out, &format!("vehicle {i}"));
@@ -176,7 +264,7 @@ fn ten_members_arm_and_fly_ten_mavlink_vehicles_to_their_goals() {
             .iter()
             .map(|x| x.as_f64().unwrap_or(f64::NAN))
             .collect::<Vec<_>>();
-        let want = to_ned(goal);
+        let want = to_ned(goal, origins[i]);
         let err = (0..3)
             .map(|k| (end[k] - want[k]).powi(2))
             .sum::<f64>()
@@ -185,7 +273,15 @@ fn ten_members_arm_and_fly_ten_mavlink_vehicles_to_their_goals() {
             err < 0.5,
             "vehicle {i} ended at {end:?} (NED), goal {want:?}: {err:.3} m off"
         );
+        summaries.push(v);
     }
+    // Causal order, not timing: no vehicle heard a mode or arm command before the late one was
+    // sending (the members joined only once their vehicles were heard).
+    let (last_ready, first_command) = last_ready_first_command(&summaries);
+    assert!(
+        first_command > last_ready,
+        "a command at {first_command} came before the last vehicle was ready at {last_ready}"
+    );
     assert_no_team_resources(&team_name);
 }
 
@@ -199,8 +295,11 @@ fn a_vehicle_that_stops_sending_is_named() {
     let team_name = unique_team("mav10lost");
     const SILENT: usize = 6;
     let silent_id = file.agents[SILENT].id;
-    let vehicles = start_vehicles(&file, base, Some((SILENT, 8.0)), &[]);
-    let orch = launch_team(dir.path(), &team_name, &scenario, base, &[]);
+    let origins = [ORIGIN; N];
+    let silent = Some((SILENT, 8.0));
+    let vehicles = start_vehicles(&file, (base, &origins), 0..N, silent, &[]);
+    let at = ["--vehicle-origin", &csv(ORIGIN)];
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
     let o = orch.finish(DEADLINE);
     assert_eq!(o.status.code(), Some(3), "{}", describe(&o));
     for v in vehicles {
@@ -228,7 +327,43 @@ fn bad_vehicle_options_exit_2_naming_them() {
     let file = team(3.0);
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
     let path = scenario.to_str().expect("utf-8 path");
-    let cases: [(&[&str], &str); 4] = [
+    let unknown = dir.path().join("unknown.toml");
+    let mut text = String::new();
+    for a in &file.agents {
+        text += &format!("[[vehicle]]\nid = {}\norigin = [0, 0, 0]\n", a.id);
+    }
+    std::fs::write(
+        &unknown,
+        format!("{text}[[vehicle]]\nid = 999\norigin = [0, 0, 0]\n"),
+    )
+    .expect("write");
+    let unknown = unknown.to_str().expect("utf-8 path");
+    let unknown_line = format!(
+        "unknown.toml line {}: agent 999 is not in the scenario",
+        3 * N + 1
+    );
+    let mavlink_rt = ["--realtime", "--vehicles", "mavlink"];
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &[
+                mavlink_rt[0],
+                mavlink_rt[1],
+                mavlink_rt[2],
+                "--vehicle-origins",
+                unknown,
+            ],
+            &unknown_line,
+        ),
+        (
+            &[
+                mavlink_rt[0],
+                mavlink_rt[1],
+                mavlink_rt[2],
+                "--vehicle-origins",
+                "/nonexistent/o.toml",
+            ],
+            "--vehicle-origins /nonexistent/o.toml: cannot read it",
+        ),
         (&["--arm"], "need --vehicles mavlink"),
         (
             &["--vehicles", "mavlink"],

@@ -171,6 +171,30 @@ pub struct AuditReport {
     /// `simulate` keep the audit.json they always had).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub realtime: Option<RealtimeFigures>,
+    /// What each member measured on its real vehicle (`launch --vehicles mavlink`), by agent id
+    /// (absent otherwise, so other runs keep the audit.json they always had).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub vehicles: BTreeMap<u32, VehicleFigures>,
+}
+
+/// One member's real vehicle, from its newest vehicle report (cdm-mavlink `report`): the
+/// stream's punctuality and the vehicle's ATTITUDE. The tracking error against r_HT is in the
+/// audit's own deviation figures, from the measured states.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct VehicleFigures {
+    /// Setpoints sent to the vehicle (SET_POSITION_TARGET_LOCAL_NED).
+    pub setpoints_sent: u64,
+    /// Setpoints sent more than one period after their scheduled instant.
+    pub late_setpoints: u64,
+    /// The latest a setpoint was sent after its instant (ms).
+    pub max_setpoint_late_ms: Real,
+    /// ATTITUDE messages received.
+    pub attitudes_received: u64,
+    /// The largest |roll| and |pitch| the vehicle reported (degrees).
+    pub max_abs_roll_deg: Real,
+    pub max_abs_pitch_deg: Real,
+    /// The newest ATTITUDE (roll, pitch, yaw; degrees), absent if none arrived.
+    pub last_attitude_deg: Option<[Real; 3]>,
 }
 
 /// The pacing figures of a real-time flight, from the members' own reports (their pacing
@@ -285,6 +309,7 @@ impl Auditor {
                 fault: None,
                 losses: Vec::new(),
                 realtime: None,
+                vehicles: BTreeMap::new(),
             },
         }
     }
@@ -463,6 +488,11 @@ impl Auditor {
     /// Adds the pacing figures of a real-time flight.
     pub fn set_realtime(&mut self, figures: RealtimeFigures) {
         self.report.realtime = Some(figures);
+    }
+
+    /// Records member `id`'s vehicle figures (its newest report replaces an older one).
+    pub fn set_vehicle(&mut self, id: u32, figures: VehicleFigures) {
+        self.report.vehicles.insert(id, figures);
     }
 
     /// The finished report; `complete` when every tick of the plan was audited. A run stopped

@@ -89,7 +89,7 @@ fn chain_member(
                     m.publish(StateMsg::ok(c.grant_tick, HASH, id, [f64::from(id); 12]))?;
                     published = true;
                 }
-                ClockCommand::Run | ClockCommand::Realtime { .. } => {}
+                ClockCommand::Run | ClockCommand::Realtime { .. } | ClockCommand::Arm => {}
                 ClockCommand::Stop(_) => stopped = true,
             }
         }

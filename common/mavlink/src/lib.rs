@@ -14,7 +14,9 @@ pub mod health;
 pub mod messages;
 pub mod ned;
 pub mod plant;
+pub mod report;
 pub mod setpoint;
+pub mod team_arm;
 pub mod udp;
 pub mod vehicle;
 
@@ -22,6 +24,10 @@ pub use arming::{ArmAction, ArmError, ArmStage, Autopilot};
 pub use health::LinkFault;
 pub use messages::Setpoint;
 pub use ned::VehicleOrigin;
-pub use plant::{MavlinkPlant, PlantConfig, PlantError};
+pub use plant::{ArmProgress, LinkFigures, MavlinkPlant, PlantConfig, PlantError, SendTimes};
+pub use report::{Reporting, VehicleReport};
+pub use team_arm::{before_start, TeamArmError};
 pub use udp::{member_addr, UdpError, UdpLink, DEFAULT_BASE_PORT};
-pub use vehicle::{MavlinkVehicle, MeasuredState, VehicleConfig, VehicleError};
+pub use vehicle::{
+    Attitude, AttitudeFigures, MavlinkVehicle, MeasuredState, VehicleConfig, VehicleError,
+};

@@ -25,7 +25,7 @@ use crate::arming::ArmStage;
 use crate::messages::Setpoint;
 use crate::setpoint::{hold_at, measured_state, setpoint_for};
 use crate::udp::{UdpError, UdpLink};
-use crate::vehicle::{LinkCounters, MavlinkVehicle, VehicleConfig, VehicleError};
+use crate::vehicle::{AttitudeFigures, LinkCounters, MavlinkVehicle, VehicleConfig, VehicleError};
 
 /// How one member's plant is set up.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,6 +63,30 @@ struct Shared {
     /// The link's first failure (the stream stopped with it).
     fault: Option<PlantError>,
     stop: bool,
+    /// The team's arm order arrived (`--arm` waits for it: [`MavlinkPlant::order_arm`]).
+    team_ready: bool,
+    /// The stream's own punctuality (late setpoints), for the vehicle report.
+    sends: SendTimes,
+}
+
+/// How punctually the streaming thread sent its setpoints.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SendTimes {
+    /// Setpoints sent more than one period after their scheduled instant.
+    pub late: u64,
+    /// The latest a setpoint was sent after its instant (s).
+    pub max_late_s: f64,
+}
+
+/// Where the member's `--arm` sequence is, as the team's arm order sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ArmProgress {
+    /// Not armed yet (or the order has not come).
+    Pending,
+    /// In OFFBOARD/GUIDED and armed.
+    Armed,
+    /// No `--arm`: the member only streams; the operator arms.
+    StreamOnly,
 }
 
 fn lock(shared: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
@@ -74,6 +98,8 @@ fn lock(shared: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
 #[derive(Debug)]
 pub struct MavlinkPlant<'a> {
     agent: u32,
+    /// `--arm`.
+    arm: bool,
     step: StepConfig,
     plan: &'a TeamPlan,
     law: Law,
@@ -104,6 +130,8 @@ impl<'a> MavlinkPlant<'a> {
             setpoint: hold_at(member.position),
             fault: None,
             stop: false,
+            team_ready: false,
+            sends: SendTimes::default(),
         }));
         let for_thread = Arc::clone(&shared);
         let streamer = std::thread::Builder::new()
@@ -113,6 +141,7 @@ impl<'a> MavlinkPlant<'a> {
         let (law, neighbor_ids) = law_for(member);
         let mut plant = MavlinkPlant {
             agent,
+            arm: config.vehicle.arm,
             step,
             plan,
             law,
@@ -121,11 +150,14 @@ impl<'a> MavlinkPlant<'a> {
             streamer: Some(streamer),
             x0: QuadState::hover(member.position),
         };
-        plant.wait_ready(config.vehicle.arm, interrupted)?;
+        plant.wait_ready(interrupted)?;
         Ok(plant)
     }
 
-    fn wait_ready(&mut self, arm: bool, interrupted: &AtomicBool) -> Result<(), PlantError> {
+    /// Waits until the vehicle is heard (HEARTBEAT and position). `--arm` waits for the team's
+    /// order ([`Self::order_arm`]): the member joins its team only once its vehicle is heard,
+    /// and the orchestrator orders the arming once every member has joined.
+    fn wait_ready(&mut self, interrupted: &AtomicBool) -> Result<(), PlantError> {
         loop {
             {
                 let mut g = lock(&self.shared);
@@ -143,14 +175,47 @@ impl<'a> MavlinkPlant<'a> {
                         waiting,
                     });
                 }
-                let armed = !arm || g.vehicle.arm_stage() == ArmStage::Armed;
-                if let (true, Some(m)) = (g.vehicle.ready() && armed, g.vehicle.state()) {
+                if let (true, Some(m)) = (g.vehicle.ready(), g.vehicle.state()) {
                     tracing::info!(agent = self.agent, position = ?m.position, "vehicle ready");
                     return Ok(());
                 }
             }
             std::thread::sleep(Duration::from_millis(10));
         }
+    }
+
+    /// The member's agent id.
+    pub fn agent(&self) -> u32 {
+        self.agent
+    }
+
+    /// Whether the member arms its vehicle (`--arm`).
+    pub fn arms(&self) -> bool {
+        self.arm
+    }
+
+    /// The team's arm order: from now on the streaming thread runs `--arm` (mode change, then
+    /// arming). Without `--arm` it changes nothing.
+    pub fn order_arm(&self) {
+        lock(&self.shared).team_ready = true;
+    }
+
+    /// Where `--arm` is, or the link's failure (lost vehicle, refused mode or arming).
+    pub fn arm_progress(&self) -> Result<ArmProgress, VehicleFault> {
+        let g = lock(&self.shared);
+        if let Some(f) = &g.fault {
+            return Err(Self::link_fault(f));
+        }
+        Ok(match g.vehicle.arm_stage() {
+            ArmStage::StreamOnly => ArmProgress::StreamOnly,
+            ArmStage::Armed => ArmProgress::Armed,
+            _ => ArmProgress::Pending,
+        })
+    }
+
+    /// A handle on the link's figures that outlives handing the plant to the member core.
+    pub fn figures(&self) -> LinkFigures {
+        LinkFigures(Arc::clone(&self.shared))
     }
 
     /// The link's message counts so far.
@@ -163,6 +228,16 @@ impl<'a> MavlinkPlant<'a> {
         VehicleFault::Link {
             what: f.to_string(),
         }
+    }
+}
+
+impl SendTimes {
+    /// A setpoint sent `late` after its instant (the stream's period `period`).
+    fn on_send(&mut self, late: Duration, period: Duration) {
+        if late > period {
+            self.late += 1;
+        }
+        self.max_late_s = self.max_late_s.max(late.as_secs_f64());
     }
 }
 
@@ -223,6 +298,18 @@ impl Drop for MavlinkPlant<'_> {
     }
 }
 
+/// A read-only view of a plant's link for the vehicle report (`crate::report`).
+#[derive(Debug, Clone)]
+pub struct LinkFigures(Arc<Mutex<Shared>>);
+
+impl LinkFigures {
+    /// The link's counters, newest attitude and extremes, and the stream's punctuality.
+    pub fn read(&self) -> (LinkCounters, AttitudeFigures, SendTimes) {
+        let g = lock(&self.0);
+        (*g.vehicle.counters(), g.vehicle.attitude_figures(), g.sends)
+    }
+}
+
 /// The streaming thread: every `period`, read, check, send. Ends on `stop` or the first fault
 /// (kept in `shared` for the member).
 fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: Instant) {
@@ -234,12 +321,13 @@ fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: In
             if g.stop {
                 return;
             }
-            let sp = g.setpoint;
+            let (sp, team_ready) = (g.setpoint, g.team_ready);
             let g = &mut *g;
+            g.sends.on_send(now.saturating_sub(next), period);
             let r = link
                 .receive(now, &mut g.vehicle)
                 .map_err(PlantError::from)
-                .and_then(|_| Ok(g.vehicle.on_tick(now, Some(&sp), true)?));
+                .and_then(|_| Ok(g.vehicle.on_tick(now, Some(&sp), team_ready)?));
             match r {
                 Ok(out) => out,
                 Err(e) => {

@@ -52,6 +52,25 @@ pub struct Attitude {
     pub time_boot_ms: u32,
 }
 
+/// What the audit records of a vehicle's ATTITUDE messages: the largest tilts and the newest.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AttitudeFigures {
+    /// The largest |roll| and |pitch| received (rad).
+    pub max_abs_roll_rad: Real,
+    pub max_abs_pitch_rad: Real,
+    /// The newest ATTITUDE, if any.
+    pub last: Option<Attitude>,
+}
+
+impl AttitudeFigures {
+    fn on_attitude(&mut self, a: Attitude) {
+        // A NaN from a broken sender must not hide the extremes (max ignores NaN).
+        self.max_abs_roll_rad = self.max_abs_roll_rad.max(a.roll_rad.abs());
+        self.max_abs_pitch_rad = self.max_abs_pitch_rad.max(a.pitch_rad.abs());
+        self.last = Some(a);
+    }
+}
+
 /// Message counts, for summaries and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct LinkCounters {
@@ -84,7 +103,7 @@ pub struct MavlinkVehicle {
     target: Option<Target>,
     mode: Option<VehicleMode>,
     state: Option<MeasuredState>,
-    attitude: Option<Attitude>,
+    attitude: AttitudeFigures,
     last_heartbeat_sent: Option<Duration>,
     stream_started: Option<Duration>,
     counters: LinkCounters,
@@ -100,7 +119,7 @@ impl MavlinkVehicle {
             target: None,
             mode: None,
             state: None,
-            attitude: None,
+            attitude: AttitudeFigures::default(),
             last_heartbeat_sent: None,
             stream_started: None,
             counters: LinkCounters::default(),
@@ -151,7 +170,7 @@ impl MavlinkVehicle {
             }
             MavMessage::ATTITUDE(a) if from_vehicle => {
                 self.counters.attitudes_received += 1;
-                self.attitude = Some(Attitude {
+                self.attitude.on_attitude(Attitude {
                     roll_rad: Real::from(a.roll),
                     pitch_rad: Real::from(a.pitch),
                     yaw_rad: Real::from(a.yaw),
@@ -223,7 +242,12 @@ impl MavlinkVehicle {
 
     /// The last attitude, if any.
     pub fn attitude(&self) -> Option<&Attitude> {
-        self.attitude.as_ref()
+        self.attitude.last.as_ref()
+    }
+
+    /// The attitude's extremes and newest value.
+    pub fn attitude_figures(&self) -> AttitudeFigures {
+        self.attitude
     }
 
     /// The last HEARTBEAT's mode and armed state, if any.
@@ -348,6 +372,18 @@ mod tests {
             }),
         );
         assert_eq!(v.attitude().unwrap().yaw_rad, 0.5);
+        v.on_message(
+            ms(12),
+            &VEHICLE,
+            &MavMessage::ATTITUDE(ATTITUDE_DATA {
+                roll: -0.25,
+                pitch: 0.125,
+                ..ATTITUDE_DATA::default()
+            }),
+        );
+        let f = v.attitude_figures();
+        assert_eq!((f.max_abs_roll_rad, f.max_abs_pitch_rad), (0.25, 0.125));
+        assert_eq!(f.last.unwrap().yaw_rad, 0.0);
     }
 
     #[test]

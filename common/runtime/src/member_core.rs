@@ -301,6 +301,8 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             ClockCommand::Realtime { .. } => Err(MemberFault::ModeMismatch {
                 member_realtime: false,
             }),
+            // Only a real-time team of MAVLink vehicles is armed; the model has nothing to arm.
+            ClockCommand::Arm => Ok(None),
             ClockCommand::Stop(_) => Ok(Some(Finished {
                 tick: self.tick,
                 reason: c.reason,

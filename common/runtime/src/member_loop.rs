@@ -121,7 +121,7 @@ pub const LINGER: Duration = Duration::from_secs(5);
 /// subscriber has not yet taken when their publisher's process exits, so a member that ran ahead
 /// (a large window) and exited at once could take its fault report, and the states before it,
 /// with it; the orchestrator would then see only an exited process.
-pub(crate) fn linger<T: MemberTransport, K: Clock>(
+pub fn linger<T: MemberTransport, K: Clock>(
     transport: &mut T,
     clock: &K,
     interrupted: &AtomicBool,

@@ -18,6 +18,15 @@ pub const STATUS_FAULT: u32 = 1;
 /// [`StateMsg::status`] decodes it as a fault, so a reader that does not know it never audits it.
 pub const STATUS_PACING: u32 = 2;
 
+/// `StateMsg::status`: not a state but a member's answer to [`COMMAND_ARM`]: its vehicle is in
+/// OFFBOARD/GUIDED and armed (`state[0]` = 1), or the member only streams (started without
+/// `--arm`: `state[0]` = 0). [`StateMsg::status`] decodes it as a fault, like
+/// [`STATUS_PACING`], so a reader that does not know it never audits it.
+pub const STATUS_ARMED: u32 = 3;
+/// `StateMsg::status`: not a state but a MAVLink member's vehicle report (attitude and late
+/// setpoints, `cdm_mavlink::report`), published just before each of its pacing reports.
+pub const STATUS_VEHICLE: u32 = 4;
+
 /// `StateMsg::fault_code`: no fault (always the value while `status == STATUS_OK`).
 pub const FAULT_NONE: u32 = 0;
 /// `StateMsg::fault_code`: the agent's own state or command became non-finite.
@@ -61,6 +70,11 @@ pub const COMMAND_STOP: u32 = 1;
 /// seed ([`PHASES_ALIGNED`]: no phase offsets). The message keeps its 24 bytes: other languages
 /// mirror the layout (`python/cdm_bus.py`).
 pub const COMMAND_REALTIME: u32 = 2;
+/// `ClockMsg::command`: every member's vehicle is ready (a MAVLink member joins only once its
+/// vehicle is heard): switch it to OFFBOARD/GUIDED and arm it, then answer [`STATUS_ARMED`].
+/// Sent once, before the start, and only by `orchestrator launch --arm`. A member that does not
+/// know the command decodes it as a stop: it cannot arm on the team's order, so it must not fly.
+pub const COMMAND_ARM: u32 = 3;
 /// `ClockMsg::reason` with [`COMMAND_REALTIME`]: every member ticks at the start instant plus
 /// whole periods (no phase offsets).
 pub const PHASES_ALIGNED: u32 = 0;
@@ -266,6 +280,22 @@ impl StateMsg {
         self
     }
 
+    /// A member's answer to [`COMMAND_ARM`] ([`STATUS_ARMED`]): `armed` says it armed its
+    /// vehicle (false: it only streams, started without `--arm`).
+    pub fn arm_report(tick: u64, scenario_hash: u64, id: u32, armed: bool) -> Self {
+        let mut state = [0.0; 12];
+        state[0] = if armed { 1.0 } else { 0.0 };
+        Self {
+            status: STATUS_ARMED,
+            ..Self::ok(tick, scenario_hash, id, state)
+        }
+    }
+
+    /// `Some(armed)` for an answer to [`COMMAND_ARM`], `None` for anything else.
+    pub fn armed(&self) -> Option<bool> {
+        (self.status == STATUS_ARMED).then_some(self.state[0] == 1.0)
+    }
+
     /// True for a real-time member's pacing report ([`STATUS_PACING`]), which is not a state.
     pub fn is_pacing(&self) -> bool {
         self.status == STATUS_PACING
@@ -331,6 +361,8 @@ pub enum ClockCommand {
     Run,
     /// Fly in real time from this start instant (CLOCK_REALTIME ns) with these phase offsets.
     Realtime { start_unix_ns: u64, phase_seed: u32 },
+    /// Arm the vehicles ([`COMMAND_ARM`]): sent once every member's vehicle is ready.
+    Arm,
     /// Stop now.
     Stop(StopReason),
 }
@@ -396,6 +428,14 @@ impl ClockMsg {
         }
     }
 
+    /// The order to arm every vehicle ([`COMMAND_ARM`]).
+    pub fn arm(scenario_hash: u64) -> Self {
+        Self {
+            command: COMMAND_ARM,
+            ..Self::run(0, scenario_hash)
+        }
+    }
+
     /// Decodes `command` and `reason`. Any command other than [`COMMAND_RUN`] and
     /// [`COMMAND_REALTIME`] stops: an agent that cannot understand the orchestrator must not
     /// keep flying the plan.
@@ -406,6 +446,7 @@ impl ClockMsg {
                 start_unix_ns: self.grant_tick,
                 phase_seed: self.reason,
             },
+            COMMAND_ARM => ClockCommand::Arm,
             _ => ClockCommand::Stop(StopReason::from_code(self.reason)),
         }
     }
@@ -464,6 +505,11 @@ mod tests {
         };
         assert_eq!(ClockMsg::run(5, 1).with_loss(Some(n)).loss(), Some(n));
         assert_eq!(odd.command(), ClockCommand::Stop(StopReason::AgentFault));
+        assert_eq!(ClockMsg::arm(1).command(), ClockCommand::Arm);
+        let r = StateMsg::arm_report(0, 1, 4, true);
+        assert_eq!(r.armed(), Some(true));
+        assert!(matches!(r.status(), AgentStatus::Fault { .. }));
+        assert_eq!(StateMsg::ok(0, 1, 4, [1.0; 12]).armed(), None);
         assert_eq!(
             ClockMsg::realtime(1_700_000_000_000_000_000, 1, 7).command(),
             ClockCommand::Realtime {

@@ -314,6 +314,9 @@ impl<V: Vehicle> RealtimeCore<V> {
                 }
                 Ok(None)
             }
+            // A MAVLink member answers the arm order before its core runs (cdm-mavlink
+            // `team_arm`); the model has nothing to arm.
+            ClockCommand::Arm => Ok(None),
             ClockCommand::Stop(_) => Ok(Some(Finished {
                 tick: self.tick,
                 reason: c.reason,

@@ -1,0 +1,190 @@
+//! What the orchestrator records of a MAVLink member's vehicle (issue 13: "what the team
+//! measures on the vehicles ... appears in audit.json"): the stream's late setpoints and the
+//! vehicle's ATTITUDE (largest |roll| and |pitch|, the newest). The member publishes it as a
+//! [`STATUS_VEHICLE`] message just before each of its pacing reports ([`Reporting`] wraps the
+//! member's transport), so the orchestrator has the newest one whatever stops the team; the
+//! tracking error against r_HT is the audit's own, from the measured states.
+
+use std::time::Duration;
+
+use cdm_runtime::messages::{ClockMsg, StateMsg, STATUS_VEHICLE};
+use cdm_runtime::seams::MemberTransport;
+
+use crate::plant::LinkFigures;
+use crate::vehicle::Attitude;
+
+/// One member's vehicle figures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleReport {
+    /// Setpoints sent to the vehicle.
+    pub setpoints_sent: u64,
+    /// Setpoints sent more than one period after their scheduled instant.
+    pub late_setpoints: u64,
+    /// The latest a setpoint was sent after its instant (ms).
+    pub max_late_ms: f64,
+    /// ATTITUDE messages received.
+    pub attitudes: u64,
+    /// The largest |roll| and |pitch| received (rad).
+    pub max_abs_roll_rad: f64,
+    pub max_abs_pitch_rad: f64,
+    /// The newest (roll, pitch, yaw) in rad, if any ATTITUDE arrived.
+    pub last_attitude_rad: Option<[f64; 3]>,
+}
+
+impl VehicleReport {
+    /// The figures of a plant's link now.
+    pub fn of(link: &LinkFigures) -> Self {
+        let (counters, attitude, sends) = link.read();
+        VehicleReport {
+            setpoints_sent: counters.setpoints_sent,
+            late_setpoints: sends.late,
+            max_late_ms: sends.max_late_s * 1e3,
+            attitudes: counters.attitudes_received,
+            max_abs_roll_rad: attitude.max_abs_roll_rad,
+            max_abs_pitch_rad: attitude.max_abs_pitch_rad,
+            last_attitude_rad: attitude
+                .last
+                .map(|a: Attitude| [a.roll_rad, a.pitch_rad, a.yaw_rad]),
+        }
+    }
+
+    /// As a message: `tick` = setpoints sent, `state` = [late setpoints, max lateness ms,
+    /// attitudes, max |roll|, max |pitch|, last roll, pitch, yaw (NaN without one), 0...].
+    pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
+        let mut f = [0.0; 12];
+        f[0] = self.late_setpoints as f64;
+        f[1] = self.max_late_ms;
+        f[2] = self.attitudes as f64;
+        f[3] = self.max_abs_roll_rad;
+        f[4] = self.max_abs_pitch_rad;
+        let last = self.last_attitude_rad.unwrap_or([f64::NAN; 3]);
+        f[5..8].copy_from_slice(&last);
+        StateMsg {
+            status: STATUS_VEHICLE,
+            ..StateMsg::ok(self.setpoints_sent, hash, id, f)
+        }
+    }
+
+    /// Reads a vehicle report back: the member's id and its figures (`None`: not one).
+    pub fn from_msg(m: &StateMsg) -> Option<(u32, Self)> {
+        if m.status != STATUS_VEHICLE {
+            return None;
+        }
+        let f = &m.state;
+        let last = [f[5], f[6], f[7]];
+        Some((
+            m.id,
+            VehicleReport {
+                setpoints_sent: m.tick,
+                late_setpoints: f[0] as u64,
+                max_late_ms: f[1],
+                attitudes: f[2] as u64,
+                max_abs_roll_rad: f[3],
+                max_abs_pitch_rad: f[4],
+                last_attitude_rad: last.iter().all(|v| v.is_finite()).then_some(last),
+            },
+        ))
+    }
+}
+
+/// A member's transport that publishes its vehicle report just before each pacing report (the
+/// same publisher keeps the order: the orchestrator has the report once it has the pacing).
+#[derive(Debug)]
+pub struct Reporting<'t, T> {
+    inner: &'t mut T,
+    link: LinkFigures,
+    id: u32,
+    hash: u64,
+}
+
+impl<'t, T: MemberTransport> Reporting<'t, T> {
+    /// Wraps member `id`'s transport (scenario `hash`), reporting `link`.
+    pub fn new(inner: &'t mut T, link: LinkFigures, id: u32, hash: u64) -> Self {
+        Reporting {
+            inner,
+            link,
+            id,
+            hash,
+        }
+    }
+
+    fn report_before(&mut self, msg: &StateMsg) -> Result<(), T::Error> {
+        if msg.is_pacing() {
+            let r = VehicleReport::of(&self.link).to_msg(self.id, self.hash);
+            self.inner.publish_quietly(r)?;
+        }
+        Ok(())
+    }
+}
+
+impl<T: MemberTransport> MemberTransport for Reporting<'_, T> {
+    type Error = T::Error;
+
+    fn publish(&mut self, msg: StateMsg) -> Result<usize, Self::Error> {
+        self.report_before(&msg)?;
+        self.inner.publish(msg)
+    }
+
+    fn publish_quietly(&mut self, msg: StateMsg) -> Result<usize, Self::Error> {
+        self.report_before(&msg)?;
+        self.inner.publish_quietly(msg)
+    }
+
+    fn notify_readers(&mut self) -> Result<(), Self::Error> {
+        self.inner.notify_readers()
+    }
+
+    fn receive_neighbors(&mut self, f: impl FnMut(StateMsg)) -> Result<usize, Self::Error> {
+        self.inner.receive_neighbors(f)
+    }
+
+    fn latest_clock(&mut self) -> Result<Option<ClockMsg>, Self::Error> {
+        self.inner.latest_clock()
+    }
+
+    fn wait(&mut self, timeout: Duration) -> Result<bool, Self::Error> {
+        self.inner.wait(timeout)
+    }
+
+    fn orchestrator_alive(&self) -> bool {
+        self.inner.orchestrator_alive()
+    }
+
+    fn receive_clock(&mut self, f: impl FnMut(ClockMsg)) -> Result<usize, Self::Error> {
+        self.inner.receive_clock(f)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_report_round_trips_and_is_not_a_state() {
+        let r = VehicleReport {
+            setpoints_sent: 250,
+            late_setpoints: 3,
+            max_late_ms: 41.5,
+            attitudes: 240,
+            max_abs_roll_rad: 0.2,
+            max_abs_pitch_rad: 0.1,
+            last_attitude_rad: Some([0.01, -0.02, 1.5]),
+        };
+        let m = r.to_msg(7, 9);
+        assert_eq!(VehicleReport::from_msg(&m), Some((7, r)));
+        assert!(!m.is_pacing());
+        assert!(matches!(
+            m.status(),
+            cdm_runtime::messages::AgentStatus::Fault { .. }
+        ));
+        let none = VehicleReport {
+            last_attitude_rad: None,
+            ..r
+        };
+        assert_eq!(VehicleReport::from_msg(&none.to_msg(7, 9)), Some((7, none)));
+        assert_eq!(
+            VehicleReport::from_msg(&StateMsg::ok(1, 9, 7, [0.0; 12])),
+            None
+        );
+    }
+}
