@@ -32,7 +32,7 @@ fn limit(resource: libc::__rlimit_resource_t) -> std::io::Result<(u64, u64)> {
 }
 
 /// Raises this process's soft `RLIMIT_NOFILE` to the hard limit and returns the new soft limit.
-/// The orchestrator holds about 12 descriptors per agent, so a large team passes 1024 quickly.
+/// The orchestrator holds about 11 descriptors per agent, so a large team passes 1024 quickly.
 pub fn raise_fd_limit() -> std::io::Result<u64> {
     let (soft, hard) = limit(libc::RLIMIT_NOFILE)?;
     if soft < hard {
@@ -60,10 +60,12 @@ pub fn fd_exhausted() -> Option<FdUsage> {
     (open + FD_MARGIN >= soft).then_some(FdUsage { open, soft, hard })
 }
 
-/// Descriptors the orchestrator holds for a team of `agents`, measured with iceoryx2 0.10 (per
-/// agent: a state service, its subscriber, a wake event and its notifier, 11 descriptors in all;
-/// 19 more for the node, the clock and the orchestrator's own event: N=40 holds 459, N=100 1119),
-/// with a margin for the run directory, the children's pipes and the logging.
+/// Descriptors the orchestrator holds for a team of `agents`, measured with iceoryx2 0.10 on a
+/// flying team (`launch --n 100` holds 1,119): per agent 11, the dynamic segment and static file
+/// of its state and wake services, a port tag for the subscriber and the notifier, a connection
+/// segment each way (its state, the clock), the wake event's management segment and socket and
+/// its publisher's data segment; with a margin for the run directory, the children's pipes and
+/// the logging. N = 2000 needs 24,064 (22,000 held), above a hard limit of 20,000.
 pub fn orchestrator_fd_need(agents: usize) -> u64 {
     64 + 12 * agents as u64
 }
@@ -92,8 +94,7 @@ pub fn fd_short(agents: usize) -> Option<FdShortfall> {
 
 /// Raises the soft `RLIMIT_NOFILE` to `need` when the hard limit allows it, and otherwise the hard
 /// limit too, up to the kernel's `fs.nr_open`, which only a privileged process may do (root:
-/// `CAP_SYS_RESOURCE`; N = 2000 needs 24,064 against a hard limit of 20,000 on the development
-/// VM). Best effort: what it cannot raise, [`fd_short`] reports.
+/// `CAP_SYS_RESOURCE`). Best effort: what it cannot raise, [`fd_short`] reports.
 pub fn raise_fd_limit_to(need: u64) {
     let Ok((soft, hard)) = limit(libc::RLIMIT_NOFILE) else {
         return;
