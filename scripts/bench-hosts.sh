@@ -2,9 +2,9 @@
 # One team over two "hosts" against one host, in the same session (issue 12; BENCHMARKS.md).
 # Two network namespaces joined by a veth pair (10.77.0.1/24, 10.77.0.2/24); host B gets its own
 # /dev/shm. Needs root and release binaries (cargo build --release). Usage:
-#   scripts/bench-hosts.sh [N ...]        (default: 40 250)
+#   [BIN_DIR=DIR] scripts/bench-hosts.sh [N ...]   (default: 40 250; BIN_DIR: other binaries)
 set -eu
-bin=$(cd "$(dirname "$0")/.." && pwd)/target/release/orchestrator
+bin=${BIN_DIR:-$(cd "$(dirname "$0")/.." && pwd)/target/release}/orchestrator
 ticks=${TICKS:-5000}
 ns=${*:-40 250}
 a=cdmbench$$a b=cdmbench$$b

@@ -170,10 +170,10 @@ pub fn run_member(
     } = *flight;
     let s = Scenario::load(scenario_path, Checks::Member)?;
     let s = link.apply(&s).map_err(MemberError::Link)?;
-    if let Some(why) = matches!(mode, Mode::Realtime { .. })
-        .then(|| crate::options::realtime_links_refusal(&s))
-        .flatten()
-    {
+    if let Some(why) = match mode {
+        Mode::Realtime { stale_after } => crate::options::realtime_links_refusal(&s, stale_after),
+        Mode::Lockstep => None,
+    } {
         return Err(MemberError::Link(why));
     }
     let Some(me) = s.formation.member(id).cloned() else {
@@ -256,6 +256,7 @@ impl Joined<'_> {
                 dt_s: s.dt_s(),
                 stale_after,
                 deadlines,
+                links: s.link_model(),
             };
             let at_rest = neighbor_positions(s, me);
             let mut core = RealtimeCore::new(me, at_rest, setup, vehicle, clock.now());

@@ -104,10 +104,17 @@ impl LinkArgs {
     }
 }
 
-/// Real-time mode does not apply link impairments to its deliveries yet (issue 11): a scenario
-/// whose links are not perfect is refused in real time rather than flown as if they were.
-pub fn realtime_links_refusal(s: &crate::scenario::Scenario) -> Option<String> {
-    (!s.link_model().is_perfect()).then(|| {
-        "--realtime does not apply --link-delay-ms/--link-jitter-ms/--link-loss (or the scenario's [link] table) yet: use them with simulate or lockstep launch".to_string()
+/// Real time holds every state back by the link delay, so a delay at or beyond the stale bound
+/// would make every neighbour a fault at its first tick: refused up front, naming both.
+pub fn realtime_links_refusal(
+    s: &crate::scenario::Scenario,
+    stale_after: std::time::Duration,
+) -> Option<String> {
+    let delay_ms = s.link_model().spec().delay_ms;
+    let bound_ms = stale_after.as_secs_f64() * 1e3;
+    (delay_ms >= bound_ms).then(|| {
+        format!(
+            "--link-delay-ms {delay_ms} (or the scenario's link.delay_ms) is not below --stale-after ({bound_ms} ms): in real time every neighbour would be stale"
+        )
     })
 }

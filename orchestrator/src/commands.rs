@@ -123,10 +123,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 .apply(&load(&source)?)
                 .map_err(Failure::bad_input)?;
             let realtime = realtime.options(&s)?;
-            if let Some(why) = realtime
-                .is_some()
-                .then(|| common::options::realtime_links_refusal(&s))
-                .flatten()
+            if let Some(why) =
+                realtime.and_then(|rt| common::options::realtime_links_refusal(&s, rt.stale_after))
             {
                 return Err(Failure::bad_input(why));
             }
@@ -175,12 +173,6 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 losses,
                 on_loss: run.on_loss.into(),
             };
-            if opts.realtime.is_some() && opts.hosts.hosts > 1 {
-                // Real time across hosts needs the daemons to pace their members (not yet).
-                return Err(Failure::bad_input(
-                    "--realtime with --hosts: real time across hosts is not supported yet",
-                ));
-            }
             if opts.hosts.hosts > 1 && !opts.losses.events.is_empty() {
                 return Err(Failure::bad_input(
                     "--lose with --hosts: losing members across hosts is not supported yet",

@@ -118,15 +118,19 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
         .collect();
     let hosts = crate::host::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
-    let mut layout = TeamLayout::new(ids.clone(), ins, o.window)
+    // Over delayed links a repair's new reader also needs its new in-neighbour's states of the
+    // longest delay back (`LinkModel::oldest_candidate`): the buffers and history grow by it.
+    let delay = u32::try_from(s.link_model().max_ticks()).unwrap_or(u32::MAX);
+    let buffers = o.window.saturating_add(delay);
+    let mut layout = TeamLayout::new(ids.clone(), ins, buffers)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
     if o.on_loss == common::loss::OnLoss::Repair {
-        layout = layout.with_repair_room(crate::loss::repair_room(s, o.window));
+        layout = layout.with_repair_room(crate::loss::repair_room(s, buffers));
     }
     let layout = hosts.hide_remote_edges(layout);
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
-    let bridge = hosts.start_bridge(s, &o.team, o.window)?;
+    let bridge = hosts.start_bridge(s, &o.team, crate::host::Flight::of(o))?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
     let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
@@ -165,7 +169,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
         Err((fault, reason)) => {
-            audit.fault(fault);
+            audit.fault(match &bridge {
+                Some(b) => b.explain(fault),
+                None => fault,
+            });
             (false, reason, None)
         }
     };

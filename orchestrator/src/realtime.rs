@@ -8,15 +8,17 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use common::audit::Auditor;
+use common::audit::{Auditor, RealtimeFigures};
 use common::formation::Role;
+use common::math::Vec3;
 use common::messages::{ClockMsg, FaultCode, StopReason};
 use common::outcome::FaultKind;
 use common::realtime_loop::unix_now_ns;
 use common::realtime_monitor::{Heard, MonitorCore, RunFigures};
+use common::record::{write_fault, TickRecorder};
 use common::rundir::RunDir;
 use common::scenario::Scenario;
-use common::telemetry::{Row, TelemetrySink};
+use common::telemetry::TelemetrySink;
 use common::transport::OrchestratorPorts;
 
 use crate::launch::LaunchOptions;
@@ -122,20 +124,7 @@ pub fn run(
         let f = fault(FaultKind::Io, None, None, 0, e.to_string());
         (f, StopReason::AgentFault)
     })?;
-    let members: Vec<_> = s
-        .formation
-        .members
-        .iter()
-        .map(|m| (m.id, m.position, m.role == Role::Follower))
-        .collect();
-    let hash = s.content_hash();
-    let mut core = MonitorCore::new(&members, hash, s.dt_s(), rt.phase_seed);
-    let lead = start_lead(members.len());
-    let start_ns = unix_now_ns() + lead.as_nanos() as u64;
-    let start = Instant::now() + lead;
-    ports
-        .publish_clock(ClockMsg::realtime(start_ns, hash, rt.phase_seed))
-        .map_err(|e| transport(e, 0))?;
+    let (mut core, start) = announce(s, rt, ports)?;
     let mut m = Monitor {
         s,
         o,
@@ -145,6 +134,8 @@ pub fn run(
         audit,
         tel: tel.as_mut(),
         audits: 0,
+        rec: TickRecorder::new(s),
+        at: Vec::with_capacity(s.formation.members.len()),
     };
     let cpu_at_start = team_cpu_s(children);
     let result = m.fly(ports, children, interrupted);
@@ -158,7 +149,7 @@ pub fn run(
         .as_ref()
         .map_or_else(|(_, r)| *r, |_| StopReason::Finished);
     core.stopping();
-    let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
+    let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), s.content_hash(), reason));
     collect_final_reports(&mut core, ports, children);
     let figures = core.figures(RunFigures {
         audits,
@@ -169,31 +160,12 @@ pub fn run(
         team_cpu_cores: (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s),
     });
     if !o.quiet {
-        out!(
-            "  real time: {} ticks, {} late ({:.3} %), neighbour age p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms ({} of {} members reported)",
-            figures.ticks,
-            figures.late_ticks,
-            figures.late_ticks_pct,
-            figures.neighbor_age_ms_p50,
-            figures.neighbor_age_ms_p99,
-            figures.neighbor_age_ms_max,
-            figures.members_reported,
-            members.len()
-        );
+        print_figures(&figures, s.formation.members.len());
     }
     audit.set_realtime(figures);
-    let io = |e: std::io::Error| {
-        let f = fault(
-            FaultKind::Io,
-            None,
-            None,
-            audits,
-            format!("cannot write telemetry: {e}"),
-        );
-        (f, StopReason::AgentFault)
-    };
     match result {
         Ok(complete) => {
+            let io = |e: std::io::Error| (write_fault(audits, &e), StopReason::AgentFault);
             tel.finish().map_err(io)?;
             Ok((start, complete))
         }
@@ -202,6 +174,53 @@ pub fn run(
             Err(stop)
         }
     }
+}
+
+/// The monitor of `s`'s team, and the start instant it announced (tick 0's instant on this
+/// process's monotonic clock) with the phase seed.
+fn announce(
+    s: &Scenario,
+    rt: &RealtimeOptions,
+    ports: &mut OrchestratorPorts,
+) -> Result<(MonitorCore, Instant), Stop> {
+    let members: Vec<_> = s
+        .formation
+        .members
+        .iter()
+        .map(|m| (m.id, m.position, m.role == Role::Follower))
+        .collect();
+    let hash = s.content_hash();
+    let core = MonitorCore::new(&members, hash, s.dt_s(), rt.phase_seed);
+    let lead = start_lead(members.len());
+    let start_ns = unix_now_ns() + lead.as_nanos() as u64;
+    let start = Instant::now() + lead;
+    ports
+        .publish_clock(ClockMsg::realtime(start_ns, hash, rt.phase_seed))
+        .map_err(|e| transport(e, 0))?;
+    Ok((core, start))
+}
+
+/// The pacing line of the summary (and what the links dropped, when they are impaired).
+fn print_figures(f: &RealtimeFigures, agents: usize) {
+    let links = if f.link_states_lost > 0 {
+        format!(
+            "; the links dropped {} of {} neighbour states",
+            f.link_states_lost, f.link_states_received
+        )
+    } else {
+        String::new()
+    };
+    out!(
+        "  real time: {} ticks, {} late ({:.3} %), neighbour age p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms ({} of {} members reported){links}",
+        f.ticks,
+        f.late_ticks,
+        f.late_ticks_pct,
+        f.neighbor_age_ms_p50,
+        f.neighbor_age_ms_p99,
+        f.neighbor_age_ms_max,
+        f.members_reported,
+        agents
+    );
 }
 
 /// Waits (at most 1.5 s) for the final pacing report of every member still running.
@@ -275,6 +294,10 @@ struct Monitor<'a> {
     tel: &'a mut dyn TelemetrySink,
     /// Audit instants done.
     audits: u64,
+    /// The shared per-tick audit and telemetry (`cdm_core::record`).
+    rec: TickRecorder,
+    /// Every member's position and velocity at the instant being audited (formation order).
+    at: Vec<(Vec3, Vec3)>,
 }
 
 impl Monitor<'_> {
@@ -380,42 +403,18 @@ impl Monitor<'_> {
         }
     }
 
-    /// Audits and writes the instant `t_s` (audit index `self.audits`).
+    /// Audits and writes the instant `t_s` (audit index `self.audits`) with the recorder
+    /// `simulate` and lockstep `launch` use: the same audit, the same columns.
     fn audit_once(&mut self, t_s: f64) -> Result<(), Stop> {
-        let s = self.s;
-        let n = s.formation.members.len();
-        let mut ht = Vec::with_capacity(n);
-        s.desired_positions(t_s, &mut ht);
-        let at: Vec<_> = (0..n).map(|k| self.core.state_at(k, t_s)).collect();
-        let pos: Vec<_> = at.iter().map(|(r, _)| *r).collect();
-        let tick = self.audits;
-        self.audit.observe(tick, t_s, &pos, &ht);
-        if !self.tel.keeps(tick) {
-            return Ok(());
-        }
-        let rows: Vec<Row> = s
-            .id_order()
-            .into_iter()
-            .map(|k| {
-                let m = &s.formation.members[k];
-                Row {
-                    tick,
-                    t_s,
-                    id: m.id,
-                    role: m.role,
-                    r: at[k].0,
-                    v: at[k].1,
-                    ht: ht[k],
-                }
+        let n = self.s.formation.members.len();
+        self.at.clear();
+        self.at.extend((0..n).map(|k| self.core.state_at(k, t_s)));
+        let at = &self.at;
+        self.rec
+            .record_at(self.s, (self.audits, t_s), self.audit, self.tel, |k| {
+                Some(at[k])
             })
-            .collect();
-        self.tel.write_tick(&rows).map_err(|e| {
-            let what = format!("cannot write telemetry: {e}");
-            (
-                fault(FaultKind::Io, None, None, tick, what),
-                StopReason::AgentFault,
-            )
-        })
+            .map_err(|f| (f, StopReason::AgentFault))
     }
 }
 

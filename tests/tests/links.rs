@@ -66,6 +66,34 @@ fn lockstep_launch_equals_simulate_with_delay_jitter_and_loss() {
     assert_windows_match_simulate(dir.path(), &source, &sim, &["1", "256"], "lk", DEADLINE);
 }
 
+/// Links and a scripted loss together: follower 7 is lost at 2 s (its two readers
+/// re-triangulate onto new in-neighbours, whose states reach them over the same delayed, lossy
+/// links); lockstep `launch` (which kills the process) writes exactly `simulate`'s telemetry,
+/// and both record the loss alike.
+#[test]
+fn lockstep_launch_equals_simulate_with_links_and_a_scripted_loss() {
+    let dir = TempDir::new();
+    let base = ["--n", "10", "--max-ticks", "400", "--no-figures"];
+    let mut source: Vec<&str> = base.iter().chain(&IMPAIRED).copied().collect();
+    source.extend(["--lose", "7@2"]);
+    let sim = dir.path().join("sim");
+    assert_exit(
+        &run(&mut simulate(&sim, &source), DEADLINE),
+        0,
+        "simulate --n 10 impaired with a loss",
+    );
+    let audit = read_json(&sim.join("audit.json"));
+    let losses = &audit["losses"];
+    assert_eq!(losses.as_array().map(Vec::len), Some(1), "{audit:#}");
+    assert_eq!(losses[0]["id"], 7, "{audit:#}");
+    let rewired = losses[0]["retriangulated"].as_array().map_or(0, Vec::len);
+    assert!(
+        rewired >= 1,
+        "7 had readers that take new links: {losses:#}"
+    );
+    assert_windows_match_simulate(dir.path(), &source, &sim, &["1", "256"], "lkl", DEADLINE);
+}
+
 /// `--no-spawn` with links: members started with the same flags fly the team exactly as
 /// simulated; a member without them has another scenario hash and is refused (exit 2).
 #[test]

@@ -113,6 +113,49 @@ fn a_short_plan_flies_safe_in_real_time_with_sane_pacing_figures() {
     );
 }
 
+/// Impaired real deliveries: with `--link-delay-ms 20 --link-loss 0.1` every member holds each
+/// in-neighbour state back until 20 ms after its stamp and drops the ones the seeded draws lose;
+/// the short plan still flies SAFE and complete, the median neighbour age is at least the delay
+/// (a state is never used younger than its link allows; no upper bound is asserted), and about
+/// a tenth of the states received were dropped (the draws are lockstep's, per link and tick). A
+/// delay not below `--stale-after` is refused (every neighbour would be stale), exit 2.
+#[test]
+fn impaired_links_hold_real_deliveries_back_and_drop_some() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_links");
+    let out = dir.path().join("rt");
+    let mut extra = SHORT.to_vec();
+    extra.extend(["--link-delay-ms", "20", "--link-loss", "0.1", "--seed", "3"]);
+    let o = run(&mut realtime_launch(&team, &out, &extra), DEADLINE);
+    assert_exit(&o, 0, "launch --realtime over impaired links");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    let rt = &audit["realtime"];
+    assert_eq!(rt["members_reported"], 10, "{rt:#}");
+    let p50 = num(rt, "neighbor_age_ms_p50");
+    assert!(p50 >= 20.0, "held back by the 20 ms delay: {rt:#}");
+    assert!(num(rt, "neighbor_age_ms_max") < 500.0, "{rt:#}");
+    let (received, lost) = (num(rt, "link_states_received"), num(rt, "link_states_lost"));
+    // 4 followers x 3 in-neighbours x ~300 states.
+    assert!(received >= 3000.0, "{rt:#}");
+    let share = lost / received;
+    assert!(
+        (0.07..0.13).contains(&share),
+        "lost {share} of the states: {rt:#}"
+    );
+    assert_no_process_of(&team);
+
+    let team = unique_team("rt_links_bad");
+    let bad = dir.path().join("bad");
+    let o = run(
+        &mut realtime_launch(&team, &bad, &["--link-delay-ms", "500"]),
+        DEADLINE,
+    );
+    assert_exit(&o, 2, "a delay at the stale bound");
+    assert_stderr_has(&o, "launch", &["--link-delay-ms 500", "--stale-after"]);
+}
+
 /// SIGSTOP of follower 9 in real time: its newest state ages past the bound (0.5 s), so the
 /// monitor (or a follower that reads it) names agent 9; the team is stopped (the stopped
 /// process killed), exit 3, nothing of the team left.

@@ -190,6 +190,10 @@ pub struct RealtimeFigures {
     pub neighbor_age_ms_p99: Real,
     /// The oldest neighbour state any follower used (ms).
     pub neighbor_age_ms_max: Real,
+    /// In-neighbour states the followers received, and how many of them the impaired links
+    /// (`--link-loss`) dropped on purpose (0 with perfect links).
+    pub link_states_received: u64,
+    pub link_states_lost: u64,
     /// The member with the most late ticks (then the latest tick); absent when none reported.
     pub slowest_member: Option<SlowMember>,
     /// Members whose pacing report the monitor received (of `agents`).

@@ -156,17 +156,33 @@ impl LinkModel {
         self.max_ticks
     }
 
-    /// The tick from which the state sampled at tick `m` on link `from -> to` can be used, or
-    /// `None` when it is lost.
-    pub fn arrival(&self, from: u32, to: u32, m: u64) -> Option<u64> {
+    /// The links as specified (real time applies them in milliseconds, unrounded).
+    pub fn spec(&self) -> LinkSpec {
+        self.spec
+    }
+
+    /// The delay of the state sampled at tick `m` on link `from -> to` before any rounding,
+    /// milliseconds: `delay_ms + u * jitter_ms`, u the link's draw; `None` when it is lost.
+    /// Lockstep rounds it to whole ticks ([`Self::arrival`]); real time holds a received state
+    /// back by this much wall time (cdm-runtime's `realtime_links`).
+    pub fn delay_ms(&self, from: u32, to: u32, m: u64) -> Option<Real> {
         let key = draw_key(self.spec.seed, from, to, m);
         if self.spec.loss > 0.0 && unit(splitmix64(key ^ LOSS_STREAM)) < self.spec.loss {
             return None;
         }
+        if self.spec.jitter_ms == 0.0 {
+            return Some(self.spec.delay_ms);
+        }
+        Some(self.spec.delay_ms + self.spec.jitter_ms * unit(splitmix64(key ^ JITTER_STREAM)))
+    }
+
+    /// The tick from which the state sampled at tick `m` on link `from -> to` can be used, or
+    /// `None` when it is lost.
+    pub fn arrival(&self, from: u32, to: u32, m: u64) -> Option<u64> {
+        let ms = self.delay_ms(from, to, m)?;
         if self.max_ticks == self.min_ticks {
             return Some(m + self.min_ticks);
         }
-        let ms = self.spec.delay_ms + self.spec.jitter_ms * unit(splitmix64(key ^ JITTER_STREAM));
         let ticks = ((ms / self.dt_ms).round() as u64).clamp(self.min_ticks, self.max_ticks);
         Some(m + ticks)
     }
@@ -323,6 +339,29 @@ mod tests {
         );
         let differ = (0..200).filter(|&t| reseeded.arrival(1, 2, t) != m.arrival(1, 2, t));
         assert!(differ.count() > 20, "the seed changes the draws");
+    }
+
+    #[test]
+    fn delay_ms_is_the_unrounded_draw_of_arrival() {
+        let m = LinkModel::new(spec(20.0, 50.0, 0.3), 0.01);
+        let mut lost = 0;
+        for t in 0..2000 {
+            match (m.delay_ms(4, 9, t), m.arrival(4, 9, t)) {
+                (None, None) => lost += 1,
+                (Some(ms), Some(a)) => {
+                    assert!((20.0..70.0).contains(&ms), "tick {t}: {ms} ms");
+                    assert_eq!(a - t, (ms / 10.0).round() as u64, "tick {t}: {ms} ms");
+                }
+                other => panic!("tick {t}: lost in one and not the other: {other:?}"),
+            }
+        }
+        assert!((450..750).contains(&lost), "lost {lost} of 2000 at p = 0.3");
+        let fixed = LinkModel::new(spec(4.0, 0.0, 0.0), 0.01);
+        assert_eq!(
+            fixed.delay_ms(1, 2, 3),
+            Some(4.0),
+            "under half a tick still counts"
+        );
     }
 
     #[test]

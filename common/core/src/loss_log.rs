@@ -40,6 +40,11 @@ impl LossLog {
         }
     }
 
+    /// The formation before any loss.
+    pub fn original(&self) -> &Formation {
+        &self.original
+    }
+
     /// Every loss, (tick, id), in tick order.
     pub fn losses(&self) -> &[(u64, u32)] {
         &self.losses

@@ -69,6 +69,9 @@ pub enum FaultKind {
     /// The orchestrator itself did not run for a while (stopped or starved): its clock stalled
     /// and the members stopped by themselves.
     OrchestratorStalled,
+    /// Across hosts: a host's daemon was lost (killed, exited, or cut off by a partition), and
+    /// every member it ran with it.
+    HostLost,
 }
 
 impl FaultKind {
@@ -88,6 +91,7 @@ impl FaultKind {
             FaultKind::Interrupted => "interrupted",
             FaultKind::OrchestratorStalled => "orchestrator-stalled",
             FaultKind::VehicleLost => "vehicle-lost",
+            FaultKind::HostLost => "host-lost",
         }
     }
 }
@@ -102,7 +106,7 @@ impl fmt::Display for FaultKind {
 mod tests {
     use super::*;
 
-    const KINDS: [FaultKind; 13] = [
+    const KINDS: [FaultKind; 14] = [
         FaultKind::Control,
         FaultKind::AgentFault,
         FaultKind::NonFiniteState,
@@ -116,6 +120,7 @@ mod tests {
         FaultKind::OrchestratorStalled,
         FaultKind::Lost,
         FaultKind::VehicleLost,
+        FaultKind::HostLost,
     ];
 
     #[test]
@@ -153,7 +158,8 @@ mod tests {
                 "interrupted",
                 "orchestrator-stalled",
                 "lost",
-                "vehicle-lost"
+                "vehicle-lost",
+                "host-lost"
             ]
         );
         assert_eq!(

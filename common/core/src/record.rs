@@ -43,6 +43,20 @@ impl TickRecorder {
         member: impl Fn(usize) -> Option<(Vec3, Vec3)>,
     ) -> Result<Real, FaultRecord> {
         let t = tick_time(tick, s.dt_s());
+        self.record_at(s, (tick, t), audit, tel, member)?;
+        Ok(t)
+    }
+
+    /// [`Self::record`] at time `t` rather than the tick's: the real-time monitor's audit
+    /// instants (`tick` is the audit index, `t` = index / audit rate).
+    pub fn record_at(
+        &mut self,
+        s: &Scenario,
+        (tick, t): (u64, Real),
+        audit: &mut Auditor,
+        tel: &mut dyn TelemetrySink,
+        member: impl Fn(usize) -> Option<(Vec3, Vec3)>,
+    ) -> Result<(), FaultRecord> {
         s.desired_positions(t, &mut self.ht);
         for (k, p) in self.pos.iter_mut().enumerate() {
             if let Some((r, _)) = member(k) {
@@ -51,7 +65,7 @@ impl TickRecorder {
         }
         audit.observe(tick, t, &self.pos, &self.ht);
         if !tel.keeps(tick) {
-            return Ok(t);
+            return Ok(());
         }
         self.rows.clear();
         for &k in &self.order {
@@ -68,8 +82,7 @@ impl TickRecorder {
             });
         }
         tel.write_tick(&self.rows)
-            .map_err(|e| write_fault(tick, &e))?;
-        Ok(t)
+            .map_err(|e| write_fault(tick, &e))
     }
 
     /// The positions of the last recorded tick (formation order).

@@ -24,6 +24,7 @@ use cdm_core::step::{law_for, Law, NeighborModel, StepConfig, StepFault};
 
 use crate::inbox::Inbox;
 use crate::member_loss::{LossFault, LossWork, MemberLosses};
+use crate::member_watch::{report_fault, Watch};
 use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};
 use crate::seams::{TickClock, Vehicle, VehicleFault};
 
@@ -163,10 +164,9 @@ pub struct MemberCore<V, C> {
     published: Option<u64>,
     inbox: [Inbox; 3],
     last_progress: Duration,
-    last_alive_check: Duration,
     progress: bool,
     unnotified: bool,
-    pending: Option<Action>,
+    watch: Watch,
     /// Loss notices and repairs (`None`: a loss notice is a fault).
     losses: Option<Box<MemberLosses>>,
     links: Links,
@@ -210,10 +210,9 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             published: None,
             inbox: Default::default(),
             last_progress: now,
-            last_alive_check: now,
             progress: false,
             unnotified: false,
-            pending: None,
+            watch: Watch::new(now),
             losses: None,
             links: Links {
                 model: LinkModel::perfect(1.0),
@@ -286,12 +285,10 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                 None => Err(MemberFault::RepairUnsupported { tick: self.tick }),
             };
             if let Err(fault) = taken {
-                if self.pending.is_none() {
-                    self.pending = Some(Action::Fail {
-                        report: None,
-                        fault,
-                    });
-                }
+                self.watch.defer(Action::Fail {
+                    report: None,
+                    fault,
+                });
             }
             self.progress = true;
         }
@@ -332,13 +329,14 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
         if msg.status() != AgentStatus::Ok {
             return;
         }
-        if msg.scenario_hash != self.hash && self.pending.is_none() {
+        if msg.scenario_hash != self.hash && !self.watch.is_pending() {
             let fault = MemberFault::ForeignState {
                 tick: self.tick,
                 peer: msg.id,
                 peer_tick: msg.tick,
             };
-            self.pending = Some(self.fail(FaultCode::NeighborFault, msg.id, fault));
+            self.watch
+                .defer(self.fail(FaultCode::NeighborFault, msg.id, fault));
         }
         if msg.tick >= self.links.model.oldest_candidate(self.tick) {
             self.inbox[slot].insert(msg.tick, QuadState(msg.state).flat());
@@ -348,19 +346,13 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
 
     /// The answer to [`Action::CheckOrchestrator`].
     pub fn on_orchestrator_alive(&mut self, alive: bool) {
-        if !alive && self.pending.is_none() {
-            let fault = MemberFault::OrchestratorLost { tick: self.tick };
-            self.pending = Some(Action::Fail {
-                report: None,
-                fault,
-            });
-        }
+        self.watch.orchestrator_alive(alive, self.tick);
     }
 
     /// The next action at time `now`. Call it until it returns [`Action::Poll`],
     /// [`Action::NotifyReaders`] or [`Action::Wait`] (then read the inputs) or [`Action::Fail`].
     pub fn poll(&mut self, now: Duration) -> Action {
-        if let Some(a) = self.pending.take() {
+        if let Some(a) = self.watch.take() {
             return a;
         }
         if let Some(w) = self.losses.as_mut().and_then(|l| l.next_work()) {
@@ -374,8 +366,7 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             return Action::Poll;
         }
         let idle = now.saturating_sub(self.last_progress);
-        if now.saturating_sub(self.last_alive_check) >= ALIVE_CHECK {
-            self.last_alive_check = now;
+        if self.watch.check_due(now) {
             return Action::CheckOrchestrator;
         }
         let limit = if self.clock.allowed().is_none() {
@@ -467,7 +458,17 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                     .unwrap_or_default(),
             };
             self.inbox[slot] = kept;
-            self.inbox[slot].drop_before(tick);
+            // Over delayed links the states of a few ticks back are still candidates.
+            self.inbox[slot].drop_before(self.links.model.oldest_candidate(tick));
+            if *id != self.neighbor_ids[slot] {
+                // As the engine: a new neighbour in a slot is known where it started until
+                // its states arrive (`Engine::apply_repair`).
+                let start = self.losses.as_ref().and_then(|l| l.start_of(*id));
+                self.links.held[slot] = Heard {
+                    tick: 0,
+                    flat: Flat::rest(start.unwrap_or(self.rest.r)),
+                };
+            }
         }
         self.neighbor_ids = ids;
         tracing::info!(id = self.id, tick, in_neighbors = ?ids, "flying the repaired link");
@@ -550,12 +551,8 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
 
     /// A fault that is reported to the team (this member's state flagged with `code`).
     fn fail(&self, code: FaultCode, peer: u32, fault: MemberFault) -> Action {
-        let msg = StateMsg::ok(self.tick, self.hash, self.id, self.vehicle.state());
-        let peer = (peer != NO_PEER).then_some(peer);
-        Action::Fail {
-            report: Some(msg.with_status(AgentStatus::Fault { code, peer })),
-            fault,
-        }
+        let state = self.vehicle.state();
+        report_fault((self.id, self.hash, self.tick), state, (code, peer), fault)
     }
 
     fn waiting_for(&self) -> WaitingFor {

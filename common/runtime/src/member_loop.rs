@@ -8,7 +8,7 @@ use std::time::Duration;
 use crate::fault_inject::Injection;
 use crate::member_core::{Action, Finished, MemberCore, MemberFault, ALIVE_CHECK};
 use crate::member_loss::LossWork;
-use crate::messages::ClockCommand;
+use crate::messages::{ClockCommand, StateMsg};
 use crate::seams::{Clock, MemberTransport, TickClock, Vehicle};
 
 /// Why the loop stopped without the orchestrator's stop.
@@ -90,15 +90,27 @@ where
                     break;
                 }
                 Action::Fail { report, fault } => {
-                    if let Some(r) = report {
-                        let _ = transport.publish(r);
-                        linger(transport, clock, interrupted);
-                    }
-                    return Err(LoopError::Fault(fault));
+                    return Err(failed(transport, clock, interrupted, report, fault));
                 }
             }
         }
     }
+}
+
+/// [`Action::Fail`] in either loop (lockstep or real time): publish the fault's report, if
+/// any, and [`linger`] for the orchestrator's stop so the team reads it; the loop then ends.
+pub(crate) fn failed<T: MemberTransport, K: Clock>(
+    transport: &mut T,
+    clock: &K,
+    interrupted: &AtomicBool,
+    report: Option<StateMsg>,
+    fault: MemberFault,
+) -> LoopError<T::Error> {
+    if let Some(r) = report {
+        let _ = transport.publish(r);
+        linger(transport, clock, interrupted);
+    }
+    LoopError::Fault(fault)
 }
 
 /// How long a member that reported a fault keeps its ports open for the orchestrator's stop.

@@ -119,6 +119,11 @@ impl MemberLosses {
             .any(|(_, m)| m.link.is_some_and(|l| l.in_neighbors.contains(&id)))
     }
 
+    /// Where member `id` started (the scenario's position), if it is in the team.
+    pub(crate) fn start_of(&self, id: u32) -> Option<cdm_core::math::Vec3> {
+        self.log.original().member(id).map(|m| m.position)
+    }
+
     /// Keeps a future in-neighbour's state.
     pub(crate) fn keep(&mut self, id: u32, tick: u64, state: cdm_core::dynamics::Flat) {
         match self.ahead.iter_mut().find(|(j, _)| *j == id) {

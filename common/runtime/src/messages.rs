@@ -194,6 +194,9 @@ impl FaultCode {
         match self {
             FaultCode::Control => FaultKind::Control,
             FaultCode::VehicleLost => FaultKind::VehicleLost,
+            FaultCode::HostLost => FaultKind::HostLost,
+            // A member on another host exited: as a member here would (its daemon saw it).
+            FaultCode::RemoteExited => FaultKind::AgentExited,
             _ => FaultKind::AgentFault,
         }
     }

@@ -14,21 +14,25 @@
 //! older than the bound (`--stale-after`, default 0.5 s) is a fault: the member reports it (its
 //! state flagged `NeighborSilent` with the peer) and holds (it flies no further tick, so a real
 //! vehicle would hover where it is) until the orchestrator stops the team.
+//!
+//! Over imperfect links (`--link-delay-ms`, `--link-jitter-ms`, `--link-loss`) a received state
+//! is held back, or dropped, as lockstep's seeded draws say, in milliseconds of wall time
+//! ([`crate::realtime_links`]); the follower extrapolates from the newest state it has.
 
 use std::time::Duration;
 
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
+use cdm_core::link::LinkModel;
 use cdm_core::math::Vec3;
 use cdm_core::step::{extrapolate_flat, law_for, Law, NeighborModel, TickAt};
 
-use crate::member_core::{
-    Action, Deadlines, Finished, MemberFault, WaitingFor, ALIVE_CHECK, WAIT_SLICE,
-};
+use crate::member_core::{Action, Deadlines, Finished, MemberFault, WaitingFor, WAIT_SLICE};
+use crate::member_watch::{report_fault, Watch};
 use crate::messages::{
-    AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER, PHASES_ALIGNED,
-    STATUS_PACING,
+    AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, PHASES_ALIGNED, STATUS_PACING,
 };
+use crate::realtime_links::DelayLine;
 use crate::seams::Vehicle;
 
 /// The default bound on a neighbour's age before it is a fault.
@@ -68,6 +72,8 @@ pub struct Pacing {
     age_bins: Vec<u32>,
     /// The largest neighbour age (ms).
     pub age_max_ms: f64,
+    /// In-neighbour states received, and how many of them the links lost (`realtime_links`).
+    pub link_states: (u64, u64),
 }
 
 /// Width of a neighbour-age histogram bin (ms): percentiles are reported to this resolution.
@@ -86,6 +92,8 @@ pub struct PacingFigures {
     pub age_max_ms: f64,
     /// How many neighbour ages were measured (0 for a leader).
     pub age_samples: u64,
+    /// In-neighbour states received, and how many of them the links lost.
+    pub link_states: (u64, u64),
 }
 
 impl Default for Pacing {
@@ -96,6 +104,7 @@ impl Default for Pacing {
             max_late_ms: 0.0,
             age_bins: vec![0; AGE_BINS],
             age_max_ms: 0.0,
+            link_states: (0, 0),
         }
     }
 }
@@ -134,7 +143,7 @@ impl Pacing {
     }
 
     /// The figures as a message: `tick` = ticks flown, `state` = [late ticks, max lateness ms,
-    /// age p50 ms, age p99 ms, age max ms, age samples, 0...].
+    /// age p50 ms, age p99 ms, age max ms, age samples, states received, states lost, 0...].
     pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
         let samples: u64 = self.age_bins.iter().map(|&c| u64::from(c)).sum();
         let mut f = [0.0; 12];
@@ -144,6 +153,8 @@ impl Pacing {
         f[3] = self.age_quantile_ms(0.99);
         f[4] = self.age_max_ms;
         f[5] = samples as f64;
+        f[6] = self.link_states.0 as f64;
+        f[7] = self.link_states.1 as f64;
         let mut m = StateMsg::ok(self.ticks, hash, id, f);
         m.status = STATUS_PACING;
         m
@@ -160,6 +171,7 @@ impl Pacing {
             age_p99_ms: m.state[3],
             age_max_ms: m.state[4],
             age_samples: m.state[5] as u64,
+            link_states: (m.state[6] as u64, m.state[7] as u64),
         })
     }
 }
@@ -186,6 +198,8 @@ pub struct RealtimeSetup {
     pub stale_after: Duration,
     /// The join and silence deadlines (silence bounds the wait for the stop after the last tick).
     pub deadlines: Deadlines,
+    /// The scenario's links: real deliveries are held back or dropped as they say.
+    pub links: LinkModel,
 }
 
 /// One member's real-time protocol state.
@@ -200,13 +214,14 @@ pub struct RealtimeCore<V> {
     initial: [Flat; 3],
     /// The newest state heard of each in-neighbour: its tick and flat output.
     heard: [Option<(u64, Flat)>; 3],
+    /// Received states the links still hold back.
+    links: DelayLine,
     start: Option<Start>,
     tick: u64,
     published: Option<u64>,
     pacing: Pacing,
     created: Duration,
-    last_alive_check: Duration,
-    pending: Option<Action>,
+    watch: Watch,
 }
 
 impl<V: Vehicle> RealtimeCore<V> {
@@ -228,13 +243,13 @@ impl<V: Vehicle> RealtimeCore<V> {
             is_follower: matches!(law, Law::Follower { .. }),
             initial: neighbor_positions.map(Flat::rest),
             heard: [None; 3],
+            links: DelayLine::new(setup.links, member.id, neighbor_ids),
             start: None,
             tick: 0,
             published: None,
             pacing: Pacing::default(),
             created: now,
-            last_alive_check: now,
-            pending: None,
+            watch: Watch::new(now),
         }
     }
 
@@ -314,35 +329,32 @@ impl<V: Vehicle> RealtimeCore<V> {
         if msg.status() != AgentStatus::Ok {
             return;
         }
-        if msg.scenario_hash != self.setup.hash && self.pending.is_none() {
+        if msg.scenario_hash != self.setup.hash && !self.watch.is_pending() {
             let fault = MemberFault::ForeignState {
                 tick: self.tick,
                 peer: msg.id,
                 peer_tick: msg.tick,
             };
-            self.pending = Some(self.fail(FaultCode::NeighborFault, msg.id, fault));
+            self.watch
+                .defer(self.fail(FaultCode::NeighborFault, msg.id, fault));
             return;
         }
-        if self.heard[slot].is_none_or(|(t, _)| msg.tick > t) {
-            self.heard[slot] = Some((msg.tick, QuadState(msg.state).flat()));
+        let flat = QuadState(msg.state).flat();
+        if let Some((tick, flat)) = self.links.receive(slot, msg.tick, flat) {
+            hear(&mut self.heard[slot], tick, flat);
         }
+        self.pacing.link_states = self.links.counts();
     }
 
     /// The answer to [`Action::CheckOrchestrator`].
     pub fn on_orchestrator_alive(&mut self, alive: bool) {
-        if !alive && self.pending.is_none() {
-            let fault = MemberFault::OrchestratorLost { tick: self.tick };
-            self.pending = Some(Action::Fail {
-                report: None,
-                fault,
-            });
-        }
+        self.watch.orchestrator_alive(alive, self.tick);
     }
 
     /// The next action at time `now` (this member's monotonic clock). Call it until it returns
     /// [`Action::Wait`] (then read the inputs) or [`Action::Fail`].
     pub fn poll(&mut self, now: Duration) -> Action {
-        if let Some(a) = self.pending.take() {
+        if let Some(a) = self.watch.take() {
             return a;
         }
         let Some(start) = self.start else {
@@ -373,6 +385,12 @@ impl<V: Vehicle> RealtimeCore<V> {
         let dt = self.setup.dt_s;
         let mut flats = self.initial;
         if self.is_follower {
+            let heard = &mut self.heard;
+            self.links.release(
+                t_own,
+                |slot, tick| stamp_s(tick, start.neighbor_phase_s[slot], dt),
+                |slot, tick, flat| hear(&mut heard[slot], tick, flat),
+            );
             for (slot, out) in flats.iter_mut().enumerate() {
                 let (stamp, flat) = match self.heard[slot] {
                     Some((t, f)) => (stamp_s(t, start.neighbor_phase_s[slot], dt), f),
@@ -419,8 +437,7 @@ impl<V: Vehicle> RealtimeCore<V> {
         deadline: Option<Duration>,
         until: Option<Duration>,
     ) -> Action {
-        if now.saturating_sub(self.last_alive_check) >= ALIVE_CHECK {
-            self.last_alive_check = now;
+        if self.watch.check_due(now) {
             return Action::CheckOrchestrator;
         }
         let mut slice = WAIT_SLICE;
@@ -448,12 +465,16 @@ impl<V: Vehicle> RealtimeCore<V> {
 
     /// A fault reported to the team (this member's state flagged with `code`).
     fn fail(&self, code: FaultCode, peer: u32, fault: MemberFault) -> Action {
-        let msg = StateMsg::ok(self.tick, self.setup.hash, self.id, self.vehicle.state());
-        let peer = (peer != NO_PEER).then_some(peer);
-        Action::Fail {
-            report: Some(msg.with_status(AgentStatus::Fault { code, peer })),
-            fault,
-        }
+        let state = self.vehicle.state();
+        let who = (self.id, self.setup.hash, self.tick);
+        report_fault(who, state, (code, peer), fault)
+    }
+}
+
+/// Keeps `(tick, flat)` in `slot` when it is newer than what the slot holds.
+fn hear(slot: &mut Option<(u64, Flat)>, tick: u64, flat: Flat) {
+    if slot.is_none_or(|(t, _)| tick > t) {
+        *slot = Some((tick, flat));
     }
 }
 

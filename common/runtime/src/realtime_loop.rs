@@ -5,7 +5,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::member_core::{Action, Finished};
-use crate::member_loop::{linger, LoopError};
+use crate::member_loop::{failed, linger, LoopError};
 use crate::realtime::RealtimeCore;
 use crate::seams::{Clock, MemberTransport, Vehicle};
 
@@ -69,11 +69,7 @@ where
                     break;
                 }
                 Action::Fail { report, fault } => {
-                    if let Some(r) = report {
-                        let _ = transport.publish(r);
-                        linger(transport, clock, interrupted);
-                    }
-                    return Err(LoopError::Fault(fault));
+                    return Err(failed(transport, clock, interrupted, report, fault));
                 }
             }
         }

@@ -209,6 +209,8 @@ impl MonitorCore {
             neighbor_age_ms_p50: p50s.get(p50s.len() / 2).copied().unwrap_or(0.0),
             neighbor_age_ms_p99: max(|p| p.age_p99_ms),
             neighbor_age_ms_max: max(|p| p.age_max_ms),
+            link_states_received: reports.iter().map(|p| p.link_states.0).sum(),
+            link_states_lost: reports.iter().map(|p| p.link_states.1).sum(),
             slowest_member: slowest,
             members_reported: reports.len(),
             audits: run.audits,

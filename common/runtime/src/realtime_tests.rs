@@ -3,6 +3,7 @@
 
 use cdm_core::control::ControlFault;
 use cdm_core::formation::{Link, Role};
+use cdm_core::link::LinkSpec;
 use cdm_core::math::{vec3, Vec2};
 
 use super::*;
@@ -63,12 +64,17 @@ fn follower() -> Member {
 }
 
 fn core(phase_seed: u32) -> RealtimeCore<Still> {
+    core_over(phase_seed, LinkModel::perfect(DT))
+}
+
+fn core_over(phase_seed: u32, links: LinkModel) -> RealtimeCore<Still> {
     let setup = RealtimeSetup {
         hash: HASH,
         last: 1000,
         dt_s: DT,
         stale_after: STALE_AFTER,
         deadlines: Deadlines::default(),
+        links,
     };
     let mut c = RealtimeCore::new(
         &follower(),
@@ -176,6 +182,31 @@ fn neighbour_ages_are_own_time_minus_the_newest_stamp() {
     let p = Pacing::from_msg(&c.pacing().to_msg(ME, HASH)).expect("a pacing message");
     assert_eq!(p.ticks, 43);
     assert!((p.age_max_ms - 20.0).abs() < 1e-6, "{p:?}");
+}
+
+#[test]
+fn over_delayed_links_a_state_is_used_only_once_its_delay_has_passed() {
+    let spec = LinkSpec {
+        delay_ms: 25.0,
+        ..LinkSpec::default()
+    };
+    let mut c = core_over(PHASES_ALIGNED, LinkModel::new(spec, DT));
+    for id in [1, 2, 3] {
+        c.on_neighbor(&state(id, 40));
+    }
+    // Tick 42 (own time 0.42 s): the tick-40 states (stamp 0.40 s) are 5 ms short of their
+    // 25 ms, so the follower still extrapolates from where its neighbours started.
+    let now = secs(1.0 + 42.0 * DT);
+    while c.tick() < 43 {
+        let _ = c.poll(now);
+    }
+    assert_eq!(c.heard, [None; 3]);
+    // Tick 43 (0.43 s): released, 30 ms old when used.
+    let now = secs(1.0 + 43.0 * DT);
+    while c.tick() < 44 {
+        let _ = c.poll(now);
+    }
+    assert!(c.heard.iter().all(|h| h.is_some_and(|(t, _)| t == 40)));
 }
 
 #[test]

@@ -10,7 +10,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// A [`StateMsg`], field for field (the shared-memory type stays free of serde).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -154,6 +154,10 @@ pub struct Assignment {
     pub window: u32,
     /// No frame from the orchestrator for this long: the link is lost.
     pub link_timeout_ms: u64,
+    /// Real time (`launch --realtime`): the members' `--stale-after`, in seconds. The start
+    /// instant comes later, as a wall-clock (UNIX) time in the clock's `Realtime` message, so
+    /// members on every host pace on the same instant.
+    pub realtime_stale_after_s: Option<f64>,
 }
 
 /// The orchestrator's answer to a [`JoinRequest`].

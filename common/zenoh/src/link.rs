@@ -42,6 +42,28 @@ pub enum NetError {
     /// Nobody answered a join request before the deadline.
     #[error("no orchestrator answered on {endpoint} within {waited_s:.0} s")]
     NoAnswer { endpoint: String, waited_s: f64 },
+    /// The peer's liveliness token on `key` went away: its zenoh session closed (the process
+    /// exited or was killed; its TCP connection closed). A partition closes nothing: the
+    /// callers' silence deadline covers it.
+    #[error("its zenoh session closed (liveliness token {key} gone)")]
+    PeerGone { key: String },
+}
+
+/// After a peer's token goes, frames it sent just before may still be on their way (zenoh
+/// carries declarations with a higher priority than data): they are delivered first, then the
+/// loss is reported.
+const GONE_GRACE: Duration = Duration::from_millis(150);
+
+/// What a channel's receiving queue carries.
+enum Event {
+    Frame(Vec<u8>),
+    /// The peer's liveliness token was undeclared.
+    PeerGone,
+}
+
+/// The liveliness key that says the sender on `key` is alive.
+fn alive_key(key: &str) -> String {
+    format!("{key}/alive")
 }
 
 /// The zenoh key of the frames towards host `host`'s daemon.
@@ -122,13 +144,17 @@ impl Net {
         &self.endpoint
     }
 
-    /// A channel that sends on `out_key` and receives what arrives on `in_key`.
+    /// A channel that sends on `out_key` and receives what arrives on `in_key`. Each side
+    /// declares a liveliness token beside its out key and watches the other's: a peer whose
+    /// session closes (killed, exited) is seen as soon as its TCP connection drops.
     pub fn channel(&self, out_key: &str, in_key: &str) -> Result<Channel, NetError> {
         let declare = |what, key: &str, e: zenoh::Error| NetError::Declare {
             what,
             key: key.to_owned(),
             detail: e.to_string(),
         };
+        let (tx, rx) = mpsc::channel();
+        let (token, watch) = self.liveliness(out_key, in_key, tx.clone())?;
         // Lockstep needs every frame: block (bounded by zenoh's own close timeout) rather than
         // drop under congestion; one publisher per direction keeps the frames in order.
         let publisher = self
@@ -139,7 +165,6 @@ impl Net {
             .map_err(|e| declare("a publisher", out_key, e))?;
         // An unbounded queue: zenoh's receiving thread never blocks on us, so two hosts that
         // both send can never wait on each other (a window bounds what is in flight).
-        let (tx, rx) = mpsc::channel();
         let received = Arc::new(AtomicU64::new(0));
         let counter = received.clone();
         let subscriber = self
@@ -148,20 +173,67 @@ impl Net {
             .callback(move |sample| {
                 let bytes = sample.payload().to_bytes().into_owned();
                 counter.fetch_add(bytes.len() as u64, Ordering::Relaxed);
-                let _ = tx.send(bytes);
+                let _ = tx.send(Event::Frame(bytes));
             })
             .wait()
             .map_err(|e| declare("a subscriber", in_key, e))?;
         Ok(Channel {
             publisher,
             _subscriber: subscriber,
+            _token: token,
+            _watch: watch,
             rx,
             ahead: None,
+            gone_since: None,
+            peer_key: alive_key(in_key),
             out_key: out_key.to_owned(),
             in_key: in_key.to_owned(),
             sent: 0,
             received,
         })
+    }
+
+    /// Declares this side's liveliness token beside `out_key` and watches the peer's beside
+    /// `in_key`: its undeclaration (the peer's session closed) is queued as [`Event::PeerGone`].
+    fn liveliness(
+        &self,
+        out_key: &str,
+        in_key: &str,
+        tx: mpsc::Sender<Event>,
+    ) -> Result<
+        (
+            zenoh::liveliness::LivelinessToken,
+            zenoh::pubsub::Subscriber<()>,
+        ),
+        NetError,
+    > {
+        let declare = |what, key: &str, e: zenoh::Error| NetError::Declare {
+            what,
+            key: key.to_owned(),
+            detail: e.to_string(),
+        };
+        let alive = alive_key(out_key);
+        let token = self
+            .session
+            .liveliness()
+            .declare_token(alive.clone())
+            .wait()
+            .map_err(|e| declare("a liveliness token", &alive, e))?;
+        let peer_key = alive_key(in_key);
+        // History: a peer whose token is already up is seen at once; only its Delete matters.
+        let watch = self
+            .session
+            .liveliness()
+            .declare_subscriber(peer_key.clone())
+            .history(true)
+            .callback(move |sample| {
+                if sample.kind() == zenoh::sample::SampleKind::Delete {
+                    let _ = tx.send(Event::PeerGone);
+                }
+            })
+            .wait()
+            .map_err(|e| declare("a liveliness subscriber", &peer_key, e))?;
+        Ok((token, watch))
     }
 
     /// Serves join requests for `team` (see [`JoinDesk`]).
@@ -221,9 +293,14 @@ impl Net {
 pub struct Channel {
     publisher: zenoh::pubsub::Publisher<'static>,
     _subscriber: zenoh::pubsub::Subscriber<()>,
-    rx: mpsc::Receiver<Vec<u8>>,
-    /// A frame taken by [`Channel::wait`], returned by the next receive.
-    ahead: Option<Vec<u8>>,
+    _token: zenoh::liveliness::LivelinessToken,
+    _watch: zenoh::pubsub::Subscriber<()>,
+    rx: mpsc::Receiver<Event>,
+    /// An event taken by [`Channel::wait`], returned by the next receive.
+    ahead: Option<Event>,
+    /// When the peer's liveliness token went (reported after [`GONE_GRACE`]).
+    gone_since: Option<Instant>,
+    peer_key: String,
     out_key: String,
     in_key: String,
     sent: u64,
@@ -244,17 +321,33 @@ impl Channel {
             })
     }
 
-    /// The next frame received, if any (never blocks).
+    /// The next frame received, if any (never blocks); [`NetError::PeerGone`] once the peer's
+    /// session closed and every frame it sent before was delivered.
     pub fn try_recv<T: DeserializeOwned>(&mut self) -> Result<Option<T>, NetError> {
-        match self.ahead.take().or_else(|| self.rx.try_recv().ok()) {
-            Some(bytes) => self.decode(&bytes).map(Some),
-            None => Ok(None),
+        while let Some(event) = self.ahead.take().or_else(|| self.rx.try_recv().ok()) {
+            match event {
+                Event::Frame(bytes) => return self.decode(&bytes).map(Some),
+                Event::PeerGone => {
+                    self.gone_since.get_or_insert_with(Instant::now);
+                }
+            }
+        }
+        match self.gone_since {
+            Some(t) if t.elapsed() >= GONE_GRACE => Err(NetError::PeerGone {
+                key: self.peer_key.clone(),
+            }),
+            _ => Ok(None),
         }
     }
 
     /// Sleeps until a frame arrives or `timeout` passes (the frame stays for the next receive).
     pub fn wait(&mut self, timeout: Duration) {
         if self.ahead.is_none() {
+            let timeout = match self.gone_since {
+                // Wake when the grace is over, to report the loss.
+                Some(t) => timeout.min(GONE_GRACE.saturating_sub(t.elapsed())),
+                None => timeout,
+            };
             self.ahead = self.rx.recv_timeout(timeout).ok();
         }
     }

@@ -3,21 +3,23 @@
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use cdm_zenoh::{
-    down_key, up_key, Assignment, Channel, Down, JoinDesk, JoinReply, Net, PendingJoin, Regions,
-    Up, PROTOCOL_VERSION,
+    down_key, up_key, Assignment, Channel, Down, IdleBackoff, JoinDesk, JoinReply, JoinRequest,
+    Net, NetError, PendingJoin, Regions, Up, PROTOCOL_VERSION,
 };
+use common::audit::FaultRecord;
 use common::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg};
+use common::outcome::FaultKind;
 use common::scenario::Scenario;
 use common::transport::{MemberPorts, TeamName};
 use serde::Serialize;
 
 use super::plan::placed;
-use super::HostOptions;
+use super::{Flight, HostOptions};
 use crate::Failure;
 
 /// How often a quiet link says it is alive.
@@ -29,13 +31,25 @@ const STOP_DEADLINE: Duration = Duration::from_secs(8);
 struct Ctx {
     team: TeamName,
     hash: u64,
-    window: u32,
+    flight: Flight,
     scenario_json: String,
     regions: Regions,
     ins: BTreeMap<u32, Vec<u32>>,
     outs: BTreeMap<u32, Vec<u32>>,
     link_timeout: Duration,
     quiet: bool,
+    lost: LostHosts,
+}
+
+/// Hosts the bridge lost, by host number: why, for the team's fault record.
+type LostHosts = Arc<Mutex<BTreeMap<u32, LostHost>>>;
+
+/// A host whose link was lost, and the members that went with it.
+#[derive(Debug, Clone)]
+struct LostHost {
+    who: String,
+    members: Vec<u32>,
+    why: String,
 }
 
 /// The bridge thread and its stop flag.
@@ -43,6 +57,7 @@ pub struct Bridge {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<Vec<HostReport>>>,
     crossing: Vec<(u32, u32)>,
+    lost: LostHosts,
 }
 
 /// One host as `hosts.json` records it.
@@ -94,7 +109,7 @@ impl Bridge {
         team: &TeamName,
         regions: &Regions,
         h: &HostOptions,
-        window: u32,
+        flight: Flight,
         quiet: bool,
     ) -> Result<Self, Failure> {
         let desk = net
@@ -113,14 +128,16 @@ impl Bridge {
         let ctx = Ctx {
             team: team.clone(),
             hash: s.content_hash(),
-            window,
+            flight,
             scenario_json: s.to_json(),
             regions: regions.clone(),
             ins,
             outs,
             link_timeout: h.link_timeout,
             quiet,
+            lost: LostHosts::default(),
         };
+        let lost = ctx.lost.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         let thread = std::thread::Builder::new()
@@ -131,7 +148,28 @@ impl Bridge {
             stop,
             thread: Some(thread),
             crossing,
+            lost,
         })
+    }
+
+    /// The team's fault, said in the terms of hosts: a member reported lost with its host
+    /// (`HostLost`) becomes the host's loss, naming the host, why, and every member it ran.
+    pub fn explain(&self, f: FaultRecord) -> FaultRecord {
+        if f.kind != FaultKind::HostLost {
+            return f;
+        }
+        let lost = self.lost.lock().map(|l| l.clone()).unwrap_or_default();
+        let Some((host, h)) = lost
+            .iter()
+            .find(|(_, h)| f.agent.is_some_and(|a| h.members.contains(&a)))
+        else {
+            return f;
+        };
+        let message = format!(
+            "host {host} ({}) lost at tick {}: {}; its agents {:?} were lost with it",
+            h.who, f.tick, h.why, h.members
+        );
+        FaultRecord { message, ..f }
     }
 
     /// After the team's stop: lets the daemons stop their members (bounded), then writes
@@ -181,6 +219,7 @@ impl Drop for Bridge {
 fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport> {
     let mut remotes: BTreeMap<u32, Remote> = BTreeMap::new();
     let mut stopping_since: Option<Instant> = None;
+    let mut idle = IdleBackoff::default();
     loop {
         while let Some(p) = desk.poll() {
             admit(&net, &ctx, &mut remotes, p);
@@ -201,10 +240,10 @@ fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport>
                 break;
             }
         }
-        if !busy {
+        if let Some(sleep) = idle.after(busy) {
             match remotes.values_mut().next() {
-                Some(r) => r.chan.wait(Duration::from_micros(500)),
-                None => std::thread::sleep(Duration::from_millis(5)),
+                Some(r) => r.chan.wait(sleep),
+                None => std::thread::sleep(sleep),
             }
         }
     }
@@ -215,58 +254,13 @@ fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport>
 fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJoin) {
     let key = cdm_zenoh::join_key(Some(ctx.team.as_str()));
     let q = p.request.clone();
-    let hosts = ctx.regions.hosts();
     let refuse = |p: PendingJoin, why: String| {
         tracing::warn!(daemon = %q.who, "refused a daemon: {why}");
         p.answer(&JoinReply::Refused(why), &key);
     };
-    if q.version != PROTOCOL_VERSION {
-        let why = format!(
-            "the daemon speaks host protocol {} and this orchestrator {PROTOCOL_VERSION}",
-            q.version
-        );
-        return refuse(p, why);
-    }
-    if let Some(t) = q.team.as_deref().filter(|t| *t != ctx.team.as_str()) {
-        let why = format!(
-            "the daemon asks for team {t}; this orchestrator runs team {}",
-            ctx.team
-        );
-        return refuse(p, why);
-    }
-    if let Some(h) = q.scenario_hash.filter(|&h| h != ctx.hash) {
-        let why = format!(
-            "the daemon's scenario has hash {h:016x}; team {} flies {:016x}",
-            ctx.team, ctx.hash
-        );
-        return refuse(p, why);
-    }
-    let host = match q.host {
-        Some(h) if h == 0 || h >= hosts => {
-            let why = format!("--host {h}: team {} has hosts 1..={}", ctx.team, hosts - 1);
-            return refuse(p, why);
-        }
-        Some(h) => match remotes.get(&h) {
-            Some(r) => {
-                let why = format!(
-                    "host {h} of team {} is already taken by {}",
-                    ctx.team, r.who
-                );
-                return refuse(p, why);
-            }
-            None => h,
-        },
-        None => match (1..hosts).find(|h| !remotes.contains_key(h)) {
-            Some(h) => h,
-            None => {
-                let why = format!(
-                    "all {} other hosts of team {} are taken",
-                    hosts - 1,
-                    ctx.team
-                );
-                return refuse(p, why);
-            }
-        },
+    let host = match which_host(ctx, remotes, &q) {
+        Ok(h) => h,
+        Err(why) => return refuse(p, why),
     };
     let chan = match net.channel(
         &down_key(ctx.team.as_str(), host),
@@ -287,8 +281,9 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
         hosts_of: ctx.regions.pairs(),
         scenario_json: ctx.scenario_json.clone(),
         scenario_hash: ctx.hash,
-        window: ctx.window,
+        window: ctx.flight.window,
         link_timeout_ms: ctx.link_timeout.as_millis() as u64,
+        realtime_stale_after_s: ctx.flight.realtime_stale_after.map(|d| d.as_secs_f64()),
     };
     p.answer(&JoinReply::Accepted(Box::new(assignment)), &key);
     if !ctx.quiet {
@@ -314,6 +309,60 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
     );
 }
 
+/// The host a join request may take, or why it is refused (another protocol, team or
+/// scenario; a host number out of range or taken; no host left).
+fn which_host(ctx: &Ctx, remotes: &BTreeMap<u32, Remote>, q: &JoinRequest) -> Result<u32, String> {
+    if q.version != PROTOCOL_VERSION {
+        let why = format!(
+            "the daemon speaks host protocol {} and this orchestrator {PROTOCOL_VERSION}",
+            q.version
+        );
+        return Err(why);
+    }
+    if let Some(t) = q.team.as_deref().filter(|t| *t != ctx.team.as_str()) {
+        let why = format!(
+            "the daemon asks for team {t}; this orchestrator runs team {}",
+            ctx.team
+        );
+        return Err(why);
+    }
+    if let Some(h) = q.scenario_hash.filter(|&h| h != ctx.hash) {
+        let why = format!(
+            "the daemon's scenario has hash {h:016x}; team {} flies {:016x}",
+            ctx.team, ctx.hash
+        );
+        return Err(why);
+    }
+    let hosts = ctx.regions.hosts();
+    Ok(match q.host {
+        Some(h) if h == 0 || h >= hosts => {
+            let why = format!("--host {h}: team {} has hosts 1..={}", ctx.team, hosts - 1);
+            return Err(why);
+        }
+        Some(h) => match remotes.get(&h) {
+            Some(r) => {
+                let why = format!(
+                    "host {h} of team {} is already taken by {}",
+                    ctx.team, r.who
+                );
+                return Err(why);
+            }
+            None => h,
+        },
+        None => match (1..hosts).find(|h| !remotes.contains_key(h)) {
+            Some(h) => h,
+            None => {
+                let why = format!(
+                    "all {} other hosts of team {} are taken",
+                    hosts - 1,
+                    ctx.team
+                );
+                return Err(why);
+            }
+        },
+    })
+}
+
 /// One round for one daemon: its frames in, the clock and the crossing states out, the
 /// heartbeat, the silence deadline. True when anything moved.
 fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
@@ -325,6 +374,10 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         let frame = match r.chan.try_recv::<Up>() {
             Ok(Some(f)) => f,
             Ok(None) => break,
+            Err(e @ NetError::PeerGone { .. }) => {
+                lose(r, ctx, format!("the daemon is gone, {e}: killed or exited"));
+                return true;
+            }
             Err(e) => {
                 lose(r, ctx, format!("{e}"));
                 return true;
@@ -338,16 +391,21 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         }
     }
     if r.phase == Phase::Ready {
-        if let Err(why) = forward(r) {
-            lose(r, ctx, why);
-            return true;
+        match forward(r) {
+            Ok(sent) => busy |= sent,
+            Err(why) => {
+                lose(r, ctx, why);
+                return true;
+            }
         }
     }
     if r.last_sent.elapsed() >= HEARTBEAT {
         let _ = r.chan.send(&Down::Heartbeat);
         r.last_sent = Instant::now();
     }
-    if r.last_heard.elapsed() > ctx.link_timeout {
+    // Once the stop went, the daemon may stop its members quietly for a while (a bounded
+    // wait); the bridge's own stop deadline bounds it, and a killed daemon is still seen.
+    if !r.stop_sent && r.last_heard.elapsed() > ctx.link_timeout {
         let why = format!(
             "nothing heard from host {} ({}) for {:.1} s: network partition or daemon gone",
             r.host,
@@ -420,8 +478,8 @@ fn open_relays(r: &mut Remote, ctx: &Ctx) -> Result<(), String> {
     Ok(())
 }
 
-/// The clock and the crossing states towards a ready host.
-fn forward(r: &mut Remote) -> Result<(), String> {
+/// The clock and the crossing states towards a ready host; true when anything went.
+fn forward(r: &mut Remote) -> Result<bool, String> {
     let mut clock = None;
     let mut batch = vec![];
     for (&g, relay) in r.relays.iter_mut() {
@@ -437,6 +495,7 @@ fn forward(r: &mut Remote) -> Result<(), String> {
             })
             .map_err(|e| e.to_string())?;
     }
+    let moved = clock.is_some() || !batch.is_empty();
     // States first: a grant must never reach members before the states it lets them use.
     if !batch.is_empty() {
         r.chan
@@ -451,7 +510,7 @@ fn forward(r: &mut Remote) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
         r.last_sent = Instant::now();
     }
-    Ok(())
+    Ok(moved)
 }
 
 /// Publishes a fault report for `id` through its relay: the orchestrator stops the team with it
@@ -470,6 +529,14 @@ fn report_fault(r: &mut Remote, ctx: &Ctx, id: u32, code: FaultCode) {
 /// The link to a daemon is gone: every member of that host is reported lost.
 fn lose(r: &mut Remote, ctx: &Ctx, why: String) {
     tracing::error!(host = r.host, "host {} lost: {why}", r.host);
+    let host = LostHost {
+        who: r.who.clone(),
+        members: r.members.clone(),
+        why: why.clone(),
+    };
+    if let Ok(mut lost) = ctx.lost.lock() {
+        lost.insert(r.host, host);
+    }
     for id in r.members.clone() {
         report_fault(r, ctx, id, FaultCode::HostLost);
     }

@@ -181,6 +181,19 @@ fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Fa
     Ok((layout, ghosts))
 }
 
+/// The members' flags for the team's mode: real time paces on the start instant the clock
+/// announces (a wall-clock time, the same on every host).
+fn member_flags(a: &Assignment) -> Vec<String> {
+    match a.realtime_stale_after_s {
+        Some(stale_s) => vec![
+            "--realtime".into(),
+            "--stale-after".into(),
+            stale_s.to_string(),
+        ],
+        None => Vec::new(),
+    }
+}
+
 /// A relayed agent's neighbours on this host.
 #[derive(Default)]
 struct Neighbours {
@@ -210,13 +223,14 @@ fn fly(
     common::rundir::write_atomic(&file, j.a.scenario_json.as_bytes())
         .map_err(|e| Failure::fault(format!("cannot write {}: {e}", file.display())))?;
     let mut children = Vec::new();
+    let flags = member_flags(&j.a);
     for m in
         j.s.formation
             .members
             .iter()
             .filter(|m| j.mine.contains(&m.id))
     {
-        match spawn_member(&file, &j.team, m.id, m.role, &[]) {
+        match spawn_member(&file, &j.team, m.id, m.role, &flags) {
             Ok(child) => children.push(Spawned { id: m.id, child }),
             Err(e) => {
                 stop_team(&mut ports, &mut children, &j.s, StopReason::AgentFault);
@@ -240,6 +254,8 @@ fn fly(
     };
     stop_team(&mut ports, &mut children, &j.s, reason);
     if outcome.is_ok() {
+        // What the members published as they stopped (real time: their pacing reports).
+        let _ = link.up(&mut ports);
         let _ = link.chan.send(&Up::Stopped);
     }
     drop(relays);
@@ -306,7 +322,7 @@ impl Link<'_> {
                 let late = ports.readiness().waiting_for();
                 return Err(format!("agents {late:?} did not start within {deadline:?}"));
             }
-            while let Some(f) = self.chan.try_recv::<Down>().map_err(|e| e.to_string())? {
+            while let Some(f) = self.chan.try_recv::<Down>().map_err(link_error)? {
                 self.last_heard = Instant::now();
                 if let Down::Clock(c) = f {
                     if matches!(ClockMsg::from(c).command(), ClockCommand::Stop(_)) {
@@ -333,12 +349,13 @@ impl Link<'_> {
         interrupted: &std::sync::atomic::AtomicBool,
     ) -> Result<StopReason, String> {
         let mut last_child_check = Instant::now();
+        let mut idle = cdm_zenoh::IdleBackoff::default();
         loop {
             if interrupted.load(Ordering::Relaxed) {
                 return Err(format!("interrupted by {}", common::signals::received()));
             }
             let mut busy = false;
-            while let Some(f) = self.chan.try_recv::<Down>().map_err(|e| e.to_string())? {
+            while let Some(f) = self.chan.try_recv::<Down>().map_err(link_error)? {
                 self.last_heard = Instant::now();
                 busy = true;
                 if let Some(reason) = down(f, ports, relays)? {
@@ -351,8 +368,8 @@ impl Link<'_> {
                 self.report_exits(ports, children)?;
             }
             self.keep_alive()?;
-            if !busy {
-                self.chan.wait(Duration::from_micros(500));
+            if let Some(sleep) = idle.after(busy) {
+                self.chan.wait(sleep);
             }
         }
     }
@@ -393,6 +410,16 @@ impl Link<'_> {
             }
         }
         Ok(())
+    }
+}
+
+/// A failed receive, said from the daemon's side.
+fn link_error(e: cdm_zenoh::NetError) -> String {
+    match e {
+        cdm_zenoh::NetError::PeerGone { .. } => {
+            format!("the orchestrator is gone, {e}: killed or exited")
+        }
+        e => e.to_string(),
     }
 }
 

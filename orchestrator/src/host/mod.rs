@@ -21,6 +21,26 @@ pub use plan::Plan;
 
 use std::time::Duration;
 
+/// How the team flies, as a daemon needs to know it to start its members.
+#[derive(Debug, Clone, Copy)]
+#[cfg_attr(not(feature = "hosts"), allow(dead_code))]
+pub struct Flight {
+    /// The clock window (ticks of states kept per subscriber).
+    pub window: u32,
+    /// `--realtime`: the members' `--stale-after`.
+    pub realtime_stale_after: Option<Duration>,
+}
+
+impl Flight {
+    /// The flight of `launch`'s options.
+    pub fn of(o: &crate::launch::LaunchOptions) -> Self {
+        Self {
+            window: o.window,
+            realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
+        }
+    }
+}
+
 /// `launch`'s host options, validated.
 #[derive(Debug, Clone)]
 #[cfg_attr(not(feature = "hosts"), allow(dead_code))]
@@ -82,7 +102,7 @@ mod single {
             &self,
             _s: &Scenario,
             _team: &common::transport::TeamName,
-            _window: u32,
+            _flight: super::Flight,
         ) -> Result<Option<Bridge>, Failure> {
             Ok(None)
         }
@@ -90,6 +110,9 @@ mod single {
 
     impl Bridge {
         pub fn finish(self, _dir: &common::rundir::RunDir, _ticks: u64, _quiet: bool) {}
+        pub fn explain(&self, f: common::audit::FaultRecord) -> common::audit::FaultRecord {
+            f
+        }
     }
 }
 #[cfg(not(feature = "hosts"))]

@@ -7,7 +7,7 @@ use common::scenario::Scenario;
 use common::transport::{TeamLayout, TeamName};
 
 use super::bridge::Bridge;
-use super::HostOptions;
+use super::{Flight, HostOptions};
 use crate::Failure;
 
 /// The split of a team over its hosts (host 0 is this one).
@@ -102,7 +102,7 @@ impl Plan {
         &self,
         s: &Scenario,
         team: &TeamName,
-        window: u32,
+        flight: Flight,
     ) -> Result<Option<Bridge>, Failure> {
         let Some(endpoint) = self
             .options
@@ -115,6 +115,6 @@ impl Plan {
         let net =
             Net::listen(endpoint).map_err(|e| Failure::bad_input(format!("--listen: {e}")))?;
         let (regions, h) = (&self.regions, &self.options);
-        Bridge::start(net, s, team, regions, h, window, self.quiet).map(Some)
+        Bridge::start(net, s, team, regions, h, flight, self.quiet).map(Some)
     }
 }

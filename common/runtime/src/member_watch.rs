@@ -1,0 +1,104 @@
+//! What the lockstep core ([`crate::member_core::MemberCore`]) and the real-time core
+//! ([`crate::realtime::RealtimeCore`]) do alike between their ticks, written once: ask whether
+//! the orchestrator lives every [`ALIVE_CHECK`], hold the one action an incoming message decided
+//! until the next poll (the first fault wins), and flag a fault in a state for the team.
+
+use std::time::Duration;
+
+use crate::member_core::{Action, MemberFault, ALIVE_CHECK};
+use crate::messages::{AgentStatus, FaultCode, StateMsg, NO_PEER};
+
+/// The orchestrator watch and the pending action of a member core.
+#[derive(Debug)]
+pub(crate) struct Watch {
+    last_alive_check: Duration,
+    pending: Option<Action>,
+}
+
+impl Watch {
+    /// A watch whose first check comes [`ALIVE_CHECK`] after `now`.
+    pub(crate) fn new(now: Duration) -> Self {
+        Self {
+            last_alive_check: now,
+            pending: None,
+        }
+    }
+
+    /// The answer to [`Action::CheckOrchestrator`] at the member's tick `tick`: a lost
+    /// orchestrator ends the flight (unreported: nobody is left to read it).
+    pub(crate) fn orchestrator_alive(&mut self, alive: bool, tick: u64) {
+        if !alive {
+            self.defer(Action::Fail {
+                report: None,
+                fault: MemberFault::OrchestratorLost { tick },
+            });
+        }
+    }
+
+    /// Returns `a` at the next poll, unless an action is pending already (the first wins).
+    pub(crate) fn defer(&mut self, a: Action) {
+        if self.pending.is_none() {
+            self.pending = Some(a);
+        }
+    }
+
+    /// True when an action waits for the next poll.
+    pub(crate) fn is_pending(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// The pending action: the first thing a poll returns.
+    pub(crate) fn take(&mut self) -> Option<Action> {
+        self.pending.take()
+    }
+
+    /// True (once per period) when it is time to ask whether the orchestrator lives.
+    pub(crate) fn check_due(&mut self, now: Duration) -> bool {
+        let due = now.saturating_sub(self.last_alive_check) >= ALIVE_CHECK;
+        if due {
+            self.last_alive_check = now;
+        }
+        due
+    }
+}
+
+/// A fault reported to the team: member `id`'s `state` at `tick` (scenario `hash`) flagged with
+/// `code` and the `peer` it is about ([`NO_PEER`] when none).
+pub(crate) fn report_fault(
+    (id, hash, tick): (u32, u64, u64),
+    state: [f64; 12],
+    (code, peer): (FaultCode, u32),
+    fault: MemberFault,
+) -> Action {
+    let msg = StateMsg::ok(tick, hash, id, state);
+    let peer = (peer != NO_PEER).then_some(peer);
+    Action::Fail {
+        report: Some(msg.with_status(AgentStatus::Fault { code, peer })),
+        fault,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_deferred_action_wins_and_checks_come_once_a_period() {
+        let mut w = Watch::new(Duration::ZERO);
+        assert!(!w.check_due(ALIVE_CHECK / 2));
+        assert!(w.check_due(ALIVE_CHECK));
+        assert!(!w.check_due(ALIVE_CHECK + ALIVE_CHECK / 2));
+        w.orchestrator_alive(true, 3);
+        assert!(!w.is_pending());
+        w.orchestrator_alive(false, 4);
+        w.orchestrator_alive(false, 5);
+        assert_eq!(
+            w.take(),
+            Some(Action::Fail {
+                report: None,
+                fault: MemberFault::OrchestratorLost { tick: 4 }
+            })
+        );
+        assert_eq!(w.take(), None);
+    }
+}

@@ -1,0 +1,43 @@
+#!/bin/sh
+# CPU of an idle team over two "hosts" (issue 12; BENCHMARKS.md): the orchestrator and the daemon
+# of a 10-agent team whose members are all stopped (SIGSTOP), so nothing moves and every cycle
+# the two processes spend is their own waiting (bridges, heartbeats, deadlines). Reads utime +
+# stime from /proc/<pid>/stat over WINDOW seconds (default 10). Needs root and release binaries.
+# Usage: scripts/bench-hosts-idle.sh [BIN_DIR]   (default: target/release of this checkout)
+set -eu
+dir=${1:-$(cd "$(dirname "$0")/.." && pwd)/target/release}
+bin=$dir/orchestrator
+window=${WINDOW:-10}
+a=cdmidle$$a b=cdmidle$$b team=idle$$
+out=$(mktemp -d)
+cleanup() {
+  [ -n "${members:-}" ] && kill -CONT $members 2>/dev/null
+  [ -n "${orch:-}" ] && kill "$orch" 2>/dev/null; wait 2>/dev/null || true
+  ip netns del "$a" 2>/dev/null || true; ip netns del "$b" 2>/dev/null || true; rm -rf "$out"
+}
+trap cleanup EXIT
+ip netns add "$a"; ip netns add "$b"
+ip -n "$a" link add veth0 type veth peer name veth1 netns "$b"
+ip -n "$a" addr add 10.77.0.1/24 dev veth0; ip -n "$b" addr add 10.77.0.2/24 dev veth1
+for x in "$a veth0" "$b veth1" "$a lo" "$b lo"; do set -- $x; ip -n "$1" link set "$2" up; done
+ip netns exec "$a" "$bin" launch --n 10 --t-total 600 --team "$team" --out "$out/run" \
+  --no-figures --quiet --agent-timeout 120 --hosts 2 --listen tcp/10.77.0.1:7447 \
+  > "$out/log" 2>&1 &
+orch=$!
+ip netns exec "$b" unshare --mount sh -c 'mount -t tmpfs tmpfs /dev/shm && exec "$0" "$@"' \
+  "$bin" host --connect tcp/10.77.0.1:7447 --team "$team" --quiet > "$out/daemon" 2>&1 &
+i=0; until [ -s "$out/run/telemetry.csv" ] || [ $i -ge 600 ]; do sleep 0.1; i=$((i + 1)); done
+# Every member on both hosts: agent or leader processes of this team.
+members=$(pgrep -f -- "--team $team --id" || true)
+kill -STOP $members
+daemon=$(pgrep -f -- "host --connect tcp/10.77.0.1:7447 --team $team" | tail -1)
+sleep 1
+cpu() { awk '{print $14 + $15}' "/proc/$1/stat"; }
+o0=$(cpu "$orch"); d0=$(cpu "$daemon")
+sleep "$window"
+o1=$(cpu "$orch"); d1=$(cpu "$daemon")
+hz=$(getconf CLK_TCK)
+echo "| binaries | orchestrator CPU % | daemon CPU % |"
+echo "|---|---|---|"
+awk -v o=$((o1 - o0)) -v d=$((d1 - d0)) -v hz="$hz" -v w="$window" -v b="$dir" \
+  'BEGIN { printf "| %s | %.1f | %.1f |\n", b, 100 * o / hz / w, 100 * d / hz / w }'
