@@ -18,8 +18,16 @@
 # REALTIME_ONLY=1 runs
 # only this section.
 #
+# Scale (issue 17), after the main table: for N in SCALE_NS (default 1000; SCALE_NS=0 skips it)
+# and, opt-in, BENCH_N (e.g. BENCH_N=2000: 2000 processes, a full plan of about 66,000 ticks,
+# tens of minutes on 2 cores): the engine alone, start-up (command to first tick) with
+# `--on-loss stop` (10 ticks flown; not for BENCH_N), then the full plan with `--telemetry
+# parquet` (its start-up is the one with the default `--on-loss repair`): ticks/s against the engine, the members' peak RSS (largest and sum of
+# VmHWM) and the machine's used memory (`free`, before and the most seen during the flight).
+# SCALE_ONLY=1 runs only this section.
+#
 # Usage: [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
-#        [REALTIME_ONLY=1] scripts/bench.sh [N ...]
+#        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [SCALE_ONLY=1] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
@@ -67,10 +75,56 @@ PY
     rm -rf "$out/rt$n"
   done
 }
+
+# Scale: start-up and a full plan with Parquet telemetry at large N (see the header).
+rate() { sed -E 's/.*\(([0-9]+) ticks\/s\).*/\1/'; }
+used_kib() { awk '/^Mem:/ {print $3}' < <(free -k); }
+scale_section() {
+  local sns=(${SCALE_NS:-1000})
+  [ "${sns[0]}" != 0 ] || sns=()
+  [ -z "${BENCH_N:-}" ] || sns+=("$BENCH_N")
+  [ ${#sns[@]} -gt 0 ] || return 0
+  echo
+  echo "Scale (\`launch --n N --telemetry parquet --no-figures\`, full plan; load average before: $(cut -d' ' -f1-3 /proc/loadavg)):"
+  echo
+  echo "| N | ticks flown | engine ticks/s | launch ticks/s | launch/engine | start-up s, --on-loss stop | start-up s, repair (default) | largest member MiB | all members MiB (sum of VmHWM) | orchestrator MiB | machine used MiB before / peak | load average after |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+  for n in "${sns[@]}"; do
+    local eng l su_stop su_rep mem before peak=0 pid
+    eng=$("$bin/cdm-bench" engine --n "$n" --ticks 1000 | rate)
+    startup() {
+      "$bin/orchestrator" launch --n "$n" --max-ticks 9 --no-figures --team "scale$n-$$" \
+        --out "$out/su$n" --force "$@" 2>/dev/null | grep "ticking:" | sed -E 's/.*start-up ([0-9.]+) s.*/\1/'
+      rm -rf "$out/su$n"
+    }
+    # BENCH_N's row is long enough already: its start-up is the full flight's (repair) only.
+    su_stop=-; [ "$n" = "${BENCH_N:-}" ] || su_stop=$(startup --on-loss stop)
+    before=$(used_kib)
+    "$bin/orchestrator" launch --n "$n" --telemetry parquet --no-figures --team "scale$n-$$" \
+      --out "$out/sc$n" >"$out/sc$n.log" 2>/dev/null &
+    pid=$!
+    while kill -0 "$pid" 2>/dev/null; do
+      local u; u=$(used_kib); [ "$u" -le "$peak" ] || peak=$u
+      sleep 2
+    done
+    wait "$pid" || echo "launch --n $n exited with $?" >&2
+    l=$(cat "$out/sc$n.log")
+    local lt ticks member orch all
+    lt=$(grep "ticking:" <<<"$l" | rate)
+    su_rep=$(grep "ticking:" <<<"$l" | sed -E 's/.*start-up ([0-9.]+) s.*/\1/')
+    ticks=$(grep -E "^launch:" <<<"$l" | sed -E 's/.* ([0-9]+) ticks in .*/\1/')
+    mem=$(grep "peak resident memory" <<<"$l")
+    member=$(sed -E 's/.*largest member ([0-9.]+) MiB.*/\1/' <<<"$mem")
+    orch=$(sed -E 's/.*orchestrator ([0-9.]+) MiB.*/\1/' <<<"$mem")
+    all=$(sed -E 's/.*together ([0-9.]+) MiB.*/\1/' <<<"$mem")
+    echo "| $n | $ticks | $eng | $lt | $(awk -v a="$lt" -v b="$eng" 'BEGIN{printf "%.2f", a/b}') | $su_stop | $su_rep | $member | $all | $orch | $((before / 1024)) / $((peak / 1024)) | $(cut -d' ' -f1-3 /proc/loadavg) |"
+    rm -rf "$out/sc$n" "$out/sc$n.log"
+  done
+}
+if [ -n "${SCALE_ONLY:-}" ]; then scale_section; exit 0; fi
 if [ -n "${REALTIME_ONLY:-}" ]; then realtime_section; exit 0; fi
 echo "| N | ticks flown | engine ticks/s | simulate ticks/s | launch ticks/s (window $window) | barrier ticks/s | launch/engine | launch/simulate | launch/barrier | start-up s | largest member RSS MiB | orchestrator RSS MiB |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
-rate() { sed -E 's/.*\(([0-9]+) ticks\/s\).*/\1/'; }
 for n in "${ns[@]}"; do
   limit=()
   case "$n" in
@@ -99,7 +153,7 @@ for n in "${ns[@]}"; do
 done
 
 fn=${FORMATS_N:-1000}
-[ "$fn" -gt 0 ] || { realtime_section; exit 0; }
+[ "$fn" -gt 0 ] || { scale_section; realtime_section; exit 0; }
 secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }
 echo
 echo "Certificate and telemetry formats at N = $fn (one after the other, full plan):"
@@ -118,4 +172,5 @@ for fmt in csv parquet; do
   echo "| \`simulate --n $fn --telemetry $fmt\` | $f_s | $(mib "$f_kb") | $(awk -v b="$size" 'BEGIN{printf "%.0f", b/1e6}') | $(awk -v a="$f_s" -v b="$base_s" 'BEGIN{printf "writing costs %.1f s (%.2f x the flight)", a-b, (a-b)/b}') |"
   rm -rf "$out/$fmt"
 done
+scale_section
 realtime_section

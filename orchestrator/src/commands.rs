@@ -269,12 +269,15 @@ fn print_launched(l: &crate::launch::Launched, started: Instant, out: &Path, qui
             l.report.ticks as f64 / l.ticking.as_secs_f64(),
             l.startup.as_secs_f64()
         );
-        if let (Some((id, member)), Some(me)) = (l.member_peak_rss, crate::team::own_peak_rss()) {
+        if let (Some(m), Some(me)) = (l.member_peak_rss, crate::team::own_peak_rss()) {
+            let (id, member) = m.largest;
             out!(
                 "  peak resident memory: largest member {:.1} MiB (agent {id}), \
-                 orchestrator {:.1} MiB",
+                 orchestrator {:.1} MiB, all {} members together {:.1} MiB",
                 member as f64 / 1024.0,
-                me as f64 / 1024.0
+                me as f64 / 1024.0,
+                m.members,
+                m.total_kib as f64 / 1024.0
             );
         }
     }

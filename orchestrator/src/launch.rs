@@ -74,9 +74,9 @@ pub struct Launched {
     pub ticking: Duration,
     /// From the command's start to the first grant (zero when the team never ticked).
     pub startup: Duration,
-    /// The member with the largest peak resident memory and that peak in KiB, read just before
-    /// the team was stopped (spawned teams only).
-    pub member_peak_rss: Option<(u32, u64)>,
+    /// The members' peak resident memory, read just before the team was stopped (spawned teams
+    /// only).
+    pub member_peak_rss: Option<crate::team::MembersPeak>,
     /// The live view (`--serve`), kept serving until the caller drops it.
     pub live: Option<LiveView>,
 }
@@ -176,7 +176,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             (false, reason, None)
         }
     };
-    let member_peak_rss = crate::team::largest_member_peak_rss(&children);
+    let member_peak_rss = crate::team::members_peak_rss(&children);
     stop_team(&mut ports, &mut children, s, reason);
     let shut = ports.shutdown();
     if let Err(e) = shut {

@@ -160,16 +160,37 @@ pub fn stop_team(
     }
 }
 
-/// The member with the largest peak resident memory (`VmHWM`, KiB) among the running `children`,
-/// read from `/proc` before the team is stopped; `None` when none can be read.
-pub fn largest_member_peak_rss(children: &[Spawned]) -> Option<(u32, u64)> {
-    children
+/// Peak resident memory (`VmHWM`) of a team's members, read from `/proc` before the team is
+/// stopped (spawned teams only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MembersPeak {
+    /// The member with the largest peak, and that peak in KiB.
+    pub largest: (u32, u64),
+    /// The sum over every member read, in KiB. An upper bound of what the team takes: each
+    /// member counts the pages it shares with the others (the binary's text, shared memory).
+    pub total_kib: u64,
+    /// How many members were read.
+    pub members: usize,
+}
+
+/// The peak resident memory of the running `children`; `None` when none can be read.
+pub fn members_peak_rss(children: &[Spawned]) -> Option<MembersPeak> {
+    let peaks: Vec<(u32, u64)> = children
         .iter()
         .filter_map(|c| {
             let status = std::fs::read_to_string(format!("/proc/{}/status", c.child.id())).ok()?;
             Some((c.id, vm_hwm_kib(&status)?))
         })
-        .max_by_key(|&(id, kib)| (kib, std::cmp::Reverse(id)))
+        .collect();
+    let largest = peaks
+        .iter()
+        .copied()
+        .max_by_key(|&(id, kib)| (kib, std::cmp::Reverse(id)))?;
+    Some(MembersPeak {
+        largest,
+        total_kib: peaks.iter().map(|p| p.1).sum(),
+        members: peaks.len(),
+    })
 }
 
 /// This process's peak resident memory in KiB.

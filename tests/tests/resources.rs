@@ -77,20 +77,17 @@ fn a_teams_shared_memory_files_are_owner_only() {
     fp.assert_nothing_left();
 }
 
-/// `launch --n 40` with RLIMIT_NOFILE at 64 (soft and hard): exit 2, "a team of 40 agents needs
-/// about 544 file descriptors ... out of file descriptors (limit RLIMIT_NOFILE soft 64, hard 64);
-/// raise it, e.g. `ulimit -n 544`", no run directory, nothing of the team left. The check comes
-/// before anything is created, so the message does not depend on which iceoryx2 call would
-/// have taken the last descriptor (CI once saw `UnableToCreateServiceTag` there instead).
-#[test]
-fn running_out_of_file_descriptors_is_reported_with_the_limit() {
-    let dir = TempDir::new();
-    let team = unique_team("nofile");
-    let out = dir.path().join("run");
-    let mut cmd = launch(&team, &out, &["--n", "40"]);
-    // SAFETY: setrlimit is async-signal-safe; the closure touches nothing but its own stack.
+/// Linux's `CAP_SYS_RESOURCE` (linux/capability.h): lets a process raise its hard limits.
+const CAP_SYS_RESOURCE: libc::c_ulong = 24;
+
+/// `cmd` runs with RLIMIT_NOFILE at 64 (soft and hard); with `privileged` false also without
+/// `CAP_SYS_RESOURCE` (dropped from the bounding set, so even root cannot raise the hard limit
+/// after exec; without root there is nothing to drop).
+fn with_64_fds(cmd: &mut Command, privileged: bool) {
+    // SAFETY: setrlimit and prctl are async-signal-safe; the closure touches nothing but its
+    // own stack.
     unsafe {
-        cmd.pre_exec(|| {
+        cmd.pre_exec(move || {
             let lim = libc::rlimit {
                 rlim_cur: 64,
                 rlim_max: 64,
@@ -98,9 +95,30 @@ fn running_out_of_file_descriptors_is_reported_with_the_limit() {
             if libc::setrlimit(libc::RLIMIT_NOFILE, &lim) != 0 {
                 return Err(std::io::Error::last_os_error());
             }
+            if !privileged && libc::geteuid() == 0 {
+                let zero: libc::c_ulong = 0;
+                if libc::prctl(libc::PR_CAPBSET_DROP, CAP_SYS_RESOURCE, zero, zero, zero) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+            }
             Ok(())
         });
     }
+}
+
+/// `launch --n 40` with RLIMIT_NOFILE at 64 (soft and hard) and no right to raise it: exit 2, "a
+/// team of 40 agents needs about 544 file descriptors ... out of file descriptors (limit
+/// RLIMIT_NOFILE soft 64, hard 64); raise it, e.g. `ulimit -n 544`", no run directory, nothing
+/// of the team left. The check comes before anything is created, so the message does not depend
+/// on which iceoryx2 call would have taken the last descriptor (CI once saw
+/// `UnableToCreateServiceTag` there instead).
+#[test]
+fn running_out_of_file_descriptors_is_reported_with_the_limit() {
+    let dir = TempDir::new();
+    let team = unique_team("nofile");
+    let out = dir.path().join("run");
+    let mut cmd = launch(&team, &out, &["--n", "40"]);
+    with_64_fds(&mut cmd, false);
     let o = run(&mut cmd, DEADLINE);
     let what = "launch --n 40 with 64 file descriptors";
     assert_exit(&o, 2, what);
@@ -115,6 +133,40 @@ fn running_out_of_file_descriptors_is_reported_with_the_limit() {
         ],
     );
     assert!(!out.exists(), "{} was written", out.display());
+    assert_no_team_resources(&team);
+}
+
+/// An orchestrator allowed to raise its hard limit (root: `CAP_SYS_RESOURCE`) raises it to what
+/// the team needs: `launch --n 40` with RLIMIT_NOFILE at 64 (soft and hard) flies. Skipped
+/// (with a note) without `CAP_SYS_RESOURCE` (not root, or a sandbox that withholds it).
+#[test]
+fn a_privileged_launch_raises_a_low_hard_file_limit() {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let effective = (status.lines())
+        .find_map(|l| l.strip_prefix("CapEff:"))
+        .and_then(|v| u64::from_str_radix(v.trim(), 16).ok())
+        .unwrap_or(0);
+    if effective & (1 << CAP_SYS_RESOURCE) == 0 {
+        eprintln!("skipped: without CAP_SYS_RESOURCE no process may raise its hard RLIMIT_NOFILE");
+        return;
+    }
+    let dir = TempDir::new();
+    let team = unique_team("nofileup");
+    let out = dir.path().join("run");
+    let mut cmd = launch(
+        &team,
+        &out,
+        &["--n", "40", "--max-ticks", "20", "--no-figures"],
+    );
+    with_64_fds(&mut cmd, true);
+    let o = run(&mut cmd, DEADLINE);
+    assert_exit(&o, 0, "launch --n 40 with 64 file descriptors, as root");
+    let rows = std::fs::read_to_string(out.join("telemetry.csv")).unwrap_or_default();
+    assert_eq!(
+        rows.lines().count(),
+        1 + 21 * 40,
+        "telemetry rows of 21 ticks"
+    );
     assert_no_team_resources(&team);
 }
 

@@ -47,6 +47,15 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
         .filter(|m| m.role.is_leader())
         .map(|m| (m.id, m.planar))
         .collect();
+    // Every follower linked already (members re-validating the orchestrator's scenario): the
+    // O(N^2) order below would change nothing. At N = 1000 it was most of a member's start-up.
+    if formation
+        .members
+        .iter()
+        .all(|m| m.role.is_leader() || m.link.is_some())
+    {
+        return Ok(());
+    }
     let leader_ids: Vec<u32> = leaders.iter().map(|(l, _)| *l).collect();
     let mut placed = leaders.clone();
     for (id, p) in farthest_point_order(formation, &leaders) {
@@ -135,16 +144,18 @@ pub fn farthest_point_order(formation: &Formation, leaders: &[(u32, Vec2)]) -> V
             (m.id, m.planar, d)
         })
         .collect();
-    left.sort_by_key(|e| e.0);
     let mut order = Vec::with_capacity(left.len());
     while !left.is_empty() {
+        // The farthest, ties to the smaller id; `swap_remove` (not `remove`, which shifted the
+        // rest on every pick) leaves `left` unordered, so the tie is decided by id here.
         let mut k = 0;
         for (i, e) in left.iter().enumerate() {
-            if e.2 > left[k].2 {
+            let best = &left[k];
+            if e.2 > best.2 || (e.2 == best.2 && e.0 < best.0) {
                 k = i;
             }
         }
-        let (id, p, _) = left.remove(k);
+        let (id, p, _) = left.swap_remove(k);
         for e in &mut left {
             e.2 = e.2.min((e.1 - p).norm());
         }
@@ -159,4 +170,72 @@ pub fn nearest(pts: &[(u32, Vec2)], p: &Vec2) -> Vec<(Real, u32, Vec2)> {
         pts.iter().map(|(j, q)| ((q - p).norm(), *j, *q)).collect();
     near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     near
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Scenario;
+
+    /// The order as first written (`Vec::remove` keeps the rest in id order, the first maximum
+    /// wins): the faster loop must give exactly this order, which fixes the graph and therefore
+    /// every flight.
+    fn reference_order(formation: &Formation, leaders: &[(u32, Vec2)]) -> Vec<(u32, Vec2)> {
+        let mut left: Vec<(u32, Vec2, Real)> = formation
+            .members
+            .iter()
+            .filter(|m| m.role == Role::Follower)
+            .map(|m| {
+                let d = leaders
+                    .iter()
+                    .map(|(_, q)| (q - m.planar).norm())
+                    .fold(Real::INFINITY, Real::min);
+                (m.id, m.planar, d)
+            })
+            .collect();
+        left.sort_by_key(|e| e.0);
+        let mut order = Vec::new();
+        while !left.is_empty() {
+            let mut k = 0;
+            for (i, e) in left.iter().enumerate() {
+                if e.2 > left[k].2 {
+                    k = i;
+                }
+            }
+            let (id, p, _) = left.remove(k);
+            for e in &mut left {
+                e.2 = e.2.min((e.1 - p).norm());
+            }
+            order.push((id, p));
+        }
+        order
+    }
+
+    #[test]
+    fn farthest_point_order_is_the_reference_order() {
+        for s in [
+            Scenario::builtin("paper40").unwrap(),
+            Scenario::generated(300).unwrap(),
+        ] {
+            let leaders: Vec<(u32, Vec2)> = (s.formation.members.iter())
+                .filter(|m| m.role.is_leader())
+                .map(|m| (m.id, m.planar))
+                .collect();
+            assert_eq!(
+                farthest_point_order(&s.formation, &leaders),
+                reference_order(&s.formation, &leaders),
+                "{}",
+                s.origin
+            );
+        }
+    }
+
+    /// A member re-validates the orchestrator's scenario, every link given: synthesis keeps them.
+    #[test]
+    fn synthesis_keeps_a_fully_linked_formation() {
+        let s = Scenario::generated(120).unwrap();
+        let mut f = s.formation.clone();
+        synthesize(&mut f, DEFAULT_WEIGHT_FLOOR).unwrap();
+        assert_eq!(f, s.formation);
+    }
 }

@@ -49,21 +49,40 @@ pub struct Repair {
 
 /// Repair `formation` for the loss of `lost` (ids that are not members are ignored).
 pub fn repair(formation: &Formation, floor: Real, lost: &BTreeSet<u32>) -> Repair {
-    let mut f = formation.clone();
-    let leaders: Vec<(u32, Vec2)> = f
+    repair_in_order(formation, floor, lost, &synthesis_order(formation))
+}
+
+/// The followers in synthesis order (`graph::farthest_point_order` from every leader): what
+/// [`repair_in_order`] takes. It depends on the t0 positions and roles only, not on the links
+/// or the losses, so a caller repairing many loss sets computes it once (O(N^2)).
+pub fn synthesis_order(formation: &Formation) -> Vec<(u32, Vec2)> {
+    let leaders: Vec<(u32, Vec2)> = formation
         .members
         .iter()
         .filter(|m| m.role.is_leader())
         .map(|m| (m.id, m.planar))
         .collect();
-    let leader_ids: Vec<u32> = leaders
+    farthest_point_order(formation, &leaders)
+}
+
+/// [`repair`] with the synthesis order given (`order` must be [`synthesis_order`] of
+/// `formation`): the same result.
+pub fn repair_in_order(
+    formation: &Formation,
+    floor: Real,
+    lost: &BTreeSet<u32>,
+    order: &[(u32, Vec2)],
+) -> Repair {
+    let mut f = formation.clone();
+    let leader_ids: Vec<u32> = f
+        .members
         .iter()
-        .map(|(id, _)| *id)
-        .filter(|id| !lost.contains(id))
+        .filter(|m| m.role.is_leader() && !lost.contains(&m.id))
+        .map(|m| m.id)
         .collect();
     let mut retriangulated = Vec::new();
     let mut degraded = Vec::new();
-    for (id, p) in farthest_point_order(&f, &leaders) {
+    for &(id, p) in order {
         let Some(old) = f.member(id).and_then(|m| m.link) else {
             continue;
         };

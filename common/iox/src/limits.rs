@@ -32,7 +32,7 @@ fn limit(resource: libc::__rlimit_resource_t) -> std::io::Result<(u64, u64)> {
 }
 
 /// Raises this process's soft `RLIMIT_NOFILE` to the hard limit and returns the new soft limit.
-/// The orchestrator holds about 12 descriptors per agent, so a large team passes 1024 quickly.
+/// The orchestrator holds about 11 descriptors per agent, so a large team passes 1024 quickly.
 pub fn raise_fd_limit() -> std::io::Result<u64> {
     let (soft, hard) = limit(libc::RLIMIT_NOFILE)?;
     if soft < hard {
@@ -60,10 +60,12 @@ pub fn fd_exhausted() -> Option<FdUsage> {
     (open + FD_MARGIN >= soft).then_some(FdUsage { open, soft, hard })
 }
 
-/// Descriptors the orchestrator holds for a team of `agents`, measured with iceoryx2 0.10 (per
-/// agent: a state service, its subscriber, a wake event and its notifier, 11 descriptors in all;
-/// 19 more for the node, the clock and the orchestrator's own event: N=40 holds 459, N=100 1119),
-/// with a margin for the run directory, the children's pipes and the logging.
+/// Descriptors the orchestrator holds for a team of `agents`, measured with iceoryx2 0.10 on a
+/// flying team (`launch --n 100` holds 1,119): per agent 11, the dynamic segment and static file
+/// of its state and wake services, a port tag for the subscriber and the notifier, a connection
+/// segment each way (its state, the clock), the wake event's management segment and socket and
+/// its publisher's data segment; with a margin for the run directory, the children's pipes and
+/// the logging. N = 2000 needs 24,064 (22,000 held), above a hard limit of 20,000.
 pub fn orchestrator_fd_need(agents: usize) -> u64 {
     64 + 12 * agents as u64
 }
@@ -81,11 +83,45 @@ pub struct FdShortfall {
 
 /// `Some` when this process's soft open-file limit is below what a team of `agents` needs, so
 /// the launch can refuse before it creates anything (instead of failing half-way, at whichever
-/// iceoryx2 call happens to take the last descriptor).
+/// iceoryx2 call happens to take the last descriptor). A limit below the need is first raised
+/// as far as this process may ([`raise_fd_limit_to`]).
 pub fn fd_short(agents: usize) -> Option<FdShortfall> {
-    let (soft, hard) = limit(libc::RLIMIT_NOFILE).ok()?;
     let need = orchestrator_fd_need(agents);
+    raise_fd_limit_to(need);
+    let (soft, hard) = limit(libc::RLIMIT_NOFILE).ok()?;
     (soft < need).then_some(FdShortfall { need, soft, hard })
+}
+
+/// Raises the soft `RLIMIT_NOFILE` to `need` when the hard limit allows it, and otherwise the hard
+/// limit too, up to the kernel's `fs.nr_open`, which only a privileged process may do (root:
+/// `CAP_SYS_RESOURCE`). Best effort: what it cannot raise, [`fd_short`] reports.
+pub fn raise_fd_limit_to(need: u64) {
+    let Ok((soft, hard)) = limit(libc::RLIMIT_NOFILE) else {
+        return;
+    };
+    if soft >= need {
+        return;
+    }
+    let nr_open = std::fs::read_to_string("/proc/sys/fs/nr_open")
+        .ok()
+        .and_then(|t| t.trim().parse::<u64>().ok())
+        .unwrap_or(hard);
+    let target = need.min(nr_open.max(hard));
+    let lim = libc::rlimit {
+        rlim_cur: target as libc::rlim_t,
+        rlim_max: target.max(hard) as libc::rlim_t,
+    };
+    // SAFETY: `lim` is a valid rlimit; the kernel refuses (EPERM) a hard limit above the current
+    // one for an unprivileged process, which leaves the limits as they were.
+    if unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &lim) } != 0 {
+        tracing::debug!(
+            need,
+            soft,
+            hard,
+            error = %std::io::Error::last_os_error(),
+            "cannot raise the open-file limit"
+        );
+    }
 }
 
 /// Where iceoryx2 (0.10, Linux) keeps its shared-memory segments.
