@@ -71,7 +71,7 @@ pub enum Command {
     /// Fly the team as processes: one per quadcopter over iceoryx2 shared memory, a shared
     /// lockstep clock, a live safety audit. Exit 0 safe and complete, 1 violation, 2 bad input,
     /// 3 runtime fault.
-    Launch(LaunchArgs),
+    Launch(Box<LaunchArgs>),
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained
     /// page that works from file://; with --serve, also serves it until interrupted.
     View {

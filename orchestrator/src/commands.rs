@@ -47,7 +47,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         }
         Command::Simulate { source, out, run } => simulate_command(&source, &out, &run, cli.quiet),
         Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
-        Command::Launch(args) => launch_command(args, cli.quiet),
+        Command::Launch(args) => launch_command(*args, cli.quiet),
         Command::View { dir, serve } => view(&dir, serve.as_deref(), cli.quiet),
         Command::Clean => clean(cli.quiet),
         Command::Host {

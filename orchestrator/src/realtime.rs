@@ -127,6 +127,7 @@ pub fn run(
         (f, StopReason::AgentFault)
     })?;
     let (mut core, start) = announce(s, rt, ports)?;
+    let hash = s.content_hash();
     let mut m = Monitor {
         s,
         o,

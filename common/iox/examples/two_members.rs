@@ -233,7 +233,8 @@ fn follow(team: &TeamName) -> Result<(), Failure> {
         me.receive_clock(|c| match c.command() {
             ClockCommand::Run => follower.granted = Some(c.grant_tick),
             ClockCommand::Stop(reason) => stop = Some(reason),
-            ClockCommand::Realtime { .. } => {}
+            // Real-time starts and arm orders are for real-time / MAVLink teams, not this one.
+            ClockCommand::Realtime { .. } | ClockCommand::Arm => {}
         })?;
         me.receive_neighbors(|s| {
             follower.heard.insert(s.tick, s.state[0]);
