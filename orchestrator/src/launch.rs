@@ -110,25 +110,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
     }
-    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
-    let ins: BTreeMap<u32, Vec<u32>> = s
-        .formation
-        .members
-        .iter()
-        .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
-        .collect();
     let hosts = crate::host::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
-    // Over delayed links a repair's new reader also needs its new in-neighbour's states of the
-    // longest delay back (`LinkModel::oldest_candidate`): the buffers and history grow by it.
-    let delay = u32::try_from(s.link_model().max_ticks()).unwrap_or(u32::MAX);
-    let buffers = o.window.saturating_add(delay);
-    let mut layout = TeamLayout::new(ids.clone(), ins, buffers)
-        .map_err(Failure::fault)?
-        .with_scenario_hash(s.content_hash());
-    if o.on_loss == common::loss::OnLoss::Repair {
-        layout = layout.with_repair_room(crate::loss::repair_room(s, buffers));
-    }
-    let layout = hosts.hide_remote_edges(layout);
+    let layout = team_layout(s, o, &hosts)?;
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     let bridge = hosts.start_bridge(s, &o.team, crate::host::Flight::of(o))?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
@@ -190,17 +173,49 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     if let Some(v) = &live {
         v.finish(&report);
     }
-    let startup = match (PROCESS_START.get(), first_tick) {
-        (Some(&t0), Some(t)) => t.saturating_duration_since(t0),
-        _ => Duration::ZERO,
-    };
     Ok(Launched {
         report,
         ticking: first_tick.map_or(Duration::ZERO, |t| ended - t),
-        startup,
+        startup: startup(first_tick),
         member_peak_rss,
         live,
     })
+}
+
+/// The team's services: every member's state and wake-up, sized for the window (and the
+/// longest link delay), with room for repairs under `--on-loss repair`; edges whose two ends
+/// run on other hosts are left out.
+fn team_layout(
+    s: &Scenario,
+    o: &LaunchOptions,
+    hosts: &crate::host::Plan,
+) -> Result<TeamLayout, Failure> {
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+    let ins: BTreeMap<u32, Vec<u32>> = s
+        .formation
+        .members
+        .iter()
+        .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
+        .collect();
+    // Over delayed links a repair's new reader also needs its new in-neighbour's states of the
+    // longest delay back (`LinkModel::oldest_candidate`): the buffers and history grow by it.
+    let delay = u32::try_from(s.link_model().max_ticks()).unwrap_or(u32::MAX);
+    let buffers = o.window.saturating_add(delay);
+    let mut layout = TeamLayout::new(ids.clone(), ins, buffers)
+        .map_err(Failure::fault)?
+        .with_scenario_hash(s.content_hash());
+    if o.on_loss == common::loss::OnLoss::Repair {
+        layout = layout.with_repair_room(crate::loss::repair_room(s, buffers));
+    }
+    Ok(hosts.hide_remote_edges(layout))
+}
+
+/// From the command's start to the first tick (zero for a team that never flew).
+fn startup(first_tick: Option<Instant>) -> Duration {
+    match (PROCESS_START.get(), first_tick) {
+        (Some(&t0), Some(t)) => t.saturating_duration_since(t0),
+        _ => Duration::ZERO,
+    }
 }
 
 /// Spawns one process per member (`--spawn`), or tells how to start them by hand.
@@ -388,6 +403,20 @@ fn transport_stop<E: std::fmt::Display>(tick: u64) -> impl Fn(E) -> Stop {
     }
 }
 
+/// The team's protocol core (sans I/O) for this launch: its members, window and deadlines,
+/// and the scripted losses; repairs only where the orchestrator can kill (spawned members).
+fn team_core(s: &Scenario, o: &LaunchOptions, last: u64, now: Duration) -> TeamCore {
+    let cfg = TeamConfig {
+        ids: s.formation.members.iter().map(|m| m.id).collect(),
+        window: o.window,
+        last_tick: last,
+        agent_timeout: o.agent_timeout,
+    };
+    let repairs = o.on_loss == common::loss::OnLoss::Repair && o.spawn;
+    let book = TeamLosses::new(s, &crate::loss::scripted_kills(&o.losses));
+    TeamCore::new(cfg, now).with_losses(book, repairs)
+}
+
 /// The tick loop: I/O only. The team core (`common::team_core`) decides what to grant, which
 /// tick is complete and when to stop; this loop receives, publishes, audits, writes and waits.
 fn fly_team(
@@ -403,15 +432,7 @@ fn fly_team(
     let hash = s.content_hash();
     let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let clock = MonotonicClock::start();
-    let cfg = TeamConfig {
-        ids: s.formation.members.iter().map(|m| m.id).collect(),
-        window: o.window,
-        last_tick: last,
-        agent_timeout: o.agent_timeout,
-    };
-    let repairs = o.on_loss == common::loss::OnLoss::Repair && o.spawn;
-    let book = TeamLosses::new(s, &crate::loss::scripted_kills(&o.losses));
-    let mut core = TeamCore::new(cfg, clock.now()).with_losses(book, repairs);
+    let mut core = team_core(s, o, last, clock.now());
     let mut rec = Recorder::new(s, last, o.quiet);
     let mut ticking = None;
     let mut last_flush = Instant::now();

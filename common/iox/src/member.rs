@@ -118,24 +118,7 @@ impl MemberPorts {
             })?;
 
         // The team's scenario must be ours before we take any slot in it.
-        {
-            use iceoryx2::service::attribute::AttributeKey;
-            let key = AttributeKey::try_from(super::SCENARIO_HASH_KEY)
-                .map_err(|e| err(&name, "attribute key", &e))?;
-            let team_hash = clock
-                .attributes()
-                .key_value(&key, 0)
-                .map(|v| v.to_string())
-                .unwrap_or_else(|| "none".into());
-            if team_hash != super::scenario_hash_value(scenario_hash) {
-                return Err(TransportError::ScenarioMismatch {
-                    team: team.clone(),
-                    id,
-                    mine: scenario_hash,
-                    team_hash,
-                });
-            }
-        }
+        check_scenario_hash(&clock, team, id, scenario_hash)?;
 
         // Then the agent's identity: its exclusive publisher slot.
         let name = team.state_service(id);
@@ -160,24 +143,7 @@ impl MemberPorts {
             e => err(&name, "create listener", &e),
         })?;
 
-        let mut neighbors = BTreeMap::new();
-        for &peer in in_neighbors {
-            let name = team.state_service(peer);
-            let service = open_state(&node, team, who, peer)?;
-            let subscriber = service.subscriber_builder().create().map_err(|e| match e {
-                SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
-                    not_a_neighbor(team, id, peer, &name, "subscriber")
-                }
-                e => err(&name, "create subscriber", &e),
-            })?;
-            neighbors.insert(
-                peer,
-                NeighborReader {
-                    _service: service,
-                    subscriber,
-                },
-            );
-        }
+        let neighbors = open_neighbors(&node, team, id, in_neighbors)?;
 
         let mut out_wakes = BTreeMap::new();
         for &peer in out_neighbors {
@@ -398,6 +364,63 @@ impl MemberPorts {
     fn error(&self, service: &str, op: &'static str, e: impl std::fmt::Debug) -> TransportError {
         service_error(&self.team, Role::Agent(self.id), service, op, e)
     }
+}
+
+/// Refuses a team whose clock service carries another scenario hash than `scenario_hash`.
+fn check_scenario_hash(
+    clock: &PubSubService<ipc::Service, ClockWire, ()>,
+    team: &TeamName,
+    id: u32,
+    scenario_hash: u64,
+) -> Result<(), TransportError> {
+    use iceoryx2::service::attribute::AttributeKey;
+    let name = team.clock_service();
+    let key = AttributeKey::try_from(super::SCENARIO_HASH_KEY)
+        .map_err(|e| service_error(team, Role::Agent(id), &name, "attribute key", e))?;
+    let team_hash = clock
+        .attributes()
+        .key_value(&key, 0)
+        .map(|v| v.to_string())
+        .unwrap_or_else(|| "none".into());
+    if team_hash != super::scenario_hash_value(scenario_hash) {
+        return Err(TransportError::ScenarioMismatch {
+            team: team.clone(),
+            id,
+            mine: scenario_hash,
+            team_hash,
+        });
+    }
+    Ok(())
+}
+
+/// One subscriber per in-neighbour's state service; a service without a free subscriber slot
+/// for us means we are not that member's reader.
+fn open_neighbors(
+    node: &Node<ipc::Service>,
+    team: &TeamName,
+    id: u32,
+    in_neighbors: &[u32],
+) -> Result<BTreeMap<u32, NeighborReader>, TransportError> {
+    let who = Role::Agent(id);
+    let mut neighbors = BTreeMap::new();
+    for &peer in in_neighbors {
+        let name = team.state_service(peer);
+        let service = open_state(node, team, who, peer)?;
+        let subscriber = service.subscriber_builder().create().map_err(|e| match e {
+            SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
+                not_a_neighbor(team, id, peer, &name, "subscriber")
+            }
+            e => service_error(team, who, &name, "create subscriber", e),
+        })?;
+        neighbors.insert(
+            peer,
+            NeighborReader {
+                _service: service,
+                subscriber,
+            },
+        );
+    }
+    Ok(neighbors)
 }
 
 /// Opens `state/<owner>`: a missing service means `owner` is not in the team; a full node table

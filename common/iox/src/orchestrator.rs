@@ -388,50 +388,9 @@ impl Ports {
         let mut states = BTreeMap::new();
         let mut wakes = BTreeMap::new();
         for &id in layout.ids() {
-            let (extra_readers, extra_writers) = layout.repair_slots(id);
-            let outs = layout.out_neighbors(id).len() + extra_readers;
-            let name = team.state_service(id);
-            let service = node
-                .service_builder(&service_name(team, WHO, &name)?)
-                .publish_subscribe::<StateWire>()
-                .max_publishers(1)
-                .max_subscribers(outs + 1 + OBSERVER_SLOTS)
-                .max_nodes(outs + 2 + SPARE_NODES + OBSERVER_SLOTS)
-                .subscriber_max_buffer_size(buffer)
-                .subscriber_max_borrowed_samples(1)
-                // A repair's new reader gets the states published before it subscribed.
-                .history_size(layout.history().min(buffer))
-                .enable_safe_overflow(true)
-                .create()
-                .map_err(|e| pubsub_create_error(team, &name, e))?;
-            let subscriber = service
-                .subscriber_builder()
-                .buffer_size(buffer)
-                .create()
-                .map_err(|e| err(&name, "create subscriber", &e))?;
-            states.insert(
-                id,
-                StateReader {
-                    service,
-                    subscriber,
-                },
-            );
-
-            let ins = layout.in_neighbors(id).len() + extra_writers;
-            let name = team.wake_service(id);
-            let service = node
-                .service_builder(&service_name(team, WHO, &name)?)
-                .event()
-                .max_listeners(1)
-                .max_notifiers(ins + 1)
-                .max_nodes(ins + 2 + SPARE_NODES)
-                .create()
-                .map_err(|e| event_create_error(team, &name, e))?;
-            let notifier = service
-                .notifier_builder()
-                .create()
-                .map_err(|e| err(&name, "create notifier", &e))?;
-            wakes.insert(id, WakeWriter { service, notifier });
+            let (reader, writer) = member_services(&node, team, layout, id, buffer)?;
+            states.insert(id, reader);
+            wakes.insert(id, writer);
         }
 
         let name = team.clock_service();
@@ -477,6 +436,59 @@ impl Ports {
             _node: node,
         })
     }
+}
+
+/// Member `id`'s state service (its one publisher, its readers' and repairs' subscriber slots,
+/// the orchestrator's own subscriber) and its wake-up event (a notifier per writer).
+fn member_services(
+    node: &Node<ipc::Service>,
+    team: &TeamName,
+    layout: &TeamLayout,
+    id: u32,
+    buffer: usize,
+) -> Result<(StateReader, WakeWriter), TransportError> {
+    let err = |service: &str, op, e: &dyn std::fmt::Debug| service_error(team, WHO, service, op, e);
+    let (extra_readers, extra_writers) = layout.repair_slots(id);
+    let outs = layout.out_neighbors(id).len() + extra_readers;
+    let name = team.state_service(id);
+    let service = node
+        .service_builder(&service_name(team, WHO, &name)?)
+        .publish_subscribe::<StateWire>()
+        .max_publishers(1)
+        .max_subscribers(outs + 1 + OBSERVER_SLOTS)
+        .max_nodes(outs + 2 + SPARE_NODES + OBSERVER_SLOTS)
+        .subscriber_max_buffer_size(buffer)
+        .subscriber_max_borrowed_samples(1)
+        // A repair's new reader gets the states published before it subscribed.
+        .history_size(layout.history().min(buffer))
+        .enable_safe_overflow(true)
+        .create()
+        .map_err(|e| pubsub_create_error(team, &name, e))?;
+    let subscriber = service
+        .subscriber_builder()
+        .buffer_size(buffer)
+        .create()
+        .map_err(|e| err(&name, "create subscriber", &e))?;
+    let reader = StateReader {
+        service,
+        subscriber,
+    };
+
+    let ins = layout.in_neighbors(id).len() + extra_writers;
+    let name = team.wake_service(id);
+    let service = node
+        .service_builder(&service_name(team, WHO, &name)?)
+        .event()
+        .max_listeners(1)
+        .max_notifiers(ins + 1)
+        .max_nodes(ins + 2 + SPARE_NODES)
+        .create()
+        .map_err(|e| event_create_error(team, &name, e))?;
+    let notifier = service
+        .notifier_builder()
+        .create()
+        .map_err(|e| err(&name, "create notifier", &e))?;
+    Ok((reader, WakeWriter { service, notifier }))
 }
 
 /// A service that already exists means another orchestrator won the race (or live members of a

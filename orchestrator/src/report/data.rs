@@ -287,22 +287,7 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         primary_paths: [Vec::new(), Vec::new(), Vec::new()],
         transients: Vec::new(),
     };
-    let repaired: std::collections::BTreeSet<u32> = data
-        .audit
-        .repairs
-        .iter()
-        .flat_map(|r| {
-            r.retriangulated
-                .iter()
-                .map(|x| x.0)
-                .chain(r.degraded.clone())
-        })
-        .collect();
-    // An id audit.json names that the scenario lacks has no row to draw.
-    let repaired: Vec<(usize, u32)> = repaired
-        .into_iter()
-        .filter_map(|id| Some((*index.get(&id)?, id)))
-        .collect();
+    let repaired = repaired_members(&data.audit.repairs, &index);
     data.transients = repaired
         .iter()
         .map(|&(_, id)| Transient {
@@ -345,6 +330,23 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         });
     })?;
     Ok(data)
+}
+
+/// The followers any loss re-triangulated or left flying its plan, as (member index, id) in id
+/// order. An id audit.json names that the scenario lacks has no row to draw: skipped.
+fn repaired_members(repairs: &[Repair], index: &BTreeMap<u32, usize>) -> Vec<(usize, u32)> {
+    let ids: std::collections::BTreeSet<u32> = repairs
+        .iter()
+        .flat_map(|r| {
+            r.retriangulated
+                .iter()
+                .map(|x| x.0)
+                .chain(r.degraded.iter().copied())
+        })
+        .collect();
+    ids.into_iter()
+        .filter_map(|id| Some((*index.get(&id)?, id)))
+        .collect()
 }
 
 /// D_S(t): the smallest signed distance of a follower (member indices `followers`) to the sides

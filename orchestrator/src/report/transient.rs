@@ -32,79 +32,19 @@ pub fn loss_transient(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureErr
         }
     }
     let mut files = vec![csv(dir, "fig_loss_transient.csv", &text)?];
-    let dt = d.scenario.dt_s();
-    // The first tick each follower was repaired from: its transient starts there.
-    let repaired_at = |id: u32| {
-        d.audit
-            .repairs
-            .iter()
-            .filter(|r| r.retriangulated.iter().any(|x| x.0 == id) || r.degraded.contains(&id))
-            .map(|r| r.tick as Real * dt)
-            .fold(Real::INFINITY, Real::min)
-    };
-    let peak = |tr: &Transient| {
-        let from = repaired_at(tr.id);
-        tr.points
-            .iter()
-            .filter(|p| p.0 >= from)
-            .map(|p| p.1)
-            .fold(0.0, Real::max)
-    };
-    let mut ranked: Vec<(Real, &Transient)> = d.transients.iter().map(|t| (peak(t), t)).collect();
-    ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.id.cmp(&b.1.id)));
-    ranked.truncate(SHOWN);
+    let ranked = largest_transients(d);
     let Some(&(worst_dev, worst)) = ranked.first() else {
         return Ok(files);
     };
-    let t_worst = repaired_at(worst.id);
-    let lines = |window: Option<(Real, Real)>| -> Vec<Line> {
-        ranked
-            .iter()
-            .enumerate()
-            .map(|(i, (dev, tr))| Line {
-                label: format!("follower {}: peak {dev:.4} m after its repair", tr.id),
-                points: thin(
-                    &tr.points
-                        .iter()
-                        .copied()
-                        .filter(|p| window.is_none_or(|(a, b)| (a..=b).contains(&p.0)))
-                        .collect::<Vec<_>>(),
-                    MAX_POINTS,
-                ),
-                color: PALETTE[i % PALETTE.len()],
-                dashed: false,
-            })
-            .collect()
-    };
-    let rules = |window: Option<(Real, Real)>| -> Vec<Rule> {
-        d.audit
-            .repairs
-            .iter()
-            .map(|r| (r.id, r.tick as Real * dt))
-            .filter(|(_, t)| window.is_none_or(|(a, b)| (a..=b).contains(t)))
-            .map(|(id, t)| Rule {
-                label: format!("loss of {id}, t = {t:.2} s"),
-                at: t,
-                vertical: true,
-                color: GREY,
-            })
-            .collect()
-    };
+    let t_worst = repaired_at(d, worst.id);
     let zoom = (t_worst - ZOOM_BEFORE_S, t_worst + ZOOM_AFTER_S);
-    let panel = |title: String, window: Option<(Real, Real)>| Panel {
-        title,
-        x_desc: "t (s)".into(),
-        y_desc: "|r - r_HT| (m)".into(),
-        lines: lines(window),
-        rules: rules(window),
-        log_y: false,
-        legend: SeriesLabelPosition::UpperRight,
-    };
     let fig = Stack {
         width: 900,
         panel_height: 360,
         panels: vec![
             panel(
+                d,
+                &ranked,
                 format!(
                     "Repaired followers' deviation (eq. 13), delta = {:.3} m",
                     d.audit.delta_m
@@ -112,6 +52,8 @@ pub fn loss_transient(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureErr
                 None,
             ),
             panel(
+                d,
+                &ranked,
                 format!(
                     "Around the worst repair: follower {} peaks at {worst_dev:.4} m",
                     worst.id
@@ -122,4 +64,81 @@ pub fn loss_transient(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureErr
     };
     files.extend(write_figure(dir, "fig_loss_transient", &fig)?);
     Ok(files)
+}
+
+/// The time of the first tick a follower was repaired from: its transient starts there.
+fn repaired_at(d: &RunData, id: u32) -> Real {
+    let dt = d.scenario.dt_s();
+    d.audit
+        .repairs
+        .iter()
+        .filter(|r| r.retriangulated.iter().any(|x| x.0 == id) || r.degraded.contains(&id))
+        .map(|r| r.tick as Real * dt)
+        .fold(Real::INFINITY, Real::min)
+}
+
+/// The [`SHOWN`] largest transients, by their peak deviation after the repair (ties: by id).
+fn largest_transients(d: &RunData) -> Vec<(Real, &Transient)> {
+    let peak = |tr: &Transient| {
+        let from = repaired_at(d, tr.id);
+        tr.points
+            .iter()
+            .filter(|p| p.0 >= from)
+            .map(|p| p.1)
+            .fold(0.0, Real::max)
+    };
+    let mut ranked: Vec<(Real, &Transient)> = d.transients.iter().map(|t| (peak(t), t)).collect();
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.id.cmp(&b.1.id)));
+    ranked.truncate(SHOWN);
+    ranked
+}
+
+/// One panel: the ranked followers' deviation, and a rule at each loss, within `window` (s).
+fn panel(
+    d: &RunData,
+    ranked: &[(Real, &Transient)],
+    title: String,
+    window: Option<(Real, Real)>,
+) -> Panel {
+    let inside = |t: Real| window.is_none_or(|(a, b)| (a..=b).contains(&t));
+    let lines = ranked
+        .iter()
+        .enumerate()
+        .map(|(i, (dev, tr))| Line {
+            label: format!("follower {}: peak {dev:.4} m after its repair", tr.id),
+            points: thin(
+                &tr.points
+                    .iter()
+                    .copied()
+                    .filter(|p| inside(p.0))
+                    .collect::<Vec<_>>(),
+                MAX_POINTS,
+            ),
+            color: PALETTE[i % PALETTE.len()],
+            dashed: false,
+        })
+        .collect();
+    let dt = d.scenario.dt_s();
+    let rules = d
+        .audit
+        .repairs
+        .iter()
+        .map(|r| (r.id, r.tick as Real * dt))
+        .filter(|(_, t)| inside(*t))
+        .map(|(id, t)| Rule {
+            label: format!("loss of {id}, t = {t:.2} s"),
+            at: t,
+            vertical: true,
+            color: GREY,
+        })
+        .collect();
+    Panel {
+        title,
+        x_desc: "t (s)".into(),
+        y_desc: "|r - r_HT| (m)".into(),
+        lines,
+        rules,
+        log_y: false,
+        legend: SeriesLabelPosition::UpperRight,
+    }
 }
