@@ -152,6 +152,8 @@ pub struct RunData {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Transient {
     pub id: u32,
+    /// The time of the first tick a loss repaired it from: its transient starts there.
+    pub from_s: Real,
     pub points: Vec<(Real, Real)>,
 }
 
@@ -290,8 +292,9 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let repaired = repaired_members(&data.audit.repairs, &index);
     data.transients = repaired
         .iter()
-        .map(|&(_, id)| Transient {
+        .map(|&(_, id, from_tick)| Transient {
             id,
+            from_s: from_tick as Real * scenario.dt_s(),
             points: Vec::new(),
         })
         .collect();
@@ -313,7 +316,7 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         data.last.clear();
         data.last.extend_from_slice(pos);
         if tick.is_multiple_of(transient_stride) {
-            for (&(k, _), tr) in repaired.iter().zip(&mut data.transients) {
+            for (&(k, _, _), tr) in repaired.iter().zip(&mut data.transients) {
                 if tp.alive[k] {
                     tr.points.push((t, (pos[k] - ht[k]).norm()));
                 }
@@ -332,20 +335,27 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     Ok(data)
 }
 
-/// The followers any loss re-triangulated or left flying its plan, as (member index, id) in id
-/// order. An id audit.json names that the scenario lacks has no row to draw: skipped.
-fn repaired_members(repairs: &[Repair], index: &BTreeMap<u32, usize>) -> Vec<(usize, u32)> {
-    let ids: std::collections::BTreeSet<u32> = repairs
-        .iter()
-        .flat_map(|r| {
-            r.retriangulated
-                .iter()
-                .map(|x| x.0)
-                .chain(r.degraded.iter().copied())
-        })
-        .collect();
-    ids.into_iter()
-        .filter_map(|id| Some((*index.get(&id)?, id)))
+/// The followers any loss re-triangulated or left flying its plan, as (member index, id, first
+/// tick repaired) in id order. An id audit.json names that the scenario lacks has no row to
+/// draw: skipped.
+fn repaired_members(repairs: &[Repair], index: &BTreeMap<u32, usize>) -> Vec<(usize, u32, u64)> {
+    let mut first: BTreeMap<u32, u64> = BTreeMap::new();
+    for r in repairs {
+        let ids = r
+            .retriangulated
+            .iter()
+            .map(|x| x.0)
+            .chain(r.degraded.iter().copied());
+        for id in ids {
+            first
+                .entry(id)
+                .and_modify(|t| *t = (*t).min(r.tick))
+                .or_insert(r.tick);
+        }
+    }
+    first
+        .into_iter()
+        .filter_map(|(id, tick)| Some((*index.get(&id)?, id, tick)))
         .collect()
 }
 

@@ -36,7 +36,7 @@ pub fn loss_transient(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureErr
     let Some(&(worst_dev, worst)) = ranked.first() else {
         return Ok(files);
     };
-    let t_worst = repaired_at(d, worst.id);
+    let t_worst = worst.from_s;
     let zoom = (t_worst - ZOOM_BEFORE_S, t_worst + ZOOM_AFTER_S);
     let fig = Stack {
         width: 900,
@@ -66,24 +66,12 @@ pub fn loss_transient(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureErr
     Ok(files)
 }
 
-/// The time of the first tick a follower was repaired from: its transient starts there.
-fn repaired_at(d: &RunData, id: u32) -> Real {
-    let dt = d.scenario.dt_s();
-    d.audit
-        .repairs
-        .iter()
-        .filter(|r| r.retriangulated.iter().any(|x| x.0 == id) || r.degraded.contains(&id))
-        .map(|r| r.tick as Real * dt)
-        .fold(Real::INFINITY, Real::min)
-}
-
 /// The [`SHOWN`] largest transients, by their peak deviation after the repair (ties: by id).
 fn largest_transients(d: &RunData) -> Vec<(Real, &Transient)> {
     let peak = |tr: &Transient| {
-        let from = repaired_at(d, tr.id);
         tr.points
             .iter()
-            .filter(|p| p.0 >= from)
+            .filter(|p| p.0 >= tr.from_s)
             .map(|p| p.1)
             .fold(0.0, Real::max)
     };
