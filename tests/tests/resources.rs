@@ -107,8 +107,8 @@ fn with_64_fds(cmd: &mut Command, privileged: bool) {
 }
 
 /// `launch --n 40` with RLIMIT_NOFILE at 64 (soft and hard) and no right to raise it: exit 2, "a
-/// team of 40 agents needs about 544 file descriptors ... out of file descriptors (limit
-/// RLIMIT_NOFILE soft 64, hard 64); raise it, e.g. `ulimit -n 544`", no run directory, nothing
+/// team of 40 agents needs about 344 file descriptors ... out of file descriptors (limit
+/// RLIMIT_NOFILE soft 64, hard 64); raise it, e.g. `ulimit -n 344`", no run directory, nothing
 /// of the team left. The check comes before anything is created, so the message does not depend
 /// on which iceoryx2 call would have taken the last descriptor (CI once saw
 /// `UnableToCreateServiceTag` there instead).
@@ -127,7 +127,7 @@ fn running_out_of_file_descriptors_is_reported_with_the_limit() {
         what,
         &[
             "out of file descriptors",
-            "a team of 40 agents needs about 544 file descriptors",
+            "a team of 40 agents needs about 344 file descriptors",
             "limit RLIMIT_NOFILE soft 64, hard 64",
             "ulimit -n",
         ],

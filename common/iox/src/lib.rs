@@ -76,6 +76,7 @@ mod member;
 mod orchestrator;
 mod ownership;
 mod team;
+mod wake_roots;
 mod wire;
 
 pub use dead_teams::{remove_dead_teams, RemovedTeam};

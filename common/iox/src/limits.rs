@@ -32,7 +32,7 @@ fn limit(resource: libc::__rlimit_resource_t) -> std::io::Result<(u64, u64)> {
 }
 
 /// Raises this process's soft `RLIMIT_NOFILE` to the hard limit and returns the new soft limit.
-/// The orchestrator holds about 11 descriptors per agent, so a large team passes 1024 quickly.
+/// The orchestrator holds 6 to 11 descriptors per agent, so a large team passes 1024 quickly.
 pub fn raise_fd_limit() -> std::io::Result<u64> {
     let (soft, hard) = limit(libc::RLIMIT_NOFILE)?;
     if soft < hard {
@@ -61,13 +61,18 @@ pub fn fd_exhausted() -> Option<FdUsage> {
 }
 
 /// Descriptors the orchestrator holds for a team of `agents`, measured with iceoryx2 0.10 on a
-/// flying team (`launch --n 100` holds 1,119): per agent 11, the dynamic segment and static file
-/// of its state and wake services, a port tag for the subscriber and the notifier, a connection
-/// segment each way (its state, the clock), the wake event's management segment and socket and
-/// its publisher's data segment; with a margin for the run directory, the children's pipes and
-/// the logging. N = 2000 needs 24,064 (22,000 held), above a hard limit of 20,000.
-pub fn orchestrator_fd_need(agents: usize) -> u64 {
-    64 + 12 * agents as u64
+/// flying team. When it wakes every agent itself (`launch --n 100` held 1,119): per agent 11,
+/// the dynamic segment and static file of its state and wake services, a port tag for the
+/// subscriber and the notifier, a connection segment each way (its state, the clock), the wake
+/// event's management segment and socket and its publisher's data segment; estimated at 12 per
+/// agent (N = 2000: 24,064, above this machine's hard limit of 20,000). With relayed wake-ups
+/// (`TeamLayout::with_relayed_wakes`) the wake event's five are gone once the team flies (its
+/// static file and segment are held only while the team gathers, when no connection is open
+/// yet): 6 per agent, estimated at 7. Both with 64 for the run directory, the children's pipes
+/// and the logging.
+pub fn orchestrator_fd_need(agents: usize, relayed_wakes: bool) -> u64 {
+    let per_agent = if relayed_wakes { 7 } else { 12 };
+    64 + per_agent * agents as u64
 }
 
 /// The orchestrator's open-file limit against what a team needs.
@@ -85,8 +90,8 @@ pub struct FdShortfall {
 /// the launch can refuse before it creates anything (instead of failing half-way, at whichever
 /// iceoryx2 call happens to take the last descriptor). A limit below the need is first raised
 /// as far as this process may ([`raise_fd_limit_to`]).
-pub fn fd_short(agents: usize) -> Option<FdShortfall> {
-    let need = orchestrator_fd_need(agents);
+pub fn fd_short(agents: usize, relayed_wakes: bool) -> Option<FdShortfall> {
+    let need = orchestrator_fd_need(agents, relayed_wakes);
     raise_fd_limit_to(need);
     let (soft, hard) = limit(libc::RLIMIT_NOFILE).ok()?;
     (soft < need).then_some(FdShortfall { need, soft, hard })

@@ -45,7 +45,7 @@ pub struct MemberPorts {
     clock_subscriber: Subscriber<ipc::Service, ClockWire, ()>,
     _clock: PubSubService<ipc::Service, ClockWire, ()>,
     listener: Listener<ipc::Service>,
-    wake: EventService<ipc::Service>,
+    _wake: EventService<ipc::Service>,
     out_wakes: BTreeMap<u32, WakeWriter>,
     wake_orch: WakeWriter,
     /// The orchestrator's node, found through the clock's publisher when opening.
@@ -99,52 +99,13 @@ impl MemberPorts {
         init_logging();
         let who = Role::Agent(id);
         let node = create_named_node(team, who, node_name)?;
-        let err =
-            |service: &str, op, e: &dyn std::fmt::Debug| service_error(team, who, service, op, e);
-
         // The clock first: its absence means the whole team is missing.
-        let name = team.clock_service();
-        let clock = node
-            .service_builder(&service_name(team, who, &name)?)
-            .publish_subscribe::<ClockWire>()
-            .open()
-            .map_err(|e| match e {
-                PublishSubscribeOpenError::DoesNotExist => TransportError::TeamNotFound {
-                    team: team.clone(),
-                    who,
-                    service: name.clone(),
-                },
-                e => err(&name, "open service", &e),
-            })?;
-
+        let clock = open_clock(&node, team, who)?;
         // The team's scenario must be ours before we take any slot in it.
         check_scenario_hash(&clock, team, id, scenario_hash)?;
-
-        // Then the agent's identity: its exclusive publisher slot.
-        let name = team.state_service(id);
-        let state = open_state(&node, team, who, id)?;
-        let publisher = state
-            .publisher_builder()
-            .max_loaned_samples(1)
-            .create()
-            .map_err(|e| match e {
-                PublisherCreateError::ExceedsMaxSupportedPublishers => {
-                    already_running(team, id, &name, "publisher")
-                }
-                e => err(&name, "create publisher", &e),
-            })?;
-
-        let name = team.wake_service(id);
-        let wake = open_event(&node, team, who, &name)?;
-        let listener = wake.listener_builder().create().map_err(|e| match e {
-            ListenerCreateError::ExceedsMaxSupportedListeners => {
-                already_running(team, id, &name, "listener")
-            }
-            e => err(&name, "create listener", &e),
-        })?;
-
+        // Then the agent's identity: its exclusive publisher slot and wake-up listener.
+        let own = OwnPorts::open(&node, team, id)?;
         let neighbors = open_neighbors(&node, team, id, in_neighbors)?;
-
         let mut out_wakes = BTreeMap::new();
         for &peer in out_neighbors {
             let name = team.wake_service(peer);
@@ -153,29 +114,28 @@ impl MemberPorts {
         }
         let name = team.orchestrator_wake_service();
         let wake_orch = open_wake_writer(&node, team, who, &name, id)?;
-
-        let name = team.clock_service();
+        // The clock subscriber last: once the orchestrator counts it (and the notifier on
+        // wake/orch), every other port of this member is in place.
         let clock_subscriber = clock
             .subscriber_builder()
             .buffer_size(CLOCK_BUFFER)
             .create()
-            .map_err(|e| err(&name, "create subscriber", &e))?;
+            .map_err(|e| service_error(team, who, &team.clock_service(), "create subscriber", e))?;
         let mut orchestrator = None;
         clock.dynamic_config().list_publishers(|p| {
             orchestrator = Some(p.node_id);
             CallbackProgression::Stop
         });
-
         Ok(Self {
             team: team.clone(),
             id,
-            publisher,
-            _state: state,
+            publisher: own.publisher,
+            _state: own.state,
             neighbors,
             clock_subscriber,
             _clock: clock,
-            listener,
-            wake,
+            listener: own.listener,
+            _wake: own.wake,
             out_wakes,
             wake_orch,
             orchestrator,
@@ -339,14 +299,16 @@ impl MemberPorts {
     }
 
     /// True while the orchestrator's node is alive. Checks only the few nodes attached to this
-    /// agent's wake event (its in-neighbours, itself and the orchestrator), so it is cheap enough
-    /// for every half second. A registry that cannot be read counts as dead (fail-safe: stop).
+    /// agent's state service (its out-neighbours, itself and the orchestrator, whose subscriber
+    /// is there for the team's lifetime; with relayed wake-ups it holds no port on most wake
+    /// events), so it is cheap enough for every half second. A registry that cannot be read
+    /// counts as dead (fail-safe: stop).
     pub fn orchestrator_alive(&self) -> bool {
         let Some(orchestrator) = self.orchestrator else {
             return false;
         };
         let mut alive = false;
-        let listed = self.wake.nodes(|state| {
+        let listed = self._state.nodes(|state| {
             if *state.node_id() == orchestrator {
                 alive = matches!(state, NodeState::Alive(_));
                 return CallbackProgression::Stop;
@@ -364,6 +326,67 @@ impl MemberPorts {
     fn error(&self, service: &str, op: &'static str, e: impl std::fmt::Debug) -> TransportError {
         service_error(&self.team, Role::Agent(self.id), service, op, e)
     }
+}
+
+/// The agent's own ports: the one publisher of `state/<id>` and the one listener of `wake/<id>`
+/// (a second process for the same id finds either taken).
+struct OwnPorts {
+    state: PubSubService<ipc::Service, StateWire, ()>,
+    publisher: Publisher<ipc::Service, StateWire, ()>,
+    wake: EventService<ipc::Service>,
+    listener: Listener<ipc::Service>,
+}
+
+impl OwnPorts {
+    fn open(node: &Node<ipc::Service>, team: &TeamName, id: u32) -> Result<Self, TransportError> {
+        let who = Role::Agent(id);
+        let name = team.state_service(id);
+        let state = open_state(node, team, who, id)?;
+        let publisher = state
+            .publisher_builder()
+            .max_loaned_samples(1)
+            .create()
+            .map_err(|e| match e {
+                PublisherCreateError::ExceedsMaxSupportedPublishers => {
+                    already_running(team, id, &name, "publisher")
+                }
+                e => service_error(team, who, &name, "create publisher", e),
+            })?;
+        let name = team.wake_service(id);
+        let wake = open_event(node, team, who, &name)?;
+        let listener = wake.listener_builder().create().map_err(|e| match e {
+            ListenerCreateError::ExceedsMaxSupportedListeners => {
+                already_running(team, id, &name, "listener")
+            }
+            e => service_error(team, who, &name, "create listener", e),
+        })?;
+        Ok(Self {
+            state,
+            publisher,
+            wake,
+            listener,
+        })
+    }
+}
+
+/// Opens the team's clock service; a missing one means no orchestrator created the team.
+fn open_clock(
+    node: &Node<ipc::Service>,
+    team: &TeamName,
+    who: Role,
+) -> Result<PubSubService<ipc::Service, ClockWire, ()>, TransportError> {
+    let name = team.clock_service();
+    node.service_builder(&service_name(team, who, &name)?)
+        .publish_subscribe::<ClockWire>()
+        .open()
+        .map_err(|e| match e {
+            PublishSubscribeOpenError::DoesNotExist => TransportError::TeamNotFound {
+                team: team.clone(),
+                who,
+                service: name.clone(),
+            },
+            e => service_error(team, who, &name, "open service", e),
+        })
 }
 
 /// Refuses a team whose clock service carries another scenario hash than `scenario_hash`.
@@ -454,7 +477,7 @@ fn open_state(
 }
 
 /// Opens an event service of the team (a missing one means the team is incomplete).
-fn open_event(
+pub(crate) fn open_event(
     node: &Node<ipc::Service>,
     team: &TeamName,
     who: Role,

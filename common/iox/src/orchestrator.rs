@@ -30,10 +30,15 @@ struct StateReader {
     subscriber: Subscriber<ipc::Service, StateWire, ()>,
 }
 
-/// One agent's wake event, notified by the orchestrator.
-struct WakeWriter {
-    service: EventService<ipc::Service>,
-    notifier: Notifier<ipc::Service>,
+/// One agent's wake event. The orchestrator created it and holds it while the team gathers
+/// (members open it meanwhile); with relayed wake-ups it lets go of it at the first clock
+/// message unless it notifies the agent itself (a root, or a reader of a lost member).
+struct WakeEvent {
+    /// `None` once let go: the agent and its in-neighbours hold it from then on.
+    service: Option<EventService<ipc::Service>>,
+    notifier: Option<Notifier<ipc::Service>>,
+    /// (listeners, notifiers) when the service was let go, for [`OrchestratorPorts::readiness`].
+    counts: (usize, usize),
 }
 
 /// Every port of the orchestrator. Fields drop in order: ports first, the node last.
@@ -41,15 +46,20 @@ struct Ports {
     states: BTreeMap<u32, StateReader>,
     clock: PubSubService<ipc::Service, ClockWire, ()>,
     clock_publisher: Publisher<ipc::Service, ClockWire, ()>,
-    wakes: BTreeMap<u32, WakeWriter>,
+    wakes: BTreeMap<u32, WakeEvent>,
+    /// True once the wake events nobody here notifies were let go (relayed wake-ups).
+    wakes_let_go: bool,
+    /// Lost members whose readers the orchestrator now wakes itself (relayed wake-ups).
+    losses_seen: std::collections::BTreeSet<u32>,
     wake_orch: EventService<ipc::Service>,
     listener: Listener<ipc::Service>,
-    /// Held, never read: the node must outlive the ports created from it.
-    _node: Node<ipc::Service>,
+    /// The node must outlive the ports created from it.
+    node: Node<ipc::Service>,
 }
 
 /// The orchestrator's ports: a subscriber on every `state/<id>`, the clock publisher, a notifier
-/// on every `wake/<id>` and the listener of `wake/orch`.
+/// on `wake/<id>` of every member it wakes itself ([`TeamLayout::wake_roots`]: all of them unless
+/// wake-ups are relayed) and the listener of `wake/orch`.
 ///
 /// Dropping it (or [`shutdown`](Self::shutdown)) releases the ports and then removes the
 /// resources of team members that died; what live members still hold disappears when they exit.
@@ -173,7 +183,7 @@ impl OrchestratorPorts {
                 need_kib: need / 1024,
             });
         }
-        if let Some(u) = super::limits::fd_short(agents) {
+        if let Some(u) = super::limits::fd_short(agents, layout.relays_wakes()) {
             return Err(TransportError::FdLimitTooLow {
                 team: team.clone(),
                 agents,
@@ -208,21 +218,74 @@ impl OrchestratorPorts {
         self.stale_nodes_removed
     }
 
-    /// Publishes a grant, then wakes every agent. Returns how many agents' listeners were reached
-    /// (fewer than the team size means some agent is not listening: dead or not yet up).
+    /// Publishes a clock message, then wakes the agents it wakes itself (every agent, or with
+    /// relayed wake-ups the [`TeamLayout::wake_roots`] and the readers of lost members). Returns
+    /// how many agents' listeners were reached (fewer than those woken means some agent is not
+    /// listening: dead or not yet up).
     pub fn publish_clock(&mut self, msg: ClockMsg) -> Result<usize, TransportError> {
+        if self.layout.relays_wakes() {
+            self.let_go_of_wakes();
+            self.wake_readers_of_loss(&msg);
+        }
         let p = self.ports();
         p.clock_publisher
             .send_copy(Wire(msg))
             .map_err(|e| self.error(&self.team.clock_service(), "send", e))?;
         let mut reached = 0;
         for (&id, wake) in &p.wakes {
-            reached += wake
-                .notifier
-                .notify()
-                .map_err(|e| self.error(&self.team.wake_service(id), "notify", e))?;
+            if let Some(notifier) = &wake.notifier {
+                reached += notifier
+                    .notify()
+                    .map_err(|e| self.error(&self.team.wake_service(id), "notify", e))?;
+            }
         }
         Ok(reached)
+    }
+
+    /// Relayed wake-ups, first clock message (the team has gathered: every member holds its own
+    /// wake event and its in-neighbours hold their notifiers on it): lets go of the wake events
+    /// the orchestrator does not notify, 2 file descriptors each (static file and segment).
+    fn let_go_of_wakes(&mut self) {
+        let Some(p) = self.ports.as_mut().filter(|p| !p.wakes_let_go) else {
+            return;
+        };
+        p.wakes_let_go = true;
+        for wake in p.wakes.values_mut().filter(|w| w.notifier.is_none()) {
+            if let Some(service) = wake.service.take() {
+                let d = service.dynamic_config();
+                wake.counts = (d.number_of_listeners(), d.number_of_notifiers());
+            }
+        }
+    }
+
+    /// Relayed wake-ups: the readers of a newly lost member may have no live in-neighbour to
+    /// pass clock messages on until their repair applies (a degraded follower never again), so
+    /// from its first notice on the orchestrator wakes them itself. Best effort: a reader
+    /// that cannot be reached still reads the clock at least every wait slice of its own.
+    fn wake_readers_of_loss(&mut self, msg: &ClockMsg) {
+        let Some(lost) = msg.loss().map(|n| n.id) else {
+            return;
+        };
+        let Some(p) = self.ports.as_mut() else {
+            return;
+        };
+        if !p.losses_seen.insert(lost) {
+            return;
+        }
+        for &reader in self.layout.out_neighbors(lost) {
+            let Some(wake) = p.wakes.get_mut(&reader).filter(|w| w.notifier.is_none()) else {
+                continue;
+            };
+            let name = self.team.wake_service(reader);
+            match open_notifier(&p.node, &self.team, &name) {
+                Ok((service, notifier)) => {
+                    wake.service = Some(service);
+                    wake.notifier = Some(notifier);
+                }
+                Err(e) => tracing::warn!(team = %self.team, lost, reader, error = %e,
+                    "cannot wake a reader of a lost member directly"),
+            }
+        }
     }
 
     /// Drains every state subscriber (agents in id order, each agent's samples oldest first) into
@@ -258,15 +321,21 @@ impl OrchestratorPorts {
             .iter()
             .filter_map(|&id| {
                 let state = p.states.get(&id)?.service.dynamic_config();
-                let wake = p.wakes.get(&id)?.service.dynamic_config();
+                let wake = p.wakes.get(&id)?;
+                let (wake_listeners, wake_notifiers) =
+                    wake.service.as_ref().map_or(wake.counts, |s| {
+                        let d = s.dynamic_config();
+                        (d.number_of_listeners(), d.number_of_notifiers())
+                    });
+                let mine = usize::from(wake.notifier.is_some());
                 Some(AgentReadiness {
                     id,
                     state_publishers: state.number_of_publishers(),
                     state_subscribers: state.number_of_subscribers(),
                     expected_state_subscribers: self.layout.visible_out_degree(id) + 1,
-                    wake_listeners: wake.number_of_listeners(),
-                    wake_notifiers: wake.number_of_notifiers(),
-                    expected_wake_notifiers: self.layout.visible_in_degree(id) + 1,
+                    wake_listeners,
+                    wake_notifiers,
+                    expected_wake_notifiers: self.layout.visible_in_degree(id) + mine,
                 })
             })
             .collect();
@@ -292,17 +361,30 @@ impl OrchestratorPorts {
         self.node_names(&node_ids, |f| reader.service.nodes(f).map(|_| ()))
     }
 
-    /// Names of the nodes notifying `wake/<id>`, sorted (the orchestrator's own included).
+    /// Names of the nodes notifying `wake/<id>`, sorted (the orchestrator's own included, if it
+    /// wakes `id` itself).
     pub fn notifier_nodes(&self, id: u32) -> Result<Vec<String>, TransportError> {
-        let Some(wake) = self.ports().wakes.get(&id) else {
+        let p = self.ports();
+        let Some(wake) = p.wakes.get(&id) else {
             return Ok(vec![]);
         };
+        // A wake event let go of (relayed wake-ups) is opened again for the question: rare (a
+        // repair's links), and its holders keep it alive.
+        let opened;
+        let service = match &wake.service {
+            Some(s) => s,
+            None => {
+                let name = self.team.wake_service(id);
+                opened = super::member::open_event(&p.node, &self.team, WHO, &name)?;
+                &opened
+            }
+        };
         let mut node_ids = vec![];
-        wake.service.dynamic_config().list_notifiers(|n| {
+        service.dynamic_config().list_notifiers(|n| {
             node_ids.push(n.node_id);
             CallbackProgression::Continue
         });
-        self.node_names(&node_ids, |f| wake.service.nodes(f).map(|_| ()))
+        self.node_names(&node_ids, |f| service.nodes(f).map(|_| ()))
     }
 
     /// True when agent `reader` subscribes to `state/<writer>` and `writer` notifies
@@ -387,10 +469,12 @@ impl Ports {
 
         let mut states = BTreeMap::new();
         let mut wakes = BTreeMap::new();
+        let roots: std::collections::BTreeSet<u32> = layout.wake_roots().into_iter().collect();
         for &id in layout.ids() {
-            let (reader, writer) = member_services(&node, team, layout, id, buffer)?;
+            let root = roots.contains(&id);
+            let (reader, wake) = member_services(&node, team, layout, id, buffer, root)?;
             states.insert(id, reader);
-            wakes.insert(id, writer);
+            wakes.insert(id, wake);
         }
 
         let name = team.clock_service();
@@ -431,22 +515,26 @@ impl Ports {
             clock,
             clock_publisher,
             wakes,
+            wakes_let_go: false,
+            losses_seen: Default::default(),
             wake_orch,
             listener,
-            _node: node,
+            node,
         })
     }
 }
 
 /// Member `id`'s state service (its one publisher, its readers' and repairs' subscriber slots,
-/// the orchestrator's own subscriber) and its wake-up event (a notifier per writer).
+/// the orchestrator's own subscriber) and its wake-up event (a notifier per writer, and a slot
+/// for the orchestrator's, which it takes at once when it wakes `id` itself: `root`).
 fn member_services(
     node: &Node<ipc::Service>,
     team: &TeamName,
     layout: &TeamLayout,
     id: u32,
     buffer: usize,
-) -> Result<(StateReader, WakeWriter), TransportError> {
+    root: bool,
+) -> Result<(StateReader, WakeEvent), TransportError> {
     let err = |service: &str, op, e: &dyn std::fmt::Debug| service_error(team, WHO, service, op, e);
     let (extra_readers, extra_writers) = layout.repair_slots(id);
     let outs = layout.out_neighbors(id).len() + extra_readers;
@@ -484,11 +572,36 @@ fn member_services(
         .max_nodes(ins + 2 + SPARE_NODES)
         .create()
         .map_err(|e| event_create_error(team, &name, e))?;
+    let notifier = match root {
+        true => Some(
+            service
+                .notifier_builder()
+                .create()
+                .map_err(|e| err(&name, "create notifier", &e))?,
+        ),
+        false => None,
+    };
+    let wake = WakeEvent {
+        service: Some(service),
+        notifier,
+        counts: (0, 0),
+    };
+    Ok((reader, wake))
+}
+
+/// Opens the wake event `name` the orchestrator created and let go of, and a notifier on it
+/// (the slot it left free).
+fn open_notifier(
+    node: &Node<ipc::Service>,
+    team: &TeamName,
+    name: &str,
+) -> Result<(EventService<ipc::Service>, Notifier<ipc::Service>), TransportError> {
+    let service = super::member::open_event(node, team, WHO, name)?;
     let notifier = service
         .notifier_builder()
         .create()
-        .map_err(|e| err(&name, "create notifier", &e))?;
-    Ok((reader, WakeWriter { service, notifier }))
+        .map_err(|e| service_error(team, WHO, name, "create notifier", e))?;
+    Ok((service, notifier))
 }
 
 /// A service that already exists means another orchestrator won the race (or live members of a

@@ -108,6 +108,9 @@ pub struct TeamLayout {
     /// Edges `(source, reader)` that this host's shared memory never carries (both ends run on
     /// one other host: that host's daemon connects them). Readiness does not wait for them.
     hidden: BTreeSet<(u32, u32)>,
+    /// Clock messages reach most members through their in-neighbours (see
+    /// [`TeamLayout::with_relayed_wakes`]); `false`: the orchestrator wakes every member itself.
+    relayed_wakes: bool,
 }
 
 /// Room the services keep for repairs after losses: readers a member may gain, and how many
@@ -182,6 +185,7 @@ impl TeamLayout {
             scenario_hash: 0,
             repair: None,
             hidden: BTreeSet::new(),
+            relayed_wakes: false,
         })
     }
 
@@ -208,6 +212,34 @@ impl TeamLayout {
     /// States a state service keeps for late subscribers (0 without repairs).
     pub fn history(&self) -> usize {
         self.repair.as_ref().map_or(0, |r| r.history)
+    }
+
+    /// The same layout, where the orchestrator wakes only the [`wake_roots`](Self::wake_roots)
+    /// after a clock message and every member passes each clock message it reads on to its
+    /// out-neighbours (it notifies them before it sleeps or exits). The orchestrator then holds
+    /// no port on the other members' wake events, which were 5 of its 11 file descriptors per
+    /// member (N = 2000 needed 24,064, above this machine's hard limit of 20,000). Lockstep
+    /// teams on one host only: real-time members do not relay (they never notify readers), and
+    /// across hosts a member's in-neighbours may live elsewhere.
+    pub fn with_relayed_wakes(mut self) -> Self {
+        self.relayed_wakes = true;
+        self
+    }
+
+    /// True when clock messages are relayed ([`Self::with_relayed_wakes`]).
+    pub fn relays_wakes(&self) -> bool {
+        self.relayed_wakes
+    }
+
+    /// The members the orchestrator wakes itself: every member when wake-ups are not relayed;
+    /// otherwise the fewest members from which the wake-up reaches everyone along the
+    /// out-neighbour edges ([`crate::wake_roots::roots`]): the leaders of a synthesised graph.
+    pub fn wake_roots(&self) -> Vec<u32> {
+        if self.relayed_wakes {
+            crate::wake_roots::roots(&self.ids, |id| self.out_neighbors(id))
+        } else {
+            self.ids.clone()
+        }
     }
 
     /// The same layout with edges `(source, reader)` that run on another host entirely (issue

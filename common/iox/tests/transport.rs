@@ -166,6 +166,47 @@ fn chain_members_receive_exactly_their_in_neighbors() {
     orch.shutdown().unwrap();
 }
 
+/// Relayed wake-ups (`TeamLayout::with_relayed_wakes`): the orchestrator wakes only the chain's
+/// root (0) after a clock message, holds no port on the other wake events once the team flies
+/// (only 0 notifies 1's, only 1 notifies 2's), and after a loss notice wakes the lost member's
+/// reader itself.
+#[test]
+fn relayed_wakes_reach_the_roots_and_the_readers_of_a_loss() {
+    use cdm_runtime::messages::LossNotice;
+    let _files = shared_files();
+    let _dog = Watchdog::new("relayed", Duration::from_secs(60));
+    let team = team(8);
+    let lay = layout(&[0, 1, 2], &[(0, 1), (1, 2)], 2).with_relayed_wakes();
+    assert_eq!(lay.wake_roots(), vec![0]);
+    let mut orch = OrchestratorPorts::create(&team, &lay).unwrap();
+    let members: Vec<MemberPorts> = lay
+        .ids()
+        .iter()
+        .map(|&id| {
+            let (ins, outs) = (lay.in_neighbors(id), lay.out_neighbors(id));
+            MemberPorts::open(&team, id, 0, ins, outs).unwrap()
+        })
+        .collect();
+    wait_ready(&orch, Duration::from_secs(20));
+    assert_eq!(orch.publish_clock(ClockMsg::run(0, HASH)).unwrap(), 1);
+    let node = |id| team.node_name(Role::Agent(id));
+    let orch_node = team.node_name(Role::Orchestrator);
+    assert_eq!(orch.notifier_nodes(0).unwrap(), vec![orch_node.clone()]);
+    assert_eq!(orch.notifier_nodes(1).unwrap(), vec![node(0)]);
+    assert_eq!(orch.notifier_nodes(2).unwrap(), vec![node(1)]);
+    let notice = LossNotice {
+        seq: 1,
+        id: 1,
+        tick: 1,
+        linked: 0,
+    };
+    let lost = ClockMsg::run(1, HASH).with_loss(Some(notice));
+    assert_eq!(orch.publish_clock(lost).unwrap(), 2);
+    assert_eq!(orch.notifier_nodes(2).unwrap(), vec![node(1), orch_node]);
+    assert!(members.iter().all(|m| m.orchestrator_alive()));
+    drop(members);
+}
+
 #[test]
 fn a_second_orchestrator_of_a_running_team_is_refused() {
     let _files = shared_files();

@@ -279,6 +279,10 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
                 team: c.scenario_hash,
             });
         }
+        // Pass it on: the readers are woken before this member sleeps (or, at a stop, exits),
+        // so a clock message the orchestrator sent only to the team's roots reaches everyone
+        // (relayed wake-ups, cdm-iox `TeamLayout::with_relayed_wakes`).
+        self.unnotified = true;
         if let Some(n) = c.loss() {
             let taken = match self.losses.as_mut() {
                 Some(l) => l.on_notice(n, self.tick).map_err(MemberFault::Loss),

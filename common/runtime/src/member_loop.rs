@@ -50,6 +50,8 @@ where
             })
             .map_err(LoopError::Transport)?;
         if let Some(done) = outcome.map_err(LoopError::Fault)? {
+            // The stop reaches readers the orchestrator does not wake itself through us.
+            let _ = transport.notify_readers();
             return Ok(done);
         }
         transport
@@ -130,7 +132,11 @@ pub fn linger<T: MemberTransport, K: Clock>(
     let mut last_alive_check = start;
     while clock.now().saturating_sub(start) < LINGER && !interrupted.load(Ordering::Relaxed) {
         match transport.latest_clock() {
-            Ok(Some(c)) if matches!(c.command(), ClockCommand::Stop(_)) => return,
+            Ok(Some(c)) if matches!(c.command(), ClockCommand::Stop(_)) => {
+                // Passed on, as in `fly`: readers may be woken only through us.
+                let _ = transport.notify_readers();
+                return;
+            }
             Ok(_) => {}
             Err(_) => return,
         }
