@@ -358,6 +358,7 @@ pub(crate) fn gather(
             return Err(interrupted_before_start());
         }
         if ports.readiness().is_complete() {
+            ports.gathered();
             break;
         }
         check_children(children, 0)?;

@@ -242,9 +242,19 @@ impl OrchestratorPorts {
         Ok(reached)
     }
 
-    /// Relayed wake-ups, first clock message (the team has gathered: every member holds its own
-    /// wake event and its in-neighbours hold their notifiers on it): lets go of the wake events
-    /// the orchestrator does not notify, 2 file descriptors each (static file and segment).
+    /// Call once every member has joined ([`Readiness::is_complete`]): with relayed wake-ups
+    /// every member now holds its own wake event and its in-neighbours their notifiers on it,
+    /// so the orchestrator lets go of those it does not notify, 2 file descriptors each (static
+    /// file and segment), before the first [`receive_states`](Self::receive_states) opens 2 more
+    /// per member (its publisher's data and connection segments). The first clock message does
+    /// it otherwise. Nothing without relayed wake-ups.
+    pub fn gathered(&mut self) {
+        if self.layout.relays_wakes() {
+            self.let_go_of_wakes();
+        }
+    }
+
+    /// See [`Self::gathered`].
     fn let_go_of_wakes(&mut self) {
         let Some(p) = self.ports.as_mut().filter(|p| !p.wakes_let_go) else {
             return;
