@@ -1,11 +1,11 @@
 //! Benchmark baselines for BENCHMARKS.md (`scripts/bench.sh` runs them beside `launch`):
 //!
 //! - `cdm-bench engine --n N --ticks K`: the in-process engine alone (controller, RK4 substeps,
-//!   neighbour exchange for all N agents; no audit, no telemetry): the floor the arithmetic sets.
+//!   neighbour exchange for all N members; no audit, no telemetry): the floor the arithmetic sets.
 //! - `cdm-bench barrier --n N --ticks K`: a bare iceoryx2 central barrier with N processes and no
 //!   math: per tick the coordinator wakes every process, each reads its 3 neighbours' samples,
 //!   publishes one 128-byte sample and acknowledges; the coordinator waits for all N samples.
-//!   This is what a naive one-process-per-agent runtime pays per tick.
+//!   This is what a naive one-process-per-member runtime pays per tick.
 //!
 //! Both print one line `<what>: N agents, K ticks in S s (R ticks/s)`. Every wait has a deadline.
 
@@ -31,7 +31,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Tick rate of the in-process engine (arithmetic only) on the generated team of N agents.
+    /// Tick rate of the in-process engine (arithmetic only) on the generated team of N members.
     Engine {
         #[arg(long)]
         n: usize,
@@ -104,7 +104,7 @@ fn node() -> Result<Node<ipc::Service>, String> {
         .map_err(|e| format!("node: {e:?}"))
 }
 
-/// The three agents agent `id` reads (no math, so any three others will do).
+/// The three members that member `id` reads (no math, so any three others will do).
 fn neighbours(n: usize, id: usize) -> [usize; 3] {
     [(id + 1) % n, (id + 2) % n, (id + 3) % n]
 }
