@@ -241,7 +241,12 @@ fn start_members(
             let mut flags = crate::realtime::member_flags(o);
             flags.extend(o.vehicles.member_args());
             match spawn_member(member_file, &o.team, m.id, m.role, &flags) {
-                Ok(c) => children.push(Spawned { id: m.id, child: c }),
+                Ok(c) => {
+                    if o.realtime.is_none() {
+                        crate::member_priority::lower(&c);
+                    }
+                    children.push(Spawned { id: m.id, child: c });
+                }
                 Err(e) => {
                     stop_team(ports, &mut children, s, StopReason::AgentFault);
                     let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));

@@ -18,6 +18,7 @@ mod export;
 mod host;
 mod launch;
 mod loss;
+mod member_priority;
 mod progress;
 mod realtime;
 mod report;
