@@ -240,6 +240,9 @@ fn start_members(
         for m in s.formation.members.iter().filter(|m| runs_here(m.id)) {
             let mut flags = crate::realtime::member_flags(o);
             flags.extend(o.vehicles.member_args());
+            if o.realtime.is_none() {
+                flags.extend(crate::member_priority::lockstep_flags(o.agent_timeout));
+            }
             match spawn_member(member_file, &o.team, m.id, m.role, &flags) {
                 Ok(c) => {
                     if o.realtime.is_none() {

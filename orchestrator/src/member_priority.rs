@@ -1,4 +1,5 @@
-//! Lockstep members run at a lower CPU priority than their orchestrator.
+//! How the orchestrator starts lockstep members: at a lower CPU priority than itself, and with a
+//! silence timeout that follows `--agent-timeout`.
 //!
 //! Why: in lockstep the orchestrator is one process on the team's critical path (it grants, and
 //! audits and writes every tick), while its members may have a window of ticks of work each. At
@@ -30,5 +31,43 @@ pub fn lower(child: &Child) {
     if unsafe { libc::setpriority(libc::PRIO_PROCESS, child.id(), nice) } != 0 {
         tracing::debug!(pid = child.id(), nice, error = %std::io::Error::last_os_error(),
             "cannot lower a member's priority");
+    }
+}
+
+/// The members' default `--silence-timeout` (common `member_cli`): how long a member waits
+/// without progress before it stops by itself.
+const MEMBER_SILENCE_S: f64 = 10.0;
+
+/// Flags for a spawned lockstep member: `--silence-timeout` at twice `--agent-timeout` when that
+/// exceeds the members' default (10 s), nothing otherwise (the default run is unchanged). Why:
+/// a team so large that one half-window takes longer than 10 s on a crowded machine (N = 2000
+/// on 2 cores at load average 300+) saw its leaders, which wait for nothing but grants, stop by
+/// themselves; a user who gives the orchestrator more patience gives it to the members too,
+/// and the orchestrator still notices a silent member first.
+pub fn lockstep_flags(agent_timeout: std::time::Duration) -> Vec<String> {
+    let silence_s = 2.0 * agent_timeout.as_secs_f64();
+    if silence_s > MEMBER_SILENCE_S {
+        vec!["--silence-timeout".into(), silence_s.to_string()]
+    } else {
+        Vec::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::lockstep_flags;
+    use std::time::Duration;
+
+    #[test]
+    fn the_default_agent_timeout_keeps_the_members_default() {
+        assert!(lockstep_flags(Duration::from_secs(5)).is_empty());
+    }
+
+    #[test]
+    fn a_longer_agent_timeout_doubles_into_the_members_silence_timeout() {
+        assert_eq!(
+            lockstep_flags(Duration::from_secs(60)),
+            vec!["--silence-timeout".to_string(), "120".to_string()]
+        );
     }
 }
