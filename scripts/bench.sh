@@ -113,7 +113,8 @@ scale_section() {
       local u; u=$(used_kib); [ "$u" -le "$peak" ] || peak=$u
       sleep 2
     done
-    wait "$pid" || echo "launch --n $n exited with $?" >&2
+    # A failed flight's reason, before the log is removed with the rest of $out.
+    wait "$pid" || { echo "launch --n $n exited with $?" >&2; grep -v "^error: agent" "$out/sc$n.log" | tail -5 >&2; }
     l=$(cat "$out/sc$n.log")
     local lt ticks member orch all
     lt=$(grep "ticking:" <<<"$l" | rate)
