@@ -516,6 +516,7 @@ fn publish_grant(
     let notice = core.losses().and_then(|l| l.notice());
     ports
         .publish_clock(ClockMsg::run(g, hash).with_loss(notice))
+        .map(drop)
         .map_err(transport_stop(core.next_tick()))
 }
 
