@@ -173,12 +173,13 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     })
 }
 
-/// Before anything is created: the member binaries are there, the live view (`--serve`) is
-/// started, the file-descriptor limit is raised.
+/// Before anything is created: the member binaries are there, the real-time scheduling asked
+/// for is granted, the live view (`--serve`) is started, the file-descriptor limit is raised.
 fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Option<LiveView>, Failure> {
     if o.spawn {
         member_binaries_present()?;
     }
+    crate::realtime::schedule(o)?;
     let live = match o.serve {
         Some(addr) => Some(start_live(s, &addr.to_string(), o.quiet)?),
         None => None,
