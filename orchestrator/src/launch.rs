@@ -132,7 +132,13 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = start_members(s, o, &dir, &mut ports, (&member_file, &scenario_file), here)?;
     let mut audit = Auditor::new(s);
     let result = if let Some(rt) = &o.realtime {
-        let team = (&mut ports, children.as_mut_slice());
+        // Members on other hosts send their final pacing reports through the bridge.
+        let elsewhere = |id: u32| bridge.as_ref().is_some_and(|b| b.reporting(id));
+        let team = (
+            &mut ports,
+            children.as_mut_slice(),
+            &elsewhere as &dyn Fn(u32) -> bool,
+        );
         crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
     } else {
         run_team(

@@ -47,6 +47,7 @@ struct Joined {
 pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     let interrupted = common::signals::install();
     crate::team::member_binaries_present()?;
+    super::workdir::sweep_dead();
     let expected_hash = match &o.scenario {
         Some(p) => Some(
             Scenario::load(p, Checks::Member)
@@ -83,7 +84,7 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
             j.mine.iter().collect::<Vec<_>>()
         );
     }
-    let dir = private_dir(&j.team)?;
+    let dir = super::workdir::create(j.team.as_str())?;
     let result = fly(&j, chan, &dir, interrupted);
     let _ = std::fs::remove_dir_all(&dir);
     result
@@ -129,17 +130,6 @@ fn joined(net: &Net, a: Assignment) -> Result<(Joined, Channel), Failure> {
 fn who() -> String {
     let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
     format!("{} (pid {})", host.trim(), std::process::id())
-}
-
-/// A directory only this user can read, for the members' scenario file.
-fn private_dir(team: &TeamName) -> Result<PathBuf, Failure> {
-    use std::os::unix::fs::DirBuilderExt;
-    let dir = std::env::temp_dir().join(format!("cdm-host-{team}-{}", std::process::id()));
-    std::fs::DirBuilder::new()
-        .mode(0o700)
-        .create(&dir)
-        .map_err(|e| Failure::fault(format!("cannot create {}: {e}", dir.display())))?;
-    Ok(dir)
 }
 
 /// This host's layout: its members with all their neighbours. The other hosts' members they
@@ -252,6 +242,9 @@ fn fly(
         Ok(r) => *r,
         Err(_) => StopReason::AgentSilent,
     };
+    if outcome.is_ok() {
+        link.up_while_stopping(&mut ports, &mut children);
+    }
     stop_team(&mut ports, &mut children, &j.s, reason);
     if outcome.is_ok() {
         // What the members published as they stopped (real time: their pacing reports).
@@ -390,6 +383,23 @@ impl Link<'_> {
         }
         self.send(&Up::States(batch))?;
         Ok(true)
+    }
+
+    /// After the orchestrator's stop (the bridge published it here): the members' last states
+    /// (real time: their final pacing reports) go up as they come, until every member exited
+    /// or the graceful stop's 3 s passed; the orchestrator waits for them a bounded while.
+    fn up_while_stopping(&mut self, ports: &mut OrchestratorPorts, children: &mut [Spawned]) {
+        let until = Instant::now() + Duration::from_secs(3);
+        loop {
+            let _ = self.up(ports);
+            let running = children
+                .iter_mut()
+                .any(|c| matches!(c.child.try_wait(), Ok(None)));
+            if !running || Instant::now() >= until {
+                return;
+            }
+            let _ = ports.wait(Duration::from_millis(5));
+        }
     }
 
     /// A member that exited: its last states first, then the exit.

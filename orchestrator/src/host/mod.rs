@@ -14,7 +14,11 @@ mod bridge;
 #[cfg(feature = "hosts")]
 pub mod daemon;
 #[cfg(feature = "hosts")]
+mod links;
+#[cfg(feature = "hosts")]
 mod plan;
+#[cfg(feature = "hosts")]
+mod workdir;
 
 #[cfg(feature = "hosts")]
 pub use plan::Plan;
@@ -112,6 +116,9 @@ mod single {
         pub fn finish(self, _dir: &common::rundir::RunDir, _ticks: u64, _quiet: bool) {}
         pub fn explain(&self, f: common::audit::FaultRecord) -> common::audit::FaultRecord {
             f
+        }
+        pub fn reporting(&self, _id: u32) -> bool {
+            false
         }
     }
 }
