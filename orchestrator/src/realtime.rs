@@ -26,6 +26,10 @@ use crate::team::{exited_fault, fault, first_exited, Spawned, Stop};
 use crate::vehicle_reports::VehicleBook;
 use crate::Failure;
 
+/// Which members run on other hosts and may still send reports (`launch --hosts`: those whose
+/// daemon neither stopped nor was lost).
+pub type Elsewhere<'a> = &'a dyn Fn(u32) -> bool;
+
 /// The real-time options of `launch`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RealtimeArgs {
@@ -115,7 +119,7 @@ pub fn run(
     o: &LaunchOptions,
     rt: &RealtimeOptions,
     dir: &RunDir,
-    team: (&mut OrchestratorPorts, &mut [Spawned], &dyn Fn(u32) -> bool),
+    team: (&mut OrchestratorPorts, &mut [Spawned], Elsewhere),
     audit: &mut Auditor,
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
@@ -238,7 +242,7 @@ fn print_figures(f: &RealtimeFigures, agents: usize) {
 fn collect_final_reports(
     core: &mut MonitorCore,
     ports: &mut OrchestratorPorts,
-    (children, elsewhere): (&mut [Spawned], &dyn Fn(u32) -> bool),
+    (children, elsewhere): (&mut [Spawned], Elsewhere),
     vehicles: &mut VehicleBook,
 ) {
     let until = Instant::now() + Duration::from_millis(1500);

@@ -168,7 +168,7 @@ impl Bridge {
     /// True when member `id` runs on another host whose reports may still arrive (its daemon
     /// joined, and neither stopped nor was lost).
     pub fn reporting(&self, id: u32) -> bool {
-        self.links().reporting(id)
+        self.links.lock().is_ok_and(|l| l.reporting(id))
     }
 
     fn links(&self) -> Links {
@@ -222,7 +222,7 @@ impl Drop for Bridge {
 fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport> {
     let mut remotes: BTreeMap<u32, Remote> = BTreeMap::new();
     let mut stopping_since: Option<Instant> = None;
-    let mut idle = IdleBackoff::default();
+    let mut idle = IdleBackoff::for_team(ctx.flight.realtime_stale_after.is_some());
     loop {
         while let Some(p) = desk.poll() {
             admit(&net, &ctx, &mut remotes, p);

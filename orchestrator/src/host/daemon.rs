@@ -342,7 +342,8 @@ impl Link<'_> {
         interrupted: &std::sync::atomic::AtomicBool,
     ) -> Result<StopReason, String> {
         let mut last_child_check = Instant::now();
-        let mut idle = cdm_zenoh::IdleBackoff::default();
+        let realtime = self.j.a.realtime_stale_after_s.is_some();
+        let mut idle = cdm_zenoh::IdleBackoff::for_team(realtime);
         loop {
             if interrupted.load(Ordering::Relaxed) {
                 return Err(format!("interrupted by {}", common::signals::received()));
