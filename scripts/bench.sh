@@ -15,8 +15,9 @@
 # ticks, neighbour age p50/p99/max and the CPU of the whole team over the flight (orchestrator and
 # members, from /proc at the start instant and the last audit), all from audit.json's `realtime`;
 # beside each row the 1-minute load average before and after the run (the machine may be shared).
-# REALTIME_ONLY=1 runs
-# only this section.
+# Each N flies twice: with ordinary scheduling, and with `--rt-priority RT_PRIORITY` (default 10;
+# SCHED_FIFO, needs root or `ulimit -r`; RT_PRIORITY=0 skips these rows).
+# REALTIME_ONLY=1 runs only this section.
 #
 # Scale (issue 17), after the main table: for N in SCALE_NS (default 1000; SCALE_NS=0 skips it)
 # and, opt-in, BENCH_N (e.g. BENCH_N=2000: 2000 processes, a full plan of about 66,000 ticks,
@@ -53,13 +54,17 @@ realtime_section() {
   echo
   echo "Real time (\`launch --n N --t-total 60 --max-ticks $((rs * 100)) --realtime\`, comm_hz 100, $rs s of flight):"
   echo
-  echo "| N | member ticks | late ticks | late % | neighbour age p50 ms | p99 ms | max ms | slowest member (late ticks, max late ms) | wall s (start to last audit) | team CPU (cores) | load average before / after |"
-  echo "|---|---|---|---|---|---|---|---|---|---|---|"
+  echo "| N | scheduling | member ticks | late ticks | late % | neighbour age p50 ms | p99 ms | max ms | slowest member (late ticks, max late ms) | wall s (start to last audit) | team CPU (cores) | load average before / after |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+  local prio=${RT_PRIORITY:-10} scheds=(normal)
+  [ "$prio" = 0 ] || scheds+=("fifo")
   for n in "${rns[@]}"; do
-    local load_before; load_before=$(cut -d' ' -f1 /proc/loadavg)
+  for sched in "${scheds[@]}"; do
+    local load_before flags=() label="normal (CFS)"; load_before=$(cut -d' ' -f1 /proc/loadavg)
+    [ "$sched" = normal ] || { flags=(--rt-priority "$prio"); label="SCHED_FIFO $prio"; }
     "$bin/orchestrator" launch --n "$n" --t-total 60 --max-ticks $((rs * 100)) --realtime \
-      --no-figures --quiet --out "$out/rt$n" >/dev/null 2>&1 || true
-    python3 - "$out/rt$n/audit.json" "$n" "$load_before" "$(cut -d' ' -f1 /proc/loadavg)" <<'PY'
+      "${flags[@]}" --no-figures --quiet --out "$out/rt$n" >/dev/null 2>&1 || true
+    python3 - "$out/rt$n/audit.json" "$n" "$load_before" "$(cut -d' ' -f1 /proc/loadavg)" "$label" <<'PY'
 import json, sys
 a = json.load(open(sys.argv[1]))
 r = a["realtime"]
@@ -67,12 +72,13 @@ load = f"{sys.argv[3]} / {sys.argv[4]}"
 s = r["slowest_member"] or {}
 cpu = r.get("team_cpu_cores")
 cpu = "?" if cpu is None else f"{cpu:.2f}"
-print(f"| {sys.argv[2]} | {r['ticks']} | {r['late_ticks']} | {r['late_ticks_pct']:.3f} | "
+print(f"| {sys.argv[2]} | {sys.argv[5]} | {r['ticks']} | {r['late_ticks']} | {r['late_ticks_pct']:.3f} | "
       f"{r['neighbor_age_ms_p50']:.2f} | {r['neighbor_age_ms_p99']:.2f} | {r['neighbor_age_ms_max']:.2f} | "
       f"{s.get('id')} ({s.get('late_ticks')}, {s.get('max_late_ms', 0):.1f}) | {r['wall_s']:.2f} | {cpu} "
       f"(verdict {a['verdict']}, {r['members_reported']}/{a['agents']} reported) | {load} |")
 PY
     rm -rf "$out/rt$n"
+  done
   done
 }
 

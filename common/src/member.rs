@@ -26,7 +26,7 @@ use crate::vehicles::Vehicles;
 
 pub use cdm_runtime::member_core::{Deadlines, Finished, MemberFault};
 
-/// Which binary is running: leaders fly primary and secondary leaders, agents fly followers.
+/// Which binary is running: `leader` flies primary and secondary leaders, `agent` flies followers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kind {
     Leader,
@@ -106,7 +106,7 @@ pub enum MemberError {
         tick: u64,
         fault: StepFault,
     },
-    /// `what` names the agent already (the vehicle link's message).
+    /// `what` names the member already (the vehicle link's message).
     #[error("{what} (at tick {tick})")]
     Vehicle { id: u32, tick: u64, what: String },
     #[error("agent {id} at tick {tick}: in-neighbour {peer} {what}")]

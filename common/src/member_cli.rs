@@ -51,6 +51,10 @@ pub struct MemberArgs {
         value_name = "SECONDS"
     )]
     pub stale_after_s: f64,
+    /// With --realtime: run this member under SCHED_FIFO at this priority (1-99), so its
+    /// wake-ups preempt ordinary processes (needs root, CAP_SYS_NICE or `ulimit -r`).
+    #[arg(long = "rt-priority", value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_runtime::sched::RT_PRIORITIES))]
+    pub rt_priority: Option<u8>,
     /// What this member flies (the model, or a MAVLink vehicle: needs --realtime).
     #[command(flatten)]
     pub vehicle: crate::vehicles::VehicleArgs,
@@ -131,7 +135,11 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             return 2;
         }
     };
-    let span = tracing::info_span!("agent", id = args.id);
+    if let Err(e) = realtime_priority(args.realtime, args.rt_priority) {
+        say(&format!("error: member {}: {e}", args.id));
+        return 2;
+    }
+    let span = tracing::info_span!("member", id = args.id);
     let _g = span.enter();
     let flight = Flight {
         deadlines,
@@ -152,6 +160,16 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             say(&format!("error: {e}"));
             e.exit_code()
         }
+    }
+}
+
+/// `--rt-priority`: only with `--realtime` (lockstep is paced by grants, not by wake-ups on
+/// time), applied before the member opens anything so its threads inherit it.
+fn realtime_priority(realtime: bool, priority: Option<u8>) -> Result<(), String> {
+    match (realtime, priority) {
+        (_, None) => Ok(()),
+        (false, Some(_)) => Err("--rt-priority needs --realtime".into()),
+        (true, Some(p)) => cdm_runtime::sched::fifo(p).map_err(|e| format!("{e}: {}", e.source)),
     }
 }
 

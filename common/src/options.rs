@@ -52,7 +52,7 @@ mod tests {
 /// links are part of the scenario's hash, so a member with other links is refused.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct LinkArgs {
-    /// Delay of every state between agents, milliseconds (rounded to whole ticks).
+    /// Delay of every state between members, milliseconds (rounded to whole ticks).
     #[arg(long, value_name = "MS", allow_negative_numbers = true)]
     pub link_delay_ms: Option<f64>,
     /// Extra delay per state, drawn uniformly in [0, MS) per (link, tick) from --seed.

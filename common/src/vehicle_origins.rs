@@ -63,7 +63,7 @@ pub enum OriginsError {
     Missing { path: PathBuf, id: u32 },
 }
 
-/// Every member's vehicle origin, by agent id.
+/// Every member's vehicle origin, by member id.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VehicleOrigins(BTreeMap<u32, Vec3>);
 

@@ -88,7 +88,7 @@ pub enum Command {
         /// The run directory.
         #[arg(value_name = "RUN_DIR")]
         dir: PathBuf,
-        /// The agent of fig_agent_<id>, a follower or a leader (default: the follower deepest
+        /// The member of fig_agent_<id>, a follower or a leader (default: the follower deepest
         /// in the graph).
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
@@ -186,7 +186,7 @@ pub enum ScenarioCommand {
         /// A built-in scenario name (paper40, the default).
         #[arg(conflicts_with = "n")]
         name: Option<String>,
-        /// A generated team of N agents instead (4..=2000).
+        /// A generated team of N members instead (4..=2000).
         #[arg(long)]
         n: Option<usize>,
         /// Output file (default: standard output); an existing file is replaced.
@@ -254,7 +254,7 @@ pub struct Source {
     /// A scenario file (TOML).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["n", "builtin"])]
     pub scenario: Option<PathBuf>,
-    /// A generated team of N agents (4..=2000).
+    /// A generated team of N members (4..=2000).
     #[arg(long, conflicts_with = "builtin")]
     pub n: Option<usize>,
     /// A built-in scenario (paper40).
@@ -308,7 +308,7 @@ pub struct RunOptions {
     /// Do not draw the figures at the end of the run.
     #[arg(long)]
     pub no_figures: bool,
-    /// The agent of fig_agent_<id>, a follower or a leader (default: the follower deepest in
+    /// The member of fig_agent_<id>, a follower or a leader (default: the follower deepest in
     /// the graph); checked before the flight.
     #[arg(long, value_name = "ID")]
     pub follow: Option<u32>,

@@ -333,7 +333,7 @@ pub fn load(source: &Source) -> Result<Scenario, Failure> {
     Ok(s)
 }
 
-/// `--follow ID` names an agent of the scenario: checked before the flight, not after it.
+/// `--follow ID` names a member of the scenario: checked before the flight, not after it.
 fn check_follow(s: &Scenario, follow: Option<u32>) -> Result<(), Failure> {
     match follow {
         Some(id) if s.role_of(id).is_none() => Err(Failure::bad_input(format!(

@@ -103,6 +103,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     if o.spawn {
         member_binaries_present()?;
     }
+    crate::realtime::schedule(o)?;
     let mut live = match o.serve {
         Some(addr) => Some(start_live(s, &addr.to_string(), o.quiet)?),
         None => None,

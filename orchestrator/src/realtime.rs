@@ -53,6 +53,11 @@ pub struct RealtimeArgs {
     /// every member on the start instant.
     #[arg(long, value_name = "SEED", default_value_t = 1)]
     pub phase_seed: u32,
+    /// With --realtime: run the orchestrator and every member under SCHED_FIFO at this
+    /// priority (1-99), so their wake-ups preempt ordinary processes; needs root,
+    /// CAP_SYS_NICE or `ulimit -r` (BENCHMARKS.md: late ticks with and without).
+    #[arg(long, value_name = "P", value_parser = clap::value_parser!(u8).range(common::sched::RT_PRIORITIES))]
+    pub rt_priority: Option<u8>,
 }
 
 /// Validated real-time options.
@@ -61,6 +66,17 @@ pub struct RealtimeOptions {
     pub audit_hz: f64,
     pub stale_after: Duration,
     pub phase_seed: u32,
+    pub rt_priority: Option<u8>,
+}
+
+/// `--rt-priority`: the orchestrator takes SCHED_FIFO itself before it creates or spawns
+/// anything (spawned members are also told with the flag, for hand-started ones), so a
+/// machine that does not allow it is refused up front with exit 2.
+pub fn schedule(o: &LaunchOptions) -> Result<(), Failure> {
+    match o.realtime.as_ref().and_then(|rt| rt.rt_priority) {
+        Some(p) => common::sched::fifo(p).map_err(Failure::bad_input),
+        None => Ok(()),
+    }
 }
 
 /// The state buffer a real-time team needs (ticks of states kept per subscriber): readers read
@@ -73,6 +89,9 @@ impl RealtimeArgs {
         if !self.realtime {
             if self.audit_hz.is_some() {
                 return Err(Failure::bad_input("--audit-hz needs --realtime"));
+            }
+            if self.rt_priority.is_some() {
+                return Err(Failure::bad_input("--rt-priority needs --realtime"));
             }
             return Ok(None);
         }
@@ -88,6 +107,7 @@ impl RealtimeArgs {
             audit_hz,
             stale_after,
             phase_seed: self.phase_seed,
+            rt_priority: self.rt_priority,
         }))
     }
 }
@@ -95,11 +115,17 @@ impl RealtimeArgs {
 /// The member flags of a real-time launch (spawned members get them; hand-started ones are told).
 pub fn member_flags(o: &LaunchOptions) -> Vec<String> {
     match &o.realtime {
-        Some(rt) => vec![
-            "--realtime".into(),
-            "--stale-after".into(),
-            rt.stale_after.as_secs_f64().to_string(),
-        ],
+        Some(rt) => {
+            let mut flags = vec![
+                "--realtime".into(),
+                "--stale-after".into(),
+                rt.stale_after.as_secs_f64().to_string(),
+            ];
+            if let Some(p) = rt.rt_priority {
+                flags.extend(["--rt-priority".into(), p.to_string()]);
+            }
+            flags
+        }
         None => Vec::new(),
     }
 }
@@ -204,7 +230,8 @@ fn announce(
         .map(|m| (m.id, m.position, m.role == Role::Follower))
         .collect();
     let hash = s.content_hash();
-    let core = MonitorCore::new(&members, hash, s.dt_s(), rt.phase_seed);
+    let history = (s.dt_s(), rt.stale_after.as_secs_f64());
+    let core = MonitorCore::new(&members, hash, history, rt.phase_seed);
     let lead = start_lead(members.len());
     let start_ns = unix_now_ns() + lead.as_nanos() as u64;
     let start = Instant::now() + lead;
@@ -339,7 +366,10 @@ impl Monitor<'_> {
         // below a multiple of the period after rounding).
         let last_audit = (t_end / period + 1e-9).floor() as u64;
         // Audit instants lag the wall clock by one member period: the state a member stamped
-        // just before an instant has then been published.
+        // just before an instant has then been published. An instant also waits until every
+        // member has been heard at or after it, so a member that is late (starved, or behind a
+        // slow link) is audited from the states around the instant instead of extrapolated
+        // from an old one; the wait is bounded by the stale rule above (--stale-after).
         let lag = s.dt_s();
         let mut progress =
             crate::progress::Progress::new("launch", last_audit, period, self.o.quiet);
@@ -365,7 +395,11 @@ impl Monitor<'_> {
                     return Err(exited_fault(id, &how, self.audits));
                 }
             }
-            while self.audits <= last_audit && self.audits as f64 * period + lag <= now_s {
+            let heard = self.core.heard_until();
+            while self.audits <= last_audit
+                && self.audits as f64 * period + lag <= now_s
+                && self.audits as f64 * period <= heard
+            {
                 self.audit_once(self.audits as f64 * period)?;
                 progress.tick(self.audits, self.audit.report());
                 self.audits += 1;
@@ -379,10 +413,11 @@ impl Monitor<'_> {
                 let _ = self.tel.flush();
             }
             // A plain sleep to the next audit instant (at most 10 ms, so fault reports are read
-            // promptly): the transport's timed wait is coarser, and members do not wake the
-            // monitor in real time.
+            // promptly; 1 ms while a due instant waits for a late member): the transport's timed
+            // wait is coarser, and members do not wake the monitor in real time.
             let next = self.audits as f64 * period + lag - self.now_s();
-            std::thread::sleep(Duration::from_secs_f64(next.clamp(0.0, 0.01)));
+            let wait = if next > 0.0 { next.min(0.01) } else { 0.001 };
+            std::thread::sleep(Duration::from_secs_f64(wait));
         }
     }
 

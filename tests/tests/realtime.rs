@@ -9,6 +9,8 @@
 //!   a killed member is named (agent-exited) the same way.
 //! - SIGINT to the orchestrator stops the team, nothing left.
 //! - A member started by hand in the other mode is refused with exit 2.
+//! - `--rt-priority P` puts the orchestrator and every member under SCHED_FIFO at P (read back
+//!   from /proc during the flight); without `--realtime` it is refused with exit 2.
 
 mod support;
 
@@ -227,6 +229,92 @@ fn sigint_in_real_time_leaves_nothing_behind() {
     );
     assert_no_process_of(&team);
     fp.assert_nothing_left();
+}
+
+/// The scheduling policy and real-time priority of a process (/proc/PID/stat fields 41 and 40).
+fn sched_of(pid: u32) -> (u32, u32) {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    let after_comm = stat.rsplit_once(')').map_or("", |(_, rest)| rest);
+    let fields: Vec<&str> = after_comm.split_whitespace().collect();
+    // Field 3 (state) is the first after the command name.
+    let field = |n: usize| {
+        fields
+            .get(n - 3)
+            .and_then(|f| f.parse().ok())
+            .unwrap_or(u32::MAX)
+    };
+    (field(41), field(40))
+}
+
+/// Whether this test process may use SCHED_FIFO at `p` (root, or `ulimit -r` >= p; CI runs
+/// as root). Checked without changing our own policy.
+fn may_use_fifo(p: u64) -> bool {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid rlimit for the call.
+    let ok = unsafe { libc::getrlimit(libc::RLIMIT_RTPRIO, &mut lim) } == 0;
+    // SAFETY: geteuid has no preconditions.
+    (unsafe { libc::geteuid() } == 0) || (ok && lim.rlim_cur >= p)
+}
+
+/// `--rt-priority 7`: while the short plan flies, the orchestrator and all 10 members run under
+/// SCHED_FIFO (policy 1) at priority 7; the flight ends SAFE. Where this machine does not allow
+/// it, the same launch is refused up front with exit 2 naming the flag. Without `--realtime`
+/// the flag is refused (exit 2) on launch and on a hand-started member.
+#[test]
+fn rt_priority_runs_the_team_under_sched_fifo() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_fifo");
+    let out = dir.path().join("rt");
+    let mut cmd = realtime_launch(&team, &out, &["--rt-priority", "7", "--max-ticks", "300"]);
+    if !may_use_fifo(7) {
+        let o = run(&mut cmd, DEADLINE);
+        assert_exit(
+            &o,
+            2,
+            "launch --rt-priority where SCHED_FIFO is not allowed",
+        );
+        assert_stderr_has(&o, "launch --rt-priority 7", &["--rt-priority 7"]);
+        return;
+    }
+    let mut orch = spawn(&mut cmd);
+    wait_for_rows(&mut orch, &out.join("telemetry.csv"), 50);
+    let procs = team_processes(&team);
+    assert_eq!(procs.len(), 11, "{procs:#?}");
+    for pid in procs.keys() {
+        assert_eq!(sched_of(*pid), (1, 7), "pid {pid}: {:?}", procs[pid]);
+    }
+    let o = orch.finish(DEADLINE);
+    assert_exit(&o, 0, "launch --realtime --rt-priority 7");
+    assert_eq!(read_json(&out.join("audit.json"))["verdict"], "SAFE");
+
+    let o = run(
+        &mut launch(
+            &unique_team("rt_fifo_ls"),
+            &dir.path().join("ls"),
+            &["--n", "10", "--rt-priority", "7"],
+        ),
+        DEADLINE,
+    );
+    assert_exit(&o, 2, "lockstep launch --rt-priority");
+    assert_stderr_has(&o, "--rt-priority", &["--rt-priority needs --realtime"]);
+    let o = run(
+        Command::new(integration_tests::bin("agent")).args([
+            "--scenario",
+            "no-such.toml",
+            "--team",
+            "rt_fifo_by_hand",
+            "--id",
+            "7",
+            "--rt-priority",
+            "7",
+        ]),
+        DEADLINE,
+    );
+    assert_exit(&o, 2, "agent --rt-priority without --realtime");
+    assert_stderr_has(&o, "--rt-priority", &["--rt-priority needs --realtime"]);
 }
 
 /// A member started by hand without --realtime for a real-time team (and one with --realtime

@@ -69,7 +69,7 @@ impl SafetyNumbers {
     }
 }
 
-/// One safety violation (the tick at which a condition starts to fail for these agents).
+/// One safety violation (the tick at which a condition starts to fail for these members).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Violation {
     /// `collision`, `containment`, `tracking` or `deformation`.
@@ -149,12 +149,12 @@ pub struct AuditReport {
     pub numbers: SafetyNumbers,
     /// lambda_1(U_D) minimum over the audited ticks.
     pub lambda1_min_run: Real,
-    /// Largest ||r_i - r_i,HT||_2 over the run, every agent (ERRATA 11: the guarantee's norm).
+    /// Largest ||r_i - r_i,HT||_2 over the run, every member (ERRATA 11: the guarantee's norm).
     pub max_deviation_m: Real,
     /// Largest ||r_i - r_i,HT||_inf (the paper's E_max, Sec. VII-D).
     pub max_deviation_inf_m: Real,
     pub max_follower_deviation_m: Real,
-    /// Smallest distance between two agents over the run.
+    /// Smallest distance between two members over the run.
     pub min_separation_m: Real,
     /// Smallest signed distance of a follower to the prism's side faces over the run.
     pub min_boundary_distance_m: Real,
@@ -171,7 +171,7 @@ pub struct AuditReport {
     /// `simulate` keep the audit.json they always had).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub realtime: Option<RealtimeFigures>,
-    /// What each member measured on its real vehicle (`launch --vehicles mavlink`), by agent id
+    /// What each member measured on its real vehicle (`launch --vehicles mavlink`), by member id
     /// (absent otherwise, so other runs keep the audit.json they always had).
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub vehicles: BTreeMap<u32, VehicleFigures>,
@@ -222,7 +222,7 @@ pub struct RealtimeFigures {
     pub slowest_member: Option<SlowMember>,
     /// Members whose pacing report the monitor received (of `agents`).
     pub members_reported: usize,
-    /// Audit instants (telemetry rows per agent) and their rate.
+    /// Audit instants (telemetry rows per member) and their rate.
     pub audits: u64,
     pub audit_hz: Real,
     /// The phase seed announced with the start (0: aligned, no offsets).

@@ -1,5 +1,5 @@
 //! The deterministic in-process engine: the whole team in one process, running the same
-//! per-agent `step` the agent processes run, in member order. It is the reference the
+//! per-member `step` the member processes run, in member order. It is the reference the
 //! multi-process runtime must match bit for bit.
 
 use crate::dynamics::{Chain, Flat, Plant, QuadState};
@@ -10,7 +10,7 @@ use crate::repair::Repair;
 use crate::scenario::Scenario;
 use crate::step::{law_for, step, tick_time, Law, NeighborModel, StepConfig, StepFault};
 
-/// An agent failed to complete a tick.
+/// A member failed to complete a tick.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[error("agent {id} at tick {tick}: {fault}")]
 pub struct AgentFault {
@@ -36,7 +36,7 @@ pub struct Engine<P: Plant> {
 }
 
 /// What the engine keeps for imperfect links (`link.rs`): the newest state each follower has
-/// heard of each in-neighbour, and every agent's recent states, from tick `history_from` on
+/// heard of each in-neighbour, and every member's recent states, from tick `history_from` on
 /// (the candidates still in flight).
 #[derive(Clone)]
 struct Links {
@@ -150,7 +150,7 @@ impl<P: Plant> Engine<P> {
         &self.scenario
     }
 
-    /// Advance every agent from tick k to k + 1: everyone reads the tick-k states, then steps.
+    /// Advance every member from tick k to k + 1: everyone reads the tick-k states, then steps.
     pub fn advance(&mut self) -> Result<(), AgentFault> {
         for (f, p) in self.flats.iter_mut().zip(&self.states) {
             *f = p.flat();

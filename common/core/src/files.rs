@@ -12,7 +12,7 @@ use std::io::{self, Read, Write};
 use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
-/// The largest file read whole (a 2000-agent scenario is about 0.3 MiB).
+/// The largest file read whole (a 2000-member scenario is about 0.3 MiB).
 pub const MAX_INPUT_BYTES: u64 = 64 << 20;
 
 /// A file that cannot be read or written, naming it.

@@ -10,7 +10,7 @@ use crate::frame::Frame;
 use crate::geometry::{barycentric, convex_hull, signed_boundary_distance};
 use crate::math::{eigenvalues_by_components, DMat, Real, Vec2, Vec3};
 
-/// What an agent is in the team.
+/// What a member is in the team.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Role {
@@ -45,7 +45,7 @@ impl Role {
     }
 }
 
-/// One agent of a formation, with everything derived at t0.
+/// One member of a formation, with everything derived at t0.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Member {
     pub id: u32,
@@ -67,7 +67,7 @@ pub struct Link {
     pub weights: [Real; 3],
 }
 
-/// A formation problem, named by the agent(s) at fault.
+/// A formation problem, named by the member(s) at fault.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FormationError {
     #[error("agent {id}: in-neighbour {neighbor} does not exist")]
@@ -109,7 +109,7 @@ pub struct Formation {
     pub polygon: Vec<usize>,
 }
 
-/// Input for one agent: id, role, position on the plane, optional in-neighbours.
+/// Input for one member: id, role, position on the plane, optional in-neighbours.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MemberInput {
     pub id: u32,
@@ -309,7 +309,7 @@ impl Formation {
         }
     }
 
-    /// Out-neighbours of every agent (who subscribes to whom), sorted, by id.
+    /// Out-neighbours of every member (who subscribes to whom), sorted, by id.
     pub fn out_neighbors(&self) -> BTreeMap<u32, Vec<u32>> {
         let mut out: BTreeMap<u32, Vec<u32>> =
             self.members.iter().map(|m| (m.id, Vec::new())).collect();

@@ -3,13 +3,13 @@
 //! with every weight (eq. 18) at least a floor.
 //!
 //! The graph is acyclic (ERRATA 7 allows it): followers are taken in farthest-point order (next
-//! the follower farthest from every agent already placed, the leaders first), and each picks its
-//! in-neighbours among the agents placed before it. Early followers are spread over the polygon
-//! and later ones fill in between, so at every step the placed agents surround the next follower
+//! the follower farthest from every member already placed, the leaders first), and each picks its
+//! in-neighbours among the members placed before it. Early followers are spread over the polygon
+//! and later ones fill in between, so at every step the placed members surround the next follower
 //! at about its distance to the nearest of them: triangles stay local (no follower reaches across
-//! the formation, no agent has hundreds of readers) at every scale, like the levels of a
+//! the formation, no member has hundreds of readers) at every scale, like the levels of a
 //! multigrid. A follower's state for a tick then never waits, through a cycle, on its
-//! own state for that tick, so in the multi-process team every agent can run a whole window of
+//! own state for that tick, so in the multi-process team every member can run a whole window of
 //! ticks on one wake-up once its in-neighbours have; with cycles every tick costs a round trip
 //! of wake-ups around the cycle. It also makes the followers' block of L triangular with
 //! spec(L) = {-1}.
@@ -34,10 +34,10 @@ pub struct SynthesisError {
     pub best: Real,
 }
 
-/// Candidate set sizes tried in turn (nearest agents first).
+/// Candidate set sizes tried in turn (nearest members first).
 const CANDIDATES: [usize; 4] = [10, 16, 28, 48];
 
-/// Give every follower without in-neighbours a triangle: among the agents placed before it (in
+/// Give every follower without in-neighbours a triangle: among the members placed before it (in
 /// farthest-point order) nearest to it (distance, then id: deterministic), the triangle that
 /// maximises the smallest weight, subject to weight >= floor.
 pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), SynthesisError> {
@@ -81,7 +81,7 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
 
 /// Among `near` (candidates sorted by distance, then id), the triangle around `p` that maximises
 /// the smallest weight (eq. 18), subject to weight >= floor: first among the k nearest for each k
-/// of `CANDIDATES`, at last among the 16 nearest and every agent of `leader_ids`. The outermost
+/// of `CANDIDATES`, at last among the 16 nearest and every member of `leader_ids`. The outermost
 /// followers along a straight edge of the polygon have nothing but the edge's ends (leaders)
 /// beyond them, which is why leaders have the most readers (N = 1000: 36). Deterministic; the
 /// ids come sorted. Err: the best smallest weight seen (for the message).

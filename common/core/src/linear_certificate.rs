@@ -10,14 +10,14 @@
 //! exponential ([`TickMaps`]); the engine's RK4 differs from it by O((k dt)^5) per tick. The
 //! test `common/tests/certificate.rs` bounds the difference against the full flight.
 //!
-//! How it stays cheap at N = 1000. Every agent's desired position is r_i,HT(t) = r_i0 + s(t) D_i
+//! How it stays cheap at N = 1000. Every member's desired position is r_i,HT(t) = r_i0 + s(t) D_i
 //! with D_i = sum_p alpha_ip (goal_p - start_p) (eqs. 13, 15), and the weights reproduce it
 //! (sum_j w_ij D_j = D_i, eq. 18). In error coordinates x_i = state_i - state_i,HT:
 //! - a leader (full feed-forward, ERRATA 4) has x_L(k) = Lam(k) D_L, one scalar response Lam;
 //! - a follower has x_i = phi D_i + H[sum_j w_ij x_j], where phi is its response to the plan's
 //!   forcing E_Q (ERRATA 8) and H the operator "one follower driven by a neighbour sequence".
 //!
-//! H acts on time and W on agents, so they commute, and with an acyclic graph (ERRATA 7: the
+//! H acts on time and W on members, so they commute, and with an acyclic graph (ERRATA 7: the
 //! follower block W_FF is nilpotent) the series ends:
 //! x_F = (phi + H Lam) c_0 + sum_{l >= 1} H^l psi c_l, with psi = phi + H Lam - Lam and
 //! c_l = W_FF^l D_F. So the whole team is D + 2 scalar chains (D = the follower graph's depth)
@@ -47,7 +47,7 @@ pub enum NotLinear {
     /// A follower's weights do not reproduce its desired position (sum_j w_ij alpha_j != alpha_i).
     #[error("follower {id}: weights reproduce its alpha only to {residual:e}")]
     Weights { id: u32, residual: Real },
-    /// An agent does not start at its desired position r_HT(0).
+    /// A member does not start at its desired position r_HT(0).
     #[error("agent {id} starts {distance_m:e} m from its desired position")]
     OffPlan { id: u32, distance_m: Real },
 }
@@ -55,7 +55,7 @@ pub enum NotLinear {
 /// Ticks between the points of the coarse pass of [`max_norm`] (0.25 s at 100 Hz).
 const COARSE_TICKS: usize = 25;
 
-/// The per-tick maps of one axis of one agent (exact discretisation).
+/// The per-tick maps of one axis of one member (exact discretisation).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TickMaps {
     /// Continuous chain matrix of a follower (and of a leader's error): x' = A x + e4 u.
@@ -204,7 +204,7 @@ impl LinearTeam {
         self.max_follower_deviation_delayed(t_total_s, 0)
     }
 
-    /// [`Self::max_follower_deviation`] with every state between agents `delay_ticks` late
+    /// [`Self::max_follower_deviation`] with every state between members `delay_ticks` late
     /// (what the engine flies with `[link] delay_ms` = delay_ticks / comm_hz and no jitter or
     /// loss). Not finite when the delayed team diverges.
     pub fn max_follower_deviation_delayed(&self, t_total_s: Real, delay_ticks: u64) -> Real {

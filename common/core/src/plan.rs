@@ -1,5 +1,5 @@
 //! Leader plans: the quintic of eqs. 15-16 with exact derivatives, the primary leaders' desired
-//! trajectories, and every other agent's global desired position through its alpha parameters
+//! trajectories, and every other member's global desired position through its alpha parameters
 //! (eqs. 13-14, 23).
 
 use crate::frame::{deformation_eigenvalues, CollinearLeaders, Homogeneous};
@@ -124,7 +124,7 @@ impl TeamPlan {
         })
     }
 
-    /// Derivatives 0..4 of r_HT for an agent with alpha parameters `alpha` (eq. 13): an affine
+    /// Derivatives 0..4 of r_HT for a member with alpha parameters `alpha` (eq. 13): an affine
     /// combination of the primary leaders' (ERRATA, "useful identities"), so no numerical
     /// differentiation is needed.
     pub fn agent_derivs(&self, alpha: &[Real; 3], t: Real, segment: Segment) -> Derivs {

@@ -20,7 +20,7 @@ pub fn lambda_from_delta(delta_m: Real, delta_max_m: Real, eps_m: Real) -> Real 
     (delta_m + eps_m) / (delta_max_m + eps_m)
 }
 
-/// D_B: the smallest distance between any two agents at t0 (Sec. VI-A).
+/// D_B: the smallest distance between any two members at t0 (Sec. VI-A).
 pub fn d_b(formation: &Formation) -> Real {
     let pos: Vec<Vec3> = formation.members.iter().map(|m| m.position).collect();
     min_separation(&pos).0

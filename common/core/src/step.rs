@@ -1,7 +1,7 @@
-//! One agent's tick: the pure function both the in-process engine and the agent processes call,
+//! One member's tick: the pure function both the in-process engine and the member processes call,
 //! so that they produce bit-identical states.
 //!
-//! At tick k every agent takes its in-neighbours' tick-k states and integrates its own plant and
+//! At tick k every member takes its in-neighbours' tick-k states and integrates its own plant and
 //! controller from t_k = k dt to t_{k+1} with RK4 substeps. Inside the tick a follower does not
 //! hold its neighbours still: it extrapolates each neighbour's position with the neighbour's own
 //! velocity, acceleration and jerk at t_k (all exact functions of its 12-state),
@@ -26,7 +26,7 @@ pub enum NeighborModel {
     Hold,
 }
 
-/// How an agent steers (eqs. 44, ERRATA 4).
+/// How a member steers (eqs. 44, ERRATA 4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Law {
     /// Leaders track r_HT = sum_j alpha_j r_j,HT with full feed-forward:
@@ -46,7 +46,7 @@ pub struct StepConfig {
     pub neighbor_model: NeighborModel,
 }
 
-/// Why an agent could not complete a tick.
+/// Why a member could not complete a tick.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum StepFault {
     /// The controller or plant failed (singular decoupling matrix, non-finite state).
@@ -104,7 +104,7 @@ pub struct TickAt {
     pub offset_s: Real,
 }
 
-/// Advance one agent from tick `tick` to `tick + 1`. `neighbors` are the in-neighbours' tick-k
+/// Advance one member from tick `tick` to `tick + 1`. `neighbors` are the in-neighbours' tick-k
 /// flat outputs in the order of the follower's weights (ignored for leaders); `neighbor_ids`
 /// name them in faults.
 pub fn step<P: Plant>(

@@ -1,4 +1,4 @@
-//! telemetry.csv: one row per agent per tick, ordered by tick then id. Numbers use Rust's
+//! telemetry.csv: one row per member per tick, ordered by tick then id. Numbers use Rust's
 //! shortest round-trip formatting, so equal values give equal bytes (the determinism contract
 //! between `simulate` and `launch` is checked on these bytes).
 
@@ -44,7 +44,7 @@ pub trait TelemetrySink {
     fn finish(&mut self) -> io::Result<()>;
 }
 
-/// One agent at one tick.
+/// One member at one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Row {
     pub tick: u64,

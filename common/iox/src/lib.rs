@@ -84,6 +84,7 @@ pub use limits::describe_spawn_error;
 pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
 pub use team::{scenario_hash_value, RepairRoom, TeamLayout, TeamName, SCENARIO_HASH_KEY};
+pub mod bench_barrier;
 pub use wire::{ClockWire, StateWire, Wire, CLOCK_TYPE_NAME, STATE_TYPE_NAME};
 
 /// The runtime's wire messages, at the path the backend's modules name them.

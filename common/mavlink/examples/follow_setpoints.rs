@@ -8,7 +8,7 @@
 //!                 --index 0 --from 0,0,2 --to 2,1,3
 //!   Terminal 2: .venv/bin/python tests/python/mavlink_vehicle.py --port 14540 --start-ned 0,0,-2
 //!
-//! Exit codes: 0 plan flown, 2 bad arguments, 3 the vehicle link failed (message names the agent).
+//! Exit codes: 0 plan flown, 2 bad arguments, 3 the vehicle link failed (message names the member).
 
 use std::net::IpAddr;
 use std::process::ExitCode;
@@ -25,7 +25,7 @@ use clap::Parser;
 #[derive(Debug, Parser)]
 #[command(about = "Stream a straight-line plan to one MAVLink vehicle and report how it went")]
 struct Args {
-    /// The member's agent id (named in faults).
+    /// The member's id (named in faults).
     #[arg(long, default_value_t = 0)]
     agent: u32,
     /// The member's index in scenario order: it listens on base port + index.

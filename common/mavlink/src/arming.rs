@@ -70,7 +70,7 @@ pub enum ArmAction {
     Arm,
 }
 
-/// Why `--arm` failed. Every variant names the member (its agent id).
+/// Why `--arm` failed. Every variant names the member (by id).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum ArmError {
     #[error("agent {agent}: --arm does not know autopilot MAV_AUTOPILOT {autopilot} (PX4 and ArduPilot only); switch mode and arm by hand without --arm")]

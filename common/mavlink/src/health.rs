@@ -9,7 +9,7 @@ pub const HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(1);
 /// No LOCAL_POSITION_NED for this long: the member flies blind (issue 13).
 pub const POSITION_TIMEOUT: Duration = Duration::from_millis(500);
 
-/// Why a member's vehicle link failed. Every variant names the member (its agent id).
+/// Why a member's vehicle link failed. Every variant names the member (by id).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum LinkFault {
     /// Nothing usable (a HEARTBEAT and a position) arrived before the connect deadline.

@@ -30,7 +30,7 @@ use crate::vehicle::{AttitudeFigures, LinkCounters, MavlinkVehicle, VehicleConfi
 /// How one member's plant is set up.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlantConfig {
-    /// The link: agent id, `--vehicle-origin`, `--arm`, the connect deadline.
+    /// The link: member id, `--vehicle-origin`, `--arm`, the connect deadline.
     pub vehicle: VehicleConfig,
     /// `H:(P + i)`.
     pub bind: SocketAddr,
@@ -184,7 +184,7 @@ impl<'a> MavlinkPlant<'a> {
         }
     }
 
-    /// The member's agent id.
+    /// The member's id.
     pub fn agent(&self) -> u32 {
         self.agent
     }
@@ -223,7 +223,7 @@ impl<'a> MavlinkPlant<'a> {
         *lock(&self.shared).vehicle.counters()
     }
 
-    /// The link's failure as the member reports it (the message names the agent).
+    /// The link's failure as the member reports it (the message names the member).
     fn link_fault(f: &PlantError) -> VehicleFault {
         VehicleFault::Link {
             what: f.to_string(),

@@ -29,7 +29,7 @@ pub enum TeamArmError<E: std::error::Error + 'static> {
         #[source]
         source: E,
     },
-    /// The vehicle was lost or refused the mode change or arming (`what` names the agent).
+    /// The vehicle was lost or refused the mode change or arming (`what` names the member).
     #[error("{what} (before the start)")]
     Vehicle { agent: u32, what: String },
     /// This member has `--arm` but the orchestrator started the flight without the arm order.

@@ -19,7 +19,7 @@ pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
 /// How one member's link is set up.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VehicleConfig {
-    /// The member's agent id (named in every fault).
+    /// The member's id (named in every fault).
     pub agent: u32,
     /// `--vehicle-origin`: where the vehicle's NED origin is in the scenario.
     pub origin: VehicleOrigin,
@@ -270,7 +270,7 @@ impl MavlinkVehicle {
         &self.counters
     }
 
-    /// The member's agent id.
+    /// The member's id.
     pub fn agent(&self) -> u32 {
         self.config.agent
     }

@@ -280,7 +280,7 @@ mod tests {
         let path = dir.join("t.parquet");
         let mut w = ParquetTelemetryWriter::create(&path, 2).unwrap();
         let mut want = Vec::new();
-        // 30,000 ticks of 5 agents, every 2nd kept: 75,000 rows, more than one row group.
+        // 30,000 ticks of 5 members, every 2nd kept: 75,000 rows, more than one row group.
         for tick in 0..30_000 {
             let rows: Vec<Row> = (1..=5).map(|id| row(tick, id)).collect();
             if w.keeps(tick) {

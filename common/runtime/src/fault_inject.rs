@@ -3,9 +3,9 @@
 //! both ids instead of flying on it.
 //!
 //! Set `CDM_FAULT_INJECT=<id>:<kind>@<tick>` in the environment of a member (or of the
-//! orchestrator, whose children inherit it); only the member flying agent `<id>` acts on it:
+//! orchestrator, whose children inherit it); only member `<id>` acts on it:
 //!
-//! | kind | what agent `<id>` publishes at tick `<tick>` |
+//! | kind | what member `<id>` publishes at tick `<tick>` |
 //! |---|---|
 //! | `nan` | its state with x = NaN |
 //! | `tick` | its state labelled tick `<tick> + 1` (a state from the wrong step) |
@@ -40,7 +40,7 @@ pub struct Injection {
     pub tick: u64,
 }
 
-/// Parses `<id>:<kind>@<tick>`; `None` when it is malformed or aimed at another agent.
+/// Parses `<id>:<kind>@<tick>`; `None` when it is malformed or aimed at another member.
 pub fn parse(spec: &str, my_id: u32) -> Option<Injection> {
     let (id, rest) = spec.split_once(':')?;
     let (kind, tick) = rest.split_once('@')?;
@@ -60,7 +60,7 @@ pub fn parse(spec: &str, my_id: u32) -> Option<Injection> {
     })
 }
 
-/// The injection for agent `my_id` from the environment, if any (logged as a warning).
+/// The injection for member `my_id` from the environment, if any (logged as a warning).
 pub fn from_env(my_id: u32) -> Option<Injection> {
     let spec = std::env::var(ENV).ok()?;
     let found = parse(&spec, my_id);

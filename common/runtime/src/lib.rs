@@ -14,6 +14,7 @@ pub mod realtime;
 pub mod realtime_links;
 pub mod realtime_loop;
 pub mod realtime_monitor;
+pub mod sched;
 pub mod seams;
 pub mod signals;
 pub mod stall;

@@ -1,6 +1,6 @@
 //! Wire types exchanged over shared memory, named by direction of travel:
-//! [`StateMsg`] goes from an agent to its out-neighbours and the orchestrator, [`ClockMsg`] from
-//! the orchestrator to every agent.
+//! [`StateMsg`] goes from a member to its out-neighbours and the orchestrator, [`ClockMsg`] from
+//! the orchestrator to every member.
 //!
 //! Both are `#[repr(C)]` with plain fields only (`u32`, `u64`, `f64`, arrays), so iceoryx2 can
 //! place them in shared memory as they are. The backend (cdm-iox) gives them `ZeroCopySend` and
@@ -9,9 +9,9 @@
 //! them. Decoding never fails: a code this build does not know is kept as `Unknown(code)` so a
 //! newer peer cannot crash an older one.
 
-/// `StateMsg::status`: the agent is healthy.
+/// `StateMsg::status`: the member is healthy.
 pub const STATUS_OK: u32 = 0;
-/// `StateMsg::status`: the agent has detected a fault and is no longer following the plan.
+/// `StateMsg::status`: the member has detected a fault and is no longer following the plan.
 pub const STATUS_FAULT: u32 = 1;
 /// `StateMsg::status`: not a state but a real-time member's pacing report, sent once when the
 /// team stops (`tick`: ticks flown; `state`: the figures, see `cdm_runtime::realtime::Pacing`).
@@ -29,7 +29,7 @@ pub const STATUS_VEHICLE: u32 = 4;
 
 /// `StateMsg::fault_code`: no fault (always the value while `status == STATUS_OK`).
 pub const FAULT_NONE: u32 = 0;
-/// `StateMsg::fault_code`: the agent's own state or command became non-finite.
+/// `StateMsg::fault_code`: the member's own state or command became non-finite.
 pub const FAULT_NON_FINITE: u32 = 1;
 /// `StateMsg::fault_code`: a neighbour (`fault_peer`) sent nothing before the deadline.
 pub const FAULT_NEIGHBOR_SILENT: u32 = 2;
@@ -50,20 +50,20 @@ pub const FAULT_CONTROL: u32 = 8;
 /// `StateMsg::fault_code`: the member lost its real vehicle (`--vehicles mavlink`: no HEARTBEAT
 /// for 1 s or no position for 0.5 s, or the vehicle refused to arm).
 pub const FAULT_VEHICLE_LOST: u32 = 9;
-/// `StateMsg::fault_code`: the agent runs on another host whose daemon can no longer be heard
-/// (a network partition or a dead daemon); published on the agent's behalf by the orchestrator's
+/// `StateMsg::fault_code`: the member runs on another host whose daemon can no longer be heard
+/// (a network partition or a dead daemon); published on the member's behalf by the orchestrator's
 /// bridge (issue 12).
 pub const FAULT_HOST_LOST: u32 = 10;
-/// `StateMsg::fault_code`: the agent's process on another host exited before the stop; its
+/// `StateMsg::fault_code`: the member's process on another host exited before the stop; its
 /// host's daemon saw it and the orchestrator's bridge publishes this on its behalf.
 pub const FAULT_REMOTE_EXITED: u32 = 11;
 
-/// `StateMsg::fault_peer` when the fault involves no other agent.
+/// `StateMsg::fault_peer` when the fault involves no other member.
 pub const NO_PEER: u32 = u32::MAX;
 
-/// `ClockMsg::command`: agents may compute ticks up to and including `grant_tick`.
+/// `ClockMsg::command`: members may compute ticks up to and including `grant_tick`.
 pub const COMMAND_RUN: u32 = 0;
-/// `ClockMsg::command`: agents stop; `reason` says why.
+/// `ClockMsg::command`: members stop; `reason` says why.
 pub const COMMAND_STOP: u32 = 1;
 /// `ClockMsg::command`: fly in real time (`--realtime`). `grant_tick` carries the start instant,
 /// tick 0's wall time as CLOCK_REALTIME nanoseconds since the Unix epoch, and `reason` the phase
@@ -83,14 +83,14 @@ pub const PHASES_ALIGNED: u32 = 0;
 pub const REASON_NONE: u32 = 0;
 /// `ClockMsg::reason`: the scenario reached its last tick.
 pub const REASON_FINISHED: u32 = 1;
-/// `ClockMsg::reason`: an agent reported a fault.
+/// `ClockMsg::reason`: a member reported a fault.
 pub const REASON_AGENT_FAULT: u32 = 2;
-/// `ClockMsg::reason`: an agent stopped answering before the deadline.
+/// `ClockMsg::reason`: a member stopped answering before the deadline.
 pub const REASON_AGENT_SILENT: u32 = 3;
 /// `ClockMsg::reason`: the operator interrupted the run (signal).
 pub const REASON_INTERRUPTED: u32 = 4;
 
-/// One agent's full state at one tick, published once per tick.
+/// One member's full state at one tick, published once per tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct StateMsg {
@@ -99,24 +99,24 @@ pub struct StateMsg {
     pub tick: u64,
     /// Hash of the scenario the sender runs; a mismatch means two different runs got mixed.
     pub scenario_hash: u64,
-    /// The sender's agent id (equal to the `<id>` of the `state/<id>` service it arrives on).
+    /// The sender's member id (equal to the `<id>` of the `state/<id>` service it arrives on).
     pub id: u32,
     /// [`STATUS_OK`] or [`STATUS_FAULT`].
     pub status: u32,
     /// One of the `FAULT_*` codes; [`FAULT_NONE`] while the status is ok.
     pub fault_code: u32,
-    /// The agent the fault is about, or [`NO_PEER`].
+    /// The member the fault is about, or [`NO_PEER`].
     pub fault_peer: u32,
     /// The full quadcopter state; its layout belongs to the dynamics module, the transport never
     /// looks inside.
     pub state: [f64; 12],
 }
 
-/// The orchestrator's grant: how far agents may run, or that they must stop.
+/// The orchestrator's grant: how far members may run, or that they must stop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(C)]
 pub struct ClockMsg {
-    /// The last tick agents may compute (inclusive).
+    /// The last tick members may compute (inclusive).
     pub grant_tick: u64,
     /// Hash of the scenario the orchestrator runs.
     pub scenario_hash: u64,
@@ -153,7 +153,7 @@ pub struct LossNotice {
     pub linked: u32,
 }
 
-/// Why an agent is faulty (the Rust view of `StateMsg::fault_code`).
+/// Why a member is faulty (the Rust view of `StateMsg::fault_code`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum FaultCode {
     /// [`FAULT_NON_FINITE`]
@@ -240,17 +240,17 @@ impl FaultCode {
 pub enum AgentStatus {
     /// Healthy.
     Ok,
-    /// Faulty, with the reason and the agent it is about (if any).
+    /// Faulty, with the reason and the member it is about (if any).
     Fault {
         /// What went wrong.
         code: FaultCode,
-        /// The other agent involved, if any.
+        /// The other member involved, if any.
         peer: Option<u32>,
     },
 }
 
 impl StateMsg {
-    /// A healthy agent's state at `tick`.
+    /// A healthy member's state at `tick`.
     pub fn ok(tick: u64, scenario_hash: u64, id: u32, state: [f64; 12]) -> Self {
         Self {
             tick,
@@ -437,7 +437,7 @@ impl ClockMsg {
     }
 
     /// Decodes `command` and `reason`. Any command other than [`COMMAND_RUN`] and
-    /// [`COMMAND_REALTIME`] stops: an agent that cannot understand the orchestrator must not
+    /// [`COMMAND_REALTIME`] stops: a member that cannot understand the orchestrator must not
     /// keep flying the plan.
     pub fn command(&self) -> ClockCommand {
         match self.command {

@@ -13,16 +13,17 @@ use cdm_core::step::{extrapolate_flat, NeighborModel};
 use crate::messages::{AgentStatus, FaultCode, StateMsg};
 use crate::realtime::{phase_offset_s, stamp_s, Pacing, PacingFigures};
 
-/// States kept per member: enough to find the newest one at or before an audit instant that
-/// lags the wall clock by one period.
-const RING: usize = 8;
+/// States kept per member beyond the history the monitor is asked to cover: an audit instant
+/// waits for the slowest member (up to the stale bound), so the fastest members' states back to
+/// that instant must still be kept.
+const RING_SLACK: usize = 8;
 
 /// What a message told the monitor.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Heard {
     /// A state, a pacing report, or nothing of interest.
     Nothing,
-    /// A member reported a fault at its tick `tick` (`peer`: the agent it is about).
+    /// A member reported a fault at its tick `tick` (`peer`: the member it is about).
     Fault {
         id: u32,
         tick: u64,
@@ -54,11 +55,20 @@ pub struct MonitorCore {
     members: Vec<Seen>,
     index: BTreeMap<u32, usize>,
     stopped: bool,
+    /// States kept per member.
+    ring: usize,
 }
 
 impl MonitorCore {
-    /// `members` in formation order: (id, initial position, is a follower).
-    pub fn new(members: &[(u32, Vec3, bool)], hash: u64, dt_s: f64, phase_seed: u32) -> Self {
+    /// `members` in formation order: (id, initial position, is a follower). `history_s`: how far
+    /// back an audit instant may lie behind the newest states (the stale bound).
+    pub fn new(
+        members: &[(u32, Vec3, bool)],
+        hash: u64,
+        (dt_s, history_s): (f64, f64),
+        phase_seed: u32,
+    ) -> Self {
+        let ring = (history_s / dt_s).ceil().clamp(0.0, 1e5) as usize + RING_SLACK;
         let members: Vec<Seen> = members
             .iter()
             .map(|&(id, p, follower)| Seen {
@@ -66,7 +76,7 @@ impl MonitorCore {
                 follower,
                 phase_s: phase_offset_s(phase_seed, id, dt_s),
                 at_rest: Flat::rest(p),
-                states: VecDeque::with_capacity(RING),
+                states: VecDeque::with_capacity(ring),
                 pacing: None,
                 final_report: false,
             })
@@ -78,6 +88,7 @@ impl MonitorCore {
             members,
             index,
             stopped: false,
+            ring,
         }
     }
 
@@ -111,7 +122,7 @@ impl MonitorCore {
             };
         }
         if m.states.back().is_none_or(|(t, _)| msg.tick > *t) {
-            if m.states.len() == RING {
+            if m.states.len() == self.ring {
                 m.states.pop_front();
             }
             m.states.push_back((msg.tick, msg.state));
@@ -150,18 +161,30 @@ impl MonitorCore {
             })
     }
 
+    /// The instant up to which every member has been heard: the oldest of the members' newest
+    /// stamps (0, the start, while one has sent nothing). An audit instant at or before it is
+    /// audited from states that bracket it, not extrapolated from a late one.
+    pub fn heard_until(&self) -> f64 {
+        (0..self.members.len())
+            .map(|k| self.newest_stamp(k))
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// Position and velocity of member `k` (formation order) at time `t_s`: its newest state
-    /// stamped at or before `t_s` (its rest before the first), moved to `t_s` on the cubic
-    /// Taylor model of a tick.
+    /// stamped at or before `t_s`, moved to `t_s` on the cubic Taylor model of a tick. When
+    /// every kept state is newer (the monitor fell behind its ring), the oldest kept one is
+    /// moved back to `t_s`; only a member never heard is taken at rest, where it starts.
     pub fn state_at(&self, k: usize, t_s: f64) -> (Vec3, Vec3) {
         let m = &self.members[k];
+        let stamped = |(t, x): &(u64, [f64; 12])| (stamp_s(*t, m.phase_s, self.dt_s), *x);
         let (stamp, flat) = m
             .states
             .iter()
             .rev()
-            .map(|(t, x)| (stamp_s(*t, m.phase_s, self.dt_s), x))
+            .map(stamped)
             .find(|(stamp, _)| *stamp <= t_s)
-            .map_or((0.0, m.at_rest), |(stamp, x)| (stamp, QuadState(*x).flat()));
+            .or_else(|| m.states.front().map(stamped))
+            .map_or((0.0, m.at_rest), |(stamp, x)| (stamp, QuadState(x).flat()));
         let f = extrapolate_flat(&flat, t_s - stamp, NeighborModel::Taylor);
         (f.r, f.v)
     }

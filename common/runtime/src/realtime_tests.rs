@@ -306,7 +306,7 @@ fn monitor() -> MonitorCore {
         (1, vec3([0.0, 0.0, 0.0]), false),
         (2, vec3([10.0, 0.0, 0.0]), true),
     ];
-    MonitorCore::new(&members, HASH, DT, PHASES_ALIGNED)
+    MonitorCore::new(&members, HASH, (DT, 0.5), PHASES_ALIGNED)
 }
 
 #[test]
@@ -329,6 +329,37 @@ fn the_monitor_brings_newest_states_to_its_instants() {
     m.on_state(&StateMsg::ok(20, HASH, 1, x));
     assert!((m.state_at(0, 0.15).0.x - 0.1).abs() < 1e-12);
     assert!((m.state_at(0, 0.2).0.x - 5.0).abs() < 1e-12);
+}
+
+/// An audit instant waits for the slowest member (`heard_until`: the oldest newest stamp), and
+/// an instant older than every kept state is taken from the oldest kept state moved back to it,
+/// never from where the member started (which read as a false violation once the monitor fell
+/// behind its ring under load).
+#[test]
+fn the_monitor_waits_for_the_slowest_member_and_never_falls_back_to_rest() {
+    let mut m = monitor();
+    assert_eq!(m.heard_until(), 0.0, "nothing heard yet");
+    // Member 1 moves at 2 m/s along x from x = 0; ticks 1..=100 overflow its ring (0.5 s / DT
+    // + 8 = 58 states), so ticks 43..=100 are kept.
+    for tick in 1..=100u64 {
+        let mut x = [0.0; 12];
+        x[0] = 2.0 * tick as f64 * DT;
+        x[3] = 2.0;
+        x[6] = 9.81;
+        m.on_state(&StateMsg::ok(tick, HASH, 1, x));
+    }
+    assert_eq!(m.heard_until(), 0.0, "member 2 not heard yet");
+    m.on_state(&StateMsg::ok(30, HASH, 2, [0.0; 12]));
+    assert!(
+        (m.heard_until() - 30.0 * DT).abs() < 1e-12,
+        "{}",
+        m.heard_until()
+    );
+    let (r, _) = m.state_at(0, 5.0 * DT);
+    assert!(
+        (r.x - 0.1).abs() < 1e-9,
+        "moved back from tick 43, not at rest: {r:?}"
+    );
 }
 
 #[test]

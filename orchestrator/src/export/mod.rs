@@ -33,7 +33,7 @@ use crate::{Exit, Failure};
 pub struct Scaled {
     pub scenario: Scenario,
     pub frame: TargetFrame,
-    /// r_HT of every agent, in id order.
+    /// r_HT of every member, in id order.
     pub trajs: Vec<AgentTrajectory>,
     pub roles: Vec<Role>,
 }

@@ -122,11 +122,11 @@ pub struct TickSample {
     pub t_s: Real,
     /// Eigenvalues of U_D, ascending (Fig. 8).
     pub lambdas: [Real; 3],
-    /// Smallest distance between two agents, D_B(t) (Fig. 11).
+    /// Smallest distance between two members, D_B(t) (Fig. 11).
     pub min_separation_m: Real,
     /// Smallest signed distance of a follower to the containment prism's sides, D_S(t) (Fig. 11).
     pub min_boundary_m: Real,
-    /// The followed agent: actual and desired position (Fig. 9).
+    /// The followed member: actual and desired position (Fig. 9).
     pub follow_r: Vec3,
     pub follow_ht: Vec3,
 }
@@ -255,7 +255,7 @@ pub fn lambdas_at(s: &Scenario, t: Real) -> [Real; 3] {
     s.plan.lambdas_at_s(sp).unwrap_or([0.0; 3])
 }
 
-/// Read a run directory. `follow` overrides the followed agent (it must be a member).
+/// Read a run directory. `follow` overrides the followed member (it must be in the scenario).
 pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let sc_path = dir.join("scenario.toml");
     let scenario =

@@ -1,4 +1,4 @@
-//! fig_export_top_view: an exported team seen from above in the target frame: every agent's
+//! fig_export_top_view: an exported team seen from above in the target frame: every member's
 //! path (r_HT, eq. 13), its start and its goal, on equal axes in metres, so the scale and the
 //! spacing that the certificate judges can be seen.
 
@@ -11,7 +11,7 @@ use common::math::{Real, Vec3};
 
 use super::plot::{e, write_figure, Figure, FAMILY, GREY, PALETTE};
 
-/// One agent's path from above.
+/// One member's path from above.
 pub struct TopPath {
     pub leader: bool,
     pub points: Vec<Vec3>,

@@ -12,7 +12,7 @@ use crate::report::data::{
     boundary_distance, lambdas_at, living_separation, Repair, TickPositions, ViolationMark,
 };
 
-/// One agent as the viewer lists it.
+/// One member as the viewer lists it.
 #[derive(Debug, Clone, Serialize)]
 pub struct AgentInfo {
     pub id: u32,
@@ -61,7 +61,7 @@ pub struct Frame {
     pub t: Real,
     /// Positions in millimetres, x y z per member (integers keep replay.html small).
     pub p: Vec<i64>,
-    /// Smallest distance between two agents (limit 2 eps, Fig. 11).
+    /// Smallest distance between two members (limit 2 eps, Fig. 11).
     pub sep: Real,
     /// Largest follower deviation |r - r_HT| (limit delta, eq. 38).
     pub dev: Real,
@@ -213,7 +213,7 @@ fn finite_or(v: Real, fallback: Real) -> Real {
     }
 }
 
-/// Frames kept so that replay.html stays within `budget_bytes` at `agents` agents: each frame
+/// Frames kept so that replay.html stays within `budget_bytes` at `agents` members: each frame
 /// costs about 7 bytes per coordinate; 3 MB are left for three.js and the page.
 pub fn frame_stride(ticks: u64, agents: usize, budget_bytes: usize) -> u64 {
     let per_frame = agents * 3 * 7 + 120;

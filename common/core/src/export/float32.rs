@@ -75,7 +75,7 @@ pub fn team_bound_m(trajs: &[AgentTrajectory], count: usize) -> Real {
 pub struct CrazyflieSplit {
     pub pieces: usize,
     pub piece_duration_s: Real,
-    /// The f32 error bound at that cut (the largest over agents, pieces and axes), metres.
+    /// The f32 error bound at that cut (the largest over members, pieces and axes), metres.
     pub f32_bound_m: Real,
     pub bytes: usize,
 }

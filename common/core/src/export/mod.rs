@@ -1,4 +1,4 @@
-//! Exports of a plan to the stacks that fly real fleets (Crazyswarm2, Skybrush): every agent's
+//! Exports of a plan to the stacks that fly real fleets (Crazyswarm2, Skybrush): every member's
 //! exact degree-5 trajectory (eqs. 13-16), cut into pieces, in the power basis of each piece or
 //! as Bézier control points, the single-precision error bound that picks a Crazyflie's cut, and
 //! the target frame the plan is scaled into. Pure: no I/O (the files are written by
@@ -19,7 +19,7 @@ use crate::scenario::Scenario;
 /// (skybrush-server `TrajectorySpecification.segments`); 60 s keeps a margin.
 pub const SKYBRUSH_MAX_SEGMENT_S: Real = 60.0;
 
-/// Every agent's desired trajectory r_HT(t), in id order (the order of telemetry.csv).
+/// Every member's desired trajectory r_HT(t), in id order (the order of telemetry.csv).
 pub fn team_trajectories(s: &Scenario) -> Vec<AgentTrajectory> {
     s.id_order()
         .into_iter()
@@ -40,7 +40,7 @@ mod tests {
     use super::*;
     use crate::scenario::{paper40, Checks};
 
-    /// The exported polynomials are the engine's own r_HT, agent by agent.
+    /// The exported polynomials are the engine's own r_HT, member by member.
     #[test]
     fn team_trajectories_match_the_engine() {
         let s = Scenario::from_file(paper40(), "paper40", Checks::Member).unwrap();

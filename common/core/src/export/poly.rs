@@ -1,6 +1,6 @@
-//! Each agent's desired trajectory as an exact polynomial. The primary leaders fly
+//! Each member's desired trajectory as an exact polynomial. The primary leaders fly
 //! r_j(t) = r_j0 + (r_jg - r_j0) s(t) (eq. 15) with the quintic s of eq. 16, and every other
-//! agent's r_HT(t) = sum_j alpha_ij r_j,HT(t) (eq. 13), so r_HT(t) = a + b s(t) with
+//! member's r_HT(t) = sum_j alpha_ij r_j,HT(t) (eq. 13), so r_HT(t) = a + b s(t) with
 //! a = sum_j alpha_ij r_j0 and b = sum_j alpha_ij (r_jg - r_j0): a polynomial of degree 5 in t on
 //! [0, T_total], held at its end afterwards (`plan::Segment::Hold`). It is exported exactly,
 //! not fitted.
@@ -23,7 +23,7 @@ fn binomial(n: usize, k: usize) -> Real {
     (0..k).fold(1.0, |acc, i| acc * (n - i) as Real / (i + 1) as Real)
 }
 
-/// One agent's r_HT(t) = a + b s(t / T_total).
+/// One member's r_HT(t) = a + b s(t / T_total).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AgentTrajectory {
     pub id: u32,
@@ -33,7 +33,7 @@ pub struct AgentTrajectory {
 }
 
 impl AgentTrajectory {
-    /// The trajectory of an agent with alpha parameters `alpha` (eqs. 13-14) under `plan`.
+    /// The trajectory of a member with alpha parameters `alpha` (eqs. 13-14) under `plan`.
     pub fn new(plan: &TeamPlan, id: u32, alpha: &[Real; 3]) -> Self {
         let mut a = Vec3::zeros();
         let mut b = Vec3::zeros();

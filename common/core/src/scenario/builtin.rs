@@ -31,7 +31,7 @@ const PAPER_FOLLOWERS: usize = 34;
 /// The paper's gains (Sec. VII-D).
 pub const PAPER_GAINS: [Real; 4] = [8.0, 24.0, 51.5625, 23.4375];
 
-/// The paper's 40-agent collective descent: 3 primary + 3 secondary leaders and goals from
+/// The paper's 40-member collective descent: 3 primary + 3 secondary leaders and goals from
 /// Sec. VII, 34 followers placed inside the leading hexagon by `place_followers` (the paper's
 /// Fig. 7 gives no coordinates).
 pub fn paper40() -> ScenarioFile {
@@ -44,7 +44,7 @@ pub fn paper40() -> ScenarioFile {
     f
 }
 
-/// A generated team of `n` agents (4 <= n <= MAX_AGENTS) flying a manoeuvre of the paper's kind:
+/// A generated team of `n` members (4 <= n <= MAX_AGENTS) flying a manoeuvre of the paper's kind:
 /// the paper's primary leaders and goals, the paper's secondary leaders when n >= 10, followers
 /// on a hexagonal lattice inside the leading polygon. Beyond 34 followers each configuration is
 /// scaled about its own centroid by sqrt(n_f / 34) so that spacing stays as in the paper, and

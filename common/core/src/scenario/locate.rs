@@ -1,12 +1,12 @@
-//! Which agent a parse error is about. The parsers report a line and column; in a file of a
-//! thousand `[[agents]]` a person also needs the agent's id (or its index when the id itself is
+//! Which member a parse error is about. The parsers report a line and column; in a file of a
+//! thousand `[[agents]]` a person also needs the member's id (or its index when the id itself is
 //! missing or malformed). Only run on the error path.
 
 use serde::Deserialize;
 
 use super::AgentSpec;
 
-/// The agent at fault: its position in `agents` and its id when it has a readable one.
+/// The member at fault: its position in `agents` and its id when it has a readable one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Who {
     pub index: usize,
@@ -22,7 +22,7 @@ impl std::fmt::Display for Who {
     }
 }
 
-/// A parse error's text with the agent in front, when one is known.
+/// A parse error's text with the member in front, when one is known.
 pub fn named(who: Option<Who>, error: String) -> String {
     match who {
         Some(w) => format!("{w}: {error}"),
@@ -30,7 +30,7 @@ pub fn named(who: Option<Who>, error: String) -> String {
     }
 }
 
-/// The first agent of a JSON scenario that does not deserialise.
+/// The first member of a JSON scenario that does not deserialise.
 pub fn json_agent(text: &str) -> Option<Who> {
     let doc: serde_json::Value = serde_json::from_str(text).ok()?;
     doc.get("agents")?
@@ -44,7 +44,7 @@ pub fn json_agent(text: &str) -> Option<Who> {
         })
 }
 
-/// The agent of a TOML scenario that an error is about: the first one that does not
+/// The member of a TOML scenario that an error is about: the first one that does not
 /// deserialise when the document itself parses, or else the `[[agents]]` section holding the
 /// error's byte offset.
 pub fn toml_agent(text: &str, offset: Option<usize>) -> Option<Who> {

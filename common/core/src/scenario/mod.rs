@@ -22,7 +22,7 @@ use crate::plan::TeamPlan;
 
 pub use builtin::{generated, paper40, MAX_AGENTS};
 
-/// Default tolerance for agents off the primary leaders' plane (ERRATA 10): within it an agent
+/// Default tolerance for members off the primary leaders' plane (ERRATA 10): within it a member
 /// is projected onto the plane (and the tool says so); beyond it the scenario is refused.
 pub const DEFAULT_PLANE_TOLERANCE_M: Real = 1.0;
 /// Default RK4 substeps per tick.
@@ -56,7 +56,7 @@ pub struct ScenarioFile {
     /// Largest distance off the leaders' plane that is projected rather than refused (default 1 m).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plane_tolerance_m: Option<Real>,
-    /// Imperfect links between the agents (delay, jitter, loss; default perfect). Set by
+    /// Imperfect links between the members (delay, jitter, loss; default perfect). Set by
     /// `--link-*` flags; `launch` hands it to its members inside the scenario, so that its
     /// content hash covers it and a member with other links is refused.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -64,7 +64,7 @@ pub struct ScenarioFile {
     pub agents: Vec<AgentSpec>,
 }
 
-/// One agent in a file.
+/// One member in a file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AgentSpec {
@@ -88,7 +88,7 @@ pub struct ScenarioError {
     pub kind: ScenarioErrorKind,
 }
 
-/// What is wrong with a scenario; every variant names the field or the agent(s).
+/// What is wrong with a scenario; every variant names the field or the member(s).
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioErrorKind {
     #[error("cannot read the file: {0}")]
@@ -173,7 +173,7 @@ impl Scenario {
 
     /// Validate scenario text in JSON (the same fields as the TOML file). `launch` hands its
     /// members this form: serde_json reads straight into the structs, where the TOML parser
-    /// builds a document first (a 1000-agent file: about 0.2 MiB against 3.9 MiB of peak memory
+    /// builds a document first (a 1000-member file: about 0.2 MiB against 3.9 MiB of peak memory
     /// in each of 1000 processes).
     pub fn parse_json(text: &str, origin: &str, checks: Checks) -> Result<Self, ScenarioError> {
         let parsed = serde_json::from_str(text).map_err(|e| {
@@ -233,7 +233,7 @@ impl Scenario {
         }
     }
 
-    /// A generated team of `n` agents (see `builtin::generated`).
+    /// A generated team of `n` members (see `builtin::generated`).
     pub fn generated(n: usize) -> Result<Self, ScenarioError> {
         let origin = format!("generated --n {n}");
         let file = generated(n).map_err(|reason| ScenarioError {
@@ -303,7 +303,7 @@ impl Scenario {
         self.file.substeps.unwrap_or(DEFAULT_SUBSTEPS)
     }
 
-    /// The role of an agent id, if present.
+    /// The role of a member id, if present.
     pub fn role_of(&self, id: u32) -> Option<Role> {
         self.formation.member(id).map(|m| m.role)
     }
