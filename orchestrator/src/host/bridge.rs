@@ -287,6 +287,7 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
         window: ctx.flight.window,
         link_timeout_ms: ctx.link_timeout.as_millis() as u64,
         realtime_stale_after_s: ctx.flight.realtime_stale_after.map(|d| d.as_secs_f64()),
+        realtime_priority: ctx.flight.realtime_priority,
     };
     p.answer(&JoinReply::Accepted(Box::new(assignment)), &key);
     if !ctx.quiet {

@@ -76,6 +76,11 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
         Err(e) => return Err(Failure::fault(e)),
     };
     let (j, chan) = joined(&net, a)?;
+    if let Some(p) = j.a.realtime_priority {
+        // `--rt-priority` of the team: this thread (the bridge loop) now, the members through
+        // their flag. zenoh's threads started before the team's mode was known and keep theirs.
+        common::sched::fifo(p).map_err(|e| Failure::bad_input(format!("team {}: {e}", j.team)))?;
+    }
     if !o.quiet {
         out!(
             "joined team {} as host {}: agents {:?}",
@@ -174,14 +179,18 @@ fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Fa
 /// The members' flags for the team's mode: real time paces on the start instant the clock
 /// announces (a wall-clock time, the same on every host).
 fn member_flags(a: &Assignment) -> Vec<String> {
-    match a.realtime_stale_after_s {
-        Some(stale_s) => vec![
-            "--realtime".into(),
-            "--stale-after".into(),
-            stale_s.to_string(),
-        ],
-        None => Vec::new(),
+    let Some(stale_s) = a.realtime_stale_after_s else {
+        return Vec::new();
+    };
+    let mut flags = vec![
+        "--realtime".into(),
+        "--stale-after".into(),
+        stale_s.to_string(),
+    ];
+    if let Some(p) = a.realtime_priority {
+        flags.extend(["--rt-priority".into(), p.to_string()]);
     }
+    flags
 }
 
 /// A relayed agent's neighbours on this host.
@@ -469,4 +478,36 @@ fn down(
         Down::Heartbeat => {}
     }
     Ok(None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assignment(stale: Option<f64>, priority: Option<u8>) -> Assignment {
+        Assignment {
+            team: "t".into(),
+            host: 1,
+            hosts_of: vec![(1, 0), (2, 1)],
+            scenario_json: String::new(),
+            scenario_hash: 0,
+            window: 16,
+            link_timeout_ms: 3000,
+            realtime_stale_after_s: stale,
+            realtime_priority: priority,
+        }
+    }
+
+    #[test]
+    fn members_fly_in_the_teams_mode() {
+        assert!(member_flags(&assignment(None, None)).is_empty());
+        assert_eq!(
+            member_flags(&assignment(Some(0.5), None)),
+            ["--realtime", "--stale-after", "0.5"]
+        );
+        assert_eq!(
+            member_flags(&assignment(Some(0.25), Some(20))),
+            ["--realtime", "--stale-after", "0.25", "--rt-priority", "20"]
+        );
+    }
 }

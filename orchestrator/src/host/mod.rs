@@ -33,6 +33,8 @@ pub struct Flight {
     pub window: u32,
     /// `--realtime`: the members' `--stale-after`.
     pub realtime_stale_after: Option<Duration>,
+    /// `--realtime --rt-priority P`: P.
+    pub realtime_priority: Option<u8>,
 }
 
 impl Flight {
@@ -41,6 +43,7 @@ impl Flight {
         Self {
             window: o.window,
             realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
+            realtime_priority: o.realtime.as_ref().and_then(|rt| rt.rt_priority),
         }
     }
 }
