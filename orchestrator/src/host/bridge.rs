@@ -155,11 +155,13 @@ impl Bridge {
     /// after 0.5 s, a closed zenoh session is reported after a short grace): for such a fault
     /// the verdict is awaited a bounded while.
     pub fn explain(&self, f: FaultRecord) -> FaultRecord {
-        let until = Instant::now() + VERDICT_WAIT;
+        // The link's quiet is measured when the fault is seen, not after the wait.
+        let seen = Instant::now();
+        let until = seen + VERDICT_WAIT;
         loop {
             let links = self.links();
             if !links.undecided(&f) || Instant::now() >= until {
-                return links.explain(f, Instant::now());
+                return links.explain(f, seen);
             }
             std::thread::sleep(Duration::from_millis(10));
         }
