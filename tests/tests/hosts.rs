@@ -321,13 +321,16 @@ fn two_hosts_fly_in_real_time() {
 /// the team flying for far longer than any test needs; a fault test ends it long before its
 /// 60,000 ticks.
 const LONG_LOCKSTEP: &[&str] = &["--n", "10", "--t-total", "600", "--window", "1"];
-/// A long flight in real time (600 s of plan).
+/// A long flight in real time (600 s of plan); `--stale-after 2`: a loaded CI machine may
+/// starve a process for longer than the default 0.5 s before the fault under test.
 const LONG_REALTIME: &[&str] = &[
     "--n",
     "10",
     "--t-total",
     "600",
     "--realtime",
+    "--stale-after",
+    "2",
     "--no-figures",
 ];
 
