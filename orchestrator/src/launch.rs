@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use common::audit::{AuditReport, Auditor};
 
+use crate::realtime::Elsewhere;
 use crate::viewer::live::LiveView;
 use common::formation::Role;
 use common::loss::{LossSchedule, LossState};
@@ -122,7 +123,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = start_members(s, o, &dir, &mut ports, (&member_file, &scenario_file), here)?;
     let mut audit = Auditor::new(s);
     let result = if let Some(rt) = &o.realtime {
-        let team = (&mut ports, children.as_mut_slice());
+        let elsewhere = |id: u32| bridge.as_ref().is_some_and(|b| b.reporting(id));
+        let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
         crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
     } else {
         run_team(
