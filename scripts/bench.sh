@@ -27,15 +27,21 @@
 # VmHWM) and the machine's used memory (`free`, before and the most seen during the flight).
 # SCALE_ONLY=1 runs only this section.
 #
-# Usage: [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
+# Usage: [BIN=DIR] [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
 #        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [SCALE_ONLY=1] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo build --release --quiet
-bin=target/release
+# BIN=DIR times the binaries in DIR (orchestrator, agent, leader, cdm-bench; e.g. an older
+# commit's, for a before/after pair in one session) and builds nothing.
+if [ -n "${BIN:-}" ]; then
+  bin=$BIN
+else
+  cargo build --release --quiet
+  bin=target/release
+fi
 out=$(mktemp -d /tmp/cdm-bench.XXXXXX)
 trap 'rm -rf "$out"' EXIT
 window=${WINDOW:-256}
@@ -44,7 +50,7 @@ ns=("$@"); [ ${#ns[@]} -gt 0 ] || ns=(10 40 100 250 1000)
 echo "Machine: nproc $(nproc), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'),"\
   "$(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo), kernel $(uname -r);"\
   "commit $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%dT%H:%MZ)."
-echo "Command: WINDOW=$window${QUICK:+ QUICK=$QUICK} scripts/bench.sh ${ns[*]}"
+echo "Command: WINDOW=$window${QUICK:+ QUICK=$QUICK}${BIN:+ BIN=$BIN} scripts/bench.sh ${ns[*]}"
 echo
 
 # Real time: one `launch --realtime` per N, REALTIME_S seconds of a 60 s plan.

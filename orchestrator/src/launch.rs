@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use common::audit::{AuditReport, Auditor};
 
+use crate::realtime::Elsewhere;
 use crate::viewer::live::LiveView;
 use common::formation::Role;
 use common::loss::{LossSchedule, LossState};
@@ -18,7 +19,7 @@ use common::record::TickRecorder;
 use common::rundir::RunDir;
 use common::scenario::Scenario;
 use common::seams::{Clock, MonotonicClock};
-use common::team_core::{TeamAction, TeamConfig, TeamCore};
+use common::team_core::{TeamAction, TeamConfig, TeamCore, TickStates};
 use common::team_loss::TeamLosses;
 use common::telemetry::TelemetrySink;
 use common::transport::{
@@ -99,18 +100,7 @@ fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure
 /// Run a launch to the end.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let interrupted = common::signals::install();
-    if o.spawn {
-        member_binaries_present()?;
-    }
-    crate::realtime::schedule(o)?;
-    let mut live = match o.serve {
-        Some(addr) => Some(start_live(s, &addr.to_string(), o.quiet)?),
-        None => None,
-    };
-    match raise_fd_limit() {
-        Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
-        Err(e) => tracing::warn!("{e}"),
-    }
+    let mut live = preflight(s, o)?;
     let hosts = crate::host::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
     let layout = team_layout(s, o, &hosts)?;
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
@@ -133,7 +123,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = start_members(s, o, &dir, &mut ports, (&member_file, &scenario_file), here)?;
     let mut audit = Auditor::new(s);
     let result = if let Some(rt) = &o.realtime {
-        let team = (&mut ports, children.as_mut_slice());
+        let elsewhere = |id: u32| bridge.as_ref().is_some_and(|b| b.reporting(id));
+        let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
         crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
     } else {
         run_team(
@@ -153,9 +144,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
         Err((fault, reason)) => {
-            audit.fault(match &bridge {
-                Some(b) => b.explain(fault),
-                None => fault,
+            audit.fault(if let Some(b) = &bridge {
+                b.explain(fault)
+            } else {
+                fault
             });
             (false, reason, None)
         }
@@ -181,6 +173,24 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         member_peak_rss,
         live,
     })
+}
+
+/// Before anything is created: the member binaries are there, the real-time scheduling asked
+/// for is granted, the live view (`--serve`) is started, the file-descriptor limit is raised.
+fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Option<LiveView>, Failure> {
+    if o.spawn {
+        member_binaries_present()?;
+    }
+    crate::realtime::schedule(o)?;
+    let live = match o.serve {
+        Some(addr) => Some(start_live(s, &addr.to_string(), o.quiet)?),
+        None => None,
+    };
+    match raise_fd_limit() {
+        Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
+        Err(e) => tracing::warn!("{e}"),
+    }
+    Ok(live)
 }
 
 /// The team's services: every member's state and wake-up, sized for the window (and the
@@ -443,7 +453,7 @@ fn fly_team(
     watchers: Watchers<'_>,
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
-    let Watchers { audit, live } = watchers;
+    let mut w = watchers;
     let hash = s.content_hash();
     let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let clock = MonotonicClock::start();
@@ -463,20 +473,12 @@ fn fly_team(
         loop {
             match core.next_action(clock.now()) {
                 TeamAction::Grant(g) => {
-                    let notice = core.losses().and_then(|l| l.notice());
-                    ports
-                        .publish_clock(ClockMsg::run(g, hash).with_loss(notice))
-                        .map_err(transport_stop(core.next_tick()))?;
+                    publish_grant(ports, &core, g, hash)?;
                     ticking.get_or_insert_with(Instant::now);
                 }
                 TeamAction::Complete { tick, states } => {
-                    rec.lose(s, tick, core.losses(), audit);
-                    rec.record(s, tick, &states, audit, live, tel)?;
-                    core.recycle(states);
-                    if o.stop_on_violation && audit.violation_count() > 0 {
-                        audit.stop_on_violation();
-                        rec.progress.finish();
-                        let _ = tel.flush();
+                    let stop = o.stop_on_violation;
+                    if rec.complete(s, (tick, states), &mut core, &mut w, tel, stop)? {
                         return Ok((ticking.unwrap_or_else(Instant::now), tick >= last));
                     }
                 }
@@ -521,6 +523,20 @@ fn fly_team(
     }
 }
 
+/// Grants ticks up to `g` on the clock channel, with the latest loss notice.
+fn publish_grant(
+    ports: &mut OrchestratorPorts,
+    core: &TeamCore,
+    g: u64,
+    hash: u64,
+) -> Result<(), Stop> {
+    let notice = core.losses().and_then(|l| l.notice());
+    ports
+        .publish_clock(ClockMsg::run(g, hash).with_loss(notice))
+        .map(drop)
+        .map_err(transport_stop(core.next_tick()))
+}
+
 /// What every complete tick gets: the shared audit and telemetry of `simulate`
 /// (`TickRecorder`), then the live view and the progress line.
 struct Recorder {
@@ -545,6 +561,29 @@ impl Recorder {
         for (cause, ids) in book.map(|b| b.due_at(tick)).unwrap_or_default() {
             self.losses.record(s, tick, &ids, cause.as_str(), audit);
         }
+    }
+
+    /// Complete tick `tick`: its losses, audit and telemetry, then its states go back to the
+    /// core. True when the run ends here, at its first violation (`stop_on_violation`).
+    fn complete(
+        &mut self,
+        s: &Scenario,
+        (tick, states): (u64, TickStates),
+        core: &mut TeamCore,
+        w: &mut Watchers<'_>,
+        tel: &mut dyn TelemetrySink,
+        stop_on_violation: bool,
+    ) -> Result<bool, Stop> {
+        self.lose(s, tick, core.losses(), w.audit);
+        self.record(s, tick, &states, w.audit, w.live, tel)?;
+        core.recycle(states);
+        if stop_on_violation && w.audit.violation_count() > 0 {
+            w.audit.stop_on_violation();
+            self.progress.finish();
+            let _ = tel.flush();
+            return Ok(true);
+        }
+        Ok(false)
     }
 
     fn record(

@@ -26,6 +26,10 @@ use crate::team::{exited_fault, fault, first_exited, Spawned, Stop};
 use crate::vehicle_reports::VehicleBook;
 use crate::Failure;
 
+/// Which members run on other hosts and may still send reports (`launch --hosts`: those whose
+/// daemon neither stopped nor was lost).
+pub type Elsewhere<'a> = &'a dyn Fn(u32) -> bool;
+
 /// The real-time options of `launch`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RealtimeArgs {
@@ -134,17 +138,18 @@ fn start_lead(agents: usize) -> Duration {
 
 /// Gathers the team, announces the start, monitors until the end of the plan or a fault, and
 /// adds the pacing figures to the audit. Returns when the flight began and whether the whole
-/// plan was audited (as the lockstep loop does); the caller stops the team.
+/// plan was audited (as the lockstep loop does); the caller stops the team. `team`'s third part
+/// says which members run on other hosts whose final reports may still come (`launch --hosts`).
 pub fn run(
     s: &Scenario,
     o: &LaunchOptions,
     rt: &RealtimeOptions,
     dir: &RunDir,
-    team: (&mut OrchestratorPorts, &mut [Spawned]),
+    team: (&mut OrchestratorPorts, &mut [Spawned], Elsewhere),
     audit: &mut Auditor,
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
-    let (ports, children) = team;
+    let (ports, children, elsewhere) = team;
     crate::launch::gather(s, o, ports, children, interrupted)?;
     crate::team_arm::arm_team(s, o, ports, children, interrupted)?;
     crate::launch::write_subscriptions(s, ports, dir);
@@ -184,7 +189,7 @@ pub fn run(
         .map_or_else(|(_, r)| *r, |_| StopReason::Finished);
     core.stopping();
     let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
-    collect_final_reports(&mut core, ports, children, &mut vehicles);
+    collect_final_reports(&mut core, ports, (children, elsewhere), &mut vehicles);
     vehicles.record(audit);
     let figures = core.figures(RunFigures {
         audits,
@@ -259,11 +264,12 @@ fn print_figures(f: &RealtimeFigures, agents: usize) {
     );
 }
 
-/// Waits (at most 1.5 s) for the final pacing report of every member still running.
+/// Waits (at most 1.5 s) for the final pacing report of every member still running, here or
+/// (`elsewhere`) on another host.
 fn collect_final_reports(
     core: &mut MonitorCore,
     ports: &mut OrchestratorPorts,
-    children: &mut [Spawned],
+    (children, elsewhere): (&mut [Spawned], Elsewhere),
     vehicles: &mut VehicleBook,
 ) {
     let until = Instant::now() + Duration::from_millis(1500);
@@ -280,7 +286,7 @@ fn collect_final_reports(
             }
         }
         // Hand-started teams (no children): wait for everyone, bounded.
-        let alive = |id: u32| children.is_empty() || running.contains(&id);
+        let alive = |id: u32| children.is_empty() || running.contains(&id) || elsewhere(id);
         if core.final_reports_in(alive) {
             return;
         }

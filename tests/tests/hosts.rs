@@ -11,7 +11,9 @@
 //!   team naming them.
 //! - Foreign daemons (another scenario, another team, a host already taken) are refused; the
 //!   orchestrator killed with SIGKILL: the daemon and every member exit by themselves.
-//! - Real time: a short plan paced on one wall-clock start instant on both hosts is SAFE.
+//! - Real time: a short plan paced on one wall-clock start instant on both hosts is SAFE, with
+//!   every member's pacing counted; a daemon killed mid-flight is named with its members.
+//! - A killed daemon's work directory is removed by the next daemon.
 //! - Nothing is left in /dev/shm on either side.
 //!
 //! Needs root (CI runs as root). Each test names its namespaces uniquely and deletes them on
@@ -269,6 +271,10 @@ fn two_hosts_fly_in_real_time() {
         "--max-ticks",
         "300",
         "--realtime",
+        // This test is about what crosses, not staleness: a loaded CI machine may starve a
+        // process for longer than the default 0.5 s.
+        "--stale-after",
+        "2",
         "--no-figures",
     ];
     let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
@@ -282,11 +288,26 @@ fn two_hosts_fly_in_real_time() {
     assert_eq!(audit["complete"], true, "{audit:#}");
     let rt = &audit["realtime"];
     assert_eq!(rt["audits"], 301, "{rt:#}");
+    // Host B's members' pacing reports crossed: every member is counted, and the ticks are
+    // those of ten members, not of host A's five.
+    assert_eq!(rt["members_reported"], 10, "{rt:#}");
     let ticks = rt["ticks"].as_f64().unwrap_or_default();
     assert!(
-        ticks >= 5.0 * 300.0,
-        "host A's members flew the plan: {rt:#}"
+        ticks >= 9.0 * 300.0,
+        "both hosts' members flew the plan: {rt:#}"
     );
+    let age = |k: &str| rt[k].as_f64().unwrap_or(f64::NAN);
+    let (p50, p99, max) = (
+        age("neighbor_age_ms_p50"),
+        age("neighbor_age_ms_p99"),
+        age("neighbor_age_ms_max"),
+    );
+    // Ages up to the stale bound (a SAFE flight had no stale neighbour), ordered.
+    assert!(
+        0.0 < p50 && p50 <= p99 && p99 <= max && max <= 2000.0,
+        "{rt:#}"
+    );
+    assert_eq!(rt["stale_after_s"], 2.0, "{rt:#}");
     let flown = flown_scenario(&out);
     let ids: BTreeSet<u32> = flown.agents.iter().map(|a| a.id).collect();
     assert_eq!(complete_ticks(&out.join("telemetry.csv"), &ids), 301);
@@ -296,16 +317,58 @@ fn two_hosts_fly_in_real_time() {
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
 }
 
-/// Starts the team on both hosts and waits for some ticks of telemetry. Strict lockstep
-/// (`--window 1`: a round trip over the network per tick) keeps the team flying for far longer
-/// than any test needs; a fault test ends it long before its 60,000 ticks.
-fn running(h: &Hosts, team: &str, out: &Path) -> (Running, Running) {
+/// A long flight: strict lockstep (`--window 1`: a round trip over the network per tick) keeps
+/// the team flying for far longer than any test needs; a fault test ends it long before its
+/// 60,000 ticks.
+const LONG_LOCKSTEP: &[&str] = &["--n", "10", "--t-total", "600", "--window", "1"];
+/// A long flight in real time (600 s of plan); `--stale-after 2`: a loaded CI machine may
+/// starve a process for longer than the default 0.5 s before the fault under test.
+const LONG_REALTIME: &[&str] = &[
+    "--n",
+    "10",
+    "--t-total",
+    "600",
+    "--realtime",
+    "--stale-after",
+    "2",
+    "--no-figures",
+];
+
+/// Starts the team (`source`) on both hosts and waits for some ticks of telemetry. The daemon's
+/// temporary directory (`TMPDIR`, its work directory's parent) is `b_tmp`.
+fn running(h: &Hosts, team: &str, out: &Path, source: &[&str], b_tmp: &Path) -> (Running, Running) {
     let out_s = out.to_string_lossy().into_owned();
-    let source = ["--n", "10", "--t-total", "600", "--window", "1"];
-    let mut orch = spawn(&mut h.on_a(&launch_args(team, &out_s, &source)));
-    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", team]));
+    let mut orch = spawn(&mut h.on_a(&launch_args(team, &out_s, source)));
+    std::fs::create_dir_all(b_tmp).expect("host B's TMPDIR");
+    let daemon = spawn(
+        h.on_b(&["host", "--connect", ENDPOINT, "--team", team])
+            .env("TMPDIR", b_tmp),
+    );
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 200);
     (orch, daemon)
+}
+
+/// The daemons' work directories in `tmp`.
+fn work_dirs(tmp: &Path) -> Vec<String> {
+    let entries = std::fs::read_dir(tmp).unwrap_or_else(|e| panic!("{}: {e}", tmp.display()));
+    entries
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("cdm-host-"))
+        .collect()
+}
+
+/// Kills the daemon of `team` with SIGKILL.
+fn kill_daemon(team: &str) {
+    let pid = team_processes(team)
+        .into_iter()
+        .find(|(_, args)| {
+            let daemon = args.first().is_some_and(|a| a.ends_with("orchestrator"));
+            daemon && args.iter().any(|a| a == "--connect")
+        })
+        .map(|(pid, _)| pid)
+        .expect("the daemon's process");
+    signal(pid, libc::SIGKILL);
 }
 
 /// The orchestrator's fault after losing host B: `host-lost`, naming host 1, `cause`, and every
@@ -340,7 +403,8 @@ fn a_partition_stops_both_sides_named() {
     let dir = TempDir::new();
     let team = unique_team("part");
     let out = dir.path().join("run");
-    let (orch, daemon) = running(&h, &team, &out);
+    let b_tmp = dir.path().join("tmp-b");
+    let (orch, daemon) = running(&h, &team, &out, LONG_LOCKSTEP, &b_tmp);
     h.cut();
     let o = orch.finish(STOP_DEADLINE);
     let d = daemon.finish(STOP_DEADLINE);
@@ -363,27 +427,61 @@ fn a_partition_stops_both_sides_named() {
 
 /// The daemon is killed with SIGKILL: its members stop by themselves (their clock's publisher is
 /// gone); the orchestrator sees the daemon's zenoh session close and stops the team with
-/// `host-lost`, naming host B and its agents.
+/// `host-lost`, naming host B and its agents. The killed daemon's work directory is removed by
+/// the next daemon that starts.
 #[test]
 fn a_killed_daemon_is_like_killed_members() {
     let Some(h) = Hosts::create("kd") else { return };
     let dir = TempDir::new();
     let team = unique_team("kdaemon");
     let out = dir.path().join("run");
-    let (orch, mut daemon) = running(&h, &team, &out);
-    let pid = team_processes(&team)
-        .into_iter()
-        .find(|(_, args)| {
-            let daemon = args.first().is_some_and(|a| a.ends_with("orchestrator"));
-            daemon && args.iter().any(|a| a == "--connect")
-        })
-        .map(|(pid, _)| pid)
-        .expect("the daemon's process");
-    signal(pid, libc::SIGKILL);
+    let b_tmp = dir.path().join("tmp-b");
+    let (orch, mut daemon) = running(&h, &team, &out, LONG_LOCKSTEP, &b_tmp);
+    kill_daemon(&team);
     let o = orch.finish(STOP_DEADLINE);
     assert_exit(&o, 3, "launch after the daemon was killed");
     // Seen through zenoh's liveliness (the daemon's TCP connection closed), not by silence.
     assert_lost_host_b(&out, "zenoh session closed");
+    wait_no_process_of(&team, STOP_DEADLINE);
+    assert_no_team_resources(&team);
+    let _ = daemon.kill();
+    assert_eq!(
+        work_dirs(&b_tmp).len(),
+        1,
+        "a SIGKILLed daemon leaves its work directory"
+    );
+    // The next daemon (here one that finds no orchestrator) removes it.
+    let next = run(
+        h.on_b(&["host", "--connect", ENDPOINT, "--join-timeout", "1"])
+            .env("TMPDIR", &b_tmp),
+        REFUSE_DEADLINE,
+    );
+    assert_exit(&next, 3, "a daemon with no orchestrator");
+    assert_eq!(
+        work_dirs(&b_tmp),
+        Vec::<String>::new(),
+        "{}",
+        describe(&next)
+    );
+}
+
+/// Real time: the daemon is killed with SIGKILL mid-flight. The monitor hears host B's members
+/// through the bridge; the loss is named as the host's (`host-lost`, host 1 and its agents),
+/// whether the bridge's verdict or a member's staleness came first.
+#[test]
+fn a_killed_daemon_in_real_time_is_named_with_its_members() {
+    let Some(h) = Hosts::create("kr") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("krt");
+    let out = dir.path().join("run");
+    let b_tmp = dir.path().join("tmp-b");
+    let (orch, mut daemon) = running(&h, &team, &out, LONG_REALTIME, &b_tmp);
+    kill_daemon(&team);
+    let o = orch.finish(STOP_DEADLINE);
+    assert_exit(&o, 3, "launch --realtime after the daemon was killed");
+    assert_lost_host_b(&out, "zenoh session closed");
+    let audit = read_json(&out.join("audit.json"));
+    assert!(audit["realtime"]["ticks"].as_u64() > Some(0), "{audit:#}");
     wait_no_process_of(&team, STOP_DEADLINE);
     assert_no_team_resources(&team);
     let _ = daemon.kill();
@@ -406,7 +504,8 @@ fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
     );
     assert_exit(&exported, 0, "scenario export");
     let other_s = other.to_string_lossy().into_owned();
-    let (mut orch, daemon) = running(&h, &team, &out);
+    let b_tmp = dir.path().join("tmp-b");
+    let (mut orch, daemon) = running(&h, &team, &out, LONG_LOCKSTEP, &b_tmp);
     let refusals: [(&[&str], &str); 3] = [
         (
             &["--team", &team, "--scenario", &other_s],

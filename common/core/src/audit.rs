@@ -3,7 +3,7 @@
 //! follower outside the containment prism), tracking (||r_i - r_i,HT||_2 > delta, eq. 34) and
 //! deformation (lambda_1(U_D) < lambda_CD,min, eq. 37).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 
 use serde::Serialize;
 
@@ -251,8 +251,8 @@ struct Failing {
     /// Per member (member order): tracking and containment.
     tracking: Vec<bool>,
     containment: Vec<bool>,
-    /// Colliding pairs (sorted ids).
-    collisions: BTreeSet<(u32, u32)>,
+    /// Colliding pairs (sorted ids), sorted.
+    collisions: Vec<(u32, u32)>,
     deformation: bool,
 }
 
@@ -267,6 +267,18 @@ pub struct Auditor {
     alive: Vec<bool>,
     failing: Failing,
     report: AuditReport,
+    /// Buffers of the collision sweep, kept from tick to tick (no allocation per tick).
+    sweep: Sweep,
+}
+
+/// The collision sweep's buffers: the bodies' order along x (last tick's order sorts in about
+/// N steps, `safety::sort_by_x`), the close pairs by index and by id.
+#[derive(Default)]
+struct Sweep {
+    by_x: Vec<usize>,
+    close: Vec<(usize, usize, Real)>,
+    pairs: Vec<((u32, u32), Real)>,
+    seen: Vec<(u32, u32)>,
 }
 
 impl Auditor {
@@ -311,6 +323,7 @@ impl Auditor {
                 realtime: None,
                 vehicles: BTreeMap::new(),
             },
+            sweep: Sweep::default(),
         }
     }
 
@@ -464,19 +477,27 @@ impl Auditor {
             &living
         };
         let id_of = |i: usize| self.ids[if idx.is_empty() { i } else { idx[i] }];
-        let (sep, _, _) = safety::min_separation(bodies);
+        let mut sw = std::mem::take(&mut self.sweep);
+        safety::sort_by_x(bodies, &mut sw.by_x);
+        let (sep, _, _) = safety::min_separation_sorted(bodies, &sw.by_x);
         self.report.min_separation_m = self.report.min_separation_m.min(sep);
-        let mut close: BTreeMap<(u32, u32), Real> = BTreeMap::new();
-        for (i, j, d) in close_pairs(bodies, 2.0 * n.eps_m) {
+        close_pairs_sorted(bodies, &sw.by_x, 2.0 * n.eps_m, &mut sw.close);
+        sw.pairs.clear();
+        sw.pairs.extend(sw.close.iter().map(|&(i, j, d)| {
             let (a, b) = (id_of(i), id_of(j));
-            close.insert((a.min(b), a.max(b)), d);
-        }
-        for (&(a, b), &d) in &close {
-            if !self.failing.collisions.contains(&(a, b)) {
+            ((a.min(b), a.max(b)), d)
+        }));
+        // Each pair once (ids are unique): sorted by ids, the order violations are recorded in.
+        sw.pairs.sort_unstable_by_key(|p| p.0);
+        for &((a, b), d) in &sw.pairs {
+            if self.failing.collisions.binary_search(&(a, b)).is_err() {
                 self.record("collision", &[a, b], at, d, 2.0 * n.eps_m);
             }
         }
-        self.failing.collisions = close.into_keys().collect();
+        std::mem::swap(&mut self.failing.collisions, &mut sw.seen);
+        self.failing.collisions.clear();
+        self.failing.collisions.extend(sw.pairs.iter().map(|p| p.0));
+        self.sweep = sw;
     }
 
     /// Record a runtime fault (the run did not complete).
@@ -517,9 +538,21 @@ impl Auditor {
 
 /// Every pair of points closer than `radius` (sweep along x), with their distance.
 pub fn close_pairs(pos: &[Vec3], radius: Real) -> Vec<(usize, usize, Real)> {
-    let mut order: Vec<usize> = (0..pos.len()).collect();
-    order.sort_by(|&a, &b| pos[a].x.total_cmp(&pos[b].x).then(a.cmp(&b)));
+    let mut order = Vec::new();
+    safety::sort_by_x(pos, &mut order);
     let mut out = Vec::new();
+    close_pairs_sorted(pos, &order, radius, &mut out);
+    out
+}
+
+/// [`close_pairs`] into `out`, with `order` from `safety::sort_by_x`.
+fn close_pairs_sorted(
+    pos: &[Vec3],
+    order: &[usize],
+    radius: Real,
+    out: &mut Vec<(usize, usize, Real)>,
+) {
+    out.clear();
     for (k, &i) in order.iter().enumerate() {
         for &j in &order[k + 1..] {
             if pos[j].x - pos[i].x >= radius {
@@ -532,5 +565,4 @@ pub fn close_pairs(pos: &[Vec3], radius: Real) -> Vec<(usize, usize, Real)> {
         }
     }
     out.sort_by_key(|a| (a.0, a.1));
-    out
 }

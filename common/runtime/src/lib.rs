@@ -20,3 +20,4 @@ pub mod signals;
 pub mod stall;
 pub mod team_core;
 pub mod team_loss;
+pub mod team_slots;

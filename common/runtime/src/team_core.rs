@@ -11,7 +11,6 @@
 //! waits for the ticks before it ([`FAULT_GRACE`]), the tick an exited member is blamed for,
 //! the silence deadline, and whether the orchestrator itself stalled ([`StallWatch`]).
 
-use std::collections::BTreeMap;
 use std::time::Duration;
 
 use cdm_core::audit::FaultRecord;
@@ -20,6 +19,7 @@ use cdm_core::outcome::FaultKind;
 use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
 use crate::stall::StallWatch;
 use crate::team_loss::{LossCause, TeamLosses};
+use crate::team_slots::{IdIndex, TickSlots};
 
 /// Why a run stops early: the fault to record and the reason sent to the members.
 pub type Stop = (FaultRecord, StopReason);
@@ -105,9 +105,10 @@ struct Exited {
 #[derive(Debug)]
 pub struct TeamCore {
     cfg: TeamConfig,
-    index: BTreeMap<u32, usize>,
+    index: IdIndex,
     window: u64,
-    pending: BTreeMap<u64, Slot>,
+    /// The ticks not complete yet, from `next_tick` on.
+    pending: TickSlots<Slot>,
     spare: Vec<TickStates>,
     /// The next tick to hand out as complete.
     next_tick: u64,
@@ -144,14 +145,14 @@ struct LossEvents {
 impl TeamCore {
     /// A team about to start at `now` (time since the caller's clock started).
     pub fn new(cfg: TeamConfig, now: Duration) -> Self {
-        let index = cfg.ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
+        let index = IdIndex::new(&cfg.ids);
         let window = u64::from(cfg.window.max(1));
         let grant = first_grant(window, cfg.last_tick);
         TeamCore {
             cfg,
             index,
             window,
-            pending: BTreeMap::new(),
+            pending: TickSlots::new(),
             spare: Vec::new(),
             next_tick: 0,
             complete: 0,
@@ -194,7 +195,7 @@ impl TeamCore {
     /// A received state or fault report. States outside the granted window are ignored (stale
     /// or foreign); a non-finite one is never used.
     pub fn on_state(&mut self, msg: StateMsg, now: Duration) {
-        let Some(&k) = self.index.get(&msg.id) else {
+        let Some(k) = self.index.get(msg.id) else {
             return;
         };
         if let AgentStatus::Fault { code, peer } = msg.status() {
@@ -202,7 +203,7 @@ impl TeamCore {
             return;
         }
         if let Some(l) = &mut self.losses {
-            l.book.saw(msg.id, msg.tick);
+            l.book.saw_at(k, msg.id, msg.tick);
         }
         if !self.started || msg.tick < self.next_tick || msg.tick > self.grant {
             return;
@@ -213,10 +214,12 @@ impl TeamCore {
         }
         let n = self.cfg.ids.len();
         let spare = &mut self.spare;
-        let slot = self.pending.entry(msg.tick).or_insert_with(|| Slot {
+        let Some(slot) = self.pending.get_or_insert_with(msg.tick, || Slot {
             states: spare.pop().unwrap_or_else(|| vec![None; n]),
             count: 0,
-        });
+        }) else {
+            return;
+        };
         if slot.states[k].is_none() {
             slot.count += 1;
         }
@@ -262,7 +265,7 @@ impl TeamCore {
         if self.lost_on_exit(id, &how, now) {
             return;
         }
-        if self.exited.is_none() && self.stopping.is_none() && self.index.contains_key(&id) {
+        if self.exited.is_none() && self.stopping.is_none() && self.index.get(id).is_some() {
             self.exited = Some(Exited { id, how, seen: now });
         }
     }
@@ -298,7 +301,7 @@ impl TeamCore {
         }
         while self
             .pending
-            .get(&self.complete)
+            .get(self.complete)
             .is_some_and(|s| s.count == self.expected(self.complete))
         {
             self.complete += 1;
@@ -332,7 +335,7 @@ impl TeamCore {
         if tick >= self.complete || self.stopping.as_ref().is_some_and(|s| tick > s.record.tick) {
             return None;
         }
-        let slot = self.pending.remove(&tick)?;
+        let slot = self.pending.take_first(tick)?;
         self.next_tick += 1;
         self.progressed = true;
         Some(TeamAction::Complete {
@@ -374,11 +377,11 @@ impl TeamCore {
         // Members run up to a window ahead of the audit: the states a dead member published
         // are audited first, and its fault is the first tick it never sent.
         if let Some(e) = &self.exited {
-            let k = self.index[&e.id];
-            let lacks = self
-                .pending
-                .get(&self.next_tick)
-                .is_none_or(|s| s.states[k].is_none());
+            let lacks = self.index.get(e.id).is_none_or(|k| {
+                self.pending
+                    .get(self.next_tick)
+                    .is_none_or(|s| s.states[k].is_none())
+            });
             if lacks && now.saturating_sub(e.seen) >= FAULT_GRACE {
                 let (f, reason) = exited_fault(e.id, &e.how, self.next_tick);
                 return TeamAction::Stop(self.stall.explain(f, now), reason);
@@ -397,7 +400,7 @@ impl TeamCore {
     /// The members that sent no state for the next tick (lost ones aside), in formation order.
     fn missing(&self) -> Vec<u32> {
         let tick = self.next_tick;
-        let have = self.pending.get(&tick);
+        let have = self.pending.get(tick);
         (self.cfg.ids.iter().enumerate())
             .filter(|(k, _)| have.is_none_or(|s| s.states[*k].is_none()))
             .map(|(_, &id)| id)

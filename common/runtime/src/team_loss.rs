@@ -100,6 +100,16 @@ impl TeamLosses {
         }
     }
 
+    /// [`Self::saw`] for the member at formation index `k` (no search; `id` checks the index
+    /// matches this book's order, else it is searched as by `saw`).
+    pub fn saw_at(&mut self, k: usize, id: u32, tick: u64) {
+        if self.ids.get(k) != Some(&id) {
+            return self.saw(id, tick);
+        }
+        let s = &mut self.seen[k];
+        *s = Some(s.map_or(tick, |t| t.max(tick)));
+    }
+
     /// The highest tick received from `id`.
     pub fn seen(&self, id: u32) -> Option<u64> {
         let k = self.ids.iter().position(|&j| j == id)?;

@@ -10,7 +10,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// A [`StateMsg`], field for field (the shared-memory type stays free of serde).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -158,6 +158,9 @@ pub struct Assignment {
     /// instant comes later, as a wall-clock (UNIX) time in the clock's `Realtime` message, so
     /// members on every host pace on the same instant.
     pub realtime_stale_after_s: Option<f64>,
+    /// Real time with `--rt-priority P`: the daemon and its members run under SCHED_FIFO at P,
+    /// as the orchestrator's host does.
+    pub realtime_priority: Option<u8>,
 }
 
 /// The orchestrator's answer to a [`JoinRequest`].

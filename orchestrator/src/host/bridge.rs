@@ -13,11 +13,11 @@ use cdm_zenoh::{
 };
 use common::audit::FaultRecord;
 use common::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg};
-use common::outcome::FaultKind;
 use common::scenario::Scenario;
 use common::transport::{MemberPorts, TeamName};
 use serde::Serialize;
 
+use super::links::{Links, LostHost};
 use super::plan::placed;
 use super::{Flight, HostOptions};
 use crate::Failure;
@@ -26,6 +26,9 @@ use crate::Failure;
 pub const HEARTBEAT: Duration = Duration::from_millis(200);
 /// How long the bridge waits, after the team's stop, for every daemon to stop its members.
 const STOP_DEADLINE: Duration = Duration::from_secs(8);
+/// How long a remote member's silence waits for the bridge's verdict on its host: a closed
+/// session is reported after zenoh's grace (150 ms); the rest is slack for a loaded machine.
+const VERDICT_WAIT: Duration = Duration::from_millis(600);
 
 /// What the bridge thread needs, owned.
 struct Ctx {
@@ -38,26 +41,18 @@ struct Ctx {
     outs: BTreeMap<u32, Vec<u32>>,
     link_timeout: Duration,
     quiet: bool,
-    lost: LostHosts,
+    links: SharedLinks,
 }
 
-/// Hosts the bridge lost, by host number: why, for the team's fault record.
-type LostHosts = Arc<Mutex<BTreeMap<u32, LostHost>>>;
-
-/// A host whose link was lost, and the members that went with it.
-#[derive(Debug, Clone)]
-struct LostHost {
-    who: String,
-    members: Vec<u32>,
-    why: String,
-}
+/// What the bridge thread knows of each host's link, read by the launch.
+type SharedLinks = Arc<Mutex<Links>>;
 
 /// The bridge thread and its stop flag.
 pub struct Bridge {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<Vec<HostReport>>>,
     crossing: Vec<(u32, u32)>,
-    lost: LostHosts,
+    links: SharedLinks,
 }
 
 /// One host as `hosts.json` records it.
@@ -135,9 +130,12 @@ impl Bridge {
             outs,
             link_timeout: h.link_timeout,
             quiet,
-            lost: LostHosts::default(),
+            links: Arc::new(Mutex::new(Links {
+                host_of: regions.pairs().into_iter().collect(),
+                ..Links::default()
+            })),
         };
-        let lost = ctx.lost.clone();
+        let links = ctx.links.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         let thread = std::thread::Builder::new()
@@ -148,28 +146,35 @@ impl Bridge {
             stop,
             thread: Some(thread),
             crossing,
-            lost,
+            links,
         })
     }
 
-    /// The team's fault, said in the terms of hosts: a member reported lost with its host
-    /// (`HostLost`) becomes the host's loss, naming the host, why, and every member it ran.
+    /// The team's fault, said in the terms of hosts ([`Links::explain`]). A remote member's
+    /// silence may come before the bridge's verdict on its host (real time: a member is stale
+    /// after 0.5 s, a closed zenoh session is reported after a short grace): for such a fault
+    /// the verdict is awaited a bounded while.
     pub fn explain(&self, f: FaultRecord) -> FaultRecord {
-        if f.kind != FaultKind::HostLost {
-            return f;
+        // The link's quiet is measured when the fault is seen, not after the wait.
+        let seen = Instant::now();
+        let until = seen + VERDICT_WAIT;
+        loop {
+            let links = self.links();
+            if !links.undecided(&f) || Instant::now() >= until {
+                return links.explain(f, seen);
+            }
+            std::thread::sleep(Duration::from_millis(10));
         }
-        let lost = self.lost.lock().map(|l| l.clone()).unwrap_or_default();
-        let Some((host, h)) = lost
-            .iter()
-            .find(|(_, h)| f.agent.is_some_and(|a| h.members.contains(&a)))
-        else {
-            return f;
-        };
-        let message = format!(
-            "host {host} ({}) lost at tick {}: {}; its agents {:?} were lost with it",
-            h.who, f.tick, h.why, h.members
-        );
-        FaultRecord { message, ..f }
+    }
+
+    /// True when member `id` runs on another host whose reports may still arrive (its daemon
+    /// joined, and neither stopped nor was lost).
+    pub fn reporting(&self, id: u32) -> bool {
+        self.links.lock().is_ok_and(|l| l.reporting(id))
+    }
+
+    fn links(&self) -> Links {
+        self.links.lock().map(|l| l.clone()).unwrap_or_default()
     }
 
     /// After the team's stop: lets the daemons stop their members (bounded), then writes
@@ -219,7 +224,7 @@ impl Drop for Bridge {
 fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport> {
     let mut remotes: BTreeMap<u32, Remote> = BTreeMap::new();
     let mut stopping_since: Option<Instant> = None;
-    let mut idle = IdleBackoff::default();
+    let mut idle = IdleBackoff::for_team(ctx.flight.realtime_stale_after.is_some());
     loop {
         while let Some(p) = desk.poll() {
             admit(&net, &ctx, &mut remotes, p);
@@ -284,6 +289,7 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
         window: ctx.flight.window,
         link_timeout_ms: ctx.link_timeout.as_millis() as u64,
         realtime_stale_after_s: ctx.flight.realtime_stale_after.map(|d| d.as_secs_f64()),
+        realtime_priority: ctx.flight.realtime_priority,
     };
     p.answer(&JoinReply::Accepted(Box::new(assignment)), &key);
     if !ctx.quiet {
@@ -307,6 +313,9 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
             subscriptions: BTreeMap::new(),
         },
     );
+    if let Some(r) = remotes.get(&host) {
+        heard(r, ctx);
+    }
 }
 
 /// The host a join request may take, or why it is refused (another protocol, team or
@@ -390,6 +399,9 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
             return true;
         }
     }
+    if busy {
+        heard(r, ctx);
+    }
     if r.phase == Phase::Ready {
         match forward(r) {
             Ok(sent) => busy |= sent,
@@ -416,6 +428,13 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         busy = true;
     }
     busy
+}
+
+/// Notes for the launch that host `r` was just heard.
+fn heard(r: &Remote, ctx: &Ctx) {
+    if let Ok(mut links) = ctx.links.lock() {
+        links.heard.insert(r.host, (r.who.clone(), r.last_heard));
+    }
 }
 
 /// One frame from a daemon.
@@ -450,7 +469,12 @@ fn on_frame(r: &mut Remote, ctx: &Ctx, frame: Up) -> Result<(), String> {
             report_fault(r, ctx, id, FaultCode::RemoteExited);
         }
         Up::Heartbeat => {}
-        Up::Stopped => r.phase = Phase::Stopped,
+        Up::Stopped => {
+            r.phase = Phase::Stopped;
+            if let Ok(mut links) = ctx.links.lock() {
+                links.stopped.insert(r.host);
+            }
+        }
     }
     Ok(())
 }
@@ -534,8 +558,8 @@ fn lose(r: &mut Remote, ctx: &Ctx, why: String) {
         members: r.members.clone(),
         why: why.clone(),
     };
-    if let Ok(mut lost) = ctx.lost.lock() {
-        lost.insert(r.host, host);
+    if let Ok(mut links) = ctx.links.lock() {
+        links.lost.insert(r.host, host);
     }
     for id in r.members.clone() {
         report_fault(r, ctx, id, FaultCode::HostLost);

@@ -47,6 +47,7 @@ struct Joined {
 pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     let interrupted = common::signals::install();
     crate::team::member_binaries_present()?;
+    super::workdir::sweep_dead();
     let expected_hash = match &o.scenario {
         Some(p) => Some(
             Scenario::load(p, Checks::Member)
@@ -75,6 +76,11 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
         Err(e) => return Err(Failure::fault(e)),
     };
     let (j, chan) = joined(&net, a)?;
+    if let Some(p) = j.a.realtime_priority {
+        // `--rt-priority` of the team: this thread (the bridge loop) now, the members through
+        // their flag. zenoh's threads started before the team's mode was known and keep theirs.
+        common::sched::fifo(p).map_err(|e| Failure::bad_input(format!("team {}: {e}", j.team)))?;
+    }
     if !o.quiet {
         out!(
             "joined team {} as host {}: agents {:?}",
@@ -83,7 +89,7 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
             j.mine.iter().collect::<Vec<_>>()
         );
     }
-    let dir = private_dir(&j.team)?;
+    let dir = super::workdir::create(j.team.as_str())?;
     let result = fly(&j, chan, &dir, interrupted);
     let _ = std::fs::remove_dir_all(&dir);
     result
@@ -131,17 +137,6 @@ fn who() -> String {
     format!("{} (pid {})", host.trim(), std::process::id())
 }
 
-/// A directory only this user can read, for the members' scenario file.
-fn private_dir(team: &TeamName) -> Result<PathBuf, Failure> {
-    use std::os::unix::fs::DirBuilderExt;
-    let dir = std::env::temp_dir().join(format!("cdm-host-{team}-{}", std::process::id()));
-    std::fs::DirBuilder::new()
-        .mode(0o700)
-        .create(&dir)
-        .map_err(|e| Failure::fault(format!("cannot create {}: {e}", dir.display())))?;
-    Ok(dir)
-}
-
 /// This host's layout: its members with all their neighbours. The other hosts' members they
 /// read or wake appear too, each standing in through a relay (its in-neighbours here are the
 /// members of this host that it reads); edges between two other hosts are not here at all.
@@ -184,14 +179,18 @@ fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Fa
 /// The members' flags for the team's mode: real time paces on the start instant the clock
 /// announces (a wall-clock time, the same on every host).
 fn member_flags(a: &Assignment) -> Vec<String> {
-    match a.realtime_stale_after_s {
-        Some(stale_s) => vec![
-            "--realtime".into(),
-            "--stale-after".into(),
-            stale_s.to_string(),
-        ],
-        None => Vec::new(),
+    let Some(stale_s) = a.realtime_stale_after_s else {
+        return Vec::new();
+    };
+    let mut flags = vec![
+        "--realtime".into(),
+        "--stale-after".into(),
+        stale_s.to_string(),
+    ];
+    if let Some(p) = a.realtime_priority {
+        flags.extend(["--rt-priority".into(), p.to_string()]);
     }
+    flags
 }
 
 /// A relayed agent's neighbours on this host.
@@ -252,6 +251,9 @@ fn fly(
         Ok(r) => *r,
         Err(_) => StopReason::AgentSilent,
     };
+    if outcome.is_ok() {
+        link.up_while_stopping(&mut ports, &mut children);
+    }
     stop_team(&mut ports, &mut children, &j.s, reason);
     if outcome.is_ok() {
         // What the members published as they stopped (real time: their pacing reports).
@@ -349,7 +351,8 @@ impl Link<'_> {
         interrupted: &std::sync::atomic::AtomicBool,
     ) -> Result<StopReason, String> {
         let mut last_child_check = Instant::now();
-        let mut idle = cdm_zenoh::IdleBackoff::default();
+        let realtime = self.j.a.realtime_stale_after_s.is_some();
+        let mut idle = cdm_zenoh::IdleBackoff::for_team(realtime);
         loop {
             if interrupted.load(Ordering::Relaxed) {
                 return Err(format!("interrupted by {}", common::signals::received()));
@@ -390,6 +393,23 @@ impl Link<'_> {
         }
         self.send(&Up::States(batch))?;
         Ok(true)
+    }
+
+    /// After the orchestrator's stop (the bridge published it here): the members' last states
+    /// (real time: their final pacing reports) go up as they come, until every member exited
+    /// or the graceful stop's 3 s passed; the orchestrator waits for them a bounded while.
+    fn up_while_stopping(&mut self, ports: &mut OrchestratorPorts, children: &mut [Spawned]) {
+        let until = Instant::now() + Duration::from_secs(3);
+        loop {
+            let _ = self.up(ports);
+            let running = children
+                .iter_mut()
+                .any(|c| matches!(c.child.try_wait(), Ok(None)));
+            if !running || Instant::now() >= until {
+                return;
+            }
+            let _ = ports.wait(Duration::from_millis(5));
+        }
     }
 
     /// A member that exited: its last states first, then the exit.
@@ -458,4 +478,36 @@ fn down(
         Down::Heartbeat => {}
     }
     Ok(None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assignment(stale: Option<f64>, priority: Option<u8>) -> Assignment {
+        Assignment {
+            team: "t".into(),
+            host: 1,
+            hosts_of: vec![(1, 0), (2, 1)],
+            scenario_json: String::new(),
+            scenario_hash: 0,
+            window: 16,
+            link_timeout_ms: 3000,
+            realtime_stale_after_s: stale,
+            realtime_priority: priority,
+        }
+    }
+
+    #[test]
+    fn members_fly_in_the_teams_mode() {
+        assert!(member_flags(&assignment(None, None)).is_empty());
+        assert_eq!(
+            member_flags(&assignment(Some(0.5), None)),
+            ["--realtime", "--stale-after", "0.5"]
+        );
+        assert_eq!(
+            member_flags(&assignment(Some(0.25), Some(20))),
+            ["--realtime", "--stale-after", "0.25", "--rt-priority", "20"]
+        );
+    }
 }

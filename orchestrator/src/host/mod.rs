@@ -14,7 +14,11 @@ mod bridge;
 #[cfg(feature = "hosts")]
 pub mod daemon;
 #[cfg(feature = "hosts")]
+mod links;
+#[cfg(feature = "hosts")]
 mod plan;
+#[cfg(feature = "hosts")]
+mod workdir;
 
 #[cfg(feature = "hosts")]
 pub use plan::Plan;
@@ -29,6 +33,8 @@ pub struct Flight {
     pub window: u32,
     /// `--realtime`: the members' `--stale-after`.
     pub realtime_stale_after: Option<Duration>,
+    /// `--realtime --rt-priority P`: P.
+    pub realtime_priority: Option<u8>,
 }
 
 impl Flight {
@@ -37,6 +43,7 @@ impl Flight {
         Self {
             window: o.window,
             realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
+            realtime_priority: o.realtime.as_ref().and_then(|rt| rt.rt_priority),
         }
     }
 }
@@ -112,6 +119,9 @@ mod single {
         pub fn finish(self, _dir: &common::rundir::RunDir, _ticks: u64, _quiet: bool) {}
         pub fn explain(&self, f: common::audit::FaultRecord) -> common::audit::FaultRecord {
             f
+        }
+        pub fn reporting(&self, _id: u32) -> bool {
+            false
         }
     }
 }
