@@ -306,7 +306,7 @@ fn interrupted_before_start() -> Stop {
     )
 }
 
-/// The stop when the team did not gather in time: names the agents no process joined as (or,
+/// The stop when the team did not gather in time: names the members no process joined as (or,
 /// when all joined, those still waiting for a neighbour's ports).
 fn join_timeout(r: &common::transport::Readiness, team: &TeamName, within: Duration) -> Stop {
     let missing = r.not_joined();

@@ -64,7 +64,7 @@ pub enum TransportError {
     ScenarioMismatch {
         /// The team.
         team: TeamName,
-        /// The agent that tried to join.
+        /// The member that tried to join.
         id: u32,
         /// The joining process's scenario hash.
         mine: u64,
@@ -81,22 +81,22 @@ pub enum TransportError {
         /// The service that is missing.
         service: String,
     },
-    /// The team exists but has no state service for this agent id.
+    /// The team exists but has no state service for this member id.
     #[error("agent {id} is not part of team {team} (no service {service})")]
     NotInTeam {
         /// The team.
         team: TeamName,
-        /// The unknown agent id.
+        /// The unknown member id.
         id: u32,
         /// The service that is missing.
         service: String,
     },
-    /// Another process already holds this agent's exclusive port.
+    /// Another process already holds this member's exclusive port.
     #[error("agent {id} of team {team} is already running ({service} refuses a second {port})")]
     AgentAlreadyRunning {
         /// The team.
         team: TeamName,
-        /// The agent id.
+        /// The member id.
         id: u32,
         /// The service whose exclusive port is taken.
         service: String,
@@ -111,25 +111,25 @@ pub enum TransportError {
     NotANeighbor {
         /// The team.
         team: TeamName,
-        /// The agent opening the port.
+        /// The member opening the port.
         id: u32,
-        /// The agent owning the service.
+        /// The member owning the service.
         peer: u32,
         /// The service.
         service: String,
         /// The kind of port that was refused.
         port: &'static str,
     },
-    /// A member tried to publish a state that carries another agent's id.
+    /// A member tried to publish a state that carries another member's id.
     #[error("agent {id} of team {team} tried to publish a state of agent {msg_id} on {service}")]
     ForeignState {
         /// The team.
         team: TeamName,
-        /// The publishing agent.
+        /// The publishing member.
         id: u32,
         /// The id found in the message.
         msg_id: u32,
-        /// The agent's state service.
+        /// The member's state service.
         service: String,
     },
     /// An iceoryx2 node could not be created.
@@ -203,7 +203,7 @@ pub enum TransportError {
         free_kib: u64,
         /// The team's size.
         agents: usize,
-        /// The clock window (ticks an agent may run ahead).
+        /// The clock window (ticks a member may run ahead).
         window: u32,
         /// What the team needs (with a margin).
         need_kib: u64,
@@ -229,7 +229,7 @@ pub enum TransportError {
         hard: u64,
     },
     /// A node, service or port could not be created because this process ran out of file
-    /// descriptors (the orchestrator holds a few per agent).
+    /// descriptors (the orchestrator holds a few per member).
     #[error(
         "team {team}, {who}: {op} on {service} failed: out of file descriptors ({open} open, \
          limit RLIMIT_NOFILE soft {soft}, hard {hard}); raise it, e.g. `ulimit -n 65536` (as \

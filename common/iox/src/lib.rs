@@ -1,17 +1,17 @@
 //! The iceoryx2 backend, the only library crate that names iceoryx2: shared-memory ports of one
 //! quadcopter team.
 //!
-//! One team = one orchestrator process + one process per agent, each with one iceoryx2 node.
+//! One team = one orchestrator process + one process per member, each with one iceoryx2 node.
 //! The orchestrator creates every service of the team, sized to the team's layout; members only
 //! open them (iceoryx2 refuses an `open` that asks for larger limits than the creator set, and
 //! exact limits let the transport itself refuse ports that the layout does not allow).
 //!
 //! | service | pattern | ports |
 //! |---|---|---|
-//! | `cdm/<team>/state/<id>` | publish-subscribe [`StateMsg`](crate::messages::StateMsg) | publisher: agent `id` (max 1); subscribers: its out-neighbours + orchestrator |
-//! | `cdm/<team>/clock` | publish-subscribe [`ClockMsg`](crate::messages::ClockMsg) | publisher: orchestrator; subscribers: every agent |
-//! | `cdm/<team>/wake/<id>` | event | listener: agent `id`; notifiers: its in-neighbours + orchestrator |
-//! | `cdm/<team>/wake/orch` | event | listener: orchestrator; notifiers: every agent |
+//! | `cdm/<team>/state/<id>` | publish-subscribe [`StateMsg`](crate::messages::StateMsg) | publisher: member `id` (max 1); subscribers: its out-neighbours + orchestrator |
+//! | `cdm/<team>/clock` | publish-subscribe [`ClockMsg`](crate::messages::ClockMsg) | publisher: orchestrator; subscribers: every member |
+//! | `cdm/<team>/wake/<id>` | event | listener: member `id`; notifiers: its in-neighbours + orchestrator |
+//! | `cdm/<team>/wake/orch` | event | listener: orchestrator; notifiers: every member |
 //!
 //! Wake-up rule: publish first, notify after `send` returned, so a woken reader always finds the
 //! sample. Events merge repeated notifications, so a reader must drain everything it can after
@@ -102,7 +102,7 @@ use iceoryx2::prelude::*;
 pub const TEAM_NAME_MAX_LEN: usize = 48;
 
 /// Node slots each service keeps beyond the team's own processes: room for a diagnostic tool and
-/// for a duplicate agent process to get far enough to be told precisely why it is refused.
+/// for a duplicate member process to get far enough to be told precisely why it is refused.
 const SPARE_NODES: usize = 2;
 
 /// Subscriber slots each state service keeps beyond the team's own readers: room for one
@@ -110,7 +110,7 @@ const SPARE_NODES: usize = 2;
 /// publishers never wait for it (safe overflow: a slow observer loses its oldest samples).
 const OBSERVER_SLOTS: usize = 1;
 
-/// Clock messages a subscriber keeps: agents read every one (a loss notice must not be
+/// Clock messages a subscriber keeps: members read every one (a loss notice must not be
 /// overwritten by the grants after it), and lag at most a few grants behind (window).
 const CLOCK_BUFFER: usize = 16;
 
@@ -122,7 +122,7 @@ const CLEANUP_TIMEOUT: Duration = Duration::from_secs(2);
 pub enum Role {
     /// The orchestrator.
     Orchestrator,
-    /// The agent with this id.
+    /// The member with this id.
     Agent(u32),
 }
 
@@ -206,7 +206,7 @@ fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, Transpo
     create_named_node(team, who, team.node_name(who))
 }
 
-/// Creates the node `name` for `who` (a bridge's relay nodes are named apart from the agents').
+/// Creates the node `name` for `who` (a bridge's relay nodes are named apart from the members').
 fn create_named_node(
     team: &TeamName,
     who: Role,

@@ -32,7 +32,7 @@ fn limit(resource: libc::__rlimit_resource_t) -> std::io::Result<(u64, u64)> {
 }
 
 /// Raises this process's soft `RLIMIT_NOFILE` to the hard limit and returns the new soft limit.
-/// The orchestrator holds 6 to 11 descriptors per agent, so a large team passes 1024 quickly.
+/// The orchestrator holds 6 to 11 descriptors per member, so a large team passes 1024 quickly.
 pub fn raise_fd_limit() -> std::io::Result<u64> {
     let (soft, hard) = limit(libc::RLIMIT_NOFILE)?;
     if soft < hard {
@@ -61,14 +61,14 @@ pub fn fd_exhausted() -> Option<FdUsage> {
 }
 
 /// Descriptors the orchestrator holds for a team of `agents`, measured with iceoryx2 0.10 on a
-/// flying team. When it wakes every agent itself (`launch --n 100` held 1,119): per agent 11,
+/// flying team. When it wakes every member itself (`launch --n 100` held 1,119): per member 11,
 /// the dynamic segment and static file of its state and wake services, a port tag for the
 /// subscriber and the notifier, a connection segment each way (its state, the clock), the wake
 /// event's management segment and socket and its publisher's data segment; estimated at 12 per
-/// agent (N = 2000: 24,064, above this machine's hard limit of 20,000). With relayed wake-ups
+/// member (N = 2000: 24,064, above this machine's hard limit of 20,000). With relayed wake-ups
 /// (`TeamLayout::with_relayed_wakes`) the wake event's five are gone once the team flies (its
 /// static file and segment are held only while the team gathers, when no connection is open
-/// yet): 6 per agent, estimated at 7. Both with 64 for the run directory, the children's pipes
+/// yet): 6 per member, estimated at 7. Both with 64 for the run directory, the children's pipes
 /// and the logging.
 pub fn orchestrator_fd_need(agents: usize, relayed_wakes: bool) -> u64 {
     let per_agent = if relayed_wakes { 7 } else { 12 };
@@ -134,8 +134,8 @@ pub const SHM_DIR: &str = "/dev/shm";
 
 /// Shared memory a team takes with a window of `window` ticks, measured with iceoryx2 0.10 at
 /// N = 100 as the space the tmpfs reports used (segments and iceoryx2's root files): about
-/// 54 KiB per agent at window 4, and the state segments grow by about 0.8 KiB per agent per tick
-/// of window (window 256: 207 KiB, 1024: 789 KiB per agent); asked for with a margin.
+/// 54 KiB per member at window 4, and the state segments grow by about 0.8 KiB per member per tick
+/// of window (window 256: 207 KiB, 1024: 789 KiB per member); asked for with a margin.
 pub fn shm_need_bytes(agents: usize, window: u32) -> u64 {
     (agents as u64 + 4) * (64 + u64::from(window)) * 1024
 }

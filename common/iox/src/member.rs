@@ -1,4 +1,4 @@
-//! A team member's side (one agent process): opens the services the orchestrator created.
+//! A team member's side (one member process): opens the services the orchestrator created.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -21,19 +21,19 @@ use super::{
 use crate::messages::{ClockMsg, StateMsg};
 use crate::wire::{ClockWire, StateWire, Wire};
 
-/// A neighbour's state service, read by this agent.
+/// A neighbour's state service, read by this member.
 struct NeighborReader {
     _service: PubSubService<ipc::Service, StateWire, ()>,
     subscriber: Subscriber<ipc::Service, StateWire, ()>,
 }
 
-/// A wake event this agent notifies.
+/// A wake event this member notifies.
 struct WakeWriter {
     _service: EventService<ipc::Service>,
     notifier: Notifier<ipc::Service>,
 }
 
-/// One agent's ports: the publisher of its `state/<id>`, subscribers on its in-neighbours' states
+/// One member's ports: the publisher of its `state/<id>`, subscribers on its in-neighbours' states
 /// and the clock, the listener of its `wake/<id>`, and notifiers on its out-neighbours' wake
 /// events and `wake/orch`. Fields drop in order: ports first, the node last.
 pub struct MemberPorts {
@@ -55,11 +55,11 @@ pub struct MemberPorts {
 }
 
 impl MemberPorts {
-    /// Opens agent `id`'s ports in `team`. Fails with [`TransportError::ScenarioMismatch`] when the
+    /// Opens member `id`'s ports in `team`. Fails with [`TransportError::ScenarioMismatch`] when the
     /// team flies another scenario (checked before any port is taken), [`TransportError::TeamNotFound`] when no
     /// orchestrator created the team, [`TransportError::NotInTeam`] when `id` (or an in-neighbour)
     /// has no state service, [`TransportError::AgentAlreadyRunning`] when another process holds
-    /// agent `id`, and [`TransportError::NotANeighbor`] when the team's layout has no such edge.
+    /// member `id`, and [`TransportError::NotANeighbor`] when the team's layout has no such edge.
     pub fn open(
         team: &TeamName,
         id: u32,
@@ -71,11 +71,11 @@ impl MemberPorts {
         Self::open_as(team, id, node, scenario_hash, in_neighbors, out_neighbors)
     }
 
-    /// Opens agent `id`'s ports on behalf of a member that runs on another host (`host`), for the
-    /// bridge that carries its states over the network (issue 12). The ports are an agent's
+    /// Opens member `id`'s ports on behalf of a member that runs on another host (`host`), for the
+    /// bridge that carries its states over the network (issue 12). The ports are a member's
     /// (so the team's layout and limits hold unchanged); only the node's name differs,
     /// `cdm/<team>/host/<host>/agent/<id>`, so `subscriptions.json` shows which edges cross
-    /// hosts. `in_neighbors` and `out_neighbors` are the agent's neighbours on this host only.
+    /// hosts. `in_neighbors` and `out_neighbors` are the member's neighbours on this host only.
     pub fn open_relay(
         team: &TeamName,
         host: u32,
@@ -103,7 +103,7 @@ impl MemberPorts {
         let clock = open_clock(&node, team, who)?;
         // The team's scenario must be ours before we take any slot in it.
         check_scenario_hash(&clock, team, id, scenario_hash)?;
-        // Then the agent's identity: its exclusive publisher slot and wake-up listener.
+        // Then the member's identity: its exclusive publisher slot and wake-up listener.
         let own = OwnPorts::open(&node, team, id)?;
         let neighbors = open_neighbors(&node, team, id, in_neighbors)?;
         let mut out_wakes = BTreeMap::new();
@@ -143,7 +143,7 @@ impl MemberPorts {
         })
     }
 
-    /// The agent id.
+    /// The member id.
     pub fn id(&self) -> u32 {
         self.id
     }
@@ -153,9 +153,9 @@ impl MemberPorts {
         &self.team
     }
 
-    /// Publishes this agent's state, then (after the send returned) wakes its out-neighbours and
+    /// Publishes this member's state, then (after the send returned) wakes its out-neighbours and
     /// the orchestrator. Returns how many subscribers the sample reached. A state carrying another
-    /// agent's id is refused.
+    /// member's id is refused.
     pub fn publish(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
         let reached = self.publish_quietly(msg)?;
         self.notify_readers()?;
@@ -299,7 +299,7 @@ impl MemberPorts {
     }
 
     /// True while the orchestrator's node is alive. Checks only the few nodes attached to this
-    /// agent's state service (its out-neighbours, itself and the orchestrator, whose subscriber
+    /// member's state service (its out-neighbours, itself and the orchestrator, whose subscriber
     /// is there for the team's lifetime; with relayed wake-ups it holds no port on most wake
     /// events), so it is cheap enough for every half second. A registry that cannot be read
     /// counts as dead (fail-safe: stop).
@@ -328,7 +328,7 @@ impl MemberPorts {
     }
 }
 
-/// The agent's own ports: the one publisher of `state/<id>` and the one listener of `wake/<id>`
+/// The member's own ports: the one publisher of `state/<id>` and the one listener of `wake/<id>`
 /// (a second process for the same id finds either taken).
 struct OwnPorts {
     state: PubSubService<ipc::Service, StateWire, ()>,
@@ -447,7 +447,7 @@ fn open_neighbors(
 }
 
 /// Opens `state/<owner>`: a missing service means `owner` is not in the team; a full node table
-/// on one's own service means another process is this agent.
+/// on one's own service means another process is this member.
 fn open_state(
     node: &Node<ipc::Service>,
     team: &TeamName,
@@ -497,7 +497,7 @@ pub(crate) fn open_event(
 }
 
 /// Opens a notifier on `name` (the wake event of `peer`, or `wake/orch`); a full notifier table
-/// means the layout has no edge from this agent to `peer`.
+/// means the layout has no edge from this member to `peer`.
 fn open_wake_writer(
     node: &Node<ipc::Service>,
     team: &TeamName,

@@ -24,17 +24,17 @@ use crate::wire::{ClockWire, StateWire, Wire};
 
 const WHO: Role = Role::Orchestrator;
 
-/// One agent's state service, read by the orchestrator.
+/// One member's state service, read by the orchestrator.
 struct StateReader {
     service: PubSubService<ipc::Service, StateWire, ()>,
     subscriber: Subscriber<ipc::Service, StateWire, ()>,
 }
 
-/// One agent's wake event. The orchestrator created it and holds it while the team gathers
+/// One member's wake event. The orchestrator created it and holds it while the team gathers
 /// (members open it meanwhile); with relayed wake-ups it lets go of it at the first clock
-/// message unless it notifies the agent itself (a root, or a reader of a lost member).
+/// message unless it notifies the member itself (a root, or a reader of a lost member).
 struct WakeEvent {
-    /// `None` once let go: the agent and its in-neighbours hold it from then on.
+    /// `None` once let go: the member and its in-neighbours hold it from then on.
     service: Option<EventService<ipc::Service>>,
     notifier: Option<Notifier<ipc::Service>>,
     /// (listeners, notifiers) when the service was let go, for [`OrchestratorPorts::readiness`].
@@ -71,18 +71,18 @@ pub struct OrchestratorPorts {
     stale_nodes_removed: usize,
 }
 
-/// How far one agent has connected its ports (see [`OrchestratorPorts::readiness`]).
+/// How far one member has connected its ports (see [`OrchestratorPorts::readiness`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct AgentReadiness {
-    /// The agent.
+    /// The member.
     pub id: u32,
-    /// Publishers on `state/<id>` (1 when the agent is up).
+    /// Publishers on `state/<id>` (1 when the member is up).
     pub state_publishers: usize,
     /// Subscribers on `state/<id>`, the orchestrator's included.
     pub state_subscribers: usize,
     /// Out-degree on this host + 1 (the orchestrator).
     pub expected_state_subscribers: usize,
-    /// Listeners on `wake/<id>` (1 when the agent is up).
+    /// Listeners on `wake/<id>` (1 when the member is up).
     pub wake_listeners: usize,
     /// Notifiers on `wake/<id>`, the orchestrator's included.
     pub wake_notifiers: usize,
@@ -91,7 +91,7 @@ pub struct AgentReadiness {
 }
 
 impl AgentReadiness {
-    /// True when the agent and all its neighbours' ports towards it are connected.
+    /// True when the member and all its neighbours' ports towards it are connected.
     pub fn is_complete(&self) -> bool {
         self.state_publishers == 1
             // An observer may already be subscribed: at least the team's readers. Every member
@@ -109,7 +109,7 @@ impl AgentReadiness {
 /// cleaned.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Readiness {
-    /// Per agent, in id order.
+    /// Per member, in id order.
     pub agents: Vec<AgentReadiness>,
     /// Subscribers on the clock (the team size when complete).
     pub clock_subscribers: usize,
@@ -126,8 +126,8 @@ impl Readiness {
             && self.agents.iter().all(AgentReadiness::is_complete)
     }
 
-    /// Agents that have not joined: no process has opened their own ports (state publisher,
-    /// wake listener). Agents that joined but wait on a neighbour are not among them.
+    /// Members that have not joined: no process has opened their own ports (state publisher,
+    /// wake listener). Members that joined but wait on a neighbour are not among them.
     pub fn not_joined(&self) -> Vec<u32> {
         self.agents
             .iter()
@@ -136,7 +136,7 @@ impl Readiness {
             .collect()
     }
 
-    /// Agents whose own or incoming ports are not all connected yet.
+    /// Members whose own or incoming ports are not all connected yet.
     pub fn waiting_for(&self) -> Vec<u32> {
         self.agents
             .iter()
@@ -218,9 +218,9 @@ impl OrchestratorPorts {
         self.stale_nodes_removed
     }
 
-    /// Publishes a clock message, then wakes the agents it wakes itself (every agent, or with
+    /// Publishes a clock message, then wakes the members it wakes itself (every member, or with
     /// relayed wake-ups the [`TeamLayout::wake_roots`] and the readers of lost members). Returns
-    /// how many agents' listeners were reached (fewer than those woken means some agent is not
+    /// how many members' listeners were reached (fewer than those woken means some member is not
     /// listening: dead or not yet up).
     pub fn publish_clock(&mut self, msg: ClockMsg) -> Result<usize, TransportError> {
         if self.layout.relays_wakes() {
@@ -298,7 +298,7 @@ impl OrchestratorPorts {
         }
     }
 
-    /// Drains every state subscriber (agents in id order, each agent's samples oldest first) into
+    /// Drains every state subscriber (members in id order, each member's samples oldest first) into
     /// `f`; returns how many samples were delivered.
     pub fn receive_states(&mut self, mut f: impl FnMut(StateMsg)) -> Result<usize, TransportError> {
         let mut count = 0;
@@ -315,7 +315,7 @@ impl OrchestratorPorts {
         Ok(count)
     }
 
-    /// Blocks until an agent notifies `wake/orch` or `timeout` passes; true when woken. Then
+    /// Blocks until a member notifies `wake/orch` or `timeout` passes; true when woken. Then
     /// drain with [`receive_states`](Self::receive_states): notifications merge.
     pub fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
         let service = self.team.orchestrator_wake_service();
@@ -397,7 +397,7 @@ impl OrchestratorPorts {
         self.node_names(&node_ids, |f| service.nodes(f).map(|_| ()))
     }
 
-    /// True when agent `reader` subscribes to `state/<writer>` and `writer` notifies
+    /// True when member `reader` subscribes to `state/<writer>` and `writer` notifies
     /// `wake/<reader>`: a link a repair opened is connected.
     pub fn linked(&self, reader: u32, writer: u32) -> Result<bool, TransportError> {
         let r = self.team.node_name(Role::Agent(reader));

@@ -38,7 +38,7 @@ impl TeamName {
         &self.0
     }
 
-    /// `cdm/<team>/state/<id>`: agent `id`'s states.
+    /// `cdm/<team>/state/<id>`: member `id`'s states.
     pub fn state_service(&self, id: u32) -> String {
         format!("cdm/{}/state/{id}", self.0)
     }
@@ -48,7 +48,7 @@ impl TeamName {
         format!("cdm/{}/clock", self.0)
     }
 
-    /// `cdm/<team>/wake/<id>`: wakes agent `id`.
+    /// `cdm/<team>/wake/<id>`: wakes member `id`.
     pub fn wake_service(&self, id: u32) -> String {
         format!("cdm/{}/wake/{id}", self.0)
     }
@@ -68,7 +68,7 @@ impl TeamName {
     }
 
     /// `cdm/<team>/host/<host>/agent/<id>`: the node through which host `host`'s bridge stands
-    /// in for agent `id`, which runs on another host.
+    /// in for member `id`, which runs on another host.
     pub fn relay_node_name(&self, host: u32, id: u32) -> String {
         format!("cdm/{}/host/{host}/agent/{id}", self.0)
     }
@@ -96,7 +96,7 @@ impl std::str::FromStr for TeamName {
 }
 
 /// Who talks to whom in a team, validated: the orchestrator sizes every service from it.
-/// `in_neighbors[i]` are the agents whose states agent `i` reads; out-neighbours are derived.
+/// `in_neighbors[i]` are the members whose states member `i` reads; out-neighbours are derived.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TeamLayout {
     ids: Vec<u32>,
@@ -135,7 +135,7 @@ pub fn scenario_hash_value(hash: u64) -> String {
 
 impl TeamLayout {
     /// Checks that ids are unique and non-empty, every neighbour is a team member, nobody is its
-    /// own neighbour, and `window >= 1` (how many ticks an agent may run ahead of the slowest).
+    /// own neighbour, and `window >= 1` (how many ticks a member may run ahead of the slowest).
     /// Ids missing from `in_neighbors` read nobody. Neighbour lists are sorted and deduplicated.
     pub fn new(
         ids: Vec<u32>,
@@ -270,22 +270,22 @@ impl TeamLayout {
         self.scenario_hash
     }
 
-    /// The agent ids, sorted.
+    /// The member ids, sorted.
     pub fn ids(&self) -> &[u32] {
         &self.ids
     }
 
-    /// The agents whose states `id` reads (sorted; empty for an unknown id).
+    /// The members whose states `id` reads (sorted; empty for an unknown id).
     pub fn in_neighbors(&self, id: u32) -> &[u32] {
         self.in_neighbors.get(&id).map_or(&[], Vec::as_slice)
     }
 
-    /// The agents that read `id`'s states (sorted; empty for an unknown id).
+    /// The members that read `id`'s states (sorted; empty for an unknown id).
     pub fn out_neighbors(&self, id: u32) -> &[u32] {
         self.out_neighbors.get(&id).map_or(&[], Vec::as_slice)
     }
 
-    /// How many ticks an agent may run ahead of the slowest one.
+    /// How many ticks a member may run ahead of the slowest one.
     pub fn window(&self) -> u32 {
         self.window
     }

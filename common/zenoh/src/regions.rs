@@ -1,7 +1,7 @@
 //! Which member runs on which host: contiguous regions of the formation, so that few
 //! communication edges cross hosts (pure; no I/O).
 //!
-//! The synthesised graph links each follower to a triangle of nearby agents
+//! The synthesised graph links each follower to a triangle of nearby members
 //! (`cdm-core/src/graph.rs`), so cutting the formation into slabs along one in-plane axis keeps
 //! most edges inside a slab. Both in-plane axes are tried and the one with fewer crossing edges
 //! kept; slabs hold `n / K` members each (the first ones one more when K does not divide n).
@@ -14,7 +14,7 @@ pub struct Placed {
     pub id: u32,
     /// In-plane coordinates at t0 (eq. 12).
     pub planar: [f64; 2],
-    /// The agents whose states it reads.
+    /// The members whose states it reads.
     pub in_neighbors: Vec<u32>,
 }
 

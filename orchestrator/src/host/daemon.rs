@@ -140,7 +140,7 @@ fn who() -> String {
 /// This host's layout: its members with all their neighbours. The other hosts' members they
 /// read or wake appear too, each standing in through a relay (its in-neighbours here are the
 /// members of this host that it reads); edges between two other hosts are not here at all.
-/// Returns the layout and, per relayed agent, its in- and out-neighbours on this host.
+/// Returns the layout and, per relayed member, its in- and out-neighbours on this host.
 fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Failure> {
     let mut ins = BTreeMap::new();
     let mut ghosts: BTreeMap<u32, Neighbours> = BTreeMap::new();
@@ -193,7 +193,7 @@ fn member_flags(a: &Assignment) -> Vec<String> {
     flags
 }
 
-/// A relayed agent's neighbours on this host.
+/// A relayed member's neighbours on this host.
 #[derive(Default)]
 struct Neighbours {
     ins: Vec<u32>,
