@@ -5,6 +5,7 @@
 # stime from /proc/<pid>/stat over WINDOW seconds (default 10). Needs root and release binaries.
 # Usage: scripts/bench-hosts-idle.sh [BIN_DIR]   (default: target/release of this checkout)
 set -eu
+. "$(dirname "$0")/two-hosts.sh"
 dir=${1:-$(cd "$(dirname "$0")/.." && pwd)/target/release}
 bin=$dir/orchestrator
 window=${WINDOW:-10}
@@ -13,19 +14,15 @@ out=$(mktemp -d)
 cleanup() {
   [ -n "${members:-}" ] && kill -CONT $members 2>/dev/null
   [ -n "${orch:-}" ] && kill "$orch" 2>/dev/null; wait 2>/dev/null || true
-  ip netns del "$a" 2>/dev/null || true; ip netns del "$b" 2>/dev/null || true; rm -rf "$out"
+  two_hosts_down; rm -rf "$out"
 }
 trap cleanup EXIT
-ip netns add "$a"; ip netns add "$b"
-ip -n "$a" link add veth0 type veth peer name veth1 netns "$b"
-ip -n "$a" addr add 10.77.0.1/24 dev veth0; ip -n "$b" addr add 10.77.0.2/24 dev veth1
-for x in "$a veth0" "$b veth1" "$a lo" "$b lo"; do set -- $x; ip -n "$1" link set "$2" up; done
+two_hosts_up
 ip netns exec "$a" "$bin" launch --n 10 --t-total 600 --team "$team" --out "$out/run" \
   --no-figures --quiet --agent-timeout 120 --hosts 2 --listen tcp/10.77.0.1:7447 \
   > "$out/log" 2>&1 &
 orch=$!
-ip netns exec "$b" unshare --mount sh -c 'mount -t tmpfs tmpfs /dev/shm && exec "$0" "$@"' \
-  "$bin" host --connect tcp/10.77.0.1:7447 --team "$team" --quiet > "$out/daemon" 2>&1 &
+daemon_in_b "$team" "$out/daemon"
 i=0; until [ -s "$out/run/telemetry.csv" ] || [ $i -ge 600 ]; do sleep 0.1; i=$((i + 1)); done
 # Every member on both hosts: agent or leader processes of this team.
 members=$(pgrep -f -- "--team $team --id" || true)
