@@ -5,6 +5,10 @@ use crate::options::{timeout, LinkArgs};
 use crate::transport::TeamName;
 use std::path::PathBuf;
 
+/// A member's default `--silence-timeout`, seconds (the orchestrator passes a longer one only
+/// when its own `--agent-timeout` asks for more patience).
+pub const DEFAULT_SILENCE_TIMEOUT_S: f64 = 10.0;
+
 /// Arguments of a member process (`agent` or `leader`).
 #[derive(Debug, Clone, clap::Parser)]
 #[command(
@@ -33,7 +37,7 @@ pub struct MemberArgs {
     #[arg(
         long = "silence-timeout",
         allow_negative_numbers = true,
-        default_value_t = 10.0
+        default_value_t = DEFAULT_SILENCE_TIMEOUT_S
     )]
     pub silence_timeout_s: f64,
     #[command(flatten)]

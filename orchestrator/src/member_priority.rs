@@ -34,10 +34,6 @@ pub fn lower(child: &Child) {
     }
 }
 
-/// The members' default `--silence-timeout` (common `member_cli`): how long a member waits
-/// without progress before it stops by itself.
-const MEMBER_SILENCE_S: f64 = 10.0;
-
 /// Flags for a spawned lockstep member: `--silence-timeout` at twice `--agent-timeout` when that
 /// exceeds the members' default (10 s), nothing otherwise (the default run is unchanged). Why:
 /// a team so large that one half-window takes longer than 10 s on a crowded machine (N = 2000
@@ -46,7 +42,7 @@ const MEMBER_SILENCE_S: f64 = 10.0;
 /// and the orchestrator still notices a silent member first.
 pub fn lockstep_flags(agent_timeout: std::time::Duration) -> Vec<String> {
     let silence_s = 2.0 * agent_timeout.as_secs_f64();
-    if silence_s > MEMBER_SILENCE_S {
+    if silence_s > common::member_cli::DEFAULT_SILENCE_TIMEOUT_S {
         vec!["--silence-timeout".into(), silence_s.to_string()]
     } else {
         Vec::new()

@@ -3,7 +3,7 @@
 //! whose newest state is too old, and sums the members' pacing reports. The loop around it (the
 //! orchestrator's `realtime.rs`) owns the ports, the processes and the files.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::VecDeque;
 
 use cdm_core::audit::{RealtimeFigures, SlowMember};
 use cdm_core::dynamics::{Flat, QuadState};
@@ -12,6 +12,7 @@ use cdm_core::step::{extrapolate_flat, NeighborModel};
 
 use crate::messages::{AgentStatus, FaultCode, StateMsg};
 use crate::realtime::{phase_offset_s, stamp_s, Pacing, PacingFigures};
+use crate::team_slots::IdIndex;
 
 /// States kept per member beyond the history the monitor is asked to cover: an audit instant
 /// waits for the slowest member (up to the stale bound), so the fastest members' states back to
@@ -53,7 +54,7 @@ pub struct MonitorCore {
     hash: u64,
     dt_s: f64,
     members: Vec<Seen>,
-    index: BTreeMap<u32, usize>,
+    index: IdIndex,
     stopped: bool,
     /// States kept per member.
     ring: usize,
@@ -81,7 +82,8 @@ impl MonitorCore {
                 final_report: false,
             })
             .collect();
-        let index = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
+        let ids: Vec<u32> = members.iter().map(|m| m.id).collect();
+        let index = IdIndex::new(&ids);
         Self {
             hash,
             dt_s,
@@ -94,7 +96,7 @@ impl MonitorCore {
 
     /// A message from a member's state service.
     pub fn on_state(&mut self, msg: &StateMsg) -> Heard {
-        let Some(&k) = self.index.get(&msg.id) else {
+        let Some(k) = self.index.get(msg.id) else {
             return Heard::Nothing;
         };
         if msg.scenario_hash != self.hash {

@@ -1,5 +1,6 @@
-//! The team core's per-tick data structures, built for the orchestrator's hot path: every
-//! member's state of every tick passes through them (N = 40: 800,000 states in a full plan).
+//! The team core's per-tick data structures (and the real-time monitor's id lookup), built for
+//! the orchestrator's hot path: every member's state of every tick passes through them (N = 40:
+//! 800,000 states in a full plan).
 //! A profile of `launch --n 40` put the `BTreeMap`s they replace at about 5 % of the
 //! orchestrator; these are a `Vec` indexed by member id and a ring of tick slots.
 
