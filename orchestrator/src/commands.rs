@@ -151,8 +151,7 @@ fn scenario_export(
 
 /// `orchestrator launch`: the team as processes, then its summary, figures and replay.
 fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
-    let (s, mut opts) = launch_options(&a, quiet)?;
-    restrict_across_hosts(&mut opts, quiet)?;
+    let (s, opts) = launch_options(&a, quiet)?;
     let started = Instant::now();
     let launched = launch(&s, &opts)?;
     print_launched(&launched, started, &opts.out, quiet);
@@ -238,25 +237,6 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         on_loss: a.run.on_loss.into(),
     };
     Ok((s, opts))
-}
-
-/// What a team over several hosts cannot do yet: refused, or (repairs) flown with
-/// `--on-loss stop`.
-fn restrict_across_hosts(opts: &mut LaunchOptions, quiet: bool) -> Result<(), Failure> {
-    if opts.hosts.hosts > 1 && !opts.losses.events.is_empty() {
-        return Err(Failure::bad_input(
-            "--lose with --hosts: losing members across hosts is not supported yet",
-        ));
-    }
-    if opts.hosts.hosts > 1 && opts.on_loss == common::loss::OnLoss::Repair {
-        // Repairs re-open services on one host's shared memory; the bridges do not
-        // carry a repaired link yet, so a team over several hosts stops on a loss.
-        opts.on_loss = common::loss::OnLoss::Stop;
-        if !quiet {
-            out!("note: --hosts > 1 flies with --on-loss stop (repair across hosts is not supported yet)");
-        }
-    }
-    Ok(())
 }
 
 /// The launch's summary: the audit, the tick rate and start-up, the peak memory.

@@ -86,6 +86,8 @@ pub struct Launched {
 struct Watchers<'a> {
     audit: &'a mut Auditor,
     live: &'a mut Option<LiveView>,
+    /// The other hosts' members, through the bridge (`--hosts`): their exits, kills and links.
+    hosts: Option<&'a crate::host::Bridge>,
 }
 
 /// Starts the live view before the team, so a bad address stops nothing (exit 2).
@@ -136,6 +138,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             Watchers {
                 audit: &mut audit,
                 live: &mut live,
+                hosts: bridge.as_ref(),
             },
             interrupted,
         )
@@ -484,18 +487,24 @@ fn fly_team(
                 }
                 TeamAction::CheckExited => {
                     let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
-                    if let Some((id, how)) = first_exited_but(children, lost) {
+                    let remote = || w.hosts.and_then(|b| b.take_exited());
+                    if let Some((id, how)) = first_exited_but(children, lost).or_else(remote) {
                         core.on_exited(id, how, clock.now());
                     }
                 }
                 TeamAction::Kill(ids) => {
                     for id in ids {
                         crate::loss::kill_and_reap(children, id);
+                        w.hosts.inspect(|b| b.kill(id));
                     }
                     break;
                 }
                 TeamAction::CheckLinks => {
-                    core.on_links(clock.now(), |r, w| ports.linked(r, w).unwrap_or(false));
+                    let hosts = w.hosts;
+                    core.on_links(clock.now(), |r, wr| match hosts {
+                        Some(b) => b.linked(ports, r, wr),
+                        None => ports.linked(r, wr).unwrap_or(false),
+                    });
                 }
                 TeamAction::Poll => {
                     // Complete ticks reach the file at least every 100 ms (and at every stop).

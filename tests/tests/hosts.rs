@@ -540,3 +540,138 @@ fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
     assert_exit(&c, 0, "clean");
     assert_no_team_resources(&team);
 }
+
+/// The generated team of `n` split as `launch --hosts 2` splits it (`cdm_zenoh::Regions`), and
+/// the follower (of host B when `on_b_only`) whose loss (alone) opens the most links across
+/// hosts, preferring one that opens a link read on host B from host A: (its id, host B's
+/// members, those links as (source, reader)).
+fn loss_across_hosts(n: usize, on_b_only: bool) -> (u32, BTreeSet<u32>, Vec<(u32, u32)>) {
+    use common::formation::Role;
+    use common::loss_log::LossLog;
+    let s = common::scenario::Scenario::generated(n).expect("a generated team");
+    let placed: Vec<cdm_zenoh::Placed> = s
+        .formation
+        .members
+        .iter()
+        .map(|m| cdm_zenoh::Placed {
+            id: m.id,
+            planar: [m.planar[0], m.planar[1]],
+            in_neighbors: m.link.map_or_else(Vec::new, |l| l.in_neighbors.to_vec()),
+        })
+        .collect();
+    let regions = cdm_zenoh::Regions::split(&placed, 2);
+    let on_b: BTreeSet<u32> = regions.members(1).into_iter().collect();
+    let crossing_of = |id: u32| -> Vec<(u32, u32)> {
+        let mut log = LossLog::new(&s);
+        log.add(id, 1);
+        log.new_links()
+            .into_iter()
+            .filter(|(r, w)| on_b.contains(r) != on_b.contains(w))
+            .map(|(r, w)| (w, r))
+            .collect()
+    };
+    let best = s
+        .formation
+        .members
+        .iter()
+        .filter(|m| m.role == Role::Follower && (!on_b_only || on_b.contains(&m.id)))
+        .map(|m| (m.id, crossing_of(m.id)))
+        .max_by_key(|(_, c)| {
+            let into_b = c.iter().any(|(w, r)| on_b.contains(r) && !on_b.contains(w));
+            (into_b, c.len())
+        })
+        .expect("the team has followers");
+    assert!(
+        !best.1.is_empty(),
+        "no follower's loss opens a link across hosts"
+    );
+    (best.0, on_b, best.1)
+}
+
+/// The edges a repair made cross hosts, from hosts.json.
+fn added_crossing(hosts: &Value) -> BTreeSet<(u32, u32)> {
+    serde_json::from_value(hosts["crossing_edges_added_by_repairs"].clone())
+        .unwrap_or_else(|e| panic!("hosts.json crossing_edges_added_by_repairs: {e}: {hosts:#}"))
+}
+
+/// `launch --hosts 2 --lose ID@T` of a follower whose repair opens links across hosts: the
+/// notice crosses on the clock, both bridges compute the same repair and carry the new links;
+/// telemetry is byte-identical to `simulate --lose ID@T`, the new crossing edges are recorded,
+/// nothing is left on either host.
+#[test]
+fn a_scripted_loss_across_hosts_flies_exactly_as_simulate() {
+    let Some(h) = Hosts::create("sl") else { return };
+    let (lost, on_b, opened) = loss_across_hosts(10, false);
+    let dir = TempDir::new();
+    let team = unique_team("hostlose");
+    let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
+    let when = format!("{lost}@5");
+    let source = ["--n", "10", "--t-total", "20", "--lose", &when];
+    let out_s = out.to_string_lossy().into_owned();
+    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
+    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", &team]));
+    let s = run(&mut simulate(&sim, &source), RUN_DEADLINE);
+    assert_exit(&s, 0, "simulate --lose");
+    let o = orch.finish(RUN_DEADLINE);
+    let d = daemon.finish(RUN_DEADLINE);
+    assert_exit(&o, 0, &format!("launch --hosts 2 --lose {when}"));
+    assert_exit(&d, 0, "orchestrator host");
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["losses"][0]["id"], lost, "{audit:#}");
+    let hosts = read_json(&out.join("hosts.json"));
+    assert_eq!(host_agents(&hosts, 1), on_b, "{hosts:#}");
+    let added = added_crossing(&hosts);
+    for e in &opened {
+        assert!(added.contains(e), "{e:?} not recorded: {hosts:#}");
+    }
+    assert_no_team_resources(&team);
+    assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+}
+
+/// A member on host B dies by SIGKILL mid-flight (at a chosen tick, `CDM_FAULT_INJECT` in the
+/// daemon's environment): its daemon reports the exit, the team repairs around it as on one
+/// host and completes; audit.json names it (`killed`, its last tick) and `simulate --lose` of
+/// that tick replays the run byte for byte.
+#[test]
+fn a_killed_member_on_another_host_is_repaired() {
+    let Some(h) = Hosts::create("km") else { return };
+    let (victim, on_b, _) = loss_across_hosts(10, true);
+    assert!(on_b.contains(&victim));
+    let dir = TempDir::new();
+    let team = unique_team("hostkill");
+    let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
+    let at = 400u64;
+    let source = ["--n", "10", "--t-total", "10"];
+    let out_s = out.to_string_lossy().into_owned();
+    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
+    let daemon = spawn(
+        h.on_b(&["host", "--connect", ENDPOINT, "--team", &team])
+            .env(common::fault_inject::ENV, format!("{victim}:kill@{at}")),
+    );
+    let o = orch.finish(RUN_DEADLINE);
+    let d = daemon.finish(RUN_DEADLINE);
+    assert_exit(&o, 0, "launch --hosts 2 with a member killed on host B");
+    assert_exit(&d, 0, "orchestrator host");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    let l = &audit["losses"][0];
+    assert_eq!(
+        (&l["id"], &l["cause"], &l["last_tick"]),
+        (
+            &Value::from(victim),
+            &Value::from("killed"),
+            &Value::from(at - 1)
+        ),
+        "{audit:#}"
+    );
+    let dt = common::scenario::Scenario::generated(10).unwrap().dt_s();
+    let when = format!("{victim}@{}", (at - 1) as f64 * dt);
+    let mut replay = source.to_vec();
+    replay.extend(["--lose", &when]);
+    let s = run(&mut simulate(&sim, &replay), RUN_DEADLINE);
+    assert_exit(&s, 0, &format!("simulate --lose {when}"));
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+    assert_no_team_resources(&team);
+    assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+}

@@ -10,7 +10,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// A [`StateMsg`], field for field (the shared-memory type stays free of serde).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -99,13 +99,17 @@ impl From<NetClock> for ClockMsg {
 /// Orchestrator -> daemon.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Down {
-    /// The newest grant or the stop.
+    /// A grant or the stop. Every clock message whose loss notice changed is sent, in order
+    /// (members must see each loss); of the others only the newest.
     Clock(NetClock),
     /// States of other hosts' members that this host's members read (crossing edges), in the
     /// order they were published.
     States(Vec<NetState>),
     /// Nothing new; proves the link alive.
     Heartbeat,
+    /// Kill this member of the host with SIGKILL (a scripted loss, `launch --lose`, or a
+    /// member silent past the deadline under `--on-loss repair`).
+    Kill(u32),
 }
 
 /// Daemon -> orchestrator.
@@ -124,6 +128,9 @@ pub enum Up {
     Heartbeat,
     /// The daemon stopped its members after the orchestrator's stop and leaves.
     Stopped,
+    /// Links (reader, writer) a repair opened, whose reader runs on this host, now connected
+    /// on its shared memory.
+    Linked(Vec<(u32, u32)>),
 }
 
 /// A daemon asks to join. Every field it gives must match the team's.
@@ -161,6 +168,9 @@ pub struct Assignment {
     /// Real time with `--rt-priority P`: the daemon and its members run under SCHED_FIFO at P,
     /// as the orchestrator's host does.
     pub realtime_priority: Option<u8>,
+    /// `--on-loss repair`: the host's services keep room for repairs, and a member that exits
+    /// is lost and repaired around rather than a fault.
+    pub repair: bool,
 }
 
 /// The orchestrator's answer to a [`JoinRequest`].

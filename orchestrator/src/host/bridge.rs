@@ -1,7 +1,7 @@
 //! The orchestrator's bridge: a thread that admits daemons, stands in for their members on this
 //! host's shared memory (relay ports), and carries the clock and the crossing states to them.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -12,13 +12,14 @@ use cdm_zenoh::{
     Net, NetError, PendingJoin, Regions, Up, PROTOCOL_VERSION,
 };
 use common::audit::FaultRecord;
-use common::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg};
+use common::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, LossNotice, StateMsg};
 use common::scenario::Scenario;
-use common::transport::{MemberPorts, TeamName};
+use common::transport::{MemberPorts, OrchestratorPorts, Role, TeamName};
 use serde::Serialize;
 
 use super::links::{Links, LostHost};
 use super::plan::placed;
+use super::repairs::{CrossRepairs, RepairStep};
 use super::{Flight, HostOptions};
 use crate::Failure;
 
@@ -42,6 +43,8 @@ struct Ctx {
     link_timeout: Duration,
     quiet: bool,
     links: SharedLinks,
+    /// No loss yet: each host's link follows the repairs from here.
+    repairs: CrossRepairs,
 }
 
 /// What the bridge thread knows of each host's link, read by the launch.
@@ -94,6 +97,12 @@ struct Remote {
     last_sent: Instant,
     stop_sent: bool,
     subscriptions: BTreeMap<u32, Vec<String>>,
+    /// The repairs as the clock messages sent to this host announced them.
+    repairs: CrossRepairs,
+    /// The loss notice of the last clock message sent.
+    last_notice: Option<LossNotice>,
+    /// Members this bridge asked the daemon to kill (their exit is expected).
+    killed: BTreeSet<u32>,
 }
 
 impl Bridge {
@@ -134,6 +143,7 @@ impl Bridge {
                 host_of: regions.pairs().into_iter().collect(),
                 ..Links::default()
             })),
+            repairs: CrossRepairs::new(s),
         };
         let links = ctx.links.clone();
         let stop = Arc::new(AtomicBool::new(false));
@@ -177,16 +187,62 @@ impl Bridge {
         self.links.lock().map(|l| l.clone()).unwrap_or_default()
     }
 
+    /// The team core's kill of member `id`: when it runs on another host, its daemon kills it
+    /// (the bridge thread sends the order); a member of this host is the launch's to kill.
+    pub fn kill(&self, id: u32) {
+        if let Ok(mut l) = self.links.lock() {
+            if l.remote_host(Some(id)).is_some() {
+                l.to_kill.push(id);
+            }
+        }
+    }
+
+    /// A remote member that exited since the last call (`--on-loss repair`), with how.
+    pub fn take_exited(&self) -> Option<(u32, String)> {
+        let mut l = self.links.lock().ok()?;
+        (!l.exited.is_empty()).then(|| l.exited.remove(0))
+    }
+
+    /// True when the link (reader, writer) a repair opened is connected: on this host's shared
+    /// memory when the reader runs here (the writer may be a remote member's relay), else as
+    /// the reader's daemon reported it.
+    pub fn linked(&self, ports: &OrchestratorPorts, reader: u32, writer: u32) -> bool {
+        let Ok(l) = self.links.lock() else {
+            return false;
+        };
+        if l.remote_host(Some(reader)).is_some() {
+            return l.linked.contains(&(reader, writer));
+        }
+        let team = ports.team();
+        let writer_node = match l.remote_host(Some(writer)) {
+            Some(h) => team.relay_node_name(h, writer),
+            None => team.node_name(Role::Agent(writer)),
+        };
+        let reader_node = team.node_name(Role::Agent(reader));
+        let reads = ports
+            .subscriber_nodes(writer)
+            .is_ok_and(|n| n.contains(&reader_node));
+        reads
+            && ports
+                .notifier_nodes(reader)
+                .is_ok_and(|n| n.contains(&writer_node))
+    }
+
     /// After the team's stop: lets the daemons stop their members (bounded), then writes
     /// `hosts.json` and says how many bytes a tick cost on the wire.
     pub fn finish(mut self, dir: &common::rundir::RunDir, ticks: u64, quiet: bool) {
         let hosts = self.join();
+        // The edges that crossed hosts by the end: a repair may have added some.
+        let added = self.links().crossing_added;
+        let mut crossing: BTreeSet<(u32, u32)> = self.crossing.iter().copied().collect();
+        crossing.extend(&added);
         let (sent, received) = hosts
             .iter()
             .fold((0, 0), |(a, b), h| (a + h.bytes_sent, b + h.bytes_received));
         let per_tick = (sent + received) as f64 / ticks.max(1) as f64;
         let doc = serde_json::json!({
-            "crossing_edges": self.crossing,
+            "crossing_edges": crossing,
+            "crossing_edges_added_by_repairs": added,
             "hosts": hosts,
             "bytes_per_tick": per_tick,
         });
@@ -195,7 +251,7 @@ impl Bridge {
         if !quiet {
             out!(
                 "  hosts: {} crossing edges, {:.0} bytes per tick on the network ({} sent, {} received)",
-                self.crossing.len(),
+                crossing.len(),
                 per_tick,
                 sent,
                 received
@@ -290,6 +346,7 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
         link_timeout_ms: ctx.link_timeout.as_millis() as u64,
         realtime_stale_after_s: ctx.flight.realtime_stale_after.map(|d| d.as_secs_f64()),
         realtime_priority: ctx.flight.realtime_priority,
+        repair: ctx.flight.repair,
     };
     p.answer(&JoinReply::Accepted(Box::new(assignment)), &key);
     if !ctx.quiet {
@@ -311,6 +368,9 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
             last_sent: now,
             stop_sent: false,
             subscriptions: BTreeMap::new(),
+            repairs: ctx.repairs.clone(),
+            last_notice: None,
+            killed: BTreeSet::new(),
         },
     );
     if let Some(r) = remotes.get(&host) {
@@ -403,7 +463,8 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         heard(r, ctx);
     }
     if r.phase == Phase::Ready {
-        match forward(r) {
+        send_kills(r, ctx);
+        match forward(r, ctx) {
             Ok(sent) => busy |= sent,
             Err(why) => {
                 lose(r, ctx, why);
@@ -465,8 +526,23 @@ fn on_frame(r: &mut Remote, ctx: &Ctx, frame: Up) -> Result<(), String> {
             }
         }
         Up::Exited { id, how } => {
+            if r.killed.contains(&id) {
+                return Ok(());
+            }
             tracing::warn!(host = r.host, id, "agent {id} on host {} {how}", r.host);
-            report_fault(r, ctx, id, FaultCode::RemoteExited);
+            if ctx.flight.repair {
+                // Lost and repaired around, as a member of this host that exits.
+                if let Ok(mut links) = ctx.links.lock() {
+                    links.exited.push((id, how));
+                }
+            } else {
+                report_fault(r, ctx, id, FaultCode::RemoteExited);
+            }
+        }
+        Up::Linked(pairs) => {
+            if let Ok(mut links) = ctx.links.lock() {
+                links.linked.extend(pairs);
+            }
         }
         Up::Heartbeat => {}
         Up::Stopped => {
@@ -503,13 +579,18 @@ fn open_relays(r: &mut Remote, ctx: &Ctx) -> Result<(), String> {
 }
 
 /// The clock and the crossing states towards a ready host; true when anything went.
-fn forward(r: &mut Remote) -> Result<bool, String> {
-    let mut clock = None;
+fn forward(r: &mut Remote, ctx: &Ctx) -> Result<bool, String> {
+    let mut clocks = vec![];
     let mut batch = vec![];
-    for (&g, relay) in r.relays.iter_mut() {
-        if let Some(c) = relay.latest_clock().map_err(|e| e.to_string())? {
-            clock = Some(c);
-        }
+    for (k, (&g, relay)) in r.relays.iter_mut().enumerate() {
+        // Every relay subscribes to the clock: each drains its own, the first one's are kept.
+        relay
+            .receive_clock(|c| {
+                if k == 0 {
+                    clocks.push(c);
+                }
+            })
+            .map_err(|e| e.to_string())?;
         let forwarder = &r.forwarder;
         relay
             .receive_neighbors(|m| {
@@ -519,7 +600,7 @@ fn forward(r: &mut Remote) -> Result<bool, String> {
             })
             .map_err(|e| e.to_string())?;
     }
-    let moved = clock.is_some() || !batch.is_empty();
+    let moved = !clocks.is_empty() || !batch.is_empty();
     // States first: a grant must never reach members before the states it lets them use.
     if !batch.is_empty() {
         r.chan
@@ -527,7 +608,10 @@ fn forward(r: &mut Remote) -> Result<bool, String> {
             .map_err(|e| e.to_string())?;
         r.last_sent = Instant::now();
     }
-    if let Some(c) = clock {
+    for c in worth_sending(&clocks, &mut r.last_notice) {
+        // A new loss: the relays carry the repaired links before the daemon's members hear it.
+        let step = r.repairs.on_notice(c.loss());
+        carry_repair(r, ctx, &step);
         r.stop_sent |= matches!(c.command(), ClockCommand::Stop(_));
         r.chan
             .send(&Down::Clock(c.into()))
@@ -535,6 +619,75 @@ fn forward(r: &mut Remote) -> Result<bool, String> {
         r.last_sent = Instant::now();
     }
     Ok(moved)
+}
+
+/// Of the clock messages drained, in order: each whose loss notice differs from the one sent
+/// before (members must see every loss, and every rise of the connected count), and the newest.
+fn worth_sending(clocks: &[ClockMsg], last: &mut Option<LossNotice>) -> Vec<ClockMsg> {
+    let mut out = vec![];
+    for (k, c) in clocks.iter().enumerate() {
+        if c.loss() != *last || k + 1 == clocks.len() {
+            *last = c.loss();
+            out.push(*c);
+        }
+    }
+    out
+}
+
+/// A repair's new links at this host's relays: a reader on that host gets its new
+/// in-neighbour's states forwarded (one relay subscribes to it here), a reader on this host is
+/// woken by the relay of its new in-neighbour there; history goes to new readers once every
+/// link is connected. A link that cannot be opened (no room left) is left for the team core's
+/// deadline, which names it.
+fn carry_repair(r: &mut Remote, ctx: &Ctx, step: &RepairStep) {
+    for &(reader, writer) in &step.new_links {
+        let (hr, hw) = (ctx.regions.host_of(reader), ctx.regions.host_of(writer));
+        let opened = if hr == r.host && hw != r.host && !r.forwarder.contains_key(&writer) {
+            r.forwarder.insert(writer, reader);
+            r.relays.get_mut(&reader).map(|p| p.connect(&[writer], &[]))
+        } else if hw == r.host && hr == 0 {
+            r.relays.get_mut(&writer).map(|p| p.connect(&[], &[reader]))
+        } else {
+            None
+        };
+        if let Some(Err(e)) = opened {
+            tracing::warn!(
+                host = r.host,
+                "cannot carry the repaired link {writer} -> {reader}: {e}"
+            );
+        }
+        if hr != hw && (hr == r.host || hw == r.host) {
+            if let Ok(mut links) = ctx.links.lock() {
+                links.crossing_added.insert((writer, reader));
+            }
+        }
+    }
+    if step.hand_over {
+        for (g, relay) in r.relays.iter_mut() {
+            if let Err(e) = relay.hand_over() {
+                tracing::warn!(host = r.host, id = g, "cannot hand over: {e}");
+            }
+        }
+    }
+}
+
+/// The team core's kills of this host's members, sent to its daemon.
+fn send_kills(r: &mut Remote, ctx: &Ctx) {
+    let ids: Vec<u32> = match ctx.links.lock() {
+        Ok(mut l) => {
+            let (mine, rest) = l.to_kill.drain(..).partition(|id| r.members.contains(id));
+            l.to_kill = rest;
+            mine
+        }
+        Err(_) => return,
+    };
+    for id in ids {
+        r.killed.insert(id);
+        if let Err(e) = r.chan.send(&Down::Kill(id)) {
+            tracing::warn!(host = r.host, id, "cannot send a kill: {e}");
+        }
+        r.last_sent = Instant::now();
+    }
 }
 
 /// Publishes a fault report for `id` through its relay: the orchestrator stops the team with it

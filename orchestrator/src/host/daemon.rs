@@ -17,6 +17,8 @@ use common::scenario::{Checks, Scenario};
 use common::transport::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
 
 use super::bridge::HEARTBEAT;
+use super::daemon_repair::DaemonRepairs;
+use super::repairs::{partners, single_loss_links, CrossRepairs};
 use crate::team::{first_exited, spawn_member, stop_team, Spawned};
 use crate::{Exit, Failure};
 
@@ -169,10 +171,21 @@ fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Fa
             ghosts.entry(m.id).or_default().ins = here;
         }
     }
+    if j.a.repair {
+        // A repair may join a member here to one of another host: that one's services must
+        // exist here before the members hear of the loss.
+        for g in partners(&single_loss_links(&j.s), &j.mine) {
+            ghosts.entry(g).or_default();
+        }
+    }
     let ids: Vec<u32> = j.mine.iter().chain(ghosts.keys()).copied().collect();
-    let layout = TeamLayout::new(ids, ins, j.a.window)
+    let mut layout = TeamLayout::new(ids, ins, j.a.window)
         .map_err(Failure::fault)?
         .with_scenario_hash(j.a.scenario_hash);
+    if j.a.repair {
+        // The same room as on the orchestrator's host (`launch`'s layout).
+        layout = layout.with_repair_room(crate::loss::repair_room(&j.s, j.a.window));
+    }
     Ok((layout, ghosts))
 }
 
@@ -237,12 +250,19 @@ fn fly(
             }
         }
     }
+    let repairs = DaemonRepairs::new(
+        j.team.clone(),
+        host_of,
+        j.mine.clone(),
+        CrossRepairs::new(&j.s),
+    );
     let mut link = Link {
         j,
         chan,
         last_heard: Instant::now(),
         last_sent: Instant::now(),
         reported: BTreeSet::new(),
+        repairs,
     };
     let outcome = link
         .wait_ready(&mut ports, &mut children, interrupted)
@@ -280,6 +300,7 @@ struct Link<'a> {
     last_sent: Instant,
     /// Members whose exit was reported.
     reported: BTreeSet<u32>,
+    repairs: DaemonRepairs,
 }
 
 impl Link<'_> {
@@ -361,11 +382,20 @@ impl Link<'_> {
             while let Some(f) = self.chan.try_recv::<Down>().map_err(link_error)? {
                 self.last_heard = Instant::now();
                 busy = true;
+                match &f {
+                    Down::Kill(id) => crate::loss::kill_and_reap(children, *id),
+                    Down::Clock(c) => self.repairs.on_clock(&ClockMsg::from(*c), relays),
+                    _ => {}
+                }
                 if let Some(reason) = down(f, ports, relays)? {
                     return Ok(reason);
                 }
             }
             busy |= self.up(ports)?;
+            let linked = self.repairs.connected(ports);
+            if !linked.is_empty() {
+                self.send(&Up::Linked(linked))?;
+            }
             if last_child_check.elapsed() > Duration::from_millis(100) {
                 last_child_check = Instant::now();
                 self.report_exits(ports, children)?;
@@ -475,7 +505,8 @@ fn down(
                 }
             }
         }
-        Down::Heartbeat => {}
+        // Handled by the caller (it owns the children).
+        Down::Heartbeat | Down::Kill(_) => {}
     }
     Ok(None)
 }
@@ -495,6 +526,7 @@ mod tests {
             link_timeout_ms: 3000,
             realtime_stale_after_s: stale,
             realtime_priority: priority,
+            repair: false,
         }
     }
 

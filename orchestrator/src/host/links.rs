@@ -28,11 +28,21 @@ pub struct Links {
     pub stopped: BTreeSet<u32>,
     /// Joined hosts: the daemon and when a frame last came from it.
     pub heard: BTreeMap<u32, (String, Instant)>,
+    /// Remote members that exited (`--on-loss repair`: lost, not a fault), oldest first, with
+    /// `first_exited`'s wording of how.
+    pub exited: Vec<(u32, String)>,
+    /// Remote members the team core asked to kill, not yet sent to their daemon.
+    pub to_kill: Vec<u32>,
+    /// Links (reader, writer) of repairs, whose reader runs on another host, that its daemon
+    /// reported connected.
+    pub linked: BTreeSet<(u32, u32)>,
+    /// Edges (source, reader) that repairs made cross hosts.
+    pub crossing_added: BTreeSet<(u32, u32)>,
 }
 
 impl Links {
     /// The host of member `id` when it is not this one.
-    fn remote_host(&self, id: Option<u32>) -> Option<u32> {
+    pub fn remote_host(&self, id: Option<u32>) -> Option<u32> {
         id.and_then(|id| self.host_of.get(&id).copied())
             .filter(|&h| h != 0)
     }

@@ -14,12 +14,18 @@ mod bridge;
 #[cfg(feature = "hosts")]
 pub mod daemon;
 #[cfg(feature = "hosts")]
+mod daemon_repair;
+#[cfg(feature = "hosts")]
 mod links;
 #[cfg(feature = "hosts")]
 mod plan;
 #[cfg(feature = "hosts")]
+mod repairs;
+#[cfg(feature = "hosts")]
 mod workdir;
 
+#[cfg(feature = "hosts")]
+pub use bridge::Bridge;
 #[cfg(feature = "hosts")]
 pub use plan::Plan;
 
@@ -35,6 +41,8 @@ pub struct Flight {
     pub realtime_stale_after: Option<Duration>,
     /// `--realtime --rt-priority P`: P.
     pub realtime_priority: Option<u8>,
+    /// Lost members are repaired around (`--on-loss repair` with spawned members).
+    pub repair: bool,
 }
 
 impl Flight {
@@ -44,6 +52,7 @@ impl Flight {
             window: o.window,
             realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
             realtime_priority: o.realtime.as_ref().and_then(|rt| rt.rt_priority),
+            repair: o.on_loss == common::loss::OnLoss::Repair && o.spawn,
         }
     }
 }
@@ -123,7 +132,19 @@ mod single {
         pub fn reporting(&self, _id: u32) -> bool {
             false
         }
+        pub fn kill(&self, _id: u32) {}
+        pub fn take_exited(&self) -> Option<(u32, String)> {
+            None
+        }
+        pub fn linked(
+            &self,
+            ports: &common::transport::OrchestratorPorts,
+            reader: u32,
+            writer: u32,
+        ) -> bool {
+            ports.linked(reader, writer).unwrap_or(false)
+        }
     }
 }
 #[cfg(not(feature = "hosts"))]
-pub use single::Plan;
+pub use single::{Bridge, Plan};
