@@ -641,8 +641,8 @@ fn a_killed_member_on_another_host_is_repaired() {
     let dir = TempDir::new();
     let team = unique_team("hostkill");
     let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
-    let at = 400u64;
-    let source = ["--n", "10", "--t-total", "10"];
+    let at = 800u64;
+    let source = ["--n", "10", "--t-total", "20"];
     let out_s = out.to_string_lossy().into_owned();
     let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
     let daemon = spawn(
