@@ -764,3 +764,37 @@ fn report(ctx: &Ctx, mut remotes: BTreeMap<u32, Remote>) -> Vec<HostReport> {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_changed_notice_is_sent_and_the_newest_grant() {
+        let n = |seq, linked| LossNotice {
+            seq,
+            id: 7,
+            tick: 30,
+            linked,
+        };
+        let c = |g, notice| ClockMsg::run(g, 1).with_loss(notice);
+        let clocks = [
+            c(10, None),
+            c(11, Some(n(1, 0))),
+            c(12, Some(n(1, 0))),
+            c(13, Some(n(1, 1))),
+            c(14, Some(n(1, 1))),
+            c(15, Some(n(1, 1))),
+        ];
+        let mut last = None;
+        let sent: Vec<u64> = worth_sending(&clocks, &mut last)
+            .iter()
+            .map(|c| c.grant_tick)
+            .collect();
+        assert_eq!(sent, [11, 13, 15]);
+        assert_eq!(last, Some(n(1, 1)));
+        assert_eq!(worth_sending(&[], &mut last), vec![]);
+        let again = worth_sending(&clocks[4..], &mut last);
+        assert_eq!(again.len(), 1, "only the newest of unchanged notices");
+    }
+}

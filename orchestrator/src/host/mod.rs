@@ -41,7 +41,8 @@ pub struct Flight {
     pub realtime_stale_after: Option<Duration>,
     /// `--realtime --rt-priority P`: P.
     pub realtime_priority: Option<u8>,
-    /// Lost members are repaired around (`--on-loss repair` with spawned members).
+    /// Lost members are repaired around (`--on-loss repair` with spawned members, lockstep:
+    /// real time repairs nothing, an exit stays a fault there as on one host).
     pub repair: bool,
 }
 
@@ -52,7 +53,7 @@ impl Flight {
             window: o.window,
             realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
             realtime_priority: o.realtime.as_ref().and_then(|rt| rt.rt_priority),
-            repair: o.on_loss == common::loss::OnLoss::Repair && o.spawn,
+            repair: o.on_loss == common::loss::OnLoss::Repair && o.spawn && o.realtime.is_none(),
         }
     }
 }
