@@ -20,14 +20,14 @@ use super::{
     TeamLayout, TeamName, TransportError, CLOCK_BUFFER, OBSERVER_SLOTS, SPARE_NODES,
 };
 use crate::messages::{ClockMsg, StateMsg};
-use crate::wire::{ClockWire, StateWire, Wire};
+use crate::wire::{ClockWire, StateBatchWire, Wire};
 
 const WHO: Role = Role::Orchestrator;
 
 /// One member's state service, read by the orchestrator.
 struct StateReader {
-    service: PubSubService<ipc::Service, StateWire, ()>,
-    subscriber: Subscriber<ipc::Service, StateWire, ()>,
+    service: PubSubService<ipc::Service, StateBatchWire, ()>,
+    subscriber: Subscriber<ipc::Service, StateBatchWire, ()>,
 }
 
 /// One member's wake event. The orchestrator created it and holds it while the team gathers
@@ -298,8 +298,8 @@ impl OrchestratorPorts {
         }
     }
 
-    /// Drains every state subscriber (members in id order, each member's samples oldest first) into
-    /// `f`; returns how many samples were delivered.
+    /// Drains every state subscriber (members in id order, each member's states oldest first) into
+    /// `f`; returns how many states were delivered.
     pub fn receive_states(&mut self, mut f: impl FnMut(StateMsg)) -> Result<usize, TransportError> {
         let mut count = 0;
         for (&id, reader) in &self.ports().states {
@@ -308,8 +308,9 @@ impl OrchestratorPorts {
                 .receive()
                 .map_err(|e| self.error(&self.team.state_service(id), "receive", e))?
             {
-                f(sample.payload().0);
-                count += 1;
+                let states = sample.payload().0.states();
+                states.iter().for_each(|m| f(*m));
+                count += states.len();
             }
         }
         Ok(count)
@@ -551,7 +552,7 @@ fn member_services(
     let name = team.state_service(id);
     let service = node
         .service_builder(&service_name(team, WHO, &name)?)
-        .publish_subscribe::<StateWire>()
+        .publish_subscribe::<StateBatchWire>()
         .max_publishers(1)
         .max_subscribers(outs + 1 + OBSERVER_SLOTS)
         .max_nodes(outs + 2 + SPARE_NODES + OBSERVER_SLOTS)
