@@ -75,6 +75,7 @@ mod limits;
 mod member;
 mod orchestrator;
 mod ownership;
+mod resend;
 mod team;
 mod wake_roots;
 mod wire;

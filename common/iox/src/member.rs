@@ -19,6 +19,7 @@ use super::{
     TransportError, CLOCK_BUFFER,
 };
 use crate::messages::{ClockMsg, StateMsg};
+use crate::resend::{Recent, RESEND_STATES_KEY};
 use crate::wire::{ClockWire, StateBatch, StateBatchWire};
 
 /// A neighbour's state service, read by this member.
@@ -43,6 +44,8 @@ pub struct MemberPorts {
     /// States published quietly and not yet sent: they go out as one sample when the batch is
     /// full or the readers are woken ([`Self::notify_readers`]), whichever comes first.
     pending: StateBatch,
+    /// The last states published, sent again at a repair's hand-over (`crate::resend`).
+    recent: Recent,
     _state: PubSubService<ipc::Service, StateBatchWire, ()>,
     neighbors: BTreeMap<u32, NeighborReader>,
     clock_subscriber: Subscriber<ipc::Service, ClockWire, ()>,
@@ -134,6 +137,7 @@ impl MemberPorts {
             id,
             publisher: own.publisher,
             pending: StateBatch::EMPTY,
+            recent: Recent::new(resend_states(&own.state)),
             _state: own.state,
             neighbors,
             clock_subscriber,
@@ -181,6 +185,7 @@ impl MemberPorts {
                 service: self.team.state_service(self.id),
             });
         }
+        self.recent.push(msg);
         if self.pending.push(msg) {
             return self.flush();
         }
@@ -190,7 +195,15 @@ impl MemberPorts {
     /// Sends the pending batch, if any, as one sample, without waking anyone; returns how many
     /// subscribers it reached.
     pub fn flush(&mut self) -> Result<usize, TransportError> {
-        let states = self.pending.states();
+        let reached = self.send(self.pending)?;
+        self.pending.clear();
+        Ok(reached)
+    }
+
+    /// Sends `batch` as one sample (nothing when it is empty); returns how many subscribers it
+    /// reached.
+    fn send(&self, batch: StateBatch) -> Result<usize, TransportError> {
+        let states = batch.states();
         if states.is_empty() {
             return Ok(0);
         }
@@ -208,11 +221,7 @@ impl MemberPorts {
             StateBatch::write_prefix(dst.cast(), states);
             sample.assume_init()
         };
-        let reached = sample
-            .send()
-            .map_err(|e| self.error(&service(), "send", e))?;
-        self.pending.clear();
-        Ok(reached)
+        sample.send().map_err(|e| self.error(&service(), "send", e))
     }
 
     /// Sends the states published quietly, then wakes every out-neighbour and the orchestrator
@@ -314,16 +323,18 @@ impl MemberPorts {
         Ok(())
     }
 
-    /// Every new link of a repair is connected: the publisher delivers its history to its new
-    /// subscribers (iceoryx2 does so when it updates its connections), then every reader is
-    /// woken.
+    /// Every new link of a repair is connected: the publisher connects its new subscribers,
+    /// sends its last states again (every reader gets them; a repeated state changes nothing,
+    /// `crate::resend`), then wakes every reader.
     pub fn hand_over(&mut self) -> Result<(), TransportError> {
         use iceoryx2::port::update_connections::UpdateConnections;
-        // The history a new reader gets must end with the newest state published.
         self.flush()?;
         self.publisher
             .update_connections()
             .map_err(|e| self.error(&self.team.state_service(self.id), "update connections", e))?;
+        for batch in self.recent.batches() {
+            self.send(batch)?;
+        }
         self.notify_readers()
     }
 
@@ -412,6 +423,20 @@ impl OwnPorts {
             listener,
         })
     }
+}
+
+/// How many states member's `state` service asks it to send again at a hand-over (0 when the
+/// team has no repairs or the attribute is missing).
+fn resend_states(state: &PubSubService<ipc::Service, StateBatchWire, ()>) -> usize {
+    use iceoryx2::service::attribute::AttributeKey;
+    let Ok(key) = AttributeKey::try_from(RESEND_STATES_KEY) else {
+        return 0;
+    };
+    state
+        .attributes()
+        .key_value(&key, 0)
+        .and_then(|v| v.to_string().parse().ok())
+        .unwrap_or(0)
 }
 
 /// Opens the team's clock service; a missing one means no orchestrator created the team.
