@@ -66,11 +66,12 @@ STATES_PER_SAMPLE = 4
 
 class StateBatch(ctypes.Structure):
     """The payload of a state service: `states[:len]`, consecutive ticks of one agent, oldest
-    first (`cdm_iox::StateBatch`, 8 + 128 * STATES_PER_SAMPLE bytes)."""
+    first (`cdm_iox::StateBatch`, 8 + 128 * STATES_PER_SAMPLE bytes); a repeated state (a repair's
+    hand-over sends the last ones again) carries the same tick and values."""
 
     _fields_ = [
         ("len", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),  # 1: sent again at a repair's hand-over
         ("states", StateMsg * STATES_PER_SAMPLE),
     ]
 

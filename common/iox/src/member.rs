@@ -19,13 +19,15 @@ use super::{
     TransportError, CLOCK_BUFFER,
 };
 use crate::messages::{ClockMsg, StateMsg};
-use crate::resend::{Recent, RESEND_STATES_KEY};
+use crate::resend::{Held, Recent, RESEND_STATES_KEY};
 use crate::wire::{ClockWire, StateBatch, StateBatchWire};
 
 /// A neighbour's state service, read by this member.
 struct NeighborReader {
     _service: PubSubService<ipc::Service, StateBatchWire, ()>,
     subscriber: Subscriber<ipc::Service, StateBatchWire, ()>,
+    /// A repair's new in-neighbour: its states wait for its repeats (`crate::resend`).
+    held: Held,
 }
 
 /// A wake event this member notifies.
@@ -218,7 +220,7 @@ impl MemberPorts {
         // bytes are initialized memory (zero-filled by the kernel, or an earlier sample's);
         // `write_prefix` sets the length and the states readers read.
         let sample = unsafe {
-            StateBatch::write_prefix(dst.cast(), states);
+            StateBatch::write_prefix(dst.cast(), states, batch.flags);
             sample.assume_init()
         };
         sample.send().map_err(|e| self.error(&service(), "send", e))
@@ -247,15 +249,14 @@ impl MemberPorts {
         mut f: impl FnMut(StateMsg),
     ) -> Result<usize, TransportError> {
         let mut count = 0;
-        for (&peer, reader) in &self.neighbors {
+        let (team, who) = (&self.team, Role::Agent(self.id));
+        for (&peer, reader) in &mut self.neighbors {
             while let Some(sample) = reader
                 .subscriber
                 .receive()
-                .map_err(|e| self.error(&self.team.state_service(peer), "receive", e))?
+                .map_err(|e| service_error(team, who, &team.state_service(peer), "receive", e))?
             {
-                let states = sample.payload().0.states();
-                states.iter().for_each(|m| f(*m));
-                count += states.len();
+                count += reader.held.take(&sample.payload().0, &mut f);
             }
         }
         Ok(count)
@@ -289,8 +290,7 @@ impl MemberPorts {
     }
 
     /// After a loss: subscribes to `subscribe`'s states (a new subscriber gets the states its
-    /// publisher still holds in its history once the publisher updates its connections, see
-    /// [`Self::hand_over`]) and opens notifiers on `notify`'s wake events. The orchestrator sized
+    /// publisher published before, sent again at its [`Self::hand_over`]) and opens notifiers on `notify`'s wake events. The orchestrator sized
     /// the services for the repairs (`TeamLayout::with_repair_links`).
     pub fn connect(&mut self, subscribe: &[u32], notify: &[u32]) -> Result<(), TransportError> {
         let who = Role::Agent(self.id);
@@ -309,6 +309,7 @@ impl MemberPorts {
             let reader = NeighborReader {
                 _service: service,
                 subscriber,
+                held: Held::until_resent(),
             };
             self.neighbors.insert(peer, reader);
         }
@@ -510,6 +511,7 @@ fn open_neighbors(
             NeighborReader {
                 _service: service,
                 subscriber,
+                held: Held::default(),
             },
         );
     }

@@ -10,7 +10,10 @@
 //! member and tick, so a repeated one changes nothing (the member's inbox replaces it with the
 //! same bits or drops it as past; the orchestrator books a tick's state once and ignores past
 //! ticks), and the subscribers' buffers have [`resend_room`] samples more so that the repeats
-//! never push out a state not yet read.
+//! never push out a state not yet read. A new reader may get the publisher's next states before
+//! the repeats (a publisher connects new subscribers at its next send): it holds those back
+//! until the repeats ([`StateBatch::RESENT`]) arrive, so it sees its new in-neighbour's states in
+//! order, as from a history ([`Held`]).
 
 use std::collections::VecDeque;
 
@@ -60,7 +63,10 @@ impl Recent {
     /// The kept states cut into batches, oldest first.
     pub(crate) fn batches(&self) -> impl Iterator<Item = StateBatch> + '_ {
         let (a, b) = self.states.as_slices();
-        let mut batch = StateBatch::EMPTY;
+        let mut batch = StateBatch {
+            flags: StateBatch::RESENT,
+            ..StateBatch::EMPTY
+        };
         let mut it = a.iter().chain(b).peekable();
         std::iter::from_fn(move || {
             batch.clear();
@@ -74,6 +80,38 @@ impl Recent {
             }
             None
         })
+    }
+}
+
+/// A new reader's states of one in-neighbour, held back until that neighbour's repeats arrive.
+#[derive(Debug, Default)]
+pub(crate) struct Held(Option<Vec<StateMsg>>);
+
+impl Held {
+    /// Holds back everything until a [`StateBatch::RESENT`] batch arrives.
+    pub(crate) fn until_resent() -> Self {
+        Held(Some(Vec::new()))
+    }
+
+    /// Takes one received batch: hands `f` what may be delivered now, in order.
+    pub(crate) fn take(&mut self, batch: &StateBatch, mut f: impl FnMut(StateMsg)) -> usize {
+        let states = batch.states();
+        match &mut self.0 {
+            None => {
+                states.iter().for_each(|m| f(*m));
+                states.len()
+            }
+            Some(held) if batch.flags == StateBatch::RESENT => {
+                let n = states.len() + held.len();
+                states.iter().chain(held.iter()).for_each(|m| f(*m));
+                self.0 = None;
+                n
+            }
+            Some(held) => {
+                held.extend_from_slice(states);
+                0
+            }
+        }
     }
 }
 
@@ -104,5 +142,37 @@ mod tests {
         none.push(state(1));
         assert_eq!(none.batches().count(), 0);
         assert_eq!(resend_room(0), 0);
+        let mut r = Recent::new(3);
+        r.push(state(5));
+        assert!(r.batches().all(|b| b.flags == StateBatch::RESENT));
+    }
+
+    #[test]
+    fn a_new_reader_holds_back_what_comes_before_the_repeats() {
+        let state = |tick| StateMsg::ok(tick, 1, 7, [tick as f64; 12]);
+        let batch = |ticks: &[u64], flags| {
+            let mut b = StateBatch {
+                flags,
+                ..StateBatch::EMPTY
+            };
+            ticks.iter().for_each(|&t| {
+                b.push(state(t));
+            });
+            b
+        };
+        let mut got = vec![];
+        let mut h = Held::until_resent();
+        assert_eq!(h.take(&batch(&[12, 13], 0), |m| got.push(m.tick)), 0);
+        assert!(got.is_empty());
+        let n = h.take(&batch(&[10, 11, 12], StateBatch::RESENT), |m| {
+            got.push(m.tick)
+        });
+        assert_eq!((n, got.clone()), (5, vec![10, 11, 12, 12, 13]));
+        // Once the repeats came, everything passes at once (a later repeat too).
+        h.take(&batch(&[14], 0), |m| got.push(m.tick));
+        h.take(&batch(&[13, 14], StateBatch::RESENT), |m| got.push(m.tick));
+        assert_eq!(got[5..], [14, 13, 14]);
+        let mut plain = Held::default();
+        assert_eq!(plain.take(&batch(&[1], 0), |_| {}), 1);
     }
 }

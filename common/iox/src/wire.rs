@@ -50,17 +50,21 @@ pub const STATES_PER_SAMPLE: usize = 4;
 pub struct StateBatch {
     /// How many of `states` are used (1 to [`STATES_PER_SAMPLE`] in a sent sample).
     pub len: u32,
-    /// Zero (keeps the layout free of implicit padding).
-    pub reserved: u32,
+    /// [`StateBatch::RESENT`] for states sent again at a repair's hand-over (`resend.rs`), else 0.
+    pub flags: u32,
     /// The states, oldest first.
     pub states: [StateMsg; STATES_PER_SAMPLE],
 }
 
 impl StateBatch {
+    /// [`Self::flags`] of a batch of states sent again at a hand-over: a new reader takes them
+    /// before the states it received since it subscribed (`resend.rs`).
+    pub const RESENT: u32 = 1;
+
     /// A batch with no state.
     pub const EMPTY: StateBatch = StateBatch {
         len: 0,
-        reserved: 0,
+        flags: 0,
         states: [StateMsg {
             tick: 0,
             scenario_hash: 0,
@@ -104,7 +108,7 @@ impl StateBatch {
         self.len = 0;
     }
 
-    /// Writes the length and `states` (at most [`STATES_PER_SAMPLE`]) into the batch at `dst`
+    /// Writes the length, `flags` and `states` (at most [`STATES_PER_SAMPLE`]) into the batch at `dst`
     /// without touching its unused slots: a sample's cost stays with the states it carries
     /// (a sample is 520 bytes; a run of one state writes 136 of them).
     ///
@@ -112,12 +116,12 @@ impl StateBatch {
     /// `dst` must be valid for writes of a `StateBatch`, aligned, and its bytes initialized
     /// memory (a chunk of a shared-memory segment: the kernel zero-fills it and earlier samples
     /// only ever wrote whole values into it), so the unused slots hold plain old bytes.
-    pub(crate) unsafe fn write_prefix(dst: *mut StateBatch, states: &[StateMsg]) {
+    pub(crate) unsafe fn write_prefix(dst: *mut StateBatch, states: &[StateMsg], flags: u32) {
         let len = states.len().min(STATES_PER_SAMPLE);
         // SAFETY: in bounds of `*dst` by the caller's contract; `len` fits the array.
         unsafe {
             core::ptr::addr_of_mut!((*dst).len).write(len as u32);
-            core::ptr::addr_of_mut!((*dst).reserved).write(0);
+            core::ptr::addr_of_mut!((*dst).flags).write(flags);
             let slots = core::ptr::addr_of_mut!((*dst).states).cast::<StateMsg>();
             core::ptr::copy_nonoverlapping(states.as_ptr(), slots, len);
         }
@@ -202,7 +206,7 @@ mod tests {
         let old = StateMsg::ok(1, 2, 3, [4.0; 12]);
         let mut b = StateBatch {
             len: 5,
-            reserved: 9,
+            flags: 9,
             states: [old; STATES_PER_SAMPLE],
         };
         let new = [
@@ -210,8 +214,8 @@ mod tests {
             StateMsg::ok(8, 2, 3, [9.0; 12]),
         ];
         // SAFETY: `b` is a whole, initialized batch.
-        unsafe { StateBatch::write_prefix(&mut b, &new) };
-        assert_eq!((b.len, b.reserved), (2, 0));
+        unsafe { StateBatch::write_prefix(&mut b, &new, StateBatch::RESENT) };
+        assert_eq!((b.len, b.flags), (2, StateBatch::RESENT));
         assert_eq!(b.states(), &new);
         assert!(b.states[2..].iter().all(|m| *m == old));
     }
