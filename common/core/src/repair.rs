@@ -140,46 +140,95 @@ fn degrade(f: &mut Formation, id: u32) {
     }
 }
 
+/// Who reads whom, by member index, in one flat table (rows of `Formation::out_neighbors`
+/// without a map of vectors). `launch` repairs every single loss to size its services before
+/// it spawns anyone, and each repair walks the graph several times: with the map that was a
+/// sixth of the orchestrator's start-up CPU at N = 1000 (BENCHMARKS.md, issue 17 start-up).
+struct ReaderTable {
+    /// Row `j` is `list[start[j]..start[j + 1]]`.
+    start: Vec<usize>,
+    list: Vec<usize>,
+}
+
+impl ReaderTable {
+    fn of(f: &Formation) -> Self {
+        let n = f.members.len();
+        let edges = || {
+            f.members.iter().enumerate().flat_map(|(k, m)| {
+                m.link
+                    .into_iter()
+                    .flat_map(|l| l.in_neighbors)
+                    .filter_map(move |nb| f.index_of(nb).map(|j| (j, k)))
+            })
+        };
+        let mut start = vec![0usize; n + 1];
+        for (j, _) in edges() {
+            start[j + 1] += 1;
+        }
+        for j in 0..n {
+            start[j + 1] += start[j];
+        }
+        let mut fill = start.clone();
+        let mut list = vec![0usize; start[n]];
+        for (j, k) in edges() {
+            list[fill[j]] = k;
+            fill[j] += 1;
+        }
+        ReaderTable { start, list }
+    }
+
+    fn row(&self, j: usize) -> &[usize] {
+        &self.list[self.start[j]..self.start[j + 1]]
+    }
+}
+
 /// Survivors that read `id`, directly or through other survivors.
 fn readers_of(f: &Formation, id: u32, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
-    let out = f.out_neighbors();
-    let mut seen = BTreeSet::new();
-    let mut stack = vec![id];
+    let table = ReaderTable::of(f);
+    let mut seen = vec![false; f.members.len()];
+    let mut stack: Vec<usize> = f.index_of(id).into_iter().collect();
     while let Some(j) = stack.pop() {
-        for &k in out.get(&j).into_iter().flatten() {
-            if !lost.contains(&k) && seen.insert(k) {
+        for &k in table.row(j) {
+            if !seen[k] && !lost.contains(&f.members[k].id) {
+                seen[k] = true;
                 stack.push(k);
             }
         }
     }
-    seen
+    (0..f.members.len())
+        .filter(|&k| seen[k])
+        .map(|k| f.members[k].id)
+        .collect()
 }
 
 /// Surviving followers not reachable from a surviving leader or a degraded follower through
 /// survivors' links (Assumption 2).
 pub fn unreachable(f: &Formation, lost: &BTreeSet<u32>) -> Vec<u32> {
-    let out = f.out_neighbors();
-    let roots = f
+    let table = ReaderTable::of(f);
+    let alive = |k: usize| !lost.contains(&f.members[k].id);
+    let mut seen: Vec<bool> = f
         .members
         .iter()
-        .filter(|m| !lost.contains(&m.id) && (m.role.is_leader() || m.link.is_none()));
-    let mut seen: BTreeSet<u32> = roots.map(|m| m.id).collect();
-    let mut stack: Vec<u32> = seen.iter().copied().collect();
+        .enumerate()
+        .map(|(k, m)| alive(k) && (m.role.is_leader() || m.link.is_none()))
+        .collect();
+    let mut stack: Vec<usize> = (0..f.members.len()).filter(|&k| seen[k]).collect();
     while let Some(j) = stack.pop() {
-        for &k in out.get(&j).into_iter().flatten() {
-            let links_alive = f
-                .member(k)
-                .and_then(|m| m.link)
+        for &k in table.row(j) {
+            let links_alive = f.members[k]
+                .link
                 .is_some_and(|l| l.in_neighbors.iter().all(|n| !lost.contains(n)));
-            if !lost.contains(&k) && links_alive && seen.insert(k) {
+            if !seen[k] && alive(k) && links_alive {
+                seen[k] = true;
                 stack.push(k);
             }
         }
     }
     f.members
         .iter()
-        .filter(|m| m.role == Role::Follower && !lost.contains(&m.id) && !seen.contains(&m.id))
-        .map(|m| m.id)
+        .enumerate()
+        .filter(|&(k, m)| m.role == Role::Follower && alive(k) && !seen[k])
+        .map(|(_, m)| m.id)
         .collect()
 }
 
@@ -261,6 +310,76 @@ mod tests {
                 assert!(w.iter().all(|w| *w >= DEFAULT_WEIGHT_FLOOR));
             }
         }
+    }
+
+    /// The walks as first written, over `Formation::out_neighbors`: the flat table must give
+    /// the same sets.
+    fn reference_readers(f: &Formation, id: u32, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
+        let out = f.out_neighbors();
+        let (mut seen, mut stack) = (BTreeSet::new(), vec![id]);
+        while let Some(j) = stack.pop() {
+            for &k in out.get(&j).into_iter().flatten() {
+                if !lost.contains(&k) && seen.insert(k) {
+                    stack.push(k);
+                }
+            }
+        }
+        seen
+    }
+
+    #[test]
+    fn reader_table_walks_match_the_map_walks() {
+        let s = Scenario::generated(120).unwrap();
+        let f = &s.formation;
+        let ids: Vec<u32> = f.members.iter().map(|m| m.id).collect();
+        let mut found = 0;
+        for lost in [
+            vec![],
+            vec![ids[0]],
+            vec![ids[5], ids[60]],
+            vec![ids[3], ids[4], ids[90]],
+        ] {
+            let lost: BTreeSet<u32> = lost.into_iter().collect();
+            for &id in &ids {
+                assert_eq!(readers_of(f, id, &lost), reference_readers(f, id, &lost));
+            }
+            // Degraded followers are roots; the lost members' readers lose their links.
+            let mut cut = f.clone();
+            for &id in &ids[10..14] {
+                degrade(&mut cut, id);
+            }
+            let got: BTreeSet<u32> = unreachable(&cut, &lost).into_iter().collect();
+            assert_eq!(got, unreachable_by_map(&cut, &lost));
+            found += got.len();
+        }
+        assert!(found > 0, "no case had an unreachable follower");
+    }
+
+    fn unreachable_by_map(f: &Formation, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
+        let out = f.out_neighbors();
+        let mut seen: BTreeSet<u32> = f
+            .members
+            .iter()
+            .filter(|m| !lost.contains(&m.id) && (m.role.is_leader() || m.link.is_none()))
+            .map(|m| m.id)
+            .collect();
+        let mut stack: Vec<u32> = seen.iter().copied().collect();
+        while let Some(j) = stack.pop() {
+            for &k in out.get(&j).into_iter().flatten() {
+                let alive = f
+                    .member(k)
+                    .and_then(|m| m.link)
+                    .is_some_and(|l| l.in_neighbors.iter().all(|n| !lost.contains(n)));
+                if !lost.contains(&k) && alive && seen.insert(k) {
+                    stack.push(k);
+                }
+            }
+        }
+        f.members
+            .iter()
+            .filter(|m| m.role == Role::Follower && !lost.contains(&m.id) && !seen.contains(&m.id))
+            .map(|m| m.id)
+            .collect()
     }
 
     #[test]
