@@ -25,10 +25,19 @@
 # `--on-loss stop` (10 ticks flown; not for BENCH_N), then the full plan with `--telemetry
 # parquet` (its start-up is the one with the default `--on-loss repair`): ticks/s against the engine, the members' peak RSS (largest and sum of
 # VmHWM) and the machine's used memory (`free`, before and the most seen during the flight).
+# BENCH_N_FLAGS: extra launch flags for BENCH_N's flight only (e.g. "--agent-timeout 60").
 # SCALE_ONLY=1 runs only this section.
 #
+# Before and after (issue 17), with BEFORE_BIN=DIR (the binaries of a build from before issue 17,
+# e.g. `git worktree add /tmp/before17 ff2bbc2 && (cd /tmp/before17 && cargo build --release
+# --bins)`): the same commands with both builds, one after the other in this run: the certificate
+# (`plan --n FORMATS_N` against `simulate --every 1000` of the same build), `launch --n 40` (full
+# plan) and `launch --n 1000 --max-ticks 2999` against each build's engine, and their start-up
+# (CSV telemetry on both sides: the older build has no Parquet). BEFORE_ONLY=1 runs only this section.
+#
 # Usage: [BIN=DIR] [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
-#        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [SCALE_ONLY=1] scripts/bench.sh [N ...]
+#        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [BENCH_N_FLAGS=...] [SCALE_ONLY=1]
+#        [BEFORE_BIN=DIR] [BEFORE_ONLY=1] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
@@ -112,8 +121,9 @@ scale_section() {
     # BENCH_N's row is long enough already: its start-up is the full flight's (repair) only.
     su_stop=-; [ "$n" = "${BENCH_N:-}" ] || su_stop=$(startup --on-loss stop)
     before=$(used_kib)
+    local extra=(); [ "$n" != "${BENCH_N:-}" ] || extra=(${BENCH_N_FLAGS:-})
     "$bin/orchestrator" launch --n "$n" --telemetry parquet --no-figures --team "scale$n-$$" \
-      --out "$out/sc$n" >"$out/sc$n.log" 2>/dev/null &
+      --out "$out/sc$n" "${extra[@]}" >"$out/sc$n.log" 2>/dev/null &
     pid=$!
     while kill -0 "$pid" 2>/dev/null; do
       local u; u=$(used_kib); [ "$u" -le "$peak" ] || peak=$u
@@ -134,6 +144,44 @@ scale_section() {
     rm -rf "$out/sc$n" "$out/sc$n.log"
   done
 }
+# Before and after issue 17 (see the header): each target's figure from both builds, in this run.
+before_after_section() {
+  [ -n "${BEFORE_BIN:-}" ] || return 0
+  local fn=${FORMATS_N:-1000}; [ "$fn" -gt 0 ] || fn=1000
+  echo
+  echo "Before and after issue 17 (before: $BEFORE_BIN, $("$BEFORE_BIN/orchestrator" --version 2>/dev/null || echo '?'); load average before: $(cut -d' ' -f1-3 /proc/loadavg)):"
+  echo
+  echo "| figure | before | after | after / before |"
+  echo "|---|---|---|---|"
+  local b a
+  cert() { # plan's wall time over one --every 1000 flight's, for the build in $1
+    local p s
+    p=$(secs "$1/orchestrator" plan --n "$fn" --quiet | cut -d' ' -f1)
+    s=$(secs "$1/orchestrator" simulate --n "$fn" --every 1000 --no-figures --quiet --out "$out/ba" | cut -d' ' -f1)
+    rm -rf "$out/ba"
+    echo "$p $s"
+  }
+  read -r bp bs < <(cert "$BEFORE_BIN"); read -r ap as < <(cert "$bin")
+  b=$(awk -v p="$bp" -v s="$bs" 'BEGIN{printf "%.3f", p/s}'); a=$(awk -v p="$ap" -v s="$as" 'BEGIN{printf "%.3f", p/s}')
+  echo "| \`plan --n $fn\` / \`simulate --n $fn --every 1000\` (wall s) | $b ($bp / $bs) | $a ($ap / $as) | $(awk -v a="$a" -v b="$b" 'BEGIN{printf "%.3f", a/b}') |"
+  for n in 40 1000; do
+    local limit=() label="full plan" eng_ticks=5000
+    [ "$n" = 40 ] || { limit=(--max-ticks 2999); label="3000 ticks"; eng_ticks=1000; }
+    local side r=() su=()
+    for side in "$BEFORE_BIN" "$bin"; do
+      local e l
+      e=$("$side/cdm-bench" engine --n "$n" --ticks "$eng_ticks" | rate)
+      l=$("$side/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --team "ba$n-$$" --out "$out/ba" 2>/dev/null | grep "ticking:")
+      rm -rf "$out/ba"
+      r+=("$(awk -v l="$(rate <<<"$l")" -v e="$e" 'BEGIN{printf "%.3f", l/e}') ($(rate <<<"$l") / $e ticks/s)")
+      su+=("$(sed -E 's/.*start-up ([0-9.]+) s.*/\1/' <<<"$l")")
+    done
+    echo "| \`launch --n $n\` / engine, $label | ${r[0]} | ${r[1]} | $(awk -v a="${r[1]%% *}" -v b="${r[0]%% *}" 'BEGIN{printf "%.2f", a/b}') |"
+    echo "| start-up s, \`launch --n $n\` (command to first tick) | ${su[0]} | ${su[1]} | $(awk -v a="${su[1]}" -v b="${su[0]}" 'BEGIN{printf "%.2f", a/b}') |"
+  done
+}
+secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }
+if [ -n "${BEFORE_ONLY:-}" ]; then before_after_section; exit 0; fi
 if [ -n "${SCALE_ONLY:-}" ]; then scale_section; exit 0; fi
 if [ -n "${REALTIME_ONLY:-}" ]; then realtime_section; exit 0; fi
 echo "| N | ticks flown | engine ticks/s | simulate ticks/s | launch ticks/s (window $window) | barrier ticks/s | launch/engine | launch/simulate | launch/barrier | start-up s | largest member RSS MiB | orchestrator RSS MiB |"
@@ -166,8 +214,7 @@ for n in "${ns[@]}"; do
 done
 
 fn=${FORMATS_N:-1000}
-[ "$fn" -gt 0 ] || { scale_section; realtime_section; exit 0; }
-secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }
+[ "$fn" -gt 0 ] || { scale_section; before_after_section; realtime_section; exit 0; }
 echo
 echo "Certificate and telemetry formats at N = $fn (one after the other, full plan):"
 echo
@@ -186,4 +233,5 @@ for fmt in csv parquet; do
   rm -rf "$out/$fmt"
 done
 scale_section
+before_after_section
 realtime_section
