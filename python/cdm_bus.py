@@ -2,7 +2,8 @@
 and the iceoryx2 configuration of the runtime's processes, for the `iceoryx2` package from PyPI
 (0.10, the version of the Rust side).
 
-Each agent publishes its state on `cdm/<team>/state/<id>`; a team keeps one spare subscriber slot
+Each agent publishes its states on `cdm/<team>/state/<id>`, up to `STATES_PER_SAMPLE` consecutive
+ticks per sample (`StateBatch`, `cdm_iox::StateBatch`); a team keeps one spare subscriber slot
 on each of these services for an observer such as `examples/watch.py`. An observer never slows
 the team: when it falls behind, it loses its oldest samples.
 """
@@ -57,6 +58,31 @@ class StateMsg(ctypes.Structure):
 
     def position(self):
         return (self.state[0], self.state[1], self.state[2])
+
+
+# The most states one sample carries (`cdm_iox::STATES_PER_SAMPLE`).
+STATES_PER_SAMPLE = 4
+
+
+class StateBatch(ctypes.Structure):
+    """The payload of a state service: `states[:len]`, consecutive ticks of one agent, oldest
+    first (`cdm_iox::StateBatch`, 8 + 128 * STATES_PER_SAMPLE bytes); a repeated state (a repair's
+    hand-over sends the last ones again) carries the same tick and values."""
+
+    _fields_ = [
+        ("len", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),  # 1: sent again at a repair's hand-over
+        ("states", StateMsg * STATES_PER_SAMPLE),
+    ]
+
+    @staticmethod
+    def type_name():
+        """The stable name the Rust type declares (`cdm_iox::STATE_BATCH_TYPE_NAME`)."""
+        return "cdm::StateBatch"
+
+    def messages(self):
+        """The states carried, oldest first (a length past the array reads as the array)."""
+        return list(self.states[: min(self.len, STATES_PER_SAMPLE)])
 
 
 class ClockMsg(ctypes.Structure):
@@ -126,7 +152,7 @@ class TeamReader:
         for agent_id in self.ids:
             service = (
                 self.node.service_builder(iox2.ServiceName.new(state_service(team, agent_id)))
-                .publish_subscribe(StateMsg)
+                .publish_subscribe(StateBatch)
                 .open()
             )
             self.subscribers[agent_id] = service.subscriber_builder().create()
@@ -145,10 +171,11 @@ class TeamReader:
                 sample = sub.receive()
                 if sample is None:
                     break
-                msg = StateMsg.from_buffer_copy(sample.payload().contents)
+                batch = StateBatch.from_buffer_copy(sample.payload().contents)
                 sample.delete()
-                if msg.status == STATUS_OK and msg.tick > self.done_tick:
-                    self.pending.setdefault(msg.tick, {})[agent_id] = msg
+                for msg in batch.messages():
+                    if msg.status == STATUS_OK and msg.tick > self.done_tick:
+                        self.pending.setdefault(msg.tick, {})[agent_id] = msg
         done = [t for t, states in self.pending.items() if len(states) == len(self.ids)]
         out = []
         for t in sorted(done):

@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 
 use common::formation::Role;
 use common::scenario::{Checks, Scenario, ScenarioFile};
-use common::transport::{ClockWire, MemberPorts, StateWire, TeamName, TransportError};
+use common::transport::{ClockWire, MemberPorts, StateBatchWire, TeamName, TransportError};
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
 use serde_json::Value;
 use support::*;
@@ -422,7 +422,7 @@ fn a_foreign_process_cannot_publish_into_a_team() {
     // The right type: the service opens (it is readable metadata), but no port is granted.
     let state = node
         .service_builder(&name(t.state_service(1)))
-        .publish_subscribe::<StateWire>()
+        .publish_subscribe::<StateBatchWire>()
         .open()
         .expect("open agent 1's state service");
     let publisher = state.publisher_builder().create();

@@ -43,6 +43,7 @@ fn python_wire_types_and_paths_are_the_rust_ones() {
             "import ctypes, cdm_bus as b; r, p = b.bus_paths(); \
              print(r); print(p); \
              print(b.StateMsg.type_name(), ctypes.sizeof(b.StateMsg)); \
+             print(b.StateBatch.type_name(), ctypes.sizeof(b.StateBatch), b.STATES_PER_SAMPLE); \
              print(b.ClockMsg.type_name(), ctypes.sizeof(b.ClockMsg))",
         ]),
         PYTHON_DEADLINE,
@@ -58,6 +59,12 @@ fn python_wire_types_and_paths_are_the_rust_ones() {
             "{} {}",
             common::transport::STATE_TYPE_NAME,
             std::mem::size_of::<common::messages::StateMsg>()
+        ),
+        format!(
+            "{} {} {}",
+            common::transport::STATE_BATCH_TYPE_NAME,
+            std::mem::size_of::<common::transport::StateBatch>(),
+            common::transport::STATES_PER_SAMPLE
         ),
         format!(
             "{} {}",

@@ -8,7 +8,7 @@
 //!
 //! | service | pattern | ports |
 //! |---|---|---|
-//! | `cdm/<team>/state/<id>` | publish-subscribe [`StateMsg`](crate::messages::StateMsg) | publisher: member `id` (max 1); subscribers: its out-neighbours + orchestrator |
+//! | `cdm/<team>/state/<id>` | publish-subscribe [`StateBatch`] (up to [`STATES_PER_SAMPLE`] [`StateMsg`](crate::messages::StateMsg)s) | publisher: member `id` (max 1); subscribers: its out-neighbours + orchestrator |
 //! | `cdm/<team>/clock` | publish-subscribe [`ClockMsg`](crate::messages::ClockMsg) | publisher: orchestrator; subscribers: every member |
 //! | `cdm/<team>/wake/<id>` | event | listener: member `id`; notifiers: its in-neighbours + orchestrator |
 //! | `cdm/<team>/wake/orch` | event | listener: orchestrator; notifiers: every member |
@@ -19,7 +19,7 @@
 //! WaitSet can lose a wake-up under load).
 //!
 //! Overflow: state and clock subscribers use iceoryx2's *safe overflow*: when a subscriber's
-//! buffer (`window + 2` states, 2 grants) is full, the publisher replaces the oldest sample. A
+//! buffer (`window + 2` samples, each at least one state; 2 grants) is full, the publisher replaces the oldest sample. A
 //! publisher therefore never blocks on a slow or dead reader, and a reader that fell behind sees a
 //! gap in `StateMsg::tick` (every state carries its tick) instead of a stall of the whole team.
 //!
@@ -75,6 +75,7 @@ mod limits;
 mod member;
 mod orchestrator;
 mod ownership;
+mod resend;
 mod team;
 mod wake_roots;
 mod wire;
@@ -86,7 +87,10 @@ pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
 pub use team::{scenario_hash_value, RepairRoom, TeamLayout, TeamName, SCENARIO_HASH_KEY};
 pub mod bench_barrier;
-pub use wire::{ClockWire, StateWire, Wire, CLOCK_TYPE_NAME, STATE_TYPE_NAME};
+pub use wire::{
+    ClockWire, StateBatch, StateBatchWire, StateWire, Wire, CLOCK_TYPE_NAME, STATES_PER_SAMPLE,
+    STATE_BATCH_TYPE_NAME, STATE_TYPE_NAME,
+};
 
 /// The runtime's wire messages, at the path the backend's modules name them.
 use cdm_runtime::messages;

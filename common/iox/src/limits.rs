@@ -133,11 +133,15 @@ pub fn raise_fd_limit_to(need: u64) {
 pub const SHM_DIR: &str = "/dev/shm";
 
 /// Shared memory a team takes with a window of `window` ticks, measured with iceoryx2 0.10 at
-/// N = 100 as the space the tmpfs reports used (segments and iceoryx2's root files): about
-/// 54 KiB per member at window 4, and the state segments grow by about 0.8 KiB per member per tick
-/// of window (window 256: 207 KiB, 1024: 789 KiB per member); asked for with a margin.
+/// N = 100 as the space the tmpfs reports used (segments and iceoryx2's root files), when a
+/// state sample was one 128-byte state: about 54 KiB per member at window 4, and the state
+/// segments grew by about 0.8 KiB per member per tick of window (window 256: 207 KiB, 1024:
+/// 789 KiB per member). They grow with the sample's size ([`StateBatch`](crate::StateBatch), up
+/// to [`STATES_PER_SAMPLE`](crate::STATES_PER_SAMPLE) states): asked for at 1 KiB per 128 bytes
+/// of sample, with a margin.
 pub fn shm_need_bytes(agents: usize, window: u32) -> u64 {
-    (agents as u64 + 4) * (64 + u64::from(window)) * 1024
+    let per_tick_kib = (std::mem::size_of::<crate::StateBatch>() as u64).div_ceil(128);
+    (agents as u64 + 4) * (64 + u64::from(window) * per_tick_kib) * 1024
 }
 
 /// Free bytes for unprivileged writers in `dir`, if it can be asked.

@@ -19,12 +19,15 @@ use super::{
     TransportError, CLOCK_BUFFER,
 };
 use crate::messages::{ClockMsg, StateMsg};
-use crate::wire::{ClockWire, StateWire, Wire};
+use crate::resend::{Held, Recent, RESEND_STATES_KEY};
+use crate::wire::{ClockWire, StateBatch, StateBatchWire};
 
 /// A neighbour's state service, read by this member.
 struct NeighborReader {
-    _service: PubSubService<ipc::Service, StateWire, ()>,
-    subscriber: Subscriber<ipc::Service, StateWire, ()>,
+    _service: PubSubService<ipc::Service, StateBatchWire, ()>,
+    subscriber: Subscriber<ipc::Service, StateBatchWire, ()>,
+    /// A repair's new in-neighbour: its states wait for its repeats (`crate::resend`).
+    held: Held,
 }
 
 /// A wake event this member notifies.
@@ -39,8 +42,13 @@ struct WakeWriter {
 pub struct MemberPorts {
     team: TeamName,
     id: u32,
-    publisher: Publisher<ipc::Service, StateWire, ()>,
-    _state: PubSubService<ipc::Service, StateWire, ()>,
+    publisher: Publisher<ipc::Service, StateBatchWire, ()>,
+    /// States published quietly and not yet sent: they go out as one sample when the batch is
+    /// full or the readers are woken ([`Self::notify_readers`]), whichever comes first.
+    pending: StateBatch,
+    /// The last states published, sent again at a repair's hand-over (`crate::resend`).
+    recent: Recent,
+    _state: PubSubService<ipc::Service, StateBatchWire, ()>,
     neighbors: BTreeMap<u32, NeighborReader>,
     clock_subscriber: Subscriber<ipc::Service, ClockWire, ()>,
     _clock: PubSubService<ipc::Service, ClockWire, ()>,
@@ -130,6 +138,8 @@ impl MemberPorts {
             team: team.clone(),
             id,
             publisher: own.publisher,
+            pending: StateBatch::EMPTY,
+            recent: Recent::new(resend_states(&own.state)),
             _state: own.state,
             neighbors,
             clock_subscriber,
@@ -153,17 +163,21 @@ impl MemberPorts {
         &self.team
     }
 
-    /// Publishes this member's state, then (after the send returned) wakes its out-neighbours and
-    /// the orchestrator. Returns how many subscribers the sample reached. A state carrying another
-    /// member's id is refused.
+    /// Publishes this member's state (with the states published quietly before it), then (after
+    /// the send returned) wakes its out-neighbours and the orchestrator. Returns how many
+    /// subscribers the sample reached. A state carrying another member's id is refused.
     pub fn publish(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
         let reached = self.publish_quietly(msg)?;
+        let flushed = self.flush()?;
         self.notify_readers()?;
-        Ok(reached)
+        Ok(reached.max(flushed))
     }
 
     /// Publishes `msg` without waking anyone: the caller must call [`Self::notify_readers`]
     /// before it sleeps, so every published state is followed by a wake-up (notify on block).
+    /// The state joins the batch of the states published since the last wake-up; a full batch
+    /// is sent at once (returns how many subscribers it reached), otherwise it waits for
+    /// [`Self::notify_readers`] or [`Self::flush`] (returns 0).
     pub fn publish_quietly(&mut self, msg: StateMsg) -> Result<usize, TransportError> {
         if msg.id != self.id {
             return Err(TransportError::ForeignState {
@@ -173,13 +187,49 @@ impl MemberPorts {
                 service: self.team.state_service(self.id),
             });
         }
-        self.publisher
-            .send_copy(Wire(msg))
-            .map_err(|e| self.error(&self.team.state_service(self.id), "send", e))
+        self.recent.push(msg);
+        if self.pending.push(msg) {
+            return self.flush();
+        }
+        Ok(0)
     }
 
-    /// Wakes every out-neighbour and the orchestrator (events merge: cheap to repeat).
+    /// Sends the pending batch, if any, as one sample, without waking anyone; returns how many
+    /// subscribers it reached.
+    pub fn flush(&mut self) -> Result<usize, TransportError> {
+        let reached = self.send(self.pending)?;
+        self.pending.clear();
+        Ok(reached)
+    }
+
+    /// Sends `batch` as one sample (nothing when it is empty); returns how many subscribers it
+    /// reached.
+    fn send(&self, batch: StateBatch) -> Result<usize, TransportError> {
+        let states = batch.states();
+        if states.is_empty() {
+            return Ok(0);
+        }
+        let service = || self.team.state_service(self.id);
+        let mut sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| self.error(&service(), "loan", e))?;
+        let dst: *mut StateBatchWire = sample.payload_mut().as_mut_ptr();
+        // SAFETY: `dst` is the loaned chunk, sized and aligned for a `StateBatchWire` (`Wire` is
+        // `repr(transparent)` over `StateBatch`) and part of a shared-memory segment, so its
+        // bytes are initialized memory (zero-filled by the kernel, or an earlier sample's);
+        // `write_prefix` sets the length and the states readers read.
+        let sample = unsafe {
+            StateBatch::write_prefix(dst.cast(), states, batch.flags);
+            sample.assume_init()
+        };
+        sample.send().map_err(|e| self.error(&service(), "send", e))
+    }
+
+    /// Sends the states published quietly, then wakes every out-neighbour and the orchestrator
+    /// (events merge: cheap to repeat).
     pub fn notify_readers(&mut self) -> Result<(), TransportError> {
+        self.flush()?;
         for (&peer, wake) in &self.out_wakes {
             wake.notifier
                 .notify()
@@ -192,21 +242,21 @@ impl MemberPorts {
         Ok(())
     }
 
-    /// Drains every in-neighbour's subscriber (neighbours in id order, each one's samples oldest
-    /// first) into `f`; returns how many samples were delivered.
+    /// Drains every in-neighbour's subscriber (neighbours in id order, each one's states oldest
+    /// first) into `f`; returns how many states were delivered.
     pub fn receive_neighbors(
         &mut self,
         mut f: impl FnMut(StateMsg),
     ) -> Result<usize, TransportError> {
         let mut count = 0;
-        for (&peer, reader) in &self.neighbors {
+        let (team, who) = (&self.team, Role::Agent(self.id));
+        for (&peer, reader) in &mut self.neighbors {
             while let Some(sample) = reader
                 .subscriber
                 .receive()
-                .map_err(|e| self.error(&self.team.state_service(peer), "receive", e))?
+                .map_err(|e| service_error(team, who, &team.state_service(peer), "receive", e))?
             {
-                f(sample.payload().0);
-                count += 1;
+                count += reader.held.take(&sample.payload().0, &mut f);
             }
         }
         Ok(count)
@@ -240,8 +290,7 @@ impl MemberPorts {
     }
 
     /// After a loss: subscribes to `subscribe`'s states (a new subscriber gets the states its
-    /// publisher still holds in its history once the publisher updates its connections, see
-    /// [`Self::hand_over`]) and opens notifiers on `notify`'s wake events. The orchestrator sized
+    /// publisher published before, sent again at its [`Self::hand_over`]) and opens notifiers on `notify`'s wake events. The orchestrator sized
     /// the services for the repairs (`TeamLayout::with_repair_links`).
     pub fn connect(&mut self, subscribe: &[u32], notify: &[u32]) -> Result<(), TransportError> {
         let who = Role::Agent(self.id);
@@ -260,6 +309,7 @@ impl MemberPorts {
             let reader = NeighborReader {
                 _service: service,
                 subscriber,
+                held: Held::until_resent(),
             };
             self.neighbors.insert(peer, reader);
         }
@@ -274,20 +324,27 @@ impl MemberPorts {
         Ok(())
     }
 
-    /// Every new link of a repair is connected: the publisher delivers its history to its new
-    /// subscribers (iceoryx2 does so when it updates its connections), then every reader is
-    /// woken.
+    /// Every new link of a repair is connected: the publisher connects its new subscribers,
+    /// sends its last states again (every reader gets them; a repeated state changes nothing,
+    /// `crate::resend`), then wakes every reader.
     pub fn hand_over(&mut self) -> Result<(), TransportError> {
         use iceoryx2::port::update_connections::UpdateConnections;
+        self.flush()?;
         self.publisher
             .update_connections()
             .map_err(|e| self.error(&self.team.state_service(self.id), "update connections", e))?;
+        for batch in self.recent.batches() {
+            self.send(batch)?;
+        }
         self.notify_readers()
     }
 
     /// Blocks until a neighbour or the orchestrator notifies `wake/<id>` or `timeout` passes;
     /// true when woken. Then drain both the clock and the neighbours: notifications merge.
     pub fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
+        // Nothing published may stay behind while this member sleeps (callers notify first;
+        // this keeps a forgotten notify from holding states back until the next one).
+        self.flush()?;
         let service = self.team.wake_service(self.id);
         wait_on(
             &self.listener,
@@ -331,8 +388,8 @@ impl MemberPorts {
 /// The member's own ports: the one publisher of `state/<id>` and the one listener of `wake/<id>`
 /// (a second process for the same id finds either taken).
 struct OwnPorts {
-    state: PubSubService<ipc::Service, StateWire, ()>,
-    publisher: Publisher<ipc::Service, StateWire, ()>,
+    state: PubSubService<ipc::Service, StateBatchWire, ()>,
+    publisher: Publisher<ipc::Service, StateBatchWire, ()>,
     wake: EventService<ipc::Service>,
     listener: Listener<ipc::Service>,
 }
@@ -367,6 +424,20 @@ impl OwnPorts {
             listener,
         })
     }
+}
+
+/// How many states member's `state` service asks it to send again at a hand-over (0 when the
+/// team has no repairs or the attribute is missing).
+fn resend_states(state: &PubSubService<ipc::Service, StateBatchWire, ()>) -> usize {
+    use iceoryx2::service::attribute::AttributeKey;
+    let Ok(key) = AttributeKey::try_from(RESEND_STATES_KEY) else {
+        return 0;
+    };
+    state
+        .attributes()
+        .key_value(&key, 0)
+        .and_then(|v| v.to_string().parse().ok())
+        .unwrap_or(0)
 }
 
 /// Opens the team's clock service; a missing one means no orchestrator created the team.
@@ -440,6 +511,7 @@ fn open_neighbors(
             NeighborReader {
                 _service: service,
                 subscriber,
+                held: Held::default(),
             },
         );
     }
@@ -453,10 +525,10 @@ fn open_state(
     team: &TeamName,
     who: Role,
     owner: u32,
-) -> Result<PubSubService<ipc::Service, StateWire, ()>, TransportError> {
+) -> Result<PubSubService<ipc::Service, StateBatchWire, ()>, TransportError> {
     let name = team.state_service(owner);
     node.service_builder(&service_name(team, who, &name)?)
-        .publish_subscribe::<StateWire>()
+        .publish_subscribe::<StateBatchWire>()
         .open()
         .map_err(|e| match (e, who) {
             (PublishSubscribeOpenError::DoesNotExist, _) => TransportError::NotInTeam {
@@ -546,6 +618,17 @@ fn not_a_neighbor(
     }
 }
 
+impl Drop for MemberPorts {
+    /// Sends what was published quietly: a member that stops between a publish and its next
+    /// wake-up keeps those states visible while its ports live, as when every state was a sample.
+    fn drop(&mut self) {
+        if let Err(e) = self.flush() {
+            tracing::debug!(team = %self.team, id = self.id, error = %e,
+                "cannot send the last states while closing the ports");
+        }
+    }
+}
+
 impl cdm_runtime::seams::MemberTransport for MemberPorts {
     type Error = TransportError;
 
@@ -559,6 +642,10 @@ impl cdm_runtime::seams::MemberTransport for MemberPorts {
 
     fn notify_readers(&mut self) -> Result<(), TransportError> {
         MemberPorts::notify_readers(self)
+    }
+
+    fn flush(&mut self) -> Result<(), TransportError> {
+        MemberPorts::flush(self).map(drop)
     }
 
     fn receive_neighbors(&mut self, f: impl FnMut(StateMsg)) -> Result<usize, TransportError> {

@@ -20,14 +20,15 @@ use super::{
     TeamLayout, TeamName, TransportError, CLOCK_BUFFER, OBSERVER_SLOTS, SPARE_NODES,
 };
 use crate::messages::{ClockMsg, StateMsg};
-use crate::wire::{ClockWire, StateWire, Wire};
+use crate::resend::{resend_room, RESEND_STATES_KEY};
+use crate::wire::{ClockWire, StateBatchWire, Wire};
 
 const WHO: Role = Role::Orchestrator;
 
 /// One member's state service, read by the orchestrator.
 struct StateReader {
-    service: PubSubService<ipc::Service, StateWire, ()>,
-    subscriber: Subscriber<ipc::Service, StateWire, ()>,
+    service: PubSubService<ipc::Service, StateBatchWire, ()>,
+    subscriber: Subscriber<ipc::Service, StateBatchWire, ()>,
 }
 
 /// One member's wake event. The orchestrator created it and holds it while the team gathers
@@ -298,8 +299,8 @@ impl OrchestratorPorts {
         }
     }
 
-    /// Drains every state subscriber (members in id order, each member's samples oldest first) into
-    /// `f`; returns how many samples were delivered.
+    /// Drains every state subscriber (members in id order, each member's states oldest first) into
+    /// `f`; returns how many states were delivered.
     pub fn receive_states(&mut self, mut f: impl FnMut(StateMsg)) -> Result<usize, TransportError> {
         let mut count = 0;
         for (&id, reader) in &self.ports().states {
@@ -308,8 +309,9 @@ impl OrchestratorPorts {
                 .receive()
                 .map_err(|e| self.error(&self.team.state_service(id), "receive", e))?
             {
-                f(sample.payload().0);
-                count += 1;
+                let states = sample.payload().0.states();
+                states.iter().for_each(|m| f(*m));
+                count += states.len();
             }
         }
         Ok(count)
@@ -549,18 +551,21 @@ fn member_services(
     let (extra_readers, extra_writers) = layout.repair_slots(id);
     let outs = layout.out_neighbors(id).len() + extra_readers;
     let name = team.state_service(id);
+    // A repair's new reader gets the states published before it subscribed: the publisher sends
+    // its last `resend` states again at the hand-over (crate::resend), not from a history.
+    let resend = layout.history().min(buffer);
+    let buffer = buffer + resend_room(resend);
     let service = node
         .service_builder(&service_name(team, WHO, &name)?)
-        .publish_subscribe::<StateWire>()
+        .publish_subscribe::<StateBatchWire>()
         .max_publishers(1)
         .max_subscribers(outs + 1 + OBSERVER_SLOTS)
         .max_nodes(outs + 2 + SPARE_NODES + OBSERVER_SLOTS)
         .subscriber_max_buffer_size(buffer)
         .subscriber_max_borrowed_samples(1)
-        // A repair's new reader gets the states published before it subscribed.
-        .history_size(layout.history().min(buffer))
+        .history_size(0)
         .enable_safe_overflow(true)
-        .create()
+        .create_with_attributes(&resend_attribute(team, resend)?)
         .map_err(|e| pubsub_create_error(team, &name, e))?;
     let subscriber = service
         .subscriber_builder()
@@ -647,6 +652,23 @@ fn event_create_error(team: &TeamName, service: &str, e: EventCreateError) -> Tr
 }
 
 /// The clock service's attribute carrying the scenario hash.
+/// The attribute of a state service that tells its member how many states to send again at a
+/// hand-over ([`RESEND_STATES_KEY`]).
+fn resend_attribute(
+    team: &TeamName,
+    states: usize,
+) -> Result<iceoryx2::service::attribute::AttributeSpecifier, TransportError> {
+    use iceoryx2::service::attribute::{AttributeKey, AttributeSpecifier, AttributeValue};
+    let bad = |e: &dyn std::fmt::Debug| TransportError::InvalidLayout {
+        reason: format!("team {team}: cannot define the resend attribute: {e:?}"),
+    };
+    let key = AttributeKey::try_from(RESEND_STATES_KEY).map_err(|e| bad(&e))?;
+    let value = AttributeValue::try_from(states.to_string().as_str()).map_err(|e| bad(&e))?;
+    AttributeSpecifier::new()
+        .define(&key, &value)
+        .map_err(|e| bad(&e))
+}
+
 fn scenario_attribute(
     team: &TeamName,
     hash: u64,

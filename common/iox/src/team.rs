@@ -114,14 +114,14 @@ pub struct TeamLayout {
 }
 
 /// Room the services keep for repairs after losses: readers a member may gain, and how many
-/// states a new reader receives from its new in-neighbour's history.
+/// states a new reader receives again from its new in-neighbour (`resend.rs`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RepairRoom {
     /// Extra subscribers (and nodes) on `state/<id>`, by id; ids not listed get none.
     pub readers: BTreeMap<u32, usize>,
     /// Extra notifiers (and nodes) on every `wake/<id>`: the new in-neighbours of a follower.
     pub writers: usize,
-    /// States every state service keeps for a late subscriber.
+    /// States every member sends again for a late subscriber at a hand-over.
     pub history: usize,
 }
 
@@ -209,7 +209,7 @@ impl TeamLayout {
         })
     }
 
-    /// States a state service keeps for late subscribers (0 without repairs).
+    /// States a member sends again for late subscribers at a hand-over (0 without repairs).
     pub fn history(&self) -> usize {
         self.repair.as_ref().map_or(0, |r| r.history)
     }

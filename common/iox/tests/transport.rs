@@ -21,6 +21,7 @@ use std::time::{Duration, Instant};
 
 use cdm_iox::{
     remove_dead_nodes, MemberPorts, OrchestratorPorts, Role, TeamLayout, TeamName, TransportError,
+    STATES_PER_SAMPLE,
 };
 use cdm_runtime::messages::{ClockCommand, ClockMsg, StateMsg, StopReason};
 use iceoryx2::node::NodeView;
@@ -205,6 +206,60 @@ fn relayed_wakes_reach_the_roots_and_the_readers_of_a_loss() {
     assert_eq!(orch.notifier_nodes(2).unwrap(), vec![node(1), orch_node]);
     assert!(members.iter().all(|m| m.orchestrator_alive()));
     drop(members);
+}
+
+/// The ticks of the states that arrived since the last call: at the reader, at the orchestrator.
+fn ticks_received(reader: &mut MemberPorts, orch: &mut OrchestratorPorts) -> (Vec<u64>, Vec<u64>) {
+    let (mut r, mut o) = (vec![], vec![]);
+    reader.receive_neighbors(|s| r.push(s.tick)).unwrap();
+    orch.receive_states(|s| o.push(s.tick)).unwrap();
+    (r, o)
+}
+
+#[test]
+fn quiet_states_travel_in_batches_in_order_and_all_arrive_by_the_wake_up() {
+    let _files = shared_files();
+    let _dog = Watchdog::new("batches", Duration::from_secs(30));
+    let t = team(9);
+    // 0 -> 1; a window wide enough for every state below to stay in the buffers.
+    let k = STATES_PER_SAMPLE as u64;
+    let lay = layout(&[0, 1], &[(0, 1)], 4 * k as u32);
+    let mut orch = OrchestratorPorts::create(&t, &lay).unwrap();
+    let mut m0 = MemberPorts::open(&t, 0, 0, &[], &[1]).unwrap();
+    let mut m1 = MemberPorts::open(&t, 1, 0, &[0], &[]).unwrap();
+    wait_ready(&orch, Duration::from_secs(10));
+    let state = |tick: u64| StateMsg::ok(tick, HASH, 0, [tick as f64; 12]);
+
+    // A full batch leaves at once, the rest waits for the wake-up.
+    let quiet = 2 * k + 3;
+    for tick in 0..quiet {
+        m0.publish_quietly(state(tick)).unwrap();
+    }
+    let full: Vec<u64> = (0..2 * k).collect();
+    assert_eq!(ticks_received(&mut m1, &mut orch), (full.clone(), full));
+    m0.notify_readers().unwrap();
+    let rest: Vec<u64> = (2 * k..quiet).collect();
+    assert_eq!(ticks_received(&mut m1, &mut orch), (rest.clone(), rest));
+    assert!(m1.wait(Duration::ZERO).unwrap(), "the reader was not woken");
+
+    // `publish` sends the quiet states before it with it; each state keeps its content.
+    m0.publish_quietly(state(quiet)).unwrap();
+    m0.publish(state(quiet + 1)).unwrap();
+    let mut got = vec![];
+    m1.receive_neighbors(|s| got.push(s)).unwrap();
+    assert_eq!(got, vec![state(quiet), state(quiet + 1)]);
+
+    // A state another member's id is refused, and nothing is sent for it.
+    let foreign = StateMsg::ok(quiet + 2, HASH, 1, [0.0; 12]);
+    assert!(matches!(
+        m0.publish_quietly(foreign),
+        Err(TransportError::ForeignState { .. })
+    ));
+    m0.notify_readers().unwrap();
+    let (r, o) = ticks_received(&mut m1, &mut orch);
+    assert_eq!((r.len(), o), (0, (quiet..quiet + 2).collect()));
+    drop((m0, m1));
+    orch.shutdown().unwrap();
 }
 
 #[test]

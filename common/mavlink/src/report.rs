@@ -134,6 +134,10 @@ impl<T: MemberTransport> MemberTransport for Reporting<'_, T> {
         self.inner.notify_readers()
     }
 
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        self.inner.flush()
+    }
+
     fn receive_neighbors(&mut self, f: impl FnMut(StateMsg)) -> Result<usize, Self::Error> {
         self.inner.receive_neighbors(f)
     }

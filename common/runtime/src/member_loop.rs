@@ -61,6 +61,9 @@ where
             match core.poll(clock.now()) {
                 Action::Publish(mut msg) => {
                     if let Some(i) = inject {
+                        // An injected crash or hang happens "instead of publishing this tick":
+                        // every earlier state must be out, as if each were its own sample.
+                        transport.flush().map_err(LoopError::Transport)?;
                         i.apply(msg.tick, &mut msg);
                     }
                     transport

@@ -56,6 +56,8 @@ where
                     transport
                         .publish_quietly(msg)
                         .map_err(LoopError::Transport)?;
+                    // Readers poll by the clock, not by wake-ups: the state must be out now.
+                    transport.flush().map_err(LoopError::Transport)?;
                 }
                 Action::CheckOrchestrator => {
                     core.on_orchestrator_alive(transport.orchestrator_alive());

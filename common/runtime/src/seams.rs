@@ -22,8 +22,15 @@ pub trait MemberTransport {
     fn publish(&mut self, msg: StateMsg) -> Result<usize, Self::Error>;
     /// Publishes `msg` without waking anyone; [`Self::notify_readers`] must follow before sleep.
     fn publish_quietly(&mut self, msg: StateMsg) -> Result<usize, Self::Error>;
-    /// Wakes every reader of this member's state.
+    /// Wakes every reader of this member's state (sending first what [`Self::publish_quietly`]
+    /// held back).
     fn notify_readers(&mut self) -> Result<(), Self::Error>;
+    /// Sends what [`Self::publish_quietly`] held back, without waking anyone: for a member whose
+    /// readers look by the clock instead of waiting for a wake-up (real time), and before an
+    /// injected fault. The default does nothing (a transport that sends every state at once).
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
     /// Drains every in-neighbour's states (neighbours in id order, oldest first) into `f`.
     fn receive_neighbors(&mut self, f: impl FnMut(StateMsg)) -> Result<usize, Self::Error>;
     /// The newest message of the clock channel since the last call, if any.
