@@ -248,7 +248,7 @@ impl Joined<'_> {
         let (s, me, team, id) = (self.s, self.me, self.team, self.me.id);
         let hash = s.content_hash();
         let ins = MemberCore::<ModelVehicle, LockstepClock>::subscriptions(me);
-        let outs = s.formation.out_neighbors().remove(&id).unwrap_or_default();
+        let outs = s.formation.readers_of(id);
         let mut ports = MemberPorts::open(team, id, hash, &ins, &outs)?;
         tracing::info!(
             id,

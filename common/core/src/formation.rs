@@ -309,6 +309,19 @@ impl Formation {
         }
     }
 
+    /// The members that read `id` (its out-neighbours), sorted: its entry of
+    /// [`Self::out_neighbors`] without building every member's (each member asks at start).
+    pub fn readers_of(&self, id: u32) -> Vec<u32> {
+        let mut v: Vec<u32> = self
+            .members
+            .iter()
+            .filter(|m| m.link.is_some_and(|l| l.in_neighbors.contains(&id)))
+            .map(|m| m.id)
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
     /// Out-neighbours of every member (who subscribes to whom), sorted, by id.
     pub fn out_neighbors(&self) -> BTreeMap<u32, Vec<u32>> {
         let mut out: BTreeMap<u32, Vec<u32>> =
@@ -493,5 +506,16 @@ mod tests {
             f.check_links(),
             Err(FormationError::MissingLink { .. })
         ));
+    }
+
+    #[test]
+    fn readers_of_is_the_out_neighbors_entry() {
+        let s = crate::scenario::Scenario::generated(60).unwrap();
+        let out = s.formation.out_neighbors();
+        for m in &s.formation.members {
+            assert_eq!(s.formation.readers_of(m.id), out[&m.id], "member {}", m.id);
+        }
+        assert!(out.values().any(|v| v.len() > 1));
+        assert!(s.formation.readers_of(9999).is_empty());
     }
 }

@@ -82,6 +82,9 @@ pub fn repair_in_order(
         .collect();
     let mut retriangulated = Vec::new();
     let mut degraded = Vec::new();
+    // Built once and kept current as links change: a table per walk was a third of the
+    // orchestrator's start-up CPU at N = 1000 (its N single-loss repairs).
+    let mut table = ReaderTable::of(&f);
     for &(id, p) in order {
         let Some(old) = f.member(id).and_then(|m| m.link) else {
             continue;
@@ -89,7 +92,7 @@ pub fn repair_in_order(
         if lost.contains(&id) || !old.in_neighbors.iter().any(|j| lost.contains(j)) {
             continue;
         }
-        let downstream = readers_of(&f, id, lost);
+        let downstream = readers_of(&f, &table, id, lost);
         let survivors: Vec<(u32, Vec2)> = f
             .members
             .iter()
@@ -107,20 +110,24 @@ pub fn repair_in_order(
             .ok()
             .and_then(|new| f.set_link(id, new).ok().map(|()| new));
         match set {
-            Some(new) => retriangulated.push(Retriangulation {
-                id,
-                old: old.in_neighbors,
-                new,
-            }),
+            Some(new) => {
+                table.relink(&f, id, Some(old.in_neighbors), Some(new));
+                retriangulated.push(Retriangulation {
+                    id,
+                    old: old.in_neighbors,
+                    new,
+                });
+            }
             None => {
                 degrade(&mut f, id);
+                table.relink(&f, id, Some(old.in_neighbors), None);
                 degraded.push(id);
             }
         }
     }
     // Strict containment makes every survivor reachable (see `graph`); should that ever fail,
     // the unreachable ones fly their plan rather than follow nobody.
-    for id in unreachable(&f, lost) {
+    for id in unreachable_in(&f, &table, lost) {
         degrade(&mut f, id);
         degraded.push(id);
     }
@@ -140,46 +147,95 @@ fn degrade(f: &mut Formation, id: u32) {
     }
 }
 
-/// Survivors that read `id`, directly or through other survivors.
-fn readers_of(f: &Formation, id: u32, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
-    let out = f.out_neighbors();
-    let mut seen = BTreeSet::new();
-    let mut stack = vec![id];
+/// Who reads whom, by member index (the rows of `Formation::out_neighbors` without a map).
+/// `launch` repairs every single loss to size its services before it spawns anyone, and each
+/// repair walks the graph several times: building `out_neighbors` for each walk was a sixth of
+/// the orchestrator's start-up CPU at N = 1000 (BENCHMARKS.md, issue 17 start-up).
+struct ReaderTable {
+    rows: Vec<Vec<usize>>,
+}
+
+impl ReaderTable {
+    fn of(f: &Formation) -> Self {
+        let mut rows = vec![Vec::new(); f.members.len()];
+        for (k, m) in f.members.iter().enumerate() {
+            for nb in m.link.into_iter().flat_map(|l| l.in_neighbors) {
+                if let Some(j) = f.index_of(nb) {
+                    rows[j].push(k);
+                }
+            }
+        }
+        ReaderTable { rows }
+    }
+
+    fn row(&self, j: usize) -> &[usize] {
+        &self.rows[j]
+    }
+
+    /// Member `id` now reads `new` instead of `old` (`None`: no link).
+    fn relink(&mut self, f: &Formation, id: u32, old: Option<[u32; 3]>, new: Option<[u32; 3]>) {
+        let Some(k) = f.index_of(id) else {
+            return;
+        };
+        for j in old.into_iter().flatten().filter_map(|nb| f.index_of(nb)) {
+            self.rows[j].retain(|&r| r != k);
+        }
+        for j in new.into_iter().flatten().filter_map(|nb| f.index_of(nb)) {
+            self.rows[j].push(k);
+        }
+    }
+}
+
+/// Survivors that read `id`, directly or through other survivors (`table`: `f`'s readers).
+fn readers_of(f: &Formation, table: &ReaderTable, id: u32, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
+    let mut seen = vec![false; f.members.len()];
+    let mut stack: Vec<usize> = f.index_of(id).into_iter().collect();
     while let Some(j) = stack.pop() {
-        for &k in out.get(&j).into_iter().flatten() {
-            if !lost.contains(&k) && seen.insert(k) {
+        for &k in table.row(j) {
+            if !seen[k] && !lost.contains(&f.members[k].id) {
+                seen[k] = true;
                 stack.push(k);
             }
         }
     }
-    seen
+    (0..f.members.len())
+        .filter(|&k| seen[k])
+        .map(|k| f.members[k].id)
+        .collect()
 }
 
 /// Surviving followers not reachable from a surviving leader or a degraded follower through
 /// survivors' links (Assumption 2).
 pub fn unreachable(f: &Formation, lost: &BTreeSet<u32>) -> Vec<u32> {
-    let out = f.out_neighbors();
-    let roots = f
+    unreachable_in(f, &ReaderTable::of(f), lost)
+}
+
+/// [`unreachable`] with `f`'s readers given.
+fn unreachable_in(f: &Formation, table: &ReaderTable, lost: &BTreeSet<u32>) -> Vec<u32> {
+    let alive = |k: usize| !lost.contains(&f.members[k].id);
+    let mut seen: Vec<bool> = f
         .members
         .iter()
-        .filter(|m| !lost.contains(&m.id) && (m.role.is_leader() || m.link.is_none()));
-    let mut seen: BTreeSet<u32> = roots.map(|m| m.id).collect();
-    let mut stack: Vec<u32> = seen.iter().copied().collect();
+        .enumerate()
+        .map(|(k, m)| alive(k) && (m.role.is_leader() || m.link.is_none()))
+        .collect();
+    let mut stack: Vec<usize> = (0..f.members.len()).filter(|&k| seen[k]).collect();
     while let Some(j) = stack.pop() {
-        for &k in out.get(&j).into_iter().flatten() {
-            let links_alive = f
-                .member(k)
-                .and_then(|m| m.link)
+        for &k in table.row(j) {
+            let links_alive = f.members[k]
+                .link
                 .is_some_and(|l| l.in_neighbors.iter().all(|n| !lost.contains(n)));
-            if !lost.contains(&k) && links_alive && seen.insert(k) {
+            if !seen[k] && alive(k) && links_alive {
+                seen[k] = true;
                 stack.push(k);
             }
         }
     }
     f.members
         .iter()
-        .filter(|m| m.role == Role::Follower && !lost.contains(&m.id) && !seen.contains(&m.id))
-        .map(|m| m.id)
+        .enumerate()
+        .filter(|&(k, m)| m.role == Role::Follower && alive(k) && !seen[k])
+        .map(|(_, m)| m.id)
         .collect()
 }
 
@@ -261,6 +317,104 @@ mod tests {
                 assert!(w.iter().all(|w| *w >= DEFAULT_WEIGHT_FLOOR));
             }
         }
+    }
+
+    /// The walks as first written, over `Formation::out_neighbors`: the flat table must give
+    /// the same sets.
+    fn reference_readers(f: &Formation, id: u32, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
+        let out = f.out_neighbors();
+        let (mut seen, mut stack) = (BTreeSet::new(), vec![id]);
+        while let Some(j) = stack.pop() {
+            for &k in out.get(&j).into_iter().flatten() {
+                if !lost.contains(&k) && seen.insert(k) {
+                    stack.push(k);
+                }
+            }
+        }
+        seen
+    }
+
+    #[test]
+    fn reader_table_walks_match_the_map_walks() {
+        let s = Scenario::generated(120).unwrap();
+        let f = &s.formation;
+        let ids: Vec<u32> = f.members.iter().map(|m| m.id).collect();
+        let mut found = 0;
+        for lost in [
+            vec![],
+            vec![ids[0]],
+            vec![ids[5], ids[60]],
+            vec![ids[3], ids[4], ids[90]],
+        ] {
+            let lost: BTreeSet<u32> = lost.into_iter().collect();
+            for &id in &ids {
+                let table = ReaderTable::of(f);
+                assert_eq!(
+                    readers_of(f, &table, id, &lost),
+                    reference_readers(f, id, &lost)
+                );
+            }
+            // Degraded followers are roots; the lost members' readers lose their links.
+            let mut cut = f.clone();
+            for &id in &ids[10..14] {
+                degrade(&mut cut, id);
+            }
+            let got: BTreeSet<u32> = unreachable(&cut, &lost).into_iter().collect();
+            assert_eq!(got, unreachable_by_map(&cut, &lost));
+            found += got.len();
+        }
+        assert!(found > 0, "no case had an unreachable follower");
+    }
+
+    #[test]
+    fn a_relinked_reader_table_is_the_table_of_the_new_graph() {
+        let s = Scenario::generated(120).unwrap();
+        let lost: BTreeSet<u32> = s.formation.members.iter().map(|m| m.id).take(1).collect();
+        let r = repair(&s.formation, DEFAULT_WEIGHT_FLOOR, &lost);
+        assert!(!r.retriangulated.is_empty());
+        let mut f = s.formation.clone();
+        let mut table = ReaderTable::of(&f);
+        for x in &r.retriangulated {
+            f.set_link(x.id, x.new).unwrap();
+            table.relink(&f, x.id, Some(x.old), Some(x.new));
+        }
+        let follower = f.members.iter().rev().find(|m| m.link.is_some()).unwrap();
+        let (id, old) = (follower.id, follower.link.unwrap().in_neighbors);
+        degrade(&mut f, id);
+        table.relink(&f, id, Some(old), None);
+        let fresh = ReaderTable::of(&f);
+        for j in 0..f.members.len() {
+            let mut a = table.row(j).to_vec();
+            a.sort_unstable();
+            assert_eq!(a, fresh.row(j), "row {j}");
+        }
+    }
+
+    fn unreachable_by_map(f: &Formation, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
+        let out = f.out_neighbors();
+        let mut seen: BTreeSet<u32> = f
+            .members
+            .iter()
+            .filter(|m| !lost.contains(&m.id) && (m.role.is_leader() || m.link.is_none()))
+            .map(|m| m.id)
+            .collect();
+        let mut stack: Vec<u32> = seen.iter().copied().collect();
+        while let Some(j) = stack.pop() {
+            for &k in out.get(&j).into_iter().flatten() {
+                let alive = f
+                    .member(k)
+                    .and_then(|m| m.link)
+                    .is_some_and(|l| l.in_neighbors.iter().all(|n| !lost.contains(n)));
+                if !lost.contains(&k) && alive && seen.insert(k) {
+                    stack.push(k);
+                }
+            }
+        }
+        f.members
+            .iter()
+            .filter(|m| m.role == Role::Follower && !lost.contains(&m.id) && !seen.contains(&m.id))
+            .map(|m| m.id)
+            .collect()
     }
 
     #[test]

@@ -256,10 +256,15 @@ impl Scenario {
         toml::to_string(&self.file).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
     }
 
-    /// Content hash of the scenario as flown (canonical TOML, SHA-256, first 8 bytes): two
-    /// processes fly the same team only if their hashes agree.
+    /// Content hash of the scenario as flown (canonical JSON, SHA-256, first 8 bytes): two
+    /// processes fly the same team only if their hashes agree. JSON rather than TOML because
+    /// every member computes it at start: serde_json writes the 1000-member file in a fifth of
+    /// the instructions the TOML writer needs (BENCHMARKS.md, issue 17 start-up). Both forms are
+    /// canonical (fields in declaration order, shortest round-trip floats), and the keys are
+    /// written, so two optional fields cannot be mistaken for each other.
     pub fn content_hash(&self) -> u64 {
-        let digest = Sha256::digest(self.to_toml().as_bytes());
+        let json = serde_json::to_vec(&self.file).unwrap_or_default();
+        let digest = Sha256::digest(&json);
         let mut b = [0u8; 8];
         b.copy_from_slice(&digest[..8]);
         u64::from_le_bytes(b)
