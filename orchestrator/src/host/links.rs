@@ -108,8 +108,9 @@ mod tests {
 
     use super::*;
 
-    fn links() -> Links {
-        let now = Instant::now();
+    /// The links as of `now` (a test's own instant: its "ms before" must not depend on how
+    /// long a loaded machine takes between two `Instant::now()`).
+    fn links_at(now: Instant) -> Links {
         Links {
             host_of: [(1, 0), (2, 1), (3, 1), (4, 2)].into_iter().collect(),
             heard: [
@@ -120,6 +121,10 @@ mod tests {
             .collect(),
             ..Links::default()
         }
+    }
+
+    fn links() -> Links {
+        links_at(Instant::now())
     }
 
     fn silent(agent: u32) -> FaultRecord {
@@ -150,8 +155,9 @@ mod tests {
 
     #[test]
     fn a_remote_silence_on_a_live_link_names_the_host_and_its_quiet() {
-        let l = links();
-        let later = Instant::now() + Duration::from_millis(250);
+        let heard = Instant::now();
+        let l = links_at(heard);
+        let later = heard + Duration::from_millis(250);
         let f = l.explain(silent(4), later);
         assert_eq!(f.kind, FaultKind::AgentSilent);
         assert!(
