@@ -485,13 +485,7 @@ fn fly_team(
                         return Ok((ticking.unwrap_or_else(Instant::now), tick >= last));
                     }
                 }
-                TeamAction::CheckExited => {
-                    let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
-                    let remote = || w.hosts.and_then(|b| b.take_exited());
-                    if let Some((id, how)) = first_exited_but(children, lost).or_else(remote) {
-                        core.on_exited(id, how, clock.now());
-                    }
-                }
+                TeamAction::CheckExited => check_exited(&mut core, children, w.hosts, clock.now()),
                 TeamAction::Kill(ids) => {
                     for id in ids {
                         crate::loss::kill_and_reap(children, id);
@@ -499,13 +493,7 @@ fn fly_team(
                     }
                     break;
                 }
-                TeamAction::CheckLinks => {
-                    let hosts = w.hosts;
-                    core.on_links(clock.now(), |r, wr| match hosts {
-                        Some(b) => b.linked(ports, r, wr),
-                        None => ports.linked(r, wr).unwrap_or(false),
-                    });
-                }
+                TeamAction::CheckLinks => check_links(&mut core, ports, w.hosts, clock.now()),
                 TeamAction::Poll => {
                     // Complete ticks reach the file at least every 100 ms (and at every stop).
                     if last_flush.elapsed() > Duration::from_millis(100) {
@@ -530,6 +518,35 @@ fn fly_team(
             }
         }
     }
+}
+
+/// Hands the team core the first member that exited and is not already lost: one of ours, or
+/// one the bridge reports from another host.
+fn check_exited(
+    core: &mut TeamCore,
+    children: &mut [Spawned],
+    hosts: Option<&crate::host::Bridge>,
+    now: Duration,
+) {
+    let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
+    let remote = || hosts.and_then(|b| b.take_exited());
+    if let Some((id, how)) = first_exited_but(children, lost).or_else(remote) {
+        core.on_exited(id, how, now);
+    }
+}
+
+/// Tells the team core which of a repair's new links are connected: on this host's shared
+/// memory, or (with `--hosts`) through the bridge, which knows where each reader runs.
+fn check_links(
+    core: &mut TeamCore,
+    ports: &OrchestratorPorts,
+    hosts: Option<&crate::host::Bridge>,
+    now: Duration,
+) {
+    core.on_links(now, |r, wr| match hosts {
+        Some(b) => b.linked(ports, r, wr),
+        None => ports.linked(r, wr).unwrap_or(false),
+    });
 }
 
 /// Grants ticks up to `g` on the clock channel, with the latest loss notice.
