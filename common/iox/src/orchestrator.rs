@@ -651,35 +651,41 @@ fn event_create_error(team: &TeamName, service: &str, e: EventCreateError) -> Tr
     }
 }
 
-/// The clock service's attribute carrying the scenario hash.
 /// The attribute of a state service that tells its member how many states to send again at a
 /// hand-over ([`RESEND_STATES_KEY`]).
 fn resend_attribute(
     team: &TeamName,
     states: usize,
 ) -> Result<iceoryx2::service::attribute::AttributeSpecifier, TransportError> {
-    use iceoryx2::service::attribute::{AttributeKey, AttributeSpecifier, AttributeValue};
-    let bad = |e: &dyn std::fmt::Debug| TransportError::InvalidLayout {
-        reason: format!("team {team}: cannot define the resend attribute: {e:?}"),
-    };
-    let key = AttributeKey::try_from(RESEND_STATES_KEY).map_err(|e| bad(&e))?;
-    let value = AttributeValue::try_from(states.to_string().as_str()).map_err(|e| bad(&e))?;
-    AttributeSpecifier::new()
-        .define(&key, &value)
-        .map_err(|e| bad(&e))
+    attribute(team, "resend", RESEND_STATES_KEY, &states.to_string())
 }
 
+/// The clock service's attribute carrying the scenario hash.
 fn scenario_attribute(
     team: &TeamName,
     hash: u64,
 ) -> Result<iceoryx2::service::attribute::AttributeSpecifier, TransportError> {
+    attribute(
+        team,
+        "scenario hash",
+        super::SCENARIO_HASH_KEY,
+        &super::scenario_hash_value(hash),
+    )
+}
+
+/// One service attribute `key = value`; `what` names it in the error.
+fn attribute(
+    team: &TeamName,
+    what: &str,
+    key: &str,
+    value: &str,
+) -> Result<iceoryx2::service::attribute::AttributeSpecifier, TransportError> {
     use iceoryx2::service::attribute::{AttributeKey, AttributeSpecifier, AttributeValue};
     let bad = |e: &dyn std::fmt::Debug| TransportError::InvalidLayout {
-        reason: format!("team {team}: cannot define the scenario hash attribute: {e:?}"),
+        reason: format!("team {team}: cannot define the {what} attribute: {e:?}"),
     };
-    let key = AttributeKey::try_from(super::SCENARIO_HASH_KEY).map_err(|e| bad(&e))?;
-    let value =
-        AttributeValue::try_from(super::scenario_hash_value(hash).as_str()).map_err(|e| bad(&e))?;
+    let key = AttributeKey::try_from(key).map_err(|e| bad(&e))?;
+    let value = AttributeValue::try_from(value).map_err(|e| bad(&e))?;
     AttributeSpecifier::new()
         .define(&key, &value)
         .map_err(|e| bad(&e))
