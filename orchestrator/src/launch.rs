@@ -161,8 +161,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     if let Err(e) = shut {
         tracing::warn!("{e}");
     }
-    let report = audit.finish(complete);
+    let mut report = audit.finish(complete);
     if let Some(b) = bridge {
+        for l in &mut report.losses {
+            l.host = b.host_of(l.id);
+        }
         b.finish(&dir, report.ticks, o.quiet);
     }
     dir.write_audit(&report).map_err(Failure::fault)?;

@@ -183,6 +183,11 @@ impl Bridge {
         self.links.lock().is_ok_and(|l| l.reporting(id))
     }
 
+    /// The host member `id` runs on (host 0 is this one).
+    pub fn host_of(&self, id: u32) -> Option<u32> {
+        self.links.lock().ok()?.host_of.get(&id).copied()
+    }
+
     fn links(&self) -> Links {
         self.links.lock().map(|l| l.clone()).unwrap_or_default()
     }
@@ -711,11 +716,27 @@ fn lose(r: &mut Remote, ctx: &Ctx, why: String) {
         members: r.members.clone(),
         why: why.clone(),
     };
+    // Lockstep `--on-loss repair`: each member still flying is lost as if SIGKILLed on one host
+    // (the team core repairs, or stops naming the losses); otherwise the team stops `host-lost`.
+    let alive: Vec<u32> = r
+        .members
+        .iter()
+        .copied()
+        .filter(|id| !r.killed.contains(id))
+        .collect();
     if let Ok(mut links) = ctx.links.lock() {
         links.lost.insert(r.host, host);
+        if ctx.flight.repair {
+            let how = format!("was killed with host {} ({}): {why}", r.host, r.who);
+            links
+                .exited
+                .extend(alive.iter().map(|&id| (id, how.clone())));
+        }
     }
-    for id in r.members.clone() {
-        report_fault(r, ctx, id, FaultCode::HostLost);
+    if !ctx.flight.repair {
+        for id in alive {
+            report_fault(r, ctx, id, FaultCode::HostLost);
+        }
     }
     r.phase = Phase::Lost(why);
 }
