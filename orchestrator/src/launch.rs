@@ -490,8 +490,12 @@ fn fly_team(
                 }
                 TeamAction::CheckExited => {
                     let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
-                    let remote = || w.hosts.and_then(|b| b.take_exited());
-                    if let Some((id, how)) = first_exited_but(children, lost).or_else(remote) {
+                    if let Some((id, how)) = first_exited_but(children, lost) {
+                        core.on_exited(id, how, clock.now());
+                    }
+                    // Every remote exit at once: a lost host's members are lost together, as
+                    // members killed at the same tick on one host.
+                    while let Some((id, how)) = w.hosts.and_then(|b| b.take_exited()) {
                         core.on_exited(id, how, clock.now());
                     }
                 }
