@@ -161,8 +161,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     if let Err(e) = shut {
         tracing::warn!("{e}");
     }
-    let report = audit.finish(complete);
+    let mut report = audit.finish(complete);
     if let Some(b) = bridge {
+        for l in &mut report.losses {
+            l.host = b.host_of(l.id);
+        }
         b.finish(&dir, report.ticks, o.quiet);
     }
     dir.write_audit(&report).map_err(Failure::fault)?;
@@ -529,8 +532,12 @@ fn check_exited(
     now: Duration,
 ) {
     let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
-    let remote = || hosts.and_then(|b| b.take_exited());
-    if let Some((id, how)) = first_exited_but(children, lost).or_else(remote) {
+    if let Some((id, how)) = first_exited_but(children, lost) {
+        core.on_exited(id, how, now);
+    }
+    // Every remote exit at once: a lost host's members are lost together, as members killed
+    // at the same tick on one host.
+    while let Some((id, how)) = hosts.and_then(|b| b.take_exited()) {
         core.on_exited(id, how, now);
     }
 }

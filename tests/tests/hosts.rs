@@ -425,23 +425,64 @@ fn a_partition_stops_both_sides_named() {
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
 }
 
-/// The daemon is killed with SIGKILL: its members stop by themselves (their clock's publisher is
-/// gone); the orchestrator sees the daemon's zenoh session close and stops the team with
-/// `host-lost`, naming host B and its agents. The killed daemon's work directory is removed by
-/// the next daemon that starts.
+/// Lockstep, `--on-loss repair` (the default): the daemon is killed with SIGKILL mid-flight. Each
+/// of its members is lost as if it had been SIGKILLed on one host: the team flies on around them
+/// to the end, byte-identical to `simulate --lose` of all of them at the tick audit.json records,
+/// and audit.json names each loss with its host. The killed daemon's work directory is removed
+/// by the next daemon that starts.
 #[test]
 fn a_killed_daemon_is_like_killed_members() {
     let Some(h) = Hosts::create("kd") else { return };
     let dir = TempDir::new();
     let team = unique_team("kdaemon");
-    let out = dir.path().join("run");
+    let (out, sim) = (dir.path().join("run"), dir.path().join("sim"));
     let b_tmp = dir.path().join("tmp-b");
-    let (orch, mut daemon) = running(&h, &team, &out, LONG_LOCKSTEP, &b_tmp);
+    let source = ["--n", "10", "--t-total", "600", "--max-ticks", "8000"];
+    let (orch, mut daemon) = running(&h, &team, &out, &source, &b_tmp);
     kill_daemon(&team);
-    let o = orch.finish(STOP_DEADLINE);
-    assert_exit(&o, 3, "launch after the daemon was killed");
+    let o = orch.finish(RUN_DEADLINE);
+    assert_exit(
+        &o,
+        0,
+        "launch after the daemon was killed (--on-loss repair)",
+    );
     // Seen through zenoh's liveliness (the daemon's TCP connection closed), not by silence.
-    assert_lost_host_b(&out, "zenoh session closed");
+    assert_stderr_has(&o, "launch", &["host 1 lost", "zenoh session closed"]);
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    let on_b = host_agents(&read_json(&out.join("hosts.json")), 1);
+    let losses = audit["losses"].as_array().cloned().unwrap_or_default();
+    let lost: BTreeSet<u32> = losses
+        .iter()
+        .filter_map(|l| l["id"].as_u64())
+        .map(|i| i as u32)
+        .collect();
+    assert_eq!(
+        lost,
+        on_b,
+        "every member of host B lost, no other: {audit:#}\n{}",
+        describe(&o)
+    );
+    // One host, the same members killed after the same ticks (each its own: members run up to
+    // a window apart).
+    let dt = common::scenario::Scenario::generated(10).unwrap().dt_s();
+    let mut lose = vec![];
+    for l in &losses {
+        assert_eq!(
+            (&l["cause"], &l["host"]),
+            (&Value::from("killed"), &Value::from(1)),
+            "{audit:#}"
+        );
+        let last = l["last_tick"].as_u64().expect("last_tick");
+        lose.push(format!("{}@{}", l["id"], last as f64 * dt));
+    }
+    let mut replay = source.to_vec();
+    for l in &lose {
+        replay.extend(["--lose", l]);
+    }
+    let s = run(&mut simulate(&sim, &replay), RUN_DEADLINE);
+    assert_exit(&s, 0, &format!("simulate {replay:?}"));
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
     wait_no_process_of(&team, STOP_DEADLINE);
     assert_no_team_resources(&team);
     let _ = daemon.kill();
@@ -463,6 +504,27 @@ fn a_killed_daemon_is_like_killed_members() {
         "{}",
         describe(&next)
     );
+}
+
+/// `--on-loss stop`: a killed daemon stops the team with `host-lost`, naming host B and its
+/// agents; its members stop by themselves (their clock's publisher is gone).
+#[test]
+fn a_killed_daemon_under_on_loss_stop_stops_the_team() {
+    let Some(h) = Hosts::create("ks") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("kstop");
+    let out = dir.path().join("run");
+    let b_tmp = dir.path().join("tmp-b");
+    let mut source = LONG_LOCKSTEP.to_vec();
+    source.extend(["--on-loss", "stop"]);
+    let (orch, mut daemon) = running(&h, &team, &out, &source, &b_tmp);
+    kill_daemon(&team);
+    let o = orch.finish(STOP_DEADLINE);
+    assert_exit(&o, 3, "launch --on-loss stop after the daemon was killed");
+    assert_lost_host_b(&out, "zenoh session closed");
+    wait_no_process_of(&team, STOP_DEADLINE);
+    assert_no_team_resources(&team);
+    let _ = daemon.kill();
 }
 
 /// Real time: the daemon is killed with SIGKILL mid-flight. The monitor hears host B's members

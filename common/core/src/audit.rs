@@ -130,6 +130,9 @@ pub struct LossRecord {
     pub retriangulated: Vec<Retriangulation>,
     /// Followers left with no valid triangle: they fly their own plan from this tick.
     pub degraded: Vec<u32>,
+    /// The host it ran on (`launch --hosts > 1`; host 0 is the orchestrator's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub host: Option<u32>,
 }
 
 /// audit.json.

@@ -203,6 +203,7 @@ fn records(
             t_s: tick_time(tick, s.dt_s()),
             retriangulated: Vec::new(),
             degraded: Vec::new(),
+            host: None,
         })
         .collect();
     for (m, old) in r.formation.members.iter().zip(&before.members) {

@@ -199,7 +199,13 @@ impl TeamLosses {
         mut linked: impl FnMut(u32, u32) -> bool,
     ) -> Result<bool, LinksTimedOut> {
         if let Some(l) = &mut self.linking {
-            l.links.retain(|&(r, w)| !linked(r, w));
+            // A link to a member lost since it was awaited never connects, and needs not: the
+            // next announcement's repair goes around that member (several losses at once, as a
+            // lost host's members are).
+            let lost = &self.lost;
+            let gone = |id: u32| lost.iter().any(|&(_, j, _)| j == id);
+            l.links
+                .retain(|&(r, w)| !gone(r) && !gone(w) && !linked(r, w));
             if !l.links.is_empty() {
                 if now.saturating_sub(l.since) > timeout {
                     return Err(LinksTimedOut {
@@ -274,6 +280,30 @@ mod tests {
         assert!(t.lost_at(id, 31) && !t.lost_at(id, 30));
         assert_eq!(t.due_at(31), vec![(LossCause::Scripted, vec![id])]);
         assert!(t.due_at(30).is_empty());
+    }
+
+    #[test]
+    fn a_link_to_a_member_lost_while_it_is_awaited_is_not_awaited_any_more() {
+        let s = paper();
+        let first = s.formation.members[7].id;
+        let mut t = TeamLosses::new(&s, &[]);
+        t.lose(first, Some(10), LossCause::Killed);
+        let sec = Duration::from_secs;
+        assert!(t.poll(sec(0), sec(5), |_, _| false).unwrap());
+        let awaited = t.awaited();
+        let &(_, writer) = awaited.first().expect("a repair opens links");
+        // Its writer is lost too (as a lost host's members are, one exit after another).
+        t.lose(writer, Some(10), LossCause::Killed);
+        let mut asked = BTreeSet::new();
+        let _ = t.poll(sec(1), sec(5), |r, w| {
+            asked.insert((r, w));
+            false
+        });
+        assert!(
+            asked.iter().all(|&(r, w)| r != writer && w != writer),
+            "{asked:?}"
+        );
+        assert!(t.awaited().iter().all(|&(r, w)| r != writer && w != writer));
     }
 
     #[test]

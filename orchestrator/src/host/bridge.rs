@@ -183,6 +183,11 @@ impl Bridge {
         self.links.lock().is_ok_and(|l| l.reporting(id))
     }
 
+    /// The host member `id` runs on (host 0 is this one).
+    pub fn host_of(&self, id: u32) -> Option<u32> {
+        self.links.lock().ok()?.host_of.get(&id).copied()
+    }
+
     fn links(&self) -> Links {
         self.links.lock().map(|l| l.clone()).unwrap_or_default()
     }
@@ -435,6 +440,10 @@ fn which_host(ctx: &Ctx, remotes: &BTreeMap<u32, Remote>, q: &JoinRequest) -> Re
 /// One round for one daemon: its frames in, the clock and the crossing states out, the
 /// heartbeat, the silence deadline. True when anything moved.
 fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
+    if matches!(r.phase, Phase::Lost(_)) && ctx.flight.repair {
+        follow_repairs(r, ctx);
+        return false;
+    }
     if matches!(r.phase, Phase::Lost(_) | Phase::Stopped) {
         return false;
     }
@@ -444,18 +453,19 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
             Ok(Some(f)) => f,
             Ok(None) => break,
             Err(e @ NetError::PeerGone { .. }) => {
-                lose(r, ctx, format!("the daemon is gone, {e}: killed or exited"));
+                let why = format!("the daemon is gone, {e}: killed or exited");
+                lose(r, ctx, why, true);
                 return true;
             }
             Err(e) => {
-                lose(r, ctx, format!("{e}"));
+                lose(r, ctx, format!("{e}"), false);
                 return true;
             }
         };
         busy = true;
         r.last_heard = Instant::now();
         if let Err(why) = on_frame(r, ctx, frame) {
-            lose(r, ctx, why);
+            lose(r, ctx, why, false);
             return true;
         }
     }
@@ -467,7 +477,7 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
         match forward(r, ctx) {
             Ok(sent) => busy |= sent,
             Err(why) => {
-                lose(r, ctx, why);
+                lose(r, ctx, why, false);
                 return true;
             }
         }
@@ -485,7 +495,7 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
             r.who,
             ctx.link_timeout.as_secs_f64()
         );
-        lose(r, ctx, why);
+        lose(r, ctx, why, false);
         busy = true;
     }
     busy
@@ -621,6 +631,25 @@ fn forward(r: &mut Remote, ctx: &Ctx) -> Result<bool, String> {
     Ok(moved)
 }
 
+/// A lost host's relays still stand in for its members' last states: repairs that make a
+/// member of this host read one of them are carried (linked, history handed over), as the
+/// killed member's own publisher would on one host.
+fn follow_repairs(r: &mut Remote, ctx: &Ctx) {
+    let mut clocks = vec![];
+    for (k, relay) in r.relays.values_mut().enumerate() {
+        let _ = relay.receive_clock(|c| {
+            if k == 0 {
+                clocks.push(c);
+            }
+        });
+        let _ = relay.receive_neighbors(|_| {});
+    }
+    for c in worth_sending(&clocks, &mut r.last_notice) {
+        let step = r.repairs.on_notice(c.loss());
+        carry_repair(r, ctx, &step);
+    }
+}
+
 /// Of the clock messages drained, in order: each whose loss notice differs from the one sent
 /// before (members must see every loss, and every rise of the connected count), and the newest.
 fn worth_sending(clocks: &[ClockMsg], last: &mut Option<LossNotice>) -> Vec<ClockMsg> {
@@ -703,19 +732,37 @@ fn report_fault(r: &mut Remote, ctx: &Ctx, id: u32, code: FaultCode) {
     }
 }
 
-/// The link to a daemon is gone: every member of that host is reported lost.
-fn lose(r: &mut Remote, ctx: &Ctx, why: String) {
+/// The link to a daemon is gone (`dead`: the daemon itself, so its members with it): every
+/// member of that host is reported lost.
+fn lose(r: &mut Remote, ctx: &Ctx, why: String, dead: bool) {
     tracing::error!(host = r.host, "host {} lost: {why}", r.host);
     let host = LostHost {
         who: r.who.clone(),
         members: r.members.clone(),
         why: why.clone(),
     };
+    // Lockstep `--on-loss repair`: each member still flying is lost as if SIGKILLed on one host
+    // (the team core repairs, or stops naming the losses); otherwise the team stops `host-lost`.
+    let repaired = dead && ctx.flight.repair;
+    let alive: Vec<u32> = r
+        .members
+        .iter()
+        .copied()
+        .filter(|id| !r.killed.contains(id))
+        .collect();
     if let Ok(mut links) = ctx.links.lock() {
         links.lost.insert(r.host, host);
+        if repaired {
+            let how = format!("was killed with host {} ({}): {why}", r.host, r.who);
+            links
+                .exited
+                .extend(alive.iter().map(|&id| (id, how.clone())));
+        }
     }
-    for id in r.members.clone() {
-        report_fault(r, ctx, id, FaultCode::HostLost);
+    if !repaired {
+        for id in alive {
+            report_fault(r, ctx, id, FaultCode::HostLost);
+        }
     }
     r.phase = Phase::Lost(why);
 }

@@ -134,6 +134,9 @@ mod single {
             false
         }
         pub fn kill(&self, _id: u32) {}
+        pub fn host_of(&self, _id: u32) -> Option<u32> {
+            None
+        }
         pub fn take_exited(&self) -> Option<(u32, String)> {
             None
         }
