@@ -222,7 +222,10 @@ fn team_layout(
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
     if o.on_loss == common::loss::OnLoss::Repair {
-        layout = layout.with_repair_room(crate::loss::repair_room(s, buffers));
+        let room = crate::loss::repair_room(s, buffers);
+        // A killed daemon loses its host's members at once (lockstep repair across hosts).
+        let room = crate::loss::with_group_losses(room, s, &hosts.remote_groups());
+        layout = layout.with_repair_room(room);
     }
     // Lockstep on one host: members pass clock messages on (5 of the orchestrator's 11 file
     // descriptors per member saved; N = 2000 fits this machine's 20,000).

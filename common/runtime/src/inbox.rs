@@ -46,6 +46,13 @@ impl Inbox {
         self.0.front().map(|e| e.0)
     }
 
+    /// Adds `other`'s states (a repeated tick replaces the one held).
+    pub fn merge(&mut self, other: Inbox) {
+        for (t, f) in other.0 {
+            self.insert(t, f);
+        }
+    }
+
     /// Forgets every tick before `tick`.
     pub fn drop_before(&mut self, tick: u64) {
         while self.0.front().is_some_and(|e| e.0 < tick) {

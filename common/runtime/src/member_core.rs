@@ -320,10 +320,11 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
     pub fn on_neighbor(&mut self, msg: &StateMsg) {
         let Some(slot) = self.neighbor_ids.iter().position(|n| *n == msg.id) else {
             // A repair's future in-neighbour: kept until its link applies.
+            let tick = self.tick;
             if let Some(l) = self
                 .losses
                 .as_mut()
-                .filter(|l| l.is_future_neighbor(msg.id))
+                .filter(|l| l.is_future_neighbor(msg.id, tick))
             {
                 if msg.status() == AgentStatus::Ok && msg.scenario_hash == self.hash {
                     l.keep(msg.id, msg.tick, QuadState(msg.state).flat());
@@ -454,6 +455,15 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
         let (law, ids) = law_for(&m);
         self.is_follower = matches!(law, Law::Follower { .. });
         let mut old = std::mem::take(&mut self.inbox);
+        // A neighbour dropped here may come back at this very tick (a later notice of the same
+        // tick, `MemberLosses::due`): its states are kept, not thrown away.
+        if let Some(l) = self.losses.as_mut() {
+            for (k, id) in self.neighbor_ids.iter().enumerate() {
+                if !ids.contains(id) && l.is_future_neighbor(*id, tick) {
+                    l.keep_all(*id, std::mem::take(&mut old[k]));
+                }
+            }
+        }
         for (slot, id) in ids.iter().enumerate() {
             let kept = match self.neighbor_ids.iter().position(|j| j == id) {
                 Some(k) => std::mem::take(&mut old[k]),

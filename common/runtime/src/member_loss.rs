@@ -47,6 +47,10 @@ pub struct MemberLosses {
     linked: u32,
     /// The member (its link) the vehicle flies now.
     applied: Member,
+    /// A link applied at tick T whose step T is not flown yet, with the member flown up to
+    /// T - 1: several losses of one tick are announced one at a time (a lost host's members),
+    /// so a later notice may still change the link at T (`replan`).
+    unflown: Option<(u64, Member)>,
     /// Later links: (first tick, member with that link), ascending.
     schedule: Vec<(u64, Member)>,
     subscribed: BTreeSet<u32>,
@@ -65,6 +69,7 @@ impl MemberLosses {
             seen: 0,
             linked: 0,
             applied: me.clone(),
+            unflown: None,
             schedule: Vec::new(),
             subscribed: subscribed.iter().copied().collect(),
             notifying: notifying.iter().copied().collect(),
@@ -102,26 +107,59 @@ impl MemberLosses {
         (!self.work.is_empty()).then(|| self.work.remove(0))
     }
 
-    /// The member to fly from `tick` on, when its link changes there.
+    /// The member to fly from `tick` on, when its link changes there (it may change again at
+    /// the same tick while step `tick` is not flown: `unflown`).
     pub fn due(&mut self, tick: u64) -> Option<Member> {
         if self.schedule.first().is_some_and(|(t, _)| *t == tick) {
             let (_, m) = self.schedule.remove(0);
+            let flown = match self.unflown.take() {
+                Some((t, before)) if t == tick => before,
+                _ => self.applied.clone(),
+            };
+            self.unflown = Some((tick, flown));
             self.applied = m.clone();
+            // States kept for a link that will not be flown (a neighbour dropped at an earlier
+            // tick that did not come back) are forgotten; the applied link's are taken next.
+            let keep: BTreeSet<u32> = self
+                .links_from(tick)
+                .chain(m.link.map(|l| l.in_neighbors).into_iter().flatten())
+                .collect();
+            self.ahead.retain(|(j, _)| keep.contains(j));
             return Some(m);
         }
         None
     }
 
-    /// True when `id` is an in-neighbour of a link still to come (its states are kept).
-    pub fn is_future_neighbor(&self, id: u32) -> bool {
+    /// The in-neighbours of the links still to come, and of the link flown before one applied
+    /// at `tick` and not flown yet.
+    fn links_from(&self, tick: u64) -> impl Iterator<Item = u32> + '_ {
+        let before = self.unflown.as_ref().filter(|(t, _)| *t == tick);
         self.schedule
             .iter()
-            .any(|(_, m)| m.link.is_some_and(|l| l.in_neighbors.contains(&id)))
+            .map(|(_, m)| m)
+            .chain(before.map(|(_, m)| m))
+            .filter_map(|m| m.link)
+            .flat_map(|l| l.in_neighbors)
+    }
+
+    /// True when `id`'s states are kept while it is not an in-neighbour: it is one of a link
+    /// still to come, or of the link flown before one applied at `tick` and not flown yet (a
+    /// later notice of the same tick may bring it back).
+    pub fn is_future_neighbor(&self, id: u32, tick: u64) -> bool {
+        self.links_from(tick).any(|j| j == id)
     }
 
     /// Where member `id` started (the scenario's position), if it is in the team.
     pub(crate) fn start_of(&self, id: u32) -> Option<cdm_core::math::Vec3> {
         self.log.original().member(id).map(|m| m.position)
+    }
+
+    /// Keeps the states of a neighbour the link applied now drops (see `due`).
+    pub(crate) fn keep_all(&mut self, id: u32, states: Inbox) {
+        match self.ahead.iter_mut().find(|(j, _)| *j == id) {
+            Some((_, inbox)) => inbox.merge(states),
+            None => self.ahead.push((id, states)),
+        }
     }
 
     /// Keeps a future in-neighbour's state.
@@ -157,11 +195,17 @@ impl MemberLosses {
                 .rev()
                 .find(|(t, _)| *t <= x)
                 .and_then(|(_, r)| own(&r.formation))
+                .or_else(|| own(self.log.original()))
                 .unwrap_or_else(|| self.applied.clone())
         };
         let now_link = in_force(tick).link;
+        // Applied at `tick` but not flown: the link flown up to tick - 1 is the one before it.
+        let flown = match &self.unflown {
+            Some((t, before)) if *t == tick => before.link,
+            _ => self.applied.link,
+        };
         let ok = now_link == self.applied.link
-            || (tick > 0 && in_force(tick - 1).link == self.applied.link)
+            || (tick > 0 && in_force(tick - 1).link == flown)
             || tick == 0;
         if !ok {
             let at = epochs
@@ -292,6 +336,49 @@ mod tests {
             Some(LossWork::Connect { notify, .. }) => assert!(notify.contains(&x.id)),
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn a_link_applied_at_a_tick_not_flown_yet_follows_a_later_notice_of_that_tick() {
+        // generated10: members 3, 5, 6 and 10 lost after tick 951, announced one at a time (a
+        // lost host's members), and 9 earlier. Member 7 reads 6: at 952 it first flies [1, 8, 10],
+        // then, 10 being lost at the same tick, no triangle (degraded), as `simulate` does with
+        // all four lost at once.
+        let s = Scenario::generated(10).unwrap();
+        let mut m = setup(&s, 7);
+        let original = s.formation.member(7).unwrap().link;
+        let mut links = vec![];
+        for (seq, (id, tick)) in [(9, 699), (3, 952), (5, 952), (6, 952), (10, 952)]
+            .into_iter()
+            .enumerate()
+        {
+            let n = LossNotice {
+                seq: seq as u32 + 1,
+                id,
+                tick,
+                linked: 0,
+            };
+            m.on_notice(n, 952).unwrap();
+            // States of a neighbour a link of this tick drops are kept: it may come back.
+            assert!(m.is_future_neighbor(4, 952) || links.is_empty());
+            links.extend(m.due(952).map(|x| x.link.map(|l| l.in_neighbors)));
+        }
+        assert_eq!(links, [Some([1, 8, 10]), None], "{original:?}");
+        // The same without an earlier loss (no epoch before the tick).
+        let mut m = setup(&s, 7);
+        let mut links = vec![];
+        for (seq, id) in [3, 5, 6, 10].into_iter().enumerate() {
+            let n = LossNotice {
+                seq: seq as u32 + 1,
+                id,
+                tick: 952,
+                linked: 0,
+            };
+            m.on_notice(n, 952).unwrap();
+            links.extend(m.due(952).map(|x| x.link.map(|l| l.in_neighbors)));
+        }
+        assert_eq!(links, [Some([1, 8, 10]), None]);
+        assert!(!m.is_future_neighbor(4, 953));
     }
 
     #[test]

@@ -62,7 +62,8 @@ pub struct TeamLosses {
     ids: Vec<u32>,
     /// Scripted losses not yet carried out: (last tick L, id), sorted.
     scripted: Vec<(u64, u32)>,
-    /// Every loss: (first tick without it, id, cause), in the order they were found.
+    /// Every loss: (first tick without it, id, cause): the announced ones in the order they
+    /// were announced, then the others in tick order.
     lost: Vec<(u64, u32, LossCause)>,
     /// Losses announced so far (a prefix of `lost`) and how many have their links connected.
     announced: usize,
@@ -138,7 +139,15 @@ impl TeamLosses {
             return from;
         }
         self.log.add(id, from);
-        self.lost.push((from, id, cause));
+        // Losses not announced yet go in tick order: members replay the log in tick order
+        // (`LossLog::epochs`), so a loss announced after one of a later tick would change links
+        // from a tick its readers' neighbours may have flown past. Several losses found at once
+        // (a lost host's members, up to a window apart) are announced earliest first.
+        let at = self.lost[self.announced..]
+            .iter()
+            .position(|&(t, _, _)| t > from)
+            .map_or(self.lost.len(), |k| self.announced + k);
+        self.lost.insert(at, (from, id, cause));
         from
     }
 
@@ -304,6 +313,44 @@ mod tests {
             "{asked:?}"
         );
         assert!(t.awaited().iter().all(|&(r, w)| r != writer && w != writer));
+    }
+
+    #[test]
+    fn losses_found_together_are_announced_earliest_tick_first() {
+        // A lost host's members, handed over at once, up to a window apart: announced in tick
+        // order whatever order they were found in, after what was already announced.
+        let s = paper();
+        let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+        let mut t = TeamLosses::new(&s, &[]);
+        t.lose(ids[30], Some(500), LossCause::Killed);
+        let sec = Duration::from_secs;
+        assert!(t.poll(sec(0), sec(5), |_, _| true).unwrap());
+        for (id, last) in [
+            (ids[9], 1015),
+            (ids[3], 768),
+            (ids[12], 1015),
+            (ids[4], 900),
+        ] {
+            t.lose(id, Some(last), LossCause::Killed);
+        }
+        let order: Vec<(u64, u32)> = t.losses().iter().map(|&(k, id, _)| (k, id)).collect();
+        assert_eq!(
+            order,
+            [
+                (501, ids[30]),
+                (769, ids[3]),
+                (901, ids[4]),
+                (1016, ids[9]),
+                (1016, ids[12])
+            ]
+        );
+        let mut announced = vec![];
+        for k in 1..10 {
+            let _ = t.poll(sec(k), sec(5), |_, _| true).unwrap();
+            announced.extend(t.notice().map(|n| n.id));
+        }
+        announced.dedup();
+        assert_eq!(announced, [ids[30], ids[3], ids[4], ids[9], ids[12]]);
     }
 
     #[test]

@@ -184,7 +184,13 @@ fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Fa
         .with_scenario_hash(j.a.scenario_hash);
     if j.a.repair {
         // The same room as on the orchestrator's host (`launch`'s layout).
-        layout = layout.with_repair_room(crate::loss::repair_room(&j.s, j.a.window));
+        let room = crate::loss::repair_room(&j.s, j.a.window);
+        let mut groups: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+        for &(id, host) in j.a.hosts_of.iter().filter(|(_, h)| *h != 0) {
+            groups.entry(host).or_default().push(id);
+        }
+        let groups: Vec<Vec<u32>> = groups.into_values().collect();
+        layout = layout.with_repair_room(crate::loss::with_group_losses(room, &j.s, &groups));
     }
     Ok((layout, ghosts))
 }

@@ -92,6 +92,13 @@ impl Plan {
         layout.with_hidden_edges(hidden)
     }
 
+    /// The members of each other host (lost together if its daemon is killed).
+    pub fn remote_groups(&self) -> Vec<Vec<u32>> {
+        (1..self.regions.hosts())
+            .map(|k| self.regions.members(k))
+            .collect()
+    }
+
     /// True when member `id` runs on this host.
     pub fn runs_here(&self, id: u32) -> bool {
         self.regions.host_of(id) == 0
