@@ -324,6 +324,12 @@ impl MemberPorts {
         Ok(())
     }
 
+    /// True when the states this port sends again at a hand-over go back to `tick` without a
+    /// gap (a relay standing in for another host's member: see `Recent::reaches`).
+    pub fn history_reaches(&self, tick: u64) -> bool {
+        self.recent.reaches(tick)
+    }
+
     /// Every new link of a repair is connected: the publisher connects its new subscribers,
     /// sends its last states again (every reader gets them; a repeated state changes nothing,
     /// `crate::resend`), then wakes every reader.

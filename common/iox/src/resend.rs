@@ -60,6 +60,23 @@ impl Recent {
         self.states.push_back(msg);
     }
 
+    /// True when the kept states go back, without a gap, from the newest to a state of `tick`
+    /// or earlier. A relay forwards another host's states in order; its history reaches a
+    /// repair's tick only once the writer's own repeats have crossed.
+    pub(crate) fn reaches(&self, tick: u64) -> bool {
+        let mut oldest: Option<u64> = None;
+        for m in self.states.iter().rev() {
+            if oldest.is_some_and(|o| m.tick + 1 < o) {
+                return false;
+            }
+            if m.tick <= tick {
+                return true;
+            }
+            oldest = Some(oldest.map_or(m.tick, |o| o.min(m.tick)));
+        }
+        false
+    }
+
     /// The kept states cut into batches, oldest first.
     pub(crate) fn batches(&self) -> impl Iterator<Item = StateBatch> + '_ {
         let (a, b) = self.states.as_slices();
@@ -145,6 +162,27 @@ mod tests {
         let mut r = Recent::new(3);
         r.push(state(5));
         assert!(r.batches().all(|b| b.flags == StateBatch::RESENT));
+    }
+
+    #[test]
+    fn the_history_reaches_a_tick_only_without_a_gap() {
+        let state = |tick| StateMsg::ok(tick, 1, 7, [tick as f64; 12]);
+        let mut r = Recent::new(64);
+        assert!(!r.reaches(5));
+        for tick in [20, 21, 22] {
+            r.push(state(tick));
+        }
+        assert!(r.reaches(20) && r.reaches(30) && !r.reaches(19));
+        // The writer's repeats cross after its newest states: the history then reaches back.
+        for tick in 10..=22 {
+            r.push(state(tick));
+        }
+        assert!(r.reaches(10) && !r.reaches(9));
+        let mut gap = Recent::new(64);
+        for tick in [10, 11, 15, 16] {
+            gap.push(state(tick));
+        }
+        assert!(gap.reaches(15) && !gap.reaches(11));
     }
 
     #[test]

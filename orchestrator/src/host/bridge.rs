@@ -17,6 +17,7 @@ use common::scenario::Scenario;
 use common::transport::{MemberPorts, OrchestratorPorts, Role, TeamName};
 use serde::Serialize;
 
+use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
 use super::links::{Links, LostHost};
 use super::plan::placed;
 use super::repairs::{CrossRepairs, RepairStep};
@@ -103,6 +104,8 @@ struct Remote {
     last_notice: Option<LossNotice>,
     /// Members this bridge asked the daemon to kill (their exit is expected).
     killed: BTreeSet<u32>,
+    /// Relays still to hand their history over (`handover.rs`).
+    handing: Option<PendingHandOver>,
 }
 
 impl Bridge {
@@ -376,6 +379,7 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
             repairs: ctx.repairs.clone(),
             last_notice: None,
             killed: BTreeSet::new(),
+            handing: None,
         },
     );
     if let Some(r) = remotes.get(&host) {
@@ -469,6 +473,13 @@ fn pump(r: &mut Remote, ctx: &Ctx) -> bool {
             return true;
         }
     }
+    // The states just published may complete a relay's history for a pending hand-over.
+    handover::poll(
+        &mut r.handing,
+        &mut r.relays,
+        HAND_OVER_WAIT,
+        warn_hand_over,
+    );
     if busy {
         heard(r, ctx);
     }
@@ -648,6 +659,13 @@ fn follow_repairs(r: &mut Remote, ctx: &Ctx) {
         let step = r.repairs.on_notice(c.loss());
         carry_repair(r, ctx, &step);
     }
+    // Nothing more will cross from a lost host: its relays hand over what they hold.
+    handover::poll(
+        &mut r.handing,
+        &mut r.relays,
+        Duration::ZERO,
+        warn_hand_over,
+    );
 }
 
 /// Of the clock messages drained, in order: each whose loss notice differs from the one sent
@@ -692,11 +710,12 @@ fn carry_repair(r: &mut Remote, ctx: &Ctx, step: &RepairStep) {
         }
     }
     if step.hand_over {
-        for (g, relay) in r.relays.iter_mut() {
-            if let Err(e) = relay.hand_over() {
-                tracing::warn!(host = r.host, id = g, "cannot hand over: {e}");
-            }
-        }
+        handover::start(
+            &mut r.handing,
+            step.needs_from,
+            &mut r.relays,
+            warn_hand_over,
+        );
     }
 }
 

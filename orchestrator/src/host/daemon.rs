@@ -398,6 +398,7 @@ impl Link<'_> {
                 }
             }
             busy |= self.up(ports)?;
+            self.repairs.hand_over_ready(relays);
             let linked = self.repairs.connected(ports);
             if !linked.is_empty() {
                 self.send(&Up::Linked(linked))?;

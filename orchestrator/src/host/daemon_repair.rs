@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use common::messages::ClockMsg;
 use common::transport::{MemberPorts, OrchestratorPorts, Role, TeamName};
 
+use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
 use super::repairs::CrossRepairs;
 
 /// How often the links awaited are looked up in the registry.
@@ -24,6 +25,8 @@ pub struct DaemonRepairs {
     /// Links (reader, writer) with the reader here, not seen connected yet.
     pending: BTreeSet<(u32, u32)>,
     last_check: Instant,
+    /// Relays still to hand their history over (`handover.rs`).
+    handing: Option<PendingHandOver>,
 }
 
 impl DaemonRepairs {
@@ -40,6 +43,7 @@ impl DaemonRepairs {
             repairs,
             pending: BTreeSet::new(),
             last_check: Instant::now(),
+            handing: None,
         }
     }
 
@@ -69,12 +73,13 @@ impl DaemonRepairs {
             }
         }
         if step.hand_over {
-            for (g, relay) in relays.iter_mut() {
-                if let Err(e) = relay.hand_over() {
-                    tracing::warn!(id = g, "the relay cannot hand over its history: {e}");
-                }
-            }
+            handover::start(&mut self.handing, step.needs_from, relays, warn_hand_over);
         }
+    }
+
+    /// Hands over the relays whose history now reaches the connected repair's tick.
+    pub fn hand_over_ready(&mut self, relays: &mut BTreeMap<u32, MemberPorts>) {
+        handover::poll(&mut self.handing, relays, HAND_OVER_WAIT, warn_hand_over);
     }
 
     /// The awaited links connected since the last call (looked up every [`CHECK_EVERY`]): the

@@ -16,6 +16,8 @@ pub mod daemon;
 #[cfg(feature = "hosts")]
 mod daemon_repair;
 #[cfg(feature = "hosts")]
+mod handover;
+#[cfg(feature = "hosts")]
 mod links;
 #[cfg(feature = "hosts")]
 mod plan;

@@ -19,6 +19,9 @@ pub struct RepairStep {
     pub new_links: Vec<(u32, u32)>,
     /// The count of connected repairs rose: publishers hand their history to new readers.
     pub hand_over: bool,
+    /// The oldest tick whose states the repair just connected needs: its tick, less the
+    /// longest link delay (a new reader's oldest candidate, `LinkModel::oldest_candidate`).
+    pub needs_from: u64,
 }
 
 /// The losses announced so far, as a bridge follows them.
@@ -28,6 +31,8 @@ pub struct CrossRepairs {
     seen: u32,
     linked: u32,
     opened: BTreeSet<(u32, u32)>,
+    /// The longest link delay, in ticks.
+    delay: u64,
 }
 
 impl CrossRepairs {
@@ -38,6 +43,7 @@ impl CrossRepairs {
             seen: 0,
             linked: 0,
             opened: BTreeSet::new(),
+            delay: s.link_model().max_ticks(),
         }
     }
 
@@ -59,6 +65,7 @@ impl CrossRepairs {
         if n.linked > self.linked {
             self.linked = n.linked;
             step.hand_over = true;
+            step.needs_from = n.tick.saturating_sub(self.delay);
         }
         step
     }
