@@ -155,15 +155,22 @@ impl OrchestratorPorts {
     pub fn create(team: &TeamName, layout: &TeamLayout) -> Result<Self, TransportError> {
         init_logging();
         let cfg = process_config();
-        let teams = scan_teams(cfg)?;
-        if let Some(scan) = teams.get(team).filter(|s| !s.alive.is_empty()) {
+        let registry = scan_teams(cfg)?;
+        if let Some(scan) = registry.teams.get(team).filter(|s| !s.alive.is_empty()) {
             return Err(TransportError::TeamAlreadyRunning {
                 team: team.clone(),
                 live: scan.alive.join(", "),
             });
         }
         let mut stale_nodes_removed = 0;
-        for gone in remove_dead(teams) {
+        let cleaned = remove_dead(registry);
+        if cleaned.unknown_nodes > 0 {
+            tracing::info!(
+                nodes = cleaned.unknown_nodes,
+                "removed dead iceoryx2 nodes of no known team (only their monitor files were left)"
+            );
+        }
+        for gone in cleaned.teams {
             if &gone.team == team {
                 stale_nodes_removed = gone.removed;
             }
