@@ -23,6 +23,7 @@ use std::time::{Duration, Instant};
 use common::transport::{iox2_location, TeamName};
 use iceoryx2::prelude::*;
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
+use support::iox_ids::{born_s, id_pid, id_seconds, monotonic_s};
 use support::*;
 
 /// Each step takes a second or two; the rest is slack for a loaded machine.

@@ -375,8 +375,8 @@ pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
 }
 
 #[path = "../../../common/tests/support/iox_ids.rs"]
-mod iox_ids;
-pub use iox_ids::{born_s, id_pid, id_seconds, ids_in, monotonic_s};
+pub mod iox_ids;
+use iox_ids::{born_s, id_pid, id_seconds, ids_in};
 
 /// A team's processes and services, recorded while it runs, to find what it leaves behind.
 pub struct Footprint {
