@@ -156,9 +156,7 @@ fn leftovers_name_a_process_files_but_not_older_files_of_a_recycled_pid() {
 /// warm-up launch that creates what iceoryx2 keeps for good (the root, the management segment).
 #[test]
 fn clean_removes_a_dead_node_of_no_team_and_a_launch_after_it_leaves_nothing() {
-    let probe = Command::new("unshare").args(["-m", "true"]).output();
-    if !probe.is_ok_and(|o| o.status.success()) {
-        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+    if !private_mounts_allowed() {
         return;
     }
     let dir = TempDir::new();

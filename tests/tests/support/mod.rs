@@ -505,6 +505,17 @@ impl Footprint {
     }
 }
 
+/// Whether this process may make a private mount namespace (`unshare -m`: needs root), for a
+/// test that wants a /dev/shm of its own; when not, says that the test is skipped.
+pub fn private_mounts_allowed() -> bool {
+    let probe = Command::new("unshare").args(["-m", "true"]).output();
+    let allowed = probe.is_ok_and(|o| o.status.success());
+    if !allowed {
+        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+    }
+    allowed
+}
+
 /// Asserts no process of `team` is alive.
 pub fn assert_no_process_of(team: &str) {
     let procs = team_processes(team);
