@@ -287,7 +287,7 @@ fn clean(quiet: bool) -> Result<Exit, Failure> {
     }
     if removed.teams.is_empty() && removed.unknown_nodes == 0 {
         text += &format!(
-            "nothing to remove: no team under {} has all its processes dead\n",
+            "nothing to remove: no team under {} has all its processes dead, and no dead node of an unknown team is left\n",
             common::transport::iox2_root()
         );
     }
