@@ -151,37 +151,45 @@ fn leftovers_name_a_process_files_but_not_older_files_of_a_recycled_pid() {
 }
 
 /// A node killed after iceoryx2 removed its details (as in the middle of a drop): only its
-/// three monitor files are left. `orchestrator clean` removes them and says so; the launch
-/// after it leaves /dev/shm exactly as before the node was made. In a private /dev/shm, after a
-/// warm-up launch that creates what iceoryx2 keeps for good (the root, the management segment).
+/// three monitor files are left. `orchestrator clean` removes them and says so; so does the
+/// clean-up a launch does first: after a second such node and a launch, /dev/shm is exactly as
+/// before the first node was made. In a private /dev/shm, after a warm-up launch that creates
+/// what iceoryx2 keeps for good (the root, the management segment).
 #[test]
-fn clean_removes_a_dead_node_of_no_team_and_a_launch_after_it_leaves_nothing() {
+fn clean_and_launch_remove_a_dead_node_of_no_team_and_leave_nothing() {
     if !private_mounts_allowed() {
         return;
     }
     let dir = TempDir::new();
     let maker_team = unique_team("nodetails");
     let team = unique_team("afterclean");
+    // `orphan FILE`: a node made by `node_maker`, its details removed, the maker SIGKILLed; the
+    // node's files are listed in FILE.
     let script = r#"
 set -eu
 O="$0"; T="$1"; D="$2"; MAKER="$3"; TEAM="$4"; ROOT="$5"; PREFIX="$6"
+orphan() {
+  out="$1"
+  CDM_NODE_MAKER="$MAKER:$D/never" "$T" node_maker "$MAKER" --exact --nocapture \
+    --test-threads=1 > "$D/maker.txt" 2>/dev/null &
+  i=0
+  until grep -q "NODE " "$D/maker.txt"; do
+    i=$((i+1)); [ "$i" -lt 600 ] || { echo "node_maker never made its node"; exit 1; }
+    sleep 0.1
+  done
+  set -- $(sed -n 's/.*NODE \([0-9]*\) \([0-9]*\).*/\1 \2/p' "$D/maker.txt")
+  rm -r "$ROOT/nodes/$1"
+  kill -9 "$2"
+  wait || true
+  ls "$ROOT/nodes" | grep "^$PREFIX$1\." | sort > "$D/$out"
+}
 mount -t tmpfs -o size=1g tmpfs /dev/shm
 timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --quiet --team warmup --out "$D/w" >/dev/null
 find /dev/shm | sort > "$D/before.txt"
-CDM_NODE_MAKER="$MAKER:$D/never" "$T" node_maker "$MAKER" --exact --nocapture --test-threads=1 \
-  > "$D/maker.txt" 2>/dev/null &
-i=0
-until grep -q "NODE " "$D/maker.txt"; do
-  i=$((i+1)); [ "$i" -lt 600 ] || { echo "node_maker never made its node"; exit 1; }
-  sleep 0.1
-done
-set -- $(sed -n 's/.*NODE \([0-9]*\) \([0-9]*\).*/\1 \2/p' "$D/maker.txt")
-rm -r "$ROOT/nodes/$1"
-kill -9 "$2"
-wait || true
-ls "$ROOT/nodes" | grep "^$PREFIX$1\." | sort > "$D/orphan.txt"
+orphan orphan1.txt
 "$O" clean > "$D/clean.txt"
 find /dev/shm | sort > "$D/cleaned.txt"
+orphan orphan2.txt
 timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --quiet --team "$TEAM" --out "$D/o" >/dev/null
 find /dev/shm | sort > "$D/after.txt"
 "#;
@@ -200,12 +208,14 @@ find /dev/shm | sort > "$D/after.txt"
         std::fs::read_to_string(dir.path().join(name))
             .unwrap_or_else(|e| panic!("{name}: {e}\n{}", describe(&o)))
     };
-    let orphan: Vec<String> = read("orphan.txt").lines().map(str::to_owned).collect();
-    let kinds: Vec<&str> = orphan
-        .iter()
-        .filter_map(|f| f.split_once(".node_monitor").map(|(_, k)| k))
-        .collect();
-    assert_eq!(kinds, ["", "_context", "_owner_lock"], "{orphan:?}");
+    for made in ["orphan1.txt", "orphan2.txt"] {
+        let orphan: Vec<String> = read(made).lines().map(str::to_owned).collect();
+        let kinds: Vec<&str> = orphan
+            .iter()
+            .filter_map(|f| f.split_once(".node_monitor").map(|(_, k)| k))
+            .collect();
+        assert_eq!(kinds, ["", "_context", "_owner_lock"], "{made}: {orphan:?}");
+    }
     let clean = read("clean.txt");
     assert!(
         clean.contains("removed 1 dead iceoryx2 node(s) of unknown teams"),
@@ -213,5 +223,9 @@ find /dev/shm | sort > "$D/after.txt"
     );
     let before = read("before.txt");
     assert_eq!(before, read("cleaned.txt"), "/dev/shm after clean");
-    assert_eq!(before, read("after.txt"), "/dev/shm after the next launch");
+    assert_eq!(
+        before,
+        read("after.txt"),
+        "/dev/shm after the second node and a launch"
+    );
 }
