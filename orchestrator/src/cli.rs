@@ -94,8 +94,9 @@ pub enum Command {
         follow: Option<u32>,
     },
     /// Remove what teams of yours left behind when all their processes died (SIGKILL, a
-    /// crash): their iceoryx2 files in /dev/shm. Running teams are never touched. `launch` does
-    /// the same before it starts.
+    /// crash): their iceoryx2 files in /dev/shm, and the monitor files of dead iceoryx2 nodes
+    /// that name no team. Running teams are never touched. `launch` does the same before it
+    /// starts.
     Clean,
     /// Run this machine's share of a team whose orchestrator was started with `launch --hosts K
     /// --listen ENDPOINT` (issue 12): join it over zenoh, spawn the members it assigns here, and

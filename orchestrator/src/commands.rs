@@ -264,7 +264,7 @@ fn print_launched(l: &crate::launch::Launched, started: Instant, out: &Path, qui
 }
 
 /// `orchestrator clean`: removes the resources of this user's teams whose processes are all
-/// dead and says which teams they were.
+/// dead, and the dead nodes of no known team, and says what it removed.
 fn clean(quiet: bool) -> Result<Exit, Failure> {
     use common::transport::TransportError;
     use std::io::Write;
@@ -273,15 +273,21 @@ fn clean(quiet: bool) -> Result<Exit, Failure> {
         e => Failure::fault(e),
     })?;
     let mut text = String::new();
-    for t in &removed {
+    for t in &removed.teams {
         text += &format!(
             "removed team {}: the iceoryx2 resources of {} dead processes\n",
             t.team, t.removed
         );
     }
-    if removed.is_empty() {
+    if removed.unknown_nodes > 0 {
         text += &format!(
-            "nothing to remove: no team under {} has all its processes dead\n",
+            "removed {} dead iceoryx2 node(s) of unknown teams: the monitor files killed processes left\n",
+            removed.unknown_nodes
+        );
+    }
+    if removed.teams.is_empty() && removed.unknown_nodes == 0 {
+        text += &format!(
+            "nothing to remove: no team under {} has all its processes dead, and no dead node of an unknown team is left\n",
             common::transport::iox2_root()
         );
     }

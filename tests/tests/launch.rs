@@ -17,8 +17,10 @@
 //! /dev/shm: other teams (another test, a benchmark) may create and remove iceoryx2 files at the
 //! same time. While the team runs, the test records its processes (from /proc and from the node
 //! files iceoryx2 writes) and its services' hashes; afterwards no service or node named after the
-//! team, and no file named by one of those hashes or by an id minted by one of those processes,
-//! may remain. The check is first shown to see the live team, so it cannot pass vacuously.
+//! team, and no file named by one of those hashes or by an id minted by one of those processes
+//! since it was born (iceoryx2's ids carry their creation second: an old dead node of a process
+//! that had the same pid before pids wrapped is not the team's), may remain. The check is first
+//! shown to see the live team, so it cannot pass vacuously.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;

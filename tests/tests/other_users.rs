@@ -152,9 +152,7 @@ fn short_launch(user: &TestUser, orch: &Path, team: &str, out: &Path) -> Output 
 /// (`UnableToGenerateUniqueNodeId`, exit 2).
 #[test]
 fn a_launch_leaves_nothing_in_dev_shm_that_another_user_can_write() {
-    let probe = Command::new("unshare").args(["-m", "true"]).output();
-    if !probe.is_ok_and(|o| o.status.success()) {
-        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+    if !private_mounts_allowed() {
         return;
     }
     let (Some(user), Some(other)) = (TestUser::create("w"), TestUser::create("x")) else {
@@ -314,9 +312,7 @@ fn a_squatted_or_open_iceoryx2_root_is_refused_naming_owner_and_mode() {
 /// `--on-loss stop` because sizing for repairs delays the creation of services past the kill.
 #[test]
 fn a_team_killed_during_start_up_is_removed_by_the_next_launch_of_another_team() {
-    let probe = Command::new("unshare").args(["-m", "true"]).output();
-    if !probe.is_ok_and(|o| o.status.success()) {
-        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+    if !private_mounts_allowed() {
         return;
     }
     let dir = TempDir::new();

@@ -3,7 +3,7 @@
 //! `orchestrator clean` on demand. A team with any live process is never touched: its dead
 //! members are evidence of a fault its orchestrator is still examining.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 
@@ -39,10 +39,30 @@ fn team_of(node_name: &str) -> Option<TeamName> {
     TeamName::new(team).ok()
 }
 
+/// What a scan of this user's iceoryx2 registry found.
+#[derive(Default)]
+pub(super) struct Registry {
+    /// Every team with a node, live or dead.
+    pub teams: BTreeMap<TeamName, TeamScan>,
+    /// Ids of the nodes iceoryx2 listed alive or with details: the only nodes that
+    /// `orphan_nodes` leaves alone without looking further.
+    pub described: BTreeSet<u128>,
+}
+
+/// What [`remove_dead_teams`] removed.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Cleaned {
+    /// The teams whose processes were all dead.
+    pub teams: Vec<RemovedTeam>,
+    /// Dead nodes of no known team (a process killed while its node was being dropped or
+    /// cleaned left only the node's monitor files: see `orphan_nodes`).
+    pub unknown_nodes: usize,
+}
+
 /// Every team of this user in iceoryx2's registry, with its live and dead nodes (a node whose
-/// details are unreadable is skipped).
-pub(super) fn scan_teams(cfg: &Config) -> Result<BTreeMap<TeamName, TeamScan>, TransportError> {
-    let mut teams: BTreeMap<TeamName, TeamScan> = BTreeMap::new();
+/// details are unreadable is skipped), and the ids of every node with details or alive.
+pub(super) fn scan_teams(cfg: &Config) -> Result<Registry, TransportError> {
+    let mut reg = Registry::default();
     let team_of_view = |v: &dyn NodeView| {
         v.details()
             .as_ref()
@@ -52,13 +72,17 @@ pub(super) fn scan_teams(cfg: &Config) -> Result<BTreeMap<TeamName, TeamScan>, T
     Node::<ipc::Service>::list(cfg, |state| {
         match state {
             NodeState::Alive(v) => {
+                reg.described.insert(v.id().value());
                 if let Some((t, n)) = team_of_view(&v) {
-                    teams.entry(t).or_default().alive.push(n);
+                    reg.teams.entry(t).or_default().alive.push(n);
                 }
             }
             NodeState::Dead(v) => {
+                if v.details().is_some() {
+                    reg.described.insert(v.id().value());
+                }
                 if let Some((t, _)) = team_of_view(&v) {
-                    teams.entry(t).or_default().dead.push(v);
+                    reg.teams.entry(t).or_default().dead.push(v);
                 }
             }
             NodeState::Inaccessible(_) | NodeState::Undefined(_) => {}
@@ -69,18 +93,20 @@ pub(super) fn scan_teams(cfg: &Config) -> Result<BTreeMap<TeamName, TeamScan>, T
         root: iox2_root().to_owned(),
         detail: format!("{e:?}"),
     })?;
-    for scan in teams.values_mut() {
+    for scan in reg.teams.values_mut() {
         scan.alive.sort();
     }
-    Ok(teams)
+    Ok(reg)
 }
 
-/// Removes the resources of every team in `teams` none of whose processes is alive.
-pub(super) fn remove_dead(teams: BTreeMap<TeamName, TeamScan>) -> Vec<RemovedTeam> {
-    if teams.values().any(|s| !s.dead.is_empty()) {
+/// Removes the resources of every team in `reg` none of whose processes is alive, and the
+/// dead nodes of no known team.
+pub(super) fn remove_dead(reg: Registry) -> Cleaned {
+    if reg.teams.values().any(|s| !s.dead.is_empty()) {
         remove_unfinished_segments();
     }
-    teams
+    let teams = reg
+        .teams
         .into_iter()
         .filter(|(_, scan)| scan.alive.is_empty() && !scan.dead.is_empty())
         .map(|(team, scan)| {
@@ -96,12 +122,17 @@ pub(super) fn remove_dead(teams: BTreeMap<TeamName, TeamScan>) -> Vec<RemovedTea
                 removed,
             }
         })
-        .collect()
+        .collect();
+    Cleaned {
+        teams,
+        unknown_nodes: super::orphan_nodes::remove(&reg.described),
+    }
 }
 
-/// Removes the resources of every team of this user whose processes are all dead, and says
-/// which. Live teams, and the dead members of live teams, are left alone.
-pub fn remove_dead_teams() -> Result<Vec<RemovedTeam>, TransportError> {
+/// Removes the resources of every team of this user whose processes are all dead, and the dead
+/// nodes of no known team, and says what it removed. Live teams, and the dead members of live
+/// teams, are left alone.
+pub fn remove_dead_teams() -> Result<Cleaned, TransportError> {
     init_logging();
     // Never read another user's files as if they were ours.
     super::ownership::check_root(super::iox2_location())?;
@@ -142,7 +173,7 @@ fn remove_unfinished_segments() {
 
 /// True when every 128-bit id in `name` was minted by a process that no longer exists (and
 /// there is at least one).
-fn creator_is_dead(name: &str) -> bool {
+pub(super) fn creator_is_dead(name: &str) -> bool {
     let mut pids = name
         .split(|c: char| !c.is_ascii_digit())
         .filter(|run| run.len() >= 20)

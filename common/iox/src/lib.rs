@@ -74,13 +74,14 @@ mod error;
 mod limits;
 mod member;
 mod orchestrator;
+mod orphan_nodes;
 mod ownership;
 mod resend;
 mod team;
 mod wake_roots;
 mod wire;
 
-pub use dead_teams::{remove_dead_teams, RemovedTeam};
+pub use dead_teams::{remove_dead_teams, Cleaned, RemovedTeam};
 pub use error::TransportError;
 pub use limits::describe_spawn_error;
 pub use member::MemberPorts;
@@ -148,8 +149,9 @@ pub fn raise_fd_limit() -> Result<u64, TransportError> {
 /// nodes were cleaned. Safe to call while the team runs: live nodes are never touched.
 pub fn remove_dead_nodes(team: &TeamName) -> Result<usize, TransportError> {
     init_logging();
-    let mut teams = dead_teams::scan_teams(process_config())?;
-    Ok(teams
+    let mut registry = dead_teams::scan_teams(process_config())?;
+    Ok(registry
+        .teams
         .remove(team)
         .map_or(0, |scan| remove_stale(team, scan.dead)))
 }

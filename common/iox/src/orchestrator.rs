@@ -150,20 +150,29 @@ impl Readiness {
 impl OrchestratorPorts {
     /// Creates the team: refuses when a live process of `team` exists, removes the files of
     /// every team of this user whose processes are all dead (this team's previous run included;
-    /// logged per team), then creates every service sized to `layout` and opens the
+    /// logged per team) and the dead nodes of no known team, then creates every service sized to `layout` and opens the
     /// orchestrator's ports.
     pub fn create(team: &TeamName, layout: &TeamLayout) -> Result<Self, TransportError> {
         init_logging();
+        // The clean-up below removes files by name: only in a root that is ours alone.
+        super::ownership::check_root(super::iox2_location())?;
         let cfg = process_config();
-        let teams = scan_teams(cfg)?;
-        if let Some(scan) = teams.get(team).filter(|s| !s.alive.is_empty()) {
+        let registry = scan_teams(cfg)?;
+        if let Some(scan) = registry.teams.get(team).filter(|s| !s.alive.is_empty()) {
             return Err(TransportError::TeamAlreadyRunning {
                 team: team.clone(),
                 live: scan.alive.join(", "),
             });
         }
         let mut stale_nodes_removed = 0;
-        for gone in remove_dead(teams) {
+        let cleaned = remove_dead(registry);
+        if cleaned.unknown_nodes > 0 {
+            tracing::info!(
+                nodes = cleaned.unknown_nodes,
+                "removed dead iceoryx2 nodes of no known team (only their monitor files were left)"
+            );
+        }
+        for gone in cleaned.teams {
             if &gone.team == team {
                 stale_nodes_removed = gone.removed;
             }

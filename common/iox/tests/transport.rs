@@ -11,6 +11,9 @@
 #[path = "../../tests/support/mod.rs"]
 mod support;
 use support::Watchdog;
+#[path = "../../tests/support/iox_ids.rs"]
+mod iox_ids;
+use iox_ids::{id_pid, id_seconds, ids_in, monotonic_s};
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
@@ -394,12 +397,6 @@ fn names_and_layouts_are_validated() {
     assert_eq!(l.out_neighbors(9), &[] as &[u32]);
 }
 
-/// Decodes the process id and creation second iceoryx2 packs into its 128-bit ids (node, port,
-/// service, listener ids all name files).
-fn id_pid(id: u128) -> u32 {
-    (id >> 64) as u32
-}
-
 /// This process's pid as iceoryx2 encodes it (the host pid, which may differ in a container).
 fn iceoryx2_pid() -> u32 {
     let probe = NodeBuilder::new()
@@ -410,10 +407,12 @@ fn iceoryx2_pid() -> u32 {
 }
 
 /// Everything of `team` still visible: its services, its nodes, and any iceoryx2 file under
-/// /dev/shm (iceoryx2's root included) whose name carries an id minted by one of `pids`.
-fn leftovers(team: &TeamName, pids: &[u32]) -> Vec<String> {
+/// /dev/shm (iceoryx2's root included) whose name carries an id minted by one of `pids` at or
+/// after the monotonic second `since_s` (taken when the test began: the files of an older
+/// process that had the same pid are not the test's).
+fn leftovers(team: &TeamName, pids: &[u32], since_s: u32) -> Vec<String> {
     let mut out = team_entries(team);
-    out.extend(files_of(pids));
+    out.extend(files_of(pids, since_s));
     out
 }
 
@@ -447,8 +446,8 @@ fn team_entries(team: &TeamName) -> Vec<String> {
 }
 
 /// Files under /dev/shm (iceoryx2's root, `iox2_root()`, is inside it) whose names carry an
-/// iceoryx2 id minted by `pids`.
-fn files_of(pids: &[u32]) -> Vec<String> {
+/// iceoryx2 id minted by `pids` at or after the monotonic second `since_s`.
+fn files_of(pids: &[u32], since_s: u32) -> Vec<String> {
     let mut out = vec![];
     let mut dirs = vec![std::path::PathBuf::from("/dev/shm")];
     if !cdm_iox::iox2_root().starts_with("/dev/shm/") {
@@ -463,11 +462,8 @@ fn files_of(pids: &[u32]) -> Vec<String> {
             if e.file_type().is_ok_and(|t| t.is_dir()) {
                 dirs.push(e.path());
             }
-            let ours = name
-                .split(|c: char| !c.is_ascii_digit())
-                .filter(|run| run.len() >= 20)
-                .filter_map(|run| run.parse::<u128>().ok())
-                .any(|id| pids.contains(&id_pid(id)));
+            let ours =
+                ids_in(&name).any(|id| pids.contains(&id_pid(id)) && id_seconds(id) >= since_s);
             if ours {
                 out.push(e.path().display().to_string());
             }
@@ -481,9 +477,16 @@ fn files_of(pids: &[u32]) -> Vec<String> {
 fn nothing_of_a_team_is_left_after_drop() {
     let _files = exclusive_files();
     let _dog = Watchdog::new("cleanup", Duration::from_secs(30));
+    let since = monotonic_s();
     let me = iceoryx2_pid();
     let t = team(6);
-    assert_eq!(leftovers(&t, &[me]), Vec::<String>::new(), "dirty start");
+    // Nothing of this process's earlier tests either (minted since it was born).
+    let born = iox_ids::born_s(std::process::id()).expect("this process is alive");
+    assert_eq!(
+        leftovers(&t, &[me], born),
+        Vec::<String>::new(),
+        "dirty start"
+    );
 
     let lay = layout(&[0, 1], &[(0, 1), (1, 0)], 1);
     let mut orch = OrchestratorPorts::create(&t, &lay).unwrap();
@@ -510,7 +513,7 @@ fn nothing_of_a_team_is_left_after_drop() {
     assert_eq!(seen, vec![1, 0]);
 
     // The checker does see a live team (services, nodes, files named by our ids).
-    let live = leftovers(&t, &[me]);
+    let live = leftovers(&t, &[me], since);
     for what in ["service ", "node ", "/dev/shm/"] {
         assert!(
             live.iter().any(|l| l.starts_with(what)),
@@ -520,7 +523,7 @@ fn nothing_of_a_team_is_left_after_drop() {
     // Members may leave before or after the orchestrator; here the orchestrator goes first.
     drop(orch);
     drop((m0, m1));
-    assert_eq!(leftovers(&t, &[me]), Vec::<String>::new());
+    assert_eq!(leftovers(&t, &[me], since), Vec::<String>::new());
 }
 
 /// Spawns this test binary as a child running only `child_process` in `role`; returns once the
@@ -572,6 +575,7 @@ fn child_process() {
 fn stale_resources_of_a_killed_team_are_removed() {
     let _files = exclusive_files();
     let _dog = Watchdog::new("stale cleanup", Duration::from_secs(60));
+    let since = monotonic_s();
     let t = team(7);
     let lay = layout(&[0, 1], &[(0, 1)], 1);
 
@@ -582,7 +586,7 @@ fn stale_resources_of_a_killed_team_are_removed() {
         c.kill().unwrap();
         c.wait().unwrap();
     }
-    let stale = leftovers(&t, &[orch_pid, member_pid]);
+    let stale = leftovers(&t, &[orch_pid, member_pid], since);
     assert!(
         stale.iter().any(|l| l.starts_with("/dev/shm/")),
         "{stale:#?}"
@@ -591,7 +595,10 @@ fn stale_resources_of_a_killed_team_are_removed() {
     // A new run of the same team cleans the crashed one and works.
     let orch = OrchestratorPorts::create(&t, &lay).unwrap();
     assert_eq!(orch.stale_nodes_removed(), 2);
-    assert_eq!(files_of(&[orch_pid, member_pid]), Vec::<String>::new());
+    assert_eq!(
+        files_of(&[orch_pid, member_pid], since),
+        Vec::<String>::new()
+    );
     let m0 = MemberPorts::open(&t, 0, 0, &[], &[1]).unwrap();
     let m1 = MemberPorts::open(&t, 1, 0, &[0], &[]).unwrap();
     wait_ready(&orch, Duration::from_secs(10));
@@ -609,12 +616,12 @@ fn stale_resources_of_a_killed_team_are_removed() {
     );
     assert_eq!(remove_dead_nodes(&t).unwrap(), 1);
     assert_eq!(orch.readiness().agents[0].state_publishers, 0);
-    assert_eq!(files_of(&[child_pid]), Vec::<String>::new());
+    assert_eq!(files_of(&[child_pid], since), Vec::<String>::new());
 
     drop((m1, orch));
     let me = iceoryx2_pid();
     assert_eq!(
-        leftovers(&t, &[me, orch_pid, member_pid, child_pid]),
+        leftovers(&t, &[me, orch_pid, member_pid, child_pid], since),
         Vec::<String>::new()
     );
 }

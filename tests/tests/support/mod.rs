@@ -374,16 +374,16 @@ pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
     out
 }
 
-/// The process id iceoryx2 packs into its 128-bit ids (node, port, service and event ids name
-/// its files): bits 64..96.
-pub fn id_pid(id: u128) -> u32 {
-    (id >> 64) as u32
-}
+#[path = "../../../common/tests/support/iox_ids.rs"]
+pub mod iox_ids;
+use iox_ids::{born_s, id_pid, id_seconds, ids_in};
 
 /// A team's processes and services, recorded while it runs, to find what it leaves behind.
 pub struct Footprint {
     team: TeamName,
-    pids: BTreeSet<u32>,
+    /// The team's processes, each with the monotonic second it was born (`None`: it had
+    /// exited when recorded).
+    pids: BTreeMap<u32, Option<u32>>,
     service_hashes: BTreeSet<String>,
 }
 
@@ -397,28 +397,40 @@ impl Footprint {
         let service_hashes = team_services(&team).into_iter().map(|(h, _)| h).collect();
         Footprint {
             team,
-            pids: all,
+            pids: all.into_iter().map(|p| (p, born_s(p))).collect(),
             service_hashes,
         }
     }
 
     /// Adds what `other` recorded (a team recorded several times while it starts and runs).
     pub fn absorb(&mut self, other: Footprint) {
-        self.pids.extend(other.pids);
+        for (pid, born) in other.pids {
+            let mine = self.pids.entry(pid).or_insert(born);
+            *mine = (*mine).or(born);
+        }
         self.service_hashes.extend(other.service_hashes);
     }
 
+    /// Counts `pid` as the team's from the monotonic second `born_s` on, as if a process of the
+    /// team held that pid now (pids are recycled: how a test shows old files are not blamed).
+    pub fn assume_process(&mut self, pid: u32, born_s: u32) {
+        self.pids.insert(pid, Some(born_s));
+    }
+
     /// Whether `name` carries one of the team's service hashes or an id minted by one of its
-    /// processes. A pid now held by a process outside the team (recycled) does not count.
+    /// processes (`pids`) since that process was born: an older process that had the same pid
+    /// is not the team's. A process that had exited when recorded counts from the birth of the
+    /// team's first process.
     fn names_the_team(&self, name: &str, pids: &BTreeSet<u32>) -> bool {
+        let first = self.pids.values().flatten().min().copied().unwrap_or(0);
         self.service_hashes
             .iter()
             .any(|h| name.contains(h.as_str()))
-            || name
-                .split(|c: char| !c.is_ascii_digit())
-                .filter(|run| run.len() >= 20)
-                .filter_map(|run| run.parse::<u128>().ok())
-                .any(|id| pids.contains(&id_pid(id)))
+            || ids_in(name).any(|id| {
+                let pid = id_pid(id);
+                let born = self.pids.get(&pid).copied().flatten().unwrap_or(first);
+                pids.contains(&pid) && id_seconds(id) >= born
+            })
     }
 
     /// Everything of the team iceoryx2 still has: services and nodes named after the team, and
@@ -427,7 +439,7 @@ impl Footprint {
         let team = self.team.as_str();
         let pids: BTreeSet<u32> = self
             .pids
-            .iter()
+            .keys()
             .copied()
             .filter(|&p| {
                 let args = cmdline(p);
@@ -491,6 +503,17 @@ impl Footprint {
             left.len()
         );
     }
+}
+
+/// Whether this process may make a private mount namespace (`unshare -m`: needs root), for a
+/// test that wants a /dev/shm of its own; when not, says that the test is skipped.
+pub fn private_mounts_allowed() -> bool {
+    let probe = Command::new("unshare").args(["-m", "true"]).output();
+    let allowed = probe.is_ok_and(|o| o.status.success());
+    if !allowed {
+        eprintln!("skipped: `unshare -m` is not available here (needs root)");
+    }
+    allowed
 }
 
 /// Asserts no process of `team` is alive.
