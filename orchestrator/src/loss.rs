@@ -2,7 +2,7 @@
 //! (`common::team_core`, `team_core_loss.rs`): the scripted kills of `--lose`, killing and
 //! reaping a member, and the room the services keep for repairs.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use common::loss::LossSchedule;
 use common::loss_log::LossLog;
@@ -85,37 +85,48 @@ pub fn repair_room(s: &Scenario, window: u32) -> RepairRoom {
     }
 }
 
-/// The largest group sized for losses one by one (see [`with_group_losses`]).
-pub const ONE_BY_ONE_UP_TO: usize = 256;
-
 /// Widens `room` for the loss of each group of `groups` at once: a killed daemon loses every
 /// member of its host (`launch --hosts`, lockstep, `--on-loss repair`), each after its own last
 /// tick. Losses apply in tick order, one epoch per tick (`LossLog::epochs`), and the ticks are
-/// not known in advance: the group is repaired all at one tick, and one by one in ascending and
-/// in descending id order; every state service gets room for the most new readers any of these
-/// gives it, plus two, and every wake event for the most new in-neighbours, plus two. Orders
-/// other than these may still need more (then the link is refused, by name). One by one costs
-/// a repair per member (0.23 s for 125 of N = 250, 3.3 s for 500 of N = 1000): groups larger
-/// than [`ONE_BY_ONE_UP_TO`] are sized for the loss at one tick only.
+/// not known in advance: the group is repaired all at one tick, one by one in ascending and in
+/// descending id order, and (groups of up to [`SHUFFLED_UP_TO`]) in [`SHUFFLES`] seeded shuffles
+/// whose ticks tie at random, and the repairs of every first few of the group at one tick
+/// (members open ports for each notice); every state service gets room for the most new
+/// readers any of these gives it, plus two, and every wake event for twice the most new
+/// in-neighbours, plus two.
+/// Orders other than these may still need more (then the link is refused, by name). One by one
+/// costs a repair per member (0.23 s for 125 of N = 250, 3.3 s for 500 of N = 1000): groups
+/// larger than [`ONE_BY_ONE_UP_TO`] are sized for the loss at one tick only.
 pub fn with_group_losses(mut room: RepairRoom, s: &Scenario, groups: &[Vec<u32>]) -> RepairRoom {
     for group in groups.iter().filter(|g| !g.is_empty()) {
-        let mut ascending = group.clone();
-        ascending.sort_unstable();
-        let descending: Vec<u32> = ascending.iter().rev().copied().collect();
-        let orders: [(&[u32], bool); 3] = [
-            (&ascending, true),
-            (&ascending, false),
-            (&descending, false),
-        ];
-        let one_by_one = group.len() <= ONE_BY_ONE_UP_TO;
-        for (order, at_once) in orders.into_iter().filter(|o| o.1 || one_by_one) {
+        let mut sets: Vec<BTreeSet<(u32, u32)>> = loss_orders(group)
+            .into_iter()
+            .map(|ticks| {
+                let mut log = LossLog::new(s);
+                for (id, tick) in ticks {
+                    log.add(id, tick);
+                }
+                log.new_links()
+            })
+            .collect();
+        // Members open ports as each notice comes, and the losses of one tick are announced one
+        // at a time (a lost host hands them over in ascending id): the repairs of the first
+        // few of them are opened too.
+        if group.len() <= ONE_BY_ONE_UP_TO {
+            let mut ascending = group.clone();
+            ascending.sort_unstable();
             let mut log = LossLog::new(s);
-            for (k, &id) in order.iter().enumerate() {
-                log.add(id, if at_once { 1 } else { k as u64 + 1 });
+            let mut all = BTreeSet::new();
+            for id in ascending {
+                log.add(id, 1);
+                all.extend(log.new_links());
             }
+            sets.push(all);
+        }
+        for links in sets {
             let mut readers: BTreeMap<u32, usize> = BTreeMap::new();
             let mut writers: BTreeMap<u32, usize> = BTreeMap::new();
-            for (reader, writer) in log.new_links() {
+            for (reader, writer) in links {
                 *readers.entry(writer).or_default() += 1;
                 *writers.entry(reader).or_default() += 1;
             }
@@ -123,11 +134,56 @@ pub fn with_group_losses(mut room: RepairRoom, s: &Scenario, groups: &[Vec<u32>]
                 let e = room.readers.entry(j).or_default();
                 *e = (*e).max(gain + 2);
             }
+            // Twice: a member also opens a notifier for the repairs of the first few losses of
+            // a tick, announced one at a time, which these sets do not count (at N = 40, one
+            // lost host needed 15 on one wake event where the sets counted 12); a notifier
+            // slot costs a few bytes of the event service's dynamic config.
             let most_writers = writers.values().copied().max().unwrap_or(0);
-            room.writers = room.writers.max(most_writers + 2);
+            room.writers = room.writers.max(2 * most_writers + 2);
         }
     }
     room
+}
+
+/// The largest group sized for losses one by one (see [`with_group_losses`]).
+pub const ONE_BY_ONE_UP_TO: usize = 256;
+/// The largest group also sized for shuffled orders.
+pub const SHUFFLED_UP_TO: usize = 64;
+/// How many shuffled orders.
+pub const SHUFFLES: u64 = 6;
+
+/// The (id, loss tick) assignments a group is sized for (see [`with_group_losses`]).
+fn loss_orders(group: &[u32]) -> Vec<Vec<(u32, u64)>> {
+    let mut ascending = group.to_vec();
+    ascending.sort_unstable();
+    let ranked =
+        |ids: &[u32]| -> Vec<(u32, u64)> { ids.iter().zip(1..).map(|(&id, k)| (id, k)).collect() };
+    let mut out = vec![ascending.iter().map(|&id| (id, 1)).collect()];
+    if group.len() > ONE_BY_ONE_UP_TO {
+        return out;
+    }
+    out.push(ranked(&ascending));
+    let descending: Vec<u32> = ascending.iter().rev().copied().collect();
+    out.push(ranked(&descending));
+    if group.len() > SHUFFLED_UP_TO {
+        return out;
+    }
+    for seed in 0..SHUFFLES {
+        let mut ids = ascending.clone();
+        let draw = |k: u64| common::link::splitmix64(seed.wrapping_mul(1 << 32) ^ k);
+        // Fisher-Yates, then ticks that stay put or step by one at random (ties: one epoch).
+        for k in (1..ids.len()).rev() {
+            ids.swap(k, (draw(k as u64) % (k as u64 + 1)) as usize);
+        }
+        let mut tick = 1;
+        let mut order = Vec::with_capacity(ids.len());
+        for (k, id) in ids.into_iter().enumerate() {
+            tick += draw(1 << 20 | k as u64) & 1;
+            order.push((id, tick));
+        }
+        out.push(order);
+    }
+    out
 }
 
 /// For the loss of each member of `lost_one_by_one` alone: the most new readers any survivor

@@ -437,7 +437,11 @@ fn a_killed_daemon_is_like_killed_members() {
     let team = unique_team("kdaemon");
     let (out, sim) = (dir.path().join("run"), dir.path().join("sim"));
     let b_tmp = dir.path().join("tmp-b");
-    let source = ["--n", "10", "--t-total", "600", "--max-ticks", "8000"];
+    // The team's size: 10 in CI; `CDM_TEST_KILLED_DAEMON_N=40` measures a larger host's loss
+    // (README, "One team, several machines").
+    let n = std::env::var("CDM_TEST_KILLED_DAEMON_N").unwrap_or_else(|_| "10".into());
+    let n_members: usize = n.parse().expect("CDM_TEST_KILLED_DAEMON_N: a team size");
+    let source = ["--n", n.as_str(), "--t-total", "600", "--max-ticks", "8000"];
     let (orch, mut daemon) = running(&h, &team, &out, &source, &b_tmp);
     kill_daemon(&team);
     let o = orch.finish(RUN_DEADLINE);
@@ -465,7 +469,9 @@ fn a_killed_daemon_is_like_killed_members() {
     );
     // One host, the same members killed after the same ticks (each its own: members run up to
     // a window apart).
-    let dt = common::scenario::Scenario::generated(10).unwrap().dt_s();
+    let dt = common::scenario::Scenario::generated(n_members)
+        .unwrap()
+        .dt_s();
     let mut lose = vec![];
     for l in &losses {
         assert_eq!(

@@ -259,7 +259,7 @@ fn draw_key(seed: u64, from: u32, to: u32, tick: u64) -> u64 {
 /// SplitMix64's output function (Steele, Lea and Flood, "Fast splittable pseudorandom number
 /// generators", OOPSLA 2014; the constants of Vigna's reference `splitmix64.c`): a bijective
 /// 64-bit mix, a counter-based generator when fed a counter.
-fn splitmix64(x: u64) -> u64 {
+pub fn splitmix64(x: u64) -> u64 {
     let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);

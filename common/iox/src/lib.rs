@@ -116,8 +116,11 @@ const SPARE_NODES: usize = 2;
 const OBSERVER_SLOTS: usize = 1;
 
 /// Clock messages a subscriber keeps: members read every one (a loss notice must not be
-/// overwritten by the grants after it), and lag at most a few grants behind (window).
-const CLOCK_BUFFER: usize = 16;
+/// overwritten by the grants after it), and lag at most a few grants behind (window). The
+/// losses of one tick are announced back to back (a lost host's members: 20 at N = 40 over two
+/// hosts), each a message, and a member starved of CPU may not drain meanwhile: 16 lost
+/// notices at N = 100. A message is 48 bytes.
+const CLOCK_BUFFER: usize = 64;
 
 /// How long a stale-resource cleanup waits for another process that is cleaning the same node.
 const CLEANUP_TIMEOUT: Duration = Duration::from_secs(2);

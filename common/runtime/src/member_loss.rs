@@ -110,6 +110,12 @@ impl MemberLosses {
     /// The member to fly from `tick` on, when its link changes there (it may change again at
     /// the same tick while step `tick` is not flown: `unflown`).
     pub fn due(&mut self, tick: u64) -> Option<Member> {
+        // Not before every announced loss is linked: the orchestrator announces the losses of
+        // one tick back to back and links them together (`TeamLosses::poll`), so a link flown
+        // from here on is the repair of all of them, not of the first few.
+        if self.linked < self.seen {
+            return None;
+        }
         if self.schedule.first().is_some_and(|(t, _)| *t == tick) {
             let (_, m) = self.schedule.remove(0);
             let flown = match self.unflown.take() {
@@ -307,9 +313,11 @@ mod tests {
         assert_eq!(subscribe, fresh);
         assert_eq!(m.next_work(), None);
         assert_eq!(m.due(19), None);
-        assert_eq!(m.due(20), Some(new));
+        // Not flown before the repair is linked (losses of one tick are linked together).
+        assert_eq!(m.due(20), None);
         m.on_notice(LossNotice { linked: 1, ..n }, 20).unwrap();
         assert_eq!(m.next_work(), Some(LossWork::HandOver));
+        assert_eq!(m.due(20), Some(new));
     }
 
     #[test]
@@ -352,11 +360,12 @@ mod tests {
             .into_iter()
             .enumerate()
         {
+            // Each linked before the next is found (a loss of that tick found late).
             let n = LossNotice {
                 seq: seq as u32 + 1,
                 id,
                 tick,
-                linked: 0,
+                linked: seq as u32 + 1,
             };
             m.on_notice(n, 952).unwrap();
             // States of a neighbour a link of this tick drops are kept: it may come back.
@@ -372,12 +381,35 @@ mod tests {
                 seq: seq as u32 + 1,
                 id,
                 tick: 952,
-                linked: 0,
+                linked: seq as u32 + 1,
             };
             m.on_notice(n, 952).unwrap();
             links.extend(m.due(952).map(|x| x.link.map(|l| l.in_neighbors)));
         }
         assert_eq!(links, [Some([1, 8, 10]), None]);
+        // As the orchestrator announces them: back to back, linked together. The member flies
+        // the repair of all four at 952, never the first's.
+        let mut m = setup(&s, 7);
+        let mut links = vec![];
+        for (seq, id) in [3, 5, 6, 10].into_iter().enumerate() {
+            let n = LossNotice {
+                seq: seq as u32 + 1,
+                id,
+                tick: 952,
+                linked: 0,
+            };
+            m.on_notice(n, 952).unwrap();
+            links.extend(m.due(952).map(|x| x.link.map(|l| l.in_neighbors)));
+        }
+        assert!(links.is_empty(), "{links:?}");
+        let all = LossNotice {
+            seq: 4,
+            id: 10,
+            tick: 952,
+            linked: 4,
+        };
+        m.on_notice(all, 952).unwrap();
+        assert_eq!(m.due(952).map(|x| x.link), Some(None));
         assert!(!m.is_future_neighbor(4, 953));
     }
 

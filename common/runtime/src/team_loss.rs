@@ -199,14 +199,31 @@ impl TeamLosses {
     }
 
     /// Moves the announcements on at `now`: the next loss is announced once the previous one's
-    /// links are connected (`linked(reader, writer)`). True when the notice changed (publish a
-    /// clock message). Fails when a repair's links are not connected within `timeout`.
+    /// links are connected (`linked(reader, writer)`), or at once when it has the same tick:
+    /// losses of one tick make one repair (`LossLog::epochs`), and members fly none of it
+    /// before all its losses are announced and linked (`MemberLosses::due`). True when the
+    /// notice changed (publish a clock message). Fails when a repair's links are not connected
+    /// within `timeout`.
     pub fn poll(
         &mut self,
         now: Duration,
         timeout: Duration,
         mut linked: impl FnMut(u32, u32) -> bool,
     ) -> Result<bool, LinksTimedOut> {
+        let same_tick =
+            |k: usize| k > 0 && k < self.lost.len() && self.lost[k].0 == self.lost[k - 1].0;
+        if self.linking.is_some() && same_tick(self.announced) {
+            let since = self.linking.as_ref().map_or(now, |l| l.since);
+            let mut before = self.linking.take().map(|l| l.links).unwrap_or_default();
+            let lost = &self.lost;
+            let gone = |id: u32| lost.iter().any(|&(_, j, _)| j == id);
+            before.retain(|&(r, w)| !gone(r) && !gone(w));
+            self.announce_next(since);
+            if let Some(l) = &mut self.linking {
+                l.links.extend(before);
+            }
+            return Ok(true);
+        }
         if let Some(l) = &mut self.linking {
             // A link to a member lost since it was awaited never connects, and needs not: the
             // next announcement's repair goes around that member (several losses at once, as a
@@ -231,6 +248,12 @@ impl TeamLosses {
         if self.announced == self.lost.len() {
             return Ok(false);
         }
+        self.announce_next(now);
+        Ok(true)
+    }
+
+    /// Announces the next loss and starts waiting for its repair's new links.
+    fn announce_next(&mut self, now: Duration) {
         self.announced += 1;
         let dead: BTreeSet<u32> = self.lost.iter().map(|&(_, id, _)| id).collect();
         // Members know the announced losses only: their links are the ones to wait for.
@@ -245,7 +268,6 @@ impl TeamLosses {
             .collect();
         self.connected.extend(&links);
         self.linking = Some(Linking { links, since: now });
-        Ok(true)
     }
 
     /// The links of the announced repair not seen connected yet (reader, writer).
@@ -313,6 +335,36 @@ mod tests {
             "{asked:?}"
         );
         assert!(t.awaited().iter().all(|&(r, w)| r != writer && w != writer));
+    }
+
+    #[test]
+    fn losses_of_one_tick_are_announced_back_to_back_and_linked_together() {
+        let s = paper();
+        let readers: Vec<u32> = s
+            .formation
+            .out_neighbors()
+            .into_iter()
+            .filter(|(_, r)| !r.is_empty())
+            .map(|(id, _)| id)
+            .take(3)
+            .collect();
+        let mut t = TeamLosses::new(&s, &[]);
+        t.lose(readers[0], Some(40), LossCause::Killed);
+        t.lose(readers[1], Some(40), LossCause::Killed);
+        t.lose(readers[2], Some(41), LossCause::Killed);
+        let sec = Duration::from_secs;
+        let notice = |t: &TeamLosses| t.notice().map(|n| (n.seq, n.tick, n.linked));
+        assert!(t.poll(sec(0), sec(5), |_, _| false).unwrap());
+        assert_eq!(notice(&t), Some((1, 41, 0)));
+        // The second of tick 41 goes without waiting for the first's links.
+        assert!(t.poll(sec(0), sec(5), |_, _| false).unwrap());
+        assert_eq!(notice(&t), Some((2, 41, 0)));
+        // Tick 42's waits until both are linked, which they are together.
+        assert!(!t.poll(sec(1), sec(5), |_, _| false).unwrap());
+        assert!(t.poll(sec(1), sec(5), |_, _| true).unwrap());
+        assert_eq!(notice(&t), Some((2, 41, 2)));
+        assert!(t.poll(sec(1), sec(5), |_, _| false).unwrap());
+        assert_eq!(notice(&t), Some((3, 42, 2)));
     }
 
     #[test]
