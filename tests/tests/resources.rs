@@ -184,9 +184,11 @@ fn a_full_dev_shm_is_reported_with_the_space_and_how_to_enlarge_it() {
     let team = unique_team("shmfull");
     let out = dir.path().join("run");
     let root = iox2_root();
+    // The root's own tmpfs is 0700: a root writable by others (a tmpfs is 1777) is refused
+    // first, before any space is counted.
     let script = format!(
         "mount -t tmpfs -o size=256k tmpfs /dev/shm && mkdir -p {root} && \
-         mount -t tmpfs tmpfs {root} && exec \"$0\" launch --n 40 --team {team} --out \"$1\" --quiet"
+         mount -t tmpfs -o mode=0700 tmpfs {root} && exec \"$0\" launch --n 40 --team {team} --out \"$1\" --quiet"
     );
     let o = run(
         Command::new("unshare")

@@ -417,6 +417,9 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
             if self.published != Some(tick) || tick >= self.last || g < tick + 1 {
                 return None;
             }
+            if self.losses.as_ref().is_some_and(|l| l.waits_at(tick)) {
+                return None;
+            }
             if let Some(a) = self.relink_if_due(tick) {
                 return Some(a);
             }

@@ -107,6 +107,13 @@ impl MemberLosses {
         (!self.work.is_empty()).then(|| self.work.remove(0))
     }
 
+    /// True when the link changes at `tick` (or before) but a loss this member knows is not
+    /// linked yet: step `tick` must wait (see [`Self::due`]). A member over delayed links is
+    /// not held up by its lost neighbour's missing state, so it must be held here.
+    pub fn waits_at(&self, tick: u64) -> bool {
+        self.linked < self.seen && self.schedule.first().is_some_and(|(t, _)| *t <= tick)
+    }
+
     /// The member to fly from `tick` on, when its link changes there (it may change again at
     /// the same tick while step `tick` is not flown: `unflown`).
     pub fn due(&mut self, tick: u64) -> Option<Member> {
@@ -314,9 +321,11 @@ mod tests {
         assert_eq!(m.next_work(), None);
         assert_eq!(m.due(19), None);
         // Not flown before the repair is linked (losses of one tick are linked together).
+        assert!(!m.waits_at(19) && m.waits_at(20));
         assert_eq!(m.due(20), None);
         m.on_notice(LossNotice { linked: 1, ..n }, 20).unwrap();
         assert_eq!(m.next_work(), Some(LossWork::HandOver));
+        assert!(!m.waits_at(20));
         assert_eq!(m.due(20), Some(new));
     }
 
