@@ -169,22 +169,24 @@ impl MemberLosses {
 
     /// Keeps the states of a neighbour the link applied now drops (see `due`).
     pub(crate) fn keep_all(&mut self, id: u32, states: Inbox) {
-        match self.ahead.iter_mut().find(|(j, _)| *j == id) {
-            Some((_, inbox)) => inbox.merge(states),
-            None => self.ahead.push((id, states)),
-        }
+        self.kept(id).merge(states);
     }
 
     /// Keeps a future in-neighbour's state.
     pub(crate) fn keep(&mut self, id: u32, tick: u64, state: cdm_core::dynamics::Flat) {
-        match self.ahead.iter_mut().find(|(j, _)| *j == id) {
-            Some((_, inbox)) => inbox.insert(tick, state),
+        self.kept(id).insert(tick, state);
+    }
+
+    /// The states kept of `id` (a new, empty inbox the first time).
+    fn kept(&mut self, id: u32) -> &mut Inbox {
+        let k = match self.ahead.iter().position(|(j, _)| *j == id) {
+            Some(k) => k,
             None => {
-                let mut inbox = Inbox::default();
-                inbox.insert(tick, state);
-                self.ahead.push((id, inbox));
+                self.ahead.push((id, Inbox::default()));
+                self.ahead.len() - 1
             }
-        }
+        };
+        &mut self.ahead[k].1
     }
 
     /// The kept states of `id` (empty when none arrived), taken.
@@ -355,6 +357,29 @@ mod tests {
         }
     }
 
+    /// Notices of the losses of `ids` at tick 952, in order, to a member at 952 (each linked
+    /// before the next when `linked_each`); the links it applies at 952 meanwhile.
+    fn notices_at_952(
+        m: &mut MemberLosses,
+        ids: &[u32],
+        linked_each: bool,
+    ) -> Vec<Option<[u32; 3]>> {
+        let mut links = vec![];
+        for (k, &id) in ids.iter().enumerate() {
+            let seq = k as u32 + 1;
+            let linked = if linked_each { seq } else { 0 };
+            let n = LossNotice {
+                seq,
+                id,
+                tick: 952,
+                linked,
+            };
+            m.on_notice(n, 952).unwrap();
+            links.extend(m.due(952).map(|x| x.link.map(|l| l.in_neighbors)));
+        }
+        links
+    }
+
     #[test]
     fn a_link_applied_at_a_tick_not_flown_yet_follows_a_later_notice_of_that_tick() {
         // generated10: members 3, 5, 6 and 10 lost after tick 951, announced one at a time (a
@@ -384,32 +409,12 @@ mod tests {
         assert_eq!(links, [Some([1, 8, 10]), None], "{original:?}");
         // The same without an earlier loss (no epoch before the tick).
         let mut m = setup(&s, 7);
-        let mut links = vec![];
-        for (seq, id) in [3, 5, 6, 10].into_iter().enumerate() {
-            let n = LossNotice {
-                seq: seq as u32 + 1,
-                id,
-                tick: 952,
-                linked: seq as u32 + 1,
-            };
-            m.on_notice(n, 952).unwrap();
-            links.extend(m.due(952).map(|x| x.link.map(|l| l.in_neighbors)));
-        }
+        let links = notices_at_952(&mut m, &[3, 5, 6, 10], true);
         assert_eq!(links, [Some([1, 8, 10]), None]);
         // As the orchestrator announces them: back to back, linked together. The member flies
         // the repair of all four at 952, never the first's.
         let mut m = setup(&s, 7);
-        let mut links = vec![];
-        for (seq, id) in [3, 5, 6, 10].into_iter().enumerate() {
-            let n = LossNotice {
-                seq: seq as u32 + 1,
-                id,
-                tick: 952,
-                linked: 0,
-            };
-            m.on_notice(n, 952).unwrap();
-            links.extend(m.due(952).map(|x| x.link.map(|l| l.in_neighbors)));
-        }
+        let links = notices_at_952(&mut m, &[3, 5, 6, 10], false);
         assert!(links.is_empty(), "{links:?}");
         let all = LossNotice {
             seq: 4,

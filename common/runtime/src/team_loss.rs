@@ -215,9 +215,7 @@ impl TeamLosses {
         if self.linking.is_some() && same_tick(self.announced) {
             let since = self.linking.as_ref().map_or(now, |l| l.since);
             let mut before = self.linking.take().map(|l| l.links).unwrap_or_default();
-            let lost = &self.lost;
-            let gone = |id: u32| lost.iter().any(|&(_, j, _)| j == id);
-            before.retain(|&(r, w)| !gone(r) && !gone(w));
+            before.retain(|&(r, w)| !self.is_lost(r) && !self.is_lost(w));
             self.announce_next(since);
             if let Some(l) = &mut self.linking {
                 l.links.extend(before);
