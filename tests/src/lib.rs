@@ -129,14 +129,20 @@ fn build_once(what: &[&str]) {
     }
 }
 
+/// What the tests run, built by one `cargo build`: every binary and every example of the
+/// workspace. Examples take the dev-dependencies, so this resolves the features `cargo test
+/// --workspace` resolves and finds its build fresh; a narrower request (`--package P --example
+/// E`, or `--bins` alone) would resolve other features and compile the workspace again.
+const EVERYTHING: &[&str] = &["--workspace", "--bins", "--examples"];
+
 fn ensure_built() {
-    build_once(&["--bins", "--workspace"]);
+    build_once(EVERYTHING);
 }
 
 /// The path of example `name` of workspace package `package`, of the same profile as the
 /// running test (built on first use, like [`bin`]).
 pub fn example(package: &str, name: &str) -> PathBuf {
-    build_once(&["--package", package, "--example", name]);
+    build_once(EVERYTHING);
     let path = profile_dir()
         .join("examples")
         .join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
@@ -178,6 +184,36 @@ pub fn venv_python() -> PathBuf {
         path.display()
     );
     path
+}
+
+/// A base port with `n` free UDP ports from it, on 127.0.0.1, below the kernel's ephemeral range
+/// (`net.ipv4.ip_local_port_range`): no socket that another process opens without choosing a port
+/// (a Python vehicle's sending socket, a zenoh link, a browser) can take one of them between this
+/// check and the member's bind, as one from the ephemeral range could. Blocks never repeat within
+/// a test process; where they start depends on the process id, so two test processes rarely meet.
+pub fn free_udp_ports(n: u16) -> u16 {
+    const LOWEST: u32 = 10_000;
+    let ephemeral_low = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|t| t.split_whitespace().next()?.parse::<u32>().ok())
+        .unwrap_or(32_768);
+    let top = ephemeral_low.max(LOWEST + 1_000);
+    let span = top - LOWEST - u32::from(n);
+    static CURSOR: Mutex<Option<u32>> = Mutex::new(None);
+    let mut cursor = CURSOR.lock().unwrap_or_else(|p| p.into_inner());
+    let mut next = cursor.unwrap_or_else(|| std::process::id().wrapping_mul(7_919) % span);
+    for _ in 0..200 {
+        let base = LOWEST + next % span;
+        next = (next + u32::from(n)) % span;
+        let held: Vec<_> = (base..base + u32::from(n))
+            .map_while(|p| std::net::UdpSocket::bind(("127.0.0.1", p as u16)).ok())
+            .collect();
+        if held.len() == usize::from(n) {
+            *cursor = Some(next);
+            return base as u16;
+        }
+    }
+    panic!("harness: no {n} consecutive free UDP ports in {LOWEST}..{top}");
 }
 
 /// Counter shared by `TempDir` and `unique_team` so names never repeat within a process.

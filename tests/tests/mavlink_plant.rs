@@ -4,7 +4,6 @@
 //! `tests/python/mavlink_vehicle.py`, a point-mass vehicle built on pymavlink. Real sockets,
 //! loopback only; every process runs under a watchdog deadline.
 
-use std::net::UdpSocket;
 use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::time::Duration;
@@ -31,11 +30,10 @@ fn vehicle_script() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("python/mavlink_vehicle.py")
 }
 
-/// A UDP port that was free a moment ago (the kernel's pick), at least `INDEX`.
+/// A UDP port that was free a moment ago, at least `INDEX`, below the ephemeral range.
 fn free_port() -> u16 {
-    let s = UdpSocket::bind("127.0.0.1:0").expect("bind an ephemeral UDP port");
-    let port = s.local_addr().expect("local address").port();
-    assert!(port >= INDEX, "ephemeral port {port} too small");
+    let port = integration_tests::free_udp_ports(1);
+    assert!(port >= INDEX, "port {port} too small");
     port
 }
 

@@ -8,14 +8,13 @@
 
 mod support;
 
-use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::time::Duration;
 
 use common::scenario::{Checks, Scenario, ScenarioFile};
 use integration_tests::{
-    describe, spawn, unique_team, venv_python, write_scenario, Running, TempDir,
+    describe, free_udp_ports, spawn, unique_team, venv_python, write_scenario, Running, TempDir,
 };
 use serde_json::Value;
 use support::{assert_no_team_resources, launch, read_json};
@@ -41,25 +40,6 @@ fn team(t_total_s: f64) -> ScenarioFile {
         }
     }
     f
-}
-
-/// A base port with `N` free UDP ports above it (the kernel's pick, checked by binding all).
-fn free_base_port() -> u16 {
-    for _ in 0..50 {
-        let probe = UdpSocket::bind("127.0.0.1:0").expect("bind an ephemeral UDP port");
-        let base = probe.local_addr().expect("local address").port();
-        drop(probe);
-        let Some(last) = base.checked_add(N as u16) else {
-            continue;
-        };
-        let held: Vec<_> = (base..last)
-            .map_while(|p| UdpSocket::bind(("127.0.0.1", p)).ok())
-            .collect();
-        if held.len() == N {
-            return base;
-        }
-    }
-    panic!("no {N} consecutive free UDP ports found");
 }
 
 fn vehicle_script() -> PathBuf {
@@ -205,7 +185,7 @@ fn ten_members_arm_when_all_are_ready_and_fly_to_their_goals() {
     let dir = TempDir::new();
     let file = team(3.0);
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
-    let base = free_base_port();
+    let base = free_udp_ports(N as u16);
     let team_name = unique_team("mav10");
     // Every vehicle has its own NED origin, its spawn point (PX4 multi-vehicle SITL).
     let origins: Vec<[f64; 3]> = file
@@ -291,7 +271,7 @@ fn a_vehicle_that_stops_sending_is_named() {
     // Long enough that the vehicle goes silent mid-flight even on a loaded machine.
     let file = team(20.0);
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
-    let base = free_base_port();
+    let base = free_udp_ports(N as u16);
     let team_name = unique_team("mav10lost");
     const SILENT: usize = 6;
     let silent_id = file.agents[SILENT].id;
