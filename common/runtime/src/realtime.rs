@@ -1,8 +1,9 @@
 //! A member in real time (`--realtime`) as a plain type with no I/O: events in (the clock
 //! channel's start or stop, a neighbour's state, whether the orchestrator lives, "now" from a
 //! clock the loop passes in), actions out (publish, ask about the orchestrator, wait, fail). The
-//! core is the one of lockstep ([`MemberCore`]); this file is the timing ([`Realtime`]) that
-//! paces it by the wall clock, and the one loop ([`crate::member_loop`]) flies it.
+//! core is the member core of lockstep too ([`MemberCore`]); this file is the timing
+//! ([`Realtime`]) that paces it by the wall clock, and the one loop ([`crate::member_loop`])
+//! flies it.
 //!
 //! How time flows (ARCHITECTURE.md): the orchestrator announces the start instant S; member i
 //! has a phase offset phi_i in [0, dt) drawn from the announced seed, and its tick k is the
