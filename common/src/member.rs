@@ -8,7 +8,8 @@ use std::time::Duration;
 
 use cdm_mavlink::udp::UdpError;
 use cdm_mavlink::{PlantError, TeamArmError};
-use cdm_runtime::member_core::MemberCore;
+use cdm_runtime::member_core::{in_neighbors, subscriptions};
+use cdm_runtime::member_lockstep::LockstepCore;
 use cdm_runtime::member_loop::{fly, LoopError};
 use cdm_runtime::member_loss::{LossFault, MemberLosses};
 use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
@@ -247,7 +248,7 @@ impl Joined<'_> {
     ) -> Result<Finished, MemberError> {
         let (s, me, team, id) = (self.s, self.me, self.team, self.me.id);
         let hash = s.content_hash();
-        let ins = MemberCore::<ModelVehicle, LockstepClock>::subscriptions(me);
+        let ins = subscriptions(me);
         let outs = s.formation.readers_of(id);
         let mut ports = MemberPorts::open(team, id, hash, &ins, &outs)?;
         tracing::info!(
@@ -275,7 +276,7 @@ impl Joined<'_> {
             let first = vehicle.before_start(&mut ports, hash, waits, interrupted)?;
             let link = vehicle.link();
             let at_rest = neighbor_positions(s, me);
-            let mut core = RealtimeCore::new(me, at_rest, setup, vehicle, clock.now());
+            let mut core = RealtimeCore::realtime(me, at_rest, setup, vehicle, clock.now());
             return crate::member_vehicle::fly(
                 &mut core,
                 &mut ports,
@@ -286,10 +287,10 @@ impl Joined<'_> {
             .map_err(|e| MemberError::from_loop(e, id, team));
         }
         let parts = (vehicle, LockstepClock::default());
-        let starts = MemberCore::<ModelVehicle, LockstepClock>::in_neighbors(me).map(|n| {
+        let starts = in_neighbors(me).map(|n| {
             QuadState::hover(s.formation.member(n).map_or(me.position, |m| m.position)).flat()
         });
-        let mut core = MemberCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
+        let mut core = LockstepCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
             .with_links(s.link_model(), &s.step_config(), starts)
             .with_losses(MemberLosses::new(me, LossLog::new(s), &ins, &outs));
         let inject = crate::fault_inject::from_env(id);

@@ -8,9 +8,9 @@ use std::time::Duration;
 
 use cdm_mavlink::{before_start, LinkFigures, MavlinkPlant, Reporting};
 use cdm_runtime::member_core::Finished;
-use cdm_runtime::member_loop::LoopError;
+use cdm_runtime::member_loop::{fly as fly_core, LoopError};
 use cdm_runtime::realtime::RealtimeCore;
-use cdm_runtime::realtime_loop::{fly_realtime, unix_now_ns};
+use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::seams::{Clock, ModelVehicle, MonotonicClock, Vehicle};
 
 use crate::member::MemberError;
@@ -91,8 +91,8 @@ pub(crate) fn fly<V: Vehicle>(
         Some(link) => {
             let (id, hash) = (core.id(), core.hash());
             let mut reporting = Reporting::new(ports, link, id, hash);
-            fly_realtime(core, &mut reporting, clock, interrupted)
+            fly_core(core, &mut reporting, clock, interrupted, None)
         }
-        None => fly_realtime(core, ports, clock, interrupted),
+        None => fly_core(core, ports, clock, interrupted, None),
     }
 }

@@ -1,13 +1,16 @@
 //! The team protocol without a transport: the `#[repr(C)]` wire messages (plain types; the
 //! iceoryx2 backend gives them their shared-memory trait), the seams (transport, clocks,
-//! vehicle), the member's protocol core (no I/O) and the generic loop around it, the signal
+//! vehicle), the member's protocol core (no I/O) with its two timings (lockstep and real time)
+//! and the one generic loop around it, the signal
 //! flags and the test-only fault injection. No iceoryx2 here: the compiler holds that rule.
 
 pub mod fault_inject;
 mod inbox;
 pub mod member_core;
+pub mod member_lockstep;
 pub mod member_loop;
 pub mod member_loss;
+mod member_protocol;
 mod member_watch;
 pub mod messages;
 pub mod realtime;

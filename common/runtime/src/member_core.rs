@@ -1,597 +1,302 @@
 //! One member's side of the team protocol as a plain type, with no I/O: events in (a clock
 //! message, a neighbour's state, whether the orchestrator lives, "now"), actions out (publish,
-//! wake readers, ask about the orchestrator, wait, fail). The loop around it ([`crate::member_loop`])
-//! only moves messages between the core and a [`MemberTransport`](crate::seams::MemberTransport).
+//! wake readers, ask about the orchestrator, wait, fail). The loop around it
+//! ([`crate::member_loop`]) only moves messages between the core and a
+//! [`MemberTransport`](crate::seams::MemberTransport).
 //!
-//! Protocol (ARCHITECTURE.md): the orchestrator grants ticks on the clock channel; a member
-//! publishes its tick-k state once tick k is granted, and computes tick k + 1 once k + 1 is
-//! granted and its three in-neighbours' tick-k states are in. Every state carries its tick, so a
-//! neighbour that runs ahead is buffered, never confused. Every wait has a deadline.
-//!
-//! Over imperfect links (`cdm_core::link`, set by [`MemberCore::with_links`]) tick k + 1 waits
-//! only for the in-neighbours' states that may be usable at k (those of tick k - min delay),
-//! and the follower flies on the newest state of each that the link model delivered, brought to
-//! t_k: the same [`LinkModel::hear`] the engine calls, so both fly the same bits.
+//! One core, two timings ([`Timing`]): in lockstep ([`crate::member_lockstep`]) the orchestrator
+//! grants ticks and a follower waits for its in-neighbours' states of each tick (over the link
+//! model of `cdm_core::link`); in real time ([`crate::realtime`]) the wall clock with this
+//! member's phase offset says when a tick is due, and a follower flies on the newest state it
+//! has of each in-neighbour. What both do alike lives here: the scenario check and the stop of
+//! a clock message, which states are an in-neighbour's, the orchestrator watch and the pending
+//! fault, publishing a tick's state, reporting a failed tick, and what an idle member does.
 
-use std::fmt;
 use std::time::Duration;
 
-use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
-use cdm_core::link::{Heard, LinkModel};
-use cdm_core::math::Real;
-use cdm_core::step::{law_for, Law, NeighborModel, StepConfig, StepFault};
+use cdm_core::step::{law_for, Law, StepFault};
 
-use crate::inbox::Inbox;
-use crate::member_loss::{LossFault, LossWork, MemberLosses};
 use crate::member_watch::{report_fault, Watch};
 use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};
-use crate::seams::{TickClock, Vehicle, VehicleFault};
+use crate::seams::{Vehicle, VehicleFault};
 
-/// Deadlines of a member.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Deadlines {
-    /// How long to wait for the team to start (first grant) while the orchestrator lives.
-    pub join: Duration,
-    /// How long without progress (no grant, no neighbour state) before giving up mid-run.
-    pub silence: Duration,
+pub use crate::member_protocol::{
+    Action, Deadlines, Finished, MemberFault, WaitingFor, ALIVE_CHECK, WAIT_SLICE,
+};
+
+/// How the loop moves a timing's messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Wiring {
+    /// Read every clock message, oldest first (loss notices must not be skipped), rather than
+    /// only the newest.
+    pub every_clock_message: bool,
+    /// Send each state as it is published: its readers look by their own clock, not because
+    /// a neighbour woke them.
+    pub flush_each_publish: bool,
+    /// Meet the end of a wait to a fraction of a period (a tick's instant), not to the
+    /// transport's coarser timeout.
+    pub fine_waits: bool,
 }
 
-impl Default for Deadlines {
-    fn default() -> Self {
-        Deadlines {
-            join: Duration::from_secs(300),
-            silence: Duration::from_secs(10),
-        }
+/// What paces a member and what its links deliver: the part of the protocol in which lockstep
+/// and real time differ. The core hands each event on once it has done what both do alike.
+pub trait Timing<V: Vehicle> {
+    /// How the loop moves this timing's messages.
+    const WIRING: Wiring;
+
+    /// A clock message of this member's scenario, before the core looks for a stop: a grant, a
+    /// start, a loss notice. `now` is this member's clock, `unix_now_ns` the system clock.
+    fn on_clock(
+        &mut self,
+        m: &mut Shared<V>,
+        c: &ClockMsg,
+        clocks: (Duration, u64),
+    ) -> Result<(), MemberFault>;
+
+    /// An in-neighbour's state of this scenario (`slot` in the order of its law).
+    fn on_neighbor(&mut self, m: &mut Shared<V>, slot: usize, msg: &StateMsg);
+
+    /// A state of a member that is not an in-neighbour (yet).
+    fn on_stranger(&mut self, m: &mut Shared<V>, msg: &StateMsg) {
+        let _ = (m, msg);
+    }
+
+    /// The next action at `now`, once no fault is pending.
+    fn poll(&mut self, m: &mut Shared<V>, now: Duration) -> Action;
+
+    /// What the member publishes when the stop arrives (its pacing figures), if anything; the
+    /// loop then keeps it readable until the orchestrator's second stop.
+    fn final_report(&self, m: &Shared<V>) -> Option<StateMsg> {
+        let _ = m;
+        None
     }
 }
 
-/// The longest single wait of a member: it only bounds how late the deadlines and the
-/// orchestrator check run (every wake-up that matters is a notification). Short slices cost:
-/// 1000 members polling every 50 ms took a tenth of a core at start-up.
-pub const WAIT_SLICE: Duration = Duration::from_millis(250);
-
-/// How often a waiting member asks whether the orchestrator still lives.
-pub const ALIVE_CHECK: Duration = Duration::from_millis(500);
-
-/// How a member ended normally: the orchestrator stopped the team.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Finished {
-    /// The last tick published.
-    pub tick: u64,
-    /// The orchestrator's stop reason code.
-    pub reason: u32,
+/// The member's state both timings share.
+#[derive(Debug)]
+pub struct Shared<V> {
+    pub(crate) id: u32,
+    pub(crate) hash: u64,
+    /// The last tick of the plan.
+    pub(crate) last: u64,
+    pub(crate) vehicle: V,
+    pub(crate) deadlines: Deadlines,
+    /// The in-neighbours in the order of the law's weights (itself, for a leader).
+    pub(crate) neighbor_ids: [u32; 3],
+    pub(crate) is_follower: bool,
+    /// The tick this member computes (lockstep) or flies (real time) next.
+    pub(crate) tick: u64,
+    pub(crate) published: Option<u64>,
+    /// Readers not yet woken since something was published or passed on.
+    pub(crate) unnotified: bool,
+    pub(crate) watch: Watch,
 }
 
-/// What a member was waiting for when it gave up.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum WaitingFor {
-    /// The first grant.
-    Start,
-    /// A grant of this tick.
-    Grant(u64),
-    /// These in-neighbours' states of this tick.
-    States { tick: u64, missing: Vec<u32> },
-    /// The orchestrator's stop after the last tick (real time).
-    Stop,
-}
-
-impl fmt::Display for WaitingFor {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            WaitingFor::Start => f.write_str("the team to start"),
-            WaitingFor::Grant(t) => write!(f, "a grant of tick {t}"),
-            WaitingFor::Stop => f.write_str("the stop after the last tick"),
-            WaitingFor::States { tick, missing } => {
-                write!(f, "tick-{tick} states of in-neighbours {missing:?}")
-            }
-        }
+impl<V: Vehicle> Shared<V> {
+    /// Publishes this tick's state (once).
+    pub(crate) fn publish_tick(&mut self) -> Action {
+        let tick = self.tick;
+        self.published = Some(tick);
+        let state = self.vehicle.state();
+        Action::Publish(StateMsg::ok(tick, self.hash, self.id, state))
     }
-}
 
-/// Why a member stops flying (the protocol's faults; the loop adds transport errors).
-#[derive(Debug, Clone, PartialEq)]
-pub enum MemberFault {
-    /// The clock carried another scenario's hash.
-    ScenarioMismatch { mine: u64, team: u64 },
-    /// The orchestrator is gone.
-    OrchestratorLost { tick: u64 },
-    /// The team flies in the other mode (lockstep or real time) than this member.
-    ModeMismatch { member_realtime: bool },
-    /// Nothing happened for `waited`.
-    Silent {
-        tick: u64,
-        waited: Duration,
-        waiting_for: WaitingFor,
-    },
-    /// This member's own tick failed.
-    Step { tick: u64, fault: StepFault },
-    /// This member's real vehicle failed (lost, never heard, refused to arm).
-    Vehicle { tick: u64, what: String },
-    /// An in-neighbour sent a state of another scenario.
-    ForeignState {
-        tick: u64,
-        peer: u32,
-        peer_tick: u64,
-    },
-    /// An in-neighbour's states skipped from `tick` to `later` (samples were lost).
-    TickGap { tick: u64, peer: u32, later: u64 },
-    /// Real time: an in-neighbour's newest state was `age` old at this member's tick (older
-    /// than the bound); the member reported it and holds.
-    NeighborStale { tick: u64, peer: u32, age: Duration },
-    /// A loss notice this member cannot follow (missed, too late, or about itself).
-    Loss(LossFault),
-    /// The vehicle or the transport cannot switch to a repaired link.
-    RepairUnsupported { tick: u64 },
-}
+    /// A fault that is reported to the team (this member's state flagged with `code`).
+    pub(crate) fn fail(&self, code: FaultCode, peer: u32, fault: MemberFault) -> Action {
+        let state = self.vehicle.state();
+        report_fault((self.id, self.hash, self.tick), state, (code, peer), fault)
+    }
 
-/// What the loop must do next.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Action {
-    /// Publish this state without waking its readers yet (notify on block).
-    Publish(StateMsg),
-    /// Wake the readers, then read the inputs again before sleeping (they may answer at once).
-    NotifyReaders,
-    /// Ask whether the orchestrator lives and tell [`MemberCore::on_orchestrator_alive`].
-    CheckOrchestrator,
-    /// Read the inputs again without sleeping (the member progressed).
-    Poll,
-    /// Sleep until woken or this long passes, then read the inputs again.
-    Wait(Duration),
-    /// Open ports for a repaired graph, or hand new readers their missed states
-    /// ([`LossWork`]), then poll again.
-    Repair(LossWork),
-    /// Stop: publish `report` (a fault notice) if any, linger for the stop, then exit.
-    Fail {
-        report: Option<StateMsg>,
-        fault: MemberFault,
-    },
-}
+    /// The report of a failed tick `tick`.
+    pub(crate) fn vehicle_failed(&self, tick: u64, fault: VehicleFault) -> Action {
+        let (code, peer, fault) = report_of(tick, fault);
+        self.fail(code, peer, fault)
+    }
 
-/// One member's protocol state.
-#[derive(Debug)]
-pub struct MemberCore<V, C> {
-    id: u32,
-    hash: u64,
-    last: u64,
-    vehicle: V,
-    clock: C,
-    deadlines: Deadlines,
-    neighbor_ids: [u32; 3],
-    is_follower: bool,
-    rest: Flat,
-    tick: u64,
-    published: Option<u64>,
-    inbox: [Inbox; 3],
-    last_progress: Duration,
-    progress: bool,
-    unnotified: bool,
-    watch: Watch,
-    /// Loss notices and repairs (`None`: a loss notice is a fault).
-    losses: Option<Box<MemberLosses>>,
-    links: Links,
-}
-
-/// A member's side of the link model: perfect links unless [`MemberCore::with_links`] said
-/// otherwise.
-#[derive(Debug)]
-struct Links {
-    model: LinkModel,
-    /// The newest state heard of each in-neighbour (link.rs).
-    held: [Heard; 3],
-    dt_s: Real,
-    neighbor_model: NeighborModel,
-}
-
-impl<V: Vehicle, C: TickClock> MemberCore<V, C> {
-    /// `member` of the scenario with content hash `hash` and last tick `last`, flying `vehicle`
-    /// paced by `clock`; `now` starts the deadlines.
-    pub fn new(
-        member: &Member,
-        hash: u64,
-        last: u64,
-        parts: (V, C),
-        deadlines: Deadlines,
+    /// Nothing to do now: ask about the orchestrator every [`ALIVE_CHECK`], wake the readers
+    /// held back, else sleep at most a slice, and not past `deadline` or `until` (the next
+    /// tick's instant). `None` once `deadline` has passed: the member gives up
+    /// ([`Self::silent`]).
+    pub(crate) fn idle(
+        &mut self,
         now: Duration,
+        deadline: Option<Duration>,
+        until: Option<Duration>,
+    ) -> Option<Action> {
+        if self.watch.check_due(now) {
+            return Some(Action::CheckOrchestrator);
+        }
+        if deadline.is_some_and(|d| now >= d) {
+            return None;
+        }
+        if std::mem::take(&mut self.unnotified) {
+            return Some(Action::NotifyReaders);
+        }
+        let mut slice = WAIT_SLICE;
+        for t in [deadline, until].into_iter().flatten() {
+            slice = slice.min(t.saturating_sub(now));
+        }
+        Some(Action::Wait(slice))
+    }
+
+    /// Gives up after `waited` without what it was `waiting_for` (unreported: the team knows).
+    pub(crate) fn silent(&self, waited: Duration, waiting_for: WaitingFor) -> Action {
+        let fault = MemberFault::Silent {
+            tick: self.tick,
+            waited,
+            waiting_for,
+        };
+        Action::Fail {
+            report: None,
+            fault,
+        }
+    }
+}
+
+/// One member's protocol state, paced by `T` (lockstep or real time).
+#[derive(Debug)]
+pub struct MemberCore<V, T> {
+    pub(crate) m: Shared<V>,
+    pub(crate) timing: T,
+}
+
+impl<V, T> MemberCore<V, T> {
+    /// `member` of the scenario with content hash `hash` and last tick `last`, flying
+    /// `vehicle` with `timing`.
+    pub(crate) fn with_timing(
+        member: &Member,
+        (hash, last): (u64, u64),
+        vehicle: V,
+        deadlines: Deadlines,
+        (timing, now): (T, Duration),
     ) -> Self {
         let (law, neighbor_ids) = law_for(member);
-        let is_follower = matches!(law, Law::Follower { .. });
-        Self {
+        let m = Shared {
             id: member.id,
             hash,
             last,
-            vehicle: parts.0,
-            clock: parts.1,
+            vehicle,
             deadlines,
             neighbor_ids,
-            is_follower,
-            rest: Flat::rest(member.position),
+            is_follower: matches!(law, Law::Follower { .. }),
             tick: 0,
             published: None,
-            inbox: Default::default(),
-            last_progress: now,
-            progress: false,
             unnotified: false,
             watch: Watch::new(now),
-            losses: None,
-            links: Links {
-                model: LinkModel::perfect(1.0),
-                held: [Heard {
-                    tick: 0,
-                    flat: Flat::rest(member.position),
-                }; 3],
-                dt_s: 1.0,
-                neighbor_model: NeighborModel::default(),
-            },
-        }
-    }
-
-    /// Fly over the imperfect links of `model` with ticks of `cfg`: `starts` are the
-    /// in-neighbours' tick-0 states (in the order of [`law_for`]), known before anything arrives.
-    pub fn with_links(mut self, model: LinkModel, cfg: &StepConfig, starts: [Flat; 3]) -> Self {
-        self.links = Links {
-            model,
-            held: starts.map(|flat| Heard { tick: 0, flat }),
-            dt_s: cfg.dt_s,
-            neighbor_model: cfg.neighbor_model,
         };
-        self
+        Self { m, timing }
     }
 
-    /// The same core, following the orchestrator's loss notices with `losses` (repair in
-    /// flight); without it a notice is a fault.
-    pub fn with_losses(mut self, losses: MemberLosses) -> Self {
-        self.losses = Some(Box::new(losses));
-        self
+    /// This member's id.
+    pub fn id(&self) -> u32 {
+        self.m.id
     }
 
-    /// The tick this member computes next (its last published one once it has published).
+    /// The scenario's content hash.
+    pub fn hash(&self) -> u64 {
+        self.m.hash
+    }
+
+    /// The tick this member computes or flies next (its last published one once it has
+    /// published, in lockstep).
     pub fn tick(&self) -> u64 {
-        self.tick
+        self.m.tick
     }
 
     /// The vehicle flown.
     pub fn vehicle(&self) -> &V {
-        &self.vehicle
+        &self.m.vehicle
     }
+}
 
-    /// The in-neighbours of `member` in the order of its weights (itself, for a leader): the
-    /// order of [`Self::with_links`]'s `starts`.
-    pub fn in_neighbors(member: &Member) -> [u32; 3] {
-        law_for(member).1
-    }
-
-    /// The in-neighbours `member` subscribes to (sorted), empty for a leader.
-    pub fn subscriptions(member: &Member) -> Vec<u32> {
-        let mut ins = match law_for(member) {
-            (Law::Follower { .. }, ids) => ids.to_vec(),
-            _ => Vec::new(),
-        };
-        ins.sort_unstable();
-        ins
-    }
-
-    /// A clock message: a grant (may allow more ticks) or a stop (the member is finished).
-    pub fn on_clock(&mut self, c: &ClockMsg) -> Result<Option<Finished>, MemberFault> {
-        if c.scenario_hash != self.hash {
+impl<V: Vehicle, T: Timing<V>> MemberCore<V, T> {
+    /// A clock message (read while this member's clock reads `now` and the system clock
+    /// `unix_now_ns`): a grant or a start (may allow more ticks) or a stop (the member is
+    /// finished).
+    pub fn on_clock(
+        &mut self,
+        c: &ClockMsg,
+        now: Duration,
+        unix_now_ns: u64,
+    ) -> Result<Option<Finished>, MemberFault> {
+        if c.scenario_hash != self.m.hash {
             return Err(MemberFault::ScenarioMismatch {
-                mine: self.hash,
+                mine: self.m.hash,
                 team: c.scenario_hash,
             });
         }
-        // Pass it on: the readers are woken before this member sleeps (or, at a stop, exits),
-        // so a clock message the orchestrator sent only to the team's roots reaches everyone
-        // (relayed wake-ups, cdm-iox `TeamLayout::with_relayed_wakes`).
-        self.unnotified = true;
-        if let Some(n) = c.loss() {
-            let taken = match self.losses.as_mut() {
-                Some(l) => l.on_notice(n, self.tick).map_err(MemberFault::Loss),
-                None => Err(MemberFault::RepairUnsupported { tick: self.tick }),
-            };
-            if let Err(fault) = taken {
-                self.watch.defer(Action::Fail {
-                    report: None,
-                    fault,
-                });
-            }
-            self.progress = true;
-        }
+        self.timing.on_clock(&mut self.m, c, (now, unix_now_ns))?;
         match c.command() {
-            ClockCommand::Run => {
-                self.progress |= self.clock.on_grant(c.grant_tick);
-                Ok(None)
-            }
-            // A real-time team: this member was started without --realtime.
-            ClockCommand::Realtime { .. } => Err(MemberFault::ModeMismatch {
-                member_realtime: false,
-            }),
-            // Only a real-time team of MAVLink vehicles is armed; the model has nothing to arm.
-            ClockCommand::Arm => Ok(None),
             ClockCommand::Stop(_) => Ok(Some(Finished {
-                tick: self.tick,
+                tick: self.m.tick,
                 reason: c.reason,
             })),
+            // A MAVLink member answers the arm order before its core runs (cdm-mavlink
+            // `team_arm`); the model has nothing to arm. Grants and starts are the timing's.
+            ClockCommand::Arm | ClockCommand::Run | ClockCommand::Realtime { .. } => Ok(None),
         }
     }
 
-    /// A state from the transport: kept when it is an in-neighbour's state of a tick still
-    /// needed. A neighbour's fault notice is not a state: the orchestrator stops the team once
-    /// every tick before the fault is complete (as the engine would have flown them).
+    /// A state from the transport. A neighbour's fault notice is not a state: the orchestrator
+    /// stops the team once every tick before the fault is complete (as the engine would have
+    /// flown them). A state of another scenario is a fault reported to the team.
     pub fn on_neighbor(&mut self, msg: &StateMsg) {
-        let Some(slot) = self.neighbor_ids.iter().position(|n| *n == msg.id) else {
-            // A repair's future in-neighbour: kept until its link applies.
-            let tick = self.tick;
-            if let Some(l) = self
-                .losses
-                .as_mut()
-                .filter(|l| l.is_future_neighbor(msg.id, tick))
-            {
-                if msg.status() == AgentStatus::Ok && msg.scenario_hash == self.hash {
-                    l.keep(msg.id, msg.tick, QuadState(msg.state).flat());
-                    self.progress = true;
-                }
-            }
+        let Some(slot) = self.m.neighbor_ids.iter().position(|n| *n == msg.id) else {
+            self.timing.on_stranger(&mut self.m, msg);
             return;
         };
         if msg.status() != AgentStatus::Ok {
             return;
         }
-        if msg.scenario_hash != self.hash && !self.watch.is_pending() {
+        if msg.scenario_hash != self.m.hash && !self.m.watch.is_pending() {
             let fault = MemberFault::ForeignState {
-                tick: self.tick,
+                tick: self.m.tick,
                 peer: msg.id,
                 peer_tick: msg.tick,
             };
-            self.watch
-                .defer(self.fail(FaultCode::NeighborFault, msg.id, fault));
+            let fail = self.m.fail(FaultCode::NeighborFault, msg.id, fault);
+            self.m.watch.defer(fail);
+            return;
         }
-        if msg.tick >= self.links.model.oldest_candidate(self.tick) {
-            self.inbox[slot].insert(msg.tick, QuadState(msg.state).flat());
-            self.progress = true;
-        }
+        self.timing.on_neighbor(&mut self.m, slot, msg);
     }
 
     /// The answer to [`Action::CheckOrchestrator`].
     pub fn on_orchestrator_alive(&mut self, alive: bool) {
-        self.watch.orchestrator_alive(alive, self.tick);
+        self.m.watch.orchestrator_alive(alive, self.m.tick);
     }
 
-    /// The next action at time `now`. Call it until it returns [`Action::Poll`],
-    /// [`Action::NotifyReaders`] or [`Action::Wait`] (then read the inputs) or [`Action::Fail`].
+    /// The next action at time `now` (this member's monotonic clock). Call it until it returns
+    /// [`Action::Poll`], [`Action::NotifyReaders`] or [`Action::Wait`] (then read the inputs)
+    /// or [`Action::Fail`].
     pub fn poll(&mut self, now: Duration) -> Action {
-        if let Some(a) = self.watch.take() {
+        if let Some(a) = self.m.watch.take() {
             return a;
         }
-        if let Some(w) = self.losses.as_mut().and_then(|l| l.next_work()) {
-            return Action::Repair(w);
-        }
-        if let Some(a) = self.advance() {
-            return a;
-        }
-        if std::mem::take(&mut self.progress) {
-            self.last_progress = now;
-            return Action::Poll;
-        }
-        let idle = now.saturating_sub(self.last_progress);
-        if self.watch.check_due(now) {
-            return Action::CheckOrchestrator;
-        }
-        let limit = if self.clock.allowed().is_none() {
-            self.deadlines.join
-        } else {
-            self.deadlines.silence
-        };
-        if idle >= limit {
-            let fault = MemberFault::Silent {
-                tick: self.tick,
-                waited: idle,
-                waiting_for: self.waiting_for(),
-            };
-            return Action::Fail {
-                report: None,
-                fault,
-            };
-        }
-        if std::mem::take(&mut self.unnotified) {
-            return Action::NotifyReaders;
-        }
-        Action::Wait(WAIT_SLICE.min(limit - idle))
+        self.timing.poll(&mut self.m, now)
     }
 
-    /// One step of "advance as far as grants and neighbour data allow": a state to publish, a
-    /// fault, or `None` when blocked (several ticks per wake-up, one action per call).
-    fn advance(&mut self) -> Option<Action> {
-        while let Some(g) = self.clock.allowed() {
-            let tick = self.tick;
-            if self.published != Some(tick) && g >= tick {
-                self.published = Some(tick);
-                self.unnotified = true;
-                self.progress = true;
-                return Some(Action::Publish(StateMsg::ok(
-                    tick,
-                    self.hash,
-                    self.id,
-                    self.vehicle.state(),
-                )));
-            }
-            if self.published != Some(tick) || tick >= self.last || g < tick + 1 {
-                return None;
-            }
-            if self.losses.as_ref().is_some_and(|l| l.waits_at(tick)) {
-                return None;
-            }
-            if let Some(a) = self.relink_if_due(tick) {
-                return Some(a);
-            }
-            let flats = match self.neighbor_flats() {
-                Ok(Some(f)) => f,
-                Ok(None) => return None,
-                Err((peer, later)) => {
-                    let fault = MemberFault::TickGap { tick, peer, later };
-                    return Some(self.fail(FaultCode::TickGap, peer, fault));
-                }
-            };
-            if let Err(fault) = self.vehicle.fly_tick(tick, &flats) {
-                return Some(self.vehicle_failed(tick, fault));
-            }
-            self.tick += 1;
-            let oldest = self.links.model.oldest_candidate(self.tick);
-            for b in self.inbox.iter_mut() {
-                b.drop_before(oldest);
-            }
-            self.progress = true;
-        }
-        None
+    /// What to publish when the stop arrives, if anything ([`Timing::final_report`]).
+    pub fn final_report(&self) -> Option<StateMsg> {
+        self.timing.final_report(&self.m)
     }
+}
 
-    /// A repaired link that applies from `tick` (a loss notice's tick): the vehicle flies it
-    /// and the in-neighbours' states come from the new neighbours, from this tick's step on.
-    fn relink_if_due(&mut self, tick: u64) -> Option<Action> {
-        let m = self.losses.as_mut()?.due(tick)?;
-        if self.vehicle.relink(&m).is_err() {
-            let fault = MemberFault::RepairUnsupported { tick };
-            return Some(Action::Fail {
-                report: None,
-                fault,
-            });
-        }
-        let (law, ids) = law_for(&m);
-        self.is_follower = matches!(law, Law::Follower { .. });
-        let mut old = std::mem::take(&mut self.inbox);
-        // A neighbour dropped here may come back at this very tick (a later notice of the same
-        // tick, `MemberLosses::due`): its states are kept, not thrown away.
-        if let Some(l) = self.losses.as_mut() {
-            for (k, id) in self.neighbor_ids.iter().enumerate() {
-                if !ids.contains(id) && l.is_future_neighbor(*id, tick) {
-                    l.keep_all(*id, std::mem::take(&mut old[k]));
-                }
-            }
-        }
-        for (slot, id) in ids.iter().enumerate() {
-            let kept = match self.neighbor_ids.iter().position(|j| j == id) {
-                Some(k) => std::mem::take(&mut old[k]),
-                None => self
-                    .losses
-                    .as_mut()
-                    .map(|l| l.take_kept(*id))
-                    .unwrap_or_default(),
-            };
-            self.inbox[slot] = kept;
-            // Over delayed links the states of a few ticks back are still candidates.
-            self.inbox[slot].drop_before(self.links.model.oldest_candidate(tick));
-            if *id != self.neighbor_ids[slot] {
-                // As the engine: a new neighbour in a slot is known where it started until
-                // its states arrive (`Engine::apply_repair`).
-                let start = self.losses.as_ref().and_then(|l| l.start_of(*id));
-                self.links.held[slot] = Heard {
-                    tick: 0,
-                    flat: Flat::rest(start.unwrap_or(self.rest.r)),
-                };
-            }
-        }
-        self.neighbor_ids = ids;
-        tracing::info!(id = self.id, tick, in_neighbors = ?ids, "flying the repaired link");
-        None
-    }
+/// The in-neighbours of `member` in the order of its weights (itself, for a leader): the order
+/// of a lockstep core's `with_links` starts and of a real-time core's neighbour positions.
+pub fn in_neighbors(member: &Member) -> [u32; 3] {
+    law_for(member).1
+}
 
-    /// The in-neighbours' states of this tick; `None` while one is missing; `Err((peer, later))`
-    /// when a later tick of `peer` arrived without this one (a sample was lost).
-    fn neighbor_flats(&mut self) -> Result<Option<[Flat; 3]>, (u32, u64)> {
-        let mut flats = [self.rest; 3];
-        if !self.is_follower {
-            return Ok(Some(flats));
-        }
-        if !self.links.model.is_perfect() {
-            return self.heard_flats();
-        }
-        let tick = self.tick;
-        let mut ready = true;
-        for (slot, f) in flats.iter_mut().enumerate() {
-            match self.inbox[slot].get(tick) {
-                Some(v) => *f = *v,
-                None => {
-                    if let Some(later) = self.inbox[slot].first_tick().filter(|&l| l > tick) {
-                        return Err((self.neighbor_ids[slot], later));
-                    }
-                    ready = false;
-                }
-            }
-        }
-        Ok(ready.then_some(flats))
-    }
-
-    /// The report of a failed [`Vehicle::fly_tick`].
-    fn vehicle_failed(&self, tick: u64, fault: VehicleFault) -> Action {
-        let (code, peer, fault) = report_of(tick, fault);
-        self.fail(code, peer, fault)
-    }
-
-    /// [`Self::neighbor_flats`] over imperfect links: once every state that may be usable at
-    /// this tick is in (the one of tick `needed`, and in order those before it), the newest
-    /// delivered state of each in-neighbour, brought to this tick.
-    fn heard_flats(&mut self) -> Result<Option<[Flat; 3]>, (u32, u64)> {
-        let tick = self.tick;
-        let l = &mut self.links;
-        let need = l.model.needed(tick);
-        if let Some(n) = need {
-            let mut ready = true;
-            for (slot, b) in self.inbox.iter().enumerate() {
-                if b.get(n).is_none() {
-                    if let Some(later) = b.last_tick().filter(|&l| l > n) {
-                        return Err((self.neighbor_ids[slot], later));
-                    }
-                    ready = false;
-                }
-            }
-            if !ready {
-                return Ok(None);
-            }
-        }
-        let inbox = &self.inbox;
-        let candidates = |slot: usize| {
-            let arrived = need.map(|n| inbox[slot].upto(n));
-            arrived
-                .into_iter()
-                .flatten()
-                .map(|(tick, flat)| Heard { tick, flat })
-        };
-        let (to, from) = (self.id, &self.neighbor_ids);
-        let (dt, nm) = (l.dt_s, l.neighbor_model);
-        Ok(Some(l.model.hear(
-            to,
-            from,
-            tick,
-            &mut l.held,
-            candidates,
-            dt,
-            nm,
-        )))
-    }
-
-    /// A fault that is reported to the team (this member's state flagged with `code`).
-    fn fail(&self, code: FaultCode, peer: u32, fault: MemberFault) -> Action {
-        let state = self.vehicle.state();
-        report_fault((self.id, self.hash, self.tick), state, (code, peer), fault)
-    }
-
-    fn waiting_for(&self) -> WaitingFor {
-        let tick = self.tick;
-        match self.clock.allowed() {
-            None => WaitingFor::Start,
-            Some(g) if g < tick + 1 || self.published != Some(tick) => WaitingFor::Grant(tick + 1),
-            Some(_) => {
-                // Over delayed links tick k waits for the states of tick k - min delay.
-                let need = self.links.model.needed(tick).unwrap_or(0);
-                WaitingFor::States {
-                    tick: need,
-                    missing: (0..3)
-                        .filter(|&k| self.inbox[k].get(need).is_none())
-                        .map(|k| self.neighbor_ids[k])
-                        .collect(),
-                }
-            }
-        }
-    }
+/// The in-neighbours `member` subscribes to (sorted), empty for a leader.
+pub fn subscriptions(member: &Member) -> Vec<u32> {
+    let mut ins = match law_for(member) {
+        (Law::Follower { .. }, ids) => ids.to_vec(),
+        _ => Vec::new(),
+    };
+    ins.sort_unstable();
+    ins
 }
 
 /// How a failed tick is reported (lockstep and real time alike): the wire code, the peer it is
@@ -612,7 +317,3 @@ pub(crate) fn report_of(tick: u64, fault: VehicleFault) -> (FaultCode, u32, Memb
         ),
     }
 }
-
-#[cfg(test)]
-#[path = "member_core_tests.rs"]
-mod tests;

@@ -10,9 +10,11 @@ use cdm_core::formation::{Link, Member, Role};
 use cdm_core::math::{Vec2, Vec3};
 
 use super::*;
+use crate::member_core::{Finished, ALIVE_CHECK};
 use crate::member_loop::{fly, LoopError};
 use crate::messages::{StopReason, STATUS_FAULT};
-use crate::seams::{Clock, LockstepClock, MemberTransport};
+use crate::seams::{Clock, MemberTransport, VehicleFault};
+use cdm_core::step::StepFault;
 
 const HASH: u64 = 0xc0ffee;
 const LAST: u64 = 100;
@@ -64,7 +66,7 @@ fn member(role: Role) -> Member {
     }
 }
 
-fn core(role: Role, fail_at: Option<u64>) -> MemberCore<Still, LockstepClock> {
+fn core(role: Role, fail_at: Option<u64>) -> LockstepCore<Still> {
     let v = Still {
         ticks: 0,
         fail_at,
@@ -81,16 +83,18 @@ fn core(role: Role, fail_at: Option<u64>) -> MemberCore<Still, LockstepClock> {
     )
 }
 
+/// A clock message as the loop hands it on (lockstep reads neither clock).
+fn on_clock(c: &mut LockstepCore<Still>, m: &ClockMsg) -> Result<Option<Finished>, MemberFault> {
+    c.on_clock(m, Duration::ZERO, 0)
+}
+
 fn state(id: u32, tick: u64) -> StateMsg {
     StateMsg::ok(tick, HASH, id, [0.0; 12])
 }
 
 /// Polls until the core blocks (a wait or a fail), answering orchestrator checks with `alive`;
 /// returns the ticks published and the blocking action.
-fn run_until_blocked(
-    c: &mut MemberCore<Still, LockstepClock>,
-    now: Duration,
-) -> (Vec<u64>, Action) {
+fn run_until_blocked(c: &mut LockstepCore<Still>, now: Duration) -> (Vec<u64>, Action) {
     let mut published = Vec::new();
     loop {
         match c.poll(now) {
@@ -115,7 +119,7 @@ fn grant_window_bounds_what_a_member_publishes_and_computes() {
     let (published, a) = run_until_blocked(&mut c, Duration::ZERO);
     assert!(published.is_empty(), "published before any grant");
     assert!(matches!(a, Action::Wait(_)), "{a:?}");
-    c.on_clock(&ClockMsg::run(2, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(2, HASH)).unwrap();
     let (published, a) = run_until_blocked(&mut c, Duration::ZERO);
     assert_eq!(published, [0, 1, 2], "a leader runs up to the grant");
     assert_eq!(
@@ -125,19 +129,19 @@ fn grant_window_bounds_what_a_member_publishes_and_computes() {
     );
     assert!(matches!(a, Action::Wait(_)), "{a:?}");
     // A stale grant changes nothing; a larger one lets it go on.
-    c.on_clock(&ClockMsg::run(1, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(1, HASH)).unwrap();
     assert_eq!(
         run_until_blocked(&mut c, Duration::ZERO).0,
         Vec::<u64>::new()
     );
-    c.on_clock(&ClockMsg::run(4, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(4, HASH)).unwrap();
     assert_eq!(run_until_blocked(&mut c, Duration::ZERO).0, [3, 4]);
 }
 
 #[test]
 fn follower_waits_for_all_three_neighbours() {
     let mut c = core(Role::Follower, None);
-    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(5, HASH)).unwrap();
     assert_eq!(run_until_blocked(&mut c, Duration::ZERO).0, [0]);
     c.on_neighbor(&state(1, 0));
     c.on_neighbor(&state(2, 0));
@@ -153,7 +157,7 @@ fn follower_waits_for_all_three_neighbours() {
 #[test]
 fn tick_gap_is_reported_naming_the_neighbour() {
     let mut c = core(Role::Follower, None);
-    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(5, HASH)).unwrap();
     run_until_blocked(&mut c, Duration::ZERO);
     c.on_neighbor(&state(1, 0));
     c.on_neighbor(&state(2, 0));
@@ -181,7 +185,7 @@ fn tick_gap_is_reported_naming_the_neighbour() {
 #[test]
 fn silent_neighbour_ends_the_member_after_the_silence_deadline() {
     let mut c = core(Role::Follower, None);
-    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(5, HASH)).unwrap();
     c.on_neighbor(&state(1, 0));
     c.on_neighbor(&state(3, 0));
     let (_, a) = run_until_blocked(&mut c, Duration::ZERO);
@@ -222,7 +226,7 @@ fn silent_neighbour_ends_the_member_after_the_silence_deadline() {
 #[test]
 fn neighbour_fault_notice_is_not_a_state_and_a_foreign_state_is_a_fault() {
     let mut c = core(Role::Follower, None);
-    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(5, HASH)).unwrap();
     run_until_blocked(&mut c, Duration::ZERO);
     let notice = state(1, 0).with_status(AgentStatus::Fault {
         code: FaultCode::Control,
@@ -239,14 +243,13 @@ fn neighbour_fault_notice_is_not_a_state_and_a_foreign_state_is_a_fault() {
     assert!(matches!(a, Action::Wait(_)), "{a:?}");
     // The orchestrator then stops the team: a normal end.
     let stop = ClockMsg::stop(5, HASH, StopReason::AgentFault);
-    let done = c
-        .on_clock(&stop)
+    let done = on_clock(&mut c, &stop)
         .unwrap()
         .expect("a stop finishes the member");
     assert_eq!(done.reason, StopReason::AgentFault.code());
 
     let mut c = core(Role::Follower, None);
-    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(5, HASH)).unwrap();
     c.on_neighbor(&StateMsg::ok(0, HASH + 1, 2, [0.0; 12]));
     let (_, a) = run_until_blocked(&mut c, Duration::ZERO);
     let (report, fault) = fault_of(&a);
@@ -288,7 +291,7 @@ fn lost_orchestrator_is_noticed_at_the_next_check() {
 #[test]
 fn join_is_refused_for_another_scenario_and_ends_after_the_join_deadline() {
     let mut c = core(Role::Follower, None);
-    let err = c.on_clock(&ClockMsg::run(3, HASH ^ 1)).unwrap_err();
+    let err = on_clock(&mut c, &ClockMsg::run(3, HASH ^ 1)).unwrap_err();
     assert_eq!(
         err,
         MemberFault::ScenarioMismatch {
@@ -312,7 +315,7 @@ fn join_is_refused_for_another_scenario_and_ends_after_the_join_deadline() {
 #[test]
 fn own_step_fault_is_reported_with_the_state_before_it() {
     let mut c = core(Role::Primary, Some(1));
-    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(5, HASH)).unwrap();
     let (published, a) = run_until_blocked(&mut c, Duration::ZERO);
     assert_eq!(published, [0, 1]);
     let (report, fault) = fault_of(&a);
@@ -341,7 +344,7 @@ fn a_lost_vehicle_is_reported_as_such_with_the_state_before_it() {
     let parts = (v, LockstepClock::default());
     let me = member(Role::Primary);
     let mut c = MemberCore::new(&me, HASH, LAST, parts, Deadlines::default(), Duration::ZERO);
-    c.on_clock(&ClockMsg::run(5, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(5, HASH)).unwrap();
     let (published, a) = run_until_blocked(&mut c, Duration::ZERO);
     assert_eq!(published, [0, 1, 2]);
     let (report, fault) = fault_of(&a);
@@ -460,7 +463,7 @@ fn delayed_links_wait_only_for_the_states_usable_at_the_tick() {
     };
     let start = Flat::rest(Vec3::zeros());
     let mut c = core(Role::Follower, None).with_links(LinkModel::new(spec, 0.01), &cfg, [start; 3]);
-    c.on_clock(&ClockMsg::run(10, HASH)).unwrap();
+    on_clock(&mut c, &ClockMsg::run(10, HASH)).unwrap();
     let (published, a) = run_until_blocked(&mut c, Duration::ZERO);
     assert_eq!(
         published,

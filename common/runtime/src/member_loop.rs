@@ -1,15 +1,18 @@
-//! The loop around a [`MemberCore`]: it only moves messages between the core and a transport,
-//! reads the clock, and sleeps. Generic over the transport, the vehicle and both clocks, so the
-//! hot path has no dynamic dispatch.
+//! The loop around a [`MemberCore`], in lockstep and in real time: it only moves messages
+//! between the core and a transport, reads the clocks, and sleeps; every decision is the
+//! core's, and how messages move is what the core's [`Timing`] says
+//! ([`Wiring`](crate::member_core::Wiring)). Generic over the transport, the vehicle, the
+//! timing and the clock, so the hot path has no dynamic dispatch.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crate::fault_inject::Injection;
-use crate::member_core::{Action, Finished, MemberCore, MemberFault, ALIVE_CHECK};
+use crate::member_core::{Action, Finished, MemberCore, MemberFault, Timing, ALIVE_CHECK};
 use crate::member_loss::LossWork;
 use crate::messages::{ClockCommand, StateMsg};
-use crate::seams::{Clock, MemberTransport, TickClock, Vehicle};
+use crate::realtime_loop::{pause, unix_now_ns};
+use crate::seams::{Clock, MemberTransport, Vehicle};
 
 /// Why the loop stopped without the orchestrator's stop.
 #[derive(Debug)]
@@ -23,9 +26,13 @@ pub enum LoopError<E> {
 }
 
 /// Flies `core` over `transport` until the orchestrator stops the team, a fault, or a signal.
-/// `inject` (tests only) alters a state just before it is published.
-pub fn fly<T, V, C, K>(
-    core: &mut MemberCore<V, C>,
+/// `inject` (tests only) alters a state just before it is published. At the stop a member with
+/// a final report (real time: its pacing figures) publishes it and waits (at most [`LINGER`])
+/// for the orchestrator's second stop or its end, which come once the orchestrator has read
+/// it. After a reported fault the member holds (flies no further tick) and keeps its ports
+/// open until the stop.
+pub fn fly<T, V, P, K>(
+    core: &mut MemberCore<V, P>,
     transport: &mut T,
     clock: &K,
     interrupted: &AtomicBool,
@@ -34,24 +41,26 @@ pub fn fly<T, V, C, K>(
 where
     T: MemberTransport,
     V: Vehicle,
-    C: TickClock,
+    P: Timing<V>,
     K: Clock,
 {
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return Err(LoopError::Interrupted { tick: core.tick() });
         }
-        let mut outcome = Ok(None);
-        transport
-            .receive_clock(|c| {
-                if matches!(outcome, Ok(None)) {
-                    outcome = core.on_clock(&c);
+        if let Some(done) = read_clock(core, transport, clock)? {
+            match core.final_report() {
+                // Kept readable until the orchestrator's second stop (a publisher's unread
+                // samples die with its process).
+                Some(report) => {
+                    let _ = transport.publish(report);
+                    linger(transport, clock, interrupted);
                 }
-            })
-            .map_err(LoopError::Transport)?;
-        if let Some(done) = outcome.map_err(LoopError::Fault)? {
-            // The stop reaches readers the orchestrator does not wake itself through us.
-            let _ = transport.notify_readers();
+                // The stop reaches readers the orchestrator does not wake itself through us.
+                None => {
+                    let _ = transport.notify_readers();
+                }
+            }
             return Ok(done);
         }
         transport
@@ -59,16 +68,8 @@ where
             .map_err(LoopError::Transport)?;
         loop {
             match core.poll(clock.now()) {
-                Action::Publish(mut msg) => {
-                    if let Some(i) = inject {
-                        // An injected crash or hang happens "instead of publishing this tick":
-                        // every earlier state must be out, as if each were its own sample.
-                        transport.flush().map_err(LoopError::Transport)?;
-                        i.apply(msg.tick, &mut msg);
-                    }
-                    transport
-                        .publish_quietly(msg)
-                        .map_err(LoopError::Transport)?;
+                Action::Publish(msg) => {
+                    publish(transport, msg, inject, P::WIRING.flush_each_publish)?;
                 }
                 Action::CheckOrchestrator => {
                     core.on_orchestrator_alive(transport.orchestrator_alive());
@@ -89,9 +90,15 @@ where
                         return Err(LoopError::Fault(MemberFault::RepairUnsupported { tick }));
                     }
                 }
+                // Progressed (in real time: flew a tick): read the inputs again first.
                 Action::Poll => break,
                 Action::Wait(d) => {
-                    transport.wait(d).map_err(LoopError::Transport)?;
+                    if P::WIRING.fine_waits {
+                        pause(transport, d)
+                    } else {
+                        transport.wait(d).map(|_| ())
+                    }
+                    .map_err(LoopError::Transport)?;
                     break;
                 }
                 Action::Fail { report, fault } => {
@@ -102,9 +109,65 @@ where
     }
 }
 
-/// [`Action::Fail`] in either loop (lockstep or real time): publish the fault's report, if
+/// Hands the core the clock messages that arrived (with `Wiring::every_clock_message` every
+/// one, oldest first, until one ends the flight; else the newest): `Some` when the team
+/// stopped.
+fn read_clock<T, V, P, K>(
+    core: &mut MemberCore<V, P>,
+    transport: &mut T,
+    clock: &K,
+) -> Result<Option<Finished>, LoopError<T::Error>>
+where
+    T: MemberTransport,
+    V: Vehicle,
+    P: Timing<V>,
+    K: Clock,
+{
+    if !P::WIRING.every_clock_message {
+        let Some(c) = transport.latest_clock().map_err(LoopError::Transport)? else {
+            return Ok(None);
+        };
+        return core
+            .on_clock(&c, clock.now(), unix_now_ns())
+            .map_err(LoopError::Fault);
+    }
+    let mut outcome = Ok(None);
+    transport
+        .receive_clock(|c| {
+            if matches!(outcome, Ok(None)) {
+                outcome = core.on_clock(&c, clock.now(), unix_now_ns());
+            }
+        })
+        .map_err(LoopError::Transport)?;
+    outcome.map_err(LoopError::Fault)
+}
+
+/// Publishes `msg`, after `inject` (tests only) altered it; `flush`: sent at once.
+fn publish<T: MemberTransport>(
+    transport: &mut T,
+    mut msg: StateMsg,
+    inject: Option<&Injection>,
+    flush: bool,
+) -> Result<(), LoopError<T::Error>> {
+    if let Some(i) = inject {
+        // An injected crash or hang happens "instead of publishing this tick": every earlier
+        // state must be out, as if each were its own sample.
+        transport.flush().map_err(LoopError::Transport)?;
+        i.apply(msg.tick, &mut msg);
+    }
+    transport
+        .publish_quietly(msg)
+        .map_err(LoopError::Transport)?;
+    if flush {
+        // Readers poll by the clock, not by wake-ups: the state must be out now.
+        transport.flush().map_err(LoopError::Transport)?;
+    }
+    Ok(())
+}
+
+/// [`Action::Fail`], in lockstep and in real time alike: publish the fault's report, if
 /// any, and [`linger`] for the orchestrator's stop so the team reads it; the loop then ends.
-pub(crate) fn failed<T: MemberTransport, K: Clock>(
+fn failed<T: MemberTransport, K: Clock>(
     transport: &mut T,
     clock: &K,
     interrupted: &AtomicBool,

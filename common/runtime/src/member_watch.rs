@@ -1,11 +1,11 @@
-//! What the lockstep core ([`crate::member_core::MemberCore`]) and the real-time core
-//! ([`crate::realtime::RealtimeCore`]) do alike between their ticks, written once: ask whether
-//! the orchestrator lives every [`ALIVE_CHECK`], hold the one action an incoming message decided
-//! until the next poll (the first fault wins), and flag a fault in a state for the team.
+//! What a member core ([`crate::member_core::MemberCore`]) does between its ticks, whatever
+//! paces it: ask whether the orchestrator lives every [`ALIVE_CHECK`], hold the one action an
+//! incoming message decided until the next poll (the first fault wins), and flag a fault in a
+//! state for the team.
 
 use std::time::Duration;
 
-use crate::member_core::{Action, MemberFault, ALIVE_CHECK};
+use crate::member_protocol::{Action, MemberFault, ALIVE_CHECK};
 use crate::messages::{AgentStatus, FaultCode, StateMsg, NO_PEER};
 
 /// The orchestrator watch and the pending action of a member core.

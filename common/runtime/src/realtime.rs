@@ -1,7 +1,9 @@
 //! A member in real time (`--realtime`) as a plain type with no I/O: events in (the clock
 //! channel's start or stop, a neighbour's state, whether the orchestrator lives, "now" from a
 //! clock the loop passes in), actions out (publish, ask about the orchestrator, wait, fail). The
-//! loop around it is [`crate::realtime_loop`].
+//! core is the member core of lockstep too ([`MemberCore`]); this file is the timing
+//! ([`Realtime`]) that paces it by the wall clock, and the one loop ([`crate::member_loop`])
+//! flies it.
 //!
 //! How time flows (ARCHITECTURE.md): the orchestrator announces the start instant S; member i
 //! has a phase offset phi_i in [0, dt) drawn from the announced seed, and its tick k is the
@@ -23,15 +25,15 @@ use std::time::Duration;
 
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
-use cdm_core::link::LinkModel;
+use cdm_core::link::{splitmix64, LinkModel};
 use cdm_core::math::Vec3;
-use cdm_core::step::{extrapolate_flat, law_for, Law, NeighborModel, TickAt};
+use cdm_core::step::{extrapolate_flat, NeighborModel, TickAt};
 
-use crate::member_core::{Action, Deadlines, Finished, MemberFault, WaitingFor, WAIT_SLICE};
-use crate::member_watch::{report_fault, Watch};
-use crate::messages::{
-    AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, PHASES_ALIGNED, STATUS_PACING,
+use crate::member_core::{
+    in_neighbors, Action, Deadlines, MemberCore, MemberFault, Shared, Timing, Wiring,
 };
+use crate::member_protocol::WaitingFor;
+use crate::messages::{ClockCommand, ClockMsg, FaultCode, StateMsg, PHASES_ALIGNED, STATUS_PACING};
 use crate::realtime_links::DelayLine;
 use crate::seams::Vehicle;
 
@@ -45,10 +47,7 @@ pub fn phase_offset_s(seed: u32, id: u32, dt_s: f64) -> f64 {
     if seed == PHASES_ALIGNED {
         return 0.0;
     }
-    let mut z = (u64::from(seed) << 32 | u64::from(id)).wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^= z >> 31;
+    let z = splitmix64(u64::from(seed) << 32 | u64::from(id));
     dt_s * ((z >> 11) as f64 / (1u64 << 53) as f64)
 }
 
@@ -202,14 +201,15 @@ pub struct RealtimeSetup {
     pub links: LinkModel,
 }
 
-/// One member's real-time protocol state.
+/// A member flown in real time.
+pub type RealtimeCore<V> = MemberCore<V, Realtime>;
+
+/// Real time's side of a member: the start and the phases, what its links deliver, and its
+/// pacing figures.
 #[derive(Debug)]
-pub struct RealtimeCore<V> {
-    id: u32,
-    setup: RealtimeSetup,
-    vehicle: V,
-    neighbor_ids: [u32; 3],
-    is_follower: bool,
+pub struct Realtime {
+    dt_s: f64,
+    stale_after: Duration,
     /// The in-neighbours' initial positions at rest: their state before their first message.
     initial: [Flat; 3],
     /// The newest state heard of each in-neighbour: its tick and flat output.
@@ -217,76 +217,55 @@ pub struct RealtimeCore<V> {
     /// Received states the links still hold back.
     links: DelayLine,
     start: Option<Start>,
-    tick: u64,
-    published: Option<u64>,
     pacing: Pacing,
     created: Duration,
-    watch: Watch,
 }
 
-impl<V: Vehicle> RealtimeCore<V> {
+impl<V: Vehicle> MemberCore<V, Realtime> {
     /// `member` flying `vehicle`; `neighbor_positions` are its in-neighbours' initial positions
     /// in the order of its law (ignored for a leader); `now` starts the join deadline.
-    pub fn new(
+    pub fn realtime(
         member: &Member,
         neighbor_positions: [Vec3; 3],
         setup: RealtimeSetup,
         vehicle: V,
         now: Duration,
     ) -> Self {
-        let (law, neighbor_ids) = law_for(member);
-        Self {
-            id: member.id,
-            setup,
-            vehicle,
-            neighbor_ids,
-            is_follower: matches!(law, Law::Follower { .. }),
+        let timing = Realtime {
+            dt_s: setup.dt_s,
+            stale_after: setup.stale_after,
             initial: neighbor_positions.map(Flat::rest),
             heard: [None; 3],
-            links: DelayLine::new(setup.links, member.id, neighbor_ids),
+            links: DelayLine::new(setup.links, member.id, in_neighbors(member)),
             start: None,
-            tick: 0,
-            published: None,
             pacing: Pacing::default(),
             created: now,
-            watch: Watch::new(now),
-        }
-    }
-
-    /// This member's id.
-    pub fn id(&self) -> u32 {
-        self.id
-    }
-
-    /// The scenario's content hash.
-    pub fn hash(&self) -> u64 {
-        self.setup.hash
-    }
-
-    /// The tick this member flies next.
-    pub fn tick(&self) -> u64 {
-        self.tick
+        };
+        let plan = (setup.hash, setup.last);
+        Self::with_timing(member, plan, vehicle, setup.deadlines, (timing, now))
     }
 
     /// The pacing figures so far.
     pub fn pacing(&self) -> &Pacing {
-        &self.pacing
+        &self.timing.pacing
     }
+}
 
-    /// A clock message: the start (with this member's clock reading `now` while the system
-    /// clock reads `unix_now_ns`), or the stop. A lockstep grant is a mode mismatch.
-    pub fn on_clock(
+impl<V: Vehicle> Timing<V> for Realtime {
+    const WIRING: Wiring = Wiring {
+        every_clock_message: false,
+        flush_each_publish: true,
+        fine_waits: true,
+    };
+
+    /// The start places tick 0 on this member's clock (read as `now` while the system clock
+    /// read `unix_now_ns`); a lockstep grant is a mode mismatch.
+    fn on_clock(
         &mut self,
+        m: &mut Shared<V>,
         c: &ClockMsg,
-        now: Duration,
-        unix_now_ns: u64,
-    ) -> Result<Option<Finished>, MemberFault> {
-        if c.scenario_hash != self.setup.hash {
-            return Err(MemberFault::ScenarioMismatch {
-                mine: self.setup.hash,
-                team: c.scenario_hash,
-            });
-        }
+        (now, unix_now_ns): (Duration, u64),
+    ) -> Result<(), MemberFault> {
         match c.command() {
             ClockCommand::Run => Err(MemberFault::ModeMismatch {
                 member_realtime: true,
@@ -303,45 +282,21 @@ impl<V: Vehicle> RealtimeCore<V> {
                     } else {
                         now.saturating_sub(Duration::from_nanos(ahead_ns.unsigned_abs() as u64))
                     };
-                    let dt = self.setup.dt_s;
+                    let dt = self.dt_s;
                     self.start = Some(Start {
                         at,
-                        phase_s: phase_offset_s(phase_seed, self.id, dt),
-                        neighbor_phase_s: self
-                            .neighbor_ids
-                            .map(|j| phase_offset_s(phase_seed, j, dt)),
+                        phase_s: phase_offset_s(phase_seed, m.id, dt),
+                        neighbor_phase_s: m.neighbor_ids.map(|j| phase_offset_s(phase_seed, j, dt)),
                     });
                 }
-                Ok(None)
+                Ok(())
             }
-            // A MAVLink member answers the arm order before its core runs (cdm-mavlink
-            // `team_arm`); the model has nothing to arm.
-            ClockCommand::Arm => Ok(None),
-            ClockCommand::Stop(_) => Ok(Some(Finished {
-                tick: self.tick,
-                reason: c.reason,
-            })),
+            ClockCommand::Arm | ClockCommand::Stop(_) => Ok(()),
         }
     }
 
-    /// A state from the transport: kept when it is an in-neighbour's newest.
-    pub fn on_neighbor(&mut self, msg: &StateMsg) {
-        let Some(slot) = self.neighbor_ids.iter().position(|n| *n == msg.id) else {
-            return;
-        };
-        if msg.status() != AgentStatus::Ok {
-            return;
-        }
-        if msg.scenario_hash != self.setup.hash && !self.watch.is_pending() {
-            let fault = MemberFault::ForeignState {
-                tick: self.tick,
-                peer: msg.id,
-                peer_tick: msg.tick,
-            };
-            self.watch
-                .defer(self.fail(FaultCode::NeighborFault, msg.id, fault));
-            return;
-        }
+    /// Kept, once its link delivers it, when it is the in-neighbour's newest.
+    fn on_neighbor(&mut self, _: &mut Shared<V>, slot: usize, msg: &StateMsg) {
         let flat = QuadState(msg.state).flat();
         if let Some((tick, flat)) = self.links.receive(slot, msg.tick, flat) {
             hear(&mut self.heard[slot], tick, flat);
@@ -349,128 +304,124 @@ impl<V: Vehicle> RealtimeCore<V> {
         self.pacing.link_states = self.links.counts();
     }
 
-    /// The answer to [`Action::CheckOrchestrator`].
-    pub fn on_orchestrator_alive(&mut self, alive: bool) {
-        self.watch.orchestrator_alive(alive, self.tick);
-    }
-
-    /// The next action at time `now` (this member's monotonic clock). Call it until it returns
-    /// [`Action::Wait`] (then read the inputs) or [`Action::Fail`].
-    pub fn poll(&mut self, now: Duration) -> Action {
-        if let Some(a) = self.watch.take() {
-            return a;
-        }
+    /// Waits for the start, then for each tick's instant: publishes the state of that time and
+    /// flies the tick at once; after the last tick, waits for the stop.
+    fn poll(&mut self, m: &mut Shared<V>, now: Duration) -> Action {
         let Some(start) = self.start else {
-            let join = self.created.saturating_add(self.setup.deadlines.join);
-            return self.idle(now, Some(join), None);
+            let join = self.created.saturating_add(m.deadlines.join);
+            return self.idle(m, now, Some(join), None);
         };
-        let dt = self.setup.dt_s;
-        let t_own = stamp_s(self.tick, start.phase_s, dt);
+        let t_own = stamp_s(m.tick, start.phase_s, self.dt_s);
         let due = start.at + Duration::from_secs_f64(t_own.max(0.0));
         if now < due {
-            return self.idle(now, None, Some(due));
+            return self.idle(m, now, None, Some(due));
         }
-        if self.published != Some(self.tick) {
-            self.published = Some(self.tick);
-            let (tick, hash) = (self.tick, self.setup.hash);
-            return Action::Publish(StateMsg::ok(tick, hash, self.id, self.vehicle.state()));
+        if m.published != Some(m.tick) {
+            return m.publish_tick();
         }
-        if self.tick >= self.setup.last {
+        if m.tick >= m.last {
             // The plan is flown: wait for the stop (bounded).
-            let silence = due.saturating_add(self.setup.deadlines.silence);
-            return self.idle(now, Some(silence), None);
+            let silence = due.saturating_add(m.deadlines.silence);
+            return self.idle(m, now, Some(silence), None);
         }
-        self.fly(start, t_own, (now - due).as_secs_f64())
+        self.fly(m, start, t_own, (now - due).as_secs_f64())
     }
 
-    /// Flies tick `self.tick` (own time `t_own`, computed `late_s` after its instant).
-    fn fly(&mut self, start: Start, t_own: f64, late_s: f64) -> Action {
-        let dt = self.setup.dt_s;
+    /// The final pacing figures.
+    fn final_report(&self, m: &Shared<V>) -> Option<StateMsg> {
+        Some(self.pacing.to_msg(m.id, m.hash))
+    }
+}
+
+impl Realtime {
+    /// Flies tick `m.tick` (own time `t_own`, computed `late_s` after its instant).
+    fn fly<V: Vehicle>(
+        &mut self,
+        m: &mut Shared<V>,
+        start: Start,
+        t_own: f64,
+        late_s: f64,
+    ) -> Action {
+        let dt = self.dt_s;
         let mut flats = self.initial;
-        if self.is_follower {
-            let heard = &mut self.heard;
-            self.links.release(
-                t_own,
-                |slot, tick| stamp_s(tick, start.neighbor_phase_s[slot], dt),
-                |slot, tick, flat| hear(&mut heard[slot], tick, flat),
-            );
-            for (slot, out) in flats.iter_mut().enumerate() {
-                let (stamp, flat) = match self.heard[slot] {
-                    Some((t, f)) => (stamp_s(t, start.neighbor_phase_s[slot], dt), f),
-                    None => (0.0, self.initial[slot]),
-                };
-                let age_s = t_own - stamp;
-                if age_s > self.setup.stale_after.as_secs_f64() {
-                    let peer = self.neighbor_ids[slot];
-                    let fault = MemberFault::NeighborStale {
-                        tick: self.tick,
-                        peer,
-                        age: Duration::from_secs_f64(age_s),
-                    };
-                    return self.fail(FaultCode::NeighborSilent, peer, fault);
-                }
-                self.pacing.age(age_s);
-                *out = extrapolate_flat(&flat, age_s, NeighborModel::Taylor);
+        if m.is_follower {
+            if let Some(stale) = self.neighbors_at(m, start, t_own, &mut flats) {
+                return stale;
             }
         }
         let at = TickAt {
-            tick: self.tick,
+            tick: m.tick,
             offset_s: start.phase_s,
         };
-        if let Err(fault) = self.vehicle.fly_tick_at(at, &flats) {
-            let (code, peer, fault) = crate::member_core::report_of(self.tick, fault);
-            return self.fail(code, peer, fault);
+        if let Err(fault) = m.vehicle.fly_tick_at(at, &flats) {
+            return m.vehicle_failed(m.tick, fault);
         }
         self.pacing.tick(late_s, dt);
-        self.tick += 1;
+        m.tick += 1;
         // A pacing report every second of flight, so the monitor has one whatever stops the team.
         let per_second = (1.0 / dt).round().max(1.0) as u64;
-        if self.tick.is_multiple_of(per_second) {
-            return Action::Publish(self.pacing.to_msg(self.id, self.setup.hash));
+        if m.tick.is_multiple_of(per_second) {
+            return Action::Publish(self.pacing.to_msg(m.id, m.hash));
         }
         Action::Poll
     }
 
-    /// Nothing to do before `until` (the next tick's instant), or at all: ask about the
-    /// orchestrator every [`ALIVE_CHECK`], give up at `deadline` (the start or the stop did not
-    /// come), else sleep at most a slice.
-    fn idle(
+    /// The in-neighbours' states brought to own time `t_own` into `flats`, from the newest
+    /// state the links delivered of each; a stale one is a fault reported to the team (the
+    /// action returned).
+    fn neighbors_at<V: Vehicle>(
         &mut self,
+        m: &Shared<V>,
+        start: Start,
+        t_own: f64,
+        flats: &mut [Flat; 3],
+    ) -> Option<Action> {
+        let dt = self.dt_s;
+        let heard = &mut self.heard;
+        self.links.release(
+            t_own,
+            |slot, tick| stamp_s(tick, start.neighbor_phase_s[slot], dt),
+            |slot, tick, flat| hear(&mut heard[slot], tick, flat),
+        );
+        for (slot, out) in flats.iter_mut().enumerate() {
+            let (stamp, flat) = match self.heard[slot] {
+                Some((t, f)) => (stamp_s(t, start.neighbor_phase_s[slot], dt), f),
+                None => (0.0, self.initial[slot]),
+            };
+            let age_s = t_own - stamp;
+            if age_s > self.stale_after.as_secs_f64() {
+                let peer = m.neighbor_ids[slot];
+                let fault = MemberFault::NeighborStale {
+                    tick: m.tick,
+                    peer,
+                    age: Duration::from_secs_f64(age_s),
+                };
+                return Some(m.fail(FaultCode::NeighborSilent, peer, fault));
+            }
+            self.pacing.age(age_s);
+            *out = extrapolate_flat(&flat, age_s, NeighborModel::Taylor);
+        }
+        None
+    }
+
+    /// Nothing to do before `until` (the next tick's instant), or at all: give up at
+    /// `deadline` (the start or the stop did not come).
+    fn idle<V: Vehicle>(
+        &self,
+        m: &mut Shared<V>,
         now: Duration,
         deadline: Option<Duration>,
         until: Option<Duration>,
     ) -> Action {
-        if self.watch.check_due(now) {
-            return Action::CheckOrchestrator;
+        if let Some(a) = m.idle(now, deadline, until) {
+            return a;
         }
-        let mut slice = WAIT_SLICE;
-        for t in [deadline, until].into_iter().flatten() {
-            slice = slice.min(t.saturating_sub(now));
-        }
-        if deadline.is_some_and(|d| now >= d) {
-            let waiting_for = if self.start.is_none() {
-                WaitingFor::Start
-            } else {
-                WaitingFor::Stop
-            };
-            let fault = MemberFault::Silent {
-                tick: self.tick,
-                waited: now.saturating_sub(self.created),
-                waiting_for,
-            };
-            return Action::Fail {
-                report: None,
-                fault,
-            };
-        }
-        Action::Wait(slice)
-    }
-
-    /// A fault reported to the team (this member's state flagged with `code`).
-    fn fail(&self, code: FaultCode, peer: u32, fault: MemberFault) -> Action {
-        let state = self.vehicle.state();
-        let who = (self.id, self.setup.hash, self.tick);
-        report_fault(who, state, (code, peer), fault)
+        let waiting_for = if self.start.is_none() {
+            WaitingFor::Start
+        } else {
+            WaitingFor::Stop
+        };
+        m.silent(now.saturating_sub(self.created), waiting_for)
     }
 }
 

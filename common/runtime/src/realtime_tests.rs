@@ -7,7 +7,8 @@ use cdm_core::link::LinkSpec;
 use cdm_core::math::{vec3, Vec2};
 
 use super::*;
-use crate::messages::{StopReason, STATUS_FAULT};
+use crate::member_core::Finished;
+use crate::messages::{AgentStatus, StopReason, STATUS_FAULT};
 use crate::realtime_monitor::{Heard, MonitorCore, RunFigures};
 use crate::seams::VehicleFault;
 use cdm_core::step::StepFault;
@@ -76,7 +77,7 @@ fn core_over(phase_seed: u32, links: LinkModel) -> RealtimeCore<Still> {
         deadlines: Deadlines::default(),
         links,
     };
-    let mut c = RealtimeCore::new(
+    let mut c = RealtimeCore::realtime(
         &follower(),
         [Vec3::zeros(); 3],
         setup,
@@ -118,6 +119,26 @@ fn phase_offsets_are_seeded_spread_and_in_one_period() {
     assert_eq!(phase_offset_s(PHASES_ALIGNED, 5, DT), 0.0);
 }
 
+/// The offsets are SplitMix64's (cdm-core `link::splitmix64`), bit for bit the values of the
+/// formula this file once wrote out by itself.
+#[test]
+fn phase_offsets_are_pinned_to_the_bit() {
+    let pinned: [(u32, u32, f64, u64); 5] = [
+        (0x1, 1, 0.01, 0x3f54_a61f_c708_8b3e),
+        (0x7, 10, 0.01, 0x3f59_ddca_0d73_b1c8),
+        (0x3, 999, 0.02, 0x3f73_49e0_aca0_ebee),
+        (0xdead_beef, 4_000_000_000, 0.005, 0x3f5e_363a_1e02_e7b1),
+        (0x2a, 7, 1.0 / 60.0, 0x3f67_a67d_a9a7_22bc),
+    ];
+    for (seed, id, dt, bits) in pinned {
+        assert_eq!(
+            phase_offset_s(seed, id, dt).to_bits(),
+            bits,
+            "{seed} {id} {dt}"
+        );
+    }
+}
+
 #[test]
 fn a_member_waits_for_its_instant_then_publishes_and_flies_at_its_phase() {
     let mut c = core(PHASES_ALIGNED);
@@ -147,7 +168,7 @@ fn a_member_waits_for_its_instant_then_publishes_and_flies_at_its_phase() {
     assert!(matches!(c.poll(due), Action::Publish(_)));
     assert_eq!(c.poll(due), Action::Poll);
     assert_eq!(
-        c.vehicle.flown,
+        c.m.vehicle.flown,
         vec![TickAt {
             tick: 0,
             offset_s: phase
@@ -200,13 +221,17 @@ fn over_delayed_links_a_state_is_used_only_once_its_delay_has_passed() {
     while c.tick() < 43 {
         let _ = c.poll(now);
     }
-    assert_eq!(c.heard, [None; 3]);
+    assert_eq!(c.timing.heard, [None; 3]);
     // Tick 43 (0.43 s): released, 30 ms old when used.
     let now = secs(1.0 + 43.0 * DT);
     while c.tick() < 44 {
         let _ = c.poll(now);
     }
-    assert!(c.heard.iter().all(|h| h.is_some_and(|(t, _)| t == 40)));
+    assert!(c
+        .timing
+        .heard
+        .iter()
+        .all(|h| h.is_some_and(|(t, _)| t == 40)));
 }
 
 #[test]
@@ -245,7 +270,11 @@ fn a_stale_neighbour_is_reported_and_the_member_holds() {
         }
         f => panic!("{f:?}"),
     }
-    assert_eq!(c.vehicle.flown.len(), 51, "ticks 0..=50 flown, none after");
+    assert_eq!(
+        c.m.vehicle.flown.len(),
+        51,
+        "ticks 0..=50 flown, none after"
+    );
 }
 
 #[test]
@@ -274,7 +303,7 @@ fn clock_messages_mismatch_start_and_stop() {
 #[test]
 fn a_failed_tick_is_reported_with_its_fault() {
     let mut c = core(PHASES_ALIGNED);
-    c.vehicle.fail = true;
+    c.m.vehicle.fail = true;
     let _ = c.poll(secs(1.0));
     assert!(matches!(
         c.poll(secs(1.0)),
