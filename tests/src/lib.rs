@@ -186,6 +186,35 @@ pub fn venv_python() -> PathBuf {
     path
 }
 
+/// Every deadline of the integration tests, from one scale. A deadline is the limit for a wait
+/// that would otherwise never end (a hung process), never the expected duration of anything:
+/// tests wait for an event (an exit, a line, a file) and pass as soon as it happens, so a longer
+/// deadline only makes a hung test fail later. The harness's waits ([`run`], [`Running::finish`],
+/// [`Running::wait_for_output`]) multiply each by `CDM_TEST_DEADLINE_SCALE` (default 1), for a
+/// machine slower than two loaded cores.
+pub mod deadline {
+    use std::time::Duration;
+
+    /// A command that refuses its input, or a short helper (a Python reader, a browser page).
+    pub const REFUSE: Duration = Duration::from_secs(30);
+    /// A small team or a short plan, start to exit.
+    pub const SHORT: Duration = Duration::from_secs(60);
+    /// A full flight: paper40 as 40 processes, a team across hosts, a browser over a live run.
+    pub const FLIGHT: Duration = Duration::from_secs(180);
+    /// The largest: a thousand members, or a run that writes gigabytes.
+    pub const LONG: Duration = Duration::from_secs(600);
+
+    /// `d` times `CDM_TEST_DEADLINE_SCALE` (a positive number; anything else counts as 1).
+    pub fn scaled(d: Duration) -> Duration {
+        let scale = std::env::var("CDM_TEST_DEADLINE_SCALE")
+            .ok()
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|k| k.is_finite() && *k > 0.0)
+            .unwrap_or(1.0);
+        d.mul_f64(scale)
+    }
+}
+
 /// A base port with `n` free UDP ports from it, on 127.0.0.1, below the kernel's ephemeral range
 /// (`net.ipv4.ip_local_port_range`): no socket that another process opens without choosing a port
 /// (a Python vehicle's sending socket, a zenoh link, a browser) can take one of them between this
@@ -383,6 +412,7 @@ impl Captured {
     /// [`Self::wait_until`] `deadline` from now; past it (group killed) panics naming the command
     /// and the deadline, with the output so far.
     fn finish_or_panic(&mut self, deadline: Duration) -> Output {
+        let deadline = deadline::scaled(deadline);
         match self.wait_until(Instant::now() + deadline) {
             Ok(out) => out,
             Err(out) => panic!(
@@ -488,6 +518,7 @@ impl Running {
     /// Wait until stdout or stderr contains `needle`. Panics, killing the child's group, if the
     /// deadline passes or the child exits without having written it.
     pub fn wait_for_output(&mut self, needle: &str, deadline: Duration) {
+        let deadline = deadline::scaled(deadline);
         let until = Instant::now() + deadline;
         loop {
             let exited = self.has_exited();

@@ -27,7 +27,7 @@ use integration_tests::{bin, describe, paper40, run, unique_team, write_scenario
 use serde_json::Value;
 
 /// A paper40 flight in-process takes about a second in release; the rest is slack.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 fn orchestrator(args: &[&str]) -> Command {
     let mut c = Command::new(bin("orchestrator"));

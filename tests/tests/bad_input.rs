@@ -16,9 +16,9 @@ use integration_tests::{bin, describe, run, unique_team, TempDir};
 use support::*;
 
 /// Every refusal here happens before any work; the deadline only keeps a hang from stalling CI.
-const DEADLINE: Duration = Duration::from_secs(30);
+const DEADLINE: Duration = integration_tests::deadline::REFUSE;
 /// A 10-agent team with a 30 s plan flies in about a second.
-const FLY_DEADLINE: Duration = Duration::from_secs(60);
+const FLY_DEADLINE: Duration = integration_tests::deadline::SHORT;
 
 fn command(binary: &str, args: &[&str]) -> Command {
     let mut c = Command::new(bin(binary));
@@ -119,7 +119,7 @@ fn team_sizes_outside_4_to_2000_are_refused() {
         let mut cmd = Command::new(bin("orchestrator"));
         cmd.args(["scenario", "export", "--n", n, "--out"])
             .arg(&file);
-        let o = run(&mut cmd, Duration::from_secs(60));
+        let o = run(&mut cmd, integration_tests::deadline::SHORT);
         assert_eq!(o.status.code(), Some(0), "export --n {n}\n{}", describe(&o));
         let text = std::fs::read_to_string(&file).expect("exported file");
         let agents = text.matches("[[agents]]").count();
@@ -313,7 +313,7 @@ fn a_launch_without_the_member_binaries_says_how_to_build_them() {
                 "--out",
             ])
             .arg(&out_dir),
-        Duration::from_secs(30),
+        integration_tests::deadline::REFUSE,
     );
     assert_eq!(out.status.code(), Some(2), "{}", describe(&out));
     let err = String::from_utf8_lossy(&out.stderr);

@@ -15,7 +15,7 @@ use integration_tests::{bin, describe, run, spawn, write_text, TempDir};
 use serde_json::Value;
 
 /// A plan or a short simulate takes seconds; the deadline only keeps a hang from stalling CI.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 /// Keys every certificate (`plan --json`) carries.
 const CERTIFICATE_KEYS: [&str; 13] = [

@@ -12,7 +12,7 @@ mod support;
 use support::Footprint;
 
 /// Generous: the machine is shared; the exchange itself takes milliseconds.
-const DEADLINE: Duration = Duration::from_secs(60);
+const DEADLINE: Duration = integration_tests::deadline::SHORT;
 const TICKS: u64 = 5;
 
 fn side(role: &str, team: &str) -> Command {

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use integration_tests::{bin, describe, run, venv_python, TempDir};
 
-const DEADLINE: Duration = Duration::from_secs(300);
+const DEADLINE: Duration = integration_tests::deadline::LONG;
 /// paper40 in a 9 m x 9 m arena: 300 m -> 4.5 m, the descent ends 0.5 m above the floor.
 const LAB: [&str; 4] = ["--scale", "0.015", "--origin=-1.2,-2.7,-7.9", "--quiet"];
 

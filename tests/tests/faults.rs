@@ -36,9 +36,9 @@ const TEAM: [&str; 2] = ["--n", "10"];
 /// The tick at which injected faults happen.
 const FAULT_TICK: u64 = 1000;
 /// A 10-agent team starts and stops in about a second; the rest is slack for a loaded machine.
-const STOP_DEADLINE: Duration = Duration::from_secs(20);
+const STOP_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 /// A short plan of a 10-agent team (3,001 ticks) runs in about a second.
-const SHORT_DEADLINE: Duration = Duration::from_secs(60);
+const SHORT_DEADLINE: Duration = integration_tests::deadline::SHORT;
 /// Rows of telemetry to see before breaking a run from outside.
 const ROWS_BEFORE_FAULT: usize = 200;
 
@@ -229,8 +229,8 @@ fn a_hangup_or_quit_signal_stops_the_team_like_sigterm() {
     }
 }
 
-/// SIGSTOP of the orchestrator for 20 s, then SIGCONT: its members see no grant for their
-/// silence timeout (10 s) and stop by themselves; the orchestrator records that its own clock
+/// SIGSTOP of the orchestrator until its members, seeing no grant for their silence timeout
+/// (10 s), have stopped by themselves; then SIGCONT: the orchestrator records that its own clock
 /// stalled (`orchestrator-stalled`, no agent blamed), not `agent 1 exited`. Exit 3, nothing left.
 #[test]
 fn a_stopped_orchestrator_records_that_its_clock_stalled() {
@@ -240,10 +240,24 @@ fn a_stopped_orchestrator_records_that_its_clock_stalled() {
     let (mut orch, s, fp) = running(&team, &out, &[]);
     let pid = orch.id();
     signal(pid, libc::SIGSTOP);
-    std::thread::sleep(Duration::from_secs(20));
+    // The members' exit is the event (they are zombies of the stopped orchestrator meanwhile,
+    // which `team_processes` does not count).
+    let until = std::time::Instant::now() + integration_tests::deadline::scaled(SHORT_DEADLINE);
+    while team_processes(&team).len() > 1 {
+        assert!(
+            std::time::Instant::now() < until,
+            "members still running {SHORT_DEADLINE:?} after SIGSTOP of the orchestrator: {:#?}",
+            team_processes(&team)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
     signal(pid, libc::SIGCONT);
     let o = orch.finish(STOP_DEADLINE);
-    assert_exit(&o, 3, "launch after SIGSTOP for 20 s and SIGCONT");
+    assert_exit(
+        &o,
+        3,
+        "launch after SIGSTOP until its members stopped, and SIGCONT",
+    );
     let audit = read_json(&out.join("audit.json"));
     let fault = &audit["fault"];
     assert_eq!(fault["kind"], "orchestrator-stalled", "{audit:#}");

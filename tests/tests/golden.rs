@@ -20,7 +20,7 @@ const PAPER40_TELEMETRY_SHA256: &str =
     "12e97df9ea3eff93f3ab34acb80ba385102effe70453ebc3127a0dade75f8d59";
 
 /// A paper40 flight takes about a second in release; the rest is slack for a loaded machine.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 fn sha256_hex(bytes: &[u8]) -> String {
     Sha256::digest(bytes)

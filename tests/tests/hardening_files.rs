@@ -14,7 +14,7 @@ use integration_tests::{bin, describe, run, unique_team, TempDir};
 use support::*;
 
 /// A short flight (paper40, 31 ticks) takes well under a second; this only stops a hang.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 /// A 200 KiB tmpfs mounted for one test, unmounted on drop.
 struct SmallDisk {

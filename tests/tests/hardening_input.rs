@@ -11,7 +11,7 @@ use integration_tests::{bin, describe, run, spawn, unique_team, TempDir};
 use support::*;
 
 /// Every refusal happens before any work; the deadline only stops a hang (a FIFO, /dev/zero).
-const DEADLINE: Duration = Duration::from_secs(60);
+const DEADLINE: Duration = integration_tests::deadline::SHORT;
 
 fn orchestrator(args: &[&str]) -> Command {
     let mut c = Command::new(bin("orchestrator"));

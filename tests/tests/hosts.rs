@@ -31,15 +31,15 @@ mod support;
 use support::*;
 
 /// A 10-agent team over two hosts runs a few thousand ticks in seconds; the rest is slack.
-const RUN_DEADLINE: Duration = Duration::from_secs(90);
+const RUN_DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 /// The link deadline given to the orchestrator (`--link-timeout`), in seconds.
 const LINK_TIMEOUT_S: &str = "2";
 /// From a fault (partition, kill) to every process of the team gone: the link deadline, the
 /// team's bounded stop, and slack for a loaded machine.
-const STOP_DEADLINE: Duration = Duration::from_secs(30);
+const STOP_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 const ENDPOINT: &str = "tcp/10.77.0.1:7447";
 /// A daemon exits at once when it is refused.
-const REFUSE_DEADLINE: Duration = Duration::from_secs(30);
+const REFUSE_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 
 /// Two network namespaces joined by a veth pair; deleted on drop (processes inside were killed
 /// by their own guards first: fields drop after the test body's guards).

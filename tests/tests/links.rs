@@ -18,9 +18,9 @@ mod support;
 use support::*;
 
 /// A 10-agent team of 400 ticks as processes takes about a second; the rest is slack.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 /// A refused member exits as soon as it has read the scenario and looked at the team.
-const REFUSE_DEADLINE: Duration = Duration::from_secs(30);
+const REFUSE_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 
 const IMPAIRED: [&str; 8] = [
     "--link-delay-ms",

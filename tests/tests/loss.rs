@@ -19,7 +19,7 @@ use serde_json::Value;
 
 /// A paper40 flight in-process takes about 3 s in release and the certificate ~15 s on a
 /// loaded machine; the rest is slack.
-const DEADLINE: Duration = Duration::from_secs(300);
+const DEADLINE: Duration = integration_tests::deadline::LONG;
 
 fn orchestrator(args: &[&str]) -> Output {
     let mut c = Command::new(bin("orchestrator"));

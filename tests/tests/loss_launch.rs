@@ -29,7 +29,7 @@ use support::{
 
 /// A 801- to 1501-tick paper40 flight of 41 processes takes about a second; the rest is slack
 /// for a loaded machine.
-const DEADLINE: Duration = Duration::from_secs(180);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 /// paper40: 1-3 primary leaders, 4-6 secondary, follower 20 read by follower 29; dt = 0.01 s.
 const SOURCE: [&str; 2] = ["--builtin", "paper40"];

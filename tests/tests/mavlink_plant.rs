@@ -13,7 +13,7 @@ use serde_json::Value;
 
 /// Generous: the machine is shared and the plan itself takes about 4 s (3 s motion, the
 /// example's default 1 s hold).
-const DEADLINE: Duration = Duration::from_secs(60);
+const DEADLINE: Duration = integration_tests::deadline::SHORT;
 const COMM_HZ: f64 = 50.0;
 /// The member under test: agent 7, the 4th member in scenario order (listens on base + 3).
 const AGENT: u32 = 7;

@@ -22,7 +22,7 @@ use support::{assert_no_team_resources, launch, read_json};
 const N: usize = 10;
 const COMM_HZ: f64 = 50.0;
 /// Generous: the machine is shared, and ten Python processes start beside ten members.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 /// The vehicles' NED origin in the scenario (ENU): every vehicle's frame is shifted by it.
 const ORIGIN: [f64; 3] = [5.0, -3.0, 0.0];
 

@@ -18,7 +18,7 @@ use integration_tests::{bin, describe, run, spawn, unique_team, TempDir};
 use support::*;
 
 /// A small team's launch and stop take a few seconds; the rest is slack for a loaded machine.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 /// A user created for one test, removed (with every file it owns in /dev/shm) when dropped.
 struct TestUser {

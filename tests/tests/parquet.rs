@@ -12,7 +12,7 @@ use integration_tests::{bin, describe, run, unique_team, venv_python, TempDir};
 mod support;
 use support::*;
 
-const DEADLINE: Duration = Duration::from_secs(300);
+const DEADLINE: Duration = integration_tests::deadline::LONG;
 
 /// Runs tests/python/parquet_equals_csv.py with the test virtual environment's pyarrow.
 fn assert_parquet_equals_csv(csv: &Path, parquets: &[&Path]) {

@@ -12,9 +12,9 @@ use common::math::{vec3, Vec3};
 use integration_tests::{bin, describe, run, spawn, unique_team, venv_python, TempDir};
 
 /// A Python start-up and one query.
-const PYTHON_DEADLINE: Duration = Duration::from_secs(60);
+const PYTHON_DEADLINE: Duration = integration_tests::deadline::SHORT;
 /// paper40 for 100,001 ticks as processes: ~10 s on two idle cores.
-const TEAM_DEADLINE: Duration = Duration::from_secs(600);
+const TEAM_DEADLINE: Duration = integration_tests::deadline::LONG;
 /// watch.py's lines: enough ticks to compare. Python drains 40 subscribers more slowly than a
 /// fast team publishes, so it completes the ticks it can (the team never waits for it); the
 /// buffered last ticks of a finished team complete in any case.

@@ -28,7 +28,7 @@ const TEAM: [&str; 4] = ["--n", "10", "--t-total", "30"];
 /// 3 s of that plan (301 ticks at comm_hz = 100).
 const SHORT: [&str; 2] = ["--max-ticks", "300"];
 /// Slack for a loaded machine around a few seconds of flight.
-const DEADLINE: Duration = Duration::from_secs(90);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 fn realtime_launch(team: &str, out: &Path, extra: &[&str]) -> Command {
     let mut args: Vec<&str> = TEAM.to_vec();

@@ -9,7 +9,7 @@ use std::time::Duration;
 use integration_tests::{bin, describe, paper40, run, write_scenario, TempDir};
 use serde_json::Value;
 
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 const PNG_MAGIC: &[u8] = b"\x89PNG\r\n\x1a\n";
 
 fn orchestrator(args: &[&str]) -> Command {

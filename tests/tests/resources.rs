@@ -20,7 +20,7 @@ use integration_tests::{bin, describe, run, spawn, unique_team, TempDir};
 use support::*;
 
 /// A hand-started team waits for its members; this bounds the wait (it is killed sooner).
-const DEADLINE: Duration = Duration::from_secs(60);
+const DEADLINE: Duration = integration_tests::deadline::SHORT;
 
 /// The mode bits of `path` (0 when it is gone).
 fn mode(path: &Path) -> u32 {

@@ -27,7 +27,7 @@ use support::iox_ids::{born_s, id_pid, id_seconds, monotonic_s};
 use support::*;
 
 /// Each step takes a second or two; the rest is slack for a loaded machine.
-const DEADLINE: Duration = Duration::from_secs(120);
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 /// Set in the child that runs `node_maker`: `<team>:<file whose creation ends it>`.
 const MAKER_ENV: &str = "CDM_NODE_MAKER";
 

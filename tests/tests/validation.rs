@@ -17,9 +17,9 @@ use integration_tests::{
 };
 
 /// A bad file is refused in milliseconds; the deadline only keeps a hang from stalling the suite.
-const REFUSE_DEADLINE: Duration = Duration::from_secs(60);
+const REFUSE_DEADLINE: Duration = integration_tests::deadline::SHORT;
 /// A valid file is planned in full (a few seconds to tens of seconds in release).
-const PLAN_DEADLINE: Duration = Duration::from_secs(120);
+const PLAN_DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 type V3 = [f64; 3];
 

@@ -13,11 +13,11 @@ use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir
 use serde_json::Value;
 
 /// One headless Chromium page load; the page renders in well under a second on an idle machine.
-const BROWSER_DEADLINE: Duration = Duration::from_secs(120);
+const BROWSER_DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 /// A short simulate or a view start.
-const RUN_DEADLINE: Duration = Duration::from_secs(180);
+const RUN_DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 /// A live team of 100k ticks: ~20 s on two idle cores, far more under load.
-const LIVE_DEADLINE: Duration = Duration::from_secs(600);
+const LIVE_DEADLINE: Duration = integration_tests::deadline::LONG;
 /// Virtual time the page gets before its snapshot (Chromium's --virtual-time-budget).
 const PAGE_BUDGET_MS: &str = "8000";
 

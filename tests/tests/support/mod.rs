@@ -16,7 +16,7 @@ use integration_tests::{bin, describe, Running};
 use serde_json::Value;
 
 /// How long a team may take to start and write its first ticks.
-pub const PROGRESS_DEADLINE: Duration = Duration::from_secs(60);
+pub const PROGRESS_DEADLINE: Duration = integration_tests::deadline::SHORT;
 
 /// `orchestrator launch SOURCE --team TEAM --out OUT --quiet`.
 pub fn launch(team: &str, out: &Path, source: &[&str]) -> Command {
