@@ -1,6 +1,7 @@
-//! Typed outcomes of a run: the verdict and the kind of a fault that ended it. Both are compared
-//! as enums everywhere and become text only at the edge (audit.json, the certificate, stdout),
-//! with the very strings those files had when they were `&str`.
+//! Typed outcomes of a run: the verdict, the kind of a fault that ended it, why a member was
+//! lost and which condition a violation breaks. They are compared as enums everywhere and
+//! become text only at the edge (audit.json, the certificate, stdout), with the very strings
+//! those files had when they were `&str`.
 
 use std::fmt;
 
@@ -102,6 +103,70 @@ impl fmt::Display for FaultKind {
     }
 }
 
+/// Why a member was lost in flight (`losses[].cause` in audit.json).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LossCause {
+    /// `--lose ID@SECONDS`: `simulate` drops it; `launch` kills it once it published that tick.
+    Scripted,
+    /// Killed by a signal from outside the team.
+    Killed,
+    /// Its process ended by itself.
+    Exited,
+    /// It sent nothing for `--agent-timeout`; the orchestrator killed it.
+    Silent,
+}
+
+impl LossCause {
+    /// The text audit.json carries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LossCause::Scripted => "scripted",
+            LossCause::Killed => "killed",
+            LossCause::Exited => "exited",
+            LossCause::Silent => "silent",
+        }
+    }
+}
+
+impl fmt::Display for LossCause {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Which safety condition a violation breaks (`violations[].kind` in audit.json; Sec. VI).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ViolationKind {
+    /// Two members closer than 2 eps.
+    Collision,
+    /// A follower outside the containment prism (Theorem 3).
+    Containment,
+    /// ||r_i - r_i,HT||_2 > delta (eq. 34).
+    Tracking,
+    /// lambda_1(U_D) < lambda_CD,min (eq. 37).
+    Deformation,
+}
+
+impl ViolationKind {
+    /// The text audit.json carries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ViolationKind::Collision => "collision",
+            ViolationKind::Containment => "containment",
+            ViolationKind::Tracking => "tracking",
+            ViolationKind::Deformation => "deformation",
+        }
+    }
+}
+
+impl fmt::Display for ViolationKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -129,6 +194,28 @@ mod tests {
             assert_eq!(
                 serde_json::to_string(&k).unwrap(),
                 format!("\"{}\"", k.as_str())
+            );
+        }
+        for c in [
+            LossCause::Scripted,
+            LossCause::Killed,
+            LossCause::Exited,
+            LossCause::Silent,
+        ] {
+            assert_eq!(
+                serde_json::to_string(&c).unwrap(),
+                format!("\"{}\"", c.as_str())
+            );
+        }
+        for v in [
+            ViolationKind::Collision,
+            ViolationKind::Containment,
+            ViolationKind::Tracking,
+            ViolationKind::Deformation,
+        ] {
+            assert_eq!(
+                serde_json::to_string(&v).unwrap(),
+                format!("\"{}\"", v.as_str())
             );
         }
         for v in [Verdict::Safe, Verdict::Unsafe, Verdict::Fault] {

@@ -19,5 +19,6 @@ pub mod seams;
 pub mod signals;
 pub mod stall;
 pub mod team_core;
+pub mod team_fault;
 pub mod team_loss;
 pub mod team_slots;
