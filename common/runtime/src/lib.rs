@@ -21,4 +21,5 @@ pub mod stall;
 pub mod team_core;
 pub mod team_fault;
 pub mod team_loss;
+pub mod team_realtime;
 pub mod team_slots;
