@@ -14,7 +14,7 @@ pub use cdm_core::{
 pub use cdm_iox as transport;
 pub use cdm_runtime::{
     fault_inject, member_core, member_loop, member_loss, messages, realtime, realtime_loop,
-    realtime_monitor, sched, seams, signals, team_core, team_loss,
+    realtime_monitor, sched, seams, signals, team_core, team_fault, team_loss, team_realtime,
 };
 
 pub mod member;

@@ -595,7 +595,7 @@ impl Recorder {
     /// bodies leave the audit; their rows leave telemetry, having no state).
     fn lose(&mut self, s: &Scenario, tick: u64, book: Option<&TeamLosses>, audit: &mut Auditor) {
         for (cause, ids) in book.map(|b| b.due_at(tick)).unwrap_or_default() {
-            self.losses.record(s, tick, &ids, cause.as_str(), audit);
+            self.losses.record(s, tick, &ids, cause, audit);
         }
     }
 

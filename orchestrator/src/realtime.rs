@@ -1,9 +1,10 @@
 //! `launch --realtime`: the orchestrator as a monitor. It announces the start instant, then
 //! never grants or waits for anyone: it audits at its own rate from the newest state of every
-//! member brought to common instants (cdm-runtime's `MonitorCore`, no I/O), writes telemetry
-//! with the usual columns (rows at the audit instants), and stops the team at the end of the
-//! plan, on a fault, a stale or exited member, or a signal. The decisions are in `MonitorCore`;
-//! this file moves messages, reads clocks, and writes files.
+//! member brought to common instants, writes telemetry with the usual columns (rows at the
+//! audit instants, through `TickRecorder` as lockstep does), and stops the team at the end of
+//! the plan, on a fault, a stale or exited member, or a signal. Every decision is cdm-runtime's
+//! `RealtimeTeam` (no I/O, driven by the clock passed in); this file moves messages, reads the
+//! clock, sleeps, and writes files.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -11,18 +12,19 @@ use std::time::{Duration, Instant};
 use common::audit::{Auditor, RealtimeFigures};
 use common::formation::Role;
 use common::math::Vec3;
-use common::messages::{ClockMsg, FaultCode, StopReason};
+use common::messages::{ClockMsg, StopReason};
 use common::outcome::FaultKind;
 use common::realtime_loop::unix_now_ns;
-use common::realtime_monitor::{Heard, MonitorCore, RunFigures};
+use common::realtime_monitor::{MonitorCore, RunFigures};
 use common::record::{write_fault, TickRecorder};
 use common::rundir::RunDir;
 use common::scenario::Scenario;
+use common::team_realtime::{MonitorAction, RealtimePlan, RealtimeTeam};
 use common::telemetry::TelemetrySink;
 use common::transport::OrchestratorPorts;
 
 use crate::launch::LaunchOptions;
-use crate::team::{exited_fault, fault, first_exited, Spawned, Stop};
+use crate::team::{fault, first_exited, Spawned, Stop};
 use crate::vehicle_reports::VehicleBook;
 use crate::Failure;
 
@@ -157,28 +159,23 @@ pub fn run(
         let f = fault(FaultKind::Io, None, None, 0, e.to_string());
         (f, StopReason::AgentFault)
     })?;
-    let (mut core, start) = announce(s, rt, ports)?;
+    let (mut core, clock, start) = announce(s, o, rt, ports)?;
     let hash = s.content_hash();
     let mut m = Monitor {
         s,
         o,
-        rt,
-        start,
+        clock,
         core: &mut core,
         audit,
         tel: tel.as_mut(),
-        audits: 0,
         rec: TickRecorder::new(s),
         at: Vec::with_capacity(s.formation.members.len()),
         vehicles: VehicleBook::new(hash),
     };
     let cpu_at_start = team_cpu_s(children);
     let result = m.fly(ports, children, interrupted);
-    let Monitor {
-        audits,
-        mut vehicles,
-        ..
-    } = m;
+    let Monitor { mut vehicles, .. } = m;
+    let audits = core.audits();
     let cpu_s = team_cpu_s(children) - cpu_at_start;
     let flight_s = Instant::now()
         .saturating_duration_since(start)
@@ -187,11 +184,12 @@ pub fn run(
     let reason = result
         .as_ref()
         .map_or_else(|(_, r)| *r, |_| StopReason::Finished);
-    core.stopping();
+    let book = core.book_mut();
+    book.stopping();
     let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
-    collect_final_reports(&mut core, ports, (children, elsewhere), &mut vehicles);
+    collect_final_reports(book, ports, (children, elsewhere), &mut vehicles);
     vehicles.record(audit);
-    let figures = core.figures(RunFigures {
+    let figures = book.figures(RunFigures {
         audits,
         audit_hz: rt.audit_hz,
         phase_seed: rt.phase_seed,
@@ -216,13 +214,14 @@ pub fn run(
     }
 }
 
-/// The monitor of `s`'s team, and the start instant it announced (tick 0's instant on this
-/// process's monotonic clock) with the phase seed.
+/// The monitor of `s`'s team on a clock started now, and the start instant it announced (tick
+/// 0's instant on this process's monotonic clock) with the phase seed.
 fn announce(
     s: &Scenario,
+    o: &LaunchOptions,
     rt: &RealtimeOptions,
     ports: &mut OrchestratorPorts,
-) -> Result<(MonitorCore, Instant), Stop> {
+) -> Result<(RealtimeTeam, Instant, Instant), Stop> {
     let members: Vec<_> = s
         .formation
         .members
@@ -231,14 +230,17 @@ fn announce(
         .collect();
     let hash = s.content_hash();
     let history = (s.dt_s(), rt.stale_after.as_secs_f64());
-    let core = MonitorCore::new(&members, hash, history, rt.phase_seed);
+    let book = MonitorCore::new(&members, hash, history, rt.phase_seed);
     let lead = start_lead(members.len());
     let start_ns = unix_now_ns() + lead.as_nanos() as u64;
-    let start = Instant::now() + lead;
+    let clock = Instant::now();
+    let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
+    let plan = RealtimePlan::new(lead, (last, s.dt_s()), rt.audit_hz, rt.stale_after);
     ports
         .publish_clock(ClockMsg::realtime(start_ns, hash, rt.phase_seed))
         .map_err(|e| transport(e, 0))?;
-    Ok((core, start))
+    let core = RealtimeTeam::new(plan, book, clock.elapsed());
+    Ok((core, clock, clock + lead))
 }
 
 /// The pacing line of the summary (and what the links dropped, when they are impaired).
@@ -331,14 +333,11 @@ fn transport(e: impl std::fmt::Display, tick: u64) -> Stop {
 struct Monitor<'a> {
     s: &'a Scenario,
     o: &'a LaunchOptions,
-    rt: &'a RealtimeOptions,
-    /// Tick 0's instant on this process's monotonic clock.
-    start: Instant,
-    core: &'a mut MonitorCore,
+    /// The clock the monitor core is driven by (it started just before the announcement).
+    clock: Instant,
+    core: &'a mut RealtimeTeam,
     audit: &'a mut Auditor,
     tel: &'a mut dyn TelemetrySink,
-    /// Audit instants done.
-    audits: u64,
     /// The shared per-tick audit and telemetry (`cdm_core::record`).
     rec: TickRecorder,
     /// Every member's position and velocity at the instant being audited (formation order).
@@ -355,162 +354,68 @@ impl Monitor<'_> {
         children: &mut [Spawned],
         interrupted: &AtomicBool,
     ) -> Result<bool, Stop> {
-        let s = self.s;
-        let last = self
-            .o
-            .max_ticks
-            .map_or(s.last_tick(), |k| k.min(s.last_tick()));
-        let t_end = last as f64 * s.dt_s();
-        let period = 1.0 / self.rt.audit_hz;
-        // The last audit instant at or before the end of the plan (1e-9: t_end may be a hair
-        // below a multiple of the period after rounding).
-        let last_audit = (t_end / period + 1e-9).floor() as u64;
-        // Audit instants lag the wall clock by one member period: the state a member stamped
-        // just before an instant has then been published. An instant also waits until every
-        // member has been heard at or after it, so a member that is late (starved, or behind a
-        // slow link) is audited from the states around the instant instead of extrapolated
-        // from an old one; the wait is bounded by the stale rule above (--stale-after).
-        let lag = s.dt_s();
+        let plan = *self.core.plan();
         let mut progress =
-            crate::progress::Progress::new("launch", last_audit, period, self.o.quiet);
-        let mut last_child_check = Instant::now();
-        let mut last_flush = Instant::now();
+            crate::progress::Progress::new("launch", plan.last_audit, plan.period_s, self.o.quiet);
         loop {
             if interrupted.load(Ordering::Relaxed) {
-                let t = self.audits as f64 * period;
-                let signal = common::signals::received();
-                let what = format!("interrupted by {signal} at t = {t:.3} s");
-                let f = fault(FaultKind::Interrupted, None, None, self.audits, what);
-                return Err((f, StopReason::Interrupted));
+                self.core.on_interrupt(common::signals::received());
             }
             self.drain(ports)?;
-            let now_s = self.now_s();
-            if let Some((id, tick, age)) = self.core.stale(now_s, self.rt.stale_after.as_secs_f64())
-            {
-                return Err(stale_fault(id, tick, age, self.audits));
-            }
-            if last_child_check.elapsed() > Duration::from_millis(100) {
-                last_child_check = Instant::now();
-                if let Some((id, how)) = first_exited(children) {
-                    return Err(exited_fault(id, &how, self.audits));
+            loop {
+                match self.core.next_action(self.clock.elapsed()) {
+                    MonitorAction::Audit { index, t_s } => {
+                        self.audit_once(index, t_s)?;
+                        progress.tick(index, self.audit.report());
+                    }
+                    MonitorAction::CheckExited => {
+                        if let Some((id, how)) = first_exited(children) {
+                            self.core.on_exited(id, how);
+                        }
+                    }
+                    MonitorAction::Flush => {
+                        let _ = self.tel.flush();
+                    }
+                    MonitorAction::Wait(d) => {
+                        // A plain sleep: the transport's timed wait is coarser, and members do
+                        // not wake the monitor in real time.
+                        std::thread::sleep(d);
+                        break;
+                    }
+                    MonitorAction::Finished => {
+                        progress.finish();
+                        return Ok(true);
+                    }
+                    MonitorAction::Stop(stop) => return Err(stop),
                 }
             }
-            let heard = self.core.heard_until();
-            while self.audits <= last_audit
-                && self.audits as f64 * period + lag <= now_s
-                && self.audits as f64 * period <= heard
-            {
-                self.audit_once(self.audits as f64 * period)?;
-                progress.tick(self.audits, self.audit.report());
-                self.audits += 1;
-            }
-            if self.audits > last_audit {
-                progress.finish();
-                return Ok(true);
-            }
-            if last_flush.elapsed() > Duration::from_millis(100) {
-                last_flush = Instant::now();
-                let _ = self.tel.flush();
-            }
-            // A plain sleep to the next audit instant (at most 10 ms, so fault reports are read
-            // promptly; 1 ms while a due instant waits for a late member): the transport's timed
-            // wait is coarser, and members do not wake the monitor in real time.
-            let next = self.audits as f64 * period + lag - self.now_s();
-            let wait = if next > 0.0 { next.min(0.01) } else { 0.001 };
-            std::thread::sleep(Duration::from_secs_f64(wait));
         }
     }
 
-    /// Seconds on the common time line (wall time since the start instant; negative before).
-    fn now_s(&self) -> f64 {
-        let now = Instant::now();
-        match now.checked_duration_since(self.start) {
-            Some(d) => d.as_secs_f64(),
-            None => -(self.start - now).as_secs_f64(),
-        }
-    }
-
-    /// Takes every state and report that arrived; a member's fault report stops the flight.
+    /// Takes every state and report that arrived (the core keeps the fault that stops it).
     fn drain(&mut self, ports: &mut OrchestratorPorts) -> Result<(), Stop> {
-        let mut bad = None;
         let core = &mut *self.core;
         let vehicles = &mut self.vehicles;
         ports
             .receive_states(|msg| {
-                if vehicles.take(&msg) {
-                    return;
-                }
-                match core.on_state(&msg) {
-                    Heard::Nothing => {}
-                    h => {
-                        bad.get_or_insert(h);
-                    }
+                if !vehicles.take(&msg) {
+                    core.on_state(&msg);
                 }
             })
-            .map_err(|e| transport(e, self.audits))?;
-        match bad {
-            None | Some(Heard::Nothing) => Ok(()),
-            Some(Heard::Fault {
-                id,
-                tick,
-                code,
-                peer,
-            }) => Err(reported_fault(id, tick, code, peer, self.rt)),
-            Some(Heard::NonFinite { id, tick }) => {
-                let what = format!("agent {id} published a non-finite state at its tick {tick}");
-                let f = fault(FaultKind::NonFiniteState, Some(id), None, tick, what);
-                Err((f, StopReason::AgentFault))
-            }
-        }
+            .map(drop)
+            .map_err(|e| transport(e, core.audits()))
     }
 
-    /// Audits and writes the instant `t_s` (audit index `self.audits`) with the recorder
-    /// `simulate` and lockstep `launch` use: the same audit, the same columns.
-    fn audit_once(&mut self, t_s: f64) -> Result<(), Stop> {
+    /// Audits and writes the instant `t_s` (audit index `index`) with the recorder `simulate`
+    /// and lockstep `launch` use: the same audit, the same columns.
+    fn audit_once(&mut self, index: u64, t_s: f64) -> Result<(), Stop> {
         let n = self.s.formation.members.len();
+        let book = self.core.book();
         self.at.clear();
-        self.at.extend((0..n).map(|k| self.core.state_at(k, t_s)));
+        self.at.extend((0..n).map(|k| book.state_at(k, t_s)));
         let at = &self.at;
         self.rec
-            .record_at(self.s, (self.audits, t_s), self.audit, self.tel, |k| {
-                Some(at[k])
-            })
+            .record_at(self.s, (index, t_s), self.audit, self.tel, |k| Some(at[k]))
             .map_err(|f| (f, StopReason::AgentFault))
     }
-}
-
-/// A member whose newest state is older than the bound (stopped, starved or hung).
-fn stale_fault(id: u32, tick: u64, age_s: f64, audits: u64) -> Stop {
-    let what = format!(
-        "agent {id} sent no state for {:.0} ms (its newest is its tick {tick}): stopped or hung",
-        age_s * 1e3
-    );
-    let f = fault(FaultKind::AgentSilent, Some(id), None, audits, what);
-    (f, StopReason::AgentSilent)
-}
-
-/// A member's own fault report. A follower that found a neighbour stale names the neighbour:
-/// that one is the fault, the follower only saw it.
-fn reported_fault(
-    id: u32,
-    tick: u64,
-    code: FaultCode,
-    peer: Option<u32>,
-    rt: &RealtimeOptions,
-) -> Stop {
-    if let (FaultCode::NeighborSilent, Some(p)) = (code, peer) {
-        let what = format!(
-            "agent {p} sent no state for more than {:.0} ms (reported by agent {id} at its tick {tick}, which holds position)",
-            rt.stale_after.as_secs_f64() * 1e3
-        );
-        let f = fault(FaultKind::AgentSilent, Some(p), Some(id), tick, what);
-        return (f, StopReason::AgentSilent);
-    }
-    let kind = code.kind();
-    let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
-    let what = format!("agent {id} reported {code:?} at its tick {tick}{on}");
-    (
-        fault(kind, Some(id), peer, tick, what),
-        StopReason::AgentFault,
-    )
 }

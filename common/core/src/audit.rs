@@ -10,7 +10,7 @@ use serde::Serialize;
 use crate::formation::Role;
 use crate::frame::deformation_eigenvalues;
 use crate::math::{Real, Vec3};
-use crate::outcome::{FaultKind, Verdict};
+use crate::outcome::{FaultKind, LossCause, Verdict, ViolationKind};
 use crate::plan::Segment;
 use crate::repair::Retriangulation;
 use crate::safety::{self, Prism};
@@ -73,7 +73,7 @@ impl SafetyNumbers {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Violation {
     /// `collision`, `containment`, `tracking` or `deformation`.
-    pub kind: &'static str,
+    pub kind: ViolationKind,
     pub tick: u64,
     pub t_s: Real,
     pub agents: Vec<u32>,
@@ -115,11 +115,12 @@ impl FaultRecord {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LossRecord {
     pub id: u32,
-    /// `primary`, `secondary` or `follower`.
-    pub role: &'static str,
+    /// `primary`, `secondary` or `follower` (`unknown`: an id outside the formation).
+    #[serde(serialize_with = "role_or_unknown")]
+    pub role: Option<Role>,
     /// Why it was lost: `scripted` (`--lose`); in `launch` also `killed` (a signal from
     /// outside), `exited` (the process ended by itself) or `silent` (past `--agent-timeout`).
-    pub cause: &'static str,
+    pub cause: LossCause,
     /// The tick of its last published state.
     pub last_tick: u64,
     /// The repair applies, and its body is out of the audit (separation, tracking,
@@ -133,6 +134,11 @@ pub struct LossRecord {
     /// The host it ran on (`launch --hosts > 1`; host 0 is the orchestrator's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub host: Option<u32>,
+}
+
+/// A loss record's role as audit.json spells it.
+fn role_or_unknown<S: serde::Serializer>(role: &Option<Role>, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(role.map_or("unknown", Role::as_str))
 }
 
 /// audit.json.
@@ -365,7 +371,7 @@ impl Auditor {
     /// Record a violation that starts at this tick (allocates only then).
     fn record(
         &mut self,
-        kind: &'static str,
+        kind: ViolationKind,
         agents: &[u32],
         at: (u64, Real),
         value: Real,
@@ -373,7 +379,7 @@ impl Auditor {
     ) {
         let (tick, t) = at;
         if self.report.violations.len() < MAX_VIOLATION_RECORDS {
-            tracing::warn!(kind, tick, t_s = t, agents = ?agents, value, limit, "safety violation");
+            tracing::warn!(kind = kind.as_str(), tick, t_s = t, agents = ?agents, value, limit, "safety violation");
             self.report.violations.push(Violation {
                 kind,
                 tick,
@@ -404,7 +410,7 @@ impl Auditor {
             r.max_deviation_inf_m = r.max_deviation_inf_m.max(e.amax());
             let bad = d2 > n.delta_m;
             if bad && !self.failing.tracking[k] {
-                self.record("tracking", &[self.ids[k]], at, d2, n.delta_m);
+                self.record(ViolationKind::Tracking, &[self.ids[k]], at, d2, n.delta_m);
             }
             self.failing.tracking[k] = bad;
         }
@@ -438,7 +444,7 @@ impl Auditor {
                     } else {
                         prism.half_height_m - height
                     };
-                    self.record("containment", &[self.ids[k]], at, value, 0.0);
+                    self.record(ViolationKind::Containment, &[self.ids[k]], at, value, 0.0);
                 }
                 self.failing.containment[k] = outside;
             }
@@ -458,7 +464,13 @@ impl Auditor {
         let bad = l1 < n.lambda_cd_min - 1e-9;
         if bad && !self.failing.deformation {
             let primaries = [self.ids[0], self.ids[1], self.ids[2]];
-            self.record("deformation", &primaries, at, l1, n.lambda_cd_min);
+            self.record(
+                ViolationKind::Deformation,
+                &primaries,
+                at,
+                l1,
+                n.lambda_cd_min,
+            );
         }
         self.failing.deformation = bad;
     }
@@ -494,7 +506,7 @@ impl Auditor {
         sw.pairs.sort_unstable_by_key(|p| p.0);
         for &((a, b), d) in &sw.pairs {
             if self.failing.collisions.binary_search(&(a, b)).is_err() {
-                self.record("collision", &[a, b], at, d, 2.0 * n.eps_m);
+                self.record(ViolationKind::Collision, &[a, b], at, d, 2.0 * n.eps_m);
             }
         }
         std::mem::swap(&mut self.failing.collisions, &mut sw.seen);

@@ -14,6 +14,7 @@ use crate::engine::Engine;
 use crate::formation::Formation;
 use crate::graph::DEFAULT_WEIGHT_FLOOR;
 use crate::math::Real;
+use crate::outcome::LossCause;
 use crate::repair::{repair, Repair, Retriangulation};
 use crate::scenario::Scenario;
 use crate::step::tick_time;
@@ -154,20 +155,19 @@ impl LossState {
         engine: &mut Engine<P>,
         audit: &mut Auditor,
     ) -> Repair {
-        let r = self.record(s, tick, ids, "scripted", audit);
+        let r = self.record(s, tick, ids, LossCause::Scripted, audit);
         engine.apply_repair(&r);
         r
     }
 
     /// Lose `ids` from `tick` on in the audit only (`launch`: the members repair themselves):
-    /// repair the graph for every member lost so far and record why (`cause`: `scripted`,
-    /// `killed`, `exited`, `silent`). Returns the repair.
+    /// repair the graph for every member lost so far and record why. Returns the repair.
     pub fn record(
         &mut self,
         s: &Scenario,
         tick: u64,
         ids: &[u32],
-        cause: &'static str,
+        cause: LossCause,
         audit: &mut Auditor,
     ) -> Repair {
         self.lost.extend(ids.iter().copied());
@@ -187,7 +187,7 @@ impl LossState {
 /// it was left unreachable).
 fn records(
     s: &Scenario,
-    (tick, cause): (u64, &'static str),
+    (tick, cause): (u64, LossCause),
     ids: &[u32],
     before: &Formation,
     r: &Repair,
@@ -196,7 +196,7 @@ fn records(
         .iter()
         .map(|&id| LossRecord {
             id,
-            role: s.role_of(id).map_or("unknown", |role| role.as_str()),
+            role: s.role_of(id),
             cause,
             last_tick: tick - 1,
             tick,

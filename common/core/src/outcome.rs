@@ -1,6 +1,7 @@
-//! Typed outcomes of a run: the verdict and the kind of a fault that ended it. Both are compared
-//! as enums everywhere and become text only at the edge (audit.json, the certificate, stdout),
-//! with the very strings those files had when they were `&str`.
+//! Typed outcomes of a run: the verdict, the kind of a fault that ended it, why a member was
+//! lost and which condition a violation breaks. They are compared as enums everywhere and
+//! become text only at the edge (audit.json, the certificate, stdout), with the very strings
+//! those files had when they were `&str`.
 
 use std::fmt;
 
@@ -28,12 +29,6 @@ impl Verdict {
             Verdict::Unsafe => "UNSAFE",
             Verdict::Fault => "FAULT",
         }
-    }
-}
-
-impl fmt::Display for Verdict {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
     }
 }
 
@@ -96,11 +91,70 @@ impl FaultKind {
     }
 }
 
-impl fmt::Display for FaultKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
+/// Why a member was lost in flight (`losses[].cause` in audit.json).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LossCause {
+    /// `--lose ID@SECONDS`: `simulate` drops it; `launch` kills it once it published that tick.
+    Scripted,
+    /// Killed by a signal from outside the team.
+    Killed,
+    /// Its process ended by itself.
+    Exited,
+    /// It sent nothing for `--agent-timeout`; the orchestrator killed it.
+    Silent,
+}
+
+impl LossCause {
+    /// The text audit.json carries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LossCause::Scripted => "scripted",
+            LossCause::Killed => "killed",
+            LossCause::Exited => "exited",
+            LossCause::Silent => "silent",
+        }
     }
 }
+
+/// Which safety condition a violation breaks (`violations[].kind` in audit.json; Sec. VI).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ViolationKind {
+    /// Two members closer than 2 eps.
+    Collision,
+    /// A follower outside the containment prism (Theorem 3).
+    Containment,
+    /// ||r_i - r_i,HT||_2 > delta (eq. 34).
+    Tracking,
+    /// lambda_1(U_D) < lambda_CD,min (eq. 37).
+    Deformation,
+}
+
+impl ViolationKind {
+    /// The text audit.json carries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ViolationKind::Collision => "collision",
+            ViolationKind::Containment => "containment",
+            ViolationKind::Tracking => "tracking",
+            ViolationKind::Deformation => "deformation",
+        }
+    }
+}
+
+/// Each outcome displays as the text audit.json carries (`as_str`).
+macro_rules! display_as_str {
+    ($($t:ty),*) => {$(
+        impl fmt::Display for $t {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+    )*};
+}
+
+display_as_str!(Verdict, FaultKind, LossCause, ViolationKind);
 
 #[cfg(test)]
 mod tests {
@@ -129,6 +183,28 @@ mod tests {
             assert_eq!(
                 serde_json::to_string(&k).unwrap(),
                 format!("\"{}\"", k.as_str())
+            );
+        }
+        for c in [
+            LossCause::Scripted,
+            LossCause::Killed,
+            LossCause::Exited,
+            LossCause::Silent,
+        ] {
+            assert_eq!(
+                serde_json::to_string(&c).unwrap(),
+                format!("\"{}\"", c.as_str())
+            );
+        }
+        for v in [
+            ViolationKind::Collision,
+            ViolationKind::Containment,
+            ViolationKind::Tracking,
+            ViolationKind::Deformation,
+        ] {
+            assert_eq!(
+                serde_json::to_string(&v).unwrap(),
+                format!("\"{}\"", v.as_str())
             );
         }
         for v in [Verdict::Safe, Verdict::Unsafe, Verdict::Fault] {

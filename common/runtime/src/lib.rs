@@ -22,5 +22,7 @@ pub mod seams;
 pub mod signals;
 pub mod stall;
 pub mod team_core;
+pub mod team_fault;
 pub mod team_loss;
+pub mod team_realtime;
 pub mod team_slots;

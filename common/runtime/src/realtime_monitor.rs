@@ -132,6 +132,11 @@ impl MonitorCore {
         Heard::Nothing
     }
 
+    /// Member `id`'s index in the formation.
+    pub fn index_of(&self, id: u32) -> Option<usize> {
+        self.index.get(id)
+    }
+
     /// The team was told to stop: pacing reports from now on are final.
     pub fn stopping(&mut self) {
         self.stopped = true;

@@ -14,10 +14,11 @@
 use std::time::Duration;
 
 use cdm_core::audit::FaultRecord;
-use cdm_core::outcome::FaultKind;
 
 use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
 use crate::stall::StallWatch;
+pub use crate::team_fault::FaultRank;
+use crate::team_fault::{InterruptedAt, TeamFault, TickClock};
 use crate::team_loss::{LossCause, TeamLosses};
 use crate::team_slots::{IdIndex, TickSlots};
 
@@ -236,23 +237,20 @@ impl TeamCore {
         peer: Option<u32>,
         now: Duration,
     ) {
-        let rank = FaultRank {
-            echo: code == FaultCode::NeighborFault,
-            tick: msg.tick,
-            member: k,
-        };
+        let rank = FaultRank::of_report(code, msg.tick, k);
         if !rank.outranks(self.stopping.as_ref().map(|s| &s.rank)) {
             return;
         }
-        let kind = code.kind();
-        let on = peer.map_or_else(String::new, |p| format!(" (peer {p})"));
-        let what = format!(
-            "agent {} reported {code:?} at tick {}{on}",
-            msg.id, msg.tick
-        );
+        let fault = TeamFault::Reported {
+            id: msg.id,
+            tick: msg.tick,
+            code,
+            peer,
+            clock: TickClock::Team,
+        };
         let since = self.stopping.as_ref().map_or(now, |s| s.since);
         self.stopping = Some(Stopping {
-            record: FaultRecord::new(kind, Some(msg.id), peer, msg.tick, what),
+            record: fault.record(),
             since,
             rank,
         });
@@ -272,10 +270,11 @@ impl TeamCore {
 
     /// The run was interrupted by `signal` (SIGINT, ...): the next action stops the team.
     pub fn on_interrupt(&mut self, signal: &str) {
-        let tick = self.next_tick;
-        let what = format!("interrupted by {signal} at tick {tick}");
-        let f = FaultRecord::new(FaultKind::Interrupted, None, None, tick, what);
-        self.interrupt.get_or_insert((f, StopReason::Interrupted));
+        let fault = TeamFault::Interrupted {
+            signal: signal.into(),
+            at: InterruptedAt::Tick(self.next_tick),
+        };
+        self.interrupt.get_or_insert_with(|| fault.stop());
     }
 
     /// Hands back a complete tick's states for a later tick.
@@ -353,15 +352,11 @@ impl TeamCore {
         if self.stopping.is_some() || now.saturating_sub(seen) <= FAULT_GRACE {
             return;
         }
-        let what = format!("agent {id} published a non-finite state at tick {tick}");
+        let clock = TickClock::Team;
         self.stopping = Some(Stopping {
-            record: FaultRecord::new(FaultKind::NonFiniteState, Some(id), None, tick, what),
+            record: TeamFault::NonFinite { id, tick, clock }.record(),
             since: now.checked_sub(FAULT_GRACE).unwrap_or(now),
-            rank: FaultRank {
-                echo: false,
-                tick,
-                member: usize::MAX,
-            },
+            rank: FaultRank::found(tick),
         });
     }
 
@@ -410,29 +405,19 @@ impl TeamCore {
 
     /// The members that sent no state for the next tick, named in formation order.
     fn silent_fault(&self) -> FaultRecord {
-        let tick = self.next_tick;
-        let missing = self.missing();
-        let what = format!(
-            "agents {missing:?} sent no state for tick {tick} within {:?}",
-            self.cfg.agent_timeout
-        );
-        FaultRecord::new(
-            FaultKind::AgentSilent,
-            missing.first().copied(),
-            None,
-            tick,
-            what,
-        )
+        TeamFault::Silent {
+            missing: self.missing(),
+            tick: self.next_tick,
+            timeout: self.cfg.agent_timeout,
+        }
+        .record()
     }
 }
 
 /// The fault of a member process that exited before the end, named with its id and `tick`.
 pub fn exited_fault(id: u32, how: &str, tick: u64) -> Stop {
-    let what = format!("agent {id} {how} at tick {tick}");
-    (
-        FaultRecord::new(FaultKind::AgentExited, Some(id), None, tick, what),
-        StopReason::AgentFault,
-    )
+    let how = how.to_owned();
+    TeamFault::Exited { id, how, tick }.stop()
 }
 
 /// The first grant: a window of ticks (0..window), at most the last tick.
@@ -449,27 +434,6 @@ pub fn next_grant(complete: u64, grant: u64, window: u64, last: u64) -> Option<u
     let want = (complete + window - 1).min(last);
     let step = (window / 2).max(1);
     (want > grant && (want >= grant + step || want == last)).then_some(want)
-}
-
-/// Where a fault report stands among the reports of a run: the root cause wins over an echo (a
-/// member stopping because its neighbour reported a fault), then the earliest tick, then the
-/// first member in formation order, as the engine stops at the first member that fails at the
-/// first failing tick.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub struct FaultRank {
-    /// True for an echo (`FaultCode::NeighborFault`).
-    pub echo: bool,
-    /// The tick of the report.
-    pub tick: u64,
-    /// The reporter's index in the formation (`usize::MAX` for a fault the orchestrator found).
-    pub member: usize,
-}
-
-impl FaultRank {
-    /// True when this report names the root cause better than `current` (or there is none).
-    pub fn outranks(&self, current: Option<&FaultRank>) -> bool {
-        current.is_none_or(|c| self < c)
-    }
 }
 
 #[path = "team_core_loss.rs"]
@@ -497,38 +461,5 @@ mod tests {
         // The last tick is granted even when it is less than a step away.
         assert_eq!(next_grant(98, 99, 4, 100), Some(100));
         assert_eq!(next_grant(100, 100, 4, 100), None);
-    }
-
-    #[test]
-    fn fault_ranking_puts_the_root_cause_over_its_echo() {
-        let root = FaultRank {
-            echo: false,
-            tick: 7,
-            member: 30,
-        };
-        let echo = FaultRank {
-            echo: true,
-            tick: 6,
-            member: 2,
-        };
-        assert!(
-            root.outranks(Some(&echo)),
-            "an earlier echo hid the root cause"
-        );
-        assert!(!echo.outranks(Some(&root)));
-        let earlier = FaultRank {
-            echo: false,
-            tick: 6,
-            member: 31,
-        };
-        assert!(earlier.outranks(Some(&root)), "the earliest tick wins");
-        let first = FaultRank {
-            echo: false,
-            tick: 7,
-            member: 3,
-        };
-        assert!(first.outranks(Some(&root)), "then formation order");
-        assert!(!root.outranks(Some(&root)), "a repeat is not better");
-        assert!(echo.outranks(None));
     }
 }

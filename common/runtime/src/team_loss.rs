@@ -10,34 +10,10 @@ use std::collections::BTreeSet;
 use std::time::Duration;
 
 use cdm_core::loss_log::LossLog;
+pub use cdm_core::outcome::LossCause;
 use cdm_core::scenario::Scenario;
 
 use crate::messages::LossNotice;
-
-/// Why a member was lost (the `cause` of its audit record).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum LossCause {
-    /// `--lose ID@SECONDS`: the orchestrator killed it once it had published that tick.
-    Scripted,
-    /// Killed by a signal from outside the team.
-    Killed,
-    /// Its process ended by itself.
-    Exited,
-    /// It sent nothing for `--agent-timeout`; the orchestrator killed it.
-    Silent,
-}
-
-impl LossCause {
-    /// The audit's spelling.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            LossCause::Scripted => "scripted",
-            LossCause::Killed => "killed",
-            LossCause::Exited => "exited",
-            LossCause::Silent => "silent",
-        }
-    }
-}
 
 /// A repair whose new links did not all connect in time.
 #[derive(Debug, Clone, PartialEq, Eq)]

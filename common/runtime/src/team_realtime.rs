@@ -1,0 +1,503 @@
+//! The orchestrator's side of a real-time flight as a plain type, with no I/O, the counterpart
+//! of [`crate::team_core::TeamCore`]: events in (a member's state or report, a member process
+//! seen exited, an interrupt, "now" from a clock the caller drives), actions out (audit and
+//! write an instant through `cdm_core::record::TickRecorder`, check the processes, flush, wait,
+//! finish, stop with a fault). The loop around it (`orchestrator/src/realtime.rs`) owns the
+//! ports, the processes and the files.
+//!
+//! What it decides: when an audit instant is due (it lags the clock by one member period, and
+//! waits until every member has been heard at or after it), which member is stale, which fault
+//! report names the root cause ([`FaultRank`], as in lockstep), and when to look for exited
+//! members and flush.
+
+use std::time::Duration;
+
+use crate::messages::{FaultCode, StateMsg};
+use crate::realtime_monitor::{Heard, MonitorCore};
+use crate::team_core::{Stop, EXIT_CHECK};
+use crate::team_fault::{FaultRank, InterruptedAt, TeamFault, TickClock};
+
+/// How often telemetry is flushed while flying.
+pub const FLUSH_EVERY: Duration = Duration::from_millis(100);
+
+/// The longest wait between two turns: fault reports are read at least this often.
+pub const MAX_WAIT: Duration = Duration::from_millis(10);
+
+/// The wait while a due instant waits for a late member.
+pub const LATE_WAIT: Duration = Duration::from_millis(1);
+
+/// The timing of a real-time flight's audits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RealtimePlan {
+    /// Tick 0's instant on the caller's clock.
+    pub start: Duration,
+    /// Seconds between audit instants (1 / audit rate).
+    pub period_s: f64,
+    /// How far audit instants lag the clock: one member period (dt), so the state a member
+    /// stamped just before an instant has been published by then.
+    pub lag_s: f64,
+    /// The last audit instant's index.
+    pub last_audit: u64,
+    /// The bound on a member's newest state's age.
+    pub stale_after: Duration,
+}
+
+impl RealtimePlan {
+    /// Audits at `audit_hz` up to the last tick `last_tick` of period `dt_s`.
+    pub fn new(
+        start: Duration,
+        (last_tick, dt_s): (u64, f64),
+        audit_hz: f64,
+        stale_after: Duration,
+    ) -> Self {
+        let period_s = 1.0 / audit_hz;
+        let t_end = last_tick as f64 * dt_s;
+        RealtimePlan {
+            start,
+            period_s,
+            lag_s: dt_s,
+            // The last audit instant at or before the end of the plan (1e-9: t_end may be a
+            // hair below a multiple of the period after rounding).
+            last_audit: (t_end / period_s + 1e-9).floor() as u64,
+            stale_after,
+        }
+    }
+}
+
+/// What the loop must do next.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MonitorAction {
+    /// Audit and write instant `index` at `t_s` of the common time line, from the members'
+    /// states brought to it ([`MonitorCore::state_at`]).
+    Audit { index: u64, t_s: f64 },
+    /// Look for an exited member process and tell [`RealtimeTeam::on_exited`] (if one is).
+    CheckExited,
+    /// Flush the telemetry.
+    Flush,
+    /// Receive what arrived after sleeping this long (or less when woken).
+    Wait(Duration),
+    /// Every instant of the plan was audited.
+    Finished,
+    /// Stop the team: record the fault and send the reason.
+    Stop(Stop),
+}
+
+/// The real-time monitor's protocol state (see the module doc).
+#[derive(Debug, Clone)]
+pub struct RealtimeTeam {
+    plan: RealtimePlan,
+    book: MonitorCore,
+    /// Audit instants done.
+    audits: u64,
+    last_exit_check: Duration,
+    last_flush: Duration,
+    /// The best-ranked fault heard since the last turn.
+    fault: Option<(FaultRank, TeamFault)>,
+    interrupt: Option<String>,
+    exited: Option<(u32, String)>,
+}
+
+impl RealtimeTeam {
+    /// A flight about to be monitored at `now`, with the members' state book.
+    pub fn new(plan: RealtimePlan, book: MonitorCore, now: Duration) -> Self {
+        RealtimeTeam {
+            plan,
+            book,
+            audits: 0,
+            last_exit_check: now,
+            last_flush: now,
+            fault: None,
+            interrupt: None,
+            exited: None,
+        }
+    }
+
+    /// The timing of the audits.
+    pub fn plan(&self) -> &RealtimePlan {
+        &self.plan
+    }
+
+    /// The members' states and reports.
+    pub fn book(&self) -> &MonitorCore {
+        &self.book
+    }
+
+    /// The members' states and reports, to take the final pacing reports after the stop.
+    pub fn book_mut(&mut self) -> &mut MonitorCore {
+        &mut self.book
+    }
+
+    /// Audit instants done.
+    pub fn audits(&self) -> u64 {
+        self.audits
+    }
+
+    /// A message from a member's state service. A fault report or a non-finite state is kept
+    /// when it names the root cause better than the one kept so far.
+    pub fn on_state(&mut self, msg: &StateMsg) {
+        let (rank, fault) = match self.book.on_state(msg) {
+            Heard::Nothing => return,
+            Heard::Fault {
+                id,
+                tick,
+                code,
+                peer,
+            } => {
+                let member = self.book.index_of(id).unwrap_or(usize::MAX);
+                (
+                    FaultRank::of_report(code, tick, member),
+                    self.reported(id, tick, code, peer),
+                )
+            }
+            Heard::NonFinite { id, tick } => {
+                let clock = TickClock::Own;
+                (
+                    FaultRank::found(tick),
+                    TeamFault::NonFinite { id, tick, clock },
+                )
+            }
+        };
+        if rank.outranks(self.fault.as_ref().map(|f| &f.0)) {
+            self.fault = Some((rank, fault));
+        }
+    }
+
+    /// A member's own report. A follower that found a neighbour stale names the neighbour: that
+    /// one is the fault, the follower only saw it.
+    fn reported(&self, id: u32, tick: u64, code: FaultCode, peer: Option<u32>) -> TeamFault {
+        match (code, peer) {
+            (FaultCode::NeighborSilent, Some(p)) => TeamFault::NeighborStale {
+                peer: p,
+                reporter: id,
+                tick,
+                bound_s: self.plan.stale_after.as_secs_f64(),
+            },
+            _ => TeamFault::Reported {
+                id,
+                tick,
+                code,
+                peer,
+                clock: TickClock::Own,
+            },
+        }
+    }
+
+    /// Member `id`'s process was seen exited (`how`: "exited with code 1").
+    pub fn on_exited(&mut self, id: u32, how: String) {
+        self.exited.get_or_insert((id, how));
+    }
+
+    /// The run was interrupted by `signal`: the next action stops the team.
+    pub fn on_interrupt(&mut self, signal: &str) {
+        self.interrupt.get_or_insert_with(|| signal.to_owned());
+    }
+
+    /// Seconds on the common time line at `now` (negative before the start instant).
+    fn time_s(&self, now: Duration) -> f64 {
+        match now.checked_sub(self.plan.start) {
+            Some(d) => d.as_secs_f64(),
+            None => -(self.plan.start - now).as_secs_f64(),
+        }
+    }
+
+    /// Audit instant `index`'s time.
+    fn instant_s(&self, index: u64) -> f64 {
+        index as f64 * self.plan.period_s
+    }
+
+    /// The next action at `now`: a signal, a fault report, a stale member, an exited member
+    /// stop the team in that order; then the audit instants due; then a flush; then a wait.
+    pub fn next_action(&mut self, now: Duration) -> MonitorAction {
+        if let Some(a) = self.stop_action(now) {
+            return MonitorAction::Stop(a.stop());
+        }
+        if now.saturating_sub(self.last_exit_check) > EXIT_CHECK {
+            self.last_exit_check = now;
+            return MonitorAction::CheckExited;
+        }
+        let now_s = self.time_s(now);
+        let t = self.instant_s(self.audits);
+        // Audit instants lag the clock by one member period: the state a member stamped just
+        // before an instant has then been published. An instant also waits until every member
+        // has been heard at or after it, so a member that is late (starved, or behind a slow
+        // link) is audited from the states around the instant instead of extrapolated from an
+        // old one; the wait is bounded by the stale rule (--stale-after).
+        if self.audits <= self.plan.last_audit
+            && t + self.plan.lag_s <= now_s
+            && t <= self.book.heard_until()
+        {
+            let index = self.audits;
+            self.audits += 1;
+            return MonitorAction::Audit { index, t_s: t };
+        }
+        if self.audits > self.plan.last_audit {
+            return MonitorAction::Finished;
+        }
+        if now.saturating_sub(self.last_flush) > FLUSH_EVERY {
+            self.last_flush = now;
+            return MonitorAction::Flush;
+        }
+        // A plain sleep to the next audit instant (at most MAX_WAIT, so fault reports are read
+        // promptly; LATE_WAIT while a due instant waits for a late member): members do not wake
+        // the monitor in real time.
+        let next = t + self.plan.lag_s - now_s;
+        MonitorAction::Wait(if next > 0.0 {
+            Duration::from_secs_f64(next).min(MAX_WAIT)
+        } else {
+            LATE_WAIT
+        })
+    }
+
+    /// The fault that stops the team now, if any.
+    fn stop_action(&mut self, now: Duration) -> Option<TeamFault> {
+        let index = self.audits;
+        if let Some(signal) = self.interrupt.take() {
+            let t_s = self.instant_s(index);
+            let at = InterruptedAt::Instant { index, t_s };
+            return Some(TeamFault::Interrupted { signal, at });
+        }
+        if let Some((_, f)) = self.fault.take() {
+            return Some(f);
+        }
+        let bound_s = self.plan.stale_after.as_secs_f64();
+        if let Some((id, newest, age_s)) = self.book.stale(self.time_s(now), bound_s) {
+            return Some(TeamFault::Stale {
+                id,
+                newest,
+                age_s,
+                index,
+            });
+        }
+        let (id, how) = self.exited.take()?;
+        Some(TeamFault::Exited {
+            id,
+            how,
+            tick: index,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cdm_core::math::Vec3;
+    use cdm_core::outcome::FaultKind;
+
+    use crate::messages::{AgentStatus, StopReason};
+
+    const HASH: u64 = 7;
+    const IDS: [u32; 3] = [1, 2, 3];
+
+    fn ms(t: u64) -> Duration {
+        Duration::from_millis(t)
+    }
+
+    /// Three members at 10 Hz, audited at 10 Hz up to tick 10 (instants 0..=10), starting at 1 s
+    /// on the fake clock, stale after 0.5 s, aligned phases.
+    fn team() -> RealtimeTeam {
+        let members: Vec<(u32, Vec3, bool)> = IDS
+            .iter()
+            .map(|&id| (id, Vec3::new(id as f64, 0.0, 0.0), id == 3))
+            .collect();
+        let book = MonitorCore::new(&members, HASH, (0.1, 0.5), 0);
+        let plan = RealtimePlan::new(ms(1000), (10, 0.1), 10.0, ms(500));
+        RealtimeTeam::new(plan, book, ms(0))
+    }
+
+    fn state(id: u32, tick: u64) -> StateMsg {
+        StateMsg::ok(tick, HASH, id, [id as f64; 12])
+    }
+
+    fn report(id: u32, tick: u64, code: FaultCode, peer: Option<u32>) -> StateMsg {
+        state(id, tick).with_status(AgentStatus::Fault { code, peer })
+    }
+
+    /// Every member's states of ticks `0..=last`.
+    fn heard(c: &mut RealtimeTeam, ids: &[u32], last: u64) {
+        for tick in 0..=last {
+            for &id in ids {
+                c.on_state(&state(id, tick));
+            }
+        }
+    }
+
+    /// What one turn did: the instants audited, the exit checks and flushes, and how it ended.
+    #[derive(Debug, Default)]
+    struct Turn {
+        audits: Vec<u64>,
+        exit_checks: usize,
+        flushes: usize,
+        end: Option<MonitorAction>,
+    }
+
+    /// Runs the monitor at `now` until it waits, finishes or stops, as the loop does (an exit
+    /// check finds `exited`).
+    fn turn(c: &mut RealtimeTeam, now: Duration, exited: Option<(u32, &str)>) -> Turn {
+        let mut t = Turn::default();
+        for _ in 0..10_000 {
+            match c.next_action(now) {
+                MonitorAction::Audit { index, t_s } => {
+                    assert_eq!(t_s, index as f64 * 0.1);
+                    t.audits.push(index);
+                }
+                MonitorAction::CheckExited => {
+                    t.exit_checks += 1;
+                    if let Some((id, how)) = exited {
+                        c.on_exited(id, how.into());
+                    }
+                }
+                MonitorAction::Flush => t.flushes += 1,
+                end => {
+                    t.end = Some(end);
+                    return t;
+                }
+            }
+        }
+        panic!("the monitor never waited");
+    }
+
+    fn stopped(t: &Turn) -> &Stop {
+        match &t.end {
+            Some(MonitorAction::Stop(stop)) => stop,
+            other => panic!("no stop: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn audit_instants_lag_the_clock_by_a_period_and_wait_for_the_slowest_member() {
+        let mut c = team();
+        // Before the start instant: nothing is due; the wait is bounded.
+        let t = turn(&mut c, ms(500), None);
+        assert!(t.audits.is_empty());
+        assert_eq!(t.end, Some(MonitorAction::Wait(MAX_WAIT)));
+        heard(&mut c, &IDS, 2);
+        // At t = 0.25 s: instants 0 and 1 are a period old, instant 2 is not yet.
+        let t = turn(&mut c, ms(1250), None);
+        assert_eq!(t.audits, [0, 1]);
+        assert_eq!(t.end, Some(MonitorAction::Wait(MAX_WAIT)));
+        // Instant 2 is due at 0.3 s, but member 3 was last heard at tick 2 (0.2 s): due, audited.
+        heard(&mut c, &[1, 2], 4);
+        let t = turn(&mut c, ms(1420), None);
+        assert_eq!(t.audits, [2]);
+        // Instant 3 waits for member 3 (heard until 0.2 s), polled often.
+        assert_eq!(t.end, Some(MonitorAction::Wait(LATE_WAIT)));
+        c.on_state(&state(3, 3));
+        assert_eq!(turn(&mut c, ms(1421), None).audits, [3]);
+    }
+
+    #[test]
+    fn every_instant_audited_finishes_the_flight_and_telemetry_is_flushed_meanwhile() {
+        let mut c = team();
+        heard(&mut c, &IDS, 10);
+        let t = turn(&mut c, ms(1550), None);
+        assert_eq!(t.audits, [0, 1, 2, 3, 4]);
+        assert_eq!((t.flushes, t.exit_checks), (1, 1));
+        let t = turn(&mut c, ms(2200), None);
+        assert_eq!(t.audits, (5..=10).collect::<Vec<_>>());
+        assert_eq!(t.end, Some(MonitorAction::Finished));
+        assert_eq!(c.audits(), 11);
+    }
+
+    #[test]
+    fn a_member_heard_too_long_ago_is_stale() {
+        let mut c = team();
+        heard(&mut c, &[1, 2], 7);
+        heard(&mut c, &[3], 1);
+        // Instant 1 is audited (member 3 heard until 0.1 s), instant 2 waits for member 3.
+        assert_eq!(turn(&mut c, ms(1300), None).audits, [0, 1]);
+        // Its newest is 0.55 s old: the fault names the next instant.
+        let t = turn(&mut c, ms(1650), None);
+        assert!(t.audits.is_empty());
+        let (f, reason) = stopped(&t);
+        assert_eq!(
+            (f.kind, f.agent, f.tick, *reason),
+            (FaultKind::AgentSilent, Some(3), 2, StopReason::AgentSilent)
+        );
+        assert_eq!(
+            f.message,
+            "agent 3 sent no state for 550 ms (its newest is its tick 1): stopped or hung"
+        );
+    }
+
+    #[test]
+    fn the_root_cause_outranks_its_echo_whatever_arrived_first() {
+        let mut c = team();
+        c.on_state(&report(1, 3, FaultCode::NeighborFault, Some(2)));
+        c.on_state(&report(2, 4, FaultCode::Control, None));
+        c.on_state(&report(3, 4, FaultCode::NeighborFault, Some(2)));
+        let t = turn(&mut c, ms(100), None);
+        let (f, reason) = stopped(&t);
+        assert_eq!(
+            (f.kind, f.agent, f.tick, *reason),
+            (FaultKind::Control, Some(2), 4, StopReason::AgentFault)
+        );
+        assert_eq!(f.message, "agent 2 reported Control at its tick 4");
+    }
+
+    #[test]
+    fn a_follower_that_found_a_neighbour_stale_names_the_neighbour() {
+        let mut c = team();
+        c.on_state(&report(3, 9, FaultCode::NeighborSilent, Some(2)));
+        let t = turn(&mut c, ms(100), None);
+        let (f, reason) = stopped(&t);
+        assert_eq!(
+            (f.kind, f.agent, f.peer, *reason),
+            (
+                FaultKind::AgentSilent,
+                Some(2),
+                Some(3),
+                StopReason::AgentSilent
+            )
+        );
+        assert_eq!(
+            f.message,
+            "agent 2 sent no state for more than 500 ms (reported by agent 3 at its tick 9, which holds position)"
+        );
+    }
+
+    #[test]
+    fn a_non_finite_state_is_never_audited_and_stops_the_flight() {
+        let mut c = team();
+        c.on_state(&StateMsg::ok(2, HASH, 1, [f64::NAN; 12]));
+        let (f, _) = stopped(&turn(&mut c, ms(100), None)).clone();
+        assert_eq!(
+            (f.kind, f.agent, f.tick),
+            (FaultKind::NonFiniteState, Some(1), 2)
+        );
+        assert_eq!(
+            f.message,
+            "agent 1 published a non-finite state at its tick 2"
+        );
+    }
+
+    #[test]
+    fn an_exited_member_is_looked_for_every_exit_check_and_stops_the_flight() {
+        let mut c = team();
+        heard(&mut c, &IDS, 3);
+        let t = turn(&mut c, ms(50), Some((2, "exited with code 1")));
+        assert_eq!(t.exit_checks, 0, "checked before EXIT_CHECK passed");
+        let t = turn(&mut c, ms(1300), Some((2, "exited with code 1")));
+        assert_eq!(t.exit_checks, 1);
+        // Checked before the instants: none audited, the fault names the next one.
+        let (f, reason) = stopped(&t);
+        assert_eq!(
+            (f.kind, f.agent, f.tick, *reason),
+            (FaultKind::AgentExited, Some(2), 0, StopReason::AgentFault)
+        );
+        assert_eq!(f.message, "agent 2 exited with code 1 at tick 0");
+    }
+
+    #[test]
+    fn an_interrupt_stops_the_flight_at_the_next_instant() {
+        let mut c = team();
+        heard(&mut c, &IDS, 3);
+        assert_eq!(turn(&mut c, ms(1250), None).audits, [0, 1]);
+        c.on_interrupt("SIGTERM");
+        let (f, reason) = stopped(&turn(&mut c, ms(1260), None)).clone();
+        assert_eq!(
+            (f.kind, f.tick, reason),
+            (FaultKind::Interrupted, 2, StopReason::Interrupted)
+        );
+        assert_eq!(f.message, "interrupted by SIGTERM at t = 0.200 s");
+    }
+}
