@@ -1,5 +1,5 @@
 //! Micro-benchmarks of the hot math: one agent's tick (controller + RK4), Q/d and lambda(U_D),
-//! and one audit of a whole team. Run: `cargo bench -p common --bench hot_math`.
+//! and one audit of a whole team. Run: `cargo bench -p cdm-core --bench hot_math`.
 
 use std::hint::black_box;
 

@@ -1,4 +1,4 @@
-//! Imperfect links in the engine (`common/src/link.rs`): nothing lost and no delay is the
+//! Imperfect links in the engine (`common/core/src/link.rs`): nothing lost and no delay is the
 //! paper's model bit for bit; delay, jitter and loss change the flight deterministically.
 
 use cdm_core::delay::deviation_at_delay;

@@ -8,7 +8,7 @@
 //!   naming the follower. Never a silent bad graph.
 //!
 //! Case counts keep the file to a few seconds in release; a watchdog ends the process if a test
-//! hangs. How to run: `cargo test --release -p common --test proptest`.
+//! hangs. How to run: `cargo test --release -p cdm-core --test proptest`.
 
 mod support;
 use support::Watchdog;

@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
 use super::links::{Links, LostHost};
-use super::plan::placed;
+use super::placed::placed;
 use super::repairs::{CrossRepairs, RepairStep};
 use super::{Flight, HostOptions};
 use cdm_team::Failure;

@@ -20,6 +20,8 @@ mod handover;
 #[cfg(feature = "hosts")]
 mod links;
 #[cfg(feature = "hosts")]
+mod placed;
+#[cfg(feature = "hosts")]
 mod plan;
 #[cfg(feature = "hosts")]
 mod repairs;

@@ -8,6 +8,7 @@ use cdm_team::out;
 use cdm_zenoh::{Net, Placed, Regions};
 
 use super::bridge::Bridge;
+use super::placed::placed;
 use super::{Flight, HostOptions};
 use cdm_team::Failure;
 
@@ -17,19 +18,6 @@ pub struct Plan {
     placed: Vec<Placed>,
     options: HostOptions,
     quiet: bool,
-}
-
-/// The formation as the split sees it (plain data).
-pub fn placed(s: &Scenario) -> Vec<Placed> {
-    s.formation
-        .members
-        .iter()
-        .map(|m| Placed {
-            id: m.id,
-            planar: [m.planar[0], m.planar[1]],
-            in_neighbors: m.link.map_or_else(Vec::new, |l| l.in_neighbors.to_vec()),
-        })
-        .collect()
 }
 
 impl Plan {
