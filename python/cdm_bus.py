@@ -1,4 +1,4 @@
-"""Python on a team's live bus: the wire types of `common/src/messages.rs` as ctypes structures,
+"""Python on a team's live bus: the wire types of `common/member/src/messages.rs` as ctypes structures,
 and the iceoryx2 configuration of the runtime's processes, for the `iceoryx2` package from PyPI
 (0.10, the version of the Rust side).
 
@@ -47,7 +47,7 @@ class StateMsg(ctypes.Structure):
         ("status", ctypes.c_uint32),
         ("fault_code", ctypes.c_uint32),
         ("fault_peer", ctypes.c_uint32),
-        # x y z, vx vy vz, then attitude and rates: the layout of common/src/dynamics.rs.
+        # x y z, vx vy vz, then attitude and rates: the layout of common/member/src/dynamics.rs.
         ("state", ctypes.c_double * 12),
     ]
 

@@ -3,9 +3,10 @@
 
 use std::path::PathBuf;
 
+use cdm_core::loss::{OnLoss, ScriptedLoss};
+use cdm_core::telemetry::TelemetryFormat;
+use cdm_export::cli::{ExportTarget, Source};
 use clap::{Args, Parser, Subcommand};
-use common::loss::{OnLoss, ScriptedLoss};
-use common::telemetry::TelemetryFormat;
 
 /// Safe continuum deformation of quadcopter teams: plan, simulate and launch a team.
 #[derive(Debug, Parser)]
@@ -171,11 +172,11 @@ pub struct LaunchArgs {
     /// What the members fly (`--vehicles mavlink`: real or SITL vehicles over MAVLink;
     /// README "Fly real vehicles").
     #[command(flatten)]
-    pub vehicle: common::vehicles::VehicleArgs,
+    pub vehicle: cdm_member::vehicles::VehicleArgs,
     #[command(flatten)]
     pub hosts: HostArgs,
     #[command(flatten)]
-    pub realtime: crate::realtime::RealtimeArgs,
+    pub realtime: cdm_launch::realtime::RealtimeArgs,
     #[command(flatten)]
     pub run: RunOptions,
 }
@@ -194,76 +195,6 @@ pub enum ScenarioCommand {
         #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
-}
-
-#[derive(Debug, Subcommand)]
-pub enum ExportTarget {
-    /// One <id>.csv of polynomial pieces per quadcopter (Crazyswarm2's uav_trajectory format),
-    /// crazyflies.yaml, README.txt, certificate.json, scenario.toml and a top view into --out.
-    Crazyswarm2 {
-        #[command(flatten)]
-        source: Source,
-        /// The output directory (created; our files in it are replaced).
-        #[arg(long, value_name = "DIR")]
-        out: PathBuf,
-        #[command(flatten)]
-        frame: ExportFrame,
-    },
-    /// A Skybrush show (.skyc: a ZIP holding show.json with Bézier trajectories), with
-    /// <stem>.certificate.json and <stem>.scenario.toml beside it.
-    Skybrush {
-        #[command(flatten)]
-        source: Source,
-        /// The show file to write (e.g. show.skyc).
-        #[arg(long, value_name = "FILE")]
-        out: PathBuf,
-        #[command(flatten)]
-        frame: ExportFrame,
-    },
-}
-
-/// Where an exported plan flies: p -> scale p + origin, and the target vehicles' radius.
-#[derive(Debug, Args, Clone)]
-pub struct ExportFrame {
-    /// Multiply every position and goal by S (the paper's team is 300 m wide; a lab is 5 m).
-    #[arg(
-        long,
-        value_name = "S",
-        default_value_t = 1.0,
-        allow_negative_numbers = true
-    )]
-    pub scale: f64,
-    /// Then add X,Y,Z metres (default 0,0,0).
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    pub origin: Option<String>,
-    /// The radius of the target vehicles' ball, metres (0.1 for a Crazyflie).
-    #[arg(
-        long,
-        value_name = "METRES",
-        default_value_t = 0.1,
-        allow_negative_numbers = true
-    )]
-    pub eps: f64,
-    /// Write the files even when the certificate at the target scale is UNSAFE (exit 1 stays).
-    #[arg(long)]
-    pub force: bool,
-}
-
-/// Which scenario to fly: a file, a built-in, or a generated team (default: built-in paper40).
-#[derive(Debug, Args, Clone)]
-pub struct Source {
-    /// A scenario file (TOML).
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["n", "builtin"])]
-    pub scenario: Option<PathBuf>,
-    /// A generated team of N members (4..=2000).
-    #[arg(long, conflicts_with = "builtin")]
-    pub n: Option<usize>,
-    /// A built-in scenario (paper40).
-    #[arg(long, value_name = "NAME")]
-    pub builtin: Option<String>,
-    /// Override the scenario's travel time t_total_s.
-    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
-    pub t_total: Option<f64>,
 }
 
 /// Where a run goes.
@@ -298,7 +229,7 @@ pub struct HostArgs {
 #[derive(Debug, Args, Clone)]
 pub struct RunOptions {
     #[command(flatten)]
-    pub link: common::options::LinkArgs,
+    pub link: cdm_member::options::LinkArgs,
     /// End the run at the tick of its first safety violation (telemetry kept, exit 1).
     #[arg(long)]
     pub stop_on_violation: bool,

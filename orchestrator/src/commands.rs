@@ -3,26 +3,28 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use common::audit::AuditReport;
-use common::delay::deviation_at_delay;
-use common::link::MAX_DELAY_MS;
-use common::loss::LossSchedule;
-use common::losscert::{certify_losses, LossCertificate};
-use common::outcome::Verdict;
-use common::rundir::RunDir;
-use common::scenario::{Checks, Scenario};
-use common::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
+use cdm_core::audit::AuditReport;
+use cdm_core::delay::deviation_at_delay;
+use cdm_core::link::MAX_DELAY_MS;
+use cdm_core::loss::LossSchedule;
+use cdm_core::losscert::{certify_losses, LossCertificate};
+use cdm_core::outcome::Verdict;
+use cdm_core::rundir::RunDir;
+use cdm_core::scenario::{Checks, Scenario};
+use cdm_core::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
+use cdm_team::out;
 
-use common::options::timeout;
-use common::transport::TeamName;
+use cdm_iox::TeamName;
+use cdm_member::options::timeout;
 
-use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand, Source};
-use crate::errors::CommandError;
-use crate::export;
-use crate::launch::{launch, LaunchOptions};
-use crate::progress::{Progress, Spinner};
-use crate::report::{report, ReportError};
-use crate::{Exit, Failure};
+use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand};
+use cdm_export::certificate::print_certificate;
+use cdm_export::cli::{load, Source};
+use cdm_launch::launch::{launch, LaunchOptions};
+use cdm_report::{report, ReportError};
+use cdm_team::errors::CommandError;
+use cdm_team::progress::{Progress, Spinner};
+use cdm_team::{Exit, Failure};
 
 pub fn run(cli: Cli) -> Result<Exit, Failure> {
     match cli.command {
@@ -57,7 +59,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             scenario,
             join_timeout,
         } => host_daemon(connect, team, host, scenario, join_timeout, cli.quiet),
-        Command::Export { target } => export::run(target, cli.quiet),
+        Command::Export { target } => cdm_export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
         } => scenario_export(name, n, out.as_deref()),
@@ -71,7 +73,7 @@ fn simulate_command(
     run: &RunOptions,
     quiet: bool,
 ) -> Result<Exit, Failure> {
-    crate::telemetry::check_available(run.telemetry)?;
+    cdm_team::telemetry::check_available(run.telemetry)?;
     let s = run.link.apply(&load(source)?).map_err(Failure::bad_input)?;
     check_follow(&s, run.follow)?;
     let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
@@ -85,7 +87,7 @@ fn simulate_command(
         on_loss: run.on_loss.into(),
     };
     let mut tel =
-        crate::telemetry::open(&dir, run.telemetry, out.every).map_err(Failure::bad_input)?;
+        cdm_team::telemetry::open(&dir, run.telemetry, out.every).map_err(Failure::bad_input)?;
     let last = run
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
@@ -139,7 +141,7 @@ fn scenario_export(
     let s = load(&source)?;
     match out {
         Some(p) => {
-            common::rundir::write_atomic(p, s.to_toml().as_bytes()).map_err(Failure::bad_input)?
+            cdm_core::rundir::write_atomic(p, s.to_toml().as_bytes()).map_err(Failure::bad_input)?
         }
         None => {
             use std::io::Write as _;
@@ -167,7 +169,7 @@ fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
 
 /// The scenario and the launch options from the command line, every value checked.
 fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOptions), Failure> {
-    crate::telemetry::check_available(a.run.telemetry)?;
+    cdm_team::telemetry::check_available(a.run.telemetry)?;
     let vehicles = a
         .vehicle
         .validate(a.realtime.realtime)
@@ -180,7 +182,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
     vehicles.check(&s).map_err(Failure::bad_input)?;
     let realtime = a.realtime.options(&s)?;
     if let Some(why) =
-        realtime.and_then(|rt| common::options::realtime_links_refusal(&s, rt.stale_after))
+        realtime.and_then(|rt| cdm_member::options::realtime_links_refusal(&s, rt.stale_after))
     {
         return Err(Failure::bad_input(why));
     }
@@ -210,7 +212,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         telemetry: a.run.telemetry,
         // Real time reads the newest states: a short buffer is enough.
         window: if realtime.is_some() {
-            crate::realtime::REALTIME_WINDOW
+            cdm_launch::realtime::REALTIME_WINDOW
         } else {
             a.window
         },
@@ -227,7 +229,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             .map(crate::cli::serve_addr)
             .transpose()
             .map_err(Failure::bad_input)?,
-        hosts: crate::host::HostOptions {
+        hosts: cdm_hosts::HostOptions {
             hosts: a.hosts.hosts,
             listen: a.hosts.listen.clone(),
             link_timeout: secs(a.hosts.link_timeout, "--link-timeout")?,
@@ -240,7 +242,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
 }
 
 /// The launch's summary: the audit, the tick rate and start-up, the peak memory.
-fn print_launched(l: &crate::launch::Launched, started: Instant, out: &Path, quiet: bool) {
+fn print_launched(l: &cdm_launch::launch::Launched, started: Instant, out: &Path, quiet: bool) {
     summary("launch", &l.report, started, out, quiet);
     if !quiet && l.ticking > Duration::ZERO {
         out!(
@@ -249,7 +251,7 @@ fn print_launched(l: &crate::launch::Launched, started: Instant, out: &Path, qui
             l.report.ticks as f64 / l.ticking.as_secs_f64(),
             l.startup.as_secs_f64()
         );
-        if let (Some(m), Some(me)) = (l.member_peak_rss, crate::team::own_peak_rss()) {
+        if let (Some(m), Some(me)) = (l.member_peak_rss, cdm_team::team::own_peak_rss()) {
             let (id, member) = m.largest;
             out!(
                 "  peak resident memory: largest member {:.1} MiB (agent {id}), \
@@ -266,9 +268,9 @@ fn print_launched(l: &crate::launch::Launched, started: Instant, out: &Path, qui
 /// `orchestrator clean`: removes the resources of this user's teams whose processes are all
 /// dead, and the dead nodes of no known team, and says what it removed.
 fn clean(quiet: bool) -> Result<Exit, Failure> {
-    use common::transport::TransportError;
+    use cdm_iox::TransportError;
     use std::io::Write;
-    let removed = common::transport::remove_dead_teams().map_err(|e| match e {
+    let removed = cdm_iox::remove_dead_teams().map_err(|e| match e {
         TransportError::UnsafeIox2Path { .. } => Failure::bad_input(e),
         e => Failure::fault(e),
     })?;
@@ -288,7 +290,7 @@ fn clean(quiet: bool) -> Result<Exit, Failure> {
     if removed.teams.is_empty() && removed.unknown_nodes == 0 {
         text += &format!(
             "nothing to remove: no team under {} has all its processes dead, and no dead node of an unknown team is left\n",
-            common::transport::iox2_root()
+            cdm_iox::iox2_root()
         );
     }
     if !quiet {
@@ -296,27 +298,6 @@ fn clean(quiet: bool) -> Result<Exit, Failure> {
         let _ = std::io::stdout().lock().write_all(text.as_bytes());
     }
     Ok(Exit::Safe)
-}
-
-/// Load and fully validate the scenario a command names.
-pub fn load(source: &Source) -> Result<Scenario, Failure> {
-    let mut s = match (&source.scenario, source.n, &source.builtin) {
-        (Some(p), _, _) => Scenario::load(p, Checks::Full),
-        (None, Some(n), _) => Scenario::generated(n),
-        (None, None, Some(b)) => Scenario::builtin(b),
-        (None, None, None) => Scenario::builtin("paper40"),
-    }
-    .map_err(Failure::bad_input)?;
-    if let Some(t) = source.t_total {
-        let mut f = s.file.clone();
-        f.t_total_s = t;
-        let origin = format!("{} with --t-total {t}", s.origin);
-        s = Scenario::from_file(f, &origin, Checks::Full).map_err(Failure::bad_input)?;
-    }
-    for note in &s.notes {
-        tracing::info!("{note}");
-    }
-    Ok(s)
 }
 
 /// `--follow ID` names a member of the scenario: checked before the flight, not after it.
@@ -364,7 +345,7 @@ fn figures_after_run(dir: &Path, run: &RunOptions, quiet: bool) {
 /// figures): the run's own outcome decides the exit code.
 fn replay_after_run(dir: &Path, quiet: bool) {
     let started = Instant::now();
-    match crate::viewer::write_replay(dir) {
+    match cdm_viewer::write_replay(dir) {
         Ok(path) if !quiet => out!(
             "  replay: {} ({:.2} s; orchestrator view redraws it)",
             path.display(),
@@ -381,10 +362,10 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
         .map(crate::cli::serve_addr)
         .transpose()
         .map_err(Failure::bad_input)?;
-    let scene = crate::viewer::replay_scene(dir).map_err(Failure::bad_input)?;
-    let page = crate::viewer::page(Some(&scene));
+    let scene = cdm_viewer::replay_scene(dir).map_err(Failure::bad_input)?;
+    let page = cdm_viewer::page(Some(&scene));
     let path = dir.join("replay.html");
-    common::rundir::write_atomic(&path, page.as_bytes()).map_err(Failure::bad_input)?;
+    cdm_core::rundir::write_atomic(&path, page.as_bytes()).map_err(Failure::bad_input)?;
     if !quiet {
         out!(
             "view: {} ({} frames, every {} tick(s) of telemetry, {:.1} MB)",
@@ -397,9 +378,9 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     let Some(addr) = addr else {
         return Ok(Exit::Safe);
     };
-    let interrupted = common::signals::install();
+    let interrupted = cdm_runtime::signals::install();
     let server =
-        crate::viewer::serve_page(&addr.to_string(), page, None).map_err(Failure::bad_input)?;
+        cdm_viewer::serve_page(&addr.to_string(), page, None).map_err(Failure::bad_input)?;
     // Only the final line goes to stdout in quiet mode: tools read the address from it.
     out!("serving http://{}/ (Ctrl-C stops)", server.addr);
     while !interrupted.load(std::sync::atomic::Ordering::Relaxed) {
@@ -495,7 +476,7 @@ fn write_sweeps(
     if let Some(times) = &sweeps.travel_s {
         let points = sweep_flights(times, "T_total =", quiet, |t| deviation_at(s, t));
         files.extend(
-            crate::report::deviation_sweep(dir, &points, c.numbers.delta_m, c.t_threshold_s)
+            cdm_report::deviation_sweep(dir, &points, c.numbers.delta_m, c.t_threshold_s)
                 .map_err(Failure::fault)?,
         );
     }
@@ -505,7 +486,7 @@ fn write_sweeps(
         });
         let bound = c.max_link_delay_ms.filter(|_| !c.max_link_delay_at_least);
         files.extend(
-            crate::report::delay_sweep(dir, &points, c.numbers.delta_m, bound)
+            cdm_report::delay_sweep(dir, &points, c.numbers.delta_m, bound)
                 .map_err(Failure::fault)?,
         );
     }
@@ -560,7 +541,7 @@ fn plan(
     }
     if let Some(p) = json {
         let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
-        common::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
+        cdm_core::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
     }
     let loses = c
         .losses
@@ -571,51 +552,6 @@ fn plan(
     } else {
         Exit::Unsafe
     })
-}
-
-pub fn print_certificate(c: &Certificate) {
-    out!(
-        "pre-flight certificate: {} ({} agents)",
-        c.scenario,
-        c.agents
-    );
-    out!(
-        "  lambda_1(U_D) min       {:.4} at t = {:.2} s",
-        c.numbers.lambda1_min,
-        c.numbers.t_lambda1_min_s
-    );
-    out!("  lambda_CD,min           {:.4}", c.numbers.lambda_cd_min);
-    out!(
-        "  D_B, D_S                {:.4} m, {:.4} m",
-        c.numbers.d_b_m,
-        c.numbers.d_s_m
-    );
-    out!("  eps                     {} m", c.numbers.eps_m);
-    out!("  delta_max (eq. 35)      {:.4} m", c.numbers.delta_max_m);
-    out!("  delta (eq. 38)          {:.4} m", c.numbers.delta_m);
-    out!(
-        "  gains stability margin  {:.4} (eq. 26)",
-        c.gains_stability_margin
-    );
-    out!(
-        "  t_total_s               {} s (max follower deviation {:.4} m)",
-        c.t_total_s,
-        c.max_follower_deviation_m
-    );
-    out!("  T_threshold             {:.2} s", c.t_threshold_s);
-    match (c.max_link_delay_ms, c.max_link_delay_at_least) {
-        (Some(ms), false) => {
-            out!("  max link delay          {ms} ms (E_max <= delta, every state that late)")
-        }
-        (Some(ms), true) => out!(
-            "  max link delay          at least {ms} ms (E_max <= delta at every delay searched)"
-        ),
-        (None, _) => out!("  max link delay          none (E_max > delta even without delay)"),
-    }
-    out!("verdict: {}", c.verdict);
-    for r in &c.reasons {
-        out!("  - {r}");
-    }
 }
 
 fn print_loss_certificate(l: &LossCertificate) {
@@ -742,7 +678,7 @@ fn host_daemon(
             TeamName::new(&t).map_err(|e| Failure::bad_input(CommandError::option("--team")(e)))
         })
         .transpose()?;
-    let o = crate::host::daemon::DaemonOptions {
+    let o = cdm_hosts::daemon::DaemonOptions {
         connect,
         team,
         host,
@@ -750,7 +686,7 @@ fn host_daemon(
         join_timeout: timeout("--join-timeout", join_timeout).map_err(Failure::bad_input)?,
         quiet,
     };
-    crate::host::daemon::run(&o)
+    cdm_hosts::daemon::run(&o)
 }
 
 /// Without the `hosts` feature there is no daemon.

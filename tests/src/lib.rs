@@ -21,7 +21,7 @@ use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use common::scenario::ScenarioFile;
+use cdm_core::scenario::ScenarioFile;
 
 /// How often `run` and `Running` poll a child for exit or output.
 const POLL: Duration = Duration::from_millis(10);
@@ -610,10 +610,10 @@ pub fn write_scenario(dir: &Path, name: &str, file: &ScenarioFile) -> PathBuf {
     write_text(dir, name, &scenario_toml(file))
 }
 
-/// The paper's 40-agent scenario (`common::scenario::paper40()`): 3 primary leaders (ids 1-3,
+/// The paper's 40-agent scenario (`cdm_core::scenario::paper40()`): 3 primary leaders (ids 1-3,
 /// with goals), 3 secondary leaders (ids 4-6), 34 followers (ids 7-40).
 pub fn paper40() -> ScenarioFile {
-    common::scenario::paper40()
+    cdm_core::scenario::paper40()
 }
 
 #[cfg(test)]

@@ -3,7 +3,7 @@
 //! refused with exit 2 and a message naming the argument, before anything is written: no run
 //! directory, no shared memory of the team.
 //!
-//! (Scenario files: `validation.rs`; property tests of the parser: `common/tests/proptest.rs`.)
+//! (Scenario files: `validation.rs`; property tests of the parser: `common/core/tests/proptest.rs`.)
 
 mod support;
 

@@ -15,7 +15,7 @@
 //!   ids; a state nobody reads is reported by the orchestrator.
 //!
 //! Faults at a chosen tick are injected with the test-only `CDM_FAULT_INJECT`
-//! (`common::fault_inject`): the orchestrator's children inherit it, only the named agent acts.
+//! (`cdm_runtime::fault_inject`): the orchestrator's children inherit it, only the named agent acts.
 
 mod support;
 
@@ -24,9 +24,9 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use common::formation::Role;
-use common::scenario::{Checks, Scenario, ScenarioFile};
-use common::transport::{ClockWire, MemberPorts, StateBatchWire, TeamName, TransportError};
+use cdm_core::formation::Role;
+use cdm_core::scenario::{Checks, Scenario, ScenarioFile};
+use cdm_iox::{ClockWire, MemberPorts, StateBatchWire, TeamName, TransportError};
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
 use serde_json::Value;
 use support::*;
@@ -98,7 +98,7 @@ fn launch_injected(
 ) -> std::process::Output {
     let mut cmd = launch_team(team, out, "600", extra);
     cmd.env(
-        common::fault_inject::ENV,
+        cdm_runtime::fault_inject::ENV,
         format!("{id}:{kind}@{FAULT_TICK}"),
     );
     let mut orch = spawn(&mut cmd);
@@ -423,7 +423,7 @@ fn a_foreign_process_cannot_publish_into_a_team() {
     let t = TeamName::new(&team).expect("team name");
     let node = NodeBuilder::new()
         .name(&NodeName::new("foreign").expect("node name"))
-        .config(&common::transport::iceoryx2_config())
+        .config(&cdm_iox::iceoryx2_config())
         .create::<ipc::Service>()
         .expect("a foreign node");
     let name = |s: String| ServiceName::new(&s).expect("service name");

@@ -469,7 +469,7 @@ fn a_killed_daemon_is_like_killed_members() {
     );
     // One host, the same members killed after the same ticks (each its own: members run up to
     // a window apart).
-    let dt = common::scenario::Scenario::generated(n_members)
+    let dt = cdm_core::scenario::Scenario::generated(n_members)
         .unwrap()
         .dt_s();
     let mut lose = vec![];
@@ -614,9 +614,9 @@ fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
 /// hosts, preferring one that opens a link read on host B from host A: (its id, host B's
 /// members, those links as (source, reader)).
 fn loss_across_hosts(n: usize, on_b_only: bool) -> (u32, BTreeSet<u32>, Vec<(u32, u32)>) {
-    use common::formation::Role;
-    use common::loss_log::LossLog;
-    let s = common::scenario::Scenario::generated(n).expect("a generated team");
+    use cdm_core::formation::Role;
+    use cdm_core::loss_log::LossLog;
+    let s = cdm_core::scenario::Scenario::generated(n).expect("a generated team");
     let placed: Vec<cdm_zenoh::Placed> = s
         .formation
         .members
@@ -715,7 +715,10 @@ fn a_killed_member_on_another_host_is_repaired() {
     let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
     let daemon = spawn(
         h.on_b(&["host", "--connect", ENDPOINT, "--team", &team])
-            .env(common::fault_inject::ENV, format!("{victim}:kill@{at}")),
+            .env(
+                cdm_runtime::fault_inject::ENV,
+                format!("{victim}:kill@{at}"),
+            ),
     );
     let o = orch.finish(RUN_DEADLINE);
     let d = daemon.finish(RUN_DEADLINE);
@@ -733,7 +736,7 @@ fn a_killed_member_on_another_host_is_repaired() {
         ),
         "{audit:#}"
     );
-    let dt = common::scenario::Scenario::generated(10).unwrap().dt_s();
+    let dt = cdm_core::scenario::Scenario::generated(10).unwrap().dt_s();
     let when = format!("{victim}@{}", (at - 1) as f64 * dt);
     let mut replay = source.to_vec();
     replay.extend(["--lose", &when]);

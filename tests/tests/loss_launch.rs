@@ -84,7 +84,7 @@ fn same_bytes(a: &Path, b: &Path, what: &str) {
 fn launched(team: &str, out: &Path, extra: &[&str], env: Option<String>) -> Output {
     let mut c = launch(team, out, &args(extra));
     if let Some(v) = env {
-        c.env(common::fault_inject::ENV, v);
+        c.env(cdm_runtime::fault_inject::ENV, v);
     }
     let o = run(&mut c, DEADLINE);
     assert_no_process_of(team);

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use common::math::{vec3, Vec3};
+use cdm_core::math::{vec3, Vec3};
 use integration_tests::{bin, describe, run, spawn, unique_team, venv_python, TempDir};
 
 /// A Python start-up and one query.
@@ -51,25 +51,25 @@ fn python_wire_types_and_paths_are_the_rust_ones() {
     assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
     let text = String::from_utf8_lossy(&out.stdout);
     let lines: Vec<&str> = text.lines().collect();
-    let cfg = common::transport::iceoryx2_config();
+    let cfg = cdm_iox::iceoryx2_config();
     let want = [
         cfg.global.root_path().to_string(),
         cfg.global.prefix.to_string(),
         format!(
             "{} {}",
-            common::transport::STATE_TYPE_NAME,
-            std::mem::size_of::<common::messages::StateMsg>()
+            cdm_iox::STATE_TYPE_NAME,
+            std::mem::size_of::<cdm_runtime::messages::StateMsg>()
         ),
         format!(
             "{} {} {}",
-            common::transport::STATE_BATCH_TYPE_NAME,
-            std::mem::size_of::<common::transport::StateBatch>(),
-            common::transport::STATES_PER_SAMPLE
+            cdm_iox::STATE_BATCH_TYPE_NAME,
+            std::mem::size_of::<cdm_iox::StateBatch>(),
+            cdm_iox::STATES_PER_SAMPLE
         ),
         format!(
             "{} {}",
-            common::transport::CLOCK_TYPE_NAME,
-            std::mem::size_of::<common::messages::ClockMsg>()
+            cdm_iox::CLOCK_TYPE_NAME,
+            std::mem::size_of::<cdm_runtime::messages::ClockMsg>()
         ),
     ];
     assert_eq!(
@@ -162,7 +162,7 @@ fn watch_py_reads_a_live_team_like_the_audit() {
             .unwrap_or_else(|| panic!("tick {tick} is not in telemetry.csv"));
         assert_eq!(pos.len(), 40, "tick {tick}");
         // The audit's own function over the same states.
-        let (audit_sep, _, _) = common::safety::min_separation(pos);
+        let (audit_sep, _, _) = cdm_core::safety::min_separation(pos);
         assert!(
             (sep - audit_sep).abs() <= 1e-9,
             "tick {tick}: watch.py {sep} m, audit {audit_sep} m"

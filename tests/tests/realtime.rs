@@ -361,7 +361,7 @@ fn a_member_in_the_other_mode_is_refused() {
 fn wait_for_file(
     orch: &mut integration_tests::Running,
     path: &Path,
-) -> common::scenario::ScenarioFile {
+) -> cdm_core::scenario::ScenarioFile {
     let until = std::time::Instant::now() + DEADLINE;
     while !path.exists() {
         assert!(

@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use common::transport::{iox2_location, TeamName};
+use cdm_iox::{iox2_location, TeamName};
 use iceoryx2::prelude::*;
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
 use support::iox_ids::{born_s, id_pid, id_seconds, monotonic_s};
@@ -41,10 +41,10 @@ fn node_maker() {
     };
     let (team, until) = job.split_once(':').expect("<team>:<file>");
     let team = TeamName::new(team).expect("team name");
-    let name = team.node_name(common::transport::Role::Agent(0));
+    let name = team.node_name(cdm_iox::Role::Agent(0));
     let node = NodeBuilder::new()
         .name(&NodeName::new(&name).expect("node name"))
-        .config(&common::transport::iceoryx2_config())
+        .config(&cdm_iox::iceoryx2_config())
         .create::<ipc::Service>()
         .expect("create the node");
     println!("NODE {} {}", node.id().value(), std::process::id());

@@ -3,15 +3,15 @@
 //!
 //! Each test starts from the paper's 40-agent scenario (`paper40`: primary leaders 1-3,
 //! secondary leaders 4-6, followers 7-40) and breaks one thing, or writes raw TOML for parse
-//! errors. The expected phrases are those of `common::scenario` (`mod.rs`, `validate.rs`) and
-//! `common::formation`.
+//! errors. The expected phrases are those of `cdm_core::scenario` (`mod.rs`, `validate.rs`) and
+//! `cdm_core::formation`.
 
 use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use common::formation::Role;
-use common::scenario::{AgentSpec, ScenarioFile};
+use cdm_core::formation::Role;
+use cdm_core::scenario::{AgentSpec, ScenarioFile};
 use integration_tests::{
     bin, describe, paper40, run, scenario_toml, write_scenario, write_text, TempDir,
 };

@@ -345,7 +345,7 @@ fn replay_of_a_thousand_agents_stays_within_its_budget() {
     let size = std::fs::metadata(out.join("replay.html"))
         .unwrap_or_else(|e| panic!("{e}"))
         .len();
-    // The budget of orchestrator/src/viewer/mod.rs (REPLAY_BUDGET_BYTES).
+    // The budget of common/viewer/src/lib.rs (REPLAY_BUDGET_BYTES).
     assert!(size <= 20 << 20, "replay.html is {size} bytes at N = 1000");
     let s = status(&file_url(&out.join("replay.html")), tmp.path(), true);
     assert_eq!((s.agents, s.tick), (1000, 1500), "{s:?}");

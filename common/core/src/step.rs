@@ -6,7 +6,7 @@
 //! hold its neighbours still: it extrapolates each neighbour's position with the neighbour's own
 //! velocity, acceleration and jerk at t_k (all exact functions of its 12-state),
 //! r_j(t_k + tau) ~ r + v tau + a tau^2 / 2 + j tau^3 / 6. The error this adds against the
-//! continuously coupled model of eqs. 24-25 is measured by `the exchange-error test (common/tests/engine.rs)`.
+//! continuously coupled model of eqs. 24-25 is measured by `the exchange-error test (common/core/tests/engine.rs)`.
 
 use serde::{Deserialize, Serialize};
 

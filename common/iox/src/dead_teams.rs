@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 
+use super::creator::creator_is_dead;
 use super::{init_logging, iox2_root, process_config, remove_stale, TeamName, TransportError};
 
 /// What a scan of this user's iceoryx2 registry found of one team.
@@ -169,24 +170,6 @@ fn remove_unfinished_segments() {
             }
         }
     }
-}
-
-/// True when every 128-bit id in `name` was minted by a process that no longer exists (and
-/// there is at least one).
-pub(super) fn creator_is_dead(name: &str) -> bool {
-    let mut pids = name
-        .split(|c: char| !c.is_ascii_digit())
-        .filter(|run| run.len() >= 20)
-        .filter_map(|run| run.parse::<u128>().ok())
-        .map(|id| (id >> 64) as u32 as libc::pid_t)
-        .peekable();
-    pids.peek().is_some()
-        && pids.all(|pid| {
-            // SAFETY: kill(2) with signal 0 only asks whether the process exists.
-            pid > 0
-                && unsafe { libc::kill(pid, 0) } != 0
-                && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH)
-        })
 }
 
 /// The files iceoryx2 keeps for one dead node in this user's root, read before iceoryx2's own

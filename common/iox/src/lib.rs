@@ -69,6 +69,7 @@ pub fn iox2_root() -> &'static str {
     &iox2_location().root
 }
 
+mod creator;
 mod dead_teams;
 mod error;
 mod limits;

@@ -15,7 +15,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use super::dead_teams::creator_is_dead;
+use super::creator::creator_is_dead;
 use super::{iox2_location, iox2_root};
 
 /// The suffix iceoryx2 0.10 gives a node's monitor files (`global.node.monitor_suffix`).

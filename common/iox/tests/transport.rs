@@ -8,10 +8,10 @@
 //! `cargo test --release -p cdm-iox --test transport -- --nocapture`
 
 // The facade's tests and these share one watchdog.
-#[path = "../../tests/support/mod.rs"]
+#[path = "../../core/tests/support/mod.rs"]
 mod support;
 use support::Watchdog;
-#[path = "../../tests/support/iox_ids.rs"]
+#[path = "../../core/tests/support/iox_ids.rs"]
 mod iox_ids;
 use iox_ids::{id_pid, id_seconds, ids_in, monotonic_s};
 

@@ -2,7 +2,7 @@
 //! member's state or fault report, a member process seen exited, an interrupt, "now" from a
 //! clock the caller drives), actions out (grant up to tick g, a complete tick to audit and
 //! write, check the processes, poll again, wait, finish, stop with a fault). The loop around it
-//! (`orchestrator/src/launch.rs`) owns the iceoryx2 ports, the processes and the files, and
+//! (`common/launch/src/launch.rs`) owns the iceoryx2 ports, the processes and the files, and
 //! nothing else: every decision below is unit-tested with a fake clock (`team_core_tests.rs`).
 //!
 //! What it decides: the grant window (members run up to `window` ticks ahead of the last tick

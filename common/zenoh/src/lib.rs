@@ -1,6 +1,6 @@
 //! Across hosts (issue 12): the zenoh link between a team's orchestrator and the daemon of each
 //! other host. The only library crate that names zenoh; members never see it (a daemon re-publishes
-//! what crosses hosts into its host's iceoryx2 services, `orchestrator/src/host.rs`).
+//! what crosses hosts into its host's iceoryx2 services, `common/hosts/src/lib.rs`).
 //!
 //! | key | frames | from -> to |
 //! |---|---|---|

@@ -12,10 +12,10 @@
 use std::process::ExitCode;
 use std::time::Instant;
 
+use cdm_core::engine::quad_engine;
+use cdm_core::scenario::Scenario;
+use cdm_iox::bench_barrier::{barrier, barrier_member};
 use clap::{Parser, Subcommand};
-use common::engine::quad_engine;
-use common::scenario::Scenario;
-use common::transport::bench_barrier::{barrier, barrier_member};
 
 #[derive(Parser)]
 #[command(about = "Baselines for BENCHMARKS.md: the engine alone and a bare iceoryx2 barrier")]

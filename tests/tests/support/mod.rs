@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use common::formation::Role;
-use common::scenario::ScenarioFile;
-use common::transport::TeamName;
+use cdm_core::formation::Role;
+use cdm_core::scenario::ScenarioFile;
+use cdm_iox::TeamName;
 use integration_tests::{bin, describe, Running};
 use serde_json::Value;
 
@@ -297,7 +297,7 @@ pub fn wait_for_rows(orch: &mut Running, telemetry: &Path, rows: usize) {
     }
 }
 
-pub use common::transport::iox2_root;
+pub use cdm_iox::iox2_root;
 pub const SHM: &str = "/dev/shm";
 
 /// The value of `key = "value"` or `key = 123` in an iceoryx2 TOML file.
@@ -329,7 +329,7 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
 
 /// The team's services as iceoryx2 stores them: (hash, name) of each
 /// `<IOX2_ROOT>/services/<prefix><hash>.service` (prefix: `cdm<uid>_`, see
-/// `common::transport::iox2_location`) whose `service_name` belongs to `team`.
+/// `cdm_iox::iox2_location`) whose `service_name` belongs to `team`.
 pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
     let prefix = format!("cdm/{team}/");
     let mut out = vec![];
@@ -337,7 +337,7 @@ pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
         let Some(hash) = path
             .file_name()
             .and_then(|n| n.to_str())
-            .and_then(|n| n.strip_prefix(common::transport::iox2_location().prefix.as_str()))
+            .and_then(|n| n.strip_prefix(cdm_iox::iox2_location().prefix.as_str()))
             .and_then(|n| n.strip_suffix(".service"))
         else {
             continue;
@@ -357,7 +357,7 @@ pub fn team_services(team: &TeamName) -> Vec<(String, String)> {
 pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
     let mut out = vec![];
     for path in files_under(&Path::new(iox2_root()).join("nodes")) {
-        let details = format!("{}node.details", common::transport::iox2_location().prefix);
+        let details = format!("{}node.details", cdm_iox::iox2_location().prefix);
         if path.file_name().and_then(|n| n.to_str()) != Some(details.as_str()) {
             continue;
         }
@@ -374,7 +374,7 @@ pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
     out
 }
 
-#[path = "../../../common/tests/support/iox_ids.rs"]
+#[path = "../../../common/core/tests/support/iox_ids.rs"]
 pub mod iox_ids;
 use iox_ids::{born_s, id_pid, id_seconds, ids_in};
 

@@ -1,0 +1,99 @@
+//! The command-line arguments of `orchestrator export`, and the scenario source every command
+//! shares (clap types: the orchestrator's CLI flattens them).
+
+use std::path::PathBuf;
+
+use cdm_core::scenario::{Checks, Scenario};
+use cdm_team::Failure;
+use clap::{Args, Subcommand};
+
+#[derive(Debug, Subcommand)]
+pub enum ExportTarget {
+    /// One <id>.csv of polynomial pieces per quadcopter (Crazyswarm2's uav_trajectory format),
+    /// crazyflies.yaml, README.txt, certificate.json, scenario.toml and a top view into --out.
+    Crazyswarm2 {
+        #[command(flatten)]
+        source: Source,
+        /// The output directory (created; our files in it are replaced).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        #[command(flatten)]
+        frame: ExportFrame,
+    },
+    /// A Skybrush show (.skyc: a ZIP holding show.json with Bézier trajectories), with
+    /// <stem>.certificate.json and <stem>.scenario.toml beside it.
+    Skybrush {
+        #[command(flatten)]
+        source: Source,
+        /// The show file to write (e.g. show.skyc).
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        #[command(flatten)]
+        frame: ExportFrame,
+    },
+}
+
+/// Where an exported plan flies: p -> scale p + origin, and the target vehicles' radius.
+#[derive(Debug, Args, Clone)]
+pub struct ExportFrame {
+    /// Multiply every position and goal by S (the paper's team is 300 m wide; a lab is 5 m).
+    #[arg(
+        long,
+        value_name = "S",
+        default_value_t = 1.0,
+        allow_negative_numbers = true
+    )]
+    pub scale: f64,
+    /// Then add X,Y,Z metres (default 0,0,0).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub origin: Option<String>,
+    /// The radius of the target vehicles' ball, metres (0.1 for a Crazyflie).
+    #[arg(
+        long,
+        value_name = "METRES",
+        default_value_t = 0.1,
+        allow_negative_numbers = true
+    )]
+    pub eps: f64,
+    /// Write the files even when the certificate at the target scale is UNSAFE (exit 1 stays).
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Which scenario to fly: a file, a built-in, or a generated team (default: built-in paper40).
+#[derive(Debug, Args, Clone)]
+pub struct Source {
+    /// A scenario file (TOML).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["n", "builtin"])]
+    pub scenario: Option<PathBuf>,
+    /// A generated team of N members (4..=2000).
+    #[arg(long, conflicts_with = "builtin")]
+    pub n: Option<usize>,
+    /// A built-in scenario (paper40).
+    #[arg(long, value_name = "NAME")]
+    pub builtin: Option<String>,
+    /// Override the scenario's travel time t_total_s.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub t_total: Option<f64>,
+}
+
+/// Load and fully validate the scenario a command names.
+pub fn load(source: &Source) -> Result<Scenario, Failure> {
+    let mut s = match (&source.scenario, source.n, &source.builtin) {
+        (Some(p), _, _) => Scenario::load(p, Checks::Full),
+        (None, Some(n), _) => Scenario::generated(n),
+        (None, None, Some(b)) => Scenario::builtin(b),
+        (None, None, None) => Scenario::builtin("paper40"),
+    }
+    .map_err(Failure::bad_input)?;
+    if let Some(t) = source.t_total {
+        let mut f = s.file.clone();
+        f.t_total_s = t;
+        let origin = format!("{} with --t-total {t}", s.origin);
+        s = Scenario::from_file(f, &origin, Checks::Full).map_err(Failure::bad_input)?;
+    }
+    for note in &s.notes {
+        tracing::info!("{note}");
+    }
+    Ok(s)
+}

@@ -1,0 +1,176 @@
+//! Crazyswarm2 files: `<id>.csv` per quadcopter in the format of Crazyswarm2's
+//! `uav_trajectory.py` (`loadcsv`, read by `uploadTrajectory`): the header
+//! `duration,x^0,...,x^7,y^0,...,y^7,z^0,...,z^7,yaw^0,...,yaw^7`, one row per piece,
+//! coefficients in increasing powers of the time local to the piece (ours stop at degree 5,
+//! yaw is 0); a `crazyflies.yaml` fragment; `fly.py`; and `README.txt`.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use cdm_core::export::{pieces, CrazyflieSplit, Piece};
+use cdm_core::math::Real;
+use cdm_core::rundir::write_atomic;
+
+use super::Scaled;
+use cdm_team::Failure;
+
+/// Coefficients per axis in the file (Crazyflie pieces are degree-7 polynomials).
+const COEFFS: usize = 8;
+
+fn header() -> String {
+    let mut h = String::from("duration");
+    for axis in ["x", "y", "z", "yaw"] {
+        for k in 0..COEFFS {
+            let _ = write!(h, ",{axis}^{k}");
+        }
+    }
+    h
+}
+
+/// One row: the duration, then x, y, z and yaw coefficients, 8 each.
+fn row(p: &Piece) -> String {
+    let mut r = format!("{}", p.duration_s);
+    for axis in 0..3 {
+        for k in 0..COEFFS {
+            let c = p.coeffs.get(k).map_or(0.0, |c| c[axis]);
+            let _ = write!(r, ",{c}");
+        }
+    }
+    for _ in 0..COEFFS {
+        r.push_str(",0");
+    }
+    r
+}
+
+fn put(dir: &Path, name: &str, text: &str) -> Result<(), Failure> {
+    write_atomic(&dir.join(name), text.as_bytes()).map_err(Failure::bad_input)
+}
+
+pub fn write(dir: &Path, sc: &Scaled, split: &CrazyflieSplit) -> Result<(), Failure> {
+    let head = header();
+    for t in &sc.trajs {
+        let mut text = head.clone();
+        text.push('\n');
+        for p in pieces(t, split.pieces) {
+            text.push_str(&row(&p));
+            text.push('\n');
+        }
+        put(dir, &format!("{}.csv", t.id), &text)?;
+    }
+    put(dir, "crazyflies.yaml", &yaml(sc))?;
+    put(dir, "fly.py", &fly_py(sc))?;
+    put(dir, "README.txt", &readme(sc, split))
+}
+
+/// Each drone on the floor under the start of its trajectory (Crazyswarm2 reads
+/// `initial_position` as where the vehicle sits before take-off).
+fn yaml(sc: &Scaled) -> String {
+    let mut y = String::from(
+        "# Fragment of Crazyswarm2's crazyflie/config/crazyflies.yaml, written by `orchestrator export\n\
+         # crazyswarm2`: merge these entries under `robots:` and set each uri to that Crazyflie's address.\n\
+         # initial_position: on the floor (z = 0) under the start of the drone's trajectory.\n\
+         robots:\n",
+    );
+    for t in &sc.trajs {
+        let p = t.position(0.0);
+        let _ = write!(
+            y,
+            "  cf{id}:\n    enabled: true\n    uri: radio://0/80/2M/E7E7E7E7{id:02X}\n    initial_position: [{x}, {yy}, 0.0]\n    type: cf21\n",
+            id = t.id,
+            x = p.x,
+            yy = p.y
+        );
+    }
+    y
+}
+
+/// The flight script: upload every trajectory, take off, go to the starts, fly, land.
+fn fly_py(sc: &Scaled) -> String {
+    let t_total = sc.scenario.file.t_total_s;
+    let lowest = sc
+        .trajs
+        .iter()
+        .map(|t| t.position(0.0).z)
+        .fold(Real::INFINITY, Real::min);
+    let mut starts = String::new();
+    for t in &sc.trajs {
+        let p = t.position(0.0);
+        let _ = writeln!(starts, "    {}: [{}, {}, {}],", t.id, p.x, p.y, p.z);
+    }
+    format!(
+        r#"#!/usr/bin/env python3
+"""Fly the exported continuum-deformation plan with Crazyswarm2 (written by `orchestrator export
+crazyswarm2`). Start the server first: ros2 launch crazyflie launch.py (with crazyflies.yaml)."""
+from pathlib import Path
+
+from crazyflie_py import Crazyswarm
+from crazyflie_py.uav_trajectory import Trajectory
+
+HERE = Path(__file__).resolve().parent
+T_TOTAL_S = {t_total}
+TAKEOFF_HEIGHT_M = {takeoff}
+START = {{
+{starts}}}
+
+
+def main():
+    swarm = Crazyswarm()
+    clock, cfs = swarm.timeHelper, swarm.allcfs
+    for ident in START:
+        traj = Trajectory()
+        traj.loadcsv(str(HERE / f"{{ident}}.csv"))
+        cfs.crazyfliesByName[f"cf{{ident}}"].uploadTrajectory(0, 0, traj)
+    cfs.takeoff(targetHeight=TAKEOFF_HEIGHT_M, duration=3.0)
+    clock.sleep(3.5)
+    for ident, start in START.items():
+        cfs.crazyfliesByName[f"cf{{ident}}"].goTo(start, 0.0, 5.0)
+    clock.sleep(5.5)
+    cfs.startTrajectory(0, timescale=1.0, relative=False)
+    clock.sleep(T_TOTAL_S + 1.0)
+    cfs.land(targetHeight=0.03, duration=4.0)
+    clock.sleep(4.5)
+
+
+if __name__ == "__main__":
+    main()
+"#,
+        takeoff = lowest.max(0.3)
+    )
+}
+
+fn readme(sc: &Scaled, split: &CrazyflieSplit) -> String {
+    let mut r = format!(
+        "Continuum-deformation plan `{name}` for Crazyswarm2, written by `orchestrator export crazyswarm2`.\n\
+         Scale {scale}, origin {origin:?} m, vehicle radius eps = {eps} m, travel time {t} s.\n\
+         Each <id>.csv holds {n} polynomial piece(s) of {d:.3} s ({bytes} of 4096 bytes of trajectory\n\
+         memory); float32 evaluation stays within {bound:.3e} m of the exact plan (limit 1 mm).\n\
+         certificate.json is the certificate at this scale; scenario.toml the scaled scenario\n\
+         (`orchestrator simulate --scenario scenario.toml` flies it).\n\n\
+         Upload and start:\n\
+         1. Merge crazyflies.yaml into crazyflie/config/crazyflies.yaml (set each uri).\n\
+         2. ros2 launch crazyflie launch.py\n\
+         3. python3 fly.py   (uploads every trajectory with uploadTrajectory, takes off, goes to\n\
+         \x20  the starts, startTrajectory(0, relative=False), lands)\n\n\
+         agent  role       file     Crazyswarm2 name\n",
+        name = sc.scenario.file.name,
+        scale = sc.frame.scale,
+        origin = [sc.frame.origin.x, sc.frame.origin.y, sc.frame.origin.z],
+        eps = sc.scenario.file.eps_m,
+        t = sc.scenario.file.t_total_s,
+        n = split.pieces,
+        d = split.piece_duration_s,
+        bytes = split.bytes,
+        bound = split.f32_bound_m,
+    );
+    for (t, role) in sc.trajs.iter().zip(&sc.roles) {
+        let _ = writeln!(
+            r,
+            "{:<6} {:<10} {:<8} cf{}",
+            t.id,
+            role.as_str(),
+            format!("{}.csv", t.id),
+            t.id
+        );
+    }
+    r
+}

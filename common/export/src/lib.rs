@@ -1,0 +1,311 @@
+//! `orchestrator export crazyswarm2|skybrush`: the plan in the formats real fleets load, in the
+//! target frame (p -> S p + origin), with the certificate issued again at that scale and the
+//! target vehicles' radius. Steps: load and scale (bad input: exit 2), cut the exact quintics
+//! into pieces (a plan the target cannot hold: exit 2), certify (UNSAFE: exit 1, and the
+//! trajectory files are written only with --force), write.
+
+pub mod certificate;
+pub mod cli;
+mod crazyswarm2;
+mod skybrush;
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use cdm_core::export::{
+    crazyflie_split, float32, skybrush_piece_count, team_trajectories, AgentTrajectory,
+    TargetFrame, DEFAULT_TOLERANCE_M,
+};
+use cdm_core::formation::Role;
+use cdm_core::math::{Real, Vec3};
+use cdm_core::outcome::Verdict;
+use cdm_core::rundir::write_atomic;
+use cdm_core::scenario::{Checks, Scenario};
+use cdm_core::simulate::{certify, Certificate};
+use cdm_team::out;
+
+use crate::certificate::print_certificate;
+use crate::cli::{load, ExportFrame, ExportTarget, Source};
+use cdm_report::{top_view, TopPath};
+use cdm_team::errors::CommandError;
+use cdm_team::progress::Spinner;
+use cdm_team::{Exit, Failure};
+
+/// The scaled scenario and everything derived from it.
+pub struct Scaled {
+    pub scenario: Scenario,
+    pub frame: TargetFrame,
+    /// r_HT of every member, in id order.
+    pub trajs: Vec<AgentTrajectory>,
+    pub roles: Vec<Role>,
+}
+
+/// What certificate.json holds: the target, the cut, and the certificate at the target scale.
+#[derive(Serialize)]
+struct Record<'a> {
+    target: &'static str,
+    scale: Real,
+    origin_m: [Real; 3],
+    pieces_per_agent: usize,
+    piece_duration_s: Real,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    f32_bound_m: Option<Real>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    f32_tolerance_m: Option<Real>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    trajectory_bytes: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    trajectory_memory_bytes: Option<usize>,
+    certificate: &'a Certificate,
+}
+
+pub fn run(target: ExportTarget, quiet: bool) -> Result<Exit, Failure> {
+    match target {
+        ExportTarget::Crazyswarm2 { source, out, frame } => {
+            to_crazyswarm2(&source, &out, &frame, quiet)
+        }
+        ExportTarget::Skybrush { source, out, frame } => to_skybrush(&source, &out, &frame, quiet),
+    }
+}
+
+fn to_crazyswarm2(
+    source: &Source,
+    out: &Path,
+    frame: &ExportFrame,
+    quiet: bool,
+) -> Result<Exit, Failure> {
+    let sc = scaled(source, frame)?;
+    let split = crazyflie_split(&sc.trajs, DEFAULT_TOLERANCE_M)
+        .map_err(|e| Failure::bad_input(CommandError::Split(e)))?;
+    let cert = certify_quietly(&sc.scenario, quiet);
+    create_dir(out)?;
+    let record = Record {
+        target: "crazyswarm2",
+        scale: sc.frame.scale,
+        origin_m: sc.frame.origin.into(),
+        pieces_per_agent: split.pieces,
+        piece_duration_s: split.piece_duration_s,
+        f32_bound_m: Some(split.f32_bound_m),
+        f32_tolerance_m: Some(DEFAULT_TOLERANCE_M),
+        trajectory_bytes: Some(split.bytes),
+        trajectory_memory_bytes: Some(float32::TRAJECTORY_MEMORY_BYTES),
+        certificate: &cert,
+    };
+    write_record(out, "", &record, &sc.scenario)?;
+    report(&sc, &record, quiet);
+    if !quiet {
+        out!(
+            "  crazyflie: {} piece(s) of {:.3} s per quadcopter, {} of {} bytes; float32 error bound {:.3e} m (limit {} m)",
+            split.pieces,
+            split.piece_duration_s,
+            split.bytes,
+            float32::TRAJECTORY_MEMORY_BYTES,
+            split.f32_bound_m,
+            DEFAULT_TOLERANCE_M
+        );
+    }
+    if refused(&cert, frame.force, out) {
+        return Ok(Exit::Unsafe);
+    }
+    crazyswarm2::write(out, &sc, &split)?;
+    draw(out, "top_view", &sc, quiet);
+    done(out, &cert, quiet)
+}
+
+fn to_skybrush(
+    source: &Source,
+    out: &Path,
+    frame: &ExportFrame,
+    quiet: bool,
+) -> Result<Exit, Failure> {
+    let sc = scaled(source, frame)?;
+    let count = skybrush_piece_count(sc.scenario.file.t_total_s);
+    let cert = certify_quietly(&sc.scenario, quiet);
+    let (dir, stem) = beside(out)?;
+    let record = Record {
+        target: "skybrush",
+        scale: sc.frame.scale,
+        origin_m: sc.frame.origin.into(),
+        pieces_per_agent: count,
+        piece_duration_s: sc.scenario.file.t_total_s / count as Real,
+        f32_bound_m: None,
+        f32_tolerance_m: None,
+        trajectory_bytes: None,
+        trajectory_memory_bytes: None,
+        certificate: &cert,
+    };
+    write_record(&dir, &format!("{stem}."), &record, &sc.scenario)?;
+    report(&sc, &record, quiet);
+    if refused(&cert, frame.force, out) {
+        return Ok(Exit::Unsafe);
+    }
+    skybrush::write(out, &sc, count, &cert)?;
+    draw(&dir, &format!("{stem}.top_view"), &sc, quiet);
+    done(out, &cert, quiet)
+}
+
+/// Load the scenario, map it into the target frame with the target radius and validate it
+/// again (`Checks::Full`: the gains' stability is part of the certificate).
+fn scaled(source: &Source, frame: &ExportFrame) -> Result<Scaled, Failure> {
+    let base = load(source)?;
+    let origin = match &frame.origin {
+        Some(text) => TargetFrame::parse_origin(text).map_err(Failure::bad_input)?,
+        None => Vec3::zeros(),
+    };
+    let tf = TargetFrame::new(frame.scale, origin).map_err(Failure::bad_input)?;
+    let file = tf
+        .apply(&base.file, frame.eps)
+        .map_err(Failure::bad_input)?;
+    let what = format!("{} at scale {} + origin {origin:?}", base.origin, tf.scale);
+    let scenario = Scenario::from_file(file, &what, Checks::Full).map_err(Failure::bad_input)?;
+    let trajs = team_trajectories(&scenario);
+    let roles = scenario
+        .id_order()
+        .into_iter()
+        .map(|k| scenario.formation.members[k].role)
+        .collect();
+    Ok(Scaled {
+        scenario,
+        frame: tf,
+        trajs,
+        roles,
+    })
+}
+
+fn certify_quietly(s: &Scenario, quiet: bool) -> Certificate {
+    let spinner = Spinner::new(
+        "certifying at the target scale: flying the plan at several travel times",
+        quiet,
+    );
+    let c = certify(s);
+    spinner.finish();
+    c
+}
+
+fn create_dir(dir: &Path) -> Result<(), Failure> {
+    std::fs::create_dir_all(dir).map_err(|source| {
+        Failure::bad_input(CommandError::CreateDir {
+            dir: dir.to_path_buf(),
+            source,
+        })
+    })
+}
+
+/// The directory and the file stem of `--out FILE`, the directory created.
+fn beside(out: &Path) -> Result<(PathBuf, String), Failure> {
+    let stem = out
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .filter(|s| !s.is_empty())
+        .ok_or_else(|| Failure::bad_input(format!("--out {}: not a file name", out.display())))?
+        .to_string();
+    let dir = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    create_dir(&dir)?;
+    Ok((dir, stem))
+}
+
+/// `<prefix>certificate.json` and `<prefix>scenario.toml` (the scaled scenario: `simulate
+/// --scenario` flies it) into `dir`.
+fn write_record(
+    dir: &Path,
+    prefix: &str,
+    record: &Record<'_>,
+    s: &Scenario,
+) -> Result<(), Failure> {
+    let text = serde_json::to_string_pretty(record).map_err(Failure::fault)?;
+    write_atomic(
+        &dir.join(format!("{prefix}certificate.json")),
+        text.as_bytes(),
+    )
+    .map_err(Failure::bad_input)?;
+    write_atomic(
+        &dir.join(format!("{prefix}scenario.toml")),
+        s.to_toml().as_bytes(),
+    )
+    .map_err(Failure::bad_input)
+}
+
+fn report(sc: &Scaled, record: &Record<'_>, quiet: bool) {
+    if quiet {
+        return;
+    }
+    out!(
+        "export {}: {} quadcopters, scale {}, origin {:?} m, eps {} m, {} piece(s) of {:.3} s each",
+        record.target,
+        sc.trajs.len(),
+        sc.frame.scale,
+        record.origin_m,
+        sc.scenario.file.eps_m,
+        record.pieces_per_agent,
+        record.piece_duration_s
+    );
+    print_certificate(record.certificate);
+    if record.certificate.t_threshold_s.is_finite() {
+        out!(
+            "  the show is SAFE at this scale when it lasts at least T_threshold = {:.2} s (--t-total)",
+            record.certificate.t_threshold_s
+        );
+    }
+}
+
+/// An UNSAFE certificate refuses the export unless `force`.
+fn refused(cert: &Certificate, force: bool, out: &Path) -> bool {
+    if cert.verdict == Verdict::Safe {
+        return false;
+    }
+    if force {
+        tracing::warn!(
+            "the certificate at the target scale is UNSAFE; writing {} anyway (--force)",
+            out.display()
+        );
+        return false;
+    }
+    eprintln!(
+        "error: the certificate at the target scale is UNSAFE: {} not written (the certificate is beside it; --force writes it anyway)",
+        out.display()
+    );
+    true
+}
+
+fn draw(dir: &Path, stem: &str, sc: &Scaled, quiet: bool) {
+    const SAMPLES: usize = 60;
+    let paths = sc
+        .trajs
+        .iter()
+        .zip(&sc.roles)
+        .map(|(t, r)| TopPath {
+            leader: r.is_leader(),
+            points: (0..=SAMPLES)
+                .map(|k| t.position(t.t_total_s * k as Real / SAMPLES as Real))
+                .collect(),
+        })
+        .collect();
+    let title = format!(
+        "{}: {} quadcopters from above, scale {} (start blue, goal red)",
+        sc.scenario.file.name,
+        sc.trajs.len(),
+        sc.frame.scale
+    );
+    match top_view(dir, stem, &title, paths) {
+        Ok(files) if !quiet => out!("  top view: {}", files[files.len() - 1].display()),
+        Ok(_) => {}
+        Err(e) => tracing::error!("top view not drawn: {e}"),
+    }
+}
+
+fn done(out: &Path, cert: &Certificate, quiet: bool) -> Result<Exit, Failure> {
+    if quiet {
+        out!("{}", cert.verdict);
+    } else {
+        out!("  written: {}", out.display());
+    }
+    Ok(if cert.verdict == Verdict::Safe {
+        Exit::Safe
+    } else {
+        Exit::Unsafe
+    })
+}

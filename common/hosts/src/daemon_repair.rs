@@ -1,0 +1,118 @@
+//! A daemon's side of a repair across hosts: the clock messages it publishes announce losses;
+//! before its members hear one, the relays standing in for other hosts' members wake their new
+//! readers here; the new links whose reader runs here are watched until connected and reported
+//! to the orchestrator (its team core announces the next loss, and has history handed over,
+//! only then); once they are, the relays hand their history to new readers, as members do.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::{Duration, Instant};
+
+use cdm_iox::{MemberPorts, OrchestratorPorts, Role, TeamName};
+use cdm_runtime::messages::ClockMsg;
+
+use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
+use super::repairs::CrossRepairs;
+
+/// How often the links awaited are looked up in the registry.
+const CHECK_EVERY: Duration = Duration::from_millis(20);
+
+/// The repairs as this host follows them.
+pub struct DaemonRepairs {
+    team: TeamName,
+    host_of: BTreeMap<u32, u32>,
+    mine: BTreeSet<u32>,
+    repairs: CrossRepairs,
+    /// Links (reader, writer) with the reader here, not seen connected yet.
+    pending: BTreeSet<(u32, u32)>,
+    last_check: Instant,
+    /// Relays still to hand their history over (`handover.rs`).
+    handing: Option<PendingHandOver>,
+}
+
+impl DaemonRepairs {
+    pub fn new(
+        team: TeamName,
+        host_of: BTreeMap<u32, u32>,
+        mine: BTreeSet<u32>,
+        repairs: CrossRepairs,
+    ) -> Self {
+        Self {
+            team,
+            host_of,
+            mine,
+            repairs,
+            pending: BTreeSet::new(),
+            last_check: Instant::now(),
+            handing: None,
+        }
+    }
+
+    /// A clock message about to be published on this host.
+    pub fn on_clock(&mut self, c: &ClockMsg, relays: &mut BTreeMap<u32, MemberPorts>) {
+        let step = self.repairs.on_notice(c.loss());
+        for &(reader, writer) in &step.new_links {
+            if !self.mine.contains(&reader) {
+                continue;
+            }
+            self.pending.insert((reader, writer));
+            if self.mine.contains(&writer) {
+                continue;
+            }
+            match relays.get_mut(&writer) {
+                Some(relay) => {
+                    if let Err(e) = relay.connect(&[], &[reader]) {
+                        tracing::warn!(
+                            "the relay of agent {writer} cannot wake agent {reader}: {e}"
+                        );
+                    }
+                }
+                None => tracing::warn!(
+                    "no relay of agent {writer} on this host for its new reader {reader}: \
+                     the repair of several losses needs a link no single loss does"
+                ),
+            }
+        }
+        if step.hand_over {
+            handover::start(&mut self.handing, step.needs_from, relays, warn_hand_over);
+        }
+    }
+
+    /// Hands over the relays whose history now reaches the connected repair's tick.
+    pub fn hand_over_ready(&mut self, relays: &mut BTreeMap<u32, MemberPorts>) {
+        handover::poll(&mut self.handing, relays, HAND_OVER_WAIT, warn_hand_over);
+    }
+
+    /// The awaited links connected since the last call (looked up every [`CHECK_EVERY`]): the
+    /// reader subscribes to the writer's state and the writer (a member here, or the relay of
+    /// one elsewhere) notifies the reader's wake event.
+    pub fn connected(&mut self, ports: &OrchestratorPorts) -> Vec<(u32, u32)> {
+        if self.pending.is_empty() || self.last_check.elapsed() < CHECK_EVERY {
+            return Vec::new();
+        }
+        self.last_check = Instant::now();
+        let done: Vec<(u32, u32)> = self
+            .pending
+            .iter()
+            .copied()
+            .filter(|&(r, w)| self.is_linked(ports, r, w))
+            .collect();
+        for l in &done {
+            self.pending.remove(l);
+        }
+        done
+    }
+
+    fn is_linked(&self, ports: &OrchestratorPorts, reader: u32, writer: u32) -> bool {
+        let writer_node = match self.host_of.get(&writer) {
+            Some(&h) if !self.mine.contains(&writer) => self.team.relay_node_name(h, writer),
+            _ => self.team.node_name(Role::Agent(writer)),
+        };
+        let reader_node = self.team.node_name(Role::Agent(reader));
+        ports
+            .subscriber_nodes(writer)
+            .is_ok_and(|n| n.contains(&reader_node))
+            && ports
+                .notifier_nodes(reader)
+                .is_ok_and(|n| n.contains(&writer_node))
+    }
+}

@@ -1,0 +1,116 @@
+//! Which member runs where, decided once before the team's services exist.
+
+use std::collections::BTreeSet;
+
+use cdm_core::scenario::Scenario;
+use cdm_iox::{TeamLayout, TeamName};
+use cdm_team::out;
+use cdm_zenoh::{Net, Placed, Regions};
+
+use super::bridge::Bridge;
+use super::placed::placed;
+use super::{Flight, HostOptions};
+use cdm_team::Failure;
+
+/// The split of a team over its hosts (host 0 is this one).
+pub struct Plan {
+    regions: Regions,
+    placed: Vec<Placed>,
+    options: HostOptions,
+    quiet: bool,
+}
+
+impl Plan {
+    /// Splits the team and says which ids went where (one line per host).
+    pub fn new(
+        s: &Scenario,
+        h: &HostOptions,
+        team: &TeamName,
+        quiet: bool,
+    ) -> Result<Self, Failure> {
+        let n = s.formation.members.len();
+        if h.hosts as usize > n {
+            return Err(Failure::bad_input(format!(
+                "--hosts {}: the team has only {n} members",
+                h.hosts
+            )));
+        }
+        if h.hosts > 1 && h.listen.is_none() {
+            return Err(Failure::bad_input(
+                "--hosts needs --listen ENDPOINT (e.g. tcp/10.77.0.1:7447)",
+            ));
+        }
+        let placed = placed(s);
+        let regions = Regions::split(&placed, h.hosts);
+        let plan = Self {
+            regions,
+            placed,
+            options: h.clone(),
+            quiet,
+        };
+        if h.hosts > 1 && !quiet {
+            for host in 0..h.hosts {
+                let here = if host == 0 { " (this one)" } else { "" };
+                out!("host {host}{here}: agents {:?}", plan.regions.members(host));
+            }
+            let crossing = plan.crossing();
+            out!(
+                "team {team}: {} of {} communication edges cross hosts; start each daemon with:\n  orchestrator host --connect {} --team {team}",
+                crossing.len(),
+                plan.placed.iter().map(|p| p.in_neighbors.len()).sum::<usize>(),
+                h.listen.as_deref().unwrap_or_default(),
+            );
+        }
+        Ok(plan)
+    }
+
+    /// Edges `(source, reader)` whose ends run on different hosts.
+    pub fn crossing(&self) -> Vec<(u32, u32)> {
+        self.regions.crossing(&self.placed)
+    }
+
+    /// The layout of this host: edges inside another host never touch its shared memory.
+    pub fn hide_remote_edges(&self, layout: TeamLayout) -> TeamLayout {
+        let r = &self.regions;
+        let hidden: BTreeSet<(u32, u32)> = self
+            .placed
+            .iter()
+            .flat_map(|p| p.in_neighbors.iter().map(move |&j| (j, p.id)))
+            .filter(|&(j, i)| r.host_of(j) == r.host_of(i) && r.host_of(i) != 0)
+            .collect();
+        layout.with_hidden_edges(hidden)
+    }
+
+    /// The members of each other host (lost together if its daemon is killed).
+    pub fn remote_groups(&self) -> Vec<Vec<u32>> {
+        (1..self.regions.hosts())
+            .map(|k| self.regions.members(k))
+            .collect()
+    }
+
+    /// True when member `id` runs on this host.
+    pub fn runs_here(&self, id: u32) -> bool {
+        self.regions.host_of(id) == 0
+    }
+
+    /// Listens for the daemons and starts the bridge (none with one host).
+    pub fn start_bridge(
+        &self,
+        s: &Scenario,
+        team: &TeamName,
+        flight: Flight,
+    ) -> Result<Option<Bridge>, Failure> {
+        let Some(endpoint) = self
+            .options
+            .listen
+            .as_deref()
+            .filter(|_| self.options.hosts > 1)
+        else {
+            return Ok(None);
+        };
+        let net =
+            Net::listen(endpoint).map_err(|e| Failure::bad_input(format!("--listen: {e}")))?;
+        let (regions, h) = (&self.regions, &self.options);
+        Bridge::start(net, s, team, regions, h, flight, self.quiet).map(Some)
+    }
+}

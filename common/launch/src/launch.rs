@@ -1,0 +1,650 @@
+//! `orchestrator launch`: create the team's services, spawn one process per quadcopter (or wait
+//! for hand-started ones), step the shared clock, audit every tick live, and stop the team.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use cdm_core::audit::{AuditReport, Auditor};
+use cdm_team::out;
+
+use crate::realtime::Elsewhere;
+use cdm_core::formation::Role;
+use cdm_core::loss::{LossSchedule, LossState};
+use cdm_core::math::vec3;
+use cdm_core::outcome::FaultKind;
+use cdm_core::record::TickRecorder;
+use cdm_core::rundir::RunDir;
+use cdm_core::scenario::Scenario;
+use cdm_core::telemetry::TelemetrySink;
+use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
+use cdm_runtime::messages::{ClockMsg, StateMsg, StopReason};
+use cdm_runtime::seams::{Clock, MonotonicClock};
+use cdm_runtime::team_core::{TeamAction, TeamConfig, TeamCore, TickStates};
+use cdm_runtime::team_loss::TeamLosses;
+use cdm_viewer::live::LiveView;
+
+use cdm_team::team::{
+    check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
+    Spawned, Stop,
+};
+use cdm_team::Failure;
+
+/// Options of a launch, validated.
+pub struct LaunchOptions {
+    pub team: TeamName,
+    pub out: PathBuf,
+    pub force: bool,
+    pub every: u64,
+    /// The telemetry file's format.
+    pub telemetry: cdm_core::telemetry::TelemetryFormat,
+    pub window: u32,
+    pub spawn: bool,
+    pub agent_timeout: Duration,
+    pub join_timeout: Duration,
+    pub quiet: bool,
+    /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
+    pub stop_on_violation: bool,
+    /// Fly only ticks 0..=K of the plan.
+    pub max_ticks: Option<u64>,
+    /// Serve the live view on this address.
+    pub serve: Option<std::net::SocketAddr>,
+    /// Across hosts (`--hosts`, `--listen`; issue 12).
+    pub hosts: cdm_hosts::HostOptions,
+    /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
+    pub realtime: Option<crate::realtime::RealtimeOptions>,
+    /// What the members fly (forwarded to the spawned members; printed for hand-started ones).
+    pub vehicles: cdm_member::vehicles::Vehicles,
+    /// Members to kill once they have published a tick (`--lose`, validated).
+    pub losses: cdm_core::loss::LossSchedule,
+    /// What a lost member does to the run (`--on-loss`).
+    pub on_loss: cdm_core::loss::OnLoss,
+}
+
+/// When the orchestrator process started (set first thing in `main`): start-up is measured from
+/// here to the first grant.
+pub static PROCESS_START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+
+/// What a finished launch reports.
+pub struct Launched {
+    /// The audit report (also written to audit.json).
+    pub report: AuditReport,
+    /// Wall time of the ticking phase.
+    pub ticking: Duration,
+    /// From the command's start to the first grant (zero when the team never ticked).
+    pub startup: Duration,
+    /// The members' peak resident memory, read just before the team was stopped (spawned teams
+    /// only).
+    pub member_peak_rss: Option<cdm_team::team::MembersPeak>,
+    /// The live view (`--serve`), kept serving until the caller drops it.
+    pub live: Option<LiveView>,
+}
+
+/// What watches every completed tick: the audit, and the live view when `--serve` asked for one.
+struct Watchers<'a> {
+    audit: &'a mut Auditor,
+    live: &'a mut Option<LiveView>,
+    /// The other hosts' members, through the bridge (`--hosts`): their exits, kills and links.
+    hosts: Option<&'a cdm_hosts::Bridge>,
+}
+
+/// Starts the live view before the team, so a bad address stops nothing (exit 2).
+fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure> {
+    let view = LiveView::start(addr, s, Auditor::new(s).numbers()).map_err(Failure::bad_input)?;
+    if !quiet {
+        out!("live view: http://{}/", view.addr());
+    }
+    Ok(view)
+}
+
+/// Run a launch to the end.
+pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
+    let interrupted = cdm_runtime::signals::install();
+    let mut live = preflight(s, o)?;
+    let hosts = cdm_hosts::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
+    let layout = team_layout(s, o, &hosts)?;
+    let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
+    let bridge = hosts.start_bridge(s, &o.team, crate::flight::flight_of(o))?;
+    // Only now, with the team name ours, touch the run directory: a refused second launch of a
+    // running team writes nothing (not even into the first one's --out).
+    let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
+    dir.write_scenario(s).map_err(Failure::fault)?;
+    // Humans start members with scenario.toml; spawned members read the JSON copy (same hash).
+    let scenario_file = dir.path().join("scenario.toml");
+    let member_file = dir.write_member_scenario(s).map_err(Failure::fault)?;
+    if ports.stale_nodes_removed() > 0 {
+        tracing::info!(
+            removed = ports.stale_nodes_removed(),
+            "removed stale resources of a previous team {}",
+            o.team
+        );
+    }
+    let here = |id: u32| hosts.runs_here(id);
+    let mut children = start_members(s, o, &dir, &mut ports, (&member_file, &scenario_file), here)?;
+    let mut audit = Auditor::new(s);
+    let result = if let Some(rt) = &o.realtime {
+        let elsewhere = |id: u32| bridge.as_ref().is_some_and(|b| b.reporting(id));
+        let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
+        crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
+    } else {
+        run_team(
+            s,
+            o,
+            &dir,
+            &mut ports,
+            &mut children,
+            Watchers {
+                audit: &mut audit,
+                live: &mut live,
+                hosts: bridge.as_ref(),
+            },
+            interrupted,
+        )
+    };
+    let ended = Instant::now();
+    let (complete, reason, first_tick) = match result {
+        Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
+        Err((fault, reason)) => {
+            audit.fault(if let Some(b) = &bridge {
+                b.explain(fault)
+            } else {
+                fault
+            });
+            (false, reason, None)
+        }
+    };
+    let member_peak_rss = cdm_team::team::members_peak_rss(&children);
+    stop_team(&mut ports, &mut children, s, reason);
+    let shut = ports.shutdown();
+    if let Err(e) = shut {
+        tracing::warn!("{e}");
+    }
+    let mut report = audit.finish(complete);
+    if let Some(b) = bridge {
+        for l in &mut report.losses {
+            l.host = b.host_of(l.id);
+        }
+        b.finish(&dir, report.ticks, o.quiet);
+    }
+    dir.write_audit(&report).map_err(Failure::fault)?;
+    if let Some(v) = &live {
+        v.finish(&report);
+    }
+    Ok(Launched {
+        report,
+        ticking: first_tick.map_or(Duration::ZERO, |t| ended - t),
+        startup: startup(first_tick),
+        member_peak_rss,
+        live,
+    })
+}
+
+/// Before anything is created: the member binaries are there, the real-time scheduling asked
+/// for is granted, the live view (`--serve`) is started, the file-descriptor limit is raised.
+fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Option<LiveView>, Failure> {
+    if o.spawn {
+        member_binaries_present()?;
+    }
+    crate::realtime::schedule(o)?;
+    let live = match o.serve {
+        Some(addr) => Some(start_live(s, &addr.to_string(), o.quiet)?),
+        None => None,
+    };
+    match raise_fd_limit() {
+        Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
+        Err(e) => tracing::warn!("{e}"),
+    }
+    Ok(live)
+}
+
+/// The team's services: every member's state and wake-up, sized for the window (and the
+/// longest link delay), with room for repairs under `--on-loss repair`; edges whose two ends
+/// run on other hosts are left out.
+fn team_layout(
+    s: &Scenario,
+    o: &LaunchOptions,
+    hosts: &cdm_hosts::Plan,
+) -> Result<TeamLayout, Failure> {
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+    let ins: BTreeMap<u32, Vec<u32>> = s
+        .formation
+        .members
+        .iter()
+        .filter_map(|m| m.link.map(|l| (m.id, l.in_neighbors.to_vec())))
+        .collect();
+    // Over delayed links a repair's new reader also needs its new in-neighbour's states of the
+    // longest delay back (`LinkModel::oldest_candidate`): the buffers and history grow by it.
+    let delay = u32::try_from(s.link_model().max_ticks()).unwrap_or(u32::MAX);
+    let buffers = o.window.saturating_add(delay);
+    let mut layout = TeamLayout::new(ids.clone(), ins, buffers)
+        .map_err(Failure::fault)?
+        .with_scenario_hash(s.content_hash());
+    if o.on_loss == cdm_core::loss::OnLoss::Repair {
+        let room = cdm_team::loss::repair_room(s, buffers);
+        // A killed daemon loses its host's members at once (lockstep repair across hosts).
+        let room = cdm_team::loss::with_group_losses(room, s, &hosts.remote_groups());
+        layout = layout.with_repair_room(room);
+    }
+    // Lockstep on one host: members pass clock messages on (5 of the orchestrator's 11 file
+    // descriptors per member saved; N = 2000 fits this machine's 20,000).
+    if o.realtime.is_none() && o.hosts.hosts <= 1 {
+        layout = layout.with_relayed_wakes();
+    }
+    Ok(hosts.hide_remote_edges(layout))
+}
+
+/// From the command's start to the first tick (zero for a team that never flew).
+fn startup(first_tick: Option<Instant>) -> Duration {
+    match (PROCESS_START.get(), first_tick) {
+        (Some(&t0), Some(t)) => t.saturating_duration_since(t0),
+        _ => Duration::ZERO,
+    }
+}
+
+/// Spawns one process per member (`--spawn`), or tells how to start them by hand.
+fn start_members(
+    s: &Scenario,
+    o: &LaunchOptions,
+    dir: &RunDir,
+    ports: &mut OrchestratorPorts,
+    (member_file, scenario_file): (&std::path::Path, &std::path::Path),
+    runs_here: impl Fn(u32) -> bool,
+) -> Result<Vec<Spawned>, Failure> {
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+    let mut children = Vec::new();
+    if o.spawn {
+        // With --hosts K, the other hosts' daemons spawn theirs.
+        for m in s.formation.members.iter().filter(|m| runs_here(m.id)) {
+            let mut flags = crate::realtime::member_flags(o);
+            flags.extend(o.vehicles.member_args());
+            if o.realtime.is_none() {
+                flags.extend(cdm_team::member_priority::lockstep_flags(o.agent_timeout));
+            }
+            match spawn_member(member_file, &o.team, m.id, m.role, &flags) {
+                Ok(c) => {
+                    if o.realtime.is_none() {
+                        cdm_team::member_priority::lower(&c);
+                    }
+                    children.push(Spawned { id: m.id, child: c });
+                }
+                Err(e) => {
+                    stop_team(ports, &mut children, s, StopReason::AgentFault);
+                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
+                    let mut audit = Auditor::new(s);
+                    audit.fault(fault(
+                        FaultKind::SpawnFailed,
+                        Some(m.id),
+                        None,
+                        0,
+                        what.clone(),
+                    ));
+                    let _ = dir.write_audit(&audit.finish(false));
+                    return Err(Failure::fault(what));
+                }
+            }
+        }
+    } else if !o.quiet {
+        out!(
+            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
+            o.team,
+            ids.len(),
+            scenario_file.display(),
+            o.team,
+            crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
+            s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
+            scenario_file.display(),
+            o.team,
+            crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
+            s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
+        );
+    }
+    Ok(children)
+}
+
+/// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT before it started.
+fn interrupted_before_start() -> Stop {
+    let what = format!(
+        "interrupted by {} before the start",
+        cdm_runtime::signals::received()
+    );
+    (
+        fault(FaultKind::Interrupted, None, None, 0, what),
+        StopReason::Interrupted,
+    )
+}
+
+/// The stop when the team did not gather in time: names the members no process joined as (or,
+/// when all joined, those still waiting for a neighbour's ports).
+fn join_timeout(r: &cdm_iox::Readiness, team: &TeamName, within: Duration) -> Stop {
+    let missing = r.not_joined();
+    let (ids, what) = if missing.is_empty() {
+        (r.waiting_for(), "did not connect to their neighbours in")
+    } else {
+        (missing, "did not join")
+    };
+    let list: Vec<String> = ids.iter().map(u32::to_string).collect();
+    let message = format!(
+        "agents {} {what} team {team} within {} s",
+        list.join(", "),
+        within.as_secs_f64()
+    );
+    (
+        fault(
+            FaultKind::JoinTimeout,
+            ids.first().copied(),
+            None,
+            0,
+            message,
+        ),
+        StopReason::AgentSilent,
+    )
+}
+
+/// Wait for every process to open its ports, record the subscription graph, then tick; returns
+/// when ticking began and whether every tick of the plan was completed.
+fn run_team(
+    s: &Scenario,
+    o: &LaunchOptions,
+    dir: &RunDir,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    watchers: Watchers<'_>,
+    interrupted: &AtomicBool,
+) -> Result<(Instant, bool), Stop> {
+    gather(s, o, ports, children, interrupted)?;
+    write_subscriptions(s, ports, dir);
+    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
+        (
+            fault(FaultKind::Io, None, None, 0, e.to_string()),
+            StopReason::AgentFault,
+        )
+    })?;
+    fly_team(s, o, ports, children, tel.as_mut(), watchers, interrupted)
+}
+
+/// Readiness: every process opened its ports, within a deadline.
+pub(crate) fn gather(
+    s: &Scenario,
+    o: &LaunchOptions,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    interrupted: &AtomicBool,
+) -> Result<(), Stop> {
+    let n = s.formation.members.len();
+    // Members of real vehicles join once their vehicle is heard (and armed): as long as
+    // --join-timeout allows, like hand-started ones.
+    let join_deadline = if o.spawn && o.vehicles == cdm_member::vehicles::Vehicles::Model {
+        Duration::from_secs(30) + Duration::from_millis(60 * n as u64)
+    } else {
+        o.join_timeout
+    };
+    let started = Instant::now();
+    loop {
+        if interrupted.load(Ordering::Relaxed) {
+            return Err(interrupted_before_start());
+        }
+        if ports.readiness().is_complete() {
+            ports.gathered();
+            break;
+        }
+        check_children(children, 0)?;
+        if started.elapsed() > join_deadline {
+            return Err(join_timeout(&ports.readiness(), &o.team, join_deadline));
+        }
+        let _ = ports.wait(Duration::from_millis(20));
+    }
+    tracing::info!(
+        agents = n,
+        startup_s = started.elapsed().as_secs_f64(),
+        "team {} ready",
+        o.team
+    );
+    Ok(())
+}
+
+/// The subscription graph as iceoryx2 sees it (subscriptions.json, best effort).
+pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
+    let mut subs = BTreeMap::new();
+    for m in &s.formation.members {
+        let nodes = ports.subscriber_nodes(m.id).unwrap_or_default();
+        subs.insert(m.id.to_string(), nodes);
+    }
+    let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
+    let _ = cdm_core::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
+}
+
+/// A telemetry write or flush that failed (a full disk) at `tick`: a fault, the file keeps its
+/// whole ticks and no later tick may follow a gap.
+fn io_stop(tick: u64) -> impl Fn(std::io::Error) -> Stop {
+    move |e| {
+        let what = format!("cannot write telemetry: {e}");
+        (
+            fault(FaultKind::Io, None, None, tick, what),
+            StopReason::AgentFault,
+        )
+    }
+}
+
+/// A transport error of the orchestrator's ports at `tick`.
+fn transport_stop<E: std::fmt::Display>(tick: u64) -> impl Fn(E) -> Stop {
+    move |e| {
+        (
+            fault(FaultKind::Transport, None, None, tick, e.to_string()),
+            StopReason::AgentFault,
+        )
+    }
+}
+
+/// The team's protocol core (sans I/O) for this launch: its members, window and deadlines,
+/// and the scripted losses; repairs only where the orchestrator can kill (spawned members).
+fn team_core(s: &Scenario, o: &LaunchOptions, last: u64, now: Duration) -> TeamCore {
+    let cfg = TeamConfig {
+        ids: s.formation.members.iter().map(|m| m.id).collect(),
+        window: o.window,
+        last_tick: last,
+        agent_timeout: o.agent_timeout,
+    };
+    let repairs = o.on_loss == cdm_core::loss::OnLoss::Repair && o.spawn;
+    let book = TeamLosses::new(s, &cdm_team::loss::scripted_kills(&o.losses));
+    TeamCore::new(cfg, now).with_losses(book, repairs)
+}
+
+/// The tick loop: I/O only. The team core (`cdm_runtime::team_core`) decides what to grant, which
+/// tick is complete and when to stop; this loop receives, publishes, audits, writes and waits.
+fn fly_team(
+    s: &Scenario,
+    o: &LaunchOptions,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    tel: &mut dyn TelemetrySink,
+    watchers: Watchers<'_>,
+    interrupted: &AtomicBool,
+) -> Result<(Instant, bool), Stop> {
+    let mut w = watchers;
+    let hash = s.content_hash();
+    let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
+    let clock = MonotonicClock::start();
+    let mut core = team_core(s, o, last, clock.now());
+    let mut rec = Recorder::new(s, last, o.quiet);
+    let mut ticking = None;
+    let mut last_flush = Instant::now();
+    loop {
+        let now = clock.now();
+        if interrupted.load(Ordering::Relaxed) {
+            core.on_interrupt(cdm_runtime::signals::received());
+        }
+        core.on_turn(now);
+        ports
+            .receive_states(|msg| core.on_state(msg, now))
+            .map_err(transport_stop(core.next_tick()))?;
+        loop {
+            match core.next_action(clock.now()) {
+                TeamAction::Grant(g) => {
+                    publish_grant(ports, &core, g, hash)?;
+                    ticking.get_or_insert_with(Instant::now);
+                }
+                TeamAction::Complete { tick, states } => {
+                    let stop = o.stop_on_violation;
+                    if rec.complete(s, (tick, states), &mut core, &mut w, tel, stop)? {
+                        return Ok((ticking.unwrap_or_else(Instant::now), tick >= last));
+                    }
+                }
+                TeamAction::CheckExited => check_exited(&mut core, children, w.hosts, clock.now()),
+                TeamAction::Kill(ids) => {
+                    for id in ids {
+                        cdm_team::loss::kill_and_reap(children, id);
+                        w.hosts.inspect(|b| b.kill(id));
+                    }
+                    break;
+                }
+                TeamAction::CheckLinks => check_links(&mut core, ports, w.hosts, clock.now()),
+                TeamAction::Poll => {
+                    // Complete ticks reach the file at least every 100 ms (and at every stop).
+                    if last_flush.elapsed() > Duration::from_millis(100) {
+                        tel.flush().map_err(io_stop(core.next_tick()))?;
+                        last_flush = Instant::now();
+                    }
+                    break;
+                }
+                TeamAction::Wait(d) => {
+                    let _ = ports.wait(d);
+                    break;
+                }
+                TeamAction::Finished => {
+                    rec.progress.finish();
+                    tel.finish().map_err(io_stop(core.next_tick()))?;
+                    return Ok((ticking.unwrap_or_else(Instant::now), true));
+                }
+                TeamAction::Stop(f, reason) => {
+                    let _ = tel.flush();
+                    return Err((f, reason));
+                }
+            }
+        }
+    }
+}
+
+/// Hands the team core the first member that exited and is not already lost: one of ours, or
+/// one the bridge reports from another host.
+fn check_exited(
+    core: &mut TeamCore,
+    children: &mut [Spawned],
+    hosts: Option<&cdm_hosts::Bridge>,
+    now: Duration,
+) {
+    let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
+    if let Some((id, how)) = first_exited_but(children, lost) {
+        core.on_exited(id, how, now);
+    }
+    // Every remote exit at once: a lost host's members are lost together, as members killed
+    // at the same tick on one host.
+    while let Some((id, how)) = hosts.and_then(|b| b.take_exited()) {
+        core.on_exited(id, how, now);
+    }
+}
+
+/// Tells the team core which of a repair's new links are connected: on this host's shared
+/// memory, or (with `--hosts`) through the bridge, which knows where each reader runs.
+fn check_links(
+    core: &mut TeamCore,
+    ports: &OrchestratorPorts,
+    hosts: Option<&cdm_hosts::Bridge>,
+    now: Duration,
+) {
+    core.on_links(now, |r, wr| match hosts {
+        Some(b) => b.linked(ports, r, wr),
+        None => ports.linked(r, wr).unwrap_or(false),
+    });
+}
+
+/// Grants ticks up to `g` on the clock channel, with the latest loss notice.
+fn publish_grant(
+    ports: &mut OrchestratorPorts,
+    core: &TeamCore,
+    g: u64,
+    hash: u64,
+) -> Result<(), Stop> {
+    let notice = core.losses().and_then(|l| l.notice());
+    ports
+        .publish_clock(ClockMsg::run(g, hash).with_loss(notice))
+        .map(drop)
+        .map_err(transport_stop(core.next_tick()))
+}
+
+/// What every complete tick gets: the shared audit and telemetry of `simulate`
+/// (`TickRecorder`), then the live view and the progress line.
+struct Recorder {
+    tick: TickRecorder,
+    progress: cdm_team::progress::Progress,
+    /// The losses' audit records (as `simulate` writes them).
+    losses: LossState,
+}
+
+impl Recorder {
+    fn new(s: &Scenario, last: u64, quiet: bool) -> Self {
+        Recorder {
+            tick: TickRecorder::new(s),
+            progress: cdm_team::progress::Progress::new("launch", last, s.dt_s(), quiet),
+            losses: LossState::new(s, LossSchedule::default()),
+        }
+    }
+
+    /// Before tick `tick` is audited: record the losses whose repair applies from it (their
+    /// bodies leave the audit; their rows leave telemetry, having no state).
+    fn lose(&mut self, s: &Scenario, tick: u64, book: Option<&TeamLosses>, audit: &mut Auditor) {
+        for (cause, ids) in book.map(|b| b.due_at(tick)).unwrap_or_default() {
+            self.losses.record(s, tick, &ids, cause, audit);
+        }
+    }
+
+    /// Complete tick `tick`: its losses, audit and telemetry, then its states go back to the
+    /// core. True when the run ends here, at its first violation (`stop_on_violation`).
+    fn complete(
+        &mut self,
+        s: &Scenario,
+        (tick, states): (u64, TickStates),
+        core: &mut TeamCore,
+        w: &mut Watchers<'_>,
+        tel: &mut dyn TelemetrySink,
+        stop_on_violation: bool,
+    ) -> Result<bool, Stop> {
+        self.lose(s, tick, core.losses(), w.audit);
+        self.record(s, tick, &states, w.audit, w.live, tel)?;
+        core.recycle(states);
+        if stop_on_violation && w.audit.violation_count() > 0 {
+            w.audit.stop_on_violation();
+            self.progress.finish();
+            let _ = tel.flush();
+            return Ok(true);
+        }
+        Ok(false)
+    }
+
+    fn record(
+        &mut self,
+        s: &Scenario,
+        tick: u64,
+        states: &[Option<StateMsg>],
+        audit: &mut Auditor,
+        live: &mut Option<LiveView>,
+        tel: &mut dyn TelemetrySink,
+    ) -> Result<(), Stop> {
+        let member = |k: usize| {
+            states[k].map(|m| {
+                let x = m.state;
+                (vec3([x[0], x[1], x[2]]), vec3([x[3], x[4], x[5]]))
+            })
+        };
+        let t = self
+            .tick
+            .record(s, tick, audit, tel, member)
+            .map_err(|f| (f, StopReason::AgentFault))?;
+        if let Some(v) = live.as_mut() {
+            let (pos, ht) = (self.tick.positions(), self.tick.desired());
+            v.tick(tick, t, (pos, ht), |k| states[k].is_some(), audit.report());
+        }
+        self.progress.tick(tick, audit.report());
+        Ok(())
+    }
+}

@@ -1,0 +1,9 @@
+//! The clock loop of one team: `launch` creates the team, spawns its members (here and, through
+//! cdm-hosts, on other hosts) and grants ticks in lockstep; `realtime` paces the same team by
+//! the wall clock. Both audit every tick and write the run directory.
+
+pub mod flight;
+pub mod launch;
+pub mod realtime;
+pub mod team_arm;
+pub mod vehicle_reports;

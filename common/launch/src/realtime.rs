@@ -1,0 +1,427 @@
+//! `launch --realtime`: the orchestrator as a monitor. It announces the start instant, then
+//! never grants or waits for anyone: it audits at its own rate from the newest state of every
+//! member brought to common instants, writes telemetry with the usual columns (rows at the
+//! audit instants, through `TickRecorder` as lockstep does), and stops the team at the end of
+//! the plan, on a fault, a stale or exited member, or a signal. Every decision is cdm-runtime's
+//! `RealtimeTeam` (no I/O, driven by the clock passed in); this file moves messages, reads the
+//! clock, sleeps, and writes files.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use cdm_core::audit::{Auditor, RealtimeFigures};
+use cdm_core::formation::Role;
+use cdm_core::math::Vec3;
+use cdm_core::outcome::FaultKind;
+use cdm_core::record::{write_fault, TickRecorder};
+use cdm_core::rundir::RunDir;
+use cdm_core::scenario::Scenario;
+use cdm_core::telemetry::TelemetrySink;
+use cdm_iox::OrchestratorPorts;
+use cdm_runtime::messages::{ClockMsg, StopReason};
+use cdm_runtime::realtime_loop::unix_now_ns;
+use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
+use cdm_runtime::team_realtime::{MonitorAction, RealtimePlan, RealtimeTeam};
+
+use cdm_team::out;
+
+use crate::launch::LaunchOptions;
+use crate::vehicle_reports::VehicleBook;
+use cdm_team::team::{fault, first_exited, Spawned, Stop};
+use cdm_team::Failure;
+
+/// Which members run on other hosts and may still send reports (`launch --hosts`: those whose
+/// daemon neither stopped nor was lost).
+pub type Elsewhere<'a> = &'a dyn Fn(u32) -> bool;
+
+/// The real-time options of `launch`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RealtimeArgs {
+    /// Fly in real time: every member ticks at comm_hz on its own clock from a start instant
+    /// this orchestrator announces, with no grant and no barrier; the orchestrator monitors.
+    #[arg(long)]
+    pub realtime: bool,
+    /// With --realtime: the monitor's audit rate, the telemetry's rows per second (default:
+    /// the scenario's comm_hz).
+    #[arg(long, value_name = "HZ")]
+    pub audit_hz: Option<f64>,
+    /// With --realtime: seconds after which a member's newest state is too old (a fault).
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        default_value_t = 0.5,
+        allow_negative_numbers = true
+    )]
+    pub stale_after: f64,
+    /// With --realtime: the seed of the members' phase offsets in [0, 1/comm_hz); 0 aligns
+    /// every member on the start instant.
+    #[arg(long, value_name = "SEED", default_value_t = 1)]
+    pub phase_seed: u32,
+    /// With --realtime: run the orchestrator and every member under SCHED_FIFO at this
+    /// priority (1-99), so their wake-ups preempt ordinary processes; needs root,
+    /// CAP_SYS_NICE or `ulimit -r` (BENCHMARKS.md: late ticks with and without).
+    #[arg(long, value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_runtime::sched::RT_PRIORITIES))]
+    pub rt_priority: Option<u8>,
+}
+
+/// Validated real-time options.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RealtimeOptions {
+    pub audit_hz: f64,
+    pub stale_after: Duration,
+    pub phase_seed: u32,
+    pub rt_priority: Option<u8>,
+}
+
+/// `--rt-priority`: the orchestrator takes SCHED_FIFO itself before it creates or spawns
+/// anything (spawned members are also told with the flag, for hand-started ones), so a
+/// machine that does not allow it is refused up front with exit 2.
+pub fn schedule(o: &LaunchOptions) -> Result<(), Failure> {
+    match o.realtime.as_ref().and_then(|rt| rt.rt_priority) {
+        Some(p) => cdm_runtime::sched::fifo(p).map_err(Failure::bad_input),
+        None => Ok(()),
+    }
+}
+
+/// The state buffer a real-time team needs (ticks of states kept per subscriber): readers read
+/// the newest state at their own rate, so a few periods are plenty.
+pub const REALTIME_WINDOW: u32 = 16;
+
+impl RealtimeArgs {
+    /// The options, or `None` without --realtime; a bad value is bad input naming its flag.
+    pub fn options(&self, s: &Scenario) -> Result<Option<RealtimeOptions>, Failure> {
+        if !self.realtime {
+            if self.audit_hz.is_some() {
+                return Err(Failure::bad_input("--audit-hz needs --realtime"));
+            }
+            if self.rt_priority.is_some() {
+                return Err(Failure::bad_input("--rt-priority needs --realtime"));
+            }
+            return Ok(None);
+        }
+        let audit_hz = self.audit_hz.unwrap_or(s.file.comm_hz);
+        if !(audit_hz.is_finite() && audit_hz > 0.0 && audit_hz <= 10_000.0) {
+            return Err(Failure::bad_input(format!(
+                "--audit-hz must be in (0, 10000], got {audit_hz}"
+            )));
+        }
+        let stale_after = cdm_member::options::timeout("--stale-after", self.stale_after)
+            .map_err(Failure::bad_input)?;
+        Ok(Some(RealtimeOptions {
+            audit_hz,
+            stale_after,
+            phase_seed: self.phase_seed,
+            rt_priority: self.rt_priority,
+        }))
+    }
+}
+
+/// The member flags of a real-time launch (spawned members get them; hand-started ones are told).
+pub fn member_flags(o: &LaunchOptions) -> Vec<String> {
+    match &o.realtime {
+        Some(rt) => {
+            let mut flags = vec![
+                "--realtime".into(),
+                "--stale-after".into(),
+                rt.stale_after.as_secs_f64().to_string(),
+            ];
+            if let Some(p) = rt.rt_priority {
+                flags.extend(["--rt-priority".into(), p.to_string()]);
+            }
+            flags
+        }
+        None => Vec::new(),
+    }
+}
+
+/// Wall-clock lead of the start instant over its announcement, so every member has the clock
+/// message before tick 0 (members wake on it at once; the lead covers a loaded machine).
+fn start_lead(agents: usize) -> Duration {
+    Duration::from_millis(300) + Duration::from_micros(500 * agents as u64)
+}
+
+/// Gathers the team, announces the start, monitors until the end of the plan or a fault, and
+/// adds the pacing figures to the audit. Returns when the flight began and whether the whole
+/// plan was audited (as the lockstep loop does); the caller stops the team. `team`'s third part
+/// says which members run on other hosts whose final reports may still come (`launch --hosts`).
+pub fn run(
+    s: &Scenario,
+    o: &LaunchOptions,
+    rt: &RealtimeOptions,
+    dir: &RunDir,
+    team: (&mut OrchestratorPorts, &mut [Spawned], Elsewhere),
+    audit: &mut Auditor,
+    interrupted: &AtomicBool,
+) -> Result<(Instant, bool), Stop> {
+    let (ports, children, elsewhere) = team;
+    crate::launch::gather(s, o, ports, children, interrupted)?;
+    crate::team_arm::arm_team(s, o, ports, children, interrupted)?;
+    crate::launch::write_subscriptions(s, ports, dir);
+    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
+        let f = fault(FaultKind::Io, None, None, 0, e.to_string());
+        (f, StopReason::AgentFault)
+    })?;
+    let (mut core, clock, start) = announce(s, o, rt, ports)?;
+    let hash = s.content_hash();
+    let mut m = Monitor {
+        s,
+        o,
+        clock,
+        core: &mut core,
+        audit,
+        tel: tel.as_mut(),
+        rec: TickRecorder::new(s),
+        at: Vec::with_capacity(s.formation.members.len()),
+        vehicles: VehicleBook::new(hash),
+    };
+    let cpu_at_start = team_cpu_s(children);
+    let result = m.fly(ports, children, interrupted);
+    let Monitor { mut vehicles, .. } = m;
+    let audits = core.audits();
+    let cpu_s = team_cpu_s(children) - cpu_at_start;
+    let flight_s = Instant::now()
+        .saturating_duration_since(start)
+        .as_secs_f64();
+    // Whatever ended the flight: tell the members, and take their final pacing reports.
+    let reason = result
+        .as_ref()
+        .map_or_else(|(_, r)| *r, |_| StopReason::Finished);
+    let book = core.book_mut();
+    book.stopping();
+    let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
+    collect_final_reports(book, ports, (children, elsewhere), &mut vehicles);
+    vehicles.record(audit);
+    let figures = book.figures(RunFigures {
+        audits,
+        audit_hz: rt.audit_hz,
+        phase_seed: rt.phase_seed,
+        stale_after_s: rt.stale_after.as_secs_f64(),
+        wall_s: flight_s,
+        team_cpu_cores: (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s),
+    });
+    if !o.quiet {
+        print_figures(&figures, s.formation.members.len());
+    }
+    audit.set_realtime(figures);
+    match result {
+        Ok(complete) => {
+            let io = |e: std::io::Error| (write_fault(audits, &e), StopReason::AgentFault);
+            tel.finish().map_err(io)?;
+            Ok((start, complete))
+        }
+        Err(stop) => {
+            let _ = tel.flush();
+            Err(stop)
+        }
+    }
+}
+
+/// The monitor of `s`'s team on a clock started now, and the start instant it announced (tick
+/// 0's instant on this process's monotonic clock) with the phase seed.
+fn announce(
+    s: &Scenario,
+    o: &LaunchOptions,
+    rt: &RealtimeOptions,
+    ports: &mut OrchestratorPorts,
+) -> Result<(RealtimeTeam, Instant, Instant), Stop> {
+    let members: Vec<_> = s
+        .formation
+        .members
+        .iter()
+        .map(|m| (m.id, m.position, m.role == Role::Follower))
+        .collect();
+    let hash = s.content_hash();
+    let history = (s.dt_s(), rt.stale_after.as_secs_f64());
+    let book = MonitorCore::new(&members, hash, history, rt.phase_seed);
+    let lead = start_lead(members.len());
+    let start_ns = unix_now_ns() + lead.as_nanos() as u64;
+    let clock = Instant::now();
+    let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
+    let plan = RealtimePlan::new(lead, (last, s.dt_s()), rt.audit_hz, rt.stale_after);
+    ports
+        .publish_clock(ClockMsg::realtime(start_ns, hash, rt.phase_seed))
+        .map_err(|e| transport(e, 0))?;
+    let core = RealtimeTeam::new(plan, book, clock.elapsed());
+    Ok((core, clock, clock + lead))
+}
+
+/// The pacing line of the summary (and what the links dropped, when they are impaired).
+fn print_figures(f: &RealtimeFigures, agents: usize) {
+    let links = if f.link_states_lost > 0 {
+        format!(
+            "; the links dropped {} of {} neighbour states",
+            f.link_states_lost, f.link_states_received
+        )
+    } else {
+        String::new()
+    };
+    out!(
+        "  real time: {} ticks, {} late ({:.3} %), neighbour age p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms ({} of {} members reported){links}",
+        f.ticks,
+        f.late_ticks,
+        f.late_ticks_pct,
+        f.neighbor_age_ms_p50,
+        f.neighbor_age_ms_p99,
+        f.neighbor_age_ms_max,
+        f.members_reported,
+        agents
+    );
+}
+
+/// Waits (at most 1.5 s) for the final pacing report of every member still running, here or
+/// (`elsewhere`) on another host.
+fn collect_final_reports(
+    core: &mut MonitorCore,
+    ports: &mut OrchestratorPorts,
+    (children, elsewhere): (&mut [Spawned], Elsewhere),
+    vehicles: &mut VehicleBook,
+) {
+    let until = Instant::now() + Duration::from_millis(1500);
+    while Instant::now() < until {
+        let _ = ports.receive_states(|msg| {
+            if !vehicles.take(&msg) {
+                core.on_state(&msg);
+            }
+        });
+        let mut running = Vec::new();
+        for c in children.iter_mut() {
+            if matches!(c.child.try_wait(), Ok(None)) {
+                running.push(c.id);
+            }
+        }
+        // Hand-started teams (no children): wait for everyone, bounded.
+        let alive = |id: u32| children.is_empty() || running.contains(&id) || elsewhere(id);
+        if core.final_reports_in(alive) {
+            return;
+        }
+        let _ = ports.wait(Duration::from_millis(20));
+    }
+}
+
+/// CPU seconds (user + system) used so far by this process and its running members, from
+/// /proc/<pid>/stat (fields 14 and 15, in clock ticks). The difference over the flight is the
+/// team's CPU (members that exit meanwhile drop out: a faulted flight reads low).
+fn team_cpu_s(children: &[Spawned]) -> f64 {
+    // SAFETY: sysconf takes no pointers.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
+    let ticks = |path: String| -> u64 {
+        let Ok(text) = std::fs::read_to_string(path) else {
+            return 0;
+        };
+        // The command name (field 2) may hold spaces: count fields after its closing ')'.
+        let rest = text.rsplit_once(')').map_or("", |(_, r)| r);
+        let f: Vec<u64> = rest
+            .split_whitespace()
+            .skip(11)
+            .take(2)
+            .filter_map(|v| v.parse().ok())
+            .collect();
+        f.iter().sum()
+    };
+    let own = ticks("/proc/self/stat".into());
+    let members: u64 = children
+        .iter()
+        .map(|c| ticks(format!("/proc/{}/stat", c.child.id())))
+        .sum();
+    (own + members) as f64 / hz
+}
+
+fn transport(e: impl std::fmt::Display, tick: u64) -> Stop {
+    let f = fault(FaultKind::Transport, None, None, tick, e.to_string());
+    (f, StopReason::AgentFault)
+}
+
+/// The monitor's loop state.
+struct Monitor<'a> {
+    s: &'a Scenario,
+    o: &'a LaunchOptions,
+    /// The clock the monitor core is driven by (it started just before the announcement).
+    clock: Instant,
+    core: &'a mut RealtimeTeam,
+    audit: &'a mut Auditor,
+    tel: &'a mut dyn TelemetrySink,
+    /// The shared per-tick audit and telemetry (`cdm_core::record`).
+    rec: TickRecorder,
+    /// Every member's position and velocity at the instant being audited (formation order).
+    at: Vec<(Vec3, Vec3)>,
+    /// The members' vehicle reports (MAVLink), kept out of the monitor.
+    vehicles: VehicleBook,
+}
+
+impl Monitor<'_> {
+    /// Audits every instant up to the end of the plan (or `--max-ticks`); true when all were.
+    fn fly(
+        &mut self,
+        ports: &mut OrchestratorPorts,
+        children: &mut [Spawned],
+        interrupted: &AtomicBool,
+    ) -> Result<bool, Stop> {
+        let plan = *self.core.plan();
+        let mut progress = cdm_team::progress::Progress::new(
+            "launch",
+            plan.last_audit,
+            plan.period_s,
+            self.o.quiet,
+        );
+        loop {
+            if interrupted.load(Ordering::Relaxed) {
+                self.core.on_interrupt(cdm_runtime::signals::received());
+            }
+            self.drain(ports)?;
+            loop {
+                match self.core.next_action(self.clock.elapsed()) {
+                    MonitorAction::Audit { index, t_s } => {
+                        self.audit_once(index, t_s)?;
+                        progress.tick(index, self.audit.report());
+                    }
+                    MonitorAction::CheckExited => {
+                        if let Some((id, how)) = first_exited(children) {
+                            self.core.on_exited(id, how);
+                        }
+                    }
+                    MonitorAction::Flush => {
+                        let _ = self.tel.flush();
+                    }
+                    MonitorAction::Wait(d) => {
+                        // A plain sleep: the transport's timed wait is coarser, and members do
+                        // not wake the monitor in real time.
+                        std::thread::sleep(d);
+                        break;
+                    }
+                    MonitorAction::Finished => {
+                        progress.finish();
+                        return Ok(true);
+                    }
+                    MonitorAction::Stop(stop) => return Err(stop),
+                }
+            }
+        }
+    }
+
+    /// Takes every state and report that arrived (the core keeps the fault that stops it).
+    fn drain(&mut self, ports: &mut OrchestratorPorts) -> Result<(), Stop> {
+        let core = &mut *self.core;
+        let vehicles = &mut self.vehicles;
+        ports
+            .receive_states(|msg| {
+                if !vehicles.take(&msg) {
+                    core.on_state(&msg);
+                }
+            })
+            .map(drop)
+            .map_err(|e| transport(e, core.audits()))
+    }
+
+    /// Audits and writes the instant `t_s` (audit index `index`) with the recorder `simulate`
+    /// and lockstep `launch` use: the same audit, the same columns.
+    fn audit_once(&mut self, index: u64, t_s: f64) -> Result<(), Stop> {
+        let n = self.s.formation.members.len();
+        let book = self.core.book();
+        self.at.clear();
+        self.at.extend((0..n).map(|k| book.state_at(k, t_s)));
+        let at = &self.at;
+        self.rec
+            .record_at(self.s, (index, t_s), self.audit, self.tel, |k| Some(at[k]))
+            .map_err(|f| (f, StopReason::AgentFault))
+    }
+}

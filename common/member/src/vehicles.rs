@@ -1,0 +1,309 @@
+//! `--vehicles model|mavlink` and the MAVLink options, shared by `orchestrator launch` (which
+//! forwards them to the members it spawns) and the hand-started `leader`/`agent`; and the start
+//! of a member's MAVLink plant (cdm-mavlink).
+
+use std::net::{IpAddr, Ipv4Addr};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use cdm_mavlink::{
+    member_addr, MavlinkPlant, PlantConfig, PlantError, VehicleConfig, VehicleOrigin,
+};
+
+use crate::member::MemberError;
+use crate::vehicle_origins::{OriginsError, VehicleOrigins};
+use cdm_core::formation::Member;
+use cdm_core::math::Vec3;
+use cdm_core::scenario::Scenario;
+
+pub use cdm_mavlink::{VehicleReport, DEFAULT_BASE_PORT};
+
+/// A member's vehicle report as audit.json records it (angles in degrees).
+pub fn vehicle_figures(r: &VehicleReport) -> cdm_core::audit::VehicleFigures {
+    cdm_core::audit::VehicleFigures {
+        setpoints_sent: r.setpoints_sent,
+        late_setpoints: r.late_setpoints,
+        max_setpoint_late_ms: r.max_late_ms,
+        attitudes_received: r.attitudes,
+        max_abs_roll_deg: r.max_abs_roll_rad.to_degrees(),
+        max_abs_pitch_deg: r.max_abs_pitch_rad.to_degrees(),
+        last_attitude_deg: r.last_attitude_rad.map(|a| a.map(f64::to_degrees)),
+    }
+}
+
+/// What each member flies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum VehicleKind {
+    /// The 12-state quadcopter model (simulation; deterministic).
+    #[default]
+    Model,
+    /// A PX4 or ArduPilot vehicle over MAVLink (UDP): member i listens on H:(P + i).
+    Mavlink,
+}
+
+/// The command-line options (flattened into the member binaries and `orchestrator launch`).
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct VehicleArgs {
+    /// What each member flies: `model` (simulated) or `mavlink` (a real or SITL vehicle; needs
+    /// the wall clock: `orchestrator launch --realtime`).
+    #[arg(long, value_enum, default_value_t = VehicleKind::Model)]
+    pub vehicles: VehicleKind,
+    /// MAVLink: member i (scenario order, from 0) listens on UDP port P + i (PX4 multi-vehicle
+    /// SITL's offboard ports start at 14540).
+    #[arg(long, value_name = "P", default_value_t = DEFAULT_BASE_PORT)]
+    pub mavlink_base_port: u16,
+    /// MAVLink: the address the members listen on.
+    #[arg(long, value_name = "H", default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
+    pub mavlink_host: IpAddr,
+    /// MAVLink: the scenario point (ENU, m) of the vehicles' NED origin, `x,y,z`.
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        default_value = "0,0,0",
+        allow_hyphen_values = true
+    )]
+    pub vehicle_origin: String,
+    /// MAVLink: each vehicle's own NED origin (PX4 multi-vehicle SITL: its spawn point), from a
+    /// TOML file of `[[vehicle]]` tables with `id` and `origin = [x, y, z]` (scenario ENU, m),
+    /// one per member; instead of --vehicle-origin.
+    #[arg(long, value_name = "FILE", conflicts_with = "vehicle_origin")]
+    pub vehicle_origins: Option<PathBuf>,
+    /// MAVLink: switch each vehicle to OFFBOARD (PX4) / GUIDED (ArduPilot) and arm it once it
+    /// is heard; without it the members only stream setpoints and the operator arms.
+    #[arg(long)]
+    pub arm: bool,
+}
+
+impl Default for VehicleArgs {
+    fn default() -> Self {
+        VehicleArgs {
+            vehicles: VehicleKind::Model,
+            mavlink_base_port: DEFAULT_BASE_PORT,
+            mavlink_host: IpAddr::V4(Ipv4Addr::LOCALHOST),
+            vehicle_origin: "0,0,0".into(),
+            vehicle_origins: None,
+            arm: false,
+        }
+    }
+}
+
+/// The MAVLink options, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MavlinkOptions {
+    pub base_port: u16,
+    pub host: IpAddr,
+    /// `--vehicle-origin`: one origin for every vehicle.
+    pub origin: Vec3,
+    /// `--vehicle-origins`: each vehicle's own (an absolute path; read against the scenario).
+    pub origins: Option<PathBuf>,
+    pub arm: bool,
+}
+
+/// What each member flies, validated.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum Vehicles {
+    #[default]
+    Model,
+    Mavlink(MavlinkOptions),
+}
+
+impl VehicleArgs {
+    /// Checks the options; the error names the option. MAVLink options without
+    /// `--vehicles mavlink` are refused (they would silently do nothing), and so is
+    /// `--vehicles mavlink` without real time (`realtime`): vehicles fly on the wall clock.
+    pub fn validate(&self, realtime: bool) -> Result<Vehicles, String> {
+        let origin = parse_origin(&self.vehicle_origin)?;
+        match self.vehicles {
+            VehicleKind::Model => {
+                if *self != (VehicleArgs::default()) {
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin and --arm need --vehicles mavlink".into());
+                }
+                Ok(Vehicles::Model)
+            }
+            VehicleKind::Mavlink if !realtime => {
+                Err("--vehicles mavlink needs --realtime (vehicles fly on the wall clock)".into())
+            }
+            VehicleKind::Mavlink => Ok(Vehicles::Mavlink(MavlinkOptions {
+                base_port: self.mavlink_base_port,
+                host: self.mavlink_host,
+                origin,
+                // Absolute: spawned members may not share this process's working directory.
+                origins: self
+                    .vehicle_origins
+                    .as_deref()
+                    .map(std::path::absolute)
+                    .transpose()
+                    .map_err(|e| format!("--vehicle-origins: {e}"))?,
+                arm: self.arm,
+            })),
+        }
+    }
+}
+
+impl Vehicles {
+    /// The options a spawned member needs to fly the same vehicles (none for the model).
+    pub fn member_args(&self) -> Vec<String> {
+        let Vehicles::Mavlink(o) = self else {
+            return Vec::new();
+        };
+        let mut a = vec![
+            "--vehicles".into(),
+            "mavlink".into(),
+            "--mavlink-base-port".into(),
+            o.base_port.to_string(),
+            "--mavlink-host".into(),
+            o.host.to_string(),
+        ];
+        match &o.origins {
+            Some(file) => a.extend(["--vehicle-origins".into(), file.display().to_string()]),
+            None => a.extend([
+                "--vehicle-origin".into(),
+                format!("{},{},{}", o.origin.x, o.origin.y, o.origin.z),
+            ]),
+        }
+        if o.arm {
+            a.push("--arm".into());
+        }
+        a
+    }
+}
+
+impl Vehicles {
+    /// Checks the options against the scenario: `--vehicle-origins` must give every member an
+    /// origin (the error names the file, the line and the member).
+    pub fn check(&self, s: &Scenario) -> Result<(), OriginsError> {
+        if let Vehicles::Mavlink(MavlinkOptions {
+            origins: Some(file),
+            ..
+        }) = self
+        {
+            VehicleOrigins::load(file, &member_ids(s))?;
+        }
+        Ok(())
+    }
+}
+
+fn member_ids(s: &Scenario) -> Vec<u32> {
+    s.formation.members.iter().map(|m| m.id).collect()
+}
+
+/// Member `me`'s vehicle origin: its entry of `--vehicle-origins`, or `--vehicle-origin`.
+fn origin_of(s: &Scenario, me: &Member, o: &MavlinkOptions) -> Result<Vec3, OriginsError> {
+    let Some(file) = &o.origins else {
+        return Ok(o.origin);
+    };
+    let origins = VehicleOrigins::load(file, &member_ids(s))?;
+    Ok(origins.of(me.id).unwrap_or(o.origin))
+}
+
+/// `x,y,z` in metres, finite.
+fn parse_origin(text: &str) -> Result<Vec3, String> {
+    let bad = || format!("--vehicle-origin {text:?}: expected three finite numbers x,y,z (m)");
+    let parts: Vec<f64> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|_| bad()))
+        .collect::<Result<_, _>>()?;
+    match parts.as_slice() {
+        [x, y, z] if parts.iter().all(|v| v.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(bad()),
+    }
+}
+
+/// Binds member `me`'s port (`H:(P + i)`, i its index in scenario order) and waits for its
+/// vehicle to be heard, within `connect` (the member's join timeout). With `--arm` the vehicle
+/// is armed later, on the team's order (`cdm_mavlink::team_arm`).
+pub fn connect<'a>(
+    s: &'a Scenario,
+    me: &Member,
+    o: &MavlinkOptions,
+    connect: Duration,
+    interrupted: &AtomicBool,
+) -> Result<MavlinkPlant<'a>, MemberError> {
+    let origin = origin_of(s, me, o)?;
+    let index = s
+        .formation
+        .members
+        .iter()
+        .position(|m| m.id == me.id)
+        .unwrap_or(0);
+    let index = u32::try_from(index).unwrap_or(u32::MAX);
+    let config = PlantConfig {
+        vehicle: VehicleConfig {
+            agent: me.id,
+            origin: VehicleOrigin(origin),
+            arm: o.arm,
+            connect_deadline: connect,
+        },
+        bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
+        period: Duration::from_secs_f64(s.dt_s()),
+    };
+    Ok(MavlinkPlant::connect(
+        config,
+        s.step_config(),
+        &s.plan,
+        me,
+        interrupted,
+    )?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(extra: &[&str]) -> VehicleArgs {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct A {
+            #[command(flatten)]
+            v: VehicleArgs,
+        }
+        let mut argv = vec!["x"];
+        argv.extend_from_slice(extra);
+        A::try_parse_from(argv).expect("parses").v
+    }
+
+    #[test]
+    fn the_model_is_the_default_and_mavlink_options_need_mavlink() {
+        assert_eq!(args(&[]).validate(false), Ok(Vehicles::Model));
+        let e = args(&["--arm"]).validate(true).unwrap_err();
+        assert!(e.contains("need --vehicles mavlink"), "{e}");
+        let e = args(&["--vehicles", "mavlink"])
+            .validate(false)
+            .unwrap_err();
+        assert!(e.contains("needs --realtime"), "{e}");
+    }
+
+    #[test]
+    fn mavlink_options_round_trip_through_a_spawned_members_arguments() {
+        let v = args(&[
+            "--vehicles",
+            "mavlink",
+            "--mavlink-base-port",
+            "15000",
+            "--vehicle-origin",
+            "-1.5,2,0.25",
+            "--arm",
+        ])
+        .validate(true)
+        .expect("valid");
+        let Vehicles::Mavlink(o) = &v else {
+            panic!("{v:?}")
+        };
+        assert_eq!(o.origin, Vec3::new(-1.5, 2.0, 0.25));
+        assert_eq!((o.base_port, o.arm), (15000, true));
+        let forwarded: Vec<String> = v.member_args();
+        let forwarded: Vec<&str> = forwarded.iter().map(String::as_str).collect();
+        assert_eq!(args(&forwarded).validate(true), Ok(v));
+    }
+
+    #[test]
+    fn a_bad_origin_is_named() {
+        for bad in ["1,2", "1,2,x", "1,2,inf", ""] {
+            let e = args(&["--vehicles", "mavlink", "--vehicle-origin", bad])
+                .validate(true)
+                .unwrap_err();
+            assert!(e.starts_with("--vehicle-origin"), "{e}");
+        }
+    }
+}
