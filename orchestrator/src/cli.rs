@@ -100,7 +100,7 @@ pub enum Command {
     /// starts.
     Clean,
     /// Run this machine's share of a team whose orchestrator was started with `launch --hosts K
-    /// --listen ENDPOINT` (issue 12): join it over zenoh, spawn the members it assigns here, and
+    /// --listen ENDPOINT`: join it over zenoh, spawn the members it assigns here, and
     /// bridge them to the other hosts. Exit 0 when the team stopped, 2 refused, 3 link lost.
     Host {
         /// The orchestrator's endpoint, in zenoh's form (tcp/10.77.0.1:7447).
@@ -211,7 +211,7 @@ pub struct OutDir {
     pub force: bool,
 }
 
-/// `launch` across hosts (issue 12).
+/// `launch` across hosts.
 #[derive(Debug, Args, Clone)]
 pub struct HostArgs {
     /// Split the team over K hosts: this one and K - 1 `orchestrator host` daemons.

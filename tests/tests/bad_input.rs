@@ -1,4 +1,4 @@
-//! Bad input on the command line (issue 6): unknown flags, missing values, team sizes outside
+//! Bad input on the command line: unknown flags, missing values, team sizes outside
 //! 4..=2000, bad numbers and names, an --out that is not empty or cannot be written. Each is
 //! refused with exit 2 and a message naming the argument, before anything is written: no run
 //! directory, no shared memory of the team.

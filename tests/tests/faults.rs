@@ -1,4 +1,4 @@
-//! Faults a flying team must survive (issue 6), each with the real binaries over real iceoryx2
+//! Faults a flying team must survive, each with the real binaries over real iceoryx2
 //! shared memory, each under a deadline. After each: the documented exit code, no process of the
 //! team alive, nothing of the team in /dev/shm or /dev/shm/cdm-iceoryx2-<uid>, telemetry.csv holding only
 //! whole ticks (every one before the fault), and audit.json saying what happened.

@@ -1,4 +1,4 @@
-//! Losing no data (issue 10, items 7-9): a full disk, a symbolic link in a run directory, a
+//! Losing no data: a full disk, a symbolic link in a run directory, a
 //! closed or full stdout. Real binaries, real files; the disk is a 200 KiB tmpfs mounted by the
 //! test (CI runs as root; elsewhere the test says "skipped").
 

@@ -1,4 +1,4 @@
-//! Bad input (issue 10, items 10-16): clear errors, exit 2, no panic, no hang. Real binaries.
+//! Bad input: clear errors, exit 2, no panic, no hang. Real binaries.
 
 mod support;
 

@@ -1,4 +1,4 @@
-//! One team over two "hosts" (issue 12): two network namespaces joined by a veth pair
+//! One team over two "hosts": two network namespaces joined by a veth pair
 //! (10.77.0.1/24 and 10.77.0.2/24). Host A runs the orchestrator and its share of the members;
 //! host B runs `orchestrator host` and the other share with its own /dev/shm (a tmpfs mounted in
 //! a private mount namespace), so only the network joins them.

@@ -1,5 +1,5 @@
 //! The crate layering of ARCHITECTURE.md, held by the manifests and checked here from
-//! `cargo metadata` (issue 9): only `cdm-iox` depends on iceoryx2, only `cdm-math` on nalgebra,
+//! `cargo metadata`: only `cdm-iox` depends on iceoryx2, only `cdm-math` on nalgebra,
 //! only `cdm-zenoh` on zenoh, and the core crate's whole dependency tree has no iceoryx2, zenoh,
 //! clap or tracing-subscriber (it is usable as a library on its own).
 

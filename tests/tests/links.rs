@@ -1,4 +1,4 @@
-//! Imperfect links (issue 11, deterministic part): `--link-delay-ms`, `--link-jitter-ms`,
+//! Imperfect links, deterministic: `--link-delay-ms`, `--link-jitter-ms`,
 //! `--link-loss` and `--seed` are part of the model, so lockstep `launch` (real processes over
 //! iceoryx2) writes exactly the telemetry of `simulate`, byte for byte; members started by hand
 //! take the same flags, and one with other links is refused. `plan` certifies the largest link

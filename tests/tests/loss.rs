@@ -1,4 +1,4 @@
-//! Losing members in flight, with the real `orchestrator` binary (issue 16, in-process part):
+//! Losing members in flight in one process (`simulate`), with the real `orchestrator` binary:
 //!
 //! - `simulate --lose` of a follower, a secondary leader and a primary leader: exit 0, every
 //!   loss recorded in audit.json with its tick and the followers that switched triangles, the

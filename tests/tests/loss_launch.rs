@@ -1,4 +1,4 @@
-//! Losing members in flight with real processes (issue 16, process side): the orchestrator,
+//! Losing members in flight with real processes: the orchestrator,
 //! `leader` and `agent` binaries over real iceoryx2 shared memory, paper40 cut short with
 //! `--max-ticks`.
 //!

@@ -1,4 +1,4 @@
-//! The MAVLink vehicle link of issue 13 against an independent implementation: the
+//! The MAVLink vehicle link against an independent implementation: the
 //! `follow_setpoints` example of `cdm-mavlink` (one member: binds `H:(P + i)`, streams a
 //! straight-line plan at comm_hz, reads the measured state) talks over loopback UDP to
 //! `tests/python/mavlink_vehicle.py`, a point-mass vehicle built on pymavlink. Real sockets,

@@ -1,4 +1,4 @@
-//! A team flies MAVLink vehicles (issue 13): `orchestrator launch --vehicles mavlink` spawns ten
+//! A team flies MAVLink vehicles: `orchestrator launch --vehicles mavlink` spawns ten
 //! members, each drives one `tests/python/mavlink_vehicle.py` (a pymavlink point mass, an
 //! implementation nobody here wrote) over loopback UDP on `P + i`, publishes the vehicle's
 //! measured state, and the orchestrator audits it. `--arm` arms the vehicles only once all of

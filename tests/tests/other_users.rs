@@ -1,4 +1,4 @@
-//! Other local users, and teams that died (issue 10, items 1, 2 and 4), with the real binaries.
+//! Other local users, and teams that died, with the real binaries.
 //!
 //! - Users: two users created for the test (`useradd`; removed with their files at the end) run
 //!   the binaries, copied into a directory they can read, with `setpriv`. Needs root (CI runs as

@@ -1,4 +1,4 @@
-//! Real time (issue 11): `launch --realtime` with the real binaries over real iceoryx2 shared
+//! Real time: `launch --realtime` with the real binaries over real iceoryx2 shared
 //! memory. Members tick on their own clocks from the announced start, with seeded phase
 //! offsets; the orchestrator monitors. Short plans (3 s of a 10-agent team) keep CI fast; no
 //! test asserts how fast anything ran (only that a paced flight cannot end before its plan).

@@ -1,4 +1,4 @@
-//! Resource safety (issue 6): what a team's shared memory lets other users do, and running out
+//! Resource safety: what a team's shared memory lets other users do, and running out
 //! of file descriptors.
 //!
 //! - Every file a team creates in /dev/shm and /dev/shm/cdm-iceoryx2-<uid> is readable and writable by its

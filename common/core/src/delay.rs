@@ -1,4 +1,4 @@
-//! What link delay does to the guarantee (issue 11): the largest delay at which a plan still
+//! What link delay does to the guarantee: the largest delay at which a plan still
 //! meets E_max <= delta (eq. 34 against eq. 38).
 //!
 //! The paper assumes continuous exchange (eqs. 24-25). Over delayed links a follower steers by

@@ -25,7 +25,7 @@
 //! follower's combination over the ticks, found exactly (every tick counts) by a coarse pass with
 //! a curvature bound ([`max_norm`]). The coarse pass runs in parallel over followers.
 //!
-//! Link delay (issue 11, `link.rs`) keeps all of this: a follower whose neighbours' states
+//! Link delay (`link.rs`) keeps all of this: a follower whose neighbours' states
 //! arrive d ticks late flies tick k with their tick-h states, h = max(k - d, 0), brought to t_k
 //! by the cubic Taylor shift S(k - h) (`Heard::at_tick`), so the neighbour term of the tick map
 //! becomes psi S(k - h) applied to the tick-h input. H is still linear and acts on time only, so

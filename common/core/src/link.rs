@@ -1,4 +1,4 @@
-//! Imperfect links as part of the deterministic model (issue 11): a state sent from one member
+//! Imperfect links as part of the deterministic model: a state sent from one member
 //! to another arrives some whole ticks late, or not at all.
 //!
 //! The paper assumes continuous exchange (eqs. 24-25). Real links are late and lossy, so a

@@ -1,4 +1,4 @@
-//! Property tests of the scenario parser, the validator and graph synthesis (issue 6, bad input):
+//! Property tests of the scenario parser, the validator and graph synthesis (bad input):
 //!
 //! - Random edits of paper40's TOML text and random structured scenarios never panic or hang;
 //!   every rejection names where the problem is (a line of the file, a field or an agent).

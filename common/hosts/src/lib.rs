@@ -1,4 +1,4 @@
-//! One team on several machines (issue 12). `launch --hosts K --listen ENDPOINT` keeps host 0's
+//! One team on several machines. `launch --hosts K --listen ENDPOINT` keeps host 0's
 //! share of the formation on this machine and serves the others to `orchestrator host --connect
 //! ENDPOINT` daemons over zenoh (crate cdm-zenoh, behind the default `hosts` feature).
 //!

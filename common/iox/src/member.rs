@@ -80,7 +80,7 @@ impl MemberPorts {
     }
 
     /// Opens member `id`'s ports on behalf of a member that runs on another host (`host`), for the
-    /// bridge that carries its states over the network (issue 12). The ports are a member's
+    /// bridge that carries its states over the network. The ports are a member's
     /// (so the team's layout and limits hold unchanged); only the node's name differs,
     /// `cdm/<team>/host/<host>/agent/<id>`, so `subscriptions.json` shows which edges cross
     /// hosts. `in_neighbors` and `out_neighbors` are the member's neighbours on this host only.

@@ -1,4 +1,4 @@
-//! `launch --arm` (issue 13): the vehicles are armed when ALL report ready. A MAVLink member
+//! `launch --arm`: the vehicles are armed when ALL report ready. A MAVLink member
 //! joins its team only once its vehicle is heard (HEARTBEAT and position), so once the team has
 //! gathered every vehicle is ready: the orchestrator then sends the arm order
 //! (`ClockMsg::arm`) once, waits until every member answers (`StateMsg::arm_report`: armed, or

@@ -4,9 +4,9 @@
 
 use std::time::Duration;
 
-/// No HEARTBEAT for this long: the vehicle is lost (issue 13).
+/// No HEARTBEAT for this long: the vehicle is lost.
 pub const HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(1);
-/// No LOCAL_POSITION_NED for this long: the member flies blind (issue 13).
+/// No LOCAL_POSITION_NED for this long: the member flies blind.
 pub const POSITION_TIMEOUT: Duration = Duration::from_millis(500);
 
 /// Why a member's vehicle link failed. Every variant names the member (by id).

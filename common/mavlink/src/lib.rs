@@ -1,4 +1,4 @@
-//! The MAVLink vehicle plant (issue 13): a member's link to a PX4 or ArduPilot vehicle. The
+//! The MAVLink vehicle plant: a member's link to a PX4 or ArduPilot vehicle. The
 //! member reads the vehicle's measured state (HEARTBEAT, LOCAL_POSITION_NED, ATTITUDE) and sends
 //! it setpoints (SET_POSITION_TARGET_LOCAL_NED with velocity and acceleration feed-forward) and a
 //! HEARTBEAT once a second.

@@ -88,7 +88,7 @@ impl ParquetTelemetryWriter {
             .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
             // Dictionary encoding pays only where values repeat: `role` (three values). On the
             // f64 columns, whose values barely repeat, it cost a quarter of a whole run in
-            // the interner and its hash table (BENCHMARKS.md, issue 17).
+            // the interner and its hash table (BENCHMARKS.md).
             .set_dictionary_enabled(false)
             .set_column_dictionary_enabled(ColumnPath::from("role"), true)
             .build();

@@ -268,7 +268,7 @@ pub fn deviation_sweep(
     sweep_figure(dir, &sweep, points, delta_m)
 }
 
-/// Fig. 10's twin for link delay (issue 11): E_max versus the delay of every state, with delta
+/// Fig. 10's twin for link delay: E_max versus the delay of every state, with delta
 /// and the certificate's largest safe delay. `points` are (delay ms, E_max) pairs.
 pub fn delay_sweep(
     dir: &Path,

@@ -1,4 +1,4 @@
-//! The repair transients of a run that lost members (issue 16): the deviation |r - r_HT|
+//! The repair transients of a run that lost members: the deviation |r - r_HT|
 //! (eq. 13) of every follower a loss made switch triangles or fly its plan. Theorem 1 keeps
 //! each survivor's r_HT, so this deviation is all a repair changes; the figure shows it over the
 //! whole flight and around the loss that disturbed it most.

@@ -52,7 +52,7 @@ pub const FAULT_CONTROL: u32 = 8;
 pub const FAULT_VEHICLE_LOST: u32 = 9;
 /// `StateMsg::fault_code`: the member runs on another host whose daemon can no longer be heard
 /// (a network partition or a dead daemon); published on the member's behalf by the orchestrator's
-/// bridge (issue 12).
+/// bridge.
 pub const FAULT_HOST_LOST: u32 = 10;
 /// `StateMsg::fault_code`: the member's process on another host exited before the stop; its
 /// host's daemon saw it and the orchestrator's bridge publishes this on its behalf.

@@ -1,4 +1,4 @@
-//! The team core's side of losing members (`--on-loss repair`, issue 16): a scripted loss's
+//! The team core's side of losing members (`--on-loss repair`): a scripted loss's
 //! member is killed once it has published its tick (grants stop there meanwhile), a member
 //! found dead or silent is lost, and after one more drain of its states its loss is announced
 //! with the tick after its last state; the next is announced once the repair's new links are

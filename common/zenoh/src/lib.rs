@@ -1,4 +1,4 @@
-//! Across hosts (issue 12): the zenoh link between a team's orchestrator and the daemon of each
+//! Across hosts: the zenoh link between a team's orchestrator and the daemon of each
 //! other host. The only library crate that names zenoh; members never see it (a daemon re-publishes
 //! what crosses hosts into its host's iceoryx2 services, `common/hosts/src/lib.rs`).
 //!
