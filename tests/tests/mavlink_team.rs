@@ -286,10 +286,12 @@ fn a_vehicle_that_stops_sending_is_named() {
         v.finish(DEADLINE);
     }
     let audit = read_json(&dir.path().join("run/audit.json"));
-    assert_eq!(audit["verdict"], "FAULT", "{audit:#}");
+    // On failure: the audit and the members' stderr (written to the orchestrator's).
+    let why = format!("{audit:#}\n{}", describe(&o));
+    assert_eq!(audit["verdict"], "FAULT", "{why}");
     let fault = &audit["fault"];
-    assert_eq!(fault["kind"], "vehicle-lost", "{audit:#}");
-    assert_eq!(fault["agent"], silent_id, "{audit:#}");
+    assert_eq!(fault["kind"], "vehicle-lost", "{why}");
+    assert_eq!(fault["agent"], silent_id, "{why}");
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(
         stderr.contains(&format!(
