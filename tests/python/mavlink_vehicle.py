@@ -1,15 +1,38 @@
 #!/usr/bin/env python3
-"""A stand-in MAVLink vehicle for the tests of the member's vehicle link (issue 13).
+"""A stand-in MAVLink vehicle for the tests of the member's vehicle link.
 
 pymavlink (pinned in python/requirements-test.txt) does all the encoding and decoding, so the
 Rust side is checked against an implementation nobody here wrote. The vehicle is a point mass
 tracking the last SET_POSITION_TARGET_LOCAL_NED it received (position, velocity and acceleration
-feed-forward). It sends HEARTBEAT, LOCAL_POSITION_NED and ATTITUDE at --rate-hz from its own UDP
-socket to the member's port, answers DO_SET_MODE / COMPONENT_ARM_DISARM like a strict PX4
-(OFFBOARD only while setpoints stream; arming only in OFFBOARD), counts what it received and the
-frames that failed their checksum, stamps every command and its own readiness (its first
-HEARTBEAT and position) on the wall clock, can go silent after --silent-after seconds, and prints one
-JSON summary on stdout at exit.
+feed-forward), stepped at --rate-hz. From its own UDP socket to the member's port it sends
+HEARTBEAT at --heartbeat-hz (1 Hz), LOCAL_POSITION_NED at --position-hz and ATTITUDE at
+--attitude-hz (both --rate-hz unless given). It answers
+DO_SET_MODE / COMPONENT_ARM_DISARM like a strict PX4, counts what it received and the frames that
+failed their checksum, stamps every command and its own readiness (its first HEARTBEAT and
+position) on the wall clock, can go silent after --silent-after seconds, and prints one JSON
+summary on stdout at exit.
+
+What it reproduces of PX4 (v1.14+ defaults):
+- HEARTBEAT once a second (PX4 and ArduPilot send it at 1 Hz whatever the link), with
+  MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, the armed flag, and the main mode in bits 16..24 of
+  custom_mode (px4_custom_mode.h).
+- Streams that are not metronomes: every packet leaves up to --jitter of its period late, one in
+  about 1/--late-prob is held back a further --late-periods periods (with the content it had
+  when due: a stale packet), and one in about 1/--dup-prob is sent twice (the same datagram, same
+  sequence number). Seeded by --seed (default: the system id), so a run is reproducible.
+  --exact turns all three off: every stream at exactly its rate.
+- OFFBOARD is accepted only while setpoints stream, arming only in OFFBOARD (or GUIDED with
+  --autopilot ardupilot), and the vehicle falls back to POSCTL when setpoints stop (after 0.5 s;
+  PX4's COM_OF_LOSS_T is 1 s by default, stricter here to see it in short tests). Every command
+  gets a COMMAND_ACK.
+
+What it does not reproduce:
+- PX4's own stream rates on an onboard link (LOCAL_POSITION_NED 30 Hz, ATTITUDE 100 Hz in
+  mavlink_main.cpp's onboard mode): the defaults here are 50 Hz for both; pass --position-hz 30
+  --attitude-hz 100 for PX4's.
+- Reordering (a late packet here never overtakes a newer one by more than its own delay), loss,
+  SYS_STATUS / BATTERY_STATUS, preflight checks, take-off, RC, failsafes (data link loss,
+  COM_DL_LOSS_T), TIMESYNC, message signing, and any dynamics beyond a point mass.
 
 Every loop is bounded: the vehicle exits after --max-s seconds, or --idle-exit-s seconds after
 the last setpoint.
@@ -20,8 +43,10 @@ How to run (with the Rust example listening on 127.0.0.1:14540):
 
 import argparse
 import json
+import heapq
 import math
 import os
+import random
 import sys
 import time
 
@@ -58,7 +83,25 @@ def parse_args():
     p.add_argument("--sysid", type=int, default=1, help="this vehicle's MAVLink system id")
     p.add_argument("--autopilot", choices=["px4", "ardupilot"], default="px4")
     p.add_argument("--start-ned", type=vec3, default=[0.0, 0.0, 0.0], help="start position, NED m")
-    p.add_argument("--rate-hz", type=float, default=50.0)
+    p.add_argument("--rate-hz", type=float, default=50.0, help="physics step")
+    p.add_argument("--position-hz", type=float, default=None,
+                   help="LOCAL_POSITION_NED rate (default: --rate-hz)")
+    p.add_argument("--heartbeat-hz", type=float, default=1.0,
+                   help="HEARTBEAT rate (PX4 and ArduPilot: 1 Hz)")
+    p.add_argument("--attitude-hz", type=float, default=None,
+                   help="ATTITUDE rate (default: --rate-hz)")
+    p.add_argument("--jitter", type=float, default=0.1,
+                   help="each packet leaves up to this fraction of its period late")
+    p.add_argument("--late-prob", type=float, default=0.02,
+                   help="chance that a packet is held back --late-periods more")
+    p.add_argument("--late-periods", type=float, default=0.5,
+                   help="how long a late packet is held back, in periods of its stream")
+    p.add_argument("--dup-prob", type=float, default=0.02,
+                   help="chance that a packet is sent twice")
+    p.add_argument("--exact", action="store_true",
+                   help="no jitter, no late or duplicated packets: every stream exactly at its rate")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the irregularities (default: --sysid)")
     p.add_argument("--require-arm", action="store_true",
                    help="move only when armed in OFFBOARD/GUIDED (otherwise track any setpoint)")
     p.add_argument("--silent-after", type=float, default=None,
@@ -92,6 +135,7 @@ class Vehicle:
         self.member_sysids = set()
         # When this vehicle first sent HEARTBEAT and position (it is ready), on the wall clock.
         self.ready_unix = None
+        self.streams = Streams(args)
 
     def guided(self):
         if self.args.autopilot == "px4":
@@ -154,25 +198,28 @@ class Vehicle:
         self.vel = [self.vel[k] + self.acc[k] * dt for k in range(3)]
         self.pos = [self.pos[k] + self.vel[k] * dt for k in range(3)]
 
-    def send(self, conn, boot_ms, silent):
+    def build(self, conn, kind, boot_ms, silent):
+        """The `kind` message with the vehicle's state now, or None while that stream is muted."""
         if self.ready_unix is None:
             self.ready_unix = time.time()
         mute = self.args.mute
-        if not (silent and mute in ("all", "heartbeat")):
+        if silent and (mute == "all" or kind == {"heartbeat": "HEARTBEAT",
+                                                 "position": "LOCAL_POSITION_NED"}[mute]):
+            return None
+        if kind == "HEARTBEAT":
             autopilot = (mavlink.MAV_AUTOPILOT_PX4 if self.args.autopilot == "px4"
                          else mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
             base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
             if self.armed:
                 base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-            conn.mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, autopilot, base,
-                                    self.custom_mode, mavlink.MAV_STATE_ACTIVE)
-        if not (silent and mute in ("all", "position")):
-            conn.mav.local_position_ned_send(boot_ms, *self.pos, *self.vel)
-        if not (silent and mute == "all"):
-            # Small-angle attitude that would produce the commanded horizontal acceleration.
-            roll = math.atan2(self.acc[1], GRAVITY)
-            pitch = -math.atan2(self.acc[0], GRAVITY)
-            conn.mav.attitude_send(boot_ms, roll, pitch, 0.0, 0.0, 0.0, 0.0)
+            return conn.mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, autopilot, base,
+                                             self.custom_mode, mavlink.MAV_STATE_ACTIVE)
+        if kind == "LOCAL_POSITION_NED":
+            return conn.mav.local_position_ned_encode(boot_ms, *self.pos, *self.vel)
+        # Small-angle attitude that would produce the commanded horizontal acceleration.
+        roll = math.atan2(self.acc[1], GRAVITY)
+        pitch = -math.atan2(self.acc[0], GRAVITY)
+        return conn.mav.attitude_encode(boot_ms, roll, pitch, 0.0, 0.0, 0.0, 0.0)
 
     def summary(self, conn, went_silent_at, exit_reason):
         t = self.setpoint_times
@@ -203,9 +250,74 @@ class Vehicle:
             "final_position_ned": self.pos,
             "last_setpoint_ned": self.setpoint[0] if self.setpoint else None,
             "ready_unix": self.ready_unix,
+            "sent": self.streams.sent,
+            "late_packets": self.streams.late,
+            "duplicated_packets": self.streams.duplicated,
             "went_silent_at_s": went_silent_at,
             "exit": exit_reason,
         }
+
+
+class Streams:
+    """When each stream is next due, and the packets waiting to leave (by send time)."""
+
+    def __init__(self, args):
+        self.args = args
+        self.rng = random.Random(args.sysid if args.seed is None else args.seed)
+        self.periods = {"HEARTBEAT": 1.0 / args.heartbeat_hz,
+                        "LOCAL_POSITION_NED": 1.0 / (args.position_hz or args.rate_hz),
+                        "ATTITUDE": 1.0 / (args.attitude_hz or args.rate_hz)}
+        # The index of the last period each stream was sent for (-1: none yet).
+        self.last = {kind: -1 for kind in self.periods}
+        self.queue = []  # heap of (send_at, order, msg, duplicate)
+        self.order = 0
+        self.sent = {kind: 0 for kind in self.periods}
+        self.late = 0
+        self.duplicated = 0
+
+    def delay(self, period):
+        """How late this packet leaves, and whether it goes twice. Three draws per packet
+        whatever the options, so --exact changes nothing else of a seeded run."""
+        jitter, late, dup = self.rng.random(), self.rng.random(), self.rng.random()
+        if self.args.exact:
+            return 0.0, False
+        d = jitter * self.args.jitter * period
+        if late < self.args.late_prob:
+            d += self.args.late_periods * period
+            self.late += 1
+        return d, dup < self.args.dup_prob
+
+    def schedule(self, vehicle, conn, now, boot_ms, silent):
+        """Queue each stream's packet once its period has come (a stalled loop skips periods,
+        as PX4's streams do, rather than bursting)."""
+        for kind, period in self.periods.items():
+            k = math.floor(now / period)
+            if k <= self.last[kind]:
+                continue
+            self.last[kind] = k
+            msg = vehicle.build(conn, kind, boot_ms, silent)
+            if msg is None:
+                continue
+            d, dup = self.delay(period)
+            heapq.heappush(self.queue, (now + d, self.order, msg, False))
+            self.order += 1
+            if dup:
+                heapq.heappush(self.queue, (now + d, self.order, msg, True))
+                self.order += 1
+
+    def flush(self, conn, now):
+        while self.queue and self.queue[0][0] <= now:
+            _, _, msg, duplicate = heapq.heappop(self.queue)
+            if duplicate:
+                # The very datagram again (same sequence number), as a duplicating link does.
+                conn.write(msg.get_msgbuf())
+                self.duplicated += 1
+            else:
+                conn.mav.send(msg)
+                self.sent[msg.get_type()] += 1
+
+    def next_at(self):
+        return self.queue[0][0] if self.queue else math.inf
 
 
 def drain(conn, vehicle, now):
@@ -219,8 +331,13 @@ def drain(conn, vehicle, now):
 
 def main():
     args = parse_args()
-    if not (0 < args.port < 65536) or not (0 < args.rate_hz <= 1000) or args.max_s <= 0:
-        print("mavlink_vehicle: --port, --rate-hz or --max-s out of range", file=sys.stderr)
+    rates = [args.rate_hz, args.heartbeat_hz, args.attitude_hz or args.rate_hz,
+             args.position_hz or args.rate_hz]
+    odds = [args.jitter, args.late_prob, args.late_periods, args.dup_prob]
+    if (not (0 < args.port < 65536) or not all(0 < r <= 1000 for r in rates)
+            or args.max_s <= 0 or not all(0 <= x <= 10 for x in odds)):
+        print("mavlink_vehicle: --port, a rate, an irregularity or --max-s out of range",
+              file=sys.stderr)
         return 2
     conn = mavutil.mavlink_connection(f"udpout:{args.host}:{args.port}",
                                       source_system=args.sysid, source_component=1)
@@ -241,17 +358,21 @@ def main():
         if t and now - t[-1] > args.idle_exit_s:
             exit_reason = "idle"
             break
-        drain(conn, vehicle, now)
-        vehicle.step(dt, now)
-        silent = args.silent_after is not None and now >= args.silent_after
-        if silent and went_silent_at is None:
-            went_silent_at = now
-            print(f"mavlink_vehicle {args.sysid}: silent ({args.mute}) at {now:.2f} s",
-                  file=sys.stderr, flush=True)
-        vehicle.send(conn, int(k * dt * 1000), silent)
-        k += 1
-        # Paced on the wall clock, one fixed step per tick (late ticks are not skipped).
-        wait = start + k * dt - time.monotonic()
+        if now >= k * dt:
+            drain(conn, vehicle, now)
+            vehicle.step(dt, now)
+            silent = args.silent_after is not None and now >= args.silent_after
+            if silent and went_silent_at is None:
+                went_silent_at = now
+                print(f"mavlink_vehicle {args.sysid}: silent ({args.mute}) at {now:.2f} s",
+                      file=sys.stderr, flush=True)
+            vehicle.streams.schedule(vehicle, conn, now, int(k * dt * 1000), silent)
+            k += 1
+        vehicle.streams.flush(conn, now)
+        # Paced on the wall clock, one fixed step per tick (late ticks are not skipped); woken
+        # early for a packet due between two ticks.
+        wake = start + min(k * dt, vehicle.streams.next_at())
+        wait = wake - time.monotonic()
         if wait > 0:
             time.sleep(wait)
     print(json.dumps(vehicle.summary(conn, went_silent_at, exit_reason)), flush=True)

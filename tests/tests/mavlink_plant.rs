@@ -174,13 +174,19 @@ fn arm_switches_px4_to_offboard_and_arms_it() {
     assert!(dist(vec3(&v, "final_position_ned"), GOAL_NED) < 0.5, "{v}");
 }
 
-/// The member's stderr when its vehicle went quiet: it failed with exit 3 naming agent 7.
-fn assert_named_loss(m_out: &Output, v: &Value, what: &str) {
+/// The member's stderr when its vehicle went quiet: it failed with exit 3 naming agent 7 and
+/// the limit (`limit`, e.g. "limit 3 s, --heartbeat-timeout").
+fn assert_named_loss(m_out: &Output, v: &Value, what: &str, limit: &str) {
     let stderr = String::from_utf8_lossy(&m_out.stderr);
     assert_eq!(m_out.status.code(), Some(3), "{}", describe(m_out));
     assert!(
         stderr.contains(&format!("agent {AGENT}: vehicle lost: no {what} for")),
         "the loss of {what} is not named:\n{}",
+        describe(m_out)
+    );
+    assert!(
+        stderr.contains(&format!("({limit})")),
+        "{}",
         describe(m_out)
     );
     assert!(v["went_silent_at_s"].is_number(), "{v}");
@@ -195,13 +201,42 @@ fn assert_named_loss(m_out: &Output, v: &Value, what: &str) {
 fn a_vehicle_that_stops_sending_positions_is_named() {
     let (m_out, v_out) = fly(&[], &["--silent-after", "1.0", "--mute", "all"]);
     // Positions stop with everything else; their 0.5 s limit is reached first.
-    assert_named_loss(&m_out, &json(&v_out, "vehicle"), "LOCAL_POSITION_NED");
+    let limit = "limit 0.5 s, --position-timeout";
+    assert_named_loss(
+        &m_out,
+        &json(&v_out, "vehicle"),
+        "LOCAL_POSITION_NED",
+        limit,
+    );
 }
 
 #[test]
 fn a_vehicle_whose_heartbeat_stops_is_named() {
-    let (m_out, v_out) = fly(&[], &["--silent-after", "1.0", "--mute", "heartbeat"]);
-    assert_named_loss(&m_out, &json(&v_out, "vehicle"), "HEARTBEAT");
+    // The vehicle's last HEARTBEAT leaves before 1 s; the member names the loss 3 s later
+    // (--heartbeat-timeout's default), so it must still be flying then: a 10 s hold.
+    let (m_out, v_out) = fly(
+        &["--hold-s", "10"],
+        &["--silent-after", "1.0", "--mute", "heartbeat"],
+    );
+    let limit = "limit 3 s, --heartbeat-timeout";
+    assert_named_loss(&m_out, &json(&v_out, "vehicle"), "HEARTBEAT", limit);
+}
+
+#[test]
+fn the_link_timeouts_are_the_members_options() {
+    // A shorter heartbeat limit is honoured (and named) ...
+    let (m_out, v_out) = fly(
+        &["--hold-s", "10", "--heartbeat-timeout", "1.5"],
+        &["--silent-after", "1.0", "--mute", "heartbeat"],
+    );
+    let limit = "limit 1.5 s, --heartbeat-timeout";
+    assert_named_loss(&m_out, &json(&v_out, "vehicle"), "HEARTBEAT", limit);
+    // ... and a 2 Hz position stream, lost under the default 0.5 s, flies with a limit of
+    // four of its periods.
+    let (m_out, v_out) = fly(&["--position-timeout", "2"], &["--position-hz", "2"]);
+    assert_eq!(m_out.status.code(), Some(0), "{}", describe(&m_out));
+    let v = json(&v_out, "vehicle");
+    assert!(dist(vec3(&v, "final_position_ned"), GOAL_NED) < 0.5, "{v}");
 }
 
 #[test]

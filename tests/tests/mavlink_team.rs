@@ -195,8 +195,10 @@ fn ten_members_arm_when_all_are_ready_and_fly_to_their_goals() {
         .collect();
     let origins_file = write_origins(dir.path(), &file, &origins);
     // Vehicles that move only in OFFBOARD and armed, and refuse OFFBOARD without a setpoint
-    // stream (like PX4). The last one starts late: nobody may be armed before it is ready.
-    let arm = ["--require-arm"];
+    // stream (like PX4), with HEARTBEAT at exactly 1 Hz (PX4's and ArduPilot's rate; the mode
+    // and arm confirmations arrive only with it). The last one starts late: nobody may be
+    // armed before it is ready.
+    let arm = ["--require-arm", "--exact", "--heartbeat-hz", "1"];
     let mut vehicles = start_vehicles(&file, (base, &origins), 0..N - 1, None, &arm);
     let origins_arg = origins_file.to_str().expect("utf-8 path");
     let orch = launch_team(
@@ -277,8 +279,15 @@ fn a_vehicle_that_stops_sending_is_named() {
     let silent_id = file.agents[SILENT].id;
     let origins = [ORIGIN; N];
     let silent = Some((SILENT, 8.0));
+    // Vehicles with PX4's 1 Hz HEARTBEAT and the script's jitter, late and duplicated packets;
+    // launch forwards a position limit of its own to every member.
     let vehicles = start_vehicles(&file, (base, &origins), 0..N, silent, &[]);
-    let at = ["--vehicle-origin", &csv(ORIGIN)];
+    let at = [
+        "--vehicle-origin",
+        &csv(ORIGIN),
+        "--position-timeout",
+        "0.75",
+    ];
     let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
     let o = orch.finish(DEADLINE);
     assert_eq!(o.status.code(), Some(3), "{}", describe(&o));
@@ -297,6 +306,11 @@ fn a_vehicle_that_stops_sending_is_named() {
         stderr.contains(&format!(
             "agent {silent_id}: vehicle lost: no LOCAL_POSITION_NED"
         )),
+        "{}",
+        describe(&o)
+    );
+    assert!(
+        stderr.contains("(limit 0.75 s, --position-timeout)"),
         "{}",
         describe(&o)
     );
@@ -325,7 +339,18 @@ fn bad_vehicle_options_exit_2_naming_them() {
         3 * N + 1
     );
     let mavlink_rt = ["--realtime", "--vehicles", "mavlink"];
-    let cases: [(&[&str], &str); 6] = [
+    let mav = |flag: &'static str, value: &'static str| -> [&'static str; 5] {
+        ["--realtime", "--vehicles", "mavlink", flag, value]
+    };
+    let (hb0, pos_neg, hb_text) = (
+        mav("--heartbeat-timeout", "0"),
+        mav("--position-timeout", "-1"),
+        mav("--heartbeat-timeout", "soon"),
+    );
+    let cases: [(&[&str], &str); 9] = [
+        (&hb0, "--heartbeat-timeout must be a number of seconds"),
+        (&pos_neg, "--position-timeout must be a number of seconds"),
+        (&hb_text, "--heartbeat-timeout"),
         (
             &[
                 mavlink_rt[0],
@@ -392,4 +417,27 @@ fn bad_vehicle_options_exit_2_naming_them() {
         last.id
     );
     support::assert_stderr_has(&out, "port out of range", &[&needle]);
+}
+
+#[test]
+fn launch_no_spawn_prints_the_link_timeouts_for_hand_started_members() {
+    let dir = TempDir::new();
+    let file = team(3.0);
+    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+    let team_name = unique_team("mavnospawn");
+    // Not --quiet: the command lines are what a hand-started team is told.
+    let mut c = std::process::Command::new(integration_tests::bin("orchestrator"));
+    c.arg("launch")
+        .args(["--scenario", scenario.to_str().expect("utf-8 path")])
+        .args(["--team", &team_name])
+        .arg("--out")
+        .arg(dir.path().join("run"))
+        .args(["--no-spawn", "--join-timeout", "1", "--no-figures"])
+        .args(["--realtime", "--vehicles", "mavlink"])
+        .args(["--heartbeat-timeout", "4.5", "--position-timeout", "0.25"]);
+    let out = integration_tests::run(&mut c, DEADLINE);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let flags = " --heartbeat-timeout 4.5 --position-timeout 0.25";
+    assert_eq!(stdout.matches(flags).count(), 2, "{}", describe(&out));
+    assert_no_team_resources(&team_name);
 }

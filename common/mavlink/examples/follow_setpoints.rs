@@ -18,7 +18,8 @@ use anyhow::{bail, Context};
 use cdm_core::plan::{Quintic, Segment};
 use cdm_math::{Real, Vec3};
 use cdm_mavlink::{
-    member_addr, MavlinkVehicle, Setpoint, UdpLink, VehicleConfig, VehicleOrigin, DEFAULT_BASE_PORT,
+    member_addr, LinkTimeouts, MavlinkVehicle, Setpoint, UdpLink, VehicleConfig, VehicleOrigin,
+    DEFAULT_BASE_PORT, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
 };
 use clap::Parser;
 
@@ -59,6 +60,12 @@ struct Args {
     /// How long to wait for the vehicle's first HEARTBEAT and position (s).
     #[arg(long, default_value_t = 10.0)]
     connect_timeout_s: Real,
+    /// No HEARTBEAT for this long (s): the vehicle is lost (the members' --heartbeat-timeout).
+    #[arg(long = "heartbeat-timeout", default_value_t = DEFAULT_HEARTBEAT_TIMEOUT.as_secs_f64(), allow_negative_numbers = true)]
+    heartbeat_timeout_s: Real,
+    /// No LOCAL_POSITION_NED for this long (s): the vehicle is lost (--position-timeout).
+    #[arg(long = "position-timeout", default_value_t = DEFAULT_POSITION_TIMEOUT.as_secs_f64(), allow_negative_numbers = true)]
+    position_timeout_s: Real,
 }
 
 /// The validated run.
@@ -110,6 +117,10 @@ fn validate(a: &Args) -> anyhow::Result<Run> {
         origin: VehicleOrigin(parse_vec3("vehicle-origin", &a.vehicle_origin)?),
         arm: a.arm,
         connect_deadline,
+        timeouts: LinkTimeouts {
+            heartbeat: positive_s("heartbeat-timeout", a.heartbeat_timeout_s)?,
+            position: positive_s("position-timeout", a.position_timeout_s)?,
+        },
     };
     // Ticks 0..=ticks cover [0, move + hold] at comm_hz.
     let ticks = ((a.move_s + a.hold_s) * a.comm_hz).round() as u64;

@@ -1,13 +1,44 @@
 //! Losing a vehicle, as pure logic over a clock the caller drives: no HEARTBEAT for
-//! [`HEARTBEAT_TIMEOUT`] or no LOCAL_POSITION_NED for [`POSITION_TIMEOUT`] is a fault naming the
-//! member. Times are durations since the link started, read from the caller's clock.
+//! [`LinkTimeouts::heartbeat`] or no LOCAL_POSITION_NED for [`LinkTimeouts::position`] is a
+//! fault naming the member. Times are durations since the link started, read from the caller's
+//! clock.
+//!
+//! Why these defaults. A HEARTBEAT comes once a second from PX4 and ArduPilot, so a limit of one
+//! period declares a healthy vehicle lost on the first late packet. The MAVLink heartbeat
+//! microservice (mavlink.io, "Heartbeat/Connection Protocol") leaves the number of missed
+//! heartbeats to the channel and notes that components on telemetry links usually beat at 1 Hz
+//! and treat four or five missed ones as a disconnection; ground stations and SDKs wait about
+//! 3 to 5 s, and PX4's own data-link-loss failsafe waits `COM_DL_LOSS_T`, 10 s by default
+//! (PX4 commander parameters). A member flies its vehicle in a formation, so it gives up sooner
+//! than the autopilot: 3 s, three missed heartbeats. The position stream is what the member
+//! flies on, so it is held to a few stream periods instead: PX4's onboard link streams
+//! LOCAL_POSITION_NED at 30 Hz (PX4 `mavlink_main.cpp`, onboard mode), and 0.5 s is 15 of its
+//! periods.
 
 use std::time::Duration;
 
-/// No HEARTBEAT for this long: the vehicle is lost.
-pub const HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(1);
-/// No LOCAL_POSITION_NED for this long: the member flies blind.
-pub const POSITION_TIMEOUT: Duration = Duration::from_millis(500);
+/// `--heartbeat-timeout`'s default: three missed 1 Hz HEARTBEATs.
+pub const DEFAULT_HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(3);
+/// `--position-timeout`'s default: 15 periods of PX4's 30 Hz LOCAL_POSITION_NED stream.
+pub const DEFAULT_POSITION_TIMEOUT: Duration = Duration::from_millis(500);
+
+/// How long each of the vehicle's streams may be silent before the vehicle is lost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinkTimeouts {
+    /// No HEARTBEAT for longer than this: lost (a multiple of the vehicle's 1 Hz beat).
+    pub heartbeat: Duration,
+    /// No LOCAL_POSITION_NED for longer than this: lost (a multiple of its stream period).
+    pub position: Duration,
+}
+
+impl Default for LinkTimeouts {
+    fn default() -> Self {
+        LinkTimeouts {
+            heartbeat: DEFAULT_HEARTBEAT_TIMEOUT,
+            position: DEFAULT_POSITION_TIMEOUT,
+        }
+    }
+}
 
 /// Why a member's vehicle link failed. Every variant names the member (by id).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -15,14 +46,20 @@ pub enum LinkFault {
     /// Nothing usable (a HEARTBEAT and a position) arrived before the connect deadline.
     #[error("agent {agent}: no vehicle heard within {:.1} s (needs a HEARTBEAT and a LOCAL_POSITION_NED)", waited.as_secs_f64())]
     NeverHeard { agent: u32, waited: Duration },
-    /// The vehicle's HEARTBEAT stopped.
-    #[error(
-        "agent {agent}: vehicle lost: no HEARTBEAT for {silent:?} (limit {HEARTBEAT_TIMEOUT:?})"
-    )]
-    HeartbeatLost { agent: u32, silent: Duration },
-    /// The vehicle's LOCAL_POSITION_NED stopped.
-    #[error("agent {agent}: vehicle lost: no LOCAL_POSITION_NED for {:.3} s (limit {:.1} s)", silent.as_secs_f64(), POSITION_TIMEOUT.as_secs_f64())]
-    PositionLost { agent: u32, silent: Duration },
+    /// The vehicle's HEARTBEAT stopped for longer than `limit` (`--heartbeat-timeout`).
+    #[error("agent {agent}: vehicle lost: no HEARTBEAT for {:.3} s (limit {} s, --heartbeat-timeout)", silent.as_secs_f64(), limit.as_secs_f64())]
+    HeartbeatLost {
+        agent: u32,
+        silent: Duration,
+        limit: Duration,
+    },
+    /// The vehicle's LOCAL_POSITION_NED stopped for longer than `limit` (`--position-timeout`).
+    #[error("agent {agent}: vehicle lost: no LOCAL_POSITION_NED for {:.3} s (limit {} s, --position-timeout)", silent.as_secs_f64(), limit.as_secs_f64())]
+    PositionLost {
+        agent: u32,
+        silent: Duration,
+        limit: Duration,
+    },
 }
 
 /// When the vehicle's HEARTBEAT and position were last heard, and the verdict.
@@ -30,17 +67,20 @@ pub enum LinkFault {
 pub struct LinkHealth {
     agent: u32,
     connect_deadline: Duration,
+    timeouts: LinkTimeouts,
     last_heartbeat: Option<Duration>,
     last_position: Option<Duration>,
 }
 
 impl LinkHealth {
     /// A link of member `agent` that must hear its vehicle (both a HEARTBEAT and a position)
-    /// within `connect_deadline` of the clock's zero.
-    pub fn new(agent: u32, connect_deadline: Duration) -> Self {
+    /// within `connect_deadline` of the clock's zero, and then keeps hearing it within
+    /// `timeouts`.
+    pub fn new(agent: u32, connect_deadline: Duration, timeouts: LinkTimeouts) -> Self {
         LinkHealth {
             agent,
             connect_deadline,
+            timeouts,
             last_heartbeat: None,
             last_position: None,
         }
@@ -78,16 +118,19 @@ impl LinkHealth {
         };
         let hb_silent = now.saturating_sub(hb);
         let pos_silent = now.saturating_sub(pos);
-        if hb_silent > HEARTBEAT_TIMEOUT {
+        let limits = self.timeouts;
+        if hb_silent > limits.heartbeat {
             return Err(LinkFault::HeartbeatLost {
                 agent,
                 silent: hb_silent,
+                limit: limits.heartbeat,
             });
         }
-        if pos_silent > POSITION_TIMEOUT {
+        if pos_silent > limits.position {
             return Err(LinkFault::PositionLost {
                 agent,
                 silent: pos_silent,
+                limit: limits.position,
             });
         }
         Ok(())
@@ -102,16 +145,79 @@ mod tests {
         Duration::from_millis(v)
     }
 
+    fn link() -> LinkHealth {
+        LinkHealth::new(7, ms(3000), LinkTimeouts::default())
+    }
+
     fn heard_at(t: Duration) -> LinkHealth {
-        let mut h = LinkHealth::new(7, ms(3000));
+        let mut h = link();
         h.on_heartbeat(t);
         h.on_position(t);
         h
     }
 
+    /// Arrival times (ms) of a stream with `period_ms`, each packet up to `jitter_ms` late, one
+    /// in 16 a further `late_ms` late and one in 16 duplicated, from `from_ms` to `until_ms`:
+    /// what a vehicle's scheduler and a UDP link do to a nominal rate. Seeded, so reproducible.
+    fn stream(
+        period_ms: u64,
+        jitter_ms: u64,
+        late_ms: u64,
+        from_ms: u64,
+        until_ms: u64,
+    ) -> Vec<u64> {
+        let mut seed: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = || {
+            // xorshift64: deterministic and good enough for jitter.
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let mut out = Vec::new();
+        for nominal in (from_ms..until_ms).step_by(period_ms as usize) {
+            let r = next();
+            let mut t = nominal + r % (jitter_ms + 1);
+            if (r >> 20) % 16 == 0 {
+                t += late_ms;
+            }
+            out.push(t);
+            if (r >> 30) % 16 == 0 {
+                out.push(t);
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+
+    /// Feeds the heartbeat and position arrivals in time order and checks the link every
+    /// 10 ms up to `until_ms`; returns the first fault and when it was raised.
+    fn replay(
+        mut h: LinkHealth,
+        beats: &[u64],
+        positions: &[u64],
+        until_ms: u64,
+    ) -> Option<(u64, LinkFault)> {
+        let (mut b, mut p) = (0, 0);
+        for now in (0..=until_ms).step_by(10) {
+            while b < beats.len() && beats[b] <= now {
+                h.on_heartbeat(ms(beats[b]));
+                b += 1;
+            }
+            while p < positions.len() && positions[p] <= now {
+                h.on_position(ms(positions[p]));
+                p += 1;
+            }
+            if let Err(f) = h.check(ms(now)) {
+                return Some((now, f));
+            }
+        }
+        None
+    }
+
     #[test]
     fn waits_for_the_vehicle_until_the_connect_deadline() {
-        let h = LinkHealth::new(7, ms(3000));
+        let h = link();
         assert_eq!(h.check(ms(3000)), Ok(()));
         assert_eq!(
             h.check(ms(3001)),
@@ -124,7 +230,7 @@ mod tests {
 
     #[test]
     fn a_heartbeat_alone_is_not_a_connection() {
-        let mut h = LinkHealth::new(7, ms(100));
+        let mut h = LinkHealth::new(7, ms(100), LinkTimeouts::default());
         h.on_heartbeat(ms(50));
         assert!(!h.connected());
         assert!(matches!(
@@ -134,35 +240,107 @@ mod tests {
     }
 
     #[test]
-    fn position_silence_is_named_after_half_a_second() {
-        let mut h = heard_at(ms(1000));
-        h.on_heartbeat(ms(1400));
-        assert_eq!(h.check(ms(1500)), Ok(()));
-        assert_eq!(
-            h.check(ms(1501)),
-            Err(LinkFault::PositionLost {
-                agent: 7,
-                silent: ms(501)
-            })
+    fn a_1_hz_heartbeat_with_jitter_is_never_lost() {
+        // PX4's and ArduPilot's default: HEARTBEAT at 1 Hz, here up to 150 ms late, one in 16
+        // a further 800 ms late (1.95 s between two beats), some duplicated; positions at
+        // PX4's 30 Hz onboard rate with 10 ms of jitter and an occasional 100 ms hiccup.
+        let beats = stream(1000, 150, 800, 0, 120_000);
+        let positions = stream(33, 10, 100, 0, 120_000);
+        assert!(beats.windows(2).any(|w| w[1] - w[0] > 1500), "{beats:?}");
+        assert_eq!(replay(link(), &beats, &positions, 120_000), None);
+        // The one-period limit this replaces declared this healthy vehicle lost.
+        let strict = LinkTimeouts {
+            heartbeat: ms(1000),
+            ..LinkTimeouts::default()
+        };
+        let lost = replay(
+            LinkHealth::new(7, ms(3000), strict),
+            &beats,
+            &positions,
+            120_000,
+        );
+        assert!(
+            matches!(lost, Some((_, LinkFault::HeartbeatLost { .. }))),
+            "{lost:?}"
         );
     }
 
     #[test]
-    fn heartbeat_silence_is_named_after_one_second() {
-        let mut h = heard_at(ms(1000));
-        for t in (1020..=2020).step_by(20) {
-            h.on_position(ms(t));
-        }
-        assert_eq!(h.check(ms(2000)), Ok(()));
-        let fault = h.check(ms(2001)).unwrap_err();
+    fn three_seconds_without_a_heartbeat_is_a_loss() {
+        let beats = stream(1000, 150, 0, 0, 10_000);
+        let last = *beats.last().unwrap_or(&0);
+        let positions = stream(33, 10, 0, 0, 30_000);
+        let (at, fault) = replay(link(), &beats, &positions, 30_000).expect("lost");
+        // Named on the first check past the limit (checks every 10 ms).
+        assert!(at > last + 3000 && at <= last + 3010, "{at} vs {last}");
         assert_eq!(
             fault,
             LinkFault::HeartbeatLost {
                 agent: 7,
-                silent: ms(1001)
+                silent: ms(at - last),
+                limit: DEFAULT_HEARTBEAT_TIMEOUT
             }
         );
-        assert!(fault.to_string().starts_with("agent 7: vehicle lost"));
+        assert!(fault
+            .to_string()
+            .starts_with("agent 7: vehicle lost: no HEARTBEAT for 3.0"));
+        assert!(
+            fault
+                .to_string()
+                .contains("(limit 3 s, --heartbeat-timeout)"),
+            "{fault}"
+        );
+    }
+
+    #[test]
+    fn half_a_second_without_a_position_is_a_loss() {
+        let beats = stream(1000, 150, 800, 0, 30_000);
+        let positions = stream(33, 10, 100, 0, 5_000);
+        let last = *positions.last().unwrap_or(&0);
+        let (at, fault) = replay(link(), &beats, &positions, 30_000).expect("lost");
+        assert!(at > last + 500 && at <= last + 510, "{at} vs {last}");
+        assert_eq!(
+            fault,
+            LinkFault::PositionLost {
+                agent: 7,
+                silent: ms(at - last),
+                limit: DEFAULT_POSITION_TIMEOUT
+            }
+        );
+        assert!(
+            fault
+                .to_string()
+                .contains("(limit 0.5 s, --position-timeout)"),
+            "{fault}"
+        );
+    }
+
+    #[test]
+    fn the_limits_are_the_callers_and_exceeded_strictly() {
+        let timeouts = LinkTimeouts {
+            heartbeat: ms(5000),
+            position: ms(250),
+        };
+        let mut h = LinkHealth::new(7, ms(3000), timeouts);
+        h.on_heartbeat(ms(1000));
+        h.on_position(ms(1000));
+        assert_eq!(h.check(ms(1250)), Ok(()));
+        assert!(matches!(
+            h.check(ms(1251)),
+            Err(LinkFault::PositionLost { limit, .. }) if limit == ms(250)
+        ));
+        for t in (1000..=6000).step_by(20) {
+            h.on_position(ms(t));
+        }
+        assert_eq!(h.check(ms(6000)), Ok(()));
+        assert_eq!(
+            h.check(ms(6001)),
+            Err(LinkFault::HeartbeatLost {
+                agent: 7,
+                silent: ms(5001),
+                limit: ms(5000)
+            })
+        );
     }
 
     #[test]

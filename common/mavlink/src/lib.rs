@@ -21,7 +21,7 @@ pub mod udp;
 pub mod vehicle;
 
 pub use arming::{ArmAction, ArmError, ArmStage, Autopilot};
-pub use health::LinkFault;
+pub use health::{LinkFault, LinkTimeouts, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT};
 pub use messages::Setpoint;
 pub use ned::VehicleOrigin;
 pub use plant::{ArmProgress, LinkFigures, MavlinkPlant, PlantConfig, PlantError, SendTimes};

@@ -238,6 +238,7 @@ mod tests {
             origin: VehicleOrigin::default(),
             arm: false,
             connect_deadline: Duration::from_secs(5),
+            timeouts: crate::health::LinkTimeouts::default(),
         });
         let autopilot = UdpSocket::bind((localhost, 0)).unwrap();
         let gcs = UdpSocket::bind((localhost, 0)).unwrap();

@@ -8,7 +8,7 @@ use mavlink::dialects::common::{MavAutopilot, MavMessage, MavModeFlag};
 use mavlink::MavHeader;
 
 use crate::arming::{ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
-use crate::health::{LinkFault, LinkHealth};
+use crate::health::{LinkFault, LinkHealth, LinkTimeouts};
 use crate::messages::{self, Setpoint, Target};
 use crate::ned::{from_f32, ned_to_enu_vector, VehicleOrigin};
 use cdm_math::{Real, Vec3};
@@ -27,6 +27,8 @@ pub struct VehicleConfig {
     pub arm: bool,
     /// How long to wait for the vehicle's first HEARTBEAT and position.
     pub connect_deadline: Duration,
+    /// `--heartbeat-timeout` and `--position-timeout`: how long a stream may be silent.
+    pub timeouts: LinkTimeouts,
 }
 
 /// The vehicle's measured state in scenario coordinates (LOCAL_POSITION_NED converted). The
@@ -114,7 +116,7 @@ impl MavlinkVehicle {
     pub fn new(config: VehicleConfig) -> Self {
         MavlinkVehicle {
             config,
-            health: LinkHealth::new(config.agent, config.connect_deadline),
+            health: LinkHealth::new(config.agent, config.connect_deadline, config.timeouts),
             arm: ArmSequence::new(config.agent, config.arm),
             target: None,
             mode: None,
@@ -307,6 +309,7 @@ mod tests {
             origin: VehicleOrigin(Vec3::new(10.0, 20.0, 0.0)),
             arm,
             connect_deadline: ms(5000),
+            timeouts: LinkTimeouts::default(),
         }
     }
 
@@ -470,6 +473,36 @@ mod tests {
             );
         }
         assert_eq!(commands.len(), 2, "{commands:?}");
+        assert_eq!(v.arm_stage(), ArmStage::Armed);
+    }
+
+    #[test]
+    fn arms_a_vehicle_that_beats_once_a_second() {
+        // PX4's defaults: HEARTBEAT at 1 Hz (here 0.9 s late once), positions at 30 Hz; the
+        // member ticks at 50 Hz. The link stays up through the whole sequence.
+        let mut v = MavlinkVehicle::new(config(true));
+        let (mut offboard, mut armed) = (false, false);
+        let mut next_beat = 0u64;
+        for k in 0..=500u64 {
+            let now_ms = 20 * k;
+            let now = ms(now_ms);
+            if now_ms >= next_beat {
+                let mode = if offboard { 6 << 16 } else { 0 };
+                let beat = heartbeat(MavAutopilot::MAV_AUTOPILOT_PX4, mode, armed);
+                v.on_message(now, &VEHICLE, &beat);
+                next_beat += if k == 150 { 1900 } else { 1000 };
+            }
+            if now_ms % 33 < 20 {
+                v.on_message(now, &VEHICLE, &position(1.0, 2.0, -3.0));
+            }
+            for m in v.on_tick(now, Some(&hover()), true).unwrap() {
+                if let MavMessage::COMMAND_LONG(c) = m {
+                    use mavlink::dialects::common::MavCmd;
+                    offboard |= c.command == MavCmd::MAV_CMD_DO_SET_MODE;
+                    armed |= c.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM && offboard;
+                }
+            }
+        }
         assert_eq!(v.arm_stage(), ArmStage::Armed);
     }
 }

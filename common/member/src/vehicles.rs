@@ -8,7 +8,8 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use cdm_mavlink::{
-    member_addr, MavlinkPlant, PlantConfig, PlantError, VehicleConfig, VehicleOrigin,
+    member_addr, LinkTimeouts, MavlinkPlant, PlantConfig, PlantError, VehicleConfig, VehicleOrigin,
+    DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
 };
 
 use crate::member::MemberError;
@@ -73,6 +74,24 @@ pub struct VehicleArgs {
     /// is heard; without it the members only stream setpoints and the operator arms.
     #[arg(long)]
     pub arm: bool,
+    /// MAVLink: seconds without a HEARTBEAT before a vehicle is lost. Autopilots beat at 1 Hz,
+    /// so this is a number of missed heartbeats (the default: three).
+    #[arg(
+        long = "heartbeat-timeout",
+        value_name = "SECONDS",
+        allow_negative_numbers = true,
+        default_value_t = DEFAULT_HEARTBEAT_TIMEOUT.as_secs_f64()
+    )]
+    pub heartbeat_timeout_s: f64,
+    /// MAVLink: seconds without a LOCAL_POSITION_NED before a vehicle is lost; several periods
+    /// of the vehicle's position stream (the default is 15 of PX4's 30 Hz onboard stream).
+    #[arg(
+        long = "position-timeout",
+        value_name = "SECONDS",
+        allow_negative_numbers = true,
+        default_value_t = DEFAULT_POSITION_TIMEOUT.as_secs_f64()
+    )]
+    pub position_timeout_s: f64,
 }
 
 impl Default for VehicleArgs {
@@ -84,6 +103,8 @@ impl Default for VehicleArgs {
             vehicle_origin: "0,0,0".into(),
             vehicle_origins: None,
             arm: false,
+            heartbeat_timeout_s: DEFAULT_HEARTBEAT_TIMEOUT.as_secs_f64(),
+            position_timeout_s: DEFAULT_POSITION_TIMEOUT.as_secs_f64(),
         }
     }
 }
@@ -98,6 +119,8 @@ pub struct MavlinkOptions {
     /// `--vehicle-origins`: each vehicle's own (an absolute path; read against the scenario).
     pub origins: Option<PathBuf>,
     pub arm: bool,
+    /// `--heartbeat-timeout` and `--position-timeout`.
+    pub timeouts: LinkTimeouts,
 }
 
 /// What each member flies, validated.
@@ -114,10 +137,14 @@ impl VehicleArgs {
     /// `--vehicles mavlink` without real time (`realtime`): vehicles fly on the wall clock.
     pub fn validate(&self, realtime: bool) -> Result<Vehicles, String> {
         let origin = parse_origin(&self.vehicle_origin)?;
+        let timeouts = LinkTimeouts {
+            heartbeat: crate::options::timeout("--heartbeat-timeout", self.heartbeat_timeout_s)?,
+            position: crate::options::timeout("--position-timeout", self.position_timeout_s)?,
+        };
         match self.vehicles {
             VehicleKind::Model => {
                 if *self != (VehicleArgs::default()) {
-                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin and --arm need --vehicles mavlink".into());
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout and --position-timeout need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
             }
@@ -136,6 +163,7 @@ impl VehicleArgs {
                     .transpose()
                     .map_err(|e| format!("--vehicle-origins: {e}"))?,
                 arm: self.arm,
+                timeouts,
             })),
         }
     }
@@ -165,6 +193,13 @@ impl Vehicles {
         if o.arm {
             a.push("--arm".into());
         }
+        // Seconds as the shortest text that parses back to the same value.
+        a.extend([
+            "--heartbeat-timeout".into(),
+            o.timeouts.heartbeat.as_secs_f64().to_string(),
+            "--position-timeout".into(),
+            o.timeouts.position.as_secs_f64().to_string(),
+        ]);
         a
     }
 }
@@ -234,6 +269,7 @@ pub fn connect<'a>(
             origin: VehicleOrigin(origin),
             arm: o.arm,
             connect_deadline: connect,
+            timeouts: o.timeouts,
         },
         bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
         period: Duration::from_secs_f64(s.dt_s()),
@@ -284,6 +320,10 @@ mod tests {
             "--vehicle-origin",
             "-1.5,2,0.25",
             "--arm",
+            "--heartbeat-timeout",
+            "4.25",
+            "--position-timeout",
+            "0.1",
         ])
         .validate(true)
         .expect("valid");
@@ -292,6 +332,13 @@ mod tests {
         };
         assert_eq!(o.origin, Vec3::new(-1.5, 2.0, 0.25));
         assert_eq!((o.base_port, o.arm), (15000, true));
+        assert_eq!(
+            o.timeouts,
+            LinkTimeouts {
+                heartbeat: Duration::from_millis(4250),
+                position: Duration::from_millis(100),
+            }
+        );
         let forwarded: Vec<String> = v.member_args();
         let forwarded: Vec<&str> = forwarded.iter().map(String::as_str).collect();
         assert_eq!(args(&forwarded).validate(true), Ok(v));
@@ -304,6 +351,38 @@ mod tests {
                 .validate(true)
                 .unwrap_err();
             assert!(e.starts_with("--vehicle-origin"), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_link_timeouts_default_to_three_missed_heartbeats_and_half_a_second() {
+        let v = args(&["--vehicles", "mavlink"])
+            .validate(true)
+            .expect("valid");
+        let Vehicles::Mavlink(o) = &v else {
+            panic!("{v:?}")
+        };
+        assert_eq!(o.timeouts, LinkTimeouts::default());
+        let forwarded = v.member_args();
+        let at = |flag: &str| {
+            let i = forwarded.iter().position(|a| a == flag).expect(flag);
+            forwarded[i + 1].clone()
+        };
+        assert_eq!(at("--heartbeat-timeout"), "3");
+        assert_eq!(at("--position-timeout"), "0.5");
+    }
+
+    #[test]
+    fn a_bad_link_timeout_is_named() {
+        for flag in ["--heartbeat-timeout", "--position-timeout"] {
+            for bad in ["0", "-1", "nan", "inf", "1e9"] {
+                let e = args(&["--vehicles", "mavlink", flag, bad])
+                    .validate(true)
+                    .unwrap_err();
+                assert!(e.starts_with(flag), "{flag} {bad}: {e}");
+            }
+            let e = args(&[flag, "2"]).validate(true).unwrap_err();
+            assert!(e.contains("need --vehicles mavlink"), "{e}");
         }
     }
 }
