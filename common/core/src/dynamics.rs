@@ -5,7 +5,7 @@
 //! Everything here is pure and allocation-free; the trigonometry of the attitude is evaluated
 //! once per model evaluation (the private `Kinematics`).
 
-use crate::control::{ControlFault, SingularityGuard};
+use crate::guard::{ControlFault, SingularityGuard};
 use crate::math::{Mat3, Real, Vec3, GRAVITY_MPS2};
 
 /// Names of the 12 components of [`QuadState`], in order (eq. 42, ERRATA 1).
@@ -576,7 +576,7 @@ pub(crate) mod tests {
         let f = x.flat();
         assert_eq!(f, Flat::rest(Vec3::new(360.0, 0.0, 900.0)));
         assert_eq!(
-            crate::control::input_for_snap(&x, &Vec3::zeros()),
+            Kinematics::of(&x).input_for_snap(&Vec3::zeros(), &SingularityGuard::DEFAULT),
             Ok(Vec3::zeros())
         );
     }

@@ -24,6 +24,7 @@ pub mod frame;
 pub mod gains;
 pub mod geometry;
 pub mod graph;
+pub mod guard;
 pub mod linear_certificate;
 pub mod link;
 pub mod loss;
