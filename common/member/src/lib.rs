@@ -8,6 +8,7 @@
 
 pub mod member;
 pub mod member_cli;
+pub mod member_error;
 mod member_vehicle;
 pub mod options;
 pub mod vehicle_origins;

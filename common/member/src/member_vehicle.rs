@@ -13,7 +13,7 @@ use cdm_runtime::realtime::RealtimeCore;
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::seams::{Clock, ModelVehicle, MonotonicClock, Vehicle};
 
-use crate::member::MemberError;
+use crate::member_error::MemberError;
 use cdm_iox::{MemberPorts, TransportError};
 use cdm_runtime::messages::ClockMsg;
 

@@ -12,7 +12,7 @@ use cdm_mavlink::{
     DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
 };
 
-use crate::member::MemberError;
+use crate::member_error::MemberError;
 use crate::vehicle_origins::{OriginsError, VehicleOrigins};
 use cdm_core::formation::Member;
 use cdm_core::math::Vec3;
