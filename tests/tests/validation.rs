@@ -1,25 +1,103 @@
-//! `orchestrator plan --scenario FILE` refuses every kind of bad scenario with exit code 2 and an
-//! `error:` line that names the file and the agent(s) or field at fault, never with a panic.
+//! Bad input, refused with exit 2 and a message naming what is at fault, never with a panic.
 //!
-//! Each test starts from the paper's 40-agent scenario (`paper40`: primary leaders 1-3,
-//! secondary leaders 4-6, followers 7-40) and breaks one thing, or writes raw TOML for parse
-//! errors. The expected phrases are those of `cdm_core::scenario` (`mod.rs`, `validate.rs`) and
-//! `cdm_core::formation`.
+//! - The command line: unknown flags, missing values, team sizes outside 4..=2000, bad numbers,
+//!   durations and names, an --out that is not empty or cannot be written, a launch without the
+//!   member binaries, `--follow` and `--sweep`. Each is refused before anything is written: no
+//!   run directory, no shared memory of the team.
+//! - Special files (/dev/zero, a FIFO) where a regular file is read.
+//! - Scenario files: `orchestrator plan --scenario FILE` refuses every kind of bad scenario with
+//!   an `error:` line that names the file and the agent(s) or field at fault. Each test starts
+//!   from the paper's 40-agent scenario (`paper40`: primary leaders 1-3, secondary leaders 4-6,
+//!   followers 7-40) and breaks one thing, or writes raw TOML for parse errors. The expected
+//!   phrases are those of `cdm_core::scenario` (`mod.rs`, `validate.rs`) and
+//!   `cdm_core::formation`.
+//! - A hand-started team that does not assemble: the launch names the members that did not join.
+//!
+//! (Full disks and closed pipes: `hardening_files.rs`; property tests of the parser:
+//! `common/core/tests/proptest.rs`.)
 
-use std::path::Path;
+mod support;
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::Duration;
 
 use cdm_core::formation::Role;
 use cdm_core::scenario::{AgentSpec, ScenarioFile};
 use integration_tests::{
-    bin, describe, paper40, run, scenario_toml, write_scenario, write_text, TempDir,
+    bin, describe, paper40, run, scenario_toml, spawn, unique_team, write_scenario, write_text,
+    TempDir,
+};
+use support::{
+    assert_exit, assert_no_team_resources, assert_stderr_has, files_under, launch, member,
+    read_json, simulate, toml_value,
 };
 
-/// A bad file is refused in milliseconds; the deadline only keeps a hang from stalling the suite.
-const REFUSE_DEADLINE: Duration = integration_tests::deadline::SHORT;
+/// A refusal on the command line happens before any work; the deadline only keeps a hang from
+/// stalling CI.
+const CLI_DEADLINE: Duration = integration_tests::deadline::REFUSE;
+/// A refusal that reads a file first (a scenario, /dev/zero, a FIFO) takes milliseconds, and a
+/// 10-agent team with a 30 s plan flies in about a second: the deadline only stops a hang.
+const SHORT_DEADLINE: Duration = integration_tests::deadline::SHORT;
 /// A valid file is planned in full (a few seconds to tens of seconds in release).
 const PLAN_DEADLINE: Duration = integration_tests::deadline::FLIGHT;
+
+fn command(binary: &str, args: &[&str]) -> Command {
+    let mut c = Command::new(bin(binary));
+    c.args(args);
+    c
+}
+
+/// Runs `c` within `deadline` and asserts exit 2, no panic, and every needle in stderr.
+fn refused_within(c: &mut Command, deadline: Duration, needles: &[&str]) -> Output {
+    let what = format!("{c:?}");
+    let o = run(c, deadline);
+    assert!(
+        !String::from_utf8_lossy(&o.stderr).contains("panicked"),
+        "{what} panicked:\n{}",
+        describe(&o)
+    );
+    assert_exit(&o, 2, &what);
+    assert_stderr_has(&o, &what, needles);
+    o
+}
+
+/// Runs `binary args` and asserts exit 2 with every needle in stderr and nothing on stdout.
+fn refused(binary: &str, args: &[&str], needles: &[&str]) -> Output {
+    let o = refused_within(&mut command(binary, args), CLI_DEADLINE, needles);
+    let what = format!("{binary} {}", args.join(" "));
+    assert!(
+        o.stdout.is_empty(),
+        "{what}: wrote to stdout\n{}",
+        describe(&o)
+    );
+    o
+}
+
+/// Runs `c`, which may read a file first, and asserts exit 2 with every needle in stderr.
+fn refused_cmd(c: &mut Command, needles: &[&str]) -> Output {
+    refused_within(c, SHORT_DEADLINE, needles)
+}
+
+/// Every file under `dir` with its contents.
+fn contents(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    files_under(dir)
+        .into_iter()
+        .filter(|p| p.is_file())
+        .map(|p| {
+            let bytes = std::fs::read(&p).expect("read");
+            (p, bytes)
+        })
+        .collect()
+}
+
+fn fifo(path: &Path) {
+    let c = std::ffi::CString::new(path.to_str().expect("UTF-8")).expect("path");
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0, "mkfifo");
+}
 
 type V3 = [f64; 3];
 
@@ -94,38 +172,27 @@ fn weights(p: V3, t: [V3; 3], n: V3) -> V3 {
     ]
 }
 
-/// Run `orchestrator plan --scenario path`. `RUST_LOG` is cleared so that the notes the tool
-/// logs at its default level (projections) appear whatever the caller's environment says.
+/// `orchestrator plan --scenario path`. `RUST_LOG` is cleared so that the notes the tool logs
+/// at its default level (projections) appear whatever the caller's environment says.
+fn plan_command(path: &Path) -> Command {
+    let mut c = Command::new(bin("orchestrator"));
+    c.arg("plan")
+        .arg("--scenario")
+        .arg(path)
+        .env_remove("RUST_LOG");
+    c
+}
+
 fn plan(path: &Path, deadline: Duration) -> Output {
-    run(
-        Command::new(bin("orchestrator"))
-            .arg("plan")
-            .arg("--scenario")
-            .arg(path)
-            .env_remove("RUST_LOG"),
-        deadline,
-    )
+    run(&mut plan_command(path), deadline)
 }
 
 /// `orchestrator plan` must refuse `path` with exit code 2, no panic, and an `error:` line
 /// naming the file; that line (with any continuation lines, as a TOML parse error has) must
 /// contain every phrase in `expected`.
 fn assert_refused(path: &Path, expected: &[&str]) {
-    let out = plan(path, REFUSE_DEADLINE);
+    let out = refused_within(&mut plan_command(path), SHORT_DEADLINE, &[]);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !stderr.contains("panicked"),
-        "orchestrator panicked on {}:\n{}",
-        path.display(),
-        describe(&out)
-    );
-    assert_eq!(
-        out.status.code(),
-        Some(2),
-        "exit code for bad input {} must be 2:\n{}",
-        path.display(),
-        describe(&out)
-    );
     let origin = format!("{}: ", path.display());
     let start = stderr
         .lines()
@@ -170,7 +237,366 @@ fn paper40_table() -> toml::Table {
         .unwrap_or_else(|e| panic!("paper40 does not round-trip through TOML: {e}"))
 }
 
-// ---- the file itself -------------------------------------------------------------------------
+// ---- the command line ------------------------------------------------------------------------
+
+/// Unknown flags, missing values and values of the wrong type, for the orchestrator and the
+/// member binaries: exit 2 naming the argument.
+#[test]
+fn unknown_flags_and_missing_or_malformed_values_are_refused() {
+    let cases: &[(&str, &[&str], &[&str])] = &[
+        ("orchestrator", &["launch", "--bogus"], &["'--bogus'"]),
+        ("orchestrator", &["fly"], &["'fly'"]),
+        ("orchestrator", &["launch", "--n"], &["'--n <N>'"]),
+        (
+            "orchestrator",
+            &["launch", "--n", "ten"],
+            &["'ten'", "'--n <N>'"],
+        ),
+        ("orchestrator", &["launch", "--out"], &["'--out <DIR>'"]),
+        (
+            "orchestrator",
+            &["launch", "--scenario", "a.toml", "--n", "10"],
+            &["'--scenario <FILE>'", "'--n <N>'"],
+        ),
+        ("orchestrator", &["plan", "--window", "2"], &["'--window'"]),
+        ("agent", &["--bogus"], &["'--bogus'"]),
+        (
+            "agent",
+            &["--team", "t"],
+            &["--scenario <FILE>", "--id <ID>"],
+        ),
+        (
+            "leader",
+            &["--scenario", "s.toml", "--team", "t", "--id", "one"],
+            &["'one'", "'--id <ID>'"],
+        ),
+    ];
+    for (binary, args, needles) in cases {
+        refused(binary, args, needles);
+    }
+}
+
+/// Generated teams must have 4 to 2000 agents, in every command that takes `--n`.
+#[test]
+fn team_sizes_outside_4_to_2000_are_refused() {
+    let dir = TempDir::new();
+    for n in ["0", "3", "2001", "1000000"] {
+        let out = dir.path().join(format!("out{n}"));
+        let out = out.to_str().expect("UTF-8 path");
+        let needle = if n == "2001" || n == "1000000" {
+            format!("field `--n` must be at most 2000, got {n}")
+        } else {
+            format!("field `--n` must be at least 4 (3 primary leaders and a follower), got {n}")
+        };
+        for args in [
+            vec!["plan", "--n", n],
+            vec!["simulate", "--n", n, "--out", out],
+            vec!["launch", "--n", n, "--out", out],
+            vec!["scenario", "export", "--n", n],
+        ] {
+            refused("orchestrator", &args, &[&needle]);
+            assert!(!Path::new(out).exists(), "{args:?} wrote {out}");
+        }
+    }
+    refused("orchestrator", &["launch", "--n", "-4"], &["'-4'"]);
+    // The bounds themselves are accepted: a 4- and a 2000-agent team are generated (acyclic
+    // graph, spectrum of L by components: well under a second each).
+    for n in ["4", "2000"] {
+        let file = dir.path().join(format!("team{n}.toml"));
+        let mut cmd = Command::new(bin("orchestrator"));
+        cmd.args(["scenario", "export", "--n", n, "--out"])
+            .arg(&file);
+        let o = run(&mut cmd, integration_tests::deadline::SHORT);
+        assert_eq!(o.status.code(), Some(0), "export --n {n}\n{}", describe(&o));
+        let text = std::fs::read_to_string(&file).expect("exported file");
+        let agents = text.matches("[[agents]]").count();
+        assert_eq!(
+            agents.to_string(),
+            n,
+            "export --n {n} wrote {agents} agents"
+        );
+    }
+}
+
+/// Numbers and names the types accept but the tool does not: exit 2 naming the option.
+#[test]
+fn bad_numbers_and_names_are_refused_naming_the_option() {
+    let dir = TempDir::new();
+    let out = dir.path().join("run");
+    let out = out.to_str().expect("UTF-8 path");
+    let team = unique_team("badnum");
+    let long = "x".repeat(49);
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["--agent-timeout", "-1"],
+            "--agent-timeout must be a number of seconds in (0, 86400], got -1",
+        ),
+        (
+            &["--agent-timeout", "0"],
+            "--agent-timeout must be a number of seconds in (0, 86400], got 0",
+        ),
+        (
+            &["--agent-timeout", "nan"],
+            "--agent-timeout must be a number of seconds in (0, 86400], got NaN",
+        ),
+        (
+            &["--join-timeout", "inf"],
+            "--join-timeout must be a number of seconds in (0, 86400], got inf",
+        ),
+        (
+            &["--window", "0"],
+            "'--window <WINDOW>': 0 is not in 1..=4096",
+        ),
+        (
+            &["--window", "4097"],
+            "'--window <WINDOW>': 4097 is not in 1..=4096",
+        ),
+        (&["--every", "0"], "'--every <K>': 0 is not in 1.."),
+        (
+            &["--t-total", "-5"],
+            "field `t_total_s` must be > 0, got -5",
+        ),
+        (&["--t-total", "nan"], "field `t_total_s`"),
+        (
+            &["--team", "a/b"],
+            "--team: invalid team name \"a/b\": only A-Z",
+        ),
+        (
+            &["--team", ""],
+            "--team: invalid team name \"\": it is empty",
+        ),
+        (&["--team", &long], "it is longer than 48 characters"),
+    ];
+    for (extra, needle) in cases {
+        let mut args = vec!["launch", "--n", "10", "--out", out];
+        if !extra.contains(&"--team") {
+            args.extend(["--team", &team]);
+        }
+        args.extend(extra.iter());
+        refused("orchestrator", &args, &[needle]);
+        assert!(!Path::new(out).exists(), "{args:?} wrote {out}");
+    }
+    assert_no_team_resources(&team);
+    for (flag, v) in [("--silence-timeout", "-2"), ("--join-timeout", "0")] {
+        let args = ["--scenario", "s.toml", "--team", "t", "--id", "1", flag, v];
+        refused(
+            "agent",
+            &args,
+            &[&format!(
+                "{flag} must be a number of seconds in (0, 86400], got {v}"
+            )],
+        );
+    }
+}
+
+/// `launch --out` naming a directory that exists and is not empty: refused (exit 2) and left
+/// byte for byte as it was, without any shared memory of the team; with --force it flies.
+#[test]
+fn launch_refuses_a_non_empty_out_unless_forced() {
+    let dir = TempDir::new();
+    let team = unique_team("nonempty");
+    let out = dir.path().join("run");
+    std::fs::create_dir_all(out.join("sub")).expect("mkdir");
+    std::fs::write(out.join("notes.txt"), "keep me\n").expect("write");
+    std::fs::write(out.join("telemetry.csv"), "not ours\n").expect("write");
+    let before = contents(&out);
+    let out_s = out.to_str().expect("UTF-8 path");
+    let args = [
+        "launch",
+        "--n",
+        "10",
+        "--t-total",
+        "30",
+        "--team",
+        &team,
+        "--out",
+        out_s,
+    ];
+    refused(
+        "orchestrator",
+        &args,
+        &[&format!(
+            "--out {out_s}: exists and is not empty (use --force to overwrite)"
+        )],
+    );
+    assert_eq!(contents(&out), before, "the refused launch changed {out_s}");
+    assert_no_team_resources(&team);
+
+    let mut forced = args.to_vec();
+    forced.extend(["--force", "--quiet"]);
+    let o = run(&mut command("orchestrator", &forced), SHORT_DEADLINE);
+    assert_exit(&o, 0, "launch --force");
+    assert_eq!(
+        std::fs::read(out.join("notes.txt")).expect("notes.txt"),
+        b"keep me\n",
+        "--force removed a file that is not the tool's"
+    );
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    assert_no_team_resources(&team);
+}
+
+/// An --out that cannot be created (under a regular file; in /proc) or written (a file in
+/// /proc's read-only tree): refused with exit 2 naming --out, nothing written, no shared memory
+/// left. (Tests run as root, where permission bits do not stop writes: these paths fail for
+/// everyone.)
+#[test]
+fn an_unwritable_out_is_refused_and_nothing_is_written() {
+    let dir = TempDir::new();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "x\n").expect("write");
+    let under_file = file.join("run");
+    let under_file = under_file.to_str().expect("UTF-8 path");
+    let in_proc = format!("/proc/cdm-test-{}", std::process::id());
+    let team = unique_team("unwritable");
+    for (out, why) in [
+        (
+            under_file,
+            "cannot create the run directory: Not a directory",
+        ),
+        (in_proc.as_str(), "cannot create the run directory"),
+        ("/proc/sys", "cannot write into the run directory"),
+    ] {
+        let force = if out == "/proc/sys" {
+            "--force"
+        } else {
+            "--quiet"
+        };
+        for cmd in ["launch", "simulate"] {
+            let mut args = vec![cmd, "--n", "10", "--t-total", "30", "--out", out, force];
+            if cmd == "launch" {
+                args.extend(["--team", &team]);
+            }
+            refused("orchestrator", &args, &[&format!("--out {out}: {why}")]);
+        }
+        assert!(
+            out == "/proc/sys" || !Path::new(out).exists(),
+            "{out} was created"
+        );
+    }
+    assert_eq!(std::fs::read(&file).expect("read"), b"x\n");
+    assert_no_team_resources(&team);
+}
+
+/// `cargo run --bin orchestrator` builds only the orchestrator: a launch without the member
+/// binaries beside it is refused before anything is created, saying how to build them.
+#[test]
+fn a_launch_without_the_member_binaries_says_how_to_build_them() {
+    let dir = TempDir::new();
+    let lonely = dir.path().join("orchestrator");
+    std::fs::copy(bin("orchestrator"), &lonely).expect("copy the orchestrator binary");
+    let out_dir = dir.path().join("run");
+    let team = unique_team("lonely");
+    let out = run(
+        Command::new(&lonely)
+            .args([
+                "launch",
+                "--n",
+                "4",
+                "--max-ticks",
+                "5",
+                "--team",
+                &team,
+                "--out",
+            ])
+            .arg(&out_dir),
+        integration_tests::deadline::REFUSE,
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", describe(&out));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("binary is missing") && err.contains("cargo build --release"),
+        "{}",
+        describe(&out)
+    );
+    assert!(
+        !out_dir.exists(),
+        "nothing may be written: {}",
+        out_dir.display()
+    );
+    assert_no_team_resources(&team);
+}
+
+/// Every duration option has a range; 1e308 is refused by name, not a panic.
+#[test]
+fn huge_durations_are_refused_naming_the_option() {
+    let tmp = TempDir::new();
+    for flag in ["--agent-timeout", "--join-timeout"] {
+        let out = tmp.path().join("run");
+        let team = unique_team("dur");
+        refused_cmd(
+            launch(&team, &out, &["--n", "4"]).args([flag, "1e308"]),
+            &[&format!(
+                "{flag} must be a number of seconds in (0, 86400], got 1e308"
+            )],
+        );
+        assert!(!out.exists());
+    }
+    for flag in ["--silence-timeout", "--join-timeout"] {
+        let mut c = member("agent", Path::new("s.toml"), "t", 4);
+        refused_cmd(
+            c.args([flag, "1e308"]),
+            &[&format!("{flag} must be a number of seconds in (0, 86400]")],
+        );
+    }
+}
+
+/// `--follow` is checked before the flight; `--sweep` like `--t-total`.
+#[test]
+fn follow_and_sweep_are_checked_up_front() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("run");
+    let team = unique_team("follow");
+    refused_cmd(
+        &mut simulate(&out, &["--follow", "999"]),
+        &["--follow 999", "no agent with this id"],
+    );
+    assert!(!out.exists(), "simulate flew before refusing --follow");
+    refused_cmd(
+        &mut launch(&team, &out, &["--n", "4", "--follow", "999"]),
+        &["--follow 999", "no agent with this id"],
+    );
+    assert!(!out.exists(), "launch flew before refusing --follow");
+    assert_no_team_resources(&team);
+    let sweep = tmp.path().join("sweep");
+    refused_cmd(
+        command("orchestrator", &["plan", "--sweep", "30:1e9:1e8", "--out"]).arg(&sweep),
+        &["--sweep travel time", "field `t_total_s`", "at most 1e8"],
+    );
+    assert!(!sweep.exists());
+}
+
+// ---- special files ---------------------------------------------------------------------------
+
+/// /dev/zero, /dev/urandom or a FIFO as --scenario, and a FIFO as a run's
+/// telemetry.csv for `report`: refused at once (regular files only), exit 2.
+#[test]
+fn special_files_are_refused_as_inputs() {
+    let tmp = TempDir::new();
+    let pipe = tmp.path().join("scenario.toml");
+    fifo(&pipe);
+    for source in ["/dev/zero", "/dev/urandom", pipe.to_str().expect("UTF-8")] {
+        refused_cmd(
+            &mut command("orchestrator", &["plan", "--scenario", source]),
+            &[source, "not a regular file"],
+        );
+    }
+    let out = tmp.path().join("run");
+    let o = run(
+        &mut simulate(&out, &["--max-ticks", "3", "--no-figures"]),
+        SHORT_DEADLINE,
+    );
+    assert_exit(&o, 0, "simulate");
+    let tel = out.join("telemetry.csv");
+    fs::remove_file(&tel).expect("rm");
+    fifo(&tel);
+    refused_cmd(
+        command("orchestrator", &["report"]).arg(&out),
+        &["telemetry.csv", "not a regular file"],
+    );
+}
+
+// ---- scenario files: the file itself ---------------------------------------------------------
 
 #[test]
 fn nonexistent_file_is_refused() {
@@ -242,6 +668,81 @@ fn unknown_key_in_agent_is_refused() {
         &path,
         &["malformed scenario", &at, "unknown field `speed_mps`"],
     );
+}
+
+/// A named change to one agent's section of a file, and what the error must say.
+type Edit = (&'static str, fn(&str) -> String, &'static str);
+
+/// In a 1000-agent file, an unknown key on an agent, an unknown role and a position
+/// with two components are reported with the agent's id.
+#[test]
+fn malformed_agents_are_named_by_id() {
+    let tmp = TempDir::new();
+    let o = run(
+        &mut command("orchestrator", &["scenario", "export", "--n", "1000"]),
+        SHORT_DEADLINE,
+    );
+    assert_exit(&o, 0, "scenario export --n 1000");
+    let text = String::from_utf8(o.stdout).expect("UTF-8");
+    let sections: Vec<&str> = text.split("[[agents]]").collect();
+    // Section 701 is the 700th agent (index 699).
+    let k = 700;
+    let id = toml_value(sections[k], "id").expect("id");
+    let edits: [Edit; 3] = [
+        (
+            "unknown key",
+            |s| s.replacen("role =", "colour = 1\nrole =", 1),
+            "unknown field `colour`",
+        ),
+        (
+            "unknown role",
+            |s| s.replacen("\"follower\"", "\"boss\"", 1),
+            "unknown variant `boss`",
+        ),
+        (
+            "two components",
+            |s| {
+                let start = s.find("position = [").expect("position") + 12;
+                let end = start + s[start..].find(']').expect("]");
+                let mut parts: Vec<&str> = s[start..end].split(',').collect();
+                parts.pop();
+                format!("{}{}{}", &s[..start], parts.join(","), &s[end..])
+            },
+            "invalid length 2",
+        ),
+    ];
+    for (what, edit, needle) in edits {
+        let mut parts: Vec<String> = sections.iter().map(|s| s.to_string()).collect();
+        parts[k] = edit(&parts[k]);
+        let p = tmp.path().join(format!("{}.toml", what.replace(' ', "_")));
+        fs::write(&p, parts.join("[[agents]]")).expect("write");
+        refused_cmd(
+            &mut command(
+                "orchestrator",
+                &["plan", "--scenario", p.to_str().expect("UTF-8")],
+            ),
+            &[&format!("agent {id} (agents[{}])", k - 1), needle],
+        );
+    }
+}
+
+/// A scenario name is at most 256 bytes; a 10 MB one is refused without being printed.
+#[test]
+fn long_names_are_refused_without_printing_them() {
+    let tmp = TempDir::new();
+    for len in [257, 10_000_000] {
+        let mut f = integration_tests::paper40();
+        f.name = "n".repeat(len);
+        let p = integration_tests::write_scenario(tmp.path(), "s.toml", &f);
+        let o = refused_cmd(
+            &mut command(
+                "orchestrator",
+                &["plan", "--scenario", p.to_str().expect("UTF-8")],
+            ),
+            &[&format!("field `name` is {len} bytes long; at most 256")],
+        );
+        assert!(o.stderr.len() < 4096, "{} bytes of error", o.stderr.len());
+    }
 }
 
 // ---- numbers ---------------------------------------------------------------------------------
@@ -332,6 +833,40 @@ fn unstable_gains_are_refused() {
         &f,
         &["gains [1.0, 1.0, 10.0, 1.0] are unstable"],
     );
+}
+
+/// Ticks that cannot resolve the motion are bad input with the reason: too few ticks
+/// (`--t-total 0.005`), a clock too slow for the gains' fastest pole (`comm_hz = 0.001`), a
+/// clock so fast the certificate would fly for hours (`comm_hz = 500000`).
+#[test]
+fn plans_whose_ticks_cannot_resolve_the_motion_are_refused_cmd() {
+    let tmp = TempDir::new();
+    let team = unique_team("ticks");
+    let out = tmp.path().join("run");
+    let needles = ["field `t_total_s`", "ticks over the motion"];
+    refused_cmd(
+        &mut command("orchestrator", &["plan", "--t-total", "0.005"]),
+        &needles,
+    );
+    refused_cmd(&mut simulate(&out, &["--t-total", "0.005"]), &needles);
+    refused_cmd(&mut launch(&team, &out, &["--t-total", "0.005"]), &needles);
+    assert!(!out.exists());
+    for (hz, needles) in [
+        ("0.001", &["field `comm_hz`", "fastest pole"][..]),
+        ("500000", &["field `comm_hz`", "at most 10000 Hz"][..]),
+    ] {
+        let mut f = integration_tests::paper40();
+        f.comm_hz = hz.parse().expect("number");
+        let p = integration_tests::write_scenario(tmp.path(), "s.toml", &f);
+        refused_cmd(
+            &mut command(
+                "orchestrator",
+                &["plan", "--scenario", p.to_str().expect("UTF-8")],
+            ),
+            needles,
+        );
+    }
+    assert_no_team_resources(&team);
 }
 
 // ---- ids and roles ---------------------------------------------------------------------------
@@ -464,7 +999,7 @@ fn primaries_collinear_during_the_plan_are_refused() {
         &["primary leaders [1, 2, 3] are (nearly) collinear at t = "],
     );
     // Neither end is the problem.
-    let out = plan(&path, REFUSE_DEADLINE);
+    let out = plan(&path, SHORT_DEADLINE);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         !stderr.contains("at t0") && !stderr.contains("at their goals"),
@@ -612,4 +1147,37 @@ fn two_in_neighbors_are_refused() {
         &f,
         &["agent 7: in-neighbours must be 3 distinct agents, got [1, 2]"],
     );
+}
+
+// ---- a hand-started team that does not assemble ----------------------------------------------
+
+/// `--no-spawn` with only leader 1 joining: the message lists the agents that did not
+/// join (not leader 1), and leader 1 exits 3 saying its team was stopped before the end.
+#[test]
+fn a_partial_hand_started_team_names_only_the_missing_agents() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("run");
+    let team = unique_team("partial");
+    let orch = spawn(
+        launch(&team, &out, &["--n", "4", "--t-total", "30"])
+            .args(["--no-spawn", "--join-timeout", "3"])
+            .arg("--no-figures"),
+    );
+    let scenario = out.join("scenario.toml");
+    let start = std::time::Instant::now();
+    while !scenario.exists() {
+        assert!(start.elapsed() < SHORT_DEADLINE, "no scenario.toml");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let leader = run(&mut member("leader", &scenario, &team, 1), SHORT_DEADLINE);
+    let o = orch.finish(SHORT_DEADLINE);
+    assert_exit(&o, 3, "launch with only leader 1");
+    assert_stderr_has(&o, "launch", &["agents 2, 3, 4 did not join team"]);
+    assert_exit(&leader, 3, "leader 1 of a team that never flew");
+    assert_stderr_has(
+        &leader,
+        "leader 1",
+        &["stopped by its orchestrator", "before the end of the plan"],
+    );
+    assert_no_team_resources(&team);
 }
