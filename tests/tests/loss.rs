@@ -9,6 +9,8 @@
 //! - `plan --losses --json`: the certificate covers every member, and its number for the worst
 //!   loss is what `simulate --lose` of that member at the certificate's tick measures.
 
+mod support;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::{Command, Output};
@@ -16,6 +18,7 @@ use std::time::Duration;
 
 use integration_tests::{bin, describe, run, TempDir};
 use serde_json::Value;
+use support::read_json;
 
 /// A paper40 flight in-process takes about 3 s in release and the certificate ~15 s on a
 /// loaded machine; the rest is slack.
@@ -31,11 +34,6 @@ fn simulate(out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["simulate", "--no-figures", "--out", out.to_str().unwrap()];
     args.extend_from_slice(extra);
     orchestrator(&args)
-}
-
-fn json(p: &Path) -> Value {
-    let text = std::fs::read_to_string(p).unwrap_or_else(|e| panic!("read {}: {e}", p.display()));
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("parse {}: {e}", p.display()))
 }
 
 /// Telemetry rows: tick -> id -> (position, desired position).
@@ -69,7 +67,7 @@ fn simulate_loses_a_follower_a_secondary_and_a_primary_and_flies_on() {
     assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("lost 3 member(s)"), "{stdout}");
-    let audit = json(&a.join("audit.json"));
+    let audit = read_json(&a.join("audit.json"));
     assert_eq!(audit["verdict"], "SAFE");
     let losses = audit["losses"].as_array().expect("losses");
     let got: Vec<(u64, u64, &str)> = losses
@@ -152,7 +150,7 @@ fn on_loss_stop_keeps_the_loss_a_fault() {
     let out_dir = tmp.path().join("stop");
     let out = simulate(&out_dir, &["--lose", "20@30", "--on-loss", "stop"]);
     assert_eq!(out.status.code(), Some(3), "{}", describe(&out));
-    let audit = json(&out_dir.join("audit.json"));
+    let audit = read_json(&out_dir.join("audit.json"));
     assert_eq!(audit["verdict"], "FAULT");
     assert_eq!(audit["fault"]["kind"], "lost");
     assert_eq!(audit["fault"]["agent"], 20);
@@ -163,7 +161,7 @@ fn on_loss_stop_keeps_the_loss_a_fault() {
     let plain = tmp.path().join("plain");
     let out = simulate(&plain, &["--max-ticks", "100"]);
     assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
-    assert!(json(&plain.join("audit.json")).get("losses").is_none());
+    assert!(read_json(&plain.join("audit.json")).get("losses").is_none());
 }
 
 #[test]
@@ -201,7 +199,7 @@ fn plan_losses_certifies_every_member_and_matches_simulate() {
         stdout.contains("loss verdict: survives the loss of any single member"),
         "{stdout}"
     );
-    let c = json(&cert_path);
+    let c = read_json(&cert_path);
     assert_eq!(c["verdict"], "SAFE");
     let l = &c["losses"];
     assert_eq!(l["survives_any_single_loss"], true);
@@ -223,7 +221,7 @@ fn plan_losses_certifies_every_member_and_matches_simulate() {
     let dir = tmp.path().join("worst");
     let out = simulate(&dir, &["--lose", &at]);
     assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
-    let audit = json(&dir.join("audit.json"));
+    let audit = read_json(&dir.join("audit.json"));
     let loss = &audit["losses"][0];
     assert_eq!(loss["last_tick"].as_u64(), Some(last_tick));
     assert_eq!(loss["retriangulated"], worst["retriangulated"]);

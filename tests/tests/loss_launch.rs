@@ -24,7 +24,8 @@ use std::time::Duration;
 use integration_tests::{describe, run, unique_team, TempDir};
 use serde_json::Value;
 use support::{
-    assert_exit, assert_no_process_of, assert_no_team_resources, launch, read_json, simulate,
+    assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file, launch,
+    read_json, simulate,
 };
 
 /// A 801- to 1501-tick paper40 flight of 41 processes takes about a second; the rest is slack
@@ -68,19 +69,6 @@ fn assert_safe(audit: &Value, what: &str) {
     assert!(sep > 2.0 * eps, "{what}: separation {sep} m <= 2 eps");
 }
 
-fn same_bytes(a: &Path, b: &Path, what: &str) {
-    let x = std::fs::read(a).unwrap_or_else(|e| panic!("{}: {e}", a.display()));
-    let y = std::fs::read(b).unwrap_or_else(|e| panic!("{}: {e}", b.display()));
-    assert!(
-        x == y,
-        "{what}: {} and {} differ ({} and {} bytes)",
-        a.display(),
-        b.display(),
-        x.len(),
-        y.len()
-    );
-}
-
 fn launched(team: &str, out: &Path, extra: &[&str], env: Option<String>) -> Output {
     let mut c = launch(team, out, &args(extra));
     if let Some(v) = env {
@@ -112,11 +100,7 @@ fn launch_lose_kills_three_members_and_equals_simulate_byte_for_byte() {
     let lau = tmp.path().join("launch");
     let o = launched(&team, &lau, &lose, None);
     assert_exit(&o, 0, "launch --lose");
-    same_bytes(
-        &sim.join("telemetry.csv"),
-        &lau.join("telemetry.csv"),
-        "telemetry",
-    );
+    assert_same_file(&sim.join("telemetry.csv"), &lau.join("telemetry.csv"));
     let (a, b) = (
         read_json(&sim.join("audit.json")),
         read_json(&lau.join("audit.json")),
@@ -165,11 +149,7 @@ fn lost_unannounced(id: u32, (how, at): (&str, u64), cause: &str) {
         DEADLINE,
     );
     assert_exit(&o, 0, &format!("simulate --lose {when}"));
-    same_bytes(
-        &sim.join("telemetry.csv"),
-        &lau.join("telemetry.csv"),
-        &format!("replay of agent {id} {how} at tick {at}"),
-    );
+    assert_same_file(&sim.join("telemetry.csv"), &lau.join("telemetry.csv"));
 }
 
 #[test]

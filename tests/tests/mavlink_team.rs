@@ -426,13 +426,9 @@ fn launch_no_spawn_prints_the_link_timeouts_for_hand_started_members() {
     let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
     let team_name = unique_team("mavnospawn");
     // Not --quiet: the command lines are what a hand-started team is told.
-    let mut c = std::process::Command::new(integration_tests::bin("orchestrator"));
-    c.arg("launch")
-        .args(["--scenario", scenario.to_str().expect("utf-8 path")])
-        .args(["--team", &team_name])
-        .arg("--out")
-        .arg(dir.path().join("run"))
-        .args(["--no-spawn", "--join-timeout", "1", "--no-figures"])
+    let path = scenario.to_str().expect("utf-8 path");
+    let mut c = support::launch_loud(&team_name, &dir.path().join("run"), &["--scenario", path]);
+    c.args(["--no-spawn", "--join-timeout", "1", "--no-figures"])
         .args(["--realtime", "--vehicles", "mavlink"])
         .args(["--heartbeat-timeout", "4.5", "--position-timeout", "0.25"]);
     let out = integration_tests::run(&mut c, DEADLINE);

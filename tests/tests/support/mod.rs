@@ -20,14 +20,21 @@ pub const PROGRESS_DEADLINE: Duration = integration_tests::deadline::SHORT;
 
 /// `orchestrator launch SOURCE --team TEAM --out OUT --quiet`.
 pub fn launch(team: &str, out: &Path, source: &[&str]) -> Command {
+    let mut c = launch_loud(team, out, source);
+    c.arg("--quiet");
+    c
+}
+
+/// `orchestrator launch SOURCE --team TEAM --out OUT`, for a test that reads what `launch`
+/// prints (the command lines of a `--no-spawn` team, the summary).
+pub fn launch_loud(team: &str, out: &Path, source: &[&str]) -> Command {
     let mut c = Command::new(bin("orchestrator"));
     c.arg("launch")
         .args(source)
         .arg("--team")
         .arg(team)
         .arg("--out")
-        .arg(out)
-        .arg("--quiet");
+        .arg(out);
     c
 }
 
