@@ -7,7 +7,7 @@
 
 use crate::dynamics::{Kinematics, QuadState, QUAD_STATE_NAMES};
 pub use crate::guard::{ControlFault, SingularityGuard};
-use crate::math::{Mat3, Real, Vec3};
+use crate::math::{Mat3, Vec3};
 
 /// M = da/dq with q = (F, phi, theta) (eq. 43b, ERRATA 3):
 /// columns [cos(phi) sin(theta); -sin(phi); cos(phi) cos(theta)], F [-sin(phi) sin(theta);
@@ -48,7 +48,7 @@ mod tests {
     use super::*;
     use crate::dynamics::tests::{rel_err, sample_states};
     use crate::dynamics::{Chain, Flat, Plant};
-    use crate::math::GRAVITY_MPS2;
+    use crate::math::{Real, GRAVITY_MPS2};
 
     /// `x + h * d`.
     fn offset(x: &QuadState, d: &[Real; 12], h: Real) -> QuadState {
