@@ -632,7 +632,7 @@ fn forward(r: &mut Remote, ctx: &Ctx) -> Result<bool, String> {
     }
     for c in worth_sending(&clocks, &mut r.last_notice) {
         // A new loss: the relays carry the repaired links before the daemon's members hear it.
-        let step = r.repairs.on_notice(c.loss());
+        let step = r.repairs.on_notice(c.loss()).map_err(|e| e.to_string())?;
         carry_repair(r, ctx, &step);
         r.stop_sent |= matches!(c.command(), ClockCommand::Stop(_));
         r.chan
@@ -657,8 +657,10 @@ fn follow_repairs(r: &mut Remote, ctx: &Ctx) {
         let _ = relay.receive_neighbors(|_| {});
     }
     for c in worth_sending(&clocks, &mut r.last_notice) {
-        let step = r.repairs.on_notice(c.loss());
-        carry_repair(r, ctx, &step);
+        match r.repairs.on_notice(c.loss()) {
+            Ok(step) => carry_repair(r, ctx, &step),
+            Err(e) => tracing::warn!("host {}: the repairs its relays carry: {e}", r.host),
+        }
     }
     // Nothing more will cross from a lost host: its relays hand over what they hold.
     handover::poll(

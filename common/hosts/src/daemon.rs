@@ -398,7 +398,10 @@ impl Link<'_> {
                 busy = true;
                 match &f {
                     Down::Kill(id) => cdm_team::loss::kill_and_reap(children, *id),
-                    Down::Clock(c) => self.repairs.on_clock(&ClockMsg::from(*c), relays),
+                    Down::Clock(c) => self
+                        .repairs
+                        .on_clock(&ClockMsg::from(*c), relays)
+                        .map_err(|e| e.to_string())?,
                     _ => {}
                 }
                 if let Some(reason) = down(f, ports, relays)? {

@@ -12,6 +12,7 @@ use cdm_runtime::messages::ClockMsg;
 
 use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
 use super::repairs::CrossRepairs;
+use cdm_runtime::notices::NoticeGap;
 
 /// How often the links awaited are looked up in the registry.
 const CHECK_EVERY: Duration = Duration::from_millis(20);
@@ -48,8 +49,12 @@ impl DaemonRepairs {
     }
 
     /// A clock message about to be published on this host.
-    pub fn on_clock(&mut self, c: &ClockMsg, relays: &mut BTreeMap<u32, MemberPorts>) {
-        let step = self.repairs.on_notice(c.loss());
+    pub fn on_clock(
+        &mut self,
+        c: &ClockMsg,
+        relays: &mut BTreeMap<u32, MemberPorts>,
+    ) -> Result<(), NoticeGap> {
+        let step = self.repairs.on_notice(c.loss())?;
         for &(reader, writer) in &step.new_links {
             if !self.mine.contains(&reader) {
                 continue;
@@ -75,6 +80,7 @@ impl DaemonRepairs {
         if step.hand_over {
             handover::start(&mut self.handing, step.needs_from, relays, warn_hand_over);
         }
+        Ok(())
     }
 
     /// Hands over the relays whose history now reaches the connected repair's tick.

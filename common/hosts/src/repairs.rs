@@ -11,6 +11,7 @@ use cdm_core::loss_log::{links, LossLog};
 use cdm_core::repair::{repair_in_order, synthesis_order};
 use cdm_core::scenario::Scenario;
 use cdm_runtime::messages::LossNotice;
+use cdm_runtime::notices::{NoticeGap, Notices};
 
 /// What one clock message's notice asks of a bridge.
 #[derive(Debug, Default, Clone, PartialEq, Eq)]
@@ -27,9 +28,7 @@ pub struct RepairStep {
 /// The losses announced so far, as a bridge follows them.
 #[derive(Debug, Clone)]
 pub struct CrossRepairs {
-    log: LossLog,
-    seen: u32,
-    linked: u32,
+    notices: Notices,
     opened: BTreeSet<(u32, u32)>,
     /// The longest link delay, in ticks.
     delay: u64,
@@ -39,35 +38,32 @@ impl CrossRepairs {
     /// No loss yet.
     pub fn new(s: &Scenario) -> Self {
         Self {
-            log: LossLog::new(s),
-            seen: 0,
-            linked: 0,
+            notices: Notices::new(LossLog::new(s)),
             opened: BTreeSet::new(),
             delay: s.link_model().max_ticks(),
         }
     }
 
-    /// The notice of a clock message (None: no loss announced yet). A repeat changes nothing.
-    /// Every notice is seen in order: the team core announces a loss only after the previous
-    /// one's links connected, and the bridges forward every clock message whose notice changed.
-    pub fn on_notice(&mut self, n: Option<LossNotice>) -> RepairStep {
+    /// The notice of a clock message (None: no loss announced yet). A repeat changes nothing;
+    /// a jump in the notice numbers is a [`NoticeGap`] (the bridges forward every clock message
+    /// whose notice changed, and the team announces a loss only after the previous one's links
+    /// connected, so a gap means a notice was lost on the way).
+    pub fn on_notice(&mut self, n: Option<LossNotice>) -> Result<RepairStep, NoticeGap> {
         let Some(n) = n else {
-            return RepairStep::default();
+            return Ok(RepairStep::default());
         };
         let mut step = RepairStep::default();
-        if n.seq > self.seen {
-            self.seen = n.seq;
-            self.log.add(n.id, n.tick);
-            let now: BTreeSet<(u32, u32)> = self.log.new_links();
+        let followed = self.notices.follow(n)?;
+        if followed.lost.is_some() {
+            let now: BTreeSet<(u32, u32)> = self.notices.log().new_links();
             step.new_links = now.difference(&self.opened).copied().collect();
             self.opened.extend(now);
         }
-        if n.linked > self.linked {
-            self.linked = n.linked;
+        if followed.linked {
             step.hand_over = true;
             step.needs_from = n.tick.saturating_sub(self.delay);
         }
-        step
+        Ok(step)
     }
 }
 
@@ -122,8 +118,8 @@ mod tests {
         let s = Scenario::builtin("paper40").unwrap();
         let lost = s.formation.members[20].id;
         let mut r = CrossRepairs::new(&s);
-        assert_eq!(r.on_notice(None), RepairStep::default());
-        let step = r.on_notice(notice(1, lost, 30, 0));
+        assert_eq!(r.on_notice(None), Ok(RepairStep::default()));
+        let step = r.on_notice(notice(1, lost, 30, 0)).unwrap();
         let mut log = LossLog::new(&s);
         log.add(lost, 30);
         let expected: Vec<(u32, u32)> = log.new_links().into_iter().collect();
@@ -133,8 +129,11 @@ mod tests {
         );
         assert_eq!(step.new_links, expected);
         assert!(!step.hand_over);
-        assert_eq!(r.on_notice(notice(1, lost, 30, 0)), RepairStep::default());
-        let linked = r.on_notice(notice(1, lost, 30, 1));
+        assert_eq!(
+            r.on_notice(notice(1, lost, 30, 0)),
+            Ok(RepairStep::default())
+        );
+        let linked = r.on_notice(notice(1, lost, 30, 1)).unwrap();
         assert!(linked.hand_over && linked.new_links.is_empty());
         let all = single_loss_links(&s);
         assert!(expected.iter().all(|l| all.contains(l)));

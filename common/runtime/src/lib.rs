@@ -13,6 +13,7 @@ pub mod member_loss;
 mod member_protocol;
 mod member_watch;
 pub mod messages;
+pub mod notices;
 pub mod realtime;
 pub mod realtime_links;
 pub mod realtime_loop;

@@ -13,6 +13,7 @@ use cdm_core::loss_log::LossLog;
 
 use crate::inbox::Inbox;
 use crate::messages::LossNotice;
+use crate::notices::Notices;
 
 /// What taking a loss notice asks of the member's loop.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -42,9 +43,7 @@ pub enum LossFault {
 #[derive(Debug)]
 pub struct MemberLosses {
     id: u32,
-    log: LossLog,
-    seen: u32,
-    linked: u32,
+    notices: Notices,
     /// The member (its link) the vehicle flies now.
     applied: Member,
     /// A link applied at tick T whose step T is not flown yet, with the member flown up to
@@ -65,9 +64,7 @@ impl MemberLosses {
     pub fn new(me: &Member, log: LossLog, subscribed: &[u32], notifying: &[u32]) -> Self {
         MemberLosses {
             id: me.id,
-            log,
-            seen: 0,
-            linked: 0,
+            notices: Notices::new(log),
             applied: me.clone(),
             unflown: None,
             schedule: Vec::new(),
@@ -81,22 +78,17 @@ impl MemberLosses {
     /// The notice of a clock message, this member being at `tick` (its next step). A repeat
     /// changes nothing.
     pub fn on_notice(&mut self, n: LossNotice, tick: u64) -> Result<(), LossFault> {
-        if n.seq > self.seen + 1 {
-            return Err(LossFault::Missed {
-                seen: self.seen,
-                got: n.seq,
-            });
+        if self.notices.is_next(&n) && n.id == self.id {
+            return Err(LossFault::SelfLost { tick });
         }
-        if n.seq == self.seen + 1 {
-            if n.id == self.id {
-                return Err(LossFault::SelfLost { tick });
-            }
-            self.seen = n.seq;
-            self.log.add(n.id, n.tick);
+        let step = self.notices.follow(n).map_err(|g| LossFault::Missed {
+            seen: g.seen,
+            got: g.got,
+        })?;
+        if step.lost.is_some() {
             self.replan(tick)?;
         }
-        if n.linked > self.linked {
-            self.linked = n.linked;
+        if step.linked {
             self.work.push(LossWork::HandOver);
         }
         Ok(())
@@ -111,7 +103,7 @@ impl MemberLosses {
     /// linked yet: step `tick` must wait (see [`Self::due`]). A member over delayed links is
     /// not held up by its lost neighbour's missing state, so it must be held here.
     pub fn waits_at(&self, tick: u64) -> bool {
-        self.linked < self.seen && self.schedule.first().is_some_and(|(t, _)| *t <= tick)
+        self.notices.unlinked() && self.schedule.first().is_some_and(|(t, _)| *t <= tick)
     }
 
     /// The member to fly from `tick` on, when its link changes there (it may change again at
@@ -120,7 +112,7 @@ impl MemberLosses {
         // Not before every announced loss is linked: the orchestrator announces the losses of
         // one tick back to back and links them together (`TeamLosses::poll`), so a link flown
         // from here on is the repair of all of them, not of the first few.
-        if self.linked < self.seen {
+        if self.notices.unlinked() {
             return None;
         }
         if self.schedule.first().is_some_and(|(t, _)| *t == tick) {
@@ -164,7 +156,7 @@ impl MemberLosses {
 
     /// Where member `id` started (the scenario's position), if it is in the team.
     pub(crate) fn start_of(&self, id: u32) -> Option<cdm_core::math::Vec3> {
-        self.log.original().member(id).map(|m| m.position)
+        self.notices.log().original().member(id).map(|m| m.position)
     }
 
     /// Keeps the states of a neighbour the link applied now drops (see `due`).
@@ -199,7 +191,7 @@ impl MemberLosses {
 
     /// Recomputes this member's future links and the ports it lacks after a new loss.
     fn replan(&mut self, tick: u64) -> Result<(), LossFault> {
-        let epochs = self.log.epochs();
+        let epochs = self.notices.log().epochs();
         let own = |f: &Formation| f.member(self.id).cloned();
         // The link flown for the steps already computed must not change: the link in force at
         // `tick` is either the one applied, or (changing exactly at `tick`, not applied yet) the
@@ -210,7 +202,7 @@ impl MemberLosses {
                 .rev()
                 .find(|(t, _)| *t <= x)
                 .and_then(|(_, r)| own(&r.formation))
-                .or_else(|| own(self.log.original()))
+                .or_else(|| own(self.notices.log().original()))
                 .unwrap_or_else(|| self.applied.clone())
         };
         let now_link = in_force(tick).link;
