@@ -378,7 +378,7 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     let Some(addr) = addr else {
         return Ok(Exit::Safe);
     };
-    let interrupted = cdm_runtime::signals::install();
+    let interrupted = cdm_process::signals::install();
     let server =
         cdm_viewer::serve_page(&addr.to_string(), page, None).map_err(Failure::bad_input)?;
     // Only the final line goes to stdout in quiet mode: tools read the address from it.

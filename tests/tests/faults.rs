@@ -15,7 +15,7 @@
 //!   ids; a state nobody reads is reported by the orchestrator.
 //!
 //! Faults at a chosen tick are injected with the test-only `CDM_FAULT_INJECT`
-//! (`cdm_runtime::fault_inject`): the orchestrator's children inherit it, only the named agent acts.
+//! (`cdm_process::fault_inject`): the orchestrator's children inherit it, only the named agent acts.
 
 mod support;
 
@@ -98,7 +98,7 @@ fn launch_injected(
 ) -> std::process::Output {
     let mut cmd = launch_team(team, out, "600", extra);
     cmd.env(
-        cdm_runtime::fault_inject::ENV,
+        cdm_process::fault_inject::ENV,
         format!("{id}:{kind}@{FAULT_TICK}"),
     );
     let mut orch = spawn(&mut cmd);

@@ -716,7 +716,7 @@ fn a_killed_member_on_another_host_is_repaired() {
     let daemon = spawn(
         h.on_b(&["host", "--connect", ENDPOINT, "--team", &team])
             .env(
-                cdm_runtime::fault_inject::ENV,
+                cdm_process::fault_inject::ENV,
                 format!("{victim}:kill@{at}"),
             ),
     );

@@ -72,7 +72,7 @@ fn assert_safe(audit: &Value, what: &str) {
 fn launched(team: &str, out: &Path, extra: &[&str], env: Option<String>) -> Output {
     let mut c = launch(team, out, &args(extra));
     if let Some(v) = env {
-        c.env(cdm_runtime::fault_inject::ENV, v);
+        c.env(cdm_process::fault_inject::ENV, v);
     }
     let o = run(&mut c, DEADLINE);
     assert_no_process_of(team);

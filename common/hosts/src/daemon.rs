@@ -48,7 +48,7 @@ struct Joined {
 
 /// Runs the daemon to the end of the team (exit 0), a lost link (3) or a refusal (2).
 pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
-    let interrupted = cdm_runtime::signals::install();
+    let interrupted = cdm_process::signals::install();
     cdm_team::team::member_binaries_present()?;
     super::workdir::sweep_dead();
     let expected_hash = match &o.scenario {
@@ -82,7 +82,7 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     if let Some(p) = j.a.realtime_priority {
         // `--rt-priority` of the team: this thread (the bridge loop) now, the members through
         // their flag. zenoh's threads started before the team's mode was known and keep theirs.
-        cdm_runtime::sched::fifo(p)
+        cdm_process::sched::fifo(p)
             .map_err(|e| Failure::bad_input(format!("team {}: {e}", j.team)))?;
     }
     if !o.quiet {
@@ -346,7 +346,7 @@ impl Link<'_> {
             if interrupted.load(Ordering::Relaxed) {
                 return Err(format!(
                     "interrupted by {}",
-                    cdm_runtime::signals::received()
+                    cdm_process::signals::received()
                 ));
             }
             if let Some((id, how)) = first_exited(children) {
@@ -389,7 +389,7 @@ impl Link<'_> {
             if interrupted.load(Ordering::Relaxed) {
                 return Err(format!(
                     "interrupted by {}",
-                    cdm_runtime::signals::received()
+                    cdm_process::signals::received()
                 ));
             }
             let mut busy = false;

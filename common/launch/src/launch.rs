@@ -100,7 +100,7 @@ fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure
 
 /// Run a launch to the end.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
-    let interrupted = cdm_runtime::signals::install();
+    let interrupted = cdm_process::signals::install();
     let mut live = preflight(s, o)?;
     let hosts = cdm_hosts::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
     let layout = team_layout(s, o, &hosts)?;
@@ -306,7 +306,7 @@ fn start_members(
 fn interrupted_before_start() -> Stop {
     let what = format!(
         "interrupted by {} before the start",
-        cdm_runtime::signals::received()
+        cdm_process::signals::received()
     );
     (
         fault(FaultKind::Interrupted, None, None, 0, what),
@@ -472,7 +472,7 @@ fn fly_team(
     loop {
         let now = clock.now();
         if interrupted.load(Ordering::Relaxed) {
-            core.on_interrupt(cdm_runtime::signals::received());
+            core.on_interrupt(cdm_process::signals::received());
         }
         core.on_turn(now);
         ports

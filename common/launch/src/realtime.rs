@@ -60,7 +60,7 @@ pub struct RealtimeArgs {
     /// With --realtime: run the orchestrator and every member under SCHED_FIFO at this
     /// priority (1-99), so their wake-ups preempt ordinary processes; needs root,
     /// CAP_SYS_NICE or `ulimit -r` (BENCHMARKS.md: late ticks with and without).
-    #[arg(long, value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_runtime::sched::RT_PRIORITIES))]
+    #[arg(long, value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_process::sched::RT_PRIORITIES))]
     pub rt_priority: Option<u8>,
 }
 
@@ -78,7 +78,7 @@ pub struct RealtimeOptions {
 /// machine that does not allow it is refused up front with exit 2.
 pub fn schedule(o: &LaunchOptions) -> Result<(), Failure> {
     match o.realtime.as_ref().and_then(|rt| rt.rt_priority) {
-        Some(p) => cdm_runtime::sched::fifo(p).map_err(Failure::bad_input),
+        Some(p) => cdm_process::sched::fifo(p).map_err(Failure::bad_input),
         None => Ok(()),
     }
 }
@@ -365,7 +365,7 @@ impl Monitor<'_> {
         );
         loop {
             if interrupted.load(Ordering::Relaxed) {
-                self.core.on_interrupt(cdm_runtime::signals::received());
+                self.core.on_interrupt(cdm_process::signals::received());
             }
             self.drain(ports)?;
             loop {

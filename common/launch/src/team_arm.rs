@@ -118,7 +118,7 @@ pub fn arm_team(
         if interrupted.load(Ordering::Relaxed) {
             let what = format!(
                 "interrupted by {} while arming",
-                cdm_runtime::signals::received()
+                cdm_process::signals::received()
             );
             let f = fault(FaultKind::Interrupted, None, None, 0, what);
             return Err((f, StopReason::Interrupted));

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use cdm_runtime::member_core::{in_neighbors, subscriptions};
 use cdm_runtime::member_lockstep::LockstepCore;
-use cdm_runtime::member_loop::fly;
+use cdm_runtime::member_loop::{fly, BeforePublish};
 use cdm_runtime::member_loss::MemberLosses;
 use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
@@ -191,8 +191,10 @@ impl Joined<'_> {
         let mut core = LockstepCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
             .with_links(s.link_model(), &s.step_config(), starts)
             .with_losses(MemberLosses::new(me, LossLog::new(s), &ins, &outs));
-        let inject = cdm_runtime::fault_inject::from_env(id);
-        fly(&mut core, &mut ports, &clock, interrupted, inject.as_ref())
+        let inject = cdm_process::fault_inject::from_env(id);
+        let hook = inject.map(|i| move |m: &mut cdm_runtime::messages::StateMsg| i.apply(m));
+        let hook = hook.as_ref().map(|h| h as BeforePublish);
+        fly(&mut core, &mut ports, &clock, interrupted, hook)
             .map_err(|e| MemberError::from_loop(e, id, team))
     }
 }

@@ -57,7 +57,7 @@ pub struct MemberArgs {
     pub stale_after_s: f64,
     /// With --realtime: run this member under SCHED_FIFO at this priority (1-99), so its
     /// wake-ups preempt ordinary processes (needs root, CAP_SYS_NICE or `ulimit -r`).
-    #[arg(long = "rt-priority", value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_runtime::sched::RT_PRIORITIES))]
+    #[arg(long = "rt-priority", value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_process::sched::RT_PRIORITIES))]
     pub rt_priority: Option<u8>,
     /// What this member flies (the model, or a MAVLink vehicle: needs --realtime).
     #[command(flatten)]
@@ -106,7 +106,7 @@ pub fn main(kind: Kind, name: &'static str) -> ! {
 
 /// Run a member process and return its exit code: 0 finished, 2 bad input, 3 runtime fault.
 pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
-    let interrupted = cdm_runtime::signals::install();
+    let interrupted = cdm_process::signals::install();
     let team = match TeamName::new(&args.team) {
         Ok(t) => t,
         Err(e) => {
@@ -173,7 +173,7 @@ fn realtime_priority(realtime: bool, priority: Option<u8>) -> Result<(), String>
     match (realtime, priority) {
         (_, None) => Ok(()),
         (false, Some(_)) => Err("--rt-priority needs --realtime".into()),
-        (true, Some(p)) => cdm_runtime::sched::fifo(p).map_err(|e| format!("{e}: {}", e.source)),
+        (true, Some(p)) => cdm_process::sched::fifo(p).map_err(|e| format!("{e}: {}", e.source)),
     }
 }
 

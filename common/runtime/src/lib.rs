@@ -1,10 +1,10 @@
 //! The team protocol without a transport: the `#[repr(C)]` wire messages (plain types; the
 //! iceoryx2 backend gives them their shared-memory trait), the seams (transport, clocks,
 //! vehicle), the member's protocol core (no I/O) with its two timings (lockstep and real time)
-//! and the one generic loop around it, the signal
-//! flags and the test-only fault injection. No iceoryx2 here: the compiler holds that rule.
+//! and the one generic loop around it, and the team's cores. No iceoryx2 here, and no OS
+//! process concerns (signals, scheduling, fault injection: cdm-process): the compiler holds
+//! that rule.
 
-pub mod fault_inject;
 mod inbox;
 pub mod member_core;
 pub mod member_lockstep;
@@ -18,9 +18,7 @@ pub mod realtime;
 pub mod realtime_links;
 pub mod realtime_loop;
 pub mod realtime_monitor;
-pub mod sched;
 pub mod seams;
-pub mod signals;
 pub mod stall;
 pub mod team_core;
 pub mod team_fault;

@@ -7,7 +7,6 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use crate::fault_inject::Injection;
 use crate::member_core::{Action, Finished, MemberCore, MemberFault, Timing, ALIVE_CHECK};
 use crate::member_loss::LossWork;
 use crate::messages::{ClockCommand, StateMsg};
@@ -25,6 +24,10 @@ pub enum LoopError<E> {
     Interrupted { tick: u64 },
 }
 
+/// Alters a state just before it is published: the hook through which tests inject faults
+/// (`cdm_process::fault_inject`; a crash or a hang "instead of publishing this tick").
+pub type BeforePublish<'a> = &'a dyn Fn(&mut StateMsg);
+
 /// Flies `core` over `transport` until the orchestrator stops the team, a fault, or a signal.
 /// `inject` (tests only) alters a state just before it is published. At the stop a member with
 /// a final report (real time: its pacing figures) publishes it and waits (at most [`LINGER`])
@@ -36,7 +39,7 @@ pub fn fly<T, V, P, K>(
     transport: &mut T,
     clock: &K,
     interrupted: &AtomicBool,
-    inject: Option<&Injection>,
+    inject: Option<BeforePublish>,
 ) -> Result<Finished, LoopError<T::Error>>
 where
     T: MemberTransport,
@@ -146,14 +149,14 @@ where
 fn publish<T: MemberTransport>(
     transport: &mut T,
     mut msg: StateMsg,
-    inject: Option<&Injection>,
+    inject: Option<BeforePublish>,
     flush: bool,
 ) -> Result<(), LoopError<T::Error>> {
     if let Some(i) = inject {
         // An injected crash or hang happens "instead of publishing this tick": every earlier
         // state must be out, as if each were its own sample.
         transport.flush().map_err(LoopError::Transport)?;
-        i.apply(msg.tick, &mut msg);
+        i(&mut msg);
     }
     transport
         .publish_quietly(msg)

@@ -74,9 +74,10 @@ pub fn from_env(my_id: u32) -> Option<Injection> {
 }
 
 impl Injection {
-    /// Applies the injection to the state about to be published at `tick` (or, for `kill`,
-    /// ends the process).
-    pub fn apply(&self, tick: u64, msg: &mut crate::messages::StateMsg) {
+    /// Applies the injection to the state about to be published (or, for `kill`, ends the
+    /// process): the member loop's before-publish hook.
+    pub fn apply(&self, msg: &mut cdm_runtime::messages::StateMsg) {
+        let tick = msg.tick;
         if tick != self.tick {
             return;
         }
