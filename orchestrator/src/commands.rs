@@ -564,7 +564,7 @@ fn print_loss_certificate(l: &LossCertificate) {
         out!(
             "  {:<3} {:<10} {:<8} {:>8}  {:>8}  {:>8}  {:>14.4} m  {:>7.4} m",
             m.id,
-            m.role,
+            m.role.as_str(),
             m.verdict.as_str(),
             m.retriangulated.len(),
             m.degraded.len(),
@@ -584,7 +584,7 @@ fn print_loss_certificate(l: &LossCertificate) {
         out!(
             "  worst repair transient: losing {} ({}), follower {} deviates {:.4} m at t = {:.2} s (delta {:.4} m)",
             w.id,
-            w.role,
+            w.role.as_str(),
             w.worst_id.map_or("-".into(), |id| id.to_string()),
             w.max_repaired_deviation_m, w.worst_t_s, l.delta_m
         );

@@ -36,7 +36,8 @@ use crate::step::{law_for, step, tick_time, Law, StepConfig};
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MemberLoss {
     pub id: u32,
-    pub role: &'static str,
+    /// Its role (serialised lowercase, as in the scenario).
+    pub role: Role,
     /// Safe or Unsafe.
     pub verdict: Verdict,
     pub reasons: Vec<String>,
@@ -198,7 +199,7 @@ struct Branch {
 
 impl Branch {
     /// The branch of losing `id` after the nominal `e`'s current tick (states at tick L + 1).
-    fn new(s: &Scenario, e: &Engine<QuadState>, id: u32, floor: Real) -> Self {
+    fn new(s: &Scenario, e: &Engine<QuadState>, (id, role): (u32, Role), floor: Real) -> Self {
         let r = repair(&s.formation, floor, &BTreeSet::from([id]));
         let changed: BTreeSet<u32> = r
             .retriangulated
@@ -222,7 +223,7 @@ impl Branch {
         let states: Vec<QuadState> = idx.iter().map(|&k| e.states()[k]).collect();
         let out = MemberLoss {
             id,
-            role: s.role_of(id).map_or("unknown", |r| r.as_str()),
+            role,
             verdict: Verdict::Safe,
             reasons: Vec::new(),
             retriangulated: r.retriangulated.clone(),
@@ -362,7 +363,9 @@ fn fly_branches(
     }
     let mut branches: Vec<Branch> = ids
         .iter()
-        .map(|&id| Branch::new(s, &e, id, floor))
+        // Ids outside the team have no branch (the callers pass the formation's own).
+        .filter_map(|&id| s.role_of(id).map(|role| (id, role)))
+        .map(|member| Branch::new(s, &e, member, floor))
         .collect();
     let (mut ht, mut pos, mut flats) = (Vec::new(), Vec::new(), Vec::new());
     let half = nominal.delta_m + s.file.eps_m;

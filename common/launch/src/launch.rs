@@ -22,6 +22,7 @@ use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayou
 use cdm_runtime::messages::{ClockMsg, StateMsg, StopReason};
 use cdm_runtime::seams::{Clock, MonotonicClock};
 use cdm_runtime::team_core::{TeamAction, TeamConfig, TeamCore, TickStates};
+use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_runtime::team_loss::TeamLosses;
 use cdm_viewer::live::LiveView;
 
@@ -304,14 +305,11 @@ fn start_members(
 
 /// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT before it started.
 fn interrupted_before_start() -> Stop {
-    let what = format!(
-        "interrupted by {} before the start",
-        cdm_process::signals::received()
-    );
-    (
-        fault(FaultKind::Interrupted, None, None, 0, what),
-        StopReason::Interrupted,
-    )
+    TeamFault::Interrupted {
+        signal: cdm_process::signals::received().to_string(),
+        at: InterruptedAt::BeforeStart,
+    }
+    .stop()
 }
 
 /// The stop when the team did not gather in time: names the members no process joined as (or,
@@ -418,9 +416,8 @@ pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: 
 /// whole ticks and no later tick may follow a gap.
 fn io_stop(tick: u64) -> impl Fn(std::io::Error) -> Stop {
     move |e| {
-        let what = format!("cannot write telemetry: {e}");
         (
-            fault(FaultKind::Io, None, None, tick, what),
+            cdm_core::record::write_fault(tick, &e),
             StopReason::AgentFault,
         )
     }

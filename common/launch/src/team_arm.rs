@@ -14,6 +14,7 @@ use cdm_core::scenario::Scenario;
 use cdm_iox::OrchestratorPorts;
 use cdm_member::vehicles::Vehicles;
 use cdm_runtime::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason, STATUS_FAULT};
+use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_team::out;
 
 use crate::launch::LaunchOptions;
@@ -116,12 +117,11 @@ pub fn arm_team(
     let started = Instant::now();
     while !roll.complete() {
         if interrupted.load(Ordering::Relaxed) {
-            let what = format!(
-                "interrupted by {} while arming",
-                cdm_process::signals::received()
-            );
-            let f = fault(FaultKind::Interrupted, None, None, 0, what);
-            return Err((f, StopReason::Interrupted));
+            return Err(TeamFault::Interrupted {
+                signal: cdm_process::signals::received().to_string(),
+                at: InterruptedAt::Arming,
+            }
+            .stop());
         }
         let mut bad = None;
         let _ = ports.receive_states(|m| {
@@ -150,15 +150,11 @@ pub fn arm_team(
 
 /// The stop when members did not answer in time (names them).
 fn not_armed(roll: &ArmRoll, within: Duration) -> Stop {
-    let ids: Vec<String> = roll.waiting().iter().map(u32::to_string).collect();
-    let what = format!(
-        "agents {} did not report their vehicle armed within {} s (--join-timeout)",
-        ids.join(", "),
-        within.as_secs_f64()
-    );
-    let first = roll.waiting().iter().next().copied();
-    let f = fault(FaultKind::VehicleLost, first, None, 0, what);
-    (f, StopReason::AgentSilent)
+    TeamFault::NotArmed {
+        waiting: roll.waiting().iter().copied().collect(),
+        within,
+    }
+    .stop()
 }
 
 #[cfg(test)]

@@ -8,11 +8,8 @@
 
 use std::time::Duration;
 
-use cdm_core::audit::FaultRecord;
-use cdm_core::outcome::FaultKind;
-
 use super::{first_grant, FaultRank, LossEvents, Stopping, TeamAction, TeamCore, WAIT_SLICE};
-use crate::messages::StopReason;
+use crate::team_fault::TeamFault;
 use crate::team_loss::{LossCause, TeamLosses};
 
 impl TeamCore {
@@ -49,18 +46,13 @@ impl TeamCore {
                 }
             }
             Err(e) => {
-                let what = format!(
-                    "the repair after losing agent {} did not connect within {timeout:?}: links (reader, writer) {:?} missing",
-                    e.id, e.missing
-                );
-                let f = FaultRecord::new(
-                    FaultKind::AgentSilent,
-                    Some(e.id),
-                    None,
-                    self.next_tick,
-                    what,
-                );
-                self.interrupt.get_or_insert((f, StopReason::AgentSilent));
+                let fault = TeamFault::RepairUnlinked {
+                    id: e.id,
+                    missing: e.missing,
+                    timeout,
+                    tick: self.next_tick,
+                };
+                self.interrupt.get_or_insert(fault.stop());
             }
         }
     }
@@ -122,10 +114,6 @@ impl TeamCore {
             if l.repairs {
                 continue;
             }
-            let what = format!(
-                "agent(s) [{id}] lost after tick {} (--on-loss stop)",
-                from.saturating_sub(1)
-            );
             let rank = FaultRank {
                 echo: false,
                 tick: from,
@@ -133,7 +121,7 @@ impl TeamCore {
             };
             if rank.outranks(self.stopping.as_ref().map(|s| &s.rank)) {
                 self.stopping = Some(Stopping {
-                    record: FaultRecord::new(FaultKind::Lost, Some(id), None, from, what),
+                    record: TeamFault::LostStop { id, from }.record(),
                     since: now,
                     rank,
                 });
@@ -179,8 +167,9 @@ impl TeamCore {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::messages::StateMsg;
+    use crate::messages::{StateMsg, StopReason};
     use crate::team_core::TeamConfig;
+    use cdm_core::outcome::FaultKind;
     use cdm_core::scenario::Scenario;
 
     fn ms(t: u64) -> Duration {

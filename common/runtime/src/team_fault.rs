@@ -33,8 +33,15 @@ impl TickClock {
 /// `t_s` of the common time line (real time).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum InterruptedAt {
+    /// Before the start: while the team was created or joined.
+    BeforeStart,
+    /// While the members armed their vehicles (`--arm`).
+    Arming,
     Tick(u64),
-    Instant { index: u64, t_s: f64 },
+    Instant {
+        index: u64,
+        t_s: f64,
+    },
 }
 
 /// A fault the team stops on.
@@ -80,6 +87,18 @@ pub enum TeamFault {
     Exited { id: u32, how: String, tick: u64 },
     /// SIGINT, SIGTERM, SIGHUP or SIGQUIT (`signal` names it).
     Interrupted { signal: String, at: InterruptedAt },
+    /// The repair after losing member `id` did not connect within `timeout`: the links
+    /// (reader, writer) `missing` never joined; found with tick `tick` next.
+    RepairUnlinked {
+        id: u32,
+        missing: Vec<(u32, u32)>,
+        timeout: Duration,
+        tick: u64,
+    },
+    /// Member `id` was lost after tick `from - 1` under `--on-loss stop`.
+    LostStop { id: u32, from: u64 },
+    /// Members `waiting` (ascending) did not report their vehicle armed within `within`.
+    NotArmed { waiting: Vec<u32>, within: Duration },
 }
 
 impl TeamFault {
@@ -90,8 +109,11 @@ impl TeamFault {
             TeamFault::NonFinite { .. } => FaultKind::NonFiniteState,
             TeamFault::NeighborStale { .. }
             | TeamFault::Silent { .. }
-            | TeamFault::Stale { .. } => FaultKind::AgentSilent,
+            | TeamFault::Stale { .. }
+            | TeamFault::RepairUnlinked { .. } => FaultKind::AgentSilent,
             TeamFault::Exited { .. } => FaultKind::AgentExited,
+            TeamFault::LostStop { .. } => FaultKind::Lost,
+            TeamFault::NotArmed { .. } => FaultKind::VehicleLost,
             TeamFault::Interrupted { .. } => FaultKind::Interrupted,
         }
     }
@@ -101,7 +123,9 @@ impl TeamFault {
         match self {
             TeamFault::NeighborStale { .. }
             | TeamFault::Silent { .. }
-            | TeamFault::Stale { .. } => StopReason::AgentSilent,
+            | TeamFault::Stale { .. }
+            | TeamFault::RepairUnlinked { .. }
+            | TeamFault::NotArmed { .. } => StopReason::AgentSilent,
             TeamFault::Interrupted { .. } => StopReason::Interrupted,
             _ => StopReason::AgentFault,
         }
@@ -123,7 +147,11 @@ impl TeamFault {
             } => (missing.first().copied(), None, tick),
             TeamFault::Stale { id, index, .. } => (Some(id), None, index),
             TeamFault::Exited { id, tick, .. } => (Some(id), None, tick),
+            TeamFault::RepairUnlinked { id, tick, .. } => (Some(id), None, tick),
+            TeamFault::LostStop { id, from } => (Some(id), None, from),
+            TeamFault::NotArmed { ref waiting, .. } => (waiting.first().copied(), None, 0),
             TeamFault::Interrupted { at, .. } => match at {
+                InterruptedAt::BeforeStart | InterruptedAt::Arming => (None, None, 0),
                 InterruptedAt::Tick(tick) => (None, None, tick),
                 InterruptedAt::Instant { index, .. } => (None, None, index),
             },
@@ -188,11 +216,36 @@ impl fmt::Display for TeamFault {
             ),
             TeamFault::Exited { id, how, tick } => write!(f, "agent {id} {how} at tick {tick}"),
             TeamFault::Interrupted { signal, at } => match at {
+                InterruptedAt::BeforeStart => write!(f, "interrupted by {signal} before the start"),
+                InterruptedAt::Arming => write!(f, "interrupted by {signal} while arming"),
                 InterruptedAt::Tick(tick) => write!(f, "interrupted by {signal} at tick {tick}"),
                 InterruptedAt::Instant { t_s, .. } => {
                     write!(f, "interrupted by {signal} at t = {t_s:.3} s")
                 }
             },
+            TeamFault::RepairUnlinked {
+                id,
+                missing,
+                timeout,
+                ..
+            } => write!(
+                f,
+                "the repair after losing agent {id} did not connect within {timeout:?}: links (reader, writer) {missing:?} missing"
+            ),
+            TeamFault::NotArmed { waiting, within } => {
+                let ids: Vec<String> = waiting.iter().map(u32::to_string).collect();
+                write!(
+                    f,
+                    "agents {} did not report their vehicle armed within {} s (--join-timeout)",
+                    ids.join(", "),
+                    within.as_secs_f64()
+                )
+            }
+            TeamFault::LostStop { id, from } => write!(
+                f,
+                "agent(s) [{id}] lost after tick {} (--on-loss stop)",
+                from.saturating_sub(1)
+            ),
         }
     }
 }
@@ -342,5 +395,42 @@ mod tests {
             tick: 6,
         };
         assert_eq!(ex.to_string(), "agent 1 exited with code 3 at tick 6");
+        assert_eq!(
+            int(InterruptedAt::BeforeStart).to_string(),
+            "interrupted by SIGINT before the start"
+        );
+        assert_eq!(
+            int(InterruptedAt::Arming).to_string(),
+            "interrupted by SIGINT while arming"
+        );
+        let unarmed = TeamFault::NotArmed {
+            waiting: vec![3, 7],
+            within: Duration::from_secs(30),
+        };
+        assert_eq!(
+            unarmed.to_string(),
+            "agents 3, 7 did not report their vehicle armed within 30 s (--join-timeout)"
+        );
+        assert_eq!(
+            (unarmed.kind(), unarmed.reason(), unarmed.record().agent),
+            (FaultKind::VehicleLost, StopReason::AgentSilent, Some(3))
+        );
+        let unlinked = TeamFault::RepairUnlinked {
+            id: 20,
+            missing: vec![(21, 4)],
+            timeout: Duration::from_secs(5),
+            tick: 9,
+        };
+        assert_eq!(
+            unlinked.to_string(),
+            "the repair after losing agent 20 did not connect within 5s: links (reader, writer) [(21, 4)] missing"
+        );
+        assert_eq!(unlinked.stop().1, StopReason::AgentSilent);
+        let lost = TeamFault::LostStop { id: 20, from: 6 };
+        assert_eq!(
+            lost.to_string(),
+            "agent(s) [20] lost after tick 5 (--on-loss stop)"
+        );
+        assert_eq!((lost.kind(), lost.record().tick), (FaultKind::Lost, 6));
     }
 }
