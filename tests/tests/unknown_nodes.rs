@@ -20,10 +20,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use cdm_iox::ids::{born_s, id_pid, id_seconds, monotonic_s};
 use cdm_iox::{iox2_location, TeamName};
 use iceoryx2::prelude::*;
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
-use support::iox_ids::{born_s, id_pid, id_seconds, monotonic_s};
 use support::*;
 
 /// Each step takes a second or two; the rest is slack for a loaded machine.

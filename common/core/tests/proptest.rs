@@ -10,8 +10,7 @@
 //! Case counts keep the file to a few seconds in release; a watchdog ends the process if a test
 //! hangs. How to run: `cargo test --release -p cdm-core --test proptest`.
 
-mod support;
-use support::Watchdog;
+use cdm_test_support::Watchdog;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;

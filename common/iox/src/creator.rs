@@ -4,11 +4,8 @@
 /// True when every 128-bit id in `name` was minted by a process that no longer exists (and
 /// there is at least one).
 pub(super) fn creator_is_dead(name: &str) -> bool {
-    let mut pids = name
-        .split(|c: char| !c.is_ascii_digit())
-        .filter(|run| run.len() >= 20)
-        .filter_map(|run| run.parse::<u128>().ok())
-        .map(|id| (id >> 64) as u32 as libc::pid_t)
+    let mut pids = crate::ids::ids_in(name)
+        .map(|id| crate::ids::id_pid(id) as libc::pid_t)
         .peekable();
     pids.peek().is_some()
         && pids.all(|pid| {

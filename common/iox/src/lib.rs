@@ -89,6 +89,7 @@ pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
 pub use team::{scenario_hash_value, RepairRoom, TeamLayout, TeamName, SCENARIO_HASH_KEY};
 pub mod bench_barrier;
+pub mod ids;
 pub use wire::{
     ClockWire, StateBatch, StateBatchWire, StateWire, Wire, CLOCK_TYPE_NAME, STATES_PER_SAMPLE,
     STATE_BATCH_TYPE_NAME, STATE_TYPE_NAME,

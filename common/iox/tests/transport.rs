@@ -7,13 +7,8 @@
 //! How to run (the throughput line is printed, never asserted):
 //! `cargo test --release -p cdm-iox --test transport -- --nocapture`
 
-// The facade's tests and these share one watchdog.
-#[path = "../../core/tests/support/mod.rs"]
-mod support;
-use support::Watchdog;
-#[path = "../../core/tests/support/iox_ids.rs"]
-mod iox_ids;
-use iox_ids::{id_pid, id_seconds, ids_in, monotonic_s};
+use cdm_iox::ids::{id_pid, id_seconds, ids_in, monotonic_s};
+use cdm_test_support::Watchdog;
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
@@ -481,7 +476,7 @@ fn nothing_of_a_team_is_left_after_drop() {
     let me = iceoryx2_pid();
     let t = team(6);
     // Nothing of this process's earlier tests either (minted since it was born).
-    let born = iox_ids::born_s(std::process::id()).expect("this process is alive");
+    let born = cdm_iox::ids::born_s(std::process::id()).expect("this process is alive");
     assert_eq!(
         leftovers(&t, &[me], born),
         Vec::<String>::new(),

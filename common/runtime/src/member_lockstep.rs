@@ -375,5 +375,4 @@ impl<C: TickClock> Lockstep<C> {
 }
 
 #[cfg(test)]
-#[path = "member_core_tests.rs"]
 mod tests;

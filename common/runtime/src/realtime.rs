@@ -433,5 +433,4 @@ fn hear(slot: &mut Option<(u64, Flat)>, tick: u64, flat: Flat) {
 }
 
 #[cfg(test)]
-#[path = "realtime_tests.rs"]
 mod tests;

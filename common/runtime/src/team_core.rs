@@ -3,7 +3,7 @@
 //! clock the caller drives), actions out (grant up to tick g, a complete tick to audit and
 //! write, check the processes, poll again, wait, finish, stop with a fault). The loop around it
 //! (`common/launch/src/launch.rs`) owns the iceoryx2 ports, the processes and the files, and
-//! nothing else: every decision below is unit-tested with a fake clock (`team_core_tests.rs`).
+//! nothing else: every decision below is unit-tested with a fake clock (`team_core/core_tests.rs`).
 //!
 //! What it decides: the grant window (members run up to `window` ticks ahead of the last tick
 //! completely received), which ticks are complete (one slot per tick and member), which fault
@@ -130,7 +130,7 @@ pub struct TeamCore {
     losses: Option<LossEvents>,
 }
 
-/// The losses of a run as the team core handles them (`team_core_loss.rs`).
+/// The losses of a run as the team core handles them (`team_core/loss_events.rs`).
 #[derive(Debug)]
 struct LossEvents {
     book: TeamLosses,
@@ -436,11 +436,9 @@ pub fn next_grant(complete: u64, grant: u64, window: u64, last: u64) -> Option<u
     (want > grant && (want >= grant + step || want == last)).then_some(want)
 }
 
-#[path = "team_core_loss.rs"]
 mod loss_events;
 
 #[cfg(test)]
-#[path = "team_core_tests.rs"]
 mod core_tests;
 
 #[cfg(test)]

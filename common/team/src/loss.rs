@@ -1,5 +1,5 @@
 //! `launch` losing members: the I/O pieces around the team core's loss decisions
-//! (`cdm_runtime::team_core`, `team_core_loss.rs`): the scripted kills of `--lose`, killing and
+//! (`cdm_runtime::team_core`, `team_core/loss_events.rs`): the scripted kills of `--lose`, killing and
 //! reaping a member, and the room the services keep for repairs.
 
 use std::collections::{BTreeMap, BTreeSet};

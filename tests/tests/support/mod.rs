@@ -381,9 +381,7 @@ pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
     out
 }
 
-#[path = "../../../common/core/tests/support/iox_ids.rs"]
-pub mod iox_ids;
-use iox_ids::{born_s, id_pid, id_seconds, ids_in};
+use cdm_iox::ids::{born_s, id_pid, id_seconds, ids_in};
 
 /// A team's processes and services, recorded while it runs, to find what it leaves behind.
 pub struct Footprint {

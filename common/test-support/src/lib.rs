@@ -1,4 +1,5 @@
-//! Shared by the integration tests of `common` and `cdm-iox`.
+//! Test-only helpers shared by the integration tests of cdm-core and cdm-iox (a dev-dependency
+//! only: nothing ships with it).
 
 use std::sync::mpsc;
 use std::thread;
