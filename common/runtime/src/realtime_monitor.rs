@@ -21,7 +21,7 @@ const RING_SLACK: usize = 8;
 
 /// What a message told the monitor.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Heard {
+pub enum MonitorEvent {
     /// A state, a pacing report, or nothing of interest.
     Nothing,
     /// A member reported a fault at its tick `tick` (`peer`: the member it is about).
@@ -95,22 +95,22 @@ impl MonitorCore {
     }
 
     /// A message from a member's state service.
-    pub fn on_state(&mut self, msg: &StateMsg) -> Heard {
+    pub fn on_state(&mut self, msg: &StateMsg) -> MonitorEvent {
         let Some(k) = self.index.get(msg.id) else {
-            return Heard::Nothing;
+            return MonitorEvent::Nothing;
         };
         if msg.scenario_hash != self.hash {
-            return Heard::Nothing;
+            return MonitorEvent::Nothing;
         }
         let stopped = self.stopped;
         let m = &mut self.members[k];
         if let Some(p) = Pacing::from_msg(msg) {
             m.pacing = Some(p);
             m.final_report |= stopped;
-            return Heard::Nothing;
+            return MonitorEvent::Nothing;
         }
         if let AgentStatus::Fault { code, peer } = msg.status() {
-            return Heard::Fault {
+            return MonitorEvent::Fault {
                 id: msg.id,
                 tick: msg.tick,
                 code,
@@ -118,7 +118,7 @@ impl MonitorCore {
             };
         }
         if msg.state.iter().any(|v| !v.is_finite()) {
-            return Heard::NonFinite {
+            return MonitorEvent::NonFinite {
                 id: msg.id,
                 tick: msg.tick,
             };
@@ -129,7 +129,7 @@ impl MonitorCore {
             }
             m.states.push_back((msg.tick, msg.state));
         }
-        Heard::Nothing
+        MonitorEvent::Nothing
     }
 
     /// Member `id`'s index in the formation.

@@ -13,7 +13,7 @@
 use std::time::Duration;
 
 use crate::messages::{FaultCode, StateMsg};
-use crate::realtime_monitor::{Heard, MonitorCore};
+use crate::realtime_monitor::{MonitorCore, MonitorEvent};
 use crate::team_core::{Stop, EXIT_CHECK};
 use crate::team_fault::{FaultRank, InterruptedAt, TeamFault, TickClock};
 
@@ -136,8 +136,8 @@ impl RealtimeTeam {
     /// when it names the root cause better than the one kept so far.
     pub fn on_state(&mut self, msg: &StateMsg) {
         let (rank, fault) = match self.book.on_state(msg) {
-            Heard::Nothing => return,
-            Heard::Fault {
+            MonitorEvent::Nothing => return,
+            MonitorEvent::Fault {
                 id,
                 tick,
                 code,
@@ -149,7 +149,7 @@ impl RealtimeTeam {
                     self.reported(id, tick, code, peer),
                 )
             }
-            Heard::NonFinite { id, tick } => {
+            MonitorEvent::NonFinite { id, tick } => {
                 let clock = TickClock::Own;
                 (
                     FaultRank::found(tick),

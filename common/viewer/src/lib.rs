@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use cdm_core::scenario::{Checks, Scenario};
 
 use cdm_report::data::{read_audit, read_timeline, stream_ticks, ReadError};
-use scene::{frame_stride, FrameMaker, Scene};
+use scene::{frame_stride, Scene, ShownTickMaker};
 
 pub use serve::serve_page;
 
@@ -59,7 +59,7 @@ pub fn replay_scene(dir: &Path) -> Result<Scene, ViewerError> {
     scene.violations = timeline.violations;
     let n = scenario.formation.members.len();
     scene.stride = frame_stride(timeline.ticks.max(1), n, REPLAY_BUDGET_BYTES);
-    let maker = FrameMaker::new(&scenario, scene.half_height_m);
+    let maker = ShownTickMaker::new(&scenario, scene.half_height_m);
     let mut seen = 0u64;
     let mut last = None;
     stream_ticks(dir, &scenario, &numbers.losses, |tp| {

@@ -9,7 +9,7 @@ use cdm_core::audit::{AuditReport, SafetyNumbers};
 use cdm_core::math::Vec3;
 use cdm_core::scenario::Scenario;
 
-use super::scene::{FrameMaker, Scene};
+use super::scene::{Scene, ShownTickMaker};
 use super::serve::{serve_page, Hub, ServeError, Server};
 use cdm_report::data::TickPositions;
 
@@ -21,7 +21,7 @@ pub struct LiveView {
     hub: Arc<Hub>,
     server: Server,
     scenario: Scenario,
-    maker: FrameMaker,
+    maker: ShownTickMaker,
     interval: Duration,
     last_sent: Option<(Instant, u64)>,
 }
@@ -37,7 +37,7 @@ impl LiveView {
             hub,
             server,
             scenario: scenario.clone(),
-            maker: FrameMaker::new(scenario, n.delta_m + n.eps_m),
+            maker: ShownTickMaker::new(scenario, n.delta_m + n.eps_m),
             interval: Duration::from_secs(1) / FRAMES_PER_S,
             last_sent: None,
         })

@@ -1,5 +1,5 @@
 //! What the viewer draws, as plain data: the team's static description ([`Scene`]) and one
-//! [`Frame`] per shown tick with the four margins of the live audit. Pure: no I/O, the same code
+//! [`ShownTick`] per shown tick with the four margins of the live audit. Pure: no I/O, the same code
 //! feeds `replay.html` and the live `--serve` stream.
 
 use serde::Serialize;
@@ -39,7 +39,7 @@ pub struct Scene {
     pub verdict: String,
     pub violations: Vec<ViolationMark>,
     /// Replay only (empty live: frames arrive as events).
-    pub frames: Vec<Frame>,
+    pub frames: Vec<ShownTick>,
     /// How many ticks one replay frame stands for (1 live).
     pub stride: u64,
     /// The graph after each loss's repair, from the tick it applies (replay of a run with losses).
@@ -56,7 +56,7 @@ pub struct GraphChange {
 
 /// One shown tick.
 #[derive(Debug, Clone, Serialize)]
-pub struct Frame {
+pub struct ShownTick {
     pub tick: u64,
     pub t: Real,
     /// Positions in millimetres, x y z per member (integers keep replay.html small).
@@ -157,17 +157,17 @@ impl Scene {
 }
 
 /// Computes frames for one scenario (keeps the follower list between ticks).
-pub struct FrameMaker {
+pub struct ShownTickMaker {
     followers: Vec<usize>,
     half_height_m: Real,
 }
 
-impl FrameMaker {
+impl ShownTickMaker {
     pub fn new(scenario: &Scenario, half_height_m: Real) -> Self {
         let followers = (0..scenario.formation.members.len())
             .filter(|&k| scenario.formation.members[k].role == Role::Follower)
             .collect();
-        FrameMaker {
+        ShownTickMaker {
             followers,
             half_height_m,
         }
@@ -175,7 +175,7 @@ impl FrameMaker {
 
     /// The frame of one tick from actual (`pos`) and desired (`ht`) positions in member order;
     /// only living members (`alive`) count for deviation, separation and containment.
-    pub fn frame(&self, s: &Scenario, tp: &TickPositions<'_>) -> Frame {
+    pub fn frame(&self, s: &Scenario, tp: &TickPositions<'_>) -> ShownTick {
         let (tick, t, pos, ht, alive) = (tp.tick, tp.t_s, tp.pos, tp.ht, tp.alive);
         let dev = self
             .followers
@@ -183,7 +183,7 @@ impl FrameMaker {
             .filter(|&&k| alive[k])
             .map(|&k| (pos[k] - ht[k]).norm())
             .fold(0.0, Real::max);
-        Frame {
+        ShownTick {
             tick,
             t,
             p: pos

@@ -9,7 +9,7 @@ use cdm_core::math::{vec3, Vec2};
 use super::*;
 use crate::member_core::Finished;
 use crate::messages::{AgentStatus, StopReason, STATUS_FAULT};
-use crate::realtime_monitor::{Heard, MonitorCore, RunFigures};
+use crate::realtime_monitor::{MonitorCore, MonitorEvent, RunFigures};
 use crate::seams::VehicleFault;
 use cdm_core::step::StepFault;
 
@@ -345,7 +345,10 @@ fn the_monitor_brings_newest_states_to_its_instants() {
     let mut x = [0.0; 12];
     x[3] = 2.0;
     x[6] = 9.81;
-    assert_eq!(m.on_state(&StateMsg::ok(10, HASH, 1, x)), Heard::Nothing);
+    assert_eq!(
+        m.on_state(&StateMsg::ok(10, HASH, 1, x)),
+        MonitorEvent::Nothing
+    );
     let (r, v) = m.state_at(0, 0.15);
     assert!(
         (r.x - 0.1).abs() < 1e-12 && (v.x - 2.0).abs() < 1e-12,
@@ -404,7 +407,7 @@ fn the_monitor_names_the_stalest_member_and_passes_on_fault_reports() {
     });
     assert_eq!(
         m.on_state(&report),
-        Heard::Fault {
+        MonitorEvent::Fault {
             id: 2,
             tick: 41,
             code: FaultCode::NeighborSilent,
@@ -413,7 +416,10 @@ fn the_monitor_names_the_stalest_member_and_passes_on_fault_reports() {
     );
     let mut nan = state(1, 101);
     nan.state[0] = f64::NAN;
-    assert_eq!(m.on_state(&nan), Heard::NonFinite { id: 1, tick: 101 });
+    assert_eq!(
+        m.on_state(&nan),
+        MonitorEvent::NonFinite { id: 1, tick: 101 }
+    );
 }
 
 #[test]
