@@ -579,6 +579,40 @@ impl Drop for Running {
     }
 }
 
+// The one launch builder of the integration tests: every test that starts `orchestrator launch`
+// starts it from here (and adds its own flags), so a flag every launch needs is added once.
+
+/// `orchestrator launch SOURCE --team TEAM --out OUT --quiet`.
+pub fn launch(team: &str, out: &Path, source: &[&str]) -> Command {
+    let mut c = launch_loud(team, out, source);
+    c.arg("--quiet");
+    c
+}
+
+/// `orchestrator launch SOURCE --team TEAM --out OUT`, for a test that reads what `launch`
+/// prints (the command lines of a `--no-spawn` team, the summary).
+pub fn launch_loud(team: &str, out: &Path, source: &[&str]) -> Command {
+    let mut c = Command::new(bin("orchestrator"));
+    c.arg("launch")
+        .args(source)
+        .arg("--team")
+        .arg(team)
+        .arg("--out")
+        .arg(out);
+    c
+}
+
+/// `orchestrator simulate SOURCE --out OUT --quiet`.
+pub fn simulate(out: &Path, source: &[&str]) -> Command {
+    let mut c = Command::new(bin("orchestrator"));
+    c.arg("simulate")
+        .args(source)
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet");
+    c
+}
+
 /// A readable account of a finished process (exit status, stdout, stderr) for assertion
 /// messages.
 pub fn describe(out: &Output) -> String {

@@ -305,13 +305,9 @@ fn launch_audits_live_and_stops_at_the_first_violation() {
     assert_exit(&simulate(&scenario, &sim, &["--stop-on-violation"]), 1);
     let launched = dir.path().join("launched");
     let team = unique_team("audit-stop");
-    let mut c = orchestrator(&["launch", "--quiet", "--no-figures", "--stop-on-violation"]);
-    c.arg("--scenario")
-        .arg(&scenario)
-        .arg("--out")
-        .arg(&launched)
-        .arg("--team")
-        .arg(&team);
+    let source = ["--scenario", scenario.to_str().unwrap_or_default()];
+    let mut c = integration_tests::launch(&team, &launched, &source);
+    c.args(["--no-figures", "--stop-on-violation"]);
     let out = run(&mut c, DEADLINE);
     assert_exit(&out, 1);
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), "UNSAFE");

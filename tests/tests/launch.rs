@@ -303,21 +303,9 @@ fn a_hand_started_team_refuses_wrong_members_and_flies_with_the_right_ones() {
     let other = write_scenario(dir.path(), "other.toml", &file);
 
     let run_dir = dir.path().join("run");
-    let mut orch = spawn(
-        Command::new(bin("orchestrator"))
-            .arg("launch")
-            .arg("--scenario")
-            .arg(&scenario)
-            .args([
-                "--team",
-                &team,
-                "--no-spawn",
-                "--join-timeout",
-                "60",
-                "--out",
-            ])
-            .arg(&run_dir),
-    );
+    let source = ["--scenario", scenario.to_str().unwrap_or_default()];
+    let mut orch =
+        spawn(launch_loud(&team, &run_dir, &source).args(["--no-spawn", "--join-timeout", "60"]));
     orch.wait_for_output("waits for 10 processes", SMALL_DEADLINE);
 
     let follower = file

@@ -116,13 +116,10 @@ fn hand_started_members_need_the_same_links() {
 
     let run_dir = dir.path().join("run");
     let mut orch = spawn(
-        Command::new(bin("orchestrator"))
-            .args(["launch", "--scenario", path, "--team", &team, "--no-spawn"])
-            .args(["--join-timeout", "60"])
+        launch_loud(&team, &run_dir, &["--scenario", path])
+            .args(["--no-spawn", "--join-timeout", "60"])
             .args(limits)
-            .args(IMPAIRED)
-            .arg("--out")
-            .arg(&run_dir),
+            .args(IMPAIRED),
     );
     orch.wait_for_output("waits for 10 processes", DEADLINE);
 

@@ -9,7 +9,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use cdm_core::math::{vec3, Vec3};
-use integration_tests::{bin, describe, run, spawn, unique_team, venv_python, TempDir};
+use integration_tests::{describe, run, spawn, unique_team, venv_python, TempDir};
 
 /// A Python start-up and one query.
 const PYTHON_DEADLINE: Duration = integration_tests::deadline::SHORT;
@@ -106,12 +106,7 @@ fn watch_py_reads_a_live_team_like_the_audit() {
     let tmp = TempDir::new();
     let out = tmp.path().join("run");
     let team = unique_team("watch");
-    let orch = spawn(Command::new(bin("orchestrator")).args([
-        "launch",
-        "--team",
-        &team,
-        "--out",
-        out.to_str().unwrap_or_default(),
+    let orch = spawn(integration_tests::launch_loud(&team, &out, &[]).args([
         "--no-figures",
         "--t-total",
         "1000",

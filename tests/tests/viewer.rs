@@ -271,17 +271,11 @@ fn a_live_launch_is_served_and_its_tick_advances() {
     let tmp = TempDir::new();
     let out = tmp.path().join("live");
     let team = unique_team("viewer");
-    let o = out.to_str().unwrap_or_default();
     // 1,000,001 ticks (about a minute here, telemetry every 1000th): the team is sure to be
     // flying while Chromium, slow to start on a loaded machine, looks at it twice; then SIGINT
     // lands it. (A plan of 100,001 ticks could end before the first look, and the page then
     // showed one final tick: a flaky "the tick advances".)
-    let mut orch = spawn(&mut orchestrator(&[
-        "launch",
-        "--team",
-        &team,
-        "--out",
-        o,
+    let mut orch = spawn(integration_tests::launch_loud(&team, &out, &[]).args([
         "--no-figures",
         "--t-total",
         "10000",
@@ -374,7 +368,7 @@ fn bad_serve_addresses_and_run_directories_are_refused() {
         .to_string();
     let team = unique_team("busyport");
     let busy = run(
-        &mut orchestrator(&["launch", "--team", &team, "--out", o, "--serve", &addr]),
+        integration_tests::launch_loud(&team, &out, &[]).args(["--serve", &addr]),
         RUN_DEADLINE,
     );
     assert_eq!(busy.status.code(), Some(2), "{}", describe(&busy));

@@ -18,36 +18,8 @@ use serde_json::Value;
 /// How long a team may take to start and write its first ticks.
 pub const PROGRESS_DEADLINE: Duration = integration_tests::deadline::SHORT;
 
-/// `orchestrator launch SOURCE --team TEAM --out OUT --quiet`.
-pub fn launch(team: &str, out: &Path, source: &[&str]) -> Command {
-    let mut c = launch_loud(team, out, source);
-    c.arg("--quiet");
-    c
-}
-
-/// `orchestrator launch SOURCE --team TEAM --out OUT`, for a test that reads what `launch`
-/// prints (the command lines of a `--no-spawn` team, the summary).
-pub fn launch_loud(team: &str, out: &Path, source: &[&str]) -> Command {
-    let mut c = Command::new(bin("orchestrator"));
-    c.arg("launch")
-        .args(source)
-        .arg("--team")
-        .arg(team)
-        .arg("--out")
-        .arg(out);
-    c
-}
-
-/// `orchestrator simulate SOURCE --out OUT --quiet`.
-pub fn simulate(out: &Path, source: &[&str]) -> Command {
-    let mut c = Command::new(bin("orchestrator"));
-    c.arg("simulate")
-        .args(source)
-        .arg("--out")
-        .arg(out)
-        .arg("--quiet");
-    c
-}
+#[allow(unused_imports)] // each test file uses a different part
+pub use integration_tests::{launch, launch_loud, simulate};
 
 /// `leader` or `agent` (by `role`) joining `team` as `id` with `scenario`.
 pub fn member(binary: &str, scenario: &Path, team: &str, id: u32) -> Command {
