@@ -436,6 +436,132 @@ fn launch_refuses_a_non_empty_out_unless_forced() {
     assert_no_team_resources(&team);
 }
 
+/// An export never overwrites: a file at a Skybrush export's --out, or a non-empty directory at
+/// a Crazyswarm2 export's, is refused with exit 2 and left as it was, unless --force; an empty
+/// directory is used.
+#[test]
+fn export_refuses_an_existing_out_unless_forced() {
+    let dir = TempDir::new();
+    let show = dir.path().join("show.skyc");
+    std::fs::write(&show, "an unrelated file\n").expect("write");
+    let show_s = show.to_str().expect("UTF-8 path");
+    let sky = [
+        "export", "skybrush", "--n", "10", "--scale", "0.05", "--out", show_s,
+    ];
+    refused_cmd(
+        &mut command("orchestrator", &sky),
+        &[&format!(
+            "--out {show_s}: exists (use --force to overwrite)"
+        )],
+    );
+    assert_eq!(std::fs::read(&show).expect("show"), b"an unrelated file\n");
+    let cs = dir.path().join("cs");
+    std::fs::create_dir(&cs).expect("mkdir");
+    std::fs::write(cs.join("notes.txt"), "keep me\n").expect("write");
+    let before = contents(&cs);
+    let cs_s = cs.to_str().expect("UTF-8 path");
+    let crazy = [
+        "export",
+        "crazyswarm2",
+        "--n",
+        "10",
+        "--scale",
+        "0.05",
+        "--out",
+        cs_s,
+    ];
+    refused_cmd(
+        &mut command("orchestrator", &crazy),
+        &[&format!(
+            "--out {cs_s}: exists and is not empty (use --force to overwrite)"
+        )],
+    );
+    assert_eq!(contents(&cs), before, "the refused export changed {cs_s}");
+    let mut forced = sky.to_vec();
+    forced.extend(["--force", "--quiet"]);
+    let o = run(&mut command("orchestrator", &forced), PLAN_DEADLINE);
+    assert_exit(&o, 0, "export skybrush --force");
+    let zip = std::fs::read(&show).expect("the forced show");
+    assert!(zip.starts_with(b"PK"), "--force wrote a .skyc (a ZIP)");
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).expect("mkdir");
+    let into_empty = [
+        "export",
+        "crazyswarm2",
+        "--n",
+        "10",
+        "--scale",
+        "0.05",
+        "--quiet",
+        "--out",
+    ];
+    let o = run(
+        command("orchestrator", &into_empty).arg(&empty),
+        PLAN_DEADLINE,
+    );
+    assert_exit(&o, 0, "export crazyswarm2 into an empty directory");
+}
+
+/// Scales that no vehicle flies (and that lose the digits the certificate needs) are refused
+/// naming the range, not blamed on the formation.
+#[test]
+fn export_scales_out_of_range_are_refused_naming_the_limit() {
+    let dir = TempDir::new();
+    for scale in ["1e300", "1e-9"] {
+        let out = dir.path().join(format!("s{scale}.skyc"));
+        let o = refused_cmd(
+            command(
+                "orchestrator",
+                &["export", "skybrush", "--n", "10", "--scale", scale],
+            )
+            .arg("--out")
+            .arg(&out),
+            &["is out of range", "[1e-4, 1e4]"],
+        );
+        assert!(
+            !String::from_utf8_lossy(&o.stderr).contains("collinear"),
+            "{}",
+            describe(&o)
+        );
+        assert!(!out.exists(), "a refused export wrote {}", out.display());
+    }
+}
+
+/// Scripted losses the runtime cannot fly as asked are refused up front, the same in every
+/// mode: losing every member (nobody left to fly; simulate called it SAFE while the processes
+/// stopped on "no state"), and --lose in real time (which repairs no loss).
+#[test]
+fn scripted_losses_that_cannot_be_flown_are_refused() {
+    let dir = TempDir::new();
+    let every: Vec<String> = (1..=10).map(|id| format!("{id}@10")).collect();
+    for cmd in ["simulate", "launch"] {
+        let out = dir.path().join(format!("{cmd}-all"));
+        let mut args = vec![cmd, "--n", "10", "--t-total", "30", "--quiet", "--out"];
+        args.push(out.to_str().expect("UTF-8 path"));
+        for l in &every {
+            args.extend(["--lose", l]);
+        }
+        refused(
+            "orchestrator",
+            &args,
+            &["--lose names all 10 agents of the team: nobody would be left to fly the plan"],
+        );
+        assert!(!out.join("audit.json").exists(), "{cmd} wrote an audit");
+    }
+    let team = unique_team("rtlose");
+    let out = dir.path().join("rt");
+    let o = refused_cmd(
+        integration_tests::launch(&team, &out, &["--n", "10"]).args([
+            "--realtime",
+            "--lose",
+            "8@5",
+        ]),
+        &["--lose is not available with --realtime"],
+    );
+    assert!(o.stdout.is_empty(), "{}", describe(&o));
+    assert_no_team_resources(&team);
+}
+
 /// An --out that cannot be created (under a regular file; in /proc) or written (a file in
 /// /proc's read-only tree): refused with exit 2 naming --out, nothing written, no shared memory
 /// left. (Tests run as root, where permission bits do not stop writes: these paths fail for

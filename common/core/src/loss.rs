@@ -47,6 +47,8 @@ pub enum LossError {
     OutOfFlight { id: u32, at_s: Real, end_s: Real },
     #[error("--lose {id}: given twice")]
     Twice { id: u32 },
+    #[error("--lose names all {agents} agents of the team: nobody would be left to fly the plan")]
+    Everyone { agents: usize },
 }
 
 impl std::str::FromStr for ScriptedLoss {
@@ -95,6 +97,11 @@ impl LossSchedule {
             // The first tick at or after at_s (a hair of tolerance for at_s = k dt in decimal).
             let last = ((l.at_s / dt) - 1e-6).ceil().max(0.0) as u64;
             events.push((last + 1, vec![l.id]));
+        }
+        // A team with no member left has no formation to audit (simulate called it SAFE, the
+        // processes stopped on "no state"): refused, the same in every mode.
+        if seen.len() == s.formation.members.len() {
+            return Err(LossError::Everyone { agents: seen.len() });
         }
         events.sort();
         let mut merged: Vec<(u64, Vec<u32>)> = Vec::new();

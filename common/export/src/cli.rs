@@ -55,7 +55,8 @@ pub struct ExportFrame {
         allow_negative_numbers = true
     )]
     pub eps: f64,
-    /// Write the files even when the certificate at the target scale is UNSAFE (exit 1 stays).
+    /// Write the files even when the certificate at the target scale is UNSAFE (exit 1 stays),
+    /// or when --out already exists (it is overwritten).
     #[arg(long)]
     pub force: bool,
 }

@@ -75,6 +75,7 @@ fn to_crazyswarm2(
     frame: &ExportFrame,
     quiet: bool,
 ) -> Result<Exit, Failure> {
+    refuse_existing(out, frame.force)?;
     let sc = scaled(source, frame)?;
     let split = crazyflie_split(&sc.trajs, DEFAULT_TOLERANCE_M)
         .map_err(|e| Failure::bad_input(CommandError::Split(e)))?;
@@ -119,6 +120,7 @@ fn to_skybrush(
     frame: &ExportFrame,
     quiet: bool,
 ) -> Result<Exit, Failure> {
+    refuse_existing(out, frame.force)?;
     let sc = scaled(source, frame)?;
     let count = skybrush_piece_count(sc.scenario.file.t_total_s);
     let cert = certify_quietly(&sc.scenario, quiet);
@@ -249,6 +251,26 @@ fn report(sc: &Scaled, record: &Record<'_>, quiet: bool) {
             "  the show is SAFE at this scale when it lasts at least T_threshold = {:.2} s (--t-total)",
             record.certificate.t_threshold_s
         );
+    }
+}
+
+/// An export never overwrites what is at `out` (a file, or a directory with anything in it: an
+/// unrelated file named like the show, an earlier export) unless `force`; an empty directory is
+/// used. Checked before the certificate is flown, so the refusal is immediate.
+fn refuse_existing(out: &Path, force: bool) -> Result<(), Failure> {
+    if force {
+        return Ok(());
+    }
+    let taken = match std::fs::read_dir(out) {
+        Ok(mut entries) => entries.next().map(|_| true),
+        Err(_) => out.symlink_metadata().is_ok().then_some(false),
+    };
+    match taken {
+        Some(dir) => Err(Failure::bad_input(CommandError::OutExists {
+            out: out.to_path_buf(),
+            dir,
+        })),
+        None => Ok(()),
     }
 }
 

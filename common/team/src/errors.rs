@@ -27,6 +27,10 @@ pub enum CommandError {
         #[source]
         source: std::io::Error,
     },
+    /// An export's `--out` already holds something (a file, or a directory that is not empty):
+    /// it is not overwritten unless `--force`.
+    #[error("--out {}: exists{} (use --force to overwrite)", out.display(), if *dir { " and is not empty" } else { "" })]
+    OutExists { out: PathBuf, dir: bool },
     /// The plan cannot be cut into pieces the target (a Crazyflie) holds.
     #[error("export crazyswarm2: {0}")]
     Split(#[source] SplitError),

@@ -13,11 +13,23 @@ pub struct TargetFrame {
     pub origin: Vec3,
 }
 
+/// The scales an export accepts: the paper's 300 m team from 3 cm (a tabletop) to 3,000 km.
+/// Beyond them no vehicle flies the show, and the scaled positions lose the digits that the
+/// float32 trajectories and the certificate need (1e300 printed a 300-digit scale, then blamed
+/// collinear leaders).
+pub const SCALE_RANGE: std::ops::RangeInclusive<Real> = 1e-4..=1e4;
+
 /// A target frame that cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FrameError {
     #[error("--scale must be a positive finite number, got {0}")]
     Scale(Real),
+    #[error(
+        "--scale {0:e} is out of range: it must lie in [{lo:e}, {hi:e}]",
+        lo = SCALE_RANGE.start(),
+        hi = SCALE_RANGE.end()
+    )]
+    ScaleRange(Real),
     #[error("--origin must be three finite numbers X,Y,Z in metres, got {0:?}")]
     Origin(String),
     #[error("--eps must be a positive finite radius in metres, got {0}")]
@@ -29,6 +41,9 @@ impl TargetFrame {
     pub fn new(scale: Real, origin: Vec3) -> Result<Self, FrameError> {
         if !(scale.is_finite() && scale > 0.0) {
             return Err(FrameError::Scale(scale));
+        }
+        if !SCALE_RANGE.contains(&scale) {
+            return Err(FrameError::ScaleRange(scale));
         }
         Ok(TargetFrame { scale, origin })
     }
