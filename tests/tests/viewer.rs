@@ -240,6 +240,81 @@ fn view_serves_the_replay_of_a_finished_run() {
     assert!(done.status.signal_or_code_known(), "{}", describe(&done));
 }
 
+/// A client that asks for the page and never reads it (a stalled browser, or someone on the
+/// port on purpose) holds only its own answer: every other client is served at once. Three such
+/// clients, each with a 4 KiB receive buffer against a page of MBs, are being answered (their
+/// first bytes read) before the fourth asks; it must get the whole page within the deadline.
+#[test]
+fn clients_that_never_read_do_not_block_the_others() {
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    use std::os::fd::AsRawFd;
+
+    let tmp = TempDir::new();
+    let (out, _) = paper40_run(&tmp, &[]);
+    let page = std::fs::metadata(out.join("replay.html")).map_or(0, |m| m.len()) as usize;
+    assert!(
+        page > 1 << 20,
+        "the page ({page} bytes) outgrows the sockets' buffers"
+    );
+    let o = out.to_str().unwrap_or_default();
+    let mut view = spawn(&mut orchestrator(&["view", o, "--serve", "127.0.0.1:0"]));
+    view.wait_for_output("serving http://", RUN_DEADLINE);
+    let url = served_url(&mut view, "serving ");
+    let addr = url
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_owned();
+    let get = b"GET / HTTP/1.1\r\nHost: viewer\r\nConnection: close\r\n\r\n";
+    let connect = || {
+        let s = TcpStream::connect(&addr).unwrap_or_else(|e| panic!("connect {addr}: {e}"));
+        s.set_read_timeout(Some(RUN_DEADLINE))
+            .unwrap_or_else(|e| panic!("{e}"));
+        s
+    };
+    let stalled: Vec<TcpStream> = (0..3)
+        .map(|k| {
+            let mut s = connect();
+            let small: libc::c_int = 4096;
+            // SAFETY: setsockopt(2) reads one c_int from a live local for a socket we own.
+            let rc = unsafe {
+                libc::setsockopt(
+                    s.as_raw_fd(),
+                    libc::SOL_SOCKET,
+                    libc::SO_RCVBUF,
+                    (&small as *const libc::c_int).cast(),
+                    std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+                )
+            };
+            assert_eq!(rc, 0, "SO_RCVBUF: {}", std::io::Error::last_os_error());
+            s.write_all(get).unwrap_or_else(|e| panic!("{e}"));
+            let mut head = [0u8; 12];
+            s.read_exact(&mut head)
+                .unwrap_or_else(|e| panic!("stalled client {k} got no answer: {e}"));
+            assert_eq!(&head, b"HTTP/1.1 200", "stalled client {k}");
+            s
+        })
+        .collect();
+    let mut other = connect();
+    other.write_all(get).unwrap_or_else(|e| panic!("{e}"));
+    let mut body = Vec::new();
+    if let Err(e) = other.read_to_end(&mut body) {
+        panic!(
+            "with {} clients not reading, another got {} of {page} bytes: {e}",
+            stalled.len(),
+            body.len()
+        );
+    }
+    assert!(
+        body.starts_with(b"HTTP/1.1 200") && body.len() > page,
+        "{} bytes",
+        body.len()
+    );
+    drop(stalled);
+    let done = view.kill();
+    assert!(done.status.signal_or_code_known(), "{}", describe(&done));
+}
+
 /// The `http://HOST:PORT/` the command printed after `prefix`.
 fn served_url(child: &mut Running, prefix: &str) -> String {
     let (stdout, _) = child.output_so_far();

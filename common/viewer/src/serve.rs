@@ -4,6 +4,7 @@
 //! the team its speed.
 
 use std::io::Write;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
@@ -11,6 +12,21 @@ use std::time::Duration;
 
 /// Frames a slow client may have queued before it loses the newest ones.
 const CLIENT_QUEUE: usize = 64;
+
+/// Requests answered at once, each on its own thread: a client that asks for the page (MBs for
+/// a long replay) and never reads blocks only its own thread's write, never another client's.
+/// Past this many, a request is answered 503 at once (a reply small enough for the socket's
+/// buffer, so even that never blocks the accepting thread).
+const MAX_RESPONDERS: usize = 64;
+
+/// Counts a responder thread while it lives (also when its handler panics).
+struct Responding(Arc<AtomicUsize>);
+
+impl Drop for Responding {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
 
 /// The server could not start.
 #[derive(Debug, thiserror::Error)]
@@ -118,8 +134,22 @@ pub fn serve_page(addr: &str, page: String, hub: Option<Arc<Hub>>) -> Result<Ser
         .name("viewer-http".into())
         .spawn(move || {
             // `incoming_requests` ends when the server is unblocked (on drop).
+            let busy = Arc::new(AtomicUsize::new(0));
             for request in accepting.incoming_requests() {
-                handle(request, &page, hub.as_ref());
+                if busy.fetch_add(1, Ordering::SeqCst) >= MAX_RESPONDERS {
+                    drop(Responding(busy.clone()));
+                    let _ = request.respond(tiny_http::Response::empty(503));
+                    continue;
+                }
+                let guard = Responding(busy.clone());
+                let (page, hub) = (page.clone(), hub.clone());
+                // A thread that cannot start drops the request (its connection closes).
+                let _ = std::thread::Builder::new()
+                    .name("viewer-respond".into())
+                    .spawn(move || {
+                        let _guard = guard;
+                        handle(request, &page, hub.as_ref());
+                    });
             }
         })
         .map_err(|e| ServeError::Bind {
@@ -150,13 +180,8 @@ fn handle(request: tiny_http::Request, page: &Arc<str>, hub: Option<&Arc<Hub>>) 
             let json = hub.lock().scene_json.clone();
             respond(request, json, "application/json")
         }
-        ("/events", Some(hub)) => {
-            let hub = hub.clone();
-            // One thread per stream: a slow browser only slows its own writes.
-            let _ = std::thread::Builder::new()
-                .name("viewer-sse".into())
-                .spawn(move || stream_events(request, &hub));
-        }
+        // On this request's own thread: a slow browser only slows its own writes.
+        ("/events", Some(hub)) => stream_events(request, hub),
         _ => {
             let _ = request.respond(tiny_http::Response::empty(404));
         }
