@@ -41,7 +41,7 @@ fn node_maker() {
     };
     let (team, until) = job.split_once(':').expect("<team>:<file>");
     let team = TeamName::new(team).expect("team name");
-    let name = team.node_name(cdm_iox::Role::Agent(0));
+    let name = team.node_name(cdm_iox::TeamProcess::Agent(0));
     let node = NodeBuilder::new()
         .name(&NodeName::new(&name).expect("node name"))
         .config(&cdm_iox::iceoryx2_config())

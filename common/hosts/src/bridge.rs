@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use cdm_core::audit::FaultRecord;
 use cdm_core::scenario::Scenario;
-use cdm_iox::{MemberPorts, OrchestratorPorts, Role, TeamName};
+use cdm_iox::{MemberPorts, OrchestratorPorts, TeamName, TeamProcess};
 use cdm_runtime::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, LossNotice, StateMsg};
 use cdm_team::out;
 use cdm_zenoh::{
@@ -22,7 +22,7 @@ use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
 use super::links::{Links, LostHost};
 use super::placed::placed;
 use super::repairs::{CrossRepairs, RepairStep};
-use super::{Flight, HostOptions};
+use super::{HostOptions, TeamFlight};
 use cdm_team::Failure;
 
 /// How often a quiet link says it is alive.
@@ -37,7 +37,7 @@ const VERDICT_WAIT: Duration = Duration::from_millis(600);
 struct Ctx {
     team: TeamName,
     hash: u64,
-    flight: Flight,
+    flight: TeamFlight,
     scenario_json: String,
     regions: Regions,
     ins: BTreeMap<u32, Vec<u32>>,
@@ -117,7 +117,7 @@ impl Bridge {
         team: &TeamName,
         regions: &Regions,
         h: &HostOptions,
-        flight: Flight,
+        flight: TeamFlight,
         quiet: bool,
     ) -> Result<Self, Failure> {
         let desk = net
@@ -225,9 +225,9 @@ impl Bridge {
         let team = ports.team();
         let writer_node = match l.remote_host(Some(writer)) {
             Some(h) => team.relay_node_name(h, writer),
-            None => team.node_name(Role::Agent(writer)),
+            None => team.node_name(TeamProcess::Agent(writer)),
         };
-        let reader_node = team.node_name(Role::Agent(reader));
+        let reader_node = team.node_name(TeamProcess::Agent(reader));
         let reads = ports
             .subscriber_nodes(writer)
             .is_ok_and(|n| n.contains(&reader_node));

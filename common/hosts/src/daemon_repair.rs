@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-use cdm_iox::{MemberPorts, OrchestratorPorts, Role, TeamName};
+use cdm_iox::{MemberPorts, OrchestratorPorts, TeamName, TeamProcess};
 use cdm_runtime::messages::ClockMsg;
 
 use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
@@ -111,9 +111,9 @@ impl DaemonRepairs {
     fn is_linked(&self, ports: &OrchestratorPorts, reader: u32, writer: u32) -> bool {
         let writer_node = match self.host_of.get(&writer) {
             Some(&h) if !self.mine.contains(&writer) => self.team.relay_node_name(h, writer),
-            _ => self.team.node_name(Role::Agent(writer)),
+            _ => self.team.node_name(TeamProcess::Agent(writer)),
         };
-        let reader_node = self.team.node_name(Role::Agent(reader));
+        let reader_node = self.team.node_name(TeamProcess::Agent(reader));
         ports
             .subscriber_nodes(writer)
             .is_ok_and(|n| n.contains(&reader_node))

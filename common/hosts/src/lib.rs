@@ -31,14 +31,14 @@ mod workdir;
 #[cfg(feature = "hosts")]
 pub use bridge::Bridge;
 #[cfg(feature = "hosts")]
-pub use plan::Plan;
+pub use plan::HostPlan;
 
 use std::time::Duration;
 
 /// How the team flies, as a daemon needs to know it to start its members.
 #[derive(Debug, Clone, Copy)]
 #[cfg_attr(not(feature = "hosts"), allow(dead_code))]
-pub struct Flight {
+pub struct TeamFlight {
     /// The clock window (ticks of states kept per subscriber).
     pub window: u32,
     /// `--realtime`: the members' `--stale-after`.
@@ -82,12 +82,12 @@ mod single {
     use cdm_team::Failure;
 
     /// Every member runs here.
-    pub struct Plan;
+    pub struct HostPlan;
 
     /// Never built: no bridge without the feature.
     pub struct Bridge;
 
-    impl Plan {
+    impl HostPlan {
         pub fn remote_groups(&self) -> Vec<Vec<u32>> {
             Vec::new()
         }
@@ -102,7 +102,7 @@ mod single {
                     "--hosts: this orchestrator was built without the `hosts` feature (zenoh)",
                 ));
             }
-            Ok(Plan)
+            Ok(HostPlan)
         }
         pub fn hide_remote_edges(&self, layout: TeamLayout) -> TeamLayout {
             layout
@@ -114,7 +114,7 @@ mod single {
             &self,
             _s: &Scenario,
             _team: &cdm_iox::TeamName,
-            _flight: super::Flight,
+            _flight: super::TeamFlight,
         ) -> Result<Option<Bridge>, Failure> {
             Ok(None)
         }
@@ -141,4 +141,4 @@ mod single {
     }
 }
 #[cfg(not(feature = "hosts"))]
-pub use single::{Bridge, Plan};
+pub use single::{Bridge, HostPlan};

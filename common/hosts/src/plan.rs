@@ -9,18 +9,18 @@ use cdm_zenoh::{Net, Placed, Regions};
 
 use super::bridge::Bridge;
 use super::placed::placed;
-use super::{Flight, HostOptions};
+use super::{HostOptions, TeamFlight};
 use cdm_team::Failure;
 
 /// The split of a team over its hosts (host 0 is this one).
-pub struct Plan {
+pub struct HostPlan {
     regions: Regions,
     placed: Vec<Placed>,
     options: HostOptions,
     quiet: bool,
 }
 
-impl Plan {
+impl HostPlan {
     /// Splits the team and says which ids went where (one line per host).
     pub fn new(
         s: &Scenario,
@@ -98,7 +98,7 @@ impl Plan {
         &self,
         s: &Scenario,
         team: &TeamName,
-        flight: Flight,
+        flight: TeamFlight,
     ) -> Result<Option<Bridge>, Failure> {
         let Some(endpoint) = self
             .options

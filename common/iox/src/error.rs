@@ -1,6 +1,6 @@
 //! The transport's errors: each names the team, the process and the service involved.
 
-use super::{Role, TeamName};
+use super::{TeamName, TeamProcess};
 
 /// Everything that can go wrong in the transport. Messages name the team, the process (`who`)
 /// and the service involved.
@@ -77,7 +77,7 @@ pub enum TransportError {
         /// The team.
         team: TeamName,
         /// The process that looked.
-        who: Role,
+        who: TeamProcess,
         /// The service that is missing.
         service: String,
     },
@@ -138,7 +138,7 @@ pub enum TransportError {
         /// The team.
         team: TeamName,
         /// The process.
-        who: Role,
+        who: TeamProcess,
         /// The node name.
         node: String,
         /// iceoryx2's error.
@@ -166,7 +166,7 @@ pub enum TransportError {
         /// The team.
         team: TeamName,
         /// The process.
-        who: Role,
+        who: TeamProcess,
         /// The service.
         service: String,
         /// What was attempted ("open service", "create publisher", "send", ...).
@@ -180,7 +180,7 @@ pub enum TransportError {
         /// The team.
         team: TeamName,
         /// The process.
-        who: Role,
+        who: TeamProcess,
         /// The event service waited on.
         service: String,
     },
@@ -239,7 +239,7 @@ pub enum TransportError {
         /// The team.
         team: TeamName,
         /// The process.
-        who: Role,
+        who: TeamProcess,
         /// The service (or node) being created.
         service: String,
         /// What was attempted.

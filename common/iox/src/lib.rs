@@ -129,18 +129,18 @@ const CLEANUP_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Which process of a team is talking (for error messages and node names).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Role {
+pub enum TeamProcess {
     /// The orchestrator.
     Orchestrator,
     /// The member with this id.
     Agent(u32),
 }
 
-impl fmt::Display for Role {
+impl fmt::Display for TeamProcess {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Role::Orchestrator => f.write_str("orchestrator"),
-            Role::Agent(id) => write!(f, "agent {id}"),
+            TeamProcess::Orchestrator => f.write_str("orchestrator"),
+            TeamProcess::Agent(id) => write!(f, "agent {id}"),
         }
     }
 }
@@ -213,14 +213,14 @@ pub fn iceoryx2_config() -> Config {
 }
 
 /// Creates the one node of a process.
-fn create_node(team: &TeamName, who: Role) -> Result<Node<ipc::Service>, TransportError> {
+fn create_node(team: &TeamName, who: TeamProcess) -> Result<Node<ipc::Service>, TransportError> {
     create_named_node(team, who, team.node_name(who))
 }
 
 /// Creates the node `name` for `who` (a bridge's relay nodes are named apart from the members').
 fn create_named_node(
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
     name: String,
 ) -> Result<Node<ipc::Service>, TransportError> {
     let err = |detail: String| TransportError::Node {
@@ -234,7 +234,7 @@ fn create_named_node(
     // orchestrator (first of a team) also checks the segment; members skip the `/dev/shm` listing.
     let here = iox2_location();
     ownership::check_root(here)?;
-    if who == Role::Orchestrator {
+    if who == TeamProcess::Orchestrator {
         ownership::check_global_mgmt(here, false)?;
     }
     let node = NodeBuilder::new()
@@ -247,7 +247,7 @@ fn create_named_node(
             Some(u) => fd_limit_reached(team, who, &name, "create node", u),
             None => err(format!("{e:?}")),
         })?;
-    if who == Role::Orchestrator {
+    if who == TeamProcess::Orchestrator {
         // iceoryx2 creates the management segment world-writable (0666); make it ours alone.
         ownership::check_global_mgmt(here, true)?;
     }
@@ -255,7 +255,11 @@ fn create_named_node(
 }
 
 /// The iceoryx2 name of a service.
-fn service_name(team: &TeamName, who: Role, service: &str) -> Result<ServiceName, TransportError> {
+fn service_name(
+    team: &TeamName,
+    who: TeamProcess,
+    service: &str,
+) -> Result<ServiceName, TransportError> {
     ServiceName::new(service).map_err(|e| TransportError::Service {
         team: team.clone(),
         who,
@@ -268,7 +272,7 @@ fn service_name(team: &TeamName, who: Role, service: &str) -> Result<ServiceName
 /// Builds a [`TransportError::Service`] (the common case of every port operation).
 fn service_error(
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
     service: &str,
     op: &'static str,
     detail: impl fmt::Debug,
@@ -287,7 +291,7 @@ fn service_error(
 
 fn fd_limit_reached(
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
     service: &str,
     op: &'static str,
     u: limits::FdUsage,
@@ -308,7 +312,7 @@ fn wait_on(
     listener: &iceoryx2::port::listener::Listener<ipc::Service>,
     timeout: Duration,
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
     service: &str,
 ) -> Result<bool, TransportError> {
     use iceoryx2::port::listener::ListenerWaitError;

@@ -15,7 +15,7 @@ use iceoryx2::service::port_factory::event::PortFactory as EventService;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubService;
 
 use super::{
-    create_named_node, init_logging, service_error, service_name, wait_on, Role, TeamName,
+    create_named_node, init_logging, service_error, service_name, wait_on, TeamName, TeamProcess,
     TransportError, CLOCK_BUFFER,
 };
 use crate::messages::{ClockMsg, StateMsg};
@@ -75,7 +75,7 @@ impl MemberPorts {
         in_neighbors: &[u32],
         out_neighbors: &[u32],
     ) -> Result<Self, TransportError> {
-        let node = team.node_name(Role::Agent(id));
+        let node = team.node_name(TeamProcess::Agent(id));
         Self::open_as(team, id, node, scenario_hash, in_neighbors, out_neighbors)
     }
 
@@ -105,7 +105,7 @@ impl MemberPorts {
         out_neighbors: &[u32],
     ) -> Result<Self, TransportError> {
         init_logging();
-        let who = Role::Agent(id);
+        let who = TeamProcess::Agent(id);
         let node = create_named_node(team, who, node_name)?;
         // The clock first: its absence means the whole team is missing.
         let clock = open_clock(&node, team, who)?;
@@ -249,7 +249,7 @@ impl MemberPorts {
         mut f: impl FnMut(StateMsg),
     ) -> Result<usize, TransportError> {
         let mut count = 0;
-        let (team, who) = (&self.team, Role::Agent(self.id));
+        let (team, who) = (&self.team, TeamProcess::Agent(self.id));
         for (&peer, reader) in &mut self.neighbors {
             while let Some(sample) = reader
                 .subscriber
@@ -293,7 +293,7 @@ impl MemberPorts {
     /// publisher published before, sent again at its [`Self::hand_over`]) and opens notifiers on `notify`'s wake events. The orchestrator sized
     /// the services for the repairs (`TeamLayout::with_repair_links`).
     pub fn connect(&mut self, subscribe: &[u32], notify: &[u32]) -> Result<(), TransportError> {
-        let who = Role::Agent(self.id);
+        let who = TeamProcess::Agent(self.id);
         for &peer in subscribe {
             if self.neighbors.contains_key(&peer) {
                 continue;
@@ -356,7 +356,7 @@ impl MemberPorts {
             &self.listener,
             timeout,
             &self.team,
-            Role::Agent(self.id),
+            TeamProcess::Agent(self.id),
             &service,
         )
     }
@@ -387,7 +387,7 @@ impl MemberPorts {
     }
 
     fn error(&self, service: &str, op: &'static str, e: impl std::fmt::Debug) -> TransportError {
-        service_error(&self.team, Role::Agent(self.id), service, op, e)
+        service_error(&self.team, TeamProcess::Agent(self.id), service, op, e)
     }
 }
 
@@ -402,7 +402,7 @@ struct OwnPorts {
 
 impl OwnPorts {
     fn open(node: &Node<ipc::Service>, team: &TeamName, id: u32) -> Result<Self, TransportError> {
-        let who = Role::Agent(id);
+        let who = TeamProcess::Agent(id);
         let name = team.state_service(id);
         let state = open_state(node, team, who, id)?;
         let publisher = state
@@ -450,7 +450,7 @@ fn resend_states(state: &PubSubService<ipc::Service, StateBatchWire, ()>) -> usi
 fn open_clock(
     node: &Node<ipc::Service>,
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
 ) -> Result<PubSubService<ipc::Service, ClockWire, ()>, TransportError> {
     let name = team.clock_service();
     node.service_builder(&service_name(team, who, &name)?)
@@ -476,7 +476,7 @@ fn check_scenario_hash(
     use iceoryx2::service::attribute::AttributeKey;
     let name = team.clock_service();
     let key = AttributeKey::try_from(super::SCENARIO_HASH_KEY)
-        .map_err(|e| service_error(team, Role::Agent(id), &name, "attribute key", e))?;
+        .map_err(|e| service_error(team, TeamProcess::Agent(id), &name, "attribute key", e))?;
     let team_hash = clock
         .attributes()
         .key_value(&key, 0)
@@ -501,7 +501,7 @@ fn open_neighbors(
     id: u32,
     in_neighbors: &[u32],
 ) -> Result<BTreeMap<u32, NeighborReader>, TransportError> {
-    let who = Role::Agent(id);
+    let who = TeamProcess::Agent(id);
     let mut neighbors = BTreeMap::new();
     for &peer in in_neighbors {
         let name = team.state_service(peer);
@@ -529,7 +529,7 @@ fn open_neighbors(
 fn open_state(
     node: &Node<ipc::Service>,
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
     owner: u32,
 ) -> Result<PubSubService<ipc::Service, StateBatchWire, ()>, TransportError> {
     let name = team.state_service(owner);
@@ -542,12 +542,12 @@ fn open_state(
                 id: owner,
                 service: name.clone(),
             },
-            (PublishSubscribeOpenError::ExceedsMaxNumberOfNodes, Role::Agent(me))
+            (PublishSubscribeOpenError::ExceedsMaxNumberOfNodes, TeamProcess::Agent(me))
                 if me == owner =>
             {
                 already_running(team, owner, &name, "node")
             }
-            (PublishSubscribeOpenError::ExceedsMaxNumberOfNodes, Role::Agent(me)) => {
+            (PublishSubscribeOpenError::ExceedsMaxNumberOfNodes, TeamProcess::Agent(me)) => {
                 not_a_neighbor(team, me, owner, &name, "node")
             }
             (e, _) => service_error(team, who, &name, "open service", e),
@@ -558,7 +558,7 @@ fn open_state(
 pub(crate) fn open_event(
     node: &Node<ipc::Service>,
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
     name: &str,
 ) -> Result<EventService<ipc::Service>, TransportError> {
     node.service_builder(&service_name(team, who, name)?)
@@ -579,7 +579,7 @@ pub(crate) fn open_event(
 fn open_wake_writer(
     node: &Node<ipc::Service>,
     team: &TeamName,
-    who: Role,
+    who: TeamProcess,
     name: &str,
     peer: u32,
 ) -> Result<WakeWriter, TransportError> {
@@ -588,7 +588,7 @@ fn open_wake_writer(
         .notifier_builder()
         .create()
         .map_err(|e| match (e, who) {
-            (NotifierCreateError::ExceedsMaxSupportedNotifiers, Role::Agent(me)) => {
+            (NotifierCreateError::ExceedsMaxSupportedNotifiers, TeamProcess::Agent(me)) => {
                 not_a_neighbor(team, me, peer, name, "notifier")
             }
             (e, _) => service_error(team, who, name, "create notifier", e),

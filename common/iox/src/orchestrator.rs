@@ -16,14 +16,14 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubSer
 
 use super::dead_teams::{remove_dead, scan_teams};
 use super::{
-    create_node, init_logging, process_config, service_error, service_name, wait_on, Role,
-    TeamLayout, TeamName, TransportError, CLOCK_BUFFER, OBSERVER_SLOTS, SPARE_NODES,
+    create_node, init_logging, process_config, service_error, service_name, wait_on, TeamLayout,
+    TeamName, TeamProcess, TransportError, CLOCK_BUFFER, OBSERVER_SLOTS, SPARE_NODES,
 };
 use crate::messages::{ClockMsg, StateMsg};
 use crate::resend::{resend_room, RESEND_STATES_KEY};
 use crate::wire::{ClockWire, StateBatchWire, Wire};
 
-const WHO: Role = Role::Orchestrator;
+const WHO: TeamProcess = TeamProcess::Orchestrator;
 
 /// One member's state service, read by the orchestrator.
 struct StateReader {
@@ -411,8 +411,8 @@ impl OrchestratorPorts {
     /// True when member `reader` subscribes to `state/<writer>` and `writer` notifies
     /// `wake/<reader>`: a link a repair opened is connected.
     pub fn linked(&self, reader: u32, writer: u32) -> Result<bool, TransportError> {
-        let r = self.team.node_name(Role::Agent(reader));
-        let w = self.team.node_name(Role::Agent(writer));
+        let r = self.team.node_name(TeamProcess::Agent(reader));
+        let w = self.team.node_name(TeamProcess::Agent(writer));
         Ok(
             self.subscriber_nodes(writer)?.contains(&r)
                 && self.notifier_nodes(reader)?.contains(&w),

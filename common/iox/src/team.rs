@@ -4,7 +4,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
-use super::{Role, TransportError, TEAM_NAME_MAX_LEN};
+use super::{TeamProcess, TransportError, TEAM_NAME_MAX_LEN};
 
 /// A validated team name (`[A-Za-z0-9_-]`, 1 to [`TEAM_NAME_MAX_LEN`] characters). It prefixes
 /// every service and node name of the team, so two teams never see each other.
@@ -60,10 +60,10 @@ impl TeamName {
 
     /// The node name of a process of this team: `cdm/<team>/agent/<id>` or
     /// `cdm/<team>/orchestrator`.
-    pub fn node_name(&self, who: Role) -> String {
+    pub fn node_name(&self, who: TeamProcess) -> String {
         match who {
-            Role::Orchestrator => format!("cdm/{}/orchestrator", self.0),
-            Role::Agent(id) => format!("cdm/{}/agent/{id}", self.0),
+            TeamProcess::Orchestrator => format!("cdm/{}/orchestrator", self.0),
+            TeamProcess::Agent(id) => format!("cdm/{}/agent/{id}", self.0),
         }
     }
 

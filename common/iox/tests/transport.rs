@@ -18,8 +18,8 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use cdm_iox::{
-    remove_dead_nodes, MemberPorts, OrchestratorPorts, Role, TeamLayout, TeamName, TransportError,
-    STATES_PER_SAMPLE,
+    remove_dead_nodes, MemberPorts, OrchestratorPorts, TeamLayout, TeamName, TeamProcess,
+    TransportError, STATES_PER_SAMPLE,
 };
 use cdm_runtime::messages::{ClockCommand, ClockMsg, StateMsg, StopReason};
 use iceoryx2::node::NodeView;
@@ -126,14 +126,14 @@ fn chain_members_receive_exactly_their_in_neighbors() {
     wait_ready(&orch, Duration::from_secs(20));
 
     let node = |who| team.node_name(who);
-    let orch_node = node(Role::Orchestrator);
+    let orch_node = node(TeamProcess::Orchestrator);
     assert_eq!(
         orch.subscriber_nodes(0).unwrap(),
-        vec![node(Role::Agent(1)), orch_node.clone()]
+        vec![node(TeamProcess::Agent(1)), orch_node.clone()]
     );
     assert_eq!(
         orch.subscriber_nodes(1).unwrap(),
-        vec![node(Role::Agent(2)), orch_node.clone()]
+        vec![node(TeamProcess::Agent(2)), orch_node.clone()]
     );
     assert_eq!(orch.subscriber_nodes(2).unwrap(), vec![orch_node]);
     assert!(orch.subscriber_nodes(7).unwrap().is_empty());
@@ -188,8 +188,8 @@ fn relayed_wakes_reach_the_roots_and_the_readers_of_a_loss() {
         .collect();
     wait_ready(&orch, Duration::from_secs(20));
     assert_eq!(orch.publish_clock(ClockMsg::run(0, HASH)).unwrap(), 1);
-    let node = |id| team.node_name(Role::Agent(id));
-    let orch_node = team.node_name(Role::Orchestrator);
+    let node = |id| team.node_name(TeamProcess::Agent(id));
+    let orch_node = team.node_name(TeamProcess::Orchestrator);
     assert_eq!(orch.notifier_nodes(0).unwrap(), vec![orch_node.clone()]);
     assert_eq!(orch.notifier_nodes(1).unwrap(), vec![node(0)]);
     assert_eq!(orch.notifier_nodes(2).unwrap(), vec![node(1)]);
@@ -277,7 +277,10 @@ fn a_second_orchestrator_of_a_running_team_is_refused() {
         msg.starts_with(&format!("team {a} is already running")),
         "{msg}"
     );
-    assert!(msg.contains(&a.node_name(Role::Orchestrator)), "{msg}");
+    assert!(
+        msg.contains(&a.node_name(TeamProcess::Orchestrator)),
+        "{msg}"
+    );
 
     let other = OrchestratorPorts::create(&b, &lay).unwrap();
     // Both teams work side by side, each agent 1 belongs to its own team.
@@ -373,7 +376,7 @@ fn names_and_layouts_are_validated() {
     }
     let ok = TeamName::new(&"A-z_9".repeat(10)[..48]).unwrap();
     assert_eq!(ok.state_service(3), format!("cdm/{ok}/state/3"));
-    assert!(ok.owns_node(&ok.node_name(Role::Agent(4))));
+    assert!(ok.owns_node(&ok.node_name(TeamProcess::Agent(4))));
     assert!(!ok.owns_node(&format!("cdm/{ok}x/orchestrator")));
 
     let ins = |pairs: &[(u32, &[u32])]| -> BTreeMap<u32, Vec<u32>> {

@@ -1,13 +1,13 @@
 //! The flight a host daemon needs to know to start its members, read from `launch`'s options
 //! (here, not in cdm-hosts: the daemon crate sits below the launch loop that owns the options).
 
-use cdm_hosts::Flight;
+use cdm_hosts::TeamFlight;
 
 use crate::launch::LaunchOptions;
 
 /// The flight of `launch`'s options.
-pub fn flight_of(o: &LaunchOptions) -> Flight {
-    Flight {
+pub fn flight_of(o: &LaunchOptions) -> TeamFlight {
+    TeamFlight {
         window: o.window,
         realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
         realtime_priority: o.realtime.as_ref().and_then(|rt| rt.rt_priority),

@@ -103,7 +103,7 @@ fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let interrupted = cdm_process::signals::install();
     let mut live = preflight(s, o)?;
-    let hosts = cdm_hosts::Plan::new(s, &o.hosts, &o.team, o.quiet)?;
+    let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.quiet)?;
     let layout = team_layout(s, o, &hosts)?;
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     let bridge = hosts.start_bridge(s, &o.team, crate::flight::flight_of(o))?;
@@ -205,7 +205,7 @@ fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Option<LiveView>, Failur
 fn team_layout(
     s: &Scenario,
     o: &LaunchOptions,
-    hosts: &cdm_hosts::Plan,
+    hosts: &cdm_hosts::HostPlan,
 ) -> Result<TeamLayout, Failure> {
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let ins: BTreeMap<u32, Vec<u32>> = s
