@@ -609,7 +609,7 @@ fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
     assert_no_team_resources(&team);
 }
 
-/// The generated team of `n` split as `launch --hosts 2` splits it (`cdm_zenoh::Regions`), and
+/// The generated team of `n` split as `launch --hosts 2` splits it (`cdm_hosts::Regions`), and
 /// the follower (of host B when `on_b_only`) whose loss (alone) opens the most links across
 /// hosts, preferring one that opens a link read on host B from host A: (its id, host B's
 /// members, those links as (source, reader)).
@@ -617,17 +617,17 @@ fn loss_across_hosts(n: usize, on_b_only: bool) -> (u32, BTreeSet<u32>, Vec<(u32
     use cdm_core::formation::Role;
     use cdm_core::loss_log::LossLog;
     let s = cdm_core::scenario::Scenario::generated(n).expect("a generated team");
-    let placed: Vec<cdm_zenoh::Placed> = s
+    let placed: Vec<cdm_hosts::Placed> = s
         .formation
         .members
         .iter()
-        .map(|m| cdm_zenoh::Placed {
+        .map(|m| cdm_hosts::Placed {
             id: m.id,
             planar: [m.planar[0], m.planar[1]],
             in_neighbors: m.link.map_or_else(Vec::new, |l| l.in_neighbors.to_vec()),
         })
         .collect();
-    let regions = cdm_zenoh::Regions::split(&placed, 2);
+    let regions = cdm_hosts::Regions::split(&placed, 2);
     let on_b: BTreeSet<u32> = regions.members(1).into_iter().collect();
     let crossing_of = |id: u32| -> Vec<(u32, u32)> {
         let mut log = LossLog::new(&s);

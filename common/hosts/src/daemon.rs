@@ -12,16 +12,21 @@ use cdm_core::scenario::{Checks, Scenario};
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{ClockCommand, ClockMsg, StopReason};
 use cdm_team::out;
-use cdm_zenoh::{
-    down_key, up_key, Assignment, Channel, Down, JoinReply, JoinRequest, Net, NetState, Up,
-    PROTOCOL_VERSION,
-};
-
-use super::bridge::HEARTBEAT;
-use super::daemon_repair::DaemonRepairs;
-use super::repairs::{partners, single_loss_links, CrossRepairs};
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
 use cdm_team::{Exit, Failure};
+use cdm_zenoh::{
+    down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, NetState, Up, PROTOCOL_VERSION,
+};
+
+use crate::bridge::HEARTBEAT;
+use crate::daemon_repair::DaemonRepairs;
+use crate::error::DaemonStop;
+use crate::host_link::{HostLink, ZenohLink};
+use crate::idle::IdleBackoff;
+use crate::repairs::{partners, single_loss_links, CrossRepairs};
+
+/// The link to the orchestrator: its frames down, this host's up.
+type OrchestratorLink = ZenohLink<Down, Up>;
 
 /// `orchestrator host`'s options, validated.
 pub struct DaemonOptions {
@@ -100,7 +105,7 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
 }
 
 /// Checks the assignment and opens the host's link.
-fn joined(net: &Net, a: Assignment) -> Result<(Joined, Channel), Failure> {
+fn joined(net: &Net, a: Assignment) -> Result<(Joined, OrchestratorLink), Failure> {
     let team = TeamName::new(&a.team).map_err(Failure::fault)?;
     let s = Scenario::parse_json(
         &a.scenario_json,
@@ -123,6 +128,7 @@ fn joined(net: &Net, a: Assignment) -> Result<(Joined, Channel), Failure> {
         .collect();
     let chan = net
         .channel(&up_key(&a.team, a.host), &down_key(&a.team, a.host))
+        .map(ZenohLink::new)
         .map_err(Failure::fault)?;
     let link_timeout = Duration::from_millis(a.link_timeout_ms.max(1));
     let j = Joined {
@@ -224,7 +230,7 @@ struct Neighbours {
 /// Creates the host's services, spawns the members, waits for them, then bridges to the end.
 fn fly(
     j: &Joined,
-    chan: Channel,
+    chan: OrchestratorLink,
     dir: &Path,
     interrupted: &std::sync::atomic::AtomicBool,
 ) -> Result<Exit, Failure> {
@@ -258,20 +264,15 @@ fn fly(
             }
         }
     }
+    let now = Instant::now();
     let repairs = DaemonRepairs::new(
         j.team.clone(),
         host_of,
         j.mine.clone(),
         CrossRepairs::new(&j.s),
+        now,
     );
-    let mut link = Link {
-        j,
-        chan,
-        last_heard: Instant::now(),
-        last_sent: Instant::now(),
-        reported: BTreeSet::new(),
-        repairs,
-    };
+    let mut link = Link::new(j, chan, repairs, now);
     let outcome = link
         .wait_ready(&mut ports, &mut children, interrupted)
         .and_then(|()| link.bridge(&mut ports, &mut relays, &mut children, interrupted));
@@ -285,8 +286,9 @@ fn fly(
     stop_team(&mut ports, &mut children, &j.s, reason);
     if outcome.is_ok() {
         // What the members published as they stopped (real time: their pacing reports).
-        let _ = link.up(&mut ports);
-        let _ = link.chan.send(&Up::Stopped);
+        let now = Instant::now();
+        let _ = link.up(&mut ports, now);
+        let _ = link.send(&Up::Stopped, now);
     }
     drop(relays);
     if let Err(e) = ports.shutdown() {
@@ -300,10 +302,11 @@ fn fly(
     })
 }
 
-/// The daemon's side of the link, with its deadlines.
-struct Link<'a> {
+/// The daemon's side of the link, with its deadlines, over link `L` (zenoh; a fake one in the
+/// unit tests). Every step is handed the instant of its turn: the loops read the clock.
+struct Link<'a, L = OrchestratorLink> {
     j: &'a Joined,
-    chan: Channel,
+    chan: L,
     last_heard: Instant,
     last_sent: Instant,
     /// Members whose exit was reported.
@@ -311,25 +314,52 @@ struct Link<'a> {
     repairs: DaemonRepairs,
 }
 
-impl Link<'_> {
-    /// Heartbeat out when due; an error when the orchestrator has been silent too long.
-    fn keep_alive(&mut self) -> Result<(), String> {
-        if self.last_sent.elapsed() >= HEARTBEAT {
-            self.send(&Up::Heartbeat)?;
+/// Interrupted by a signal: the daemon says which.
+fn interrupted_by() -> DaemonStop {
+    DaemonStop::Interrupted(cdm_process::signals::received())
+}
+
+impl<'a, L: HostLink<In = Down, Out = Up>> Link<'a, L> {
+    fn new(j: &'a Joined, chan: L, repairs: DaemonRepairs, now: Instant) -> Self {
+        Link {
+            j,
+            chan,
+            last_heard: now,
+            last_sent: now,
+            reported: BTreeSet::new(),
+            repairs,
         }
-        if self.last_heard.elapsed() > self.j.link_timeout {
-            return Err(format!(
-                "nothing heard from the orchestrator for {:.1} s (network partition or \
-                 orchestrator gone)",
-                self.j.link_timeout.as_secs_f64()
-            ));
+    }
+
+    /// Heartbeat out when due at `now`; an error when the orchestrator has been silent too long.
+    fn keep_alive(&mut self, now: Instant) -> Result<(), DaemonStop> {
+        if now.saturating_duration_since(self.last_sent) >= HEARTBEAT {
+            self.send(&Up::Heartbeat, now)?;
+        }
+        if now.saturating_duration_since(self.last_heard) > self.j.link_timeout {
+            return Err(DaemonStop::Silent {
+                after: self.j.link_timeout,
+            });
         }
         Ok(())
     }
 
-    fn send(&mut self, frame: &Up) -> Result<(), String> {
-        self.last_sent = Instant::now();
-        self.chan.send(frame).map_err(|e| e.to_string())
+    fn send(&mut self, frame: &Up, now: Instant) -> Result<(), DaemonStop> {
+        self.last_sent = now;
+        Ok(self.chan.send(frame)?)
+    }
+
+    /// Frames from the orchestrator before the team starts: a stop ends the wait.
+    fn before_start(&mut self, now: Instant) -> Result<(), DaemonStop> {
+        while let Some(f) = self.chan.try_recv()? {
+            self.last_heard = now;
+            if let Down::Clock(c) = f {
+                if matches!(ClockMsg::from(c).command(), ClockCommand::Stop(_)) {
+                    return Err(DaemonStop::StoppedBeforeStart);
+                }
+            }
+        }
+        self.keep_alive(now)
     }
 
     /// Waits (bounded) until every member of this host has opened its ports, then says so.
@@ -338,40 +368,30 @@ impl Link<'_> {
         ports: &mut OrchestratorPorts,
         children: &mut [Spawned],
         interrupted: &std::sync::atomic::AtomicBool,
-    ) -> Result<(), String> {
+    ) -> Result<(), DaemonStop> {
         let n = self.j.mine.len() as u64;
         let deadline = Duration::from_secs(30) + Duration::from_millis(60 * n);
         let started = Instant::now();
         while !ports.readiness().is_complete() {
+            let now = Instant::now();
             if interrupted.load(Ordering::Relaxed) {
-                return Err(format!(
-                    "interrupted by {}",
-                    cdm_process::signals::received()
-                ));
+                return Err(interrupted_by());
             }
             if let Some((id, how)) = first_exited(children) {
-                return Err(format!("agent {id} {how} before the team started"));
+                return Err(DaemonStop::ExitedEarly { id, how });
             }
-            if started.elapsed() > deadline {
+            if now.saturating_duration_since(started) > deadline {
                 let late = ports.readiness().waiting_for();
-                return Err(format!("agents {late:?} did not start within {deadline:?}"));
+                return Err(DaemonStop::NotStarted { late, deadline });
             }
-            while let Some(f) = self.chan.try_recv::<Down>().map_err(link_error)? {
-                self.last_heard = Instant::now();
-                if let Down::Clock(c) = f {
-                    if matches!(ClockMsg::from(c).command(), ClockCommand::Stop(_)) {
-                        return Err("the orchestrator stopped the team before it started".into());
-                    }
-                }
-            }
-            self.keep_alive()?;
+            self.before_start(now)?;
             let _ = ports.wait(Duration::from_millis(20));
         }
         let mut subscriptions = BTreeMap::new();
         for &id in &self.j.mine {
             subscriptions.insert(id, ports.subscriber_nodes(id).unwrap_or_default());
         }
-        self.send(&Up::Ready { subscriptions })
+        self.send(&Up::Ready { subscriptions }, Instant::now())
     }
 
     /// Carries frames both ways until the orchestrator's stop (its reason) or a lost link.
@@ -381,44 +401,39 @@ impl Link<'_> {
         relays: &mut BTreeMap<u32, MemberPorts>,
         children: &mut [Spawned],
         interrupted: &std::sync::atomic::AtomicBool,
-    ) -> Result<StopReason, String> {
+    ) -> Result<StopReason, DaemonStop> {
         let mut last_child_check = Instant::now();
         let realtime = self.j.a.realtime_stale_after_s.is_some();
-        let mut idle = cdm_zenoh::IdleBackoff::for_team(realtime);
+        let mut idle = IdleBackoff::for_team(realtime);
         loop {
+            let now = Instant::now();
             if interrupted.load(Ordering::Relaxed) {
-                return Err(format!(
-                    "interrupted by {}",
-                    cdm_process::signals::received()
-                ));
+                return Err(interrupted_by());
             }
             let mut busy = false;
-            while let Some(f) = self.chan.try_recv::<Down>().map_err(link_error)? {
-                self.last_heard = Instant::now();
+            while let Some(f) = self.chan.try_recv()? {
+                self.last_heard = now;
                 busy = true;
                 match &f {
                     Down::Kill(id) => cdm_team::loss::kill_and_reap(children, *id),
-                    Down::Clock(c) => self
-                        .repairs
-                        .on_clock(&ClockMsg::from(*c), relays)
-                        .map_err(|e| e.to_string())?,
+                    Down::Clock(c) => self.repairs.on_clock(&ClockMsg::from(*c), relays, now)?,
                     _ => {}
                 }
                 if let Some(reason) = down(f, ports, relays)? {
                     return Ok(reason);
                 }
             }
-            busy |= self.up(ports)?;
-            self.repairs.hand_over_ready(relays);
-            let linked = self.repairs.connected(ports);
+            busy |= self.up(ports, now)?;
+            self.repairs.hand_over_ready(relays, now);
+            let linked = self.repairs.connected(ports, now);
             if !linked.is_empty() {
-                self.send(&Up::Linked(linked))?;
+                self.send(&Up::Linked(linked), now)?;
             }
-            if last_child_check.elapsed() > Duration::from_millis(100) {
-                last_child_check = Instant::now();
-                self.report_exits(ports, children)?;
+            if now.saturating_duration_since(last_child_check) > Duration::from_millis(100) {
+                last_child_check = now;
+                self.report_exits(ports, children, now)?;
             }
-            self.keep_alive()?;
+            self.keep_alive(now)?;
             if let Some(sleep) = idle.after(busy) {
                 self.chan.wait(sleep);
             }
@@ -426,20 +441,18 @@ impl Link<'_> {
     }
 
     /// This host's members' states (and fault reports) up, in order; true when any.
-    fn up(&mut self, ports: &mut OrchestratorPorts) -> Result<bool, String> {
+    fn up(&mut self, ports: &mut OrchestratorPorts, now: Instant) -> Result<bool, DaemonStop> {
         let mine = &self.j.mine;
         let mut batch: Vec<NetState> = vec![];
-        ports
-            .receive_states(|m| {
-                if mine.contains(&m.id) {
-                    batch.push(m.into());
-                }
-            })
-            .map_err(|e| e.to_string())?;
+        ports.receive_states(|m| {
+            if mine.contains(&m.id) {
+                batch.push(m.into());
+            }
+        })?;
         if batch.is_empty() {
             return Ok(false);
         }
-        self.send(&Up::States(batch))?;
+        self.send(&Up::States(batch), now)?;
         Ok(true)
     }
 
@@ -449,11 +462,12 @@ impl Link<'_> {
     fn up_while_stopping(&mut self, ports: &mut OrchestratorPorts, children: &mut [Spawned]) {
         let until = Instant::now() + Duration::from_secs(3);
         loop {
-            let _ = self.up(ports);
+            let now = Instant::now();
+            let _ = self.up(ports, now);
             let running = children
                 .iter_mut()
                 .any(|c| matches!(c.child.try_wait(), Ok(None)));
-            if !running || Instant::now() >= until {
+            if !running || now >= until {
                 return;
             }
             let _ = ports.wait(Duration::from_millis(5));
@@ -465,29 +479,20 @@ impl Link<'_> {
         &mut self,
         ports: &mut OrchestratorPorts,
         children: &mut [Spawned],
-    ) -> Result<(), String> {
+        now: Instant,
+    ) -> Result<(), DaemonStop> {
         for c in children.iter_mut() {
             if self.reported.contains(&c.id) {
                 continue;
             }
             if let Ok(Some(status)) = c.child.try_wait() {
-                self.up(ports)?;
+                self.up(ports, now)?;
                 let how = cdm_team::team::describe_exit(status);
                 self.reported.insert(c.id);
-                self.send(&Up::Exited { id: c.id, how })?;
+                self.send(&Up::Exited { id: c.id, how }, now)?;
             }
         }
         Ok(())
-    }
-}
-
-/// A failed receive, said from the daemon's side.
-fn link_error(e: cdm_zenoh::NetError) -> String {
-    match e {
-        cdm_zenoh::NetError::PeerGone { .. } => {
-            format!("the orchestrator is gone, {e}: killed or exited")
-        }
-        e => e.to_string(),
     }
 }
 
@@ -497,11 +502,11 @@ fn down(
     f: Down,
     ports: &mut OrchestratorPorts,
     relays: &mut BTreeMap<u32, MemberPorts>,
-) -> Result<Option<StopReason>, String> {
+) -> Result<Option<StopReason>, DaemonStop> {
     match f {
         Down::Clock(c) => {
             let c = ClockMsg::from(c);
-            ports.publish_clock(c).map_err(|e| e.to_string())?;
+            ports.publish_clock(c)?;
             if let ClockCommand::Stop(reason) = c.command() {
                 return Ok(Some(reason));
             }
@@ -510,16 +515,14 @@ fn down(
             let mut touched = vec![];
             for st in states {
                 if let Some(relay) = relays.get_mut(&st.id) {
-                    relay
-                        .publish_quietly(st.into())
-                        .map_err(|e| e.to_string())?;
+                    relay.publish_quietly(st.into())?;
                     touched.push(st.id);
                 }
             }
             touched.dedup();
             for id in touched {
                 if let Some(relay) = relays.get_mut(&id) {
-                    relay.notify_readers().map_err(|e| e.to_string())?;
+                    relay.notify_readers()?;
                 }
             }
         }
@@ -546,6 +549,81 @@ mod tests {
             realtime_priority: priority,
             repair: false,
         }
+    }
+
+    /// Host 1 of paper40 over two hosts, as a daemon joins it.
+    fn joined() -> Joined {
+        let s = Scenario::builtin("paper40").unwrap();
+        let mut a = assignment(None, None);
+        a.hosts_of = s
+            .formation
+            .members
+            .iter()
+            .map(|m| (m.id, m.id % 2))
+            .collect();
+        let mine = a
+            .hosts_of
+            .iter()
+            .filter(|p| p.1 == 1)
+            .map(|p| p.0)
+            .collect();
+        Joined {
+            team: TeamName::new("unit").unwrap(),
+            s,
+            mine,
+            link_timeout: Duration::from_millis(a.link_timeout_ms),
+            a,
+        }
+    }
+
+    type Fake = crate::host_link::FakeLink<Down, Up>;
+
+    fn link(j: &Joined, t0: Instant) -> Link<'_, Fake> {
+        let host_of = j.a.hosts_of.iter().copied().collect();
+        let repairs = CrossRepairs::new(&j.s);
+        let repairs = DaemonRepairs::new(j.team.clone(), host_of, j.mine.clone(), repairs, t0);
+        Link::new(j, Fake::default(), repairs, t0)
+    }
+
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
+
+    #[test]
+    fn the_daemon_keeps_its_link_alive_and_gives_up_on_a_silent_orchestrator() {
+        let (j, t0) = (joined(), Instant::now());
+        let mut l = link(&j, t0);
+        l.keep_alive(t0 + ms(199)).unwrap();
+        assert!(l.chan.sent.is_empty());
+        l.keep_alive(t0 + ms(200)).unwrap();
+        assert_eq!(l.chan.sent, [Up::Heartbeat]);
+        l.chan.incoming.push_back(Ok(Down::Heartbeat));
+        l.before_start(t0 + ms(2000)).unwrap();
+        l.keep_alive(t0 + ms(5000)).unwrap();
+        let e = l.keep_alive(t0 + ms(5001)).unwrap_err();
+        assert!(matches!(e, DaemonStop::Silent { .. }), "{e}");
+        assert_eq!(
+            e.to_string(),
+            "nothing heard from the orchestrator for 3.0 s (network partition or orchestrator gone)"
+        );
+    }
+
+    #[test]
+    fn a_stop_before_the_start_or_a_closed_session_ends_the_wait() {
+        let (j, t0) = (joined(), Instant::now());
+        let mut l = link(&j, t0);
+        let stop = ClockMsg::stop(0, 0, StopReason::AgentFault);
+        l.chan.incoming.push_back(Ok(Down::Clock(stop.into())));
+        let e = l.before_start(t0 + ms(10)).unwrap_err();
+        assert!(matches!(e, DaemonStop::StoppedBeforeStart), "{e}");
+
+        let gone = crate::host_link::LinkError::PeerGone("its zenoh session closed".into());
+        l.chan.incoming.push_back(Err(gone));
+        let e = l.before_start(t0 + ms(20)).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "the orchestrator is gone, its zenoh session closed: killed or exited"
+        );
     }
 
     #[test]

@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamName, TeamProcess};
 use cdm_runtime::messages::ClockMsg;
 
-use super::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
-use super::repairs::CrossRepairs;
+use crate::handover::{self, warn_hand_over, PendingHandOver, HAND_OVER_WAIT};
+use crate::repairs::CrossRepairs;
 use cdm_runtime::notices::NoticeGap;
 
 /// How often the links awaited are looked up in the registry.
@@ -36,6 +36,7 @@ impl DaemonRepairs {
         host_of: BTreeMap<u32, u32>,
         mine: BTreeSet<u32>,
         repairs: CrossRepairs,
+        now: Instant,
     ) -> Self {
         Self {
             team,
@@ -43,16 +44,17 @@ impl DaemonRepairs {
             mine,
             repairs,
             pending: BTreeSet::new(),
-            last_check: Instant::now(),
+            last_check: now,
             handing: None,
         }
     }
 
-    /// A clock message about to be published on this host.
+    /// A clock message about to be published on this host at `now`.
     pub fn on_clock(
         &mut self,
         c: &ClockMsg,
         relays: &mut BTreeMap<u32, MemberPorts>,
+        now: Instant,
     ) -> Result<(), NoticeGap> {
         let step = self.repairs.on_notice(c.loss())?;
         for &(reader, writer) in &step.new_links {
@@ -78,24 +80,27 @@ impl DaemonRepairs {
             }
         }
         if step.hand_over {
-            handover::start(&mut self.handing, step.needs_from, relays, warn_hand_over);
+            let from = step.needs_from;
+            handover::start(&mut self.handing, from, relays, now, warn_hand_over);
         }
         Ok(())
     }
 
     /// Hands over the relays whose history now reaches the connected repair's tick.
-    pub fn hand_over_ready(&mut self, relays: &mut BTreeMap<u32, MemberPorts>) {
-        handover::poll(&mut self.handing, relays, HAND_OVER_WAIT, warn_hand_over);
+    pub fn hand_over_ready(&mut self, relays: &mut BTreeMap<u32, MemberPorts>, now: Instant) {
+        let wait = HAND_OVER_WAIT;
+        handover::poll(&mut self.handing, relays, wait, now, warn_hand_over);
     }
 
     /// The awaited links connected since the last call (looked up every [`CHECK_EVERY`]): the
     /// reader subscribes to the writer's state and the writer (a member here, or the relay of
     /// one elsewhere) notifies the reader's wake event.
-    pub fn connected(&mut self, ports: &OrchestratorPorts) -> Vec<(u32, u32)> {
-        if self.pending.is_empty() || self.last_check.elapsed() < CHECK_EVERY {
+    pub fn connected(&mut self, ports: &OrchestratorPorts, now: Instant) -> Vec<(u32, u32)> {
+        let since = now.saturating_duration_since(self.last_check);
+        if self.pending.is_empty() || since < CHECK_EVERY {
             return Vec::new();
         }
-        self.last_check = Instant::now();
+        self.last_check = now;
         let done: Vec<(u32, u32)> = self
             .pending
             .iter()

@@ -7,6 +7,7 @@
 //! Handing over then sends too little, and the reader, holding back its new in-neighbour's
 //! states until repeats arrive (cdm-iox `resend.rs`), waits for ever. So each relay hands over
 //! once its history reaches the repair's tick, or after [`HAND_OVER_WAIT`] whatever it holds.
+//! The caller's clock says when: every call is handed its `now`.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
@@ -26,23 +27,24 @@ pub struct PendingHandOver {
 
 impl PendingHandOver {
     /// Every relay in `relays` is to hand over the states from `needs_from` on.
-    pub fn new(needs_from: u64, relays: &BTreeMap<u32, MemberPorts>) -> Self {
+    pub fn new(needs_from: u64, relays: &BTreeMap<u32, MemberPorts>, now: Instant) -> Self {
         PendingHandOver {
             needs_from,
-            since: Instant::now(),
+            since: now,
             left: relays.keys().copied().collect(),
         }
     }
 
-    /// Hands over every relay whose history reaches the tick (all of them once `wait` passed);
-    /// true when none is left. `failed` hears of a relay that could not.
+    /// Hands over every relay whose history reaches the tick (all of them once `wait` passed
+    /// at `now`); true when none is left. `failed` hears of a relay that could not.
     pub fn poll(
         &mut self,
         relays: &mut BTreeMap<u32, MemberPorts>,
         wait: Duration,
+        now: Instant,
         mut failed: impl FnMut(u32, String),
     ) -> bool {
-        let late = self.since.elapsed() >= wait;
+        let late = now.saturating_duration_since(self.since) >= wait;
         self.left.retain(|id| {
             let Some(relay) = relays.get_mut(id) else {
                 return false;
@@ -64,13 +66,14 @@ pub fn start(
     pending: &mut Option<PendingHandOver>,
     needs_from: u64,
     relays: &mut BTreeMap<u32, MemberPorts>,
+    now: Instant,
     failed: impl FnMut(u32, String) + Copy,
 ) {
     if let Some(mut before) = pending.take() {
-        before.poll(relays, Duration::ZERO, failed);
+        before.poll(relays, Duration::ZERO, now, failed);
     }
-    let mut next = PendingHandOver::new(needs_from, relays);
-    if !next.poll(relays, HAND_OVER_WAIT, failed) {
+    let mut next = PendingHandOver::new(needs_from, relays, now);
+    if !next.poll(relays, HAND_OVER_WAIT, now, failed) {
         *pending = Some(next);
     }
 }
@@ -80,10 +83,11 @@ pub fn poll(
     pending: &mut Option<PendingHandOver>,
     relays: &mut BTreeMap<u32, MemberPorts>,
     wait: Duration,
+    now: Instant,
     failed: impl FnMut(u32, String),
 ) {
     if let Some(p) = pending {
-        if p.poll(relays, wait, failed) {
+        if p.poll(relays, wait, now, failed) {
             *pending = None;
         }
     }

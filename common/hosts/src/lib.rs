@@ -15,14 +15,17 @@ mod bridge;
 pub mod daemon;
 #[cfg(feature = "hosts")]
 mod daemon_repair;
+pub mod error;
 #[cfg(feature = "hosts")]
 mod handover;
+pub mod host_link;
+pub mod idle;
 #[cfg(feature = "hosts")]
 mod links;
-#[cfg(feature = "hosts")]
+mod other_hosts;
 mod placed;
-#[cfg(feature = "hosts")]
 mod plan;
+pub mod regions;
 #[cfg(feature = "hosts")]
 mod repairs;
 #[cfg(feature = "hosts")]
@@ -30,14 +33,14 @@ mod workdir;
 
 #[cfg(feature = "hosts")]
 pub use bridge::Bridge;
-#[cfg(feature = "hosts")]
+pub use other_hosts::{OneHost, OtherHosts};
 pub use plan::HostPlan;
+pub use regions::{Placed, Regions};
 
 use std::time::Duration;
 
 /// How the team flies, as a daemon needs to know it to start its members.
 #[derive(Debug, Clone, Copy)]
-#[cfg_attr(not(feature = "hosts"), allow(dead_code))]
 pub struct TeamFlight {
     /// The clock window (ticks of states kept per subscriber).
     pub window: u32,
@@ -52,7 +55,6 @@ pub struct TeamFlight {
 
 /// `launch`'s host options, validated.
 #[derive(Debug, Clone)]
-#[cfg_attr(not(feature = "hosts"), allow(dead_code))]
 pub struct HostOptions {
     /// How many hosts share the team (1: this one only).
     pub hosts: u32,
@@ -71,74 +73,3 @@ impl Default for HostOptions {
         }
     }
 }
-
-/// Without the `hosts` feature: one host only, said clearly.
-#[cfg(not(feature = "hosts"))]
-mod single {
-    use cdm_core::scenario::Scenario;
-    use cdm_iox::TeamLayout;
-
-    use super::HostOptions;
-    use cdm_team::Failure;
-
-    /// Every member runs here.
-    pub struct HostPlan;
-
-    /// Never built: no bridge without the feature.
-    pub struct Bridge;
-
-    impl HostPlan {
-        pub fn remote_groups(&self) -> Vec<Vec<u32>> {
-            Vec::new()
-        }
-        pub fn new(
-            _s: &Scenario,
-            h: &HostOptions,
-            _team: &cdm_iox::TeamName,
-            _quiet: bool,
-        ) -> Result<Self, Failure> {
-            if h.hosts > 1 {
-                return Err(Failure::bad_input(
-                    "--hosts: this orchestrator was built without the `hosts` feature (zenoh)",
-                ));
-            }
-            Ok(HostPlan)
-        }
-        pub fn hide_remote_edges(&self, layout: TeamLayout) -> TeamLayout {
-            layout
-        }
-        pub fn runs_here(&self, _id: u32) -> bool {
-            true
-        }
-        pub fn start_bridge(
-            &self,
-            _s: &Scenario,
-            _team: &cdm_iox::TeamName,
-            _flight: super::TeamFlight,
-        ) -> Result<Option<Bridge>, Failure> {
-            Ok(None)
-        }
-    }
-
-    impl Bridge {
-        pub fn finish(self, _dir: &cdm_core::rundir::RunDir, _ticks: u64, _quiet: bool) {}
-        pub fn explain(&self, f: cdm_core::audit::FaultRecord) -> cdm_core::audit::FaultRecord {
-            f
-        }
-        pub fn reporting(&self, _id: u32) -> bool {
-            false
-        }
-        pub fn kill(&self, _id: u32) {}
-        pub fn host_of(&self, _id: u32) -> Option<u32> {
-            None
-        }
-        pub fn take_exited(&self) -> Option<(u32, String)> {
-            None
-        }
-        pub fn linked(&self, ports: &cdm_iox::OrchestratorPorts, reader: u32, writer: u32) -> bool {
-            ports.linked(reader, writer).unwrap_or(false)
-        }
-    }
-}
-#[cfg(not(feature = "hosts"))]
-pub use single::{Bridge, HostPlan};

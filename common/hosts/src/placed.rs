@@ -1,8 +1,8 @@
 //! The formation as the split into host regions sees it: read by the plan (which splits) and
 //! by the bridge (which finds the links that cross hosts).
 
+use crate::regions::Placed;
 use cdm_core::scenario::Scenario;
-use cdm_zenoh::Placed;
 
 /// The formation as the split sees it (plain data).
 pub fn placed(s: &Scenario) -> Vec<Placed> {

@@ -5,18 +5,19 @@ use std::collections::BTreeSet;
 use cdm_core::scenario::Scenario;
 use cdm_iox::{TeamLayout, TeamName};
 use cdm_team::out;
-use cdm_zenoh::{Net, Placed, Regions};
-
-use super::bridge::Bridge;
-use super::placed::placed;
-use super::{HostOptions, TeamFlight};
 use cdm_team::Failure;
+
+use crate::other_hosts::{OneHost, OtherHosts};
+use crate::placed::placed;
+use crate::regions::{Placed, Regions};
+use crate::{HostOptions, TeamFlight};
 
 /// The split of a team over its hosts (host 0 is this one).
 pub struct HostPlan {
     regions: Regions,
     placed: Vec<Placed>,
     options: HostOptions,
+    #[cfg_attr(not(feature = "hosts"), allow(dead_code))]
     quiet: bool,
 }
 
@@ -34,6 +35,11 @@ impl HostPlan {
                 "--hosts {}: the team has only {n} members",
                 h.hosts
             )));
+        }
+        if h.hosts > 1 && !cfg!(feature = "hosts") {
+            return Err(Failure::bad_input(
+                "--hosts: this orchestrator was built without the `hosts` feature (zenoh)",
+            ));
         }
         if h.hosts > 1 && h.listen.is_none() {
             return Err(Failure::bad_input(
@@ -93,24 +99,44 @@ impl HostPlan {
         self.regions.host_of(id) == 0
     }
 
-    /// Listens for the daemons and starts the bridge (none with one host).
+    /// The team's other hosts: [`OneHost`] when it has none, else the bridge, listening for
+    /// their daemons.
     pub fn start_bridge(
         &self,
         s: &Scenario,
         team: &TeamName,
         flight: TeamFlight,
-    ) -> Result<Option<Bridge>, Failure> {
-        let Some(endpoint) = self
-            .options
-            .listen
-            .as_deref()
-            .filter(|_| self.options.hosts > 1)
-        else {
-            return Ok(None);
-        };
-        let net =
-            Net::listen(endpoint).map_err(|e| Failure::bad_input(format!("--listen: {e}")))?;
+    ) -> Result<Box<dyn OtherHosts>, Failure> {
+        match self.options.listen.as_deref() {
+            Some(endpoint) if self.options.hosts > 1 => self.listen(endpoint, s, team, flight),
+            _ => Ok(Box::new(OneHost)),
+        }
+    }
+
+    #[cfg(feature = "hosts")]
+    fn listen(
+        &self,
+        endpoint: &str,
+        s: &Scenario,
+        team: &TeamName,
+        flight: TeamFlight,
+    ) -> Result<Box<dyn OtherHosts>, Failure> {
+        let net = cdm_zenoh::Net::listen(endpoint)
+            .map_err(|e| Failure::bad_input(format!("--listen: {e}")))?;
         let (regions, h) = (&self.regions, &self.options);
-        Bridge::start(net, s, team, regions, h, flight, self.quiet).map(Some)
+        let bridge = crate::bridge::Bridge::start(net, s, team, regions, h, flight, self.quiet)?;
+        Ok(Box::new(bridge))
+    }
+
+    /// Never reached: [`HostPlan::new`] refuses `--hosts` above 1 without the feature.
+    #[cfg(not(feature = "hosts"))]
+    fn listen(
+        &self,
+        _endpoint: &str,
+        _s: &Scenario,
+        _team: &TeamName,
+        _flight: TeamFlight,
+    ) -> Result<Box<dyn OtherHosts>, Failure> {
+        Ok(Box::new(OneHost))
     }
 }

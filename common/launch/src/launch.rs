@@ -18,6 +18,7 @@ use cdm_core::record::TickRecorder;
 use cdm_core::rundir::RunDir;
 use cdm_core::scenario::Scenario;
 use cdm_core::telemetry::TelemetrySink;
+use cdm_hosts::OtherHosts;
 use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{ClockMsg, StateMsg, StopReason};
 use cdm_runtime::seams::{Clock, MonotonicClock};
@@ -87,7 +88,7 @@ struct Watchers<'a> {
     audit: &'a mut Auditor,
     live: &'a mut Option<LiveView>,
     /// The other hosts' members, through the bridge (`--hosts`): their exits, kills and links.
-    hosts: Option<&'a cdm_hosts::Bridge>,
+    hosts: &'a dyn OtherHosts,
 }
 
 /// Starts the live view before the team, so a bad address stops nothing (exit 2).
@@ -106,7 +107,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.quiet)?;
     let layout = team_layout(s, o, &hosts)?;
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
-    let bridge = hosts.start_bridge(s, &o.team, crate::flight::flight_of(o))?;
+    let others = hosts.start_bridge(s, &o.team, crate::flight::flight_of(o))?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
     let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
@@ -125,7 +126,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let mut children = start_members(s, o, &dir, &mut ports, (&member_file, &scenario_file), here)?;
     let mut audit = Auditor::new(s);
     let result = if let Some(rt) = &o.realtime {
-        let elsewhere = |id: u32| bridge.as_ref().is_some_and(|b| b.reporting(id));
+        let elsewhere = |id: u32| others.reporting(id);
         let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
         crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
     } else {
@@ -138,7 +139,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
             Watchers {
                 audit: &mut audit,
                 live: &mut live,
-                hosts: bridge.as_ref(),
+                hosts: others.as_ref(),
             },
             interrupted,
         )
@@ -147,11 +148,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
         Err((fault, reason)) => {
-            audit.fault(if let Some(b) = &bridge {
-                b.explain(fault)
-            } else {
-                fault
-            });
+            audit.fault(others.explain(fault));
             (false, reason, None)
         }
     };
@@ -162,12 +159,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         tracing::warn!("{e}");
     }
     let mut report = audit.finish(complete);
-    if let Some(b) = bridge {
-        for l in &mut report.losses {
-            l.host = b.host_of(l.id);
-        }
-        b.finish(&dir, report.ticks, o.quiet);
+    for l in &mut report.losses {
+        l.host = others.host_of(l.id);
     }
+    others.finish(&dir, report.ticks, o.quiet);
     dir.write_audit(&report).map_err(Failure::fault)?;
     if let Some(v) = &live {
         v.finish(&report);
@@ -491,7 +486,7 @@ fn fly_team(
                 TeamAction::Kill(ids) => {
                     for id in ids {
                         cdm_team::loss::kill_and_reap(children, id);
-                        w.hosts.inspect(|b| b.kill(id));
+                        w.hosts.kill(id);
                     }
                     break;
                 }
@@ -527,7 +522,7 @@ fn fly_team(
 fn check_exited(
     core: &mut TeamCore,
     children: &mut [Spawned],
-    hosts: Option<&cdm_hosts::Bridge>,
+    hosts: &dyn OtherHosts,
     now: Duration,
 ) {
     let lost = |id| core.losses().is_some_and(|l| l.is_lost(id));
@@ -536,7 +531,7 @@ fn check_exited(
     }
     // Every remote exit at once: a lost host's members are lost together, as members killed
     // at the same tick on one host.
-    while let Some((id, how)) = hosts.and_then(|b| b.take_exited()) {
+    while let Some((id, how)) = hosts.take_exited() {
         core.on_exited(id, how, now);
     }
 }
@@ -546,13 +541,10 @@ fn check_exited(
 fn check_links(
     core: &mut TeamCore,
     ports: &OrchestratorPorts,
-    hosts: Option<&cdm_hosts::Bridge>,
+    hosts: &dyn OtherHosts,
     now: Duration,
 ) {
-    core.on_links(now, |r, wr| match hosts {
-        Some(b) => b.linked(ports, r, wr),
-        None => ports.linked(r, wr).unwrap_or(false),
-    });
+    core.on_links(now, |r, wr| hosts.linked(ports, r, wr));
 }
 
 /// Grants ticks up to `g` on the clock channel, with the latest loss notice.

@@ -9,14 +9,10 @@
 //! | `cdm/<team>/host/<k>/up` | [`Up`]: ready, every member's state, exits, heartbeat | daemon k -> orchestrator |
 
 pub mod frame;
-pub mod idle;
 pub mod link;
-pub mod regions;
 
 pub use frame::{
     decode, encode, Assignment, DecodeError, Down, JoinReply, JoinRequest, NetClock, NetState, Up,
     PROTOCOL_VERSION,
 };
-pub use idle::IdleBackoff;
 pub use link::{down_key, join_key, up_key, Channel, JoinDesk, Net, NetError, PendingJoin};
-pub use regions::{Placed, Regions};
