@@ -12,6 +12,7 @@ import ctypes
 import math
 import os
 import re
+import stat
 
 import iceoryx2 as iox2
 
@@ -26,6 +27,42 @@ def bus_paths(uid=None):
     """The iceoryx2 root directory and global prefix of the runtime for user `uid`."""
     uid = os.getuid() if uid is None else uid
     return ROOT_FORMAT.format(uid=uid), PREFIX_FORMAT.format(uid=uid)
+
+
+SHM_DIR = "/dev/shm"
+
+
+def restrict_global_mgmt(prefix=None):
+    """Makes this user's iceoryx2 management segments owner-only, as the Rust side does
+    (cdm-iox `ownership::check_global_mgmt`): iceoryx2 creates `/dev/shm/<prefix>*.global_mgmt`
+    with mode 0666 even under our own prefix, and any local user could then write into it. One
+    owned by another user is refused, naming it. Returns the paths it changed."""
+    prefix = bus_paths()[1] if prefix is None else prefix
+    changed = []
+    for name in sorted(os.listdir(SHM_DIR)):
+        if not (name.startswith(prefix) and name.endswith(".global_mgmt")):
+            continue
+        path = os.path.join(SHM_DIR, name)
+        # O_PATH: examine and chmod exactly this file (no symlink), without read or write access.
+        try:
+            fd = os.open(path, os.O_PATH | os.O_NOFOLLOW | os.O_CLOEXEC)
+        except FileNotFoundError:
+            continue
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                raise PermissionError(f"{path} is not a regular file; refusing to use it")
+            if st.st_uid != os.getuid():
+                raise PermissionError(
+                    f"{path} is owned by uid {st.st_uid}, not this user ({os.getuid()}): "
+                    "another user may have planted it; refusing to use it"
+                )
+            if st.st_mode & 0o077:
+                os.chmod(f"/proc/self/fd/{fd}", stat.S_IMODE(st.st_mode) & 0o700)
+                changed.append(path)
+        finally:
+            os.close(fd)
+    return changed
 
 
 def bus_config():
@@ -145,6 +182,8 @@ class TeamReader:
             .config(self.config)
             .create(iox2.ServiceType.Ipc)
         )
+        # Creating the node made the management segment, world-writable: ours alone now.
+        restrict_global_mgmt()
         self.ids = team_ids(team, self.config)
         if not self.ids:
             raise LookupError(f"team {team}: no state service (is it running, as this user?)")

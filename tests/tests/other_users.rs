@@ -225,6 +225,106 @@ fly
     }
 }
 
+/// The Python bus reader (`python/cdm_bus.py`, here through `examples/watch.py`) run by another
+/// user leaves nothing in /dev/shm that anybody else can write: creating its iceoryx2 node makes
+/// the user's management segment 0666, and the reader makes it owner-only as the Rust side does.
+/// In a private /dev/shm; the reader is the system Python with the venv's iceoryx2 package copied
+/// where the test user can read it (the venv's own interpreter may live under /root). Before the
+/// fix the segment stayed `666`.
+#[test]
+fn a_python_reader_of_another_user_leaves_nothing_writable_in_dev_shm() {
+    let system_python = Path::new("/usr/bin/python3");
+    if !private_mounts_allowed() || !system_python.is_file() {
+        eprintln!("skipped: needs `unshare -m` and /usr/bin/python3");
+        return;
+    }
+    let Some(user) = TestUser::create("p") else {
+        return;
+    };
+    let dir = TempDir::new();
+    let py = python_for_everyone(dir.path());
+    let script = r#"
+set -u
+PY="$0"; U="$1"; G="$2"
+mount -t tmpfs -o size=64m,mode=1777 tmpfs /dev/shm || exit 90
+PYTHONPATH="$PY/site" timeout 60 setpriv --reuid="$U" --regid="$G" --clear-groups /usr/bin/python3 "$PY/python/examples/watch.py" --team absent --join 1
+echo "watch exit $?"
+find /dev/shm -mindepth 1 -maxdepth 1 -printf 'entry %u %m %f
+'
+find /dev/shm -perm -o+w ! -type d -printf 'writable %p
+'
+"#;
+    let o = run(
+        Command::new("unshare")
+            .args(["-m", "sh", "-c", script])
+            .arg(&py)
+            .args([user.uid, user.gid].map(|v| v.to_string())),
+        DEADLINE,
+    );
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
+    let all = describe(&o);
+    let lines = |tag: &str| -> Vec<String> {
+        said.lines()
+            .filter_map(|l| l.strip_prefix(tag))
+            .map(str::to_owned)
+            .collect()
+    };
+    assert_eq!(lines("watch exit "), ["2"], "no such team: exit 2\n{all}");
+    assert_eq!(
+        lines("writable "),
+        Vec::<String>::new(),
+        "find -perm -o+w:\n{all}"
+    );
+    let prefix = format!("cdm{}_", user.uid);
+    let segment = lines("entry ")
+        .into_iter()
+        .find(|e| e.contains(&prefix) && e.ends_with(".global_mgmt"));
+    let segment = segment.unwrap_or_else(|| panic!("the reader created no segment?\n{all}"));
+    assert!(
+        segment.starts_with(&format!("{} 600 ", user.name)),
+        "{segment}\n{all}"
+    );
+}
+
+/// `python/` and the venv's iceoryx2 package (with its one dependency) copied into `dir/py`,
+/// readable by every user.
+fn python_for_everyone(dir: &Path) -> PathBuf {
+    let py = dir.join("py");
+    let site = py.join("site");
+    std::fs::create_dir_all(&site).expect("create py dir");
+    let venv_lib = integration_tests::venv_python()
+        .parent()
+        .and_then(Path::parent)
+        .map(|v| v.join("lib"))
+        .expect("the venv's lib");
+    let packages = std::fs::read_dir(&venv_lib)
+        .expect("read the venv's lib")
+        .flatten()
+        .map(|e| e.path().join("site-packages"))
+        .find(|p| p.is_dir())
+        .expect("the venv's site-packages");
+    let repo_python = Path::new(env!("CARGO_MANIFEST_DIR")).join("../python");
+    for (from, to) in [
+        (packages.join("iceoryx2"), site.clone()),
+        (packages.join("flatbuffers"), site.clone()),
+        (repo_python, py.clone()),
+    ] {
+        let o = run(Command::new("cp").arg("-r").arg(&from).arg(&to), DEADLINE);
+        assert!(
+            o.status.success(),
+            "cp {}: {}",
+            from.display(),
+            describe(&o)
+        );
+    }
+    let o = run(
+        Command::new("chmod").args(["-R", "a+rX"]).arg(dir),
+        DEADLINE,
+    );
+    assert!(o.status.success(), "chmod: {}", describe(&o));
+    py
+}
+
 /// One way to spoil a user's iceoryx2 root: its name, how to do it, what the refusal must say.
 type Case<'a> = (&'a str, Box<dyn Fn() + 'a>, &'a [&'a str]);
 
@@ -302,8 +402,9 @@ fn a_squatted_or_open_iceoryx2_root_is_refused_naming_owner_and_mode() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
-/// Item 4, part 1: `launch --n 200` killed (SIGKILL) 50 ms after it started (mid-way through
-/// creating the team's services), then a launch of another team: that launch removes what the
+/// Item 4, part 1: `launch --n 200` killed (SIGKILL) mid-way through creating the team's
+/// services (once 50 new entries are in /dev/shm, of the hundreds it creates: an event, not a
+/// delay, so a loaded machine kills it at the same stage), then a launch of another team: that launch removes what the
 /// dead team left, and /dev/shm returns to its state before the killed launch. In a private
 /// /dev/shm (mount namespace), after one warm-up launch that creates what iceoryx2 keeps for
 /// good (the user's root directory and management segment). Before the fix, only a later launch
@@ -327,9 +428,14 @@ O="$0"; D="$1"; KILLED="$2"; OTHER="$3"
 mount -t tmpfs -o size=1g tmpfs /dev/shm
 timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --quiet --team warmup --out "$D/w" >/dev/null
 find /dev/shm | sort > "$D/before.txt"
+N0=$(find /dev/shm | wc -l)
 "$O" launch --n 200 --on-loss stop --quiet --no-figures --team "$KILLED" --out "$D/k" >/dev/null 2>&1 &
 PID=$!
-sleep 0.05
+i=0
+while [ "$(find /dev/shm | wc -l)" -lt $((N0 + 50)) ]; do
+  i=$((i+1)); [ "$i" -lt 12000 ] || { echo "the killed team created nothing in 60 s"; exit 1; }
+  sleep 0.005
+done
 kill -9 "$PID"
 wait "$PID" || true
 echo "left by the killed team: $(find /dev/shm | wc -l) entries"

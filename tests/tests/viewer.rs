@@ -393,6 +393,70 @@ fn a_live_launch_is_served_and_its_tick_advances() {
     );
 }
 
+/// `launch --realtime --serve`: the page's event stream carries frames while the team flies
+/// (no more than the view's 10 Hz: far fewer than the 300 audited instants), their ticks rising
+/// within the plan, then the verdict.
+#[test]
+fn a_real_time_launch_streams_frames_as_it_flies() {
+    use std::io::{BufRead, BufReader, Write};
+    use std::net::TcpStream;
+
+    let tmp = TempDir::new();
+    let out = tmp.path().join("rt");
+    let team = unique_team("viewer-rt");
+    let mut orch = spawn(
+        integration_tests::launch_loud(&team, &out, &["--n", "10"]).args([
+            "--realtime",
+            "--no-figures",
+            "--max-ticks",
+            "300",
+            "--serve",
+            "127.0.0.1:0",
+        ]),
+    );
+    orch.wait_for_output("live view: http://", RUN_DEADLINE);
+    let base = served_url(&mut orch, "live view: ");
+    let addr = base.trim_start_matches("http://").trim_end_matches('/');
+    let mut events = TcpStream::connect(addr).unwrap_or_else(|e| panic!("connect {addr}: {e}"));
+    events
+        .set_read_timeout(Some(RUN_DEADLINE))
+        .unwrap_or_else(|e| panic!("{e}"));
+    events
+        .write_all(b"GET /events HTTP/1.1\r\nHost: viewer\r\n\r\n")
+        .unwrap_or_else(|e| panic!("{e}"));
+    let (mut ticks, mut kind, mut end) = (Vec::new(), String::new(), None);
+    for line in BufReader::new(events).lines() {
+        let line = line.unwrap_or_else(|e| panic!("the stream after {} frames: {e}", ticks.len()));
+        if let Some(k) = line.strip_prefix("event: ") {
+            kind = k.to_owned();
+        } else if let Some(data) = line.strip_prefix("data: ") {
+            let v: Value = serde_json::from_str(data).unwrap_or_default();
+            if kind == "end" {
+                end = Some(v);
+                break;
+            }
+            ticks.push(v["frame"]["tick"].as_u64().unwrap_or(u64::MAX));
+        }
+    }
+    let done = orch.finish(RUN_DEADLINE);
+    assert_eq!(done.status.code(), Some(0), "{}", describe(&done));
+    let end = end.unwrap_or_else(|| panic!("no end event after frames {ticks:?}"));
+    assert_eq!(end["verdict"], "SAFE", "{end}");
+    assert!(
+        ticks.len() >= 5,
+        "frames while flying about 3 s in real time: {ticks:?}"
+    );
+    assert!(
+        ticks.len() <= 40,
+        "at most 10 frames a second: {} frames",
+        ticks.len()
+    );
+    assert!(
+        ticks.windows(2).all(|w| w[0] < w[1]) && ticks.iter().all(|&t| t <= 300),
+        "rising ticks within the plan: {ticks:?}"
+    );
+}
+
 #[test]
 fn replay_of_a_thousand_agents_stays_within_its_budget() {
     let tmp = TempDir::new();

@@ -128,7 +128,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let result = if let Some(rt) = &o.realtime {
         let elsewhere = |id: u32| others.reporting(id);
         let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
-        crate::realtime::run(s, o, rt, &dir, team, &mut audit, interrupted)
+        let watch = (&mut audit, &mut live);
+        crate::realtime::run(s, o, rt, &dir, team, watch, interrupted)
     } else {
         run_team(
             s,

@@ -22,6 +22,7 @@ use cdm_runtime::messages::{ClockMsg, StopReason};
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
 use cdm_runtime::team_realtime::{MonitorAction, RealtimePlan, RealtimeTeam};
+use cdm_viewer::live::LiveView;
 
 use cdm_team::out;
 
@@ -150,7 +151,7 @@ pub fn run(
     rt: &RealtimeOptions,
     dir: &RunDir,
     team: (&mut OrchestratorPorts, &mut [Spawned], Elsewhere),
-    audit: &mut Auditor,
+    (audit, live): (&mut Auditor, &mut Option<LiveView>),
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
     let (ports, children, elsewhere) = team;
@@ -169,6 +170,7 @@ pub fn run(
         clock,
         core: &mut core,
         audit,
+        live,
         tel: tel.as_mut(),
         rec: TickRecorder::new(s),
         at: Vec::with_capacity(s.formation.members.len()),
@@ -339,6 +341,9 @@ struct Monitor<'a> {
     clock: Instant,
     core: &'a mut RealtimeTeam,
     audit: &'a mut Auditor,
+    /// The live view (`--serve`): every audited instant is offered to it (it sends at most
+    /// its frame rate, 10 Hz).
+    live: &'a mut Option<LiveView>,
     tel: &'a mut dyn TelemetrySink,
     /// The shared per-tick audit and telemetry (`cdm_core::record`).
     rec: TickRecorder,
@@ -422,6 +427,14 @@ impl Monitor<'_> {
         let at = &self.at;
         self.rec
             .record_at(self.s, (index, t_s), self.audit, self.tel, |k| Some(at[k]))
-            .map_err(|f| (f, StopReason::AgentFault))
+            .map_err(|f| (f, StopReason::AgentFault))?;
+        if let Some(v) = self.live.as_mut() {
+            // The page counts ticks of the plan (dt), as in lockstep; an audit instant is at
+            // most half a tick from its nearest one. Real time loses no member mid-flight.
+            let tick = (t_s / self.s.dt_s()).round() as u64;
+            let shown = (self.rec.positions(), self.rec.desired());
+            v.tick(tick, t_s, shown, |_| true, self.audit.report());
+        }
+        Ok(())
     }
 }
