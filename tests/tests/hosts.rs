@@ -12,7 +12,8 @@
 //! - Foreign daemons (another scenario, another team, a host already taken) are refused; the
 //!   orchestrator killed with SIGKILL: the daemon and every member exit by themselves.
 //! - Real time: a short plan paced on one wall-clock start instant on both hosts is SAFE, with
-//!   every member's pacing counted; a daemon killed mid-flight is named with its members.
+//!   every member's pacing counted; a daemon killed mid-flight is named with its members; a
+//!   partition, or a daemon stopped with SIGSTOP, is the host's loss on both sides, named.
 //! - A killed daemon's work directory is removed by the next daemon.
 //! - Nothing is left in /dev/shm on either side.
 //!
@@ -360,15 +361,19 @@ fn work_dirs(tmp: &Path) -> Vec<String> {
 
 /// Kills the daemon of `team` with SIGKILL.
 fn kill_daemon(team: &str) {
-    let pid = team_processes(team)
+    signal(daemon_pid(team), libc::SIGKILL);
+}
+
+/// The pid of `team`'s daemon (`orchestrator host --connect ...`).
+fn daemon_pid(team: &str) -> u32 {
+    team_processes(team)
         .into_iter()
         .find(|(_, args)| {
             let daemon = args.first().is_some_and(|a| a.ends_with("orchestrator"));
             daemon && args.iter().any(|a| a == "--connect")
         })
         .map(|(pid, _)| pid)
-        .expect("the daemon's process");
-    signal(pid, libc::SIGKILL);
+        .expect("the daemon's process")
 }
 
 /// The orchestrator's fault after losing host B: `host-lost`, naming host 1, `cause`, and every
@@ -553,6 +558,64 @@ fn a_killed_daemon_in_real_time_is_named_with_its_members() {
     wait_no_process_of(&team, STOP_DEADLINE);
     assert_no_team_resources(&team);
     let _ = daemon.kill();
+}
+
+/// Real time, the link cut mid-flight: the orchestrator names the host's loss (`host-lost`,
+/// host 1 and every member of it), not one member's silence, although a member goes stale as
+/// soon as the link's deadline passes; the daemon stops its members and exits 3, named.
+#[test]
+fn a_partition_in_real_time_is_the_hosts_loss_on_both_sides() {
+    let Some(h) = Hosts::create("pr") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("prt");
+    let out = dir.path().join("run");
+    let b_tmp = dir.path().join("tmp-b");
+    let (orch, daemon) = running(&h, &team, &out, LONG_REALTIME, &b_tmp);
+    h.cut();
+    let o = orch.finish(STOP_DEADLINE);
+    let d = daemon.finish(STOP_DEADLINE);
+    assert_exit(&o, 3, "launch --realtime after a partition");
+    assert_exit(&d, 3, "orchestrator host (real time) after a partition");
+    assert_lost_host_b(&out, "network partition");
+    assert_stderr_has(
+        &d,
+        "host",
+        &[
+            "nothing heard from the orchestrator",
+            "its members were stopped",
+        ],
+    );
+    wait_no_process_of(&team, STOP_DEADLINE);
+    assert_no_team_resources(&team);
+}
+
+/// Real time, the daemon stopped (SIGSTOP) mid-flight: its link falls silent, and the
+/// orchestrator names the host's loss. Resumed (SIGCONT) after the orchestrator stopped, the
+/// daemon says it did not run for longer than the link timeout, stops its members and exits 3
+/// (before, it read the frames queued meanwhile, took the link for alive and exited 0).
+#[test]
+fn a_stopped_daemon_in_real_time_is_its_hosts_loss_and_says_so_once_resumed() {
+    let Some(h) = Hosts::create("sr") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("srt");
+    let out = dir.path().join("run");
+    let b_tmp = dir.path().join("tmp-b");
+    let (orch, daemon) = running(&h, &team, &out, LONG_REALTIME, &b_tmp);
+    let pid = daemon_pid(&team);
+    signal(pid, libc::SIGSTOP);
+    let o = orch.finish(STOP_DEADLINE);
+    signal(pid, libc::SIGCONT);
+    let d = daemon.finish(STOP_DEADLINE);
+    assert_exit(&o, 3, "launch --realtime with its daemon stopped");
+    assert_lost_host_b(&out, "nothing heard from host 1");
+    assert_exit(&d, 3, "orchestrator host, stopped then resumed");
+    assert_stderr_has(
+        &d,
+        "host",
+        &["this daemon did not run for", "its members were stopped"],
+    );
+    wait_no_process_of(&team, STOP_DEADLINE);
+    assert_no_team_resources(&team);
 }
 
 /// Foreign daemons are refused by name (another scenario, another team, a host already taken);

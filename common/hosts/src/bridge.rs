@@ -34,9 +34,6 @@ use crate::{HostOptions, TeamFlight};
 pub const HEARTBEAT: Duration = Duration::from_millis(200);
 /// How long the bridge waits, after the team's stop, for every daemon to stop its members.
 const STOP_DEADLINE: Duration = Duration::from_secs(8);
-/// How long a remote member's silence waits for the bridge's verdict on its host: a closed
-/// session is reported after zenoh's grace (150 ms); the rest is slack for a loaded machine.
-const VERDICT_WAIT: Duration = Duration::from_millis(600);
 
 /// What the bridge thread needs, owned.
 struct Ctx {
@@ -83,6 +80,7 @@ impl Ctx {
             quiet,
             links: Arc::new(Mutex::new(Links {
                 host_of: regions.pairs().into_iter().collect(),
+                link_timeout: Some(link_timeout),
                 ..Links::default()
             })),
             repairs: CrossRepairs::new(s),
@@ -99,6 +97,7 @@ pub struct Bridge {
     thread: Option<JoinHandle<Vec<HostReport>>>,
     crossing: Vec<(u32, u32)>,
     links: SharedLinks,
+    link_timeout: Duration,
 }
 
 /// One host as `hosts.json` records it.
@@ -181,6 +180,7 @@ impl Bridge {
             thread: Some(thread),
             crossing,
             links,
+            link_timeout: h.link_timeout,
         })
     }
 
@@ -200,16 +200,18 @@ impl Bridge {
 impl OtherHosts for Bridge {
     /// The team's fault, said in the terms of hosts ([`Links::explain`]). A remote member's
     /// silence may come before the bridge's verdict on its host (real time: a member is stale
-    /// after 0.5 s, a closed zenoh session is reported after a short grace): for such a fault
-    /// the verdict is awaited a bounded while.
+    /// after 0.5 s; a closed zenoh session is reported after a short grace, a quiet link after
+    /// the link timeout): for such a fault the verdict is awaited as long as
+    /// [`Links::verdict_wait`] says.
     fn explain(&self, f: FaultRecord) -> FaultRecord {
         // The link's quiet is measured when the fault is seen, not after the wait.
         let seen = Instant::now();
-        let until = seen + VERDICT_WAIT;
         loop {
             let links = self.links();
-            if !links.undecided(&f) || Instant::now() >= until {
-                return links.explain(f, seen);
+            let now = Instant::now();
+            match links.verdict_wait(&f, seen, self.link_timeout) {
+                Some(until) if now < until => {}
+                _ => return links.judged_at(now).explain(f, seen),
             }
             std::thread::sleep(Duration::from_millis(10));
         }

@@ -294,7 +294,11 @@ fn fly(
     if let Err(e) = ports.shutdown() {
         tracing::warn!("{e}");
     }
-    outcome.map(|_| Exit::Safe).map_err(|why| {
+    let outcome = outcome.and_then(|reason| match reason {
+        StopReason::Finished => Ok(()),
+        r => Err(DaemonStop::TeamStopped(r)),
+    });
+    outcome.map(|()| Exit::Safe).map_err(|why| {
         Failure::fault(format!(
             "host {} of team {}: {why}; its members were stopped",
             j.a.host, j.team
@@ -340,6 +344,18 @@ impl<'a, L: HostLink<In = Down, Out = Up>> Link<'a, L> {
             return Err(DaemonStop::Silent {
                 after: self.j.link_timeout,
             });
+        }
+        Ok(())
+    }
+
+    /// Between two turns at `last` and `now`, this process did not run for longer than the link
+    /// timeout (SIGSTOP, a debugger): checked before the frames queued meanwhile are read, which
+    /// would make the link look alive.
+    fn check_ran(&self, last: Instant, now: Instant) -> Result<(), DaemonStop> {
+        let gap = now.saturating_duration_since(last);
+        let timeout = self.j.link_timeout;
+        if gap > timeout {
+            return Err(DaemonStop::Stalled { gap, timeout });
         }
         Ok(())
     }
@@ -403,6 +419,7 @@ impl<'a, L: HostLink<In = Down, Out = Up>> Link<'a, L> {
         interrupted: &std::sync::atomic::AtomicBool,
     ) -> Result<StopReason, DaemonStop> {
         let mut last_child_check = Instant::now();
+        let mut last_turn = last_child_check;
         let realtime = self.j.a.realtime_stale_after_s.is_some();
         let mut idle = IdleBackoff::for_team(realtime);
         loop {
@@ -410,6 +427,8 @@ impl<'a, L: HostLink<In = Down, Out = Up>> Link<'a, L> {
             if interrupted.load(Ordering::Relaxed) {
                 return Err(interrupted_by());
             }
+            self.check_ran(last_turn, now)?;
+            last_turn = now;
             let mut busy = false;
             while let Some(f) = self.chan.try_recv()? {
                 self.last_heard = now;
@@ -605,6 +624,24 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "nothing heard from the orchestrator for 3.0 s (network partition or orchestrator gone)"
+        );
+    }
+
+    #[test]
+    fn a_daemon_that_did_not_run_for_the_link_timeout_says_so() {
+        let (j, t0) = (joined(), Instant::now());
+        let l = link(&j, t0);
+        l.check_ran(t0, t0 + ms(3000)).unwrap();
+        let e = l.check_ran(t0, t0 + ms(5200)).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("this daemon did not run for 5.2 s"),
+            "{e}"
+        );
+        let stopped = DaemonStop::TeamStopped(StopReason::AgentSilent);
+        assert_eq!(
+            stopped.to_string(),
+            "the orchestrator stopped the team (a silent member, see its audit.json)"
         );
     }
 

@@ -6,6 +6,7 @@
 use std::time::Duration;
 
 use cdm_iox::TransportError;
+use cdm_runtime::messages::StopReason;
 use cdm_runtime::notices::NoticeGap;
 
 use crate::host_link::LinkError;
@@ -105,10 +106,34 @@ pub enum DaemonStop {
         after.as_secs_f64()
     )]
     Silent { after: Duration },
+    /// The daemon itself did not run for longer than the link timeout: the orchestrator has
+    /// called this host lost meanwhile, whatever frames are still queued.
+    #[error(
+        "this daemon did not run for {:.1} s (stopped by a signal, a debugger or a starved \
+         machine), longer than the link timeout ({:.1} s): the orchestrator has lost this host",
+        gap.as_secs_f64(),
+        timeout.as_secs_f64()
+    )]
+    Stalled { gap: Duration, timeout: Duration },
+    /// The orchestrator stopped the team on a fault (or an interrupt): the flight did not end
+    /// as planned, so neither does the daemon.
+    #[error("the orchestrator stopped the team ({})", stop_text(*.0))]
+    TeamStopped(StopReason),
     #[error(transparent)]
     Transport(#[from] TransportError),
     #[error(transparent)]
     Notice(#[from] NoticeGap),
+}
+
+/// Why the orchestrator stopped a team, for a daemon's message.
+fn stop_text(r: StopReason) -> String {
+    match r {
+        StopReason::Finished => "the plan was flown".into(),
+        StopReason::AgentFault => "a member's fault, see its audit.json".into(),
+        StopReason::AgentSilent => "a silent member, see its audit.json".into(),
+        StopReason::Interrupted => "it was interrupted".into(),
+        StopReason::Unknown(c) => format!("stop reason {c}"),
+    }
 }
 
 impl From<LinkError> for DaemonStop {

@@ -4,10 +4,15 @@
 //! whose final pacing reports may still come ([`Links::reporting`]).
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use cdm_core::audit::FaultRecord;
 use cdm_core::outcome::FaultKind;
+
+/// How long a remote member's silence waits at least for the bridge's verdict on its host: a
+/// closed session is reported after zenoh's grace (150 ms); the rest is slack for a loaded
+/// machine. It is also the slack after a quiet link's own deadline.
+pub const VERDICT_WAIT: Duration = Duration::from_millis(600);
 
 /// A host whose link was lost, and the members that went with it.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,6 +43,9 @@ pub struct Links {
     pub linked: BTreeSet<(u32, u32)>,
     /// Edges (source, reader) that repairs made cross hosts.
     pub crossing_added: BTreeSet<(u32, u32)>,
+    /// Silence on a link for this long loses the host (`--link-timeout`); `None`: judged by
+    /// the bridge thread only.
+    pub link_timeout: Option<Duration>,
 }
 
 impl Links {
@@ -63,6 +71,68 @@ impl Links {
             && self
                 .remote_host(f.agent)
                 .is_some_and(|h| !self.lost.contains_key(&h))
+    }
+
+    /// Until when the team's fault `f`, seen at `seen`, waits for the bridge's verdict on the
+    /// host of the member it names; `None`: it can be said now (not a remote member's silence,
+    /// or its host already judged). Always [`VERDICT_WAIT`] (a closed session's report is on its
+    /// way); when nothing came from that host since `seen`, until its link's own deadline
+    /// (`link_timeout` after its last frame) and [`VERDICT_WAIT`] more: a partition, or a daemon
+    /// that does not run (SIGSTOP), is the host's loss, not its member's silence. A link heard
+    /// after the fault lives: the member is silent on its own.
+    pub fn verdict_wait(
+        &self,
+        f: &FaultRecord,
+        seen: Instant,
+        link_timeout: Duration,
+    ) -> Option<Instant> {
+        if !self.undecided(f) {
+            return None;
+        }
+        let floor = seen + VERDICT_WAIT;
+        let last = self
+            .remote_host(f.agent)
+            .and_then(|h| self.heard.get(&h))
+            .map(|(_, at)| *at);
+        Some(match last {
+            Some(at) if at <= seen => floor.max(at + link_timeout + VERDICT_WAIT),
+            _ => floor,
+        })
+    }
+
+    /// These links as judged at `now`: a joined host, neither stopped nor lost, whose link has
+    /// been quiet for longer than the link timeout is lost, as the bridge thread would call it
+    /// on its next turn. The launch judges so itself once a fault's wait is over: the bridge
+    /// thread may be held in a send that zenoh blocks while the link is down (real time
+    /// forwards states at the clock's rate), and a partition must still be named as one.
+    pub fn judged_at(mut self, now: Instant) -> Self {
+        let Some(timeout) = self.link_timeout else {
+            return self;
+        };
+        for (&host, (who, at)) in &self.heard {
+            let quiet = now.saturating_duration_since(*at);
+            if quiet <= timeout || self.stopped.contains(&host) || self.lost.contains_key(&host) {
+                continue;
+            }
+            let members = self
+                .host_of
+                .iter()
+                .filter(|&(_, &h)| h == host)
+                .map(|(&id, _)| id)
+                .collect();
+            let why = crate::error::LinkLost::Silent {
+                host,
+                who: who.clone(),
+                after: timeout,
+            };
+            let lost = LostHost {
+                who: who.clone(),
+                members,
+                why: why.to_string(),
+            };
+            self.lost.insert(host, lost);
+        }
+        self
     }
 
     /// The team's fault said in the terms of hosts, at `now`:
@@ -171,6 +241,71 @@ mod tests {
             "{}",
             f.message
         );
+    }
+
+    #[test]
+    fn a_silence_waits_for_a_quiet_links_deadline_and_not_for_a_live_one() {
+        let heard = Instant::now();
+        let mut l = links_at(heard);
+        let timeout = Duration::from_secs(3);
+        // Host 2 quiet since `heard`; its member 4 seen silent 500 ms later.
+        let seen = heard + Duration::from_millis(500);
+        assert_eq!(
+            l.verdict_wait(&silent(4), seen, timeout),
+            Some(heard + timeout + VERDICT_WAIT)
+        );
+        // A frame from host 2 after the fault: only the floor.
+        l.heard
+            .insert(2, ("c (pid 8)".into(), seen + Duration::from_millis(200)));
+        assert_eq!(
+            l.verdict_wait(&silent(4), seen, timeout),
+            Some(seen + VERDICT_WAIT)
+        );
+        // Judged, a local member, another fault: at once.
+        l.lost.insert(
+            2,
+            LostHost {
+                who: "c (pid 8)".into(),
+                members: vec![4],
+                why: "gone".into(),
+            },
+        );
+        assert_eq!(l.verdict_wait(&silent(4), seen, timeout), None);
+        assert_eq!(l.verdict_wait(&silent(1), seen, timeout), None);
+        let other = FaultRecord::new(FaultKind::AgentExited, Some(3), None, 5, "x".into());
+        assert_eq!(l.verdict_wait(&other, seen, timeout), None);
+    }
+
+    #[test]
+    fn a_link_quiet_past_its_timeout_is_judged_lost_naming_its_members() {
+        let heard = Instant::now();
+        let mut l = links_at(heard);
+        let later = heard + Duration::from_millis(2500);
+        assert!(
+            l.clone().judged_at(later).lost.is_empty(),
+            "no timeout: the thread judges"
+        );
+        l.link_timeout = Some(Duration::from_secs(2));
+        l.heard
+            .insert(1, ("b (pid 7)".into(), heard + Duration::from_millis(1000)));
+        l.stopped.insert(1);
+        let j = l.clone().judged_at(later);
+        assert_eq!(
+            j.lost.keys().collect::<Vec<_>>(),
+            [&2],
+            "host 1 heard late and stopped"
+        );
+        assert_eq!(j.lost[&2].members, [4]);
+        assert_eq!(
+            j.lost[&2].why,
+            "nothing heard from host 2 (c (pid 8)) for 2.0 s: network partition or daemon gone"
+        );
+        let f = j.explain(silent(4), later);
+        assert_eq!(f.kind, FaultKind::HostLost);
+        assert!(l
+            .judged_at(heard + Duration::from_millis(1999))
+            .lost
+            .is_empty());
     }
 
     #[test]
