@@ -317,6 +317,91 @@ fn a_vehicle_that_stops_sending_is_named() {
     assert_no_team_resources(&team_name);
 }
 
+/// Once the team flies, another process floods one member's port from its own socket for 3 s:
+/// spoofed LOCAL_POSITION_NED (1 km away) and HEARTBEAT with that vehicle's system id, 65 KB
+/// and 64-byte garbage datagrams, 1000 rounds a second (`tests/python/mavlink_flood.py`). The
+/// member keeps to the vehicle it first heard: the team flies SAFE, no member is lost, the
+/// flooded member's measured positions stay its vehicle's, it sends nothing to the flooder,
+/// its setpoints keep their rate, and audit.json counts what it dropped (`foreign_packets`).
+#[test]
+fn a_flooding_spoofer_on_a_members_port_changes_nothing() {
+    const FLOODED: usize = 3;
+    let dir = TempDir::new();
+    let file = team(8.0);
+    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+    let base = free_udp_ports(N as u16);
+    let team_name = unique_team("mav10flood");
+    let origins = [ORIGIN; N];
+    let vehicles = start_vehicles(&file, (base, &origins), 0..N, None, &[]);
+    let at = ["--vehicle-origin", &csv(ORIGIN)];
+    let mut orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+    let telemetry = dir.path().join("run/telemetry.csv");
+    support::wait_for_rows(&mut orch, &telemetry, 20 * N);
+    let flood = spawn(
+        std::process::Command::new(venv_python())
+            .arg(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("python/mavlink_flood.py"))
+            .args(["--port", &(base + FLOODED as u16).to_string()])
+            .args(["--sysid", &(FLOODED + 1).to_string()])
+            .args(["--seconds", "3"]),
+    );
+    let flood = flood.finish(DEADLINE);
+    let o = orch.finish(DEADLINE);
+    let outs: Vec<Output> = vehicles.into_iter().map(|v| v.finish(DEADLINE)).collect();
+    let audit = read_json(&dir.path().join("run/audit.json"));
+    let why = format!("{audit:#}\n{}", describe(&o));
+    assert_eq!(o.status.code(), Some(0), "{why}");
+    assert_eq!(audit["verdict"], "SAFE", "{why}");
+    assert_eq!(audit["losses"].as_array().map_or(0, Vec::len), 0, "{why}");
+    let f = summary(&flood, "the flooder");
+    assert_eq!(
+        num(&f, "received"),
+        0.0,
+        "the member answered the flooder: {f}"
+    );
+    let sent = &f["sent"];
+    let all_sent: f64 = ["positions", "heartbeats", "big", "small"]
+        .iter()
+        .map(|k| num(sent, k))
+        .sum();
+    assert!(num(sent, "positions") > 100.0, "{f}");
+    let id = file.agents[FLOODED].id;
+    let dropped = num(&audit["vehicles"][id.to_string()], "foreign_packets");
+    // Each datagram the member read was dropped; the kernel drops what its socket's buffer
+    // cannot hold while the member reads at its own pace.
+    assert!(
+        dropped > 100.0 && dropped <= all_sent,
+        "agent {id} dropped {dropped} of {all_sent}: {why}"
+    );
+    for a in file.agents.iter().filter(|a| a.id != id) {
+        let other = num(&audit["vehicles"][a.id.to_string()], "foreign_packets");
+        assert_eq!(other, 0.0, "agent {}: {why}", a.id);
+    }
+    // Its measured positions are its vehicle's: none near the spoofed one, NED (1000, 1000)
+    // from ORIGIN, ENU (1005, 997).
+    let text = std::fs::read_to_string(&telemetry).expect("telemetry.csv");
+    let far = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|c| c.get(2) == Some(&id.to_string().as_str()))
+        .filter_map(|c| {
+            Some((
+                c.get(4)?.parse::<f64>().ok()?,
+                c.get(5)?.parse::<f64>().ok()?,
+            ))
+        })
+        .filter(|(x, y)| (x - 1005.0).hypot(y - 997.0) < 500.0)
+        .count();
+    assert_eq!(far, 0, "agent {id}: spoofed positions in telemetry");
+    let v = summary(&outs[FLOODED], "the flooded vehicle");
+    let rate = num(&v, "setpoint_rate_by_stamp_hz");
+    assert!(
+        (rate - COMM_HZ).abs() <= 0.1 * COMM_HZ,
+        "the flooded member's setpoints at {rate:.2} Hz, not {COMM_HZ} Hz +- 10 %: {v}"
+    );
+    assert_no_team_resources(&team_name);
+}
+
 #[test]
 fn bad_vehicle_options_exit_2_naming_them() {
     let dir = TempDir::new();

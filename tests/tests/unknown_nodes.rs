@@ -32,7 +32,7 @@ const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 const MAKER_ENV: &str = "CDM_NODE_MAKER";
 
 /// Not a test on its own: the body of the child that makes a node. Creates the node of agent 0
-/// of the team, prints `NODE <node id> <pid>`, and holds it until the file appears (then drops
+/// of the team, prints `NODE <node id> <pid> END`, and holds it until the file appears (then drops
 /// it, removing its files) or 60 s pass. In a normal run (no `CDM_NODE_MAKER`) it returns.
 #[test]
 fn node_maker() {
@@ -47,7 +47,8 @@ fn node_maker() {
         .config(&cdm_iox::iceoryx2_config())
         .create::<ipc::Service>()
         .expect("create the node");
-    println!("NODE {} {}", node.id().value(), std::process::id());
+    // ` END` closes the line: a reader that sees it has both numbers whole.
+    println!("NODE {} {} END", node.id().value(), std::process::id());
     let end = Instant::now() + Duration::from_secs(60);
     while !Path::new(until).exists() && Instant::now() < end {
         std::thread::sleep(Duration::from_millis(20));
@@ -71,7 +72,7 @@ fn maker(team: &str, until: &Path) -> Command {
 
 /// The node id and pid `node_maker` printed.
 fn made_node(maker: &mut Running) -> (u128, u32) {
-    maker.wait_for_output("NODE ", DEADLINE);
+    maker.wait_for_output(" END", DEADLINE);
     let (out, _) = maker.output_so_far();
     let (_, rest) = out.split_once("NODE ").expect("NODE line");
     let mut words = rest.split_whitespace();
@@ -173,11 +174,11 @@ orphan() {
   CDM_NODE_MAKER="$MAKER:$D/never" "$T" node_maker "$MAKER" --exact --nocapture \
     --test-threads=1 > "$D/maker.txt" 2>/dev/null &
   i=0
-  until grep -q "NODE " "$D/maker.txt"; do
+  until grep -q "NODE [0-9][0-9]* [0-9][0-9]* END" "$D/maker.txt"; do
     i=$((i+1)); [ "$i" -lt 600 ] || { echo "node_maker never made its node"; exit 1; }
     sleep 0.1
   done
-  set -- $(sed -n 's/.*NODE \([0-9]*\) \([0-9]*\).*/\1 \2/p' "$D/maker.txt")
+  set -- $(sed -n 's/.*NODE \([0-9]*\) \([0-9]*\) END.*/\1 \2/p' "$D/maker.txt")
   rm -r "$ROOT/nodes/$1"
   kill -9 "$2"
   wait || true

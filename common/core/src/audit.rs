@@ -204,6 +204,9 @@ pub struct VehicleFigures {
     pub max_abs_pitch_deg: Real,
     /// The newest ATTITUDE (roll, pitch, yaw; degrees), absent if none arrived.
     pub last_attitude_deg: Option<[Real; 3]>,
+    /// What reached the member's port and was not its vehicle's, dropped: datagrams from
+    /// another address, oversized ones, messages of another system or component.
+    pub foreign_packets: u64,
 }
 
 /// The pacing figures of a real-time flight, from the members' own reports (their pacing

@@ -61,6 +61,7 @@ mod tests {
             max_abs_roll_rad: 0.1,
             max_abs_pitch_rad: 0.2,
             last_attitude_rad: None,
+            foreign_packets: 0,
         };
         assert!(book.take(&r.to_msg(4, 9)));
         assert!(

@@ -314,6 +314,7 @@ impl LinkFigures {
 /// (kept in `shared` for the member).
 fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: Instant) {
     let mut next = clock.elapsed();
+    let (mut foreign, mut flooded);
     loop {
         let now = clock.elapsed();
         let out = {
@@ -324,12 +325,16 @@ fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: In
             let (sp, team_ready) = (g.setpoint, g.team_ready);
             let g = &mut *g;
             g.sends.on_send(now.saturating_sub(next), period);
+            foreign = g.vehicle.counters().foreign_packets;
             let r = link
                 .receive(now, &mut g.vehicle)
                 .map_err(PlantError::from)
                 .and_then(|_| Ok(g.vehicle.on_tick(now, Some(&sp), team_ready)?));
             match r {
-                Ok(out) => out,
+                Ok(out) => {
+                    flooded = g.vehicle.counters().foreign_packets > foreign;
+                    out
+                }
                 Err(e) => {
                     tracing::warn!("{e}");
                     g.fault = Some(e);
@@ -346,9 +351,44 @@ fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: In
         next += period;
         let now = clock.elapsed();
         match next.checked_sub(now) {
+            Some(_) if flooded => drain_until(&mut link, shared, clock, next),
             Some(wait) => std::thread::sleep(wait),
             None if now - next > period * 5 => next = now,
             None => {}
+        }
+    }
+}
+
+/// How often the socket is drained between two ticks while foreign datagrams arrive.
+const DRAIN_EVERY: Duration = Duration::from_millis(1);
+
+/// Waits until `until` on `clock`, draining the socket every [`DRAIN_EVERY`] while foreign
+/// datagrams keep arriving (a flood on the port): read only once a tick, a flood of large
+/// datagrams fills the kernel's receive buffer (about 200 KiB by default, three 64 KiB
+/// datagrams) between two ticks, and the kernel then drops the vehicle's own packets with the
+/// rest. Once a drain finds nothing foreign, the rest of the wait is one sleep. A receive error
+/// here is left to the next tick's receive, which reports it.
+fn drain_until(link: &mut UdpLink, shared: &Mutex<Shared>, clock: Instant, until: Duration) {
+    loop {
+        let Some(left) = until.checked_sub(clock.elapsed()) else {
+            return;
+        };
+        std::thread::sleep(left.min(DRAIN_EVERY));
+        if left <= DRAIN_EVERY {
+            return;
+        }
+        let mut g = lock(shared);
+        let before = g.vehicle.counters().foreign_packets;
+        let now = clock.elapsed();
+        if link.receive(now, &mut g.vehicle).is_err() {
+            return;
+        }
+        if g.vehicle.counters().foreign_packets == before {
+            drop(g);
+            if let Some(rest) = until.checked_sub(clock.elapsed()) {
+                std::thread::sleep(rest);
+            }
+            return;
         }
     }
 }

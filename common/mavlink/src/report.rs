@@ -29,6 +29,8 @@ pub struct VehicleReport {
     pub max_abs_pitch_rad: f64,
     /// The newest (roll, pitch, yaw) in rad, if any ATTITUDE arrived.
     pub last_attitude_rad: Option<[f64; 3]>,
+    /// Datagrams and messages that were not the vehicle's, dropped (`LinkCounters`).
+    pub foreign_packets: u64,
 }
 
 impl VehicleReport {
@@ -45,11 +47,13 @@ impl VehicleReport {
             last_attitude_rad: attitude
                 .last
                 .map(|a: Attitude| [a.roll_rad, a.pitch_rad, a.yaw_rad]),
+            foreign_packets: counters.foreign_packets,
         }
     }
 
     /// As a message: `tick` = setpoints sent, `state` = [late setpoints, max lateness ms,
-    /// attitudes, max |roll|, max |pitch|, last roll, pitch, yaw (NaN without one), 0...].
+    /// attitudes, max |roll|, max |pitch|, last roll, pitch, yaw (NaN without one), foreign
+    /// packets, 0...]. Counts up to 2^53 are exact in an f64.
     pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
         let mut f = [0.0; 12];
         f[0] = self.late_setpoints as f64;
@@ -59,6 +63,7 @@ impl VehicleReport {
         f[4] = self.max_abs_pitch_rad;
         let last = self.last_attitude_rad.unwrap_or([f64::NAN; 3]);
         f[5..8].copy_from_slice(&last);
+        f[8] = self.foreign_packets as f64;
         StateMsg {
             status: STATUS_VEHICLE,
             ..StateMsg::ok(self.setpoints_sent, hash, id, f)
@@ -82,6 +87,7 @@ impl VehicleReport {
                 max_abs_roll_rad: f[3],
                 max_abs_pitch_rad: f[4],
                 last_attitude_rad: last.iter().all(|v| v.is_finite()).then_some(last),
+                foreign_packets: f[8] as u64,
             },
         ))
     }
@@ -173,6 +179,7 @@ mod tests {
             max_abs_roll_rad: 0.2,
             max_abs_pitch_rad: 0.1,
             last_attitude_rad: Some([0.01, -0.02, 1.5]),
+            foreign_packets: 12_345,
         };
         let m = r.to_msg(7, 9);
         assert_eq!(VehicleReport::from_msg(&m), Some((7, r)));

@@ -1,6 +1,13 @@
-//! The thin I/O around [`MavlinkVehicle`]: one UDP socket per member, bound to `H:(P + i)`,
-//! replying to the address the vehicle's packets come from. It decodes and encodes with the
-//! `mavlink` crate and does nothing else; every decision is the vehicle's.
+//! The thin I/O around [`MavlinkVehicle`]: one UDP socket per member, bound to `H:(P + i)`.
+//! It locks onto the address of the vehicle's first accepted message (its HEARTBEAT) and from
+//! then on decodes only what comes from there and sends only there; datagrams from anywhere
+//! else, and datagrams larger than any vehicle's, are dropped undecoded and counted. It decodes
+//! and encodes with the `mavlink` crate; every decision about messages is the vehicle's.
+//!
+//! Bounded per call, so that a flood cannot hold a tick: at most [`MAX_DATAGRAMS_PER_RECEIVE`]
+//! datagrams read (a dropped one costs a system call and at most [`DATAGRAM_BYTES`] of copy)
+//! and at most [`MAX_DECODED_BYTES_PER_RECEIVE`] bytes decoded; the rest waits for the next
+//! tick (or is dropped by the kernel when the socket's buffer is full).
 
 use std::io;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
@@ -16,11 +23,15 @@ use crate::vehicle::MavlinkVehicle;
 /// PX4 multi-vehicle SITL sends instance k's offboard link to UDP 14540 + k.
 pub const DEFAULT_BASE_PORT: u16 = 14540;
 
-/// Largest UDP payload read at once (a MAVLink 2 frame is at most 280 bytes; a datagram may
-/// carry several).
-const DATAGRAM_BYTES: usize = 65_536;
+/// The largest datagram taken for a vehicle's: a MAVLink 2 frame is at most 280 bytes, and an
+/// autopilot packs several into at most one network MTU (1500 bytes on Ethernet, PX4's
+/// mavlink buffer). A datagram that fills this buffer is larger and dropped (the kernel cuts
+/// what does not fit), so a 64 KiB flood costs a 4 KiB copy per datagram.
+const DATAGRAM_BYTES: usize = 4096;
 /// Datagrams one `receive` reads at most (a vehicle sends a few per tick).
-const MAX_DATAGRAMS_PER_RECEIVE: usize = 1024;
+pub const MAX_DATAGRAMS_PER_RECEIVE: usize = 1024;
+/// Bytes one `receive` decodes at most (a vehicle sends well under 1 KiB per tick at 50 Hz).
+pub const MAX_DECODED_BYTES_PER_RECEIVE: usize = 64 * 1024;
 
 /// Why the member's UDP link failed.
 #[derive(Debug, thiserror::Error)]
@@ -75,7 +86,8 @@ pub struct UdpLink {
     agent: u32,
     socket: UdpSocket,
     local: SocketAddr,
-    /// Where the last valid MAVLink came from; replies go there.
+    /// The vehicle's address: where its first accepted message came from. Only datagrams from
+    /// there are decoded, and replies go only there.
     peer: Option<SocketAddr>,
     sequence: u8,
     buf: Vec<u8>,
@@ -123,16 +135,20 @@ impl UdpLink {
 
     /// Hand the datagrams waiting on the socket to `vehicle` as received at `now`; returns the
     /// number of MAVLink messages decoded. Frames with a bad checksum are skipped by the reader.
-    /// Replies go to the address of the last datagram that carried the vehicle's messages.
+    /// Datagrams from another address than the vehicle's (once known) or too large to be its
+    /// are dropped undecoded, each counted by the vehicle as foreign.
     pub fn receive(
         &mut self,
         now: Duration,
         vehicle: &mut MavlinkVehicle,
     ) -> Result<usize, UdpError> {
-        let mut decoded = 0;
+        let (mut decoded, mut decoded_bytes) = (0, 0);
         // Bounded: a flood cannot keep the caller's tick from ending; the rest waits for the
         // next tick.
         for _ in 0..MAX_DATAGRAMS_PER_RECEIVE {
+            if decoded_bytes >= MAX_DECODED_BYTES_PER_RECEIVE {
+                break;
+            }
             let (n, from) = match self.socket.recv_from(&mut self.buf) {
                 Ok(got) => got,
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
@@ -141,13 +157,18 @@ impl UdpLink {
                 Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
                 Err(e) => return Err(self.io_err("receive", e)),
             };
+            if n >= self.buf.len() || self.peer.is_some_and(|p| p != from) {
+                vehicle.on_foreign_datagram();
+                continue;
+            }
+            decoded_bytes += n;
             let mut reader = MavlinkReader::new(&self.buf[..n]);
             // Each read consumes at least one byte of the datagram, so this ends.
             loop {
                 match reader.read_any_message::<MavMessage>() {
                     Ok((header, msg)) => {
                         decoded += 1;
-                        if vehicle.on_message(now, &header, &msg) {
+                        if vehicle.on_message(now, &header, &msg) && self.peer.is_none() {
                             self.peer = Some(from);
                         }
                     }
@@ -221,7 +242,7 @@ mod tests {
         for _ in 0..1000 {
             link.receive(Duration::ZERO, vehicle).unwrap();
             let c = vehicle.counters();
-            if c.heartbeats_received + c.ignored >= want {
+            if c.heartbeats_received + c.ignored + c.foreign_packets >= want {
                 return;
             }
             std::thread::sleep(Duration::from_millis(2));
@@ -258,6 +279,14 @@ mod tests {
             MavAutopilot::MAV_AUTOPILOT_INVALID,
         );
         receive_until(&mut link, &mut vehicle, 2);
+        assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
+        // Another process sending the vehicle's own system id is not the vehicle either, nor is
+        // a datagram larger than any vehicle's from the vehicle's address.
+        beat_from(&gcs, link.local_addr(), 1, MavAutopilot::MAV_AUTOPILOT_PX4);
+        autopilot.send_to(&[0u8; 9000], link.local_addr()).unwrap();
+        receive_until(&mut link, &mut vehicle, 4);
+        assert_eq!(vehicle.counters().heartbeats_received, 1);
+        assert_eq!(vehicle.counters().foreign_packets, 3);
         assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
     }
 

@@ -79,8 +79,13 @@ pub struct LinkCounters {
     pub heartbeats_received: u64,
     pub positions_received: u64,
     pub attitudes_received: u64,
-    /// Messages from another system than the vehicle's, or of a type the member does not use.
+    /// Messages before the vehicle's first HEARTBEAT, and the vehicle's messages of a type the
+    /// member does not use.
     pub ignored: u64,
+    /// What was not the vehicle's and was dropped: datagrams from another address than the
+    /// vehicle's (not even decoded), oversized datagrams, and messages of another system or
+    /// component (a ground station, a spoofer, a gimbal).
+    pub foreign_packets: u64,
     pub setpoints_sent: u64,
     pub heartbeats_sent: u64,
     pub commands_sent: u64,
@@ -143,13 +148,17 @@ impl MavlinkVehicle {
                 }
             }
         }
-        let from_vehicle = self
-            .target
-            .is_some_and(|t| u32::from(t.system) == header.system_id);
+        let Some(t) = self.target else {
+            // Not locked yet (positions stream faster than the 1 Hz HEARTBEAT that locks).
+            self.counters.ignored += 1;
+            return false;
+        };
+        if u32::from(t.system) != header.system_id || t.component != header.component_id {
+            self.counters.foreign_packets += 1;
+            return false;
+        }
         match msg {
-            MavMessage::HEARTBEAT(hb)
-                if from_vehicle && hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID =>
-            {
+            MavMessage::HEARTBEAT(hb) if hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID => {
                 self.counters.heartbeats_received += 1;
                 self.health.on_heartbeat(now);
                 self.mode = Some(VehicleMode {
@@ -160,7 +169,7 @@ impl MavlinkVehicle {
                         .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
                 });
             }
-            MavMessage::LOCAL_POSITION_NED(p) if from_vehicle => {
+            MavMessage::LOCAL_POSITION_NED(p) => {
                 self.counters.positions_received += 1;
                 self.health.on_position(now);
                 self.state = Some(MeasuredState {
@@ -170,7 +179,7 @@ impl MavlinkVehicle {
                     received_at: now,
                 });
             }
-            MavMessage::ATTITUDE(a) if from_vehicle => {
+            MavMessage::ATTITUDE(a) => {
                 self.counters.attitudes_received += 1;
                 self.attitude.on_attitude(Attitude {
                     roll_rad: Real::from(a.roll),
@@ -268,6 +277,13 @@ impl MavlinkVehicle {
     }
 
     /// Message counts so far.
+    /// A datagram dropped unread: from another address than the vehicle's, or too large to be
+    /// one of its (the socket's decision, counted here with the rest of what is not the
+    /// vehicle's).
+    pub fn on_foreign_datagram(&mut self) {
+        self.counters.foreign_packets += 1;
+    }
+
     pub fn counters(&self) -> &LinkCounters {
         &self.counters
     }
@@ -412,7 +428,18 @@ mod tests {
             })
         );
         assert_eq!(v.state().unwrap().position, Vec3::new(12.0, 21.0, 3.0));
-        assert_eq!(v.counters().ignored, 3);
+        // Before the lock: not counted as foreign (the vehicle's own positions come first).
+        assert_eq!(v.counters().ignored, 2);
+        assert_eq!(v.counters().foreign_packets, 1);
+        // The vehicle's system id from another component (a gimbal, a spoofer): not its.
+        let other = MavHeader {
+            system_id: 3,
+            component_id: 154,
+            sequence: 0,
+        };
+        assert!(!v.on_message(ms(4), &other, &position(9.0, 9.0, 9.0)));
+        assert_eq!(v.state().unwrap().position, Vec3::new(12.0, 21.0, 3.0));
+        assert_eq!(v.counters().foreign_packets, 2);
     }
 
     #[test]

@@ -30,6 +30,7 @@ pub fn vehicle_figures(r: &VehicleReport) -> cdm_core::audit::VehicleFigures {
         max_abs_roll_deg: r.max_abs_roll_rad.to_degrees(),
         max_abs_pitch_deg: r.max_abs_pitch_rad.to_degrees(),
         last_attitude_deg: r.last_attitude_rad.map(|a| a.map(f64::to_degrees)),
+        foreign_packets: r.foreign_packets,
     }
 }
 
