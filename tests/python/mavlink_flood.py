@@ -81,7 +81,9 @@ def main():
                 received += 1
             except (BlockingIOError, ConnectionRefusedError):
                 break
-        next_round += period
+        # At most --rounds-hz over any stretch: after a stall (this process not scheduled), the
+        # schedule restarts from now instead of sending the missed rounds in one burst.
+        next_round = max(next_round + period, time.monotonic())
         wait = next_round - time.monotonic()
         if wait > 0:
             time.sleep(wait)

@@ -97,7 +97,6 @@ pub struct Bridge {
     thread: Option<JoinHandle<Vec<HostReport>>>,
     crossing: Vec<(u32, u32)>,
     links: SharedLinks,
-    link_timeout: Duration,
 }
 
 /// One host as `hosts.json` records it.
@@ -180,7 +179,6 @@ impl Bridge {
             thread: Some(thread),
             crossing,
             links,
-            link_timeout: h.link_timeout,
         })
     }
 
@@ -209,7 +207,7 @@ impl OtherHosts for Bridge {
         loop {
             let links = self.links();
             let now = Instant::now();
-            match links.verdict_wait(&f, seen, self.link_timeout) {
+            match links.verdict_wait(&f, seen) {
                 Some(until) if now < until => {}
                 _ => return links.judged_at(now).explain(f, seen),
             }

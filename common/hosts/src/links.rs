@@ -77,15 +77,10 @@ impl Links {
     /// host of the member it names; `None`: it can be said now (not a remote member's silence,
     /// or its host already judged). Always [`VERDICT_WAIT`] (a closed session's report is on its
     /// way); when nothing came from that host since `seen`, until its link's own deadline
-    /// (`link_timeout` after its last frame) and [`VERDICT_WAIT`] more: a partition, or a daemon
-    /// that does not run (SIGSTOP), is the host's loss, not its member's silence. A link heard
-    /// after the fault lives: the member is silent on its own.
-    pub fn verdict_wait(
-        &self,
-        f: &FaultRecord,
-        seen: Instant,
-        link_timeout: Duration,
-    ) -> Option<Instant> {
+    /// ([`Links::link_timeout`] after its last frame) and [`VERDICT_WAIT`] more: a partition, or
+    /// a daemon that does not run (SIGSTOP), is the host's loss, not its member's silence. A link
+    /// heard after the fault lives: the member is silent on its own.
+    pub fn verdict_wait(&self, f: &FaultRecord, seen: Instant) -> Option<Instant> {
         if !self.undecided(f) {
             return None;
         }
@@ -94,8 +89,8 @@ impl Links {
             .remote_host(f.agent)
             .and_then(|h| self.heard.get(&h))
             .map(|(_, at)| *at);
-        Some(match last {
-            Some(at) if at <= seen => floor.max(at + link_timeout + VERDICT_WAIT),
+        Some(match (last, self.link_timeout) {
+            (Some(at), Some(timeout)) if at <= seen => floor.max(at + timeout + VERDICT_WAIT),
             _ => floor,
         })
     }
@@ -248,19 +243,17 @@ mod tests {
         let heard = Instant::now();
         let mut l = links_at(heard);
         let timeout = Duration::from_secs(3);
+        l.link_timeout = Some(timeout);
         // Host 2 quiet since `heard`; its member 4 seen silent 500 ms later.
         let seen = heard + Duration::from_millis(500);
         assert_eq!(
-            l.verdict_wait(&silent(4), seen, timeout),
+            l.verdict_wait(&silent(4), seen),
             Some(heard + timeout + VERDICT_WAIT)
         );
         // A frame from host 2 after the fault: only the floor.
         l.heard
             .insert(2, ("c (pid 8)".into(), seen + Duration::from_millis(200)));
-        assert_eq!(
-            l.verdict_wait(&silent(4), seen, timeout),
-            Some(seen + VERDICT_WAIT)
-        );
+        assert_eq!(l.verdict_wait(&silent(4), seen), Some(seen + VERDICT_WAIT));
         // Judged, a local member, another fault: at once.
         l.lost.insert(
             2,
@@ -270,10 +263,10 @@ mod tests {
                 why: "gone".into(),
             },
         );
-        assert_eq!(l.verdict_wait(&silent(4), seen, timeout), None);
-        assert_eq!(l.verdict_wait(&silent(1), seen, timeout), None);
+        assert_eq!(l.verdict_wait(&silent(4), seen), None);
+        assert_eq!(l.verdict_wait(&silent(1), seen), None);
         let other = FaultRecord::new(FaultKind::AgentExited, Some(3), None, 5, "x".into());
-        assert_eq!(l.verdict_wait(&other, seen, timeout), None);
+        assert_eq!(l.verdict_wait(&other, seen), None);
     }
 
     #[test]

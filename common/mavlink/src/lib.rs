@@ -27,7 +27,7 @@ pub use ned::VehicleOrigin;
 pub use plant::{ArmProgress, LinkFigures, MavlinkPlant, PlantConfig, PlantError, SendTimes};
 pub use report::{Reporting, VehicleReport};
 pub use team_arm::{before_start, TeamArmError};
-pub use udp::{member_addr, UdpError, UdpLink, DEFAULT_BASE_PORT};
+pub use udp::{member_addr, Received, UdpError, UdpLink, DEFAULT_BASE_PORT};
 pub use vehicle::{
     Attitude, AttitudeFigures, MavlinkVehicle, MeasuredState, VehicleConfig, VehicleError,
 };

@@ -314,7 +314,7 @@ impl LinkFigures {
 /// (kept in `shared` for the member).
 fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: Instant) {
     let mut next = clock.elapsed();
-    let (mut foreign, mut flooded);
+    let mut flooded;
     loop {
         let now = clock.elapsed();
         let out = {
@@ -325,14 +325,11 @@ fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: In
             let (sp, team_ready) = (g.setpoint, g.team_ready);
             let g = &mut *g;
             g.sends.on_send(now.saturating_sub(next), period);
-            foreign = g.vehicle.counters().foreign_packets;
-            let r = link
-                .receive(now, &mut g.vehicle)
-                .map_err(PlantError::from)
-                .and_then(|_| Ok(g.vehicle.on_tick(now, Some(&sp), team_ready)?));
+            let r = link.receive(now, &mut g.vehicle).map_err(PlantError::from);
+            let r = r.and_then(|got| Ok((got, g.vehicle.on_tick(now, Some(&sp), team_ready)?)));
             match r {
-                Ok(out) => {
-                    flooded = g.vehicle.counters().foreign_packets > foreign;
+                Ok((got, out)) => {
+                    flooded = got.foreign > 0;
                     out
                 }
                 Err(e) => {
@@ -364,10 +361,11 @@ const DRAIN_EVERY: Duration = Duration::from_millis(1);
 
 /// Waits until `until` on `clock`, draining the socket every [`DRAIN_EVERY`] while foreign
 /// datagrams keep arriving (a flood on the port): read only once a tick, a flood of large
-/// datagrams fills the kernel's receive buffer (about 200 KiB by default, three 64 KiB
-/// datagrams) between two ticks, and the kernel then drops the vehicle's own packets with the
-/// rest. Once a drain finds nothing foreign, the rest of the wait is one sleep. A receive error
-/// here is left to the next tick's receive, which reports it.
+/// datagrams fills the kernel's receive buffer ([`crate::udp::RECEIVE_BUFFER_BYTES`] asked,
+/// `net.core.rmem_max` granted: three 64 KiB datagrams on a stock kernel) between two ticks,
+/// and the kernel then drops the vehicle's own packets with the rest. Once a drain finds
+/// nothing foreign, the rest of the wait is one sleep. A receive error here is left to the next
+/// tick's receive, which reports it.
 fn drain_until(link: &mut UdpLink, shared: &Mutex<Shared>, clock: Instant, until: Duration) {
     loop {
         let Some(left) = until.checked_sub(clock.elapsed()) else {
@@ -377,18 +375,17 @@ fn drain_until(link: &mut UdpLink, shared: &Mutex<Shared>, clock: Instant, until
         if left <= DRAIN_EVERY {
             return;
         }
-        let mut g = lock(shared);
-        let before = g.vehicle.counters().foreign_packets;
-        let now = clock.elapsed();
-        if link.receive(now, &mut g.vehicle).is_err() {
-            return;
-        }
-        if g.vehicle.counters().foreign_packets == before {
-            drop(g);
-            if let Some(rest) = until.checked_sub(clock.elapsed()) {
-                std::thread::sleep(rest);
+        // Its own statement: the guard is dropped here, not held through the sleep below.
+        let got = link.receive(clock.elapsed(), &mut lock(shared).vehicle);
+        match got {
+            Ok(got) if got.foreign > 0 => {}
+            Ok(_) => {
+                if let Some(rest) = until.checked_sub(clock.elapsed()) {
+                    std::thread::sleep(rest);
+                }
+                return;
             }
-            return;
+            Err(_) => return,
         }
     }
 }

@@ -32,6 +32,21 @@ const DATAGRAM_BYTES: usize = 4096;
 pub const MAX_DATAGRAMS_PER_RECEIVE: usize = 1024;
 /// Bytes one `receive` decodes at most (a vehicle sends well under 1 KiB per tick at 50 Hz).
 pub const MAX_DECODED_BYTES_PER_RECEIVE: usize = 64 * 1024;
+/// The receive buffer asked of the kernel for a member's socket. The default (212,992 bytes,
+/// `net.core.rmem_default`) holds three 64 KiB datagrams: a flood fills it within a few
+/// milliseconds the member is not scheduled, and the kernel then drops the vehicle's own
+/// packets with the flood's. The kernel grants at most `net.core.rmem_max` (212,992 bytes on a
+/// stock kernel, so nothing more there unless an operator raises it).
+pub const RECEIVE_BUFFER_BYTES: usize = 4 << 20;
+
+/// What one [`UdpLink::receive`] took in.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Received {
+    /// MAVLink messages decoded from the vehicle's datagrams.
+    pub decoded: usize,
+    /// Datagrams dropped undecoded: from another address than the vehicle's, or too large.
+    pub foreign: u64,
+}
 
 /// Why the member's UDP link failed.
 #[derive(Debug, thiserror::Error)]
@@ -104,6 +119,12 @@ impl UdpLink {
         let socket = UdpSocket::bind(addr).map_err(bind_err)?;
         socket.set_nonblocking(true).map_err(bind_err)?;
         let local = socket.local_addr().map_err(bind_err)?;
+        // Best effort: the kernel caps the size silently; the size granted is only logged.
+        let sock = socket2::SockRef::from(&socket);
+        let granted = sock
+            .set_recv_buffer_size(RECEIVE_BUFFER_BYTES)
+            .and_then(|()| sock.recv_buffer_size());
+        tracing::debug!(agent, %local, ?granted, "receive buffer");
         Ok(UdpLink {
             agent,
             socket,
@@ -133,16 +154,17 @@ impl UdpLink {
         }
     }
 
-    /// Hand the datagrams waiting on the socket to `vehicle` as received at `now`; returns the
-    /// number of MAVLink messages decoded. Frames with a bad checksum are skipped by the reader.
-    /// Datagrams from another address than the vehicle's (once known) or too large to be its
-    /// are dropped undecoded, each counted by the vehicle as foreign.
+    /// Hand the datagrams waiting on the socket to `vehicle` as received at `now`. Frames with
+    /// a bad checksum are skipped by the reader. Datagrams from another address than the
+    /// vehicle's (once known) or too large to be its are dropped undecoded, each counted by the
+    /// vehicle as foreign.
     pub fn receive(
         &mut self,
         now: Duration,
         vehicle: &mut MavlinkVehicle,
-    ) -> Result<usize, UdpError> {
-        let (mut decoded, mut decoded_bytes) = (0, 0);
+    ) -> Result<Received, UdpError> {
+        let mut got = Received::default();
+        let mut decoded_bytes = 0;
         // Bounded: a flood cannot keep the caller's tick from ending; the rest waits for the
         // next tick.
         for _ in 0..MAX_DATAGRAMS_PER_RECEIVE {
@@ -159,6 +181,7 @@ impl UdpLink {
             };
             if n >= self.buf.len() || self.peer.is_some_and(|p| p != from) {
                 vehicle.on_foreign_datagram();
+                got.foreign += 1;
                 continue;
             }
             decoded_bytes += n;
@@ -167,7 +190,7 @@ impl UdpLink {
             loop {
                 match reader.read_any_message::<MavMessage>() {
                     Ok((header, msg)) => {
-                        decoded += 1;
+                        got.decoded += 1;
                         if vehicle.on_message(now, &header, &msg) && self.peer.is_none() {
                             self.peer = Some(from);
                         }
@@ -179,7 +202,7 @@ impl UdpLink {
                 }
             }
         }
-        Ok(decoded)
+        Ok(got)
     }
 
     /// Encode `msgs` (MAVLink 2) and send them to the vehicle; nothing is sent before the
@@ -237,13 +260,15 @@ mod tests {
         socket.send_to(&frame, to).unwrap();
     }
 
-    /// Receive until `vehicle` has taken in `want` messages (bounded: loopback is immediate).
-    fn receive_until(link: &mut UdpLink, vehicle: &mut MavlinkVehicle, want: u64) {
+    /// Receive until `vehicle` has taken in `want` messages (bounded: loopback is immediate);
+    /// returns the foreign datagrams the receives reported.
+    fn receive_until(link: &mut UdpLink, vehicle: &mut MavlinkVehicle, want: u64) -> u64 {
+        let mut foreign = 0;
         for _ in 0..1000 {
-            link.receive(Duration::ZERO, vehicle).unwrap();
+            foreign += link.receive(Duration::ZERO, vehicle).unwrap().foreign;
             let c = vehicle.counters();
             if c.heartbeats_received + c.ignored + c.foreign_packets >= want {
-                return;
+                return foreign;
             }
             std::thread::sleep(Duration::from_millis(2));
         }
@@ -278,13 +303,13 @@ mod tests {
             255,
             MavAutopilot::MAV_AUTOPILOT_INVALID,
         );
-        receive_until(&mut link, &mut vehicle, 2);
+        assert_eq!(receive_until(&mut link, &mut vehicle, 2), 1);
         assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
         // Another process sending the vehicle's own system id is not the vehicle either, nor is
         // a datagram larger than any vehicle's from the vehicle's address.
         beat_from(&gcs, link.local_addr(), 1, MavAutopilot::MAV_AUTOPILOT_PX4);
         autopilot.send_to(&[0u8; 9000], link.local_addr()).unwrap();
-        receive_until(&mut link, &mut vehicle, 4);
+        assert_eq!(receive_until(&mut link, &mut vehicle, 4), 2);
         assert_eq!(vehicle.counters().heartbeats_received, 1);
         assert_eq!(vehicle.counters().foreign_packets, 3);
         assert_eq!(link.peer(), Some(autopilot.local_addr().unwrap()));
