@@ -32,7 +32,12 @@ What it does not reproduce:
   --attitude-hz 100 for PX4's.
 - Reordering (a late packet here never overtakes a newer one by more than its own delay), loss,
   SYS_STATUS / BATTERY_STATUS, preflight checks, take-off, RC, failsafes (data link loss,
-  COM_DL_LOSS_T), TIMESYNC, message signing, and any dynamics beyond a point mass.
+  COM_DL_LOSS_T), TIMESYNC, PX4's list of messages it takes unsigned while signing (RADIO_STATUS
+  and the like; here nothing unsigned is taken), and any dynamics beyond a point mass.
+
+With --signing-key it signs as PX4 does with a key on its SD card (pymavlink's MAVLink 2
+signing: every frame signed, unsigned and wrongly signed frames refused and counted); a
+duplicated packet is then the same signed frame again, a replay.
 
 Every loop is bounded: the vehicle exits after --max-s seconds, or --idle-exit-s seconds after
 the last setpoint.
@@ -111,7 +116,51 @@ def parse_args():
     p.add_argument("--max-s", type=float, default=30.0, help="hard bound on the run time")
     p.add_argument("--idle-exit-s", type=float, default=1.5,
                    help="exit this long after the last setpoint")
+    p.add_argument("--signing-key", default=None,
+                   help="a file of 64 hex digits: sign every frame sent with this key and take "
+                        "only frames signed with it (pymavlink's MAVLink 2 signing)")
+    p.add_argument("--inject-every", type=int, default=0,
+                   help="with --signing-key: after every K-th position, also send from this "
+                        "socket a position at --inject-ned unsigned and one signed with another "
+                        "key (an attacker on the vehicle's own link)")
+    p.add_argument("--inject-ned", type=vec3, default=[1000.0, 1000.0, -50.0],
+                   help="the injected position, NED m")
     return p.parse_args()
+
+
+def read_key(path):
+    with open(path, encoding="ascii") as f:
+        return bytes.fromhex(f.read().strip())
+
+
+# Signing timestamps: 10 microsecond units since 1 January 2015 (the MAVLink signing spec).
+def signing_now():
+    return int((time.time() - 1420070400) * 100 * 1000)
+
+
+class Injector:
+    """Forged positions for the vehicle's own system id, sent from the vehicle's socket: one
+    unsigned, one signed with a key that is not the team's."""
+
+    def __init__(self, args):
+        self.every = args.inject_every
+        self.ned = args.inject_ned
+        self.unsigned = mavlink.MAVLink(None, srcSystem=args.sysid, srcComponent=1)
+        self.wrong = mavlink.MAVLink(None, srcSystem=args.sysid, srcComponent=1)
+        self.wrong.signing.secret_key = bytes(range(1, 33))
+        self.wrong.signing.sign_outgoing = True
+        self.wrong.signing.timestamp = signing_now()
+        self.positions = 0
+        self.sent = 0
+
+    def after_position(self, conn, boot_ms):
+        self.positions += 1
+        if self.every <= 0 or self.positions % self.every:
+            return
+        for mav in (self.unsigned, self.wrong):
+            msg = mav.local_position_ned_encode(boot_ms, *self.ned, 0.0, 0.0, 0.0)
+            conn.write(msg.pack(mav))
+            self.sent += 1
 
 
 class Vehicle:
@@ -136,6 +185,7 @@ class Vehicle:
         # When this vehicle first sent HEARTBEAT and position (it is ready), on the wall clock.
         self.ready_unix = None
         self.streams = Streams(args)
+        self.injector = Injector(args)
 
     def guided(self):
         if self.args.autopilot == "px4":
@@ -255,6 +305,13 @@ class Vehicle:
             "duplicated_packets": self.streams.duplicated,
             "went_silent_at_s": went_silent_at,
             "exit": exit_reason,
+            "signing": None if self.args.signing_key is None else {
+                "good": conn.mav.signing.goodsig_count,
+                "bad": conn.mav.signing.badsig_count,
+                "unsigned": conn.mav.signing.unsigned_count,
+                "rejected": conn.mav.signing.reject_count,
+            },
+            "injected": self.injector.sent,
         }
 
 
@@ -305,16 +362,19 @@ class Streams:
                 heapq.heappush(self.queue, (now + d, self.order, msg, True))
                 self.order += 1
 
-    def flush(self, conn, now):
+    def flush(self, vehicle, conn, now):
         while self.queue and self.queue[0][0] <= now:
             _, _, msg, duplicate = heapq.heappop(self.queue)
             if duplicate:
-                # The very datagram again (same sequence number), as a duplicating link does.
+                # The very datagram again (same sequence number, and when signed the same
+                # signature timestamp: a replay), as a duplicating link does.
                 conn.write(msg.get_msgbuf())
                 self.duplicated += 1
             else:
                 conn.mav.send(msg)
                 self.sent[msg.get_type()] += 1
+                if msg.get_type() == "LOCAL_POSITION_NED":
+                    vehicle.injector.after_position(conn, msg.time_boot_ms)
 
     def next_at(self):
         return self.queue[0][0] if self.queue else math.inf
@@ -341,6 +401,11 @@ def main():
         return 2
     conn = mavutil.mavlink_connection(f"udpout:{args.host}:{args.port}",
                                       source_system=args.sysid, source_component=1)
+    if args.signing_key is not None:
+        # As a PX4 with a key provisioned: outgoing frames signed, incoming ones must be.
+        conn.setup_signing(read_key(args.signing_key), sign_outgoing=True,
+                           allow_unsigned_callback=None, initial_timestamp=signing_now(),
+                           link_id=0)
     vehicle = Vehicle(args)
     # Tests start the team once every vehicle says this (Python starts slowly on a loaded host).
     print(f"mavlink_vehicle {args.sysid}: sending to {args.host}:{args.port}",
@@ -368,7 +433,7 @@ def main():
                       file=sys.stderr, flush=True)
             vehicle.streams.schedule(vehicle, conn, now, int(k * dt * 1000), silent)
             k += 1
-        vehicle.streams.flush(conn, now)
+        vehicle.streams.flush(vehicle, conn, now)
         # Paced on the wall clock, one fixed step per tick (late ticks are not skipped); woken
         # early for a packet due between two ticks.
         wake = start + min(k * dt, vehicle.streams.next_at())

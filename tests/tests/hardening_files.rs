@@ -1,6 +1,7 @@
 //! Losing no data: a full disk, a symbolic link in a run directory, a
-//! closed or full stdout. Real binaries, real files; the disk is a 200 KiB tmpfs mounted by the
-//! test (CI runs as root; elsewhere the test says "skipped").
+//! closed or full stdout. Real binaries, real files; the full disk is a small tmpfs mounted by
+//! the test (CI runs as root; elsewhere the test says "skipped"), and pyarrow reads what a full
+//! disk leaves of telemetry.parquet.
 
 mod support;
 
@@ -16,16 +17,22 @@ use support::*;
 /// A short flight (paper40, 31 ticks) takes well under a second; this only stops a hang.
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
-/// A 200 KiB tmpfs mounted for one test, unmounted on drop.
+/// A tmpfs of a given size mounted for one test, unmounted on drop.
 struct SmallDisk {
     dir: PathBuf,
 }
 
 impl SmallDisk {
-    fn mount(at: &Path) -> Option<Self> {
+    fn mount(at: &Path, size: &str) -> Option<Self> {
         fs::create_dir_all(at).ok()?;
         let ok = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", "size=200k,mode=0700", "tmpfs"])
+            .args([
+                "-t",
+                "tmpfs",
+                "-o",
+                &format!("size={size},mode=0700"),
+                "tmpfs",
+            ])
             .arg(at)
             .stderr(Stdio::null())
             .status()
@@ -61,7 +68,7 @@ fn paper40_ids() -> BTreeSet<u32> {
 #[test]
 fn a_full_disk_keeps_whole_ticks_and_the_audit_and_says_where() {
     let tmp = TempDir::new();
-    let Some(disk) = SmallDisk::mount(&tmp.path().join("disk")) else {
+    let Some(disk) = SmallDisk::mount(&tmp.path().join("disk"), "200k") else {
         eprintln!("skipped: cannot mount a tmpfs here (needs root)");
         return;
     };
@@ -103,6 +110,81 @@ fn a_full_disk_keeps_whole_ticks_and_the_audit_and_says_where() {
         let len = fs::metadata(&f).map(|m| m.len()).unwrap_or(0);
         assert!(len > 0, "{} is empty", f.display());
     }
+}
+
+/// `--telemetry parquet` into a full file system: a Parquet file is readable only with its
+/// footer, and the footer comes last. The writer keeps one after every row group, so what the
+/// disk held is kept: pyarrow reads whole row groups of whole ticks; the message names the file,
+/// the free space and what was kept; audit.json says FAULT; exit 3. 200 members write about
+/// 5 MiB per row group (65,536 rows and up to a tick more), so a 12 MiB disk holds about two.
+#[test]
+fn a_full_disk_keeps_a_readable_parquet_file_of_whole_row_groups() {
+    const N: usize = 200;
+    let tmp = TempDir::new();
+    let Some(disk) = SmallDisk::mount(&tmp.path().join("disk"), "12m") else {
+        eprintln!("skipped: cannot mount a tmpfs here (needs root)");
+        return;
+    };
+    let out = disk.dir.join("run");
+    let n = N.to_string();
+    let o = run(
+        simulate(&out, &["--n", &n, "--no-figures"]).args(["--telemetry", "parquet"]),
+        DEADLINE,
+    );
+    assert_exit(&o, 3, "simulate --telemetry parquet into a full disk");
+    let all = text(&o);
+    let file = out.join("telemetry.parquet");
+    assert!(
+        all.contains(&file.display().to_string()) && all.contains("KiB free"),
+        "the message names the file and the free space\n{}",
+        describe(&o)
+    );
+    assert!(
+        all.contains("row groups"),
+        "says what it kept\n{}",
+        describe(&o)
+    );
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "FAULT", "{audit}");
+    let message = audit["fault"]["message"].as_str().unwrap_or_default();
+    assert!(message.contains("telemetry.parquet"), "{audit}");
+    // pyarrow, as a pandas or DuckDB user would open it.
+    let script = "import json, sys, collections\n\
+import pyarrow.parquet as pq\n\
+f = pq.ParquetFile(sys.argv[1])\n\
+t = f.read(columns=['tick', 'id'])\n\
+per_tick = collections.Counter(t.column('tick').to_pylist())\n\
+print(json.dumps({'row_groups': f.num_row_groups, 'rows': t.num_rows,\n\
+  'ticks': sorted(per_tick), 'sizes': sorted(set(per_tick.values()))}))\n";
+    let py = run(
+        Command::new(integration_tests::venv_python())
+            .args(["-c", script])
+            .arg(&file),
+        DEADLINE,
+    );
+    assert_exit(&py, 0, "pyarrow reads what the full disk kept");
+    let got: serde_json::Value =
+        serde_json::from_slice(&py.stdout).unwrap_or_else(|e| panic!("{e}: {}", describe(&py)));
+    let groups = got["row_groups"].as_u64().unwrap_or(0);
+    assert!(groups >= 1, "no whole row group kept: {got}");
+    assert_eq!(
+        got["sizes"],
+        serde_json::json!([N]),
+        "a tick cut short: {got}"
+    );
+    let ticks: Vec<u64> = got["ticks"]
+        .as_array()
+        .map(|t| t.iter().filter_map(|v| v.as_u64()).collect())
+        .unwrap_or_default();
+    assert!(
+        ticks.iter().copied().eq(0..ticks.len() as u64),
+        "the kept ticks are not 0, 1, 2, ...: {got}"
+    );
+    assert!(
+        all.contains(&format!("kept {} rows", ticks.len() * N)),
+        "the message's count is the file's\n{}",
+        describe(&o)
+    );
 }
 
 /// Item 8: `--force` into a run directory whose telemetry.csv and audit.json are symbolic links:

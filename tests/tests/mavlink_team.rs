@@ -8,6 +8,7 @@
 
 mod support;
 
+use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::time::Duration;
@@ -345,13 +346,7 @@ fn a_flooding_spoofer_on_a_members_port_changes_nothing() {
             .args(["--seconds", "3"]),
     );
     let flood = flood.finish(DEADLINE);
-    let o = orch.finish(DEADLINE);
-    let outs: Vec<Output> = vehicles.into_iter().map(|v| v.finish(DEADLINE)).collect();
-    let audit = read_json(&dir.path().join("run/audit.json"));
-    let why = format!("{audit:#}\n{}", describe(&o));
-    assert_eq!(o.status.code(), Some(0), "{why}");
-    assert_eq!(audit["verdict"], "SAFE", "{why}");
-    assert_eq!(audit["losses"].as_array().map_or(0, Vec::len), 0, "{why}");
+    let (outs, audit, why) = finished_safe(orch, vehicles, dir.path());
     let f = summary(&flood, "the flooder");
     assert_eq!(
         num(&f, "received"),
@@ -378,20 +373,7 @@ fn a_flooding_spoofer_on_a_members_port_changes_nothing() {
     }
     // Its measured positions are its vehicle's: none near the spoofed one, NED (1000, 1000)
     // from ORIGIN, ENU (1005, 997).
-    let text = std::fs::read_to_string(&telemetry).expect("telemetry.csv");
-    let far = text
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|c| c.get(2) == Some(&id.to_string().as_str()))
-        .filter_map(|c| {
-            Some((
-                c.get(4)?.parse::<f64>().ok()?,
-                c.get(5)?.parse::<f64>().ok()?,
-            ))
-        })
-        .filter(|(x, y)| (x - 1005.0).hypot(y - 997.0) < 500.0)
-        .count();
+    let far = rows_near(&telemetry, id, (1005.0, 997.0));
     assert_eq!(far, 0, "agent {id}: spoofed positions in telemetry");
     let v = summary(&outs[FLOODED], "the flooded vehicle");
     let rate = num(&v, "setpoint_rate_by_stamp_hz");
@@ -399,6 +381,135 @@ fn a_flooding_spoofer_on_a_members_port_changes_nothing() {
         (rate - COMM_HZ).abs() <= 0.1 * COMM_HZ,
         "the flooded member's setpoints at {rate:.2} Hz, not {COMM_HZ} Hz +- 10 %: {v}"
     );
+    assert_no_team_resources(&team_name);
+}
+
+/// Waits for the team and its vehicles, and checks the flight: exit 0, SAFE, no loss. Returns
+/// the vehicles' outputs, audit.json and a diagnosis for later assertions.
+fn finished_safe(
+    orch: Running,
+    vehicles: Vec<Running>,
+    dir: &Path,
+) -> (Vec<Output>, Value, String) {
+    let o = orch.finish(DEADLINE);
+    let outs: Vec<Output> = vehicles.into_iter().map(|v| v.finish(DEADLINE)).collect();
+    let audit = read_json(&dir.join("run/audit.json"));
+    let why = format!("{audit:#}\n{}", describe(&o));
+    assert_eq!(o.status.code(), Some(0), "{why}");
+    assert_eq!(audit["verdict"], "SAFE", "{why}");
+    assert_eq!(audit["losses"].as_array().map_or(0, Vec::len), 0, "{why}");
+    (outs, audit, why)
+}
+
+/// Rows of member `id` in telemetry.csv within 500 m of `(x, y)` (ENU): a spoofed position
+/// that got through.
+fn rows_near(telemetry: &Path, id: u32, (x0, y0): (f64, f64)) -> usize {
+    let text = std::fs::read_to_string(telemetry).expect("telemetry.csv");
+    let id = id.to_string();
+    text.lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|c| c.get(2) == Some(&id.as_str()))
+        .filter_map(|c| {
+            Some((
+                c.get(4)?.parse::<f64>().ok()?,
+                c.get(5)?.parse::<f64>().ok()?,
+            ))
+        })
+        .filter(|(x, y)| (x - x0).hypot(y - y0) < 500.0)
+        .count()
+}
+
+/// A signing key file of 64 hex digits with `mode`.
+fn write_key(path: &Path, mode: u32) {
+    std::fs::write(path, format!("{}\n", "5a".repeat(32))).expect("write the key");
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).expect("chmod");
+}
+
+/// MAVLink 2 message signing (`--mavlink-signing-key`): the vehicles sign as PX4 does with a
+/// key provisioned (pymavlink's signing), and one of them also sends, from its own socket and
+/// with its own system id, forged positions far from the team: one unsigned and one signed
+/// with another key after every fifth position. Only the signature tells them apart from the
+/// vehicle's. The member drops them and counts them (with the links' duplicated packets, which
+/// signed are replays), its telemetry holds none of them, the team flies SAFE, and every vehicle
+/// took every setpoint as signed with the team's key.
+#[test]
+fn a_signed_team_drops_unsigned_wrongly_signed_and_replayed_frames() {
+    const INJECTING: usize = 2;
+    let dir = TempDir::new();
+    let file = team(6.0);
+    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+    let key = dir.path().join("team.key");
+    write_key(&key, 0o600);
+    let key_arg = key.to_str().expect("utf-8 path");
+    let base = free_udp_ports(N as u16);
+    let team_name = unique_team("mav10sign");
+    let origins = [ORIGIN; N];
+    let mut vehicles = start_vehicles(
+        &file,
+        (base, &origins),
+        0..INJECTING,
+        None,
+        &["--signing-key", key_arg],
+    );
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        INJECTING..INJECTING + 1,
+        None,
+        &["--signing-key", key_arg, "--inject-every", "5"],
+    ));
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        INJECTING + 1..N,
+        None,
+        &["--signing-key", key_arg],
+    ));
+    let at = [
+        "--vehicle-origin",
+        &csv(ORIGIN),
+        "--mavlink-signing-key",
+        key_arg,
+    ];
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+    let (outs, audit, why) = finished_safe(orch, vehicles, dir.path());
+    for (i, (a, out)) in file.agents.iter().zip(&outs).enumerate() {
+        let v = summary(out, "a signing vehicle");
+        let signing = &v["signing"];
+        assert!(num(signing, "good") > 0.0, "agent {}: {v}", a.id);
+        for k in ["bad", "unsigned"] {
+            assert_eq!(
+                num(signing, k),
+                0.0,
+                "agent {}: the member's frames: {v}",
+                a.id
+            );
+        }
+        let replays: f64 = v["duplicated_packets"].as_f64().unwrap_or(0.0);
+        let injected = num(&v, "injected");
+        let bad = num(&audit["vehicles"][a.id.to_string()], "bad_signatures");
+        if i == INJECTING {
+            assert!(injected > 20.0, "{v}");
+            assert!(
+                bad >= injected.min(40.0) && bad <= injected + replays,
+                "agent {} dropped {bad} frames for their signature; {injected} injected, {replays} replayed: {why}",
+                a.id
+            );
+        } else {
+            assert_eq!(injected, 0.0, "{v}");
+            assert!(
+                bad <= replays,
+                "agent {}: {bad} dropped, {replays} replayed: {why}",
+                a.id
+            );
+        }
+    }
+    // No forged position in the injecting member's telemetry: NED (1000, 1000) from ORIGIN,
+    // ENU (1005, 997).
+    let id = file.agents[INJECTING].id;
+    let forged = rows_near(&dir.path().join("run/telemetry.csv"), id, (1005.0, 997.0));
+    assert_eq!(forged, 0, "agent {id}: forged positions in telemetry");
     assert_no_team_resources(&team_name);
 }
 
@@ -432,7 +543,34 @@ fn bad_vehicle_options_exit_2_naming_them() {
         mav("--position-timeout", "-1"),
         mav("--heartbeat-timeout", "soon"),
     );
-    let cases: [(&[&str], &str); 9] = [
+    // Signing keys: one others can read, one that is no key.
+    let (open_key, short_key) = (dir.path().join("open.key"), dir.path().join("short.key"));
+    write_key(&open_key, 0o644);
+    std::fs::write(&short_key, "abcd\n").expect("write");
+    std::fs::set_permissions(&short_key, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+    let (open_key, short_key) = (
+        open_key.to_str().expect("utf-8 path"),
+        short_key.to_str().expect("utf-8 path"),
+    );
+    let open_needle = format!("--mavlink-signing-key {open_key}: readable or writable by others");
+    let short_needle = format!("--mavlink-signing-key {short_key}: expected 64 hexadecimal digits");
+    let with_key = |key| {
+        [
+            "--realtime",
+            "--vehicles",
+            "mavlink",
+            "--mavlink-signing-key",
+            key,
+        ]
+    };
+    let (open_case, short_case) = (with_key(open_key), with_key(short_key));
+    let cases: [(&[&str], &str); 12] = [
+        (&open_case, &open_needle),
+        (&short_case, &short_needle),
+        (
+            &["--mavlink-signing-key", "/nonexistent/k"],
+            "need --vehicles mavlink",
+        ),
         (&hb0, "--heartbeat-timeout must be a number of seconds"),
         (&pos_neg, "--position-timeout must be a number of seconds"),
         (&hb_text, "--heartbeat-timeout"),

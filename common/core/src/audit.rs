@@ -207,6 +207,9 @@ pub struct VehicleFigures {
     /// What reached the member's port and was not its vehicle's, dropped: datagrams from
     /// another address, oversized ones, messages of another system or component.
     pub foreign_packets: u64,
+    /// With `--mavlink-signing-key`: frames dropped unsigned, signed with another key, or
+    /// replayed (0 without a key).
+    pub bad_signatures: u64,
 }
 
 /// The pacing figures of a real-time flight, from the members' own reports (their pacing

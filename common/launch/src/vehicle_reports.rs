@@ -62,6 +62,7 @@ mod tests {
             max_abs_pitch_rad: 0.2,
             last_attitude_rad: None,
             foreign_packets: 0,
+            bad_signatures: 0,
         };
         assert!(book.take(&r.to_msg(4, 9)));
         assert!(

@@ -226,7 +226,7 @@ enum Failure {
 fn run(args: &Args) -> Result<(), Failure> {
     let run = validate(args).map_err(Failure::BadInput)?;
     let agent = run.config.agent;
-    let mut link = UdpLink::bind(agent, run.bind).map_err(|e| Failure::BadInput(e.into()))?;
+    let mut link = UdpLink::bind(agent, run.bind, None).map_err(|e| Failure::BadInput(e.into()))?;
     let mut vehicle = MavlinkVehicle::new(run.config);
     let clock = Instant::now();
     eprintln!("agent {agent}: listening on {}", link.local_addr());

@@ -16,6 +16,7 @@ pub mod ned;
 pub mod plant;
 pub mod report;
 pub mod setpoint;
+pub mod signing;
 pub mod team_arm;
 pub mod udp;
 pub mod vehicle;
@@ -26,6 +27,7 @@ pub use messages::Setpoint;
 pub use ned::VehicleOrigin;
 pub use plant::{ArmProgress, LinkFigures, MavlinkPlant, PlantConfig, PlantError, SendTimes};
 pub use report::{Reporting, VehicleReport};
+pub use signing::{KeyError, SigningKey};
 pub use team_arm::{before_start, TeamArmError};
 pub use udp::{member_addr, Received, UdpError, UdpLink, DEFAULT_BASE_PORT};
 pub use vehicle::{

@@ -24,6 +24,7 @@ use cdm_runtime::seams::{Vehicle, VehicleFault};
 use crate::arming::ArmStage;
 use crate::messages::Setpoint;
 use crate::setpoint::{hold_at, measured_state, setpoint_for};
+use crate::signing::{KeyError, SigningKey};
 use crate::udp::{UdpError, UdpLink};
 use crate::vehicle::{AttitudeFigures, LinkCounters, MavlinkVehicle, VehicleConfig, VehicleError};
 
@@ -36,6 +37,8 @@ pub struct PlantConfig {
     pub bind: SocketAddr,
     /// The setpoint period, 1 / comm_hz.
     pub period: Duration,
+    /// `--mavlink-signing-key`: sign what is sent, take only what is signed with it.
+    pub signing: Option<SigningKey>,
 }
 
 /// Why the plant could not start (or stopped).
@@ -45,6 +48,8 @@ pub enum PlantError {
     Udp(#[from] UdpError),
     #[error(transparent)]
     Vehicle(#[from] VehicleError),
+    #[error(transparent)]
+    Key(#[from] KeyError),
     #[error("agent {agent}: interrupted while waiting for its vehicle ({waiting})")]
     Interrupted { agent: u32, waiting: String },
     #[error("agent {agent}: cannot start the vehicle link's thread")]
@@ -122,7 +127,9 @@ impl<'a> MavlinkPlant<'a> {
         interrupted: &AtomicBool,
     ) -> Result<Self, PlantError> {
         let agent = config.vehicle.agent;
-        let link = UdpLink::bind(agent, config.bind)?;
+        // Link id 0: a member has one link (the MAVLink guide's "normally the channel").
+        let signing = config.signing.as_ref().map(|k| k.signing_data(0));
+        let link = UdpLink::bind(agent, config.bind, signing)?;
         tracing::info!(agent, listen = %link.local_addr(), "waiting for the vehicle");
         let clock = Instant::now();
         let shared = Arc::new(Mutex::new(Shared {

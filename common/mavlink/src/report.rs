@@ -31,6 +31,8 @@ pub struct VehicleReport {
     pub last_attitude_rad: Option<[f64; 3]>,
     /// Datagrams and messages that were not the vehicle's, dropped (`LinkCounters`).
     pub foreign_packets: u64,
+    /// Frames dropped for their signature (`--mavlink-signing-key`).
+    pub bad_signatures: u64,
 }
 
 impl VehicleReport {
@@ -48,12 +50,13 @@ impl VehicleReport {
                 .last
                 .map(|a: Attitude| [a.roll_rad, a.pitch_rad, a.yaw_rad]),
             foreign_packets: counters.foreign_packets,
+            bad_signatures: counters.bad_signatures,
         }
     }
 
     /// As a message: `tick` = setpoints sent, `state` = [late setpoints, max lateness ms,
     /// attitudes, max |roll|, max |pitch|, last roll, pitch, yaw (NaN without one), foreign
-    /// packets, 0...]. Counts up to 2^53 are exact in an f64.
+    /// packets, bad signatures, 0...]. Counts up to 2^53 are exact in an f64.
     pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
         let mut f = [0.0; 12];
         f[0] = self.late_setpoints as f64;
@@ -64,6 +67,7 @@ impl VehicleReport {
         let last = self.last_attitude_rad.unwrap_or([f64::NAN; 3]);
         f[5..8].copy_from_slice(&last);
         f[8] = self.foreign_packets as f64;
+        f[9] = self.bad_signatures as f64;
         StateMsg {
             status: STATUS_VEHICLE,
             ..StateMsg::ok(self.setpoints_sent, hash, id, f)
@@ -88,6 +92,7 @@ impl VehicleReport {
                 max_abs_pitch_rad: f[4],
                 last_attitude_rad: last.iter().all(|v| v.is_finite()).then_some(last),
                 foreign_packets: f[8] as u64,
+                bad_signatures: f[9] as u64,
             },
         ))
     }
@@ -180,6 +185,7 @@ mod tests {
             max_abs_pitch_rad: 0.1,
             last_attitude_rad: Some([0.01, -0.02, 1.5]),
             foreign_packets: 12_345,
+            bad_signatures: 678,
         };
         let m = r.to_msg(7, 9);
         assert_eq!(VehicleReport::from_msg(&m), Some((7, r)));

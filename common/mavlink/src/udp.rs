@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use mavlink::dialects::common::MavMessage;
 use mavlink::error::MessageReadError;
-use mavlink::{MavHeader, MavlinkReader};
+use mavlink::{MAVLinkMessageRaw, MavHeader, MavlinkReader, Message, SigningData};
 
 use crate::messages::{MEMBER_COMPONENT_ID, MEMBER_SYSTEM_ID};
 use crate::vehicle::MavlinkVehicle;
@@ -46,6 +46,18 @@ pub struct Received {
     pub decoded: usize,
     /// Datagrams dropped undecoded: from another address than the vehicle's, or too large.
     pub foreign: u64,
+    /// Frames dropped for their signature (with a signing key): unsigned, signed with another
+    /// key, or replayed.
+    pub bad_signatures: u64,
+}
+
+/// The link's signing state (`--mavlink-signing-key`), if any.
+struct Signing(SigningData);
+
+impl std::fmt::Debug for Signing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Signing(..)")
+    }
 }
 
 /// Why the member's UDP link failed.
@@ -106,11 +118,19 @@ pub struct UdpLink {
     peer: Option<SocketAddr>,
     sequence: u8,
     buf: Vec<u8>,
+    /// With a key: every frame in and out is signed, and an unsigned or badly signed one is
+    /// dropped before the vehicle sees it (so it cannot lock the address either).
+    signing: Option<Signing>,
 }
 
 impl UdpLink {
-    /// Bind `addr` (non-blocking: the caller's loop paces itself).
-    pub fn bind(agent: u32, addr: SocketAddr) -> Result<Self, UdpError> {
+    /// Bind `addr` (non-blocking: the caller's loop paces itself); with `signing`, only frames
+    /// signed with its key are taken and every frame sent is signed.
+    pub fn bind(
+        agent: u32,
+        addr: SocketAddr,
+        signing: Option<SigningData>,
+    ) -> Result<Self, UdpError> {
         let bind_err = |source| UdpError::Bind {
             agent,
             addr,
@@ -132,6 +152,7 @@ impl UdpLink {
             peer: None,
             sequence: 0,
             buf: vec![0; DATAGRAM_BYTES],
+            signing: signing.map(Signing),
         })
     }
 
@@ -186,17 +207,41 @@ impl UdpLink {
             }
             decoded_bytes += n;
             let mut reader = MavlinkReader::new(&self.buf[..n]);
-            // Each read consumes at least one byte of the datagram, so this ends.
+            // Each read consumes at least one byte of the datagram, so this ends. Frames are
+            // read raw (checksum checked), their signature checked, then decoded.
             loop {
-                match reader.read_any_message::<MavMessage>() {
-                    Ok((header, msg)) => {
+                let raw = match reader.read_any_raw_message::<MavMessage>() {
+                    Ok(raw) => raw,
+                    Err(MessageReadError::Io(_)) => break,
+                    Err(MessageReadError::Parse(e)) => {
+                        tracing::debug!(agent = self.agent, %from, error = ?e, "undecodable MAVLink frame skipped");
+                        continue;
+                    }
+                };
+                if let Some(Signing(signing)) = &self.signing {
+                    let signed = match &raw {
+                        MAVLinkMessageRaw::V2(m) => signing.verify_signature(m),
+                        MAVLinkMessageRaw::V1(_) => false,
+                    };
+                    if !signed {
+                        vehicle.on_bad_signature();
+                        got.bad_signatures += 1;
+                        continue;
+                    }
+                }
+                let header = MavHeader {
+                    system_id: raw.system_id(),
+                    component_id: raw.component_id(),
+                    sequence: raw.sequence(),
+                };
+                match MavMessage::parse(raw.version(), raw.message_id(), raw.payload()) {
+                    Ok(msg) => {
                         got.decoded += 1;
                         if vehicle.on_message(now, &header, &msg) && self.peer.is_none() {
                             self.peer = Some(from);
                         }
                     }
-                    Err(MessageReadError::Io(_)) => break,
-                    Err(MessageReadError::Parse(e)) => {
+                    Err(e) => {
                         tracing::debug!(agent = self.agent, %from, error = ?e, "undecodable MAVLink frame skipped");
                     }
                 }
@@ -219,7 +264,8 @@ impl UdpLink {
             };
             self.sequence = self.sequence.wrapping_add(1);
             let mut frame = Vec::with_capacity(64);
-            mavlink::write_v2_msg(&mut frame, header, msg)
+            let signing = self.signing.as_ref().map(|Signing(s)| s);
+            mavlink::write_v2_msg_signed(&mut frame, header, msg, signing)
                 .map_err(|e| self.io_err("encode", io::Error::other(e.to_string())))?;
             match self.socket.send_to(&frame, peer) {
                 Ok(_) => {}
@@ -278,7 +324,7 @@ mod tests {
     #[test]
     fn replies_go_to_the_vehicle_not_to_other_senders() {
         let localhost = IpAddr::V4(Ipv4Addr::LOCALHOST);
-        let mut link = UdpLink::bind(1, SocketAddr::new(localhost, 0)).unwrap();
+        let mut link = UdpLink::bind(1, SocketAddr::new(localhost, 0), None).unwrap();
         let mut vehicle = MavlinkVehicle::new(VehicleConfig {
             agent: 1,
             origin: VehicleOrigin::default(),

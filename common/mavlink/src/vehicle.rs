@@ -86,6 +86,8 @@ pub struct LinkCounters {
     /// vehicle's (not even decoded), oversized datagrams, and messages of another system or
     /// component (a ground station, a spoofer, a gimbal).
     pub foreign_packets: u64,
+    /// With a signing key: frames dropped unsigned, signed with another key, or replayed.
+    pub bad_signatures: u64,
     pub setpoints_sent: u64,
     pub heartbeats_sent: u64,
     pub commands_sent: u64,
@@ -276,7 +278,6 @@ impl MavlinkVehicle {
         self.target
     }
 
-    /// Message counts so far.
     /// A datagram dropped unread: from another address than the vehicle's, or too large to be
     /// one of its (the socket's decision, counted here with the rest of what is not the
     /// vehicle's).
@@ -284,6 +285,13 @@ impl MavlinkVehicle {
         self.counters.foreign_packets += 1;
     }
 
+    /// A frame dropped for its signature (`--mavlink-signing-key`): unsigned, signed with
+    /// another key, or replayed; the socket's decision, counted here.
+    pub fn on_bad_signature(&mut self) {
+        self.counters.bad_signatures += 1;
+    }
+
+    /// Message counts so far.
     pub fn counters(&self) -> &LinkCounters {
         &self.counters
     }

@@ -8,8 +8,8 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use cdm_mavlink::{
-    member_addr, LinkTimeouts, MavlinkPlant, PlantConfig, PlantError, VehicleConfig, VehicleOrigin,
-    DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
+    member_addr, LinkTimeouts, MavlinkPlant, PlantConfig, PlantError, SigningKey, VehicleConfig,
+    VehicleOrigin, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
 };
 
 use crate::member_error::MemberError;
@@ -31,6 +31,7 @@ pub fn vehicle_figures(r: &VehicleReport) -> cdm_core::audit::VehicleFigures {
         max_abs_pitch_deg: r.max_abs_pitch_rad.to_degrees(),
         last_attitude_deg: r.last_attitude_rad.map(|a| a.map(f64::to_degrees)),
         foreign_packets: r.foreign_packets,
+        bad_signatures: r.bad_signatures,
     }
 }
 
@@ -93,6 +94,12 @@ pub struct VehicleArgs {
         default_value_t = DEFAULT_POSITION_TIMEOUT.as_secs_f64()
     )]
     pub position_timeout_s: f64,
+    /// MAVLink: sign every frame sent and take only frames signed with this key (MAVLink 2
+    /// message signing); a file readable by its owner only, holding the 32-byte key as 64
+    /// hexadecimal digits. Unsigned, wrongly signed and replayed frames are dropped and counted
+    /// (audit.json `vehicles.<id>.bad_signatures`).
+    #[arg(long, value_name = "FILE")]
+    pub mavlink_signing_key: Option<PathBuf>,
 }
 
 impl Default for VehicleArgs {
@@ -106,6 +113,7 @@ impl Default for VehicleArgs {
             arm: false,
             heartbeat_timeout_s: DEFAULT_HEARTBEAT_TIMEOUT.as_secs_f64(),
             position_timeout_s: DEFAULT_POSITION_TIMEOUT.as_secs_f64(),
+            mavlink_signing_key: None,
         }
     }
 }
@@ -122,6 +130,9 @@ pub struct MavlinkOptions {
     pub arm: bool,
     /// `--heartbeat-timeout` and `--position-timeout`.
     pub timeouts: LinkTimeouts,
+    /// `--mavlink-signing-key` (an absolute path; each member reads the key itself, so it is
+    /// never on a command line).
+    pub signing_key: Option<PathBuf>,
 }
 
 /// What each member flies, validated.
@@ -145,7 +156,7 @@ impl VehicleArgs {
         match self.vehicles {
             VehicleKind::Model => {
                 if *self != (VehicleArgs::default()) {
-                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout and --position-timeout need --vehicles mavlink".into());
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout and --mavlink-signing-key need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
             }
@@ -165,6 +176,15 @@ impl VehicleArgs {
                     .map_err(|e| format!("--vehicle-origins: {e}"))?,
                 arm: self.arm,
                 timeouts,
+                signing_key: self
+                    .mavlink_signing_key
+                    .as_deref()
+                    .map(|p| {
+                        // Read now, so a bad key is refused before anything starts.
+                        SigningKey::load(p).map_err(|e| e.to_string())?;
+                        std::path::absolute(p).map_err(|e| format!("--mavlink-signing-key: {e}"))
+                    })
+                    .transpose()?,
             })),
         }
     }
@@ -201,6 +221,9 @@ impl Vehicles {
             "--position-timeout".into(),
             o.timeouts.position.as_secs_f64().to_string(),
         ]);
+        if let Some(key) = &o.signing_key {
+            a.extend(["--mavlink-signing-key".into(), key.display().to_string()]);
+        }
         a
     }
 }
@@ -273,6 +296,12 @@ pub fn connect<'a>(
             timeouts: o.timeouts,
         },
         bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
+        signing: o
+            .signing_key
+            .as_deref()
+            .map(SigningKey::load)
+            .transpose()
+            .map_err(PlantError::from)?,
         period: Duration::from_secs_f64(s.dt_s()),
     };
     Ok(MavlinkPlant::connect(

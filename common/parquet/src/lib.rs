@@ -2,28 +2,37 @@
 //! file, written and read with the `parquet` and `arrow` crates, so pandas, polars, DuckDB and
 //! pyarrow read it as they are.
 //!
-//! Memory stays bounded: rows are buffered in columns and written as one row group of
-//! [`ROW_GROUP_ROWS`] rows at a time (about 6 MiB of buffered values), whatever the run's length.
+//! Memory stays bounded: rows are buffered in columns and written as one row group of whole
+//! ticks once [`ROW_GROUP_ROWS`] rows are buffered (about 6 MiB of values), whatever the run's
+//! length. The file is a readable Parquet file between any two row groups (a footer follows
+//! each), so a full disk or a killed run keeps every whole row group written.
 //! The values are the same f64 / integers telemetry.csv prints (CSV prints them shortest
 //! round-trip, so both files hold the same numbers; tested with pyarrow).
 
 use std::fs::File;
-use std::path::Path;
+use std::io::{Seek, SeekFrom};
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
+use cdm_core::files::describe;
 use cdm_core::formation::Role;
 use cdm_core::math::Vec3;
 use cdm_core::telemetry::{Row, TelemetrySink};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::arrow::ArrowWriter;
+use parquet::arrow::arrow_writer::ArrowWriterOptions;
+use parquet::arrow::{add_encoded_arrow_schema_to_metadata, ArrowSchemaConverter, ArrowWriter};
 use parquet::basic::Compression;
 use parquet::errors::ParquetError;
+use parquet::file::metadata::{
+    FileMetaData, KeyValue, ParquetMetaData, ParquetMetaDataWriter, RowGroupMetaData,
+};
 use parquet::file::properties::WriterProperties;
-use parquet::schema::types::ColumnPath;
+use parquet::schema::types::{ColumnPath, SchemaDescPtr};
 
-/// Rows per row group: 65,536 rows of 13 columns are about 6 MiB before encoding.
+/// Rows buffered before a row group is written (whole ticks: a row group holds up to one tick
+/// more): 65,536 rows of 13 columns are about 6 MiB before encoding.
 pub const ROW_GROUP_ROWS: usize = 1 << 16;
 
 /// The nine f64 columns after `tick, t, id, role`, in telemetry.csv's order.
@@ -53,7 +62,7 @@ pub enum TelemetryParquetError {
 }
 
 /// The schema: the same column names as telemetry.csv.
-pub fn schema() -> SchemaRef {
+pub fn telemetry_schema() -> SchemaRef {
     let mut fields = vec![
         Field::new("tick", DataType::UInt64, false),
         Field::new("t", DataType::Float64, false),
@@ -69,8 +78,24 @@ pub fn schema() -> SchemaRef {
 }
 
 /// Streams telemetry rows into a Parquet file, every `every`-th tick.
+///
+/// The file is readable at every moment, not only once finished: each row group (whole ticks)
+/// is followed by a footer that lists the row groups so far, written by the `parquet` crate's
+/// own [`ParquetMetaDataWriter`]; the next row group overwrites that footer in place. So a
+/// full disk, or a run killed before `finish`, leaves a Parquet file of the whole row groups
+/// written so far. When a write fails, the file is cut back to the last whole row group and
+/// its footer written again: that space was the old footer's and has just been freed.
 pub struct ParquetTelemetryWriter {
     writer: Option<ArrowWriter<File>>,
+    /// The same open file as the writer's (a duplicated descriptor, so the same offset): the
+    /// footers between row groups and the cut back after a failure go through it.
+    file: File,
+    path: PathBuf,
+    /// What a footer says besides its row groups: schema, version, writer, ARROW:schema.
+    footer: FooterParts,
+    /// The row groups on disk in full, and where the last one ends.
+    committed: Vec<RowGroupMetaData>,
+    committed_end: u64,
     every: u64,
     tick: Vec<u64>,
     t: Vec<f64>,
@@ -79,32 +104,136 @@ pub struct ParquetTelemetryWriter {
     vectors: [Vec<f64>; 9],
 }
 
+/// The parts of the file metadata that do not change from one row group to the next.
+struct FooterParts {
+    schema: SchemaDescPtr,
+    version: i32,
+    created_by: String,
+    key_value: Option<Vec<KeyValue>>,
+}
+
+impl FooterParts {
+    /// The whole footer of a file holding `row_groups`.
+    fn metadata(&self, row_groups: &[RowGroupMetaData]) -> ParquetMetaData {
+        let rows = row_groups.iter().map(RowGroupMetaData::num_rows).sum();
+        let file = FileMetaData::new(
+            self.version,
+            rows,
+            Some(self.created_by.clone()),
+            self.key_value.clone(),
+            Arc::clone(&self.schema),
+            None,
+        );
+        ParquetMetaData::new(file, row_groups.to_vec())
+    }
+}
+
 impl ParquetTelemetryWriter {
-    /// Create (truncate) the file at `path`.
+    /// Create (truncate) the file at `path`; it is at once a readable file of no rows.
     pub fn create(path: &Path, every: u64) -> Result<Self, TelemetryParquetError> {
         let file = File::create(path)?;
-        let props = WriterProperties::builder()
+        let mut props = WriterProperties::builder()
             .set_compression(Compression::SNAPPY)
-            .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+            // One row group per batch of whole ticks (`write_buffered` ends each): a file cut
+            // back to its last row group ends on a whole tick, as telemetry.csv does.
+            .set_max_row_group_row_count(None)
             // Dictionary encoding pays only where values repeat: `role` (three values). On the
             // f64 columns, whose values barely repeat, it cost a quarter of a whole run in
             // the interner and its hash table (BENCHMARKS.md).
             .set_dictionary_enabled(false)
             .set_column_dictionary_enabled(ColumnPath::from("role"), true)
             .build();
-        let writer = ArrowWriter::try_new(file, schema(), Some(props))?;
-        Ok(ParquetTelemetryWriter {
+        // What ArrowWriter would derive itself, derived once here so that the footers written
+        // between row groups say exactly what its own final footer says.
+        let schema = ArrowSchemaConverter::new()
+            .with_coerce_types(props.coerce_types())
+            .convert(&telemetry_schema())?;
+        add_encoded_arrow_schema_to_metadata(&telemetry_schema(), &mut props);
+        let footer = FooterParts {
+            schema: Arc::new(schema.clone()),
+            version: props.writer_version().as_num(),
+            created_by: props.created_by().to_string(),
+            key_value: props.key_value_metadata().cloned(),
+        };
+        let options = ArrowWriterOptions::new()
+            .with_properties(props)
+            .with_skip_arrow_metadata(true)
+            .with_parquet_schema(schema);
+        let own = file.try_clone()?;
+        let writer = ArrowWriter::try_new_with_options(file, telemetry_schema(), options)?;
+        let mut w = ParquetTelemetryWriter {
             writer: Some(writer),
+            file: own,
+            path: path.to_path_buf(),
+            footer,
+            committed: Vec::new(),
+            committed_end: 0,
             every: every.max(1),
             tick: Vec::with_capacity(ROW_GROUP_ROWS),
             t: Vec::with_capacity(ROW_GROUP_ROWS),
             id: Vec::with_capacity(ROW_GROUP_ROWS),
             role: Vec::with_capacity(ROW_GROUP_ROWS),
             vectors: std::array::from_fn(|_| Vec::with_capacity(ROW_GROUP_ROWS)),
-        })
+        };
+        w.commit()?;
+        Ok(w)
     }
 
-    /// Write the buffered rows as one record batch (a row group once it is full).
+    /// Everything the writer took is on disk: note where it ends and which row groups it
+    /// holds, write their footer after them and step back, so that the next row group
+    /// overwrites it.
+    fn commit(&mut self) -> Result<(), TelemetryParquetError> {
+        let Some(writer) = self.writer.as_mut() else {
+            return Ok(());
+        };
+        writer.sync()?;
+        let flushed = writer.flushed_row_groups();
+        self.committed
+            .extend_from_slice(&flushed[self.committed.len().min(flushed.len())..]);
+        self.committed_end = writer.bytes_written() as u64;
+        self.write_footer()
+    }
+
+    /// The footer of the committed row groups, at `committed_end`; the file ends after it and
+    /// the shared offset is back at `committed_end`.
+    fn write_footer(&mut self) -> Result<(), TelemetryParquetError> {
+        let metadata = self.footer.metadata(&self.committed);
+        self.file.seek(SeekFrom::Start(self.committed_end))?;
+        ParquetMetaDataWriter::new(&mut self.file, &metadata)
+            .with_preserve_page_index_locations(false)
+            .finish()?;
+        let end = self.file.stream_position()?;
+        self.file.set_len(end)?;
+        self.file.seek(SeekFrom::Start(self.committed_end))?;
+        Ok(())
+    }
+
+    /// After a failed write: no more writing; the file is cut back to the committed row
+    /// groups and their footer written again. Returns `e` named with the file (and, on a full
+    /// disk, the free space), and what the file keeps.
+    fn fail(&mut self, e: TelemetryParquetError) -> std::io::Error {
+        self.writer = None;
+        // Described first: the free space when the write failed, not after the cut back.
+        let cause = io_cause(&e);
+        let what = match cause {
+            Some(io) => describe(&self.path, io),
+            None => e.to_string(),
+        };
+        let kept = self.file.set_len(self.committed_end).map_err(Into::into);
+        let kept = kept.and_then(|()| self.write_footer());
+        let rows: i64 = self.committed.iter().map(RowGroupMetaData::num_rows).sum();
+        let kept = match kept {
+            Ok(()) => format!(
+                "kept {rows} rows (whole ticks) in {} row groups",
+                self.committed.len()
+            ),
+            Err(again) => format!("and its footer could not be written again either: {again}"),
+        };
+        let kind = cause.map_or(std::io::ErrorKind::Other, std::io::Error::kind);
+        std::io::Error::new(kind, format!("{}: {what}; {kept}", self.path.display()))
+    }
+
+    /// Write the buffered rows (whole ticks) as one row group and commit it.
     fn write_buffered(&mut self) -> Result<(), TelemetryParquetError> {
         let Some(writer) = self.writer.as_mut() else {
             return Ok(());
@@ -121,26 +250,39 @@ impl ParquetTelemetryWriter {
         for v in &mut self.vectors {
             columns.push(Arc::new(Float64Array::from(std::mem::take(v))));
         }
-        let batch = RecordBatch::try_new(schema(), columns).map_err(ParquetError::from)?;
+        let batch =
+            RecordBatch::try_new(telemetry_schema(), columns).map_err(ParquetError::from)?;
         writer.write(&batch)?;
-        Ok(())
+        writer.flush()?;
+        self.commit()
     }
 
-    /// Write what is buffered and the footer.
-    fn close(&mut self) -> Result<(), TelemetryParquetError> {
-        self.write_buffered()?;
-        if let Some(writer) = self.writer.take() {
-            writer.close()?;
-        }
-        Ok(())
+    /// Write what is buffered and the writer's own footer (with its page indexes).
+    fn close(&mut self) -> Result<(), std::io::Error> {
+        let done = self.write_buffered().and_then(|()| {
+            let Some(mut writer) = self.writer.take() else {
+                return Ok(());
+            };
+            writer.finish()?;
+            // The committed footer may have been longer than what follows the last row
+            // group now.
+            self.file.set_len(writer.bytes_written() as u64)?;
+            Ok(())
+        });
+        done.map_err(|e| self.fail(e))
     }
 }
 
-fn to_io(e: TelemetryParquetError) -> std::io::Error {
-    match e {
-        TelemetryParquetError::Io(e) => e,
-        other => std::io::Error::other(other),
+/// The I/O error at the root of `e`, if it is one.
+fn io_cause(e: &TelemetryParquetError) -> Option<&std::io::Error> {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(s) = source {
+        if let Some(io) = s.downcast_ref::<std::io::Error>() {
+            return Some(io);
+        }
+        source = s.source();
     }
+    None
 }
 
 impl TelemetrySink for ParquetTelemetryWriter {
@@ -152,7 +294,7 @@ impl TelemetrySink for ParquetTelemetryWriter {
         let Some(first) = rows.first() else {
             return Ok(());
         };
-        if !self.keeps(first.tick) {
+        if !self.keeps(first.tick) || self.writer.is_none() {
             return Ok(());
         }
         for r in rows {
@@ -166,25 +308,25 @@ impl TelemetrySink for ParquetTelemetryWriter {
             }
         }
         if self.tick.len() >= ROW_GROUP_ROWS {
-            self.write_buffered().map_err(to_io)?;
+            self.write_buffered().map_err(|e| self.fail(e))?;
         }
         Ok(())
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
-        // A Parquet file is readable only with its footer: complete ticks become readable at
-        // `finish`, so there is nothing useful to push earlier than a full row group.
+        // Whole row groups are on disk with their footer as they are written; rows short of a
+        // row group wait for it (a row group of a few rows would cost a footer each).
         Ok(())
     }
 
     fn finish(&mut self) -> std::io::Result<()> {
-        self.close().map_err(to_io)
+        self.close()
     }
 }
 
 impl Drop for ParquetTelemetryWriter {
     fn drop(&mut self) {
-        // A run that ends on an error path still leaves a readable file of its complete ticks.
+        // A run that ends on an error path still leaves a file of its complete ticks.
         let _ = self.close();
     }
 }
@@ -307,5 +449,61 @@ mod tests {
             b
         };
         assert!(got.iter().zip(&want).all(|(a, b)| bits(a) == bits(b)));
+    }
+
+    fn read_back(path: &Path) -> Vec<Row> {
+        let mut got = Vec::new();
+        read_rows(path, |r| {
+            got.push(*r);
+            Ok(())
+        })
+        .unwrap();
+        got
+    }
+
+    fn metadata_of(path: &Path) -> (SchemaRef, usize, Option<Vec<KeyValue>>) {
+        let b = ParquetRecordBatchReaderBuilder::try_new(File::open(path).unwrap()).unwrap();
+        let m = b.metadata();
+        let kv = m.file_metadata().key_value_metadata().cloned();
+        (b.schema().clone(), m.num_row_groups(), kv)
+    }
+
+    #[test]
+    fn a_file_never_finished_holds_its_whole_row_groups_and_says_what_a_finished_one_says() {
+        let dir = std::env::temp_dir().join(format!("cdm-parquet-kept-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (cut, done) = (dir.join("cut.parquet"), dir.join("done.parquet"));
+        // Readable before any row: a file of no rows.
+        let empty = std::mem::ManuallyDrop::new(ParquetTelemetryWriter::create(&cut, 1).unwrap());
+        assert!(read_back(&cut).is_empty());
+        drop(std::mem::ManuallyDrop::into_inner(empty));
+        let mut cut_w =
+            std::mem::ManuallyDrop::new(ParquetTelemetryWriter::create(&cut, 1).unwrap());
+        let mut done_w = ParquetTelemetryWriter::create(&done, 1).unwrap();
+        let mut want = Vec::new();
+        // 15,000 ticks of 5 members: one row group of 13,108 whole ticks (65,540 rows), the
+        // rest buffered.
+        for tick in 0..15_000 {
+            let rows: Vec<Row> = (1..=5).map(|id| row(tick, id)).collect();
+            want.extend(rows.iter().copied());
+            cut_w.write_tick(&rows).unwrap();
+            done_w.write_tick(&rows).unwrap();
+        }
+        done_w.finish().unwrap();
+        // `cut` is never finished nor dropped: as a killed run leaves it.
+        let got = read_back(&cut);
+        assert_eq!(got.len(), 65_540);
+        assert!(got
+            .iter()
+            .zip(&want)
+            .all(|(a, b)| a.tick == b.tick && a.id == b.id));
+        assert_eq!(read_back(&done).len(), want.len());
+        let (cut_schema, cut_groups, cut_kv) = metadata_of(&cut);
+        let (done_schema, done_groups, done_kv) = metadata_of(&done);
+        assert_eq!((cut_groups, done_groups), (1, 2));
+        assert_eq!(cut_schema, done_schema);
+        assert_eq!(cut_kv, done_kv);
+        assert!(cut_kv.is_some_and(|kv| kv.iter().any(|k| k.key == "ARROW:schema")));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
