@@ -31,7 +31,9 @@ What it does not reproduce:
   mavlink_main.cpp's onboard mode): the defaults here are 50 Hz for both; pass --position-hz 30
   --attitude-hz 100 for PX4's.
 - Reordering (a late packet here never overtakes a newer one by more than its own delay), loss,
-  SYS_STATUS / BATTERY_STATUS, preflight checks, take-off, RC, failsafes (data link loss,
+  BATTERY_STATUS (SYS_STATUS is sent, at PX4's onboard 5 Hz, with a battery that drains at
+  --battery-drain and a 4S voltage; PX4's own low-battery failsafe is not modelled, only
+  --failsafe-after's MAV_STATE_CRITICAL), preflight checks, take-off, RC, failsafes (data link loss,
   COM_DL_LOSS_T), TIMESYNC, PX4's list of messages it takes unsigned while signing (RADIO_STATUS
   and the like; here nothing unsigned is taken), and any dynamics beyond a point mass.
 
@@ -125,6 +127,13 @@ def parse_args():
                         "key (an attacker on the vehicle's own link)")
     p.add_argument("--inject-ned", type=vec3, default=[1000.0, 1000.0, -50.0],
                    help="the injected position, NED m")
+    p.add_argument("--sys-status-hz", type=float, default=5.0,
+                   help="SYS_STATUS rate (PX4 streams it at 5 Hz on an onboard link)")
+    p.add_argument("--battery-start", type=float, default=100.0, help="battery_remaining at start, %%")
+    p.add_argument("--battery-drain", type=float, default=0.0,
+                   help="battery_remaining lost per second, %%/s (voltage follows, 4S: 16.8 V full, 13.2 V empty)")
+    p.add_argument("--failsafe-after", type=float, default=None,
+                   help="from this many seconds on, HEARTBEAT reports MAV_STATE_CRITICAL (PX4 in a failsafe)")
     return p.parse_args()
 
 
@@ -186,6 +195,7 @@ class Vehicle:
         self.ready_unix = None
         self.streams = Streams(args)
         self.injector = Injector(args)
+        self.lowest_battery = args.battery_start
 
     def guided(self):
         if self.args.autopilot == "px4":
@@ -248,7 +258,7 @@ class Vehicle:
         self.vel = [self.vel[k] + self.acc[k] * dt for k in range(3)]
         self.pos = [self.pos[k] + self.vel[k] * dt for k in range(3)]
 
-    def build(self, conn, kind, boot_ms, silent):
+    def build(self, conn, kind, boot_ms, silent, now):
         """The `kind` message with the vehicle's state now, or None while that stream is muted."""
         if self.ready_unix is None:
             self.ready_unix = time.time()
@@ -262,8 +272,16 @@ class Vehicle:
             base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
             if self.armed:
                 base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+            failsafe = self.args.failsafe_after is not None and now >= self.args.failsafe_after
+            state = mavlink.MAV_STATE_CRITICAL if failsafe else mavlink.MAV_STATE_ACTIVE
             return conn.mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, autopilot, base,
-                                             self.custom_mode, mavlink.MAV_STATE_ACTIVE)
+                                             self.custom_mode, state)
+        if kind == "SYS_STATUS":
+            pct = max(0.0, self.args.battery_start - self.args.battery_drain * now)
+            self.lowest_battery = min(self.lowest_battery, pct)
+            millivolts = int(13200 + 3600 * pct / 100.0)
+            return conn.mav.sys_status_encode(0, 0, 0, 0, millivolts, -1, int(pct),
+                                              0, 0, 0, 0, 0, 0)
         if kind == "LOCAL_POSITION_NED":
             return conn.mav.local_position_ned_encode(boot_ms, *self.pos, *self.vel)
         # Small-angle attitude that would produce the commanded horizontal acceleration.
@@ -312,6 +330,7 @@ class Vehicle:
                 "rejected": conn.mav.signing.reject_count,
             },
             "injected": self.injector.sent,
+            "lowest_battery_pct": int(self.lowest_battery),
         }
 
 
@@ -322,6 +341,7 @@ class Streams:
         self.args = args
         self.rng = random.Random(args.sysid if args.seed is None else args.seed)
         self.periods = {"HEARTBEAT": 1.0 / args.heartbeat_hz,
+                        "SYS_STATUS": 1.0 / args.sys_status_hz,
                         "LOCAL_POSITION_NED": 1.0 / (args.position_hz or args.rate_hz),
                         "ATTITUDE": 1.0 / (args.attitude_hz or args.rate_hz)}
         # The index of the last period each stream was sent for (-1: none yet).
@@ -352,7 +372,7 @@ class Streams:
             if k <= self.last[kind]:
                 continue
             self.last[kind] = k
-            msg = vehicle.build(conn, kind, boot_ms, silent)
+            msg = vehicle.build(conn, kind, boot_ms, silent, now)
             if msg is None:
                 continue
             d, dup = self.delay(period)

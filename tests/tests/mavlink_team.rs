@@ -318,6 +318,111 @@ fn a_vehicle_that_stops_sending_is_named() {
     assert_no_team_resources(&team_name);
 }
 
+/// Flies a team whose member `which` has a vehicle started with `vehicle_extra`, launched with
+/// `team_extra`, and checks that the team stops on that vehicle's loss (exit 3, `vehicle-lost`
+/// naming the member, `needle` on stderr). Returns audit.json and the orchestrator's output.
+fn lost_vehicle(
+    name: &str,
+    which: usize,
+    vehicle_extra: &[&str],
+    team_extra: &[&str],
+    needle: &str,
+) -> (Value, Output) {
+    let dir = TempDir::new();
+    // Long enough that the loss comes mid-flight even on a loaded machine.
+    let file = team(20.0);
+    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+    let base = free_udp_ports(N as u16);
+    let team_name = unique_team(name);
+    let id = file.agents[which].id;
+    let origins = [ORIGIN; N];
+    let mut vehicles = start_vehicles(&file, (base, &origins), 0..which, None, &[]);
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        which..which + 1,
+        None,
+        vehicle_extra,
+    ));
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        which + 1..N,
+        None,
+        &[],
+    ));
+    let mut at = vec!["--vehicle-origin".to_string(), csv(ORIGIN)];
+    at.extend(team_extra.iter().map(|a| a.to_string()));
+    let at: Vec<&str> = at.iter().map(String::as_str).collect();
+    let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
+    for v in vehicles {
+        v.finish(DEADLINE);
+    }
+    let audit = read_json(&dir.path().join("run/audit.json"));
+    let why = format!("{audit:#}\n{}", describe(&o));
+    assert_eq!(o.status.code(), Some(3), "{why}");
+    assert_eq!(audit["verdict"], "FAULT", "{why}");
+    assert_eq!(audit["fault"]["kind"], "vehicle-lost", "{why}");
+    assert_eq!(audit["fault"]["agent"], id, "{why}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains(&format!("agent {id}: vehicle lost: {needle}")),
+        "{why}"
+    );
+    assert_no_team_resources(&team_name);
+    (audit, o)
+}
+
+/// `--min-battery 20`: one vehicle's SYS_STATUS battery (PX4's 5 Hz onboard stream) drains
+/// from 45 % at 4 %/s. Its member warns once at 30 % and loses the vehicle below 20 %, named
+/// with the limit; audit.json records each vehicle's lowest battery (the others stay at 100 %).
+#[test]
+fn a_vehicle_below_min_battery_is_lost_named_after_a_warning() {
+    const LOW: usize = 4;
+    let drain = ["--battery-start", "45", "--battery-drain", "4"];
+    let (audit, o) = lost_vehicle(
+        "mav10batt",
+        LOW,
+        &drain,
+        &["--min-battery", "20"],
+        "battery at 19 % (below --min-battery 20 %)",
+    );
+    let why = format!("{audit:#}\n{}", describe(&o));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("battery at 30 %: the vehicle is lost below --min-battery 20 %"),
+        "{why}"
+    );
+    let vehicles = audit["vehicles"].as_object().expect("vehicles");
+    let lowest: Vec<f64> = vehicles
+        .values()
+        .filter_map(|v| v["lowest_battery_pct"].as_f64())
+        .collect();
+    assert_eq!(lowest.len(), N, "every vehicle's battery recorded: {why}");
+    assert_eq!(
+        lowest.iter().filter(|&&p| p == 100.0).count(),
+        N - 1,
+        "{why}"
+    );
+    assert!(
+        lowest.iter().any(|&p| p <= 30.0),
+        "the draining vehicle's: {why}"
+    );
+}
+
+/// A vehicle whose HEARTBEAT turns to MAV_STATE_CRITICAL (PX4 in a failsafe) 7 s after it
+/// starts is lost, naming the state.
+#[test]
+fn a_vehicle_reporting_its_own_failsafe_is_lost_named() {
+    lost_vehicle(
+        "mav10fsafe",
+        6,
+        &["--failsafe-after", "7"],
+        &[],
+        "its autopilot reports MAV_STATE_CRITICAL (a failsafe)",
+    );
+}
+
 /// Once the team flies, another process floods one member's port from its own socket for 3 s:
 /// spoofed LOCAL_POSITION_NED (1 km away) and HEARTBEAT with that vehicle's system id, 65 KB
 /// and 64-byte garbage datagrams, 1000 rounds a second (`tests/python/mavlink_flood.py`). The
@@ -564,7 +669,9 @@ fn bad_vehicle_options_exit_2_naming_them() {
         ]
     };
     let (open_case, short_case) = (with_key(open_key), with_key(short_key));
-    let cases: [(&[&str], &str); 12] = [
+    let min0 = mav("--min-battery", "0");
+    let cases: [(&[&str], &str); 13] = [
+        (&min0, "--min-battery 0: must be a percentage in 1..=99"),
         (&open_case, &open_needle),
         (&short_case, &short_needle),
         (

@@ -210,6 +210,9 @@ pub struct VehicleFigures {
     /// With `--mavlink-signing-key`: frames dropped unsigned, signed with another key, or
     /// replayed (0 without a key).
     pub bad_signatures: u64,
+    /// The lowest battery the vehicle reported in SYS_STATUS (%, V); absent if none.
+    pub lowest_battery_pct: Option<u8>,
+    pub lowest_battery_v: Option<Real>,
 }
 
 /// The pacing figures of a real-time flight, from the members' own reports (their pacing

@@ -63,6 +63,7 @@ mod tests {
             last_attitude_rad: None,
             foreign_packets: 0,
             bad_signatures: 0,
+            battery: Default::default(),
         };
         assert!(book.take(&r.to_msg(4, 9)));
         assert!(

@@ -121,6 +121,7 @@ fn validate(a: &Args) -> anyhow::Result<Run> {
             heartbeat: positive_s("heartbeat-timeout", a.heartbeat_timeout_s)?,
             position: positive_s("position-timeout", a.position_timeout_s)?,
         },
+        min_battery_pct: None,
     };
     // Ticks 0..=ticks cover [0, move + hold] at comm_hz.
     let ticks = ((a.move_s + a.hold_s) * a.comm_hz).round() as u64;

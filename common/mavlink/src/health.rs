@@ -60,6 +60,12 @@ pub enum LinkFault {
         silent: Duration,
         limit: Duration,
     },
+    /// The vehicle's SYS_STATUS fell below `--min-battery` (`battery.rs`).
+    #[error("agent {agent}: vehicle lost: battery at {pct} % (below --min-battery {min} %)")]
+    BatteryLow { agent: u32, pct: u8, min: u8 },
+    /// The autopilot's HEARTBEAT reports its own failsafe or worse (`battery.rs`).
+    #[error("agent {agent}: vehicle lost: its autopilot reports {state}")]
+    Failsafe { agent: u32, state: &'static str },
 }
 
 /// When the vehicle's HEARTBEAT and position were last heard, and the verdict.

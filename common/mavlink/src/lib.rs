@@ -10,6 +10,7 @@
 //! the `mavlink` crate's (MAVLink 2, common dialect).
 
 pub mod arming;
+pub mod battery;
 pub mod health;
 pub mod messages;
 pub mod ned;
@@ -22,6 +23,7 @@ pub mod udp;
 pub mod vehicle;
 
 pub use arming::{ArmAction, ArmError, ArmStage, Autopilot};
+pub use battery::BatteryFigures;
 pub use health::{LinkFault, LinkTimeouts, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT};
 pub use messages::Setpoint;
 pub use ned::VehicleOrigin;

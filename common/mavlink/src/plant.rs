@@ -22,6 +22,7 @@ use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
 use cdm_runtime::seams::{Vehicle, VehicleFault};
 
 use crate::arming::ArmStage;
+use crate::battery::BatteryFigures;
 use crate::messages::Setpoint;
 use crate::setpoint::{hold_at, measured_state, setpoint_for};
 use crate::signing::{KeyError, SigningKey};
@@ -311,9 +312,15 @@ pub struct LinkFigures(Arc<Mutex<Shared>>);
 
 impl LinkFigures {
     /// The link's counters, newest attitude and extremes, and the stream's punctuality.
-    pub fn read(&self) -> (LinkCounters, AttitudeFigures, SendTimes) {
+    pub fn read(&self) -> (LinkCounters, AttitudeFigures, BatteryFigures, SendTimes) {
         let g = lock(&self.0);
-        (*g.vehicle.counters(), g.vehicle.attitude_figures(), g.sends)
+        let v = &g.vehicle;
+        (
+            *v.counters(),
+            v.attitude_figures(),
+            v.battery_figures(),
+            g.sends,
+        )
     }
 }
 
@@ -334,6 +341,9 @@ fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: In
             g.sends.on_send(now.saturating_sub(next), period);
             let r = link.receive(now, &mut g.vehicle).map_err(PlantError::from);
             let r = r.and_then(|got| Ok((got, g.vehicle.on_tick(now, Some(&sp), team_ready)?)));
+            if let Some(warning) = g.vehicle.take_warning() {
+                tracing::warn!("{warning}");
+            }
             match r {
                 Ok((got, out)) => {
                     flooded = got.foreign > 0;

@@ -10,6 +10,7 @@ use std::time::Duration;
 use cdm_runtime::messages::{ClockMsg, StateMsg, STATUS_VEHICLE};
 use cdm_runtime::seams::MemberTransport;
 
+use crate::battery::BatteryFigures;
 use crate::plant::LinkFigures;
 use crate::vehicle::Attitude;
 
@@ -33,12 +34,14 @@ pub struct VehicleReport {
     pub foreign_packets: u64,
     /// Frames dropped for their signature (`--mavlink-signing-key`).
     pub bad_signatures: u64,
+    /// The lowest SYS_STATUS battery_remaining (%) and voltage (V), if reported.
+    pub battery: BatteryFigures,
 }
 
 impl VehicleReport {
     /// The figures of a plant's link now.
     pub fn of(link: &LinkFigures) -> Self {
-        let (counters, attitude, sends) = link.read();
+        let (counters, attitude, battery, sends) = link.read();
         VehicleReport {
             setpoints_sent: counters.setpoints_sent,
             late_setpoints: sends.late,
@@ -51,12 +54,13 @@ impl VehicleReport {
                 .map(|a: Attitude| [a.roll_rad, a.pitch_rad, a.yaw_rad]),
             foreign_packets: counters.foreign_packets,
             bad_signatures: counters.bad_signatures,
+            battery,
         }
     }
 
     /// As a message: `tick` = setpoints sent, `state` = [late setpoints, max lateness ms,
     /// attitudes, max |roll|, max |pitch|, last roll, pitch, yaw (NaN without one), foreign
-    /// packets, bad signatures, 0...]. Counts up to 2^53 are exact in an f64.
+    /// packets, bad signatures, lowest battery %, lowest battery V (NaN: none reported), 0...]. Counts up to 2^53 are exact in an f64.
     pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
         let mut f = [0.0; 12];
         f[0] = self.late_setpoints as f64;
@@ -68,6 +72,8 @@ impl VehicleReport {
         f[5..8].copy_from_slice(&last);
         f[8] = self.foreign_packets as f64;
         f[9] = self.bad_signatures as f64;
+        f[10] = self.battery.lowest_pct.map_or(f64::NAN, f64::from);
+        f[11] = self.battery.lowest_voltage_v.unwrap_or(f64::NAN);
         StateMsg {
             status: STATUS_VEHICLE,
             ..StateMsg::ok(self.setpoints_sent, hash, id, f)
@@ -93,6 +99,11 @@ impl VehicleReport {
                 last_attitude_rad: last.iter().all(|v| v.is_finite()).then_some(last),
                 foreign_packets: f[8] as u64,
                 bad_signatures: f[9] as u64,
+                battery: BatteryFigures {
+                    // Whole percents in 0..=100 by construction.
+                    lowest_pct: f[10].is_finite().then(|| f[10].clamp(0.0, 100.0) as u8),
+                    lowest_voltage_v: f[11].is_finite().then_some(f[11]),
+                },
             },
         ))
     }
@@ -186,6 +197,10 @@ mod tests {
             last_attitude_rad: Some([0.01, -0.02, 1.5]),
             foreign_packets: 12_345,
             bad_signatures: 678,
+            battery: BatteryFigures {
+                lowest_pct: Some(42),
+                lowest_voltage_v: Some(15.25),
+            },
         };
         let m = r.to_msg(7, 9);
         assert_eq!(VehicleReport::from_msg(&m), Some((7, r)));

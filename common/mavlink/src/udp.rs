@@ -331,6 +331,7 @@ mod tests {
             arm: false,
             connect_deadline: Duration::from_secs(5),
             timeouts: crate::health::LinkTimeouts::default(),
+            min_battery_pct: None,
         });
         let autopilot = UdpSocket::bind((localhost, 0)).unwrap();
         let gcs = UdpSocket::bind((localhost, 0)).unwrap();

@@ -8,6 +8,7 @@ use mavlink::dialects::common::{MavAutopilot, MavMessage, MavModeFlag};
 use mavlink::MavHeader;
 
 use crate::arming::{ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
+use crate::battery::{BatteryFigures, BatteryWatch};
 use crate::health::{LinkFault, LinkHealth, LinkTimeouts};
 use crate::messages::{self, Setpoint, Target};
 use crate::ned::{from_f32, ned_to_enu_vector, VehicleOrigin};
@@ -29,6 +30,8 @@ pub struct VehicleConfig {
     pub connect_deadline: Duration,
     /// `--heartbeat-timeout` and `--position-timeout`: how long a stream may be silent.
     pub timeouts: LinkTimeouts,
+    /// `--min-battery`: below this SYS_STATUS battery_remaining (%) the vehicle is lost.
+    pub min_battery_pct: Option<u8>,
 }
 
 /// The vehicle's measured state in scenario coordinates (LOCAL_POSITION_NED converted). The
@@ -113,6 +116,7 @@ pub struct MavlinkVehicle {
     mode: Option<VehicleMode>,
     state: Option<MeasuredState>,
     attitude: AttitudeFigures,
+    battery: BatteryWatch,
     last_heartbeat_sent: Option<Duration>,
     stream_started: Option<Duration>,
     counters: LinkCounters,
@@ -129,6 +133,7 @@ impl MavlinkVehicle {
             mode: None,
             state: None,
             attitude: AttitudeFigures::default(),
+            battery: BatteryWatch::new(config.agent, config.min_battery_pct),
             last_heartbeat_sent: None,
             stream_started: None,
             counters: LinkCounters::default(),
@@ -163,6 +168,7 @@ impl MavlinkVehicle {
             MavMessage::HEARTBEAT(hb) if hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID => {
                 self.counters.heartbeats_received += 1;
                 self.health.on_heartbeat(now);
+                self.battery.on_system_status(hb.system_status);
                 self.mode = Some(VehicleMode {
                     autopilot: autopilot_of(hb.autopilot),
                     custom_mode: hb.custom_mode,
@@ -180,6 +186,10 @@ impl MavlinkVehicle {
                     time_boot_ms: p.time_boot_ms,
                     received_at: now,
                 });
+            }
+            MavMessage::SYS_STATUS(st) => {
+                self.battery
+                    .on_sys_status(st.battery_remaining, st.voltage_battery);
             }
             MavMessage::ATTITUDE(a) => {
                 self.counters.attitudes_received += 1;
@@ -208,6 +218,7 @@ impl MavlinkVehicle {
         team_ready: bool,
     ) -> Result<Vec<MavMessage>, VehicleError> {
         self.health.check(now)?;
+        self.battery.check()?;
         let mut out = Vec::with_capacity(3);
         // Nothing to say before the vehicle is known: there is no one to address.
         let Some(target) = self.target else {
@@ -261,6 +272,16 @@ impl MavlinkVehicle {
     /// The attitude's extremes and newest value.
     pub fn attitude_figures(&self) -> AttitudeFigures {
         self.attitude
+    }
+
+    /// The lowest battery figures reported.
+    pub fn battery_figures(&self) -> BatteryFigures {
+        self.battery.figures()
+    }
+
+    /// A battery warning not yet logged (`--min-battery`), taken once.
+    pub fn take_warning(&mut self) -> Option<String> {
+        self.battery.take_warning()
     }
 
     /// The last HEARTBEAT's mode and armed state, if any.
@@ -334,6 +355,7 @@ mod tests {
             arm,
             connect_deadline: ms(5000),
             timeouts: LinkTimeouts::default(),
+            min_battery_pct: None,
         }
     }
 

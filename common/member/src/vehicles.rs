@@ -32,6 +32,8 @@ pub fn vehicle_figures(r: &VehicleReport) -> cdm_core::audit::VehicleFigures {
         last_attitude_deg: r.last_attitude_rad.map(|a| a.map(f64::to_degrees)),
         foreign_packets: r.foreign_packets,
         bad_signatures: r.bad_signatures,
+        lowest_battery_pct: r.battery.lowest_pct,
+        lowest_battery_v: r.battery.lowest_voltage_v,
     }
 }
 
@@ -100,6 +102,10 @@ pub struct VehicleArgs {
     /// (audit.json `vehicles.<id>.bad_signatures`).
     #[arg(long, value_name = "FILE")]
     pub mavlink_signing_key: Option<PathBuf>,
+    /// MAVLink: a vehicle whose SYS_STATUS battery falls below PCT % (1..=99) is lost, after one
+    /// warning at PCT + 10 %. Without it the battery is only recorded (audit.json `vehicles`).
+    #[arg(long, value_name = "PCT")]
+    pub min_battery: Option<u8>,
 }
 
 impl Default for VehicleArgs {
@@ -114,6 +120,7 @@ impl Default for VehicleArgs {
             heartbeat_timeout_s: DEFAULT_HEARTBEAT_TIMEOUT.as_secs_f64(),
             position_timeout_s: DEFAULT_POSITION_TIMEOUT.as_secs_f64(),
             mavlink_signing_key: None,
+            min_battery: None,
         }
     }
 }
@@ -133,6 +140,8 @@ pub struct MavlinkOptions {
     /// `--mavlink-signing-key` (an absolute path; each member reads the key itself, so it is
     /// never on a command line).
     pub signing_key: Option<PathBuf>,
+    /// `--min-battery`.
+    pub min_battery_pct: Option<u8>,
 }
 
 /// What each member flies, validated.
@@ -156,7 +165,7 @@ impl VehicleArgs {
         match self.vehicles {
             VehicleKind::Model => {
                 if *self != (VehicleArgs::default()) {
-                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout and --mavlink-signing-key need --vehicles mavlink".into());
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key and --min-battery need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
             }
@@ -185,6 +194,12 @@ impl VehicleArgs {
                         std::path::absolute(p).map_err(|e| format!("--mavlink-signing-key: {e}"))
                     })
                     .transpose()?,
+                min_battery_pct: match self.min_battery {
+                    Some(p) if !(1..=99).contains(&p) => {
+                        return Err(format!("--min-battery {p}: must be a percentage in 1..=99"))
+                    }
+                    other => other,
+                },
             })),
         }
     }
@@ -223,6 +238,9 @@ impl Vehicles {
         ]);
         if let Some(key) = &o.signing_key {
             a.extend(["--mavlink-signing-key".into(), key.display().to_string()]);
+        }
+        if let Some(pct) = o.min_battery_pct {
+            a.extend(["--min-battery".into(), pct.to_string()]);
         }
         a
     }
@@ -294,6 +312,7 @@ pub fn connect<'a>(
             arm: o.arm,
             connect_deadline: connect,
             timeouts: o.timeouts,
+            min_battery_pct: o.min_battery_pct,
         },
         bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
         signing: o
