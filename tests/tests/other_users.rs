@@ -403,16 +403,21 @@ fn a_squatted_or_open_iceoryx2_root_is_refused_naming_owner_and_mode() {
 }
 
 /// Item 4, part 1: `launch --n 200` killed (SIGKILL) mid-way through creating the team's
-/// services (once 50 new entries are in /dev/shm, of the hundreds it creates: an event, not a
-/// delay, so a loaded machine kills it at the same stage), then a launch of another team: that launch removes what the
-/// dead team left, and /dev/shm returns to its state before the killed launch. In a private
+/// services, then a launch of another team: that launch removes what the dead team left, and
+/// /dev/shm returns to its state before the killed launch. The kill comes once a given number
+/// of new entries are in /dev/shm (an event, not a delay, so a loaded machine kills at the same
+/// stage), at five stages of the hundreds of entries a team creates, each with its own killed
+/// team: a kill in the middle of a service's creation, which leaves an unfinished static
+/// config, is then all but certain (one stage alone missed it in most runs). In a private
 /// /dev/shm (mount namespace), after one warm-up launch that creates what iceoryx2 keeps for
-/// good (the user's root directory and management segment). Before the fix, only a later launch
-/// of the same team name removed anything, and iceoryx2 itself could not remove what a kill in
-/// the middle of a service's creation left (it even waited forever on an empty segment).
-/// `--on-loss stop` because sizing for repairs delays the creation of services past the kill.
+/// good (the user's root directory and management segment). Before the fixes, only a later
+/// launch of the same team name removed anything, and iceoryx2 itself could not remove what a
+/// kill in the middle of a service's creation left (it even waited forever on an empty
+/// segment). `--on-loss stop` because sizing for repairs delays the creation of services past
+/// the kill.
 #[test]
 fn a_team_killed_during_start_up_is_removed_by_the_next_launch_of_another_team() {
+    const STAGES: [u32; 5] = [15, 35, 50, 90, 160];
     if !private_mounts_allowed() {
         return;
     }
@@ -420,55 +425,67 @@ fn a_team_killed_during_start_up_is_removed_by_the_next_launch_of_another_team()
     let killed = unique_team("killed");
     let other = unique_team("after");
     let before = dir.path().join("before.txt");
-    let after = dir.path().join("after.txt");
     // One shell in the namespace drives the sequence; each step has its own deadline.
     let script = r#"
 set -eu
-O="$0"; D="$1"; KILLED="$2"; OTHER="$3"
+O="$0"; D="$1"; KILLED="$2"; OTHER="$3"; shift 3
 mount -t tmpfs -o size=1g tmpfs /dev/shm
 timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --quiet --team warmup --out "$D/w" >/dev/null
 find /dev/shm | sort > "$D/before.txt"
 N0=$(find /dev/shm | wc -l)
-"$O" launch --n 200 --on-loss stop --quiet --no-figures --team "$KILLED" --out "$D/k" >/dev/null 2>&1 &
-PID=$!
-i=0
-while [ "$(find /dev/shm | wc -l)" -lt $((N0 + 50)) ]; do
-  i=$((i+1)); [ "$i" -lt 12000 ] || { echo "the killed team created nothing in 60 s"; exit 1; }
-  sleep 0.005
+for K in "$@"; do
+  "$O" launch --n 200 --on-loss stop --quiet --no-figures --team "$KILLED$K" --out "$D/k$K" >/dev/null 2>&1 &
+  PID=$!
+  i=0
+  while [ "$(find /dev/shm | wc -l)" -lt $((N0 + K)) ]; do
+    i=$((i+1)); [ "$i" -lt 12000 ] || { echo "the killed team created nothing in 60 s"; exit 1; }
+    sleep 0.005
+  done
+  kill -9 "$PID"
+  wait "$PID" || true
+  echo "left by the team killed at $K new entries: $(find /dev/shm | wc -l) entries"
+  i=0
+  while pgrep -f -- "--team $KILLED$K" >/dev/null; do
+    i=$((i+1)); [ "$i" -lt 600 ] || { echo "members of $KILLED$K still alive"; exit 1; }
+    sleep 0.1
+  done
+  timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --team "$OTHER$K" --out "$D/o$K"
+  find /dev/shm | sort > "$D/after$K.txt"
 done
-kill -9 "$PID"
-wait "$PID" || true
-echo "left by the killed team: $(find /dev/shm | wc -l) entries"
-i=0
-while pgrep -f -- "--team $KILLED" >/dev/null; do
-  i=$((i+1)); [ "$i" -lt 600 ] || { echo "members of $KILLED still alive"; exit 1; }
-  sleep 0.1
-done
-timeout 60 "$O" launch --n 4 --max-ticks 2 --no-figures --team "$OTHER" --out "$D/o"
-find /dev/shm | sort > "$D/after.txt"
 "#;
+    let stages: Vec<String> = STAGES.iter().map(u32::to_string).collect();
     let o = run(
         Command::new("unshare")
             .args(["-m", "sh", "-c", script])
             .arg(bin("orchestrator"))
             .arg(dir.path())
-            .args([&killed, &other]),
+            .args([&killed, &other])
+            .args(&stages),
         DEADLINE,
     );
     assert!(o.status.success(), "{}", describe(&o));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains(&format!("team={killed}")) && err.contains("removed stale resources"),
-        "the second launch says it removed the killed team:\n{err}"
-    );
     let before = std::fs::read_to_string(before).expect("before.txt");
-    let after = std::fs::read_to_string(after).expect("after.txt");
-    assert_eq!(
-        before,
-        after,
-        "/dev/shm before the killed launch and after the next one differ\n{}",
-        describe(&o)
+    // A kill before the team's first process registered leaves nothing to remove; from the
+    // original stage (50 new entries) on there is always something.
+    let removed: Vec<&String> = stages
+        .iter()
+        .filter(|k| err.contains(&format!("team={killed}{k} ")))
+        .collect();
+    assert!(
+        err.contains("removed stale resources") && removed.iter().any(|k| k.as_str() == "50"),
+        "the launch after the kill at 50 says it removed the killed team (removed after: {removed:?}):\n{err}"
     );
+    for k in &stages {
+        let after =
+            std::fs::read_to_string(dir.path().join(format!("after{k}.txt"))).expect("after.txt");
+        assert_eq!(
+            before,
+            after,
+            "/dev/shm before the launch killed at {k} new entries and after the next one differ\n{}",
+            describe(&o)
+        );
+    }
 }
 
 /// Item 4, part 2: `orchestrator clean` while a team flies leaves it alone (the team completes

@@ -172,11 +172,19 @@ fn remove_unfinished_segments() {
     }
 }
 
+/// Whether a service's static config file is one whose writer was killed before finishing it:
+/// empty, or still writable. iceoryx2 0.10 (`iceoryx2-cal` `static_storage::file`) creates it
+/// owner read-write, writes it, and only then sets it owner read-only; until then it calls the
+/// service "non-existing" and its own cleanup leaves the file.
+fn unfinished_static_config(m: &std::fs::Metadata) -> bool {
+    m.is_file() && (m.len() == 0 || m.permissions().mode() & 0o200 != 0)
+}
+
 /// The files iceoryx2 keeps for one dead node in this user's root, read before iceoryx2's own
 /// cleanup: the node's directory of tags, its monitor files, and the static configs of the
 /// services it had tagged. A node killed while it created a service or a port defeats
-/// iceoryx2 0.10's cleanup (the node stays, `InternalError`; or an empty static config stays,
-/// "non-existing service"), and no later process can remove what is left; only this user's
+/// iceoryx2 0.10's cleanup (the node stays, `InternalError`; or an unfinished static config
+/// stays, "non-existing service"), and no later process can remove what is left; only this user's
 /// teams with every process dead are swept, and only these names.
 struct NodeFiles {
     /// The node id as iceoryx2 writes it in file names (decimal).
@@ -207,8 +215,8 @@ impl NodeFiles {
         Some(Self { id, services })
     }
 
-    /// Removes what iceoryx2's cleanup left of the node: empty static configs of its services
-    /// (a service whose creation was cut short), its directory and its monitor files.
+    /// Removes what iceoryx2's cleanup left of the node: unfinished static configs of its
+    /// services (a service whose creation was cut short), its directory and its monitor files.
     fn sweep(&self, team: &TeamName) {
         let root = Path::new(iox2_root());
         let prefix = &super::iox2_location().prefix;
@@ -217,7 +225,7 @@ impl NodeFiles {
             let path = root
                 .join("services")
                 .join(format!("{prefix}{hash}.service"));
-            if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file() && m.len() == 0) {
+            if std::fs::symlink_metadata(&path).is_ok_and(|m| unfinished_static_config(&m)) {
                 gone.push(path);
             }
         }
