@@ -25,7 +25,7 @@ use crate::arming::ArmStage;
 use crate::battery::BatteryFigures;
 use crate::messages::Setpoint;
 use crate::setpoint::{hold_at, measured_state, setpoint_for};
-use crate::signing::{KeyError, SigningKey};
+use crate::signing::SigningKey;
 use crate::udp::{UdpError, UdpLink};
 use crate::vehicle::{AttitudeFigures, LinkCounters, MavlinkVehicle, VehicleConfig, VehicleError};
 
@@ -49,8 +49,6 @@ pub enum PlantError {
     Udp(#[from] UdpError),
     #[error(transparent)]
     Vehicle(#[from] VehicleError),
-    #[error(transparent)]
-    Key(#[from] KeyError),
     #[error("agent {agent}: interrupted while waiting for its vehicle ({waiting})")]
     Interrupted { agent: u32, waiting: String },
     #[error("agent {agent}: cannot start the vehicle link's thread")]

@@ -60,7 +60,8 @@ impl VehicleReport {
 
     /// As a message: `tick` = setpoints sent, `state` = [late setpoints, max lateness ms,
     /// attitudes, max |roll|, max |pitch|, last roll, pitch, yaw (NaN without one), foreign
-    /// packets, bad signatures, lowest battery %, lowest battery V (NaN: none reported), 0...]. Counts up to 2^53 are exact in an f64.
+    /// packets, bad signatures, lowest battery %, lowest battery V (NaN: none reported)].
+    /// Counts up to 2^53 are exact in an f64.
     pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
         let mut f = [0.0; 12];
         f[0] = self.late_setpoints as f64;

@@ -46,9 +46,6 @@ pub struct Received {
     pub decoded: usize,
     /// Datagrams dropped undecoded: from another address than the vehicle's, or too large.
     pub foreign: u64,
-    /// Frames dropped for their signature (with a signing key): unsigned, signed with another
-    /// key, or replayed.
-    pub bad_signatures: u64,
 }
 
 /// The link's signing state (`--mavlink-signing-key`), if any.
@@ -118,6 +115,8 @@ pub struct UdpLink {
     peer: Option<SocketAddr>,
     sequence: u8,
     buf: Vec<u8>,
+    /// The frame being sent (reused: a setpoint and a HEARTBEAT go out every tick).
+    frame: Vec<u8>,
     /// With a key: every frame in and out is signed, and an unsigned or badly signed one is
     /// dropped before the vehicle sees it (so it cannot lock the address either).
     signing: Option<Signing>,
@@ -152,6 +151,7 @@ impl UdpLink {
             peer: None,
             sequence: 0,
             buf: vec![0; DATAGRAM_BYTES],
+            frame: Vec::with_capacity(300),
             signing: signing.map(Signing),
         })
     }
@@ -225,7 +225,6 @@ impl UdpLink {
                     };
                     if !signed {
                         vehicle.on_bad_signature();
-                        got.bad_signatures += 1;
                         continue;
                     }
                 }
@@ -263,11 +262,11 @@ impl UdpLink {
                 sequence: self.sequence,
             };
             self.sequence = self.sequence.wrapping_add(1);
-            let mut frame = Vec::with_capacity(64);
+            self.frame.clear();
             let signing = self.signing.as_ref().map(|Signing(s)| s);
-            mavlink::write_v2_msg_signed(&mut frame, header, msg, signing)
+            mavlink::write_v2_msg_signed(&mut self.frame, header, msg, signing)
                 .map_err(|e| self.io_err("encode", io::Error::other(e.to_string())))?;
-            match self.socket.send_to(&frame, peer) {
+            match self.socket.send_to(&self.frame, peer) {
                 Ok(_) => {}
                 // A full socket buffer drops this frame: the next tick sends a fresher one.
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}

@@ -137,9 +137,9 @@ pub struct MavlinkOptions {
     pub arm: bool,
     /// `--heartbeat-timeout` and `--position-timeout`.
     pub timeouts: LinkTimeouts,
-    /// `--mavlink-signing-key` (an absolute path; each member reads the key itself, so it is
-    /// never on a command line).
-    pub signing_key: Option<PathBuf>,
+    /// `--mavlink-signing-key`: its absolute path (passed on to spawned members, which read the
+    /// key themselves, so it is never on a command line) and the key read from it.
+    pub signing_key: Option<(PathBuf, SigningKey)>,
     /// `--min-battery`.
     pub min_battery_pct: Option<u8>,
 }
@@ -190,8 +190,10 @@ impl VehicleArgs {
                     .as_deref()
                     .map(|p| {
                         // Read now, so a bad key is refused before anything starts.
-                        SigningKey::load(p).map_err(|e| e.to_string())?;
-                        std::path::absolute(p).map_err(|e| format!("--mavlink-signing-key: {e}"))
+                        let key = SigningKey::load(p).map_err(|e| e.to_string())?;
+                        let path = std::path::absolute(p)
+                            .map_err(|e| format!("--mavlink-signing-key: {e}"))?;
+                        Ok::<_, String>((path, key))
                     })
                     .transpose()?,
                 min_battery_pct: match self.min_battery {
@@ -236,8 +238,8 @@ impl Vehicles {
             "--position-timeout".into(),
             o.timeouts.position.as_secs_f64().to_string(),
         ]);
-        if let Some(key) = &o.signing_key {
-            a.extend(["--mavlink-signing-key".into(), key.display().to_string()]);
+        if let Some((path, _)) = &o.signing_key {
+            a.extend(["--mavlink-signing-key".into(), path.display().to_string()]);
         }
         if let Some(pct) = o.min_battery_pct {
             a.extend(["--min-battery".into(), pct.to_string()]);
@@ -315,12 +317,7 @@ pub fn connect<'a>(
             min_battery_pct: o.min_battery_pct,
         },
         bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
-        signing: o
-            .signing_key
-            .as_deref()
-            .map(SigningKey::load)
-            .transpose()
-            .map_err(PlantError::from)?,
+        signing: o.signing_key.as_ref().map(|(_, key)| *key),
         period: Duration::from_secs_f64(s.dt_s()),
     };
     Ok(MavlinkPlant::connect(

@@ -62,7 +62,7 @@ pub enum TelemetryParquetError {
 }
 
 /// The schema: the same column names as telemetry.csv.
-pub fn telemetry_schema() -> SchemaRef {
+pub fn schema() -> SchemaRef {
     let mut fields = vec![
         Field::new("tick", DataType::UInt64, false),
         Field::new("t", DataType::Float64, false),
@@ -87,6 +87,7 @@ pub fn telemetry_schema() -> SchemaRef {
 /// its footer written again: that space was the old footer's and has just been freed.
 pub struct ParquetTelemetryWriter {
     writer: Option<ArrowWriter<File>>,
+    schema: SchemaRef,
     /// The same open file as the writer's (a duplicated descriptor, so the same offset): the
     /// footers between row groups and the cut back after a failure go through it.
     file: File,
@@ -145,12 +146,13 @@ impl ParquetTelemetryWriter {
             .build();
         // What ArrowWriter would derive itself, derived once here so that the footers written
         // between row groups say exactly what its own final footer says.
-        let schema = ArrowSchemaConverter::new()
+        let arrow = schema();
+        let parquet_schema = ArrowSchemaConverter::new()
             .with_coerce_types(props.coerce_types())
-            .convert(&telemetry_schema())?;
-        add_encoded_arrow_schema_to_metadata(&telemetry_schema(), &mut props);
+            .convert(&arrow)?;
+        add_encoded_arrow_schema_to_metadata(&arrow, &mut props);
         let footer = FooterParts {
-            schema: Arc::new(schema.clone()),
+            schema: Arc::new(parquet_schema.clone()),
             version: props.writer_version().as_num(),
             created_by: props.created_by().to_string(),
             key_value: props.key_value_metadata().cloned(),
@@ -158,11 +160,12 @@ impl ParquetTelemetryWriter {
         let options = ArrowWriterOptions::new()
             .with_properties(props)
             .with_skip_arrow_metadata(true)
-            .with_parquet_schema(schema);
+            .with_parquet_schema(parquet_schema);
         let own = file.try_clone()?;
-        let writer = ArrowWriter::try_new_with_options(file, telemetry_schema(), options)?;
+        let writer = ArrowWriter::try_new_with_options(file, Arc::clone(&arrow), options)?;
         let mut w = ParquetTelemetryWriter {
             writer: Some(writer),
+            schema: arrow,
             file: own,
             path: path.to_path_buf(),
             footer,
@@ -251,7 +254,7 @@ impl ParquetTelemetryWriter {
             columns.push(Arc::new(Float64Array::from(std::mem::take(v))));
         }
         let batch =
-            RecordBatch::try_new(telemetry_schema(), columns).map_err(ParquetError::from)?;
+            RecordBatch::try_new(Arc::clone(&self.schema), columns).map_err(ParquetError::from)?;
         writer.write(&batch)?;
         writer.flush()?;
         self.commit()
