@@ -18,8 +18,9 @@ cleanup() {
 }
 trap cleanup EXIT
 two_hosts_up
+link_args "${HOW:-tls}"
 ip netns exec "$a" "$bin" launch --n 10 --t-total 600 --team "$team" --out "$out/run" \
-  --no-figures --quiet --agent-timeout 120 --hosts 2 --listen tcp/10.77.0.1:7447 \
+  --no-figures --quiet --agent-timeout 120 --hosts 2 $listen_args \
   > "$out/log" 2>&1 &
 orch=$!
 daemon_in_b "$team" "$out/daemon"
@@ -27,7 +28,7 @@ i=0; until [ -s "$out/run/telemetry.csv" ] || [ $i -ge 600 ]; do sleep 0.1; i=$(
 # Every member on both hosts: agent or leader processes of this team.
 members=$(pgrep -f -- "--team $team --id" || true)
 kill -STOP $members
-daemon=$(pgrep -f -- "host --connect tcp/10.77.0.1:7447 --team $team" | tail -1)
+daemon=$(pgrep -f -- "host $connect_args --team $team" | tail -1)
 sleep 1
 cpu() { awk '{print $14 + $15}' "/proc/$1/stat"; }
 o0=$(cpu "$orch"); d0=$(cpu "$daemon")

@@ -16,16 +16,17 @@ out=$(mktemp -d)
 cleanup() { two_hosts_down; rm -rf "$out"; }
 trap cleanup EXIT
 two_hosts_up
-echo "| N | hosts | verdict | member ticks | late ticks | late % | neighbour age p50 ms | p99 ms | max ms | members reported |"
+echo "| N | hosts (link) | verdict | member ticks | late ticks | late % | neighbour age p50 ms | p99 ms | max ms | members reported |"
 echo "|---|---|---|---|---|---|---|---|---|---|"
 for n in $ns; do
-  for hosts in 1 2; do
-    team=brt$$h$hosts
-    fly_hosts "$hosts" "$out/log" "$out/daemon" "$team" --n "$n" --t-total 600 \
+  for how in ${HOW:-1 tcp tls}; do
+    label=1; [ "$how" = 1 ] || label="2 ($how)"
+    run=$((${run:-0} + 1)); team=brt$$$how$run
+    fly_hosts "$how" "$out/log" "$out/daemon" "$team" --n "$n" --t-total 600 \
       --max-ticks "$ticks" --realtime --out "$out/$team-$n" --no-figures
     verdict=$(sed -n 's/.*verdict \([A-Z]*\).*/\1/p' "$out/log" | head -1)
     rt=$(sed -n 's/.*real time: \([0-9]*\) ticks, \([0-9]*\) late (\([0-9.]*\) %), neighbour age p50 \([0-9.]*\) ms, p99 \([0-9.]*\) ms, max \([0-9.]*\) ms (\([0-9]*\) of.*/\1 \2 \3 \4 \5 \6 \7/p' "$out/log")
     set -- ${rt:-- - - - - - -}
-    echo "| $n | $hosts | ${verdict:-?} | $1 | $2 | $3 | $4 | $5 | $6 | $7 of $n |"
+    echo "| $n | $label | ${verdict:-?} | $1 | $2 | $3 | $4 | $5 | $6 | $7 of $n |"
   done
 done

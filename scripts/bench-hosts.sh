@@ -13,16 +13,23 @@ out=$(mktemp -d)
 cleanup() { two_hosts_down; rm -rf "$out"; }
 trap cleanup EXIT
 two_hosts_up
-echo "| N | hosts | ticks | ticks/s | start-up s | crossing edges | bytes per tick |"
-echo "|---|---|---|---|---|---|---|"
+# On the wire: both directions of host A's veth end, framing, TLS records and zenoh's own
+# traffic included (the payload column counts our frames only).
+wire_bytes() { ip netns exec "$a" cat /sys/class/net/veth0/statistics/rx_bytes \
+  /sys/class/net/veth0/statistics/tx_bytes | awk '{ s += $1 } END { print s }'; }
+echo "| N | hosts (link) | ticks | ticks/s | start-up s | crossing edges | payload bytes per tick | link bytes per tick |"
+echo "|---|---|---|---|---|---|---|---|"
 for n in $ns; do
-  for hosts in 1 2; do
-    team=bench$$h$hosts
-    fly_hosts "$hosts" "$out/log" "$out/daemon" "$team" --n "$n" --max-ticks "$ticks" \
+  for how in ${HOW:-1 tcp tls}; do
+    label=1; [ "$how" = 1 ] || label="2 ($how)"
+    run=$((${run:-0} + 1)); team=bench$$$how$run
+    w0=$(wire_bytes)
+    fly_hosts "$how" "$out/log" "$out/daemon" "$team" --n "$n" --max-ticks "$ticks" \
       --out "$out/$team-$n" --no-figures
     rate=$(sed -n 's/.*ticking: [0-9.]* s (\([0-9]*\) ticks\/s), start-up \([0-9.]*\) s.*/\1 \2/p' "$out/log")
     wire=$(sed -n 's/.*hosts: \([0-9]*\) crossing edges, \([0-9]*\) bytes per tick.*/\1 \2/p' "$out/log")
-    set -- $rate ${wire:-0 0}
-    echo "| $n | $hosts | $((ticks + 1)) | $1 | $2 | $3 | $4 |"
+    w1=$(wire_bytes)
+    set -- ${rate:-- -} ${wire:-0 0}
+    echo "| $n | $label | $((ticks + 1)) | $1 | $2 | $3 | $4 | $(( (w1 - w0) / (ticks + 1) )) |"
   done
 done

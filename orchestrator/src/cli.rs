@@ -103,9 +103,16 @@ pub enum Command {
     /// --listen ENDPOINT`: join it over zenoh, spawn the members it assigns here, and
     /// bridge them to the other hosts. Exit 0 when the team stopped, 2 refused, 3 link lost.
     Host {
-        /// The orchestrator's endpoint, in zenoh's form (tcp/10.77.0.1:7447).
+        /// The orchestrator's endpoint, in zenoh's form (tls/10.77.0.1:7447).
         #[arg(long, value_name = "ENDPOINT")]
         connect: String,
+        /// This host's keys (DIR/host-K of `orchestrator keys new`): mutual TLS, and the host
+        /// number is the certificate's.
+        #[arg(long, value_name = "DIR")]
+        keys: Option<PathBuf>,
+        /// Allow a tcp/ endpoint: no authentication, no encryption (a network you trust).
+        #[arg(long)]
+        insecure: bool,
         /// Join only this team.
         #[arg(long)]
         team: Option<String>,
@@ -118,6 +125,12 @@ pub enum Command {
         /// Seconds to wait for the orchestrator to answer (at most 86400).
         #[arg(long, default_value_t = 60.0, allow_negative_numbers = true)]
         join_timeout: f64,
+    },
+    /// A team's keys for mutual TLS across hosts: its certificate authority and a certificate
+    /// for the orchestrator and for each host, every file readable by its owner only.
+    Keys {
+        #[command(subcommand)]
+        action: KeysCommand,
     },
     /// Export the plan to the stacks that fly real fleets (Crazyswarm2, Skybrush), scaled into
     /// the target volume and certified again there: exit 0 SAFE, 1 UNSAFE (files written only
@@ -211,15 +224,37 @@ pub struct OutDir {
     pub force: bool,
 }
 
+/// `orchestrator keys`.
+#[derive(Debug, Subcommand)]
+pub enum KeysCommand {
+    /// Create a team's keys in DIR (new or empty): DIR/authority (keep it; never copy it to a
+    /// host), DIR/orchestrator (to the orchestrator's machine), DIR/host-1.. (one to each host).
+    New {
+        dir: PathBuf,
+        /// How many host daemons get a certificate (hosts 1..=N).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=63))]
+        daemons: u32,
+    },
+    /// Add the next host's certificate to the team whose keys are in DIR.
+    AddHost { dir: PathBuf },
+}
+
 /// `launch` across hosts.
 #[derive(Debug, Args, Clone)]
 pub struct HostArgs {
     /// Split the team over K hosts: this one and K - 1 `orchestrator host` daemons.
     #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub hosts: u32,
-    /// Where the daemons connect, in zenoh's form (tcp/10.77.0.1:7447); needed with --hosts.
+    /// Where the daemons connect, in zenoh's form (tls/10.77.0.1:7447); needed with --hosts.
     #[arg(long, value_name = "ENDPOINT")]
     pub listen: Option<String>,
+    /// The orchestrator's keys (DIR/orchestrator of `orchestrator keys new`), for a tls/
+    /// endpoint: mutual TLS, each daemon bound to its host number by its certificate.
+    #[arg(long, value_name = "DIR")]
+    pub keys: Option<PathBuf>,
+    /// Allow a tcp/ endpoint: no authentication, no encryption (a network you trust).
+    #[arg(long)]
+    pub insecure: bool,
     /// Seconds of silence on a host link before it counts as lost (at most 86400).
     #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
     pub link_timeout: f64,

@@ -54,11 +54,17 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         Command::Clean => clean(cli.quiet),
         Command::Host {
             connect,
+            keys,
+            insecure,
             team,
             host,
             scenario,
             join_timeout,
-        } => host_daemon(connect, team, host, scenario, join_timeout, cli.quiet),
+        } => {
+            let t = cdm_hosts::Transport::choose("--connect", &connect, keys.as_deref(), insecure)?;
+            host_daemon(connect, t, team, host, scenario, join_timeout, cli.quiet)
+        }
+        Command::Keys { action } => keys_command(action, cli.quiet),
         Command::Export { target } => cdm_export::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
@@ -236,16 +242,30 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             .map(crate::cli::serve_addr)
             .transpose()
             .map_err(Failure::bad_input)?,
-        hosts: cdm_hosts::HostOptions {
-            hosts: a.hosts.hosts,
-            listen: a.hosts.listen.clone(),
-            link_timeout: secs(a.hosts.link_timeout, "--link-timeout")?,
-        },
+        hosts: host_options(a)?,
         realtime,
         losses,
         on_loss: a.run.on_loss.into(),
     };
     Ok((s, opts))
+}
+
+/// `--hosts`, `--listen` and its security: a `tls/` endpoint needs `--keys`, a `tcp/` one
+/// `--insecure` (a one-host launch opens no network link).
+fn host_options(a: &LaunchArgs) -> Result<cdm_hosts::HostOptions, Failure> {
+    let transport = match a.hosts.listen.as_deref() {
+        Some(l) if a.hosts.hosts > 1 => {
+            cdm_hosts::Transport::choose("--listen", l, a.hosts.keys.as_deref(), a.hosts.insecure)?
+        }
+        _ => cdm_hosts::Transport::Insecure,
+    };
+    Ok(cdm_hosts::HostOptions {
+        hosts: a.hosts.hosts,
+        listen: a.hosts.listen.clone(),
+        link_timeout: timeout("--link-timeout", a.hosts.link_timeout)
+            .map_err(Failure::bad_input)?,
+        transport,
+    })
 }
 
 /// The launch's summary: the audit, the tick rate and start-up, the peak memory.
@@ -674,6 +694,7 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
 #[cfg(feature = "hosts")]
 fn host_daemon(
     connect: String,
+    transport: cdm_hosts::Transport,
     team: Option<String>,
     host: Option<u32>,
     scenario: Option<PathBuf>,
@@ -687,6 +708,7 @@ fn host_daemon(
         .transpose()?;
     let o = cdm_hosts::daemon::DaemonOptions {
         connect,
+        transport,
         team,
         host,
         scenario,
@@ -700,6 +722,7 @@ fn host_daemon(
 #[cfg(not(feature = "hosts"))]
 fn host_daemon(
     _connect: String,
+    _transport: cdm_hosts::Transport,
     _team: Option<String>,
     _host: Option<u32>,
     _scenario: Option<PathBuf>,
@@ -709,4 +732,29 @@ fn host_daemon(
     Err(Failure::bad_input(
         "host: this orchestrator was built without the `hosts` feature (zenoh)",
     ))
+}
+
+/// `orchestrator keys new|add-host`: writes the team's keys and says where each directory goes.
+fn keys_command(action: crate::cli::KeysCommand, quiet: bool) -> Result<Exit, Failure> {
+    use crate::cli::KeysCommand;
+    let dirs = match action {
+        KeysCommand::New { dir, daemons } => {
+            cdm_keys::new_team(&dir, daemons).map_err(Failure::bad_input)?
+        }
+        KeysCommand::AddHost { dir } => {
+            vec![cdm_keys::add_host(&dir).map_err(Failure::bad_input)?.1]
+        }
+    };
+    if !quiet {
+        for d in &dirs {
+            let (to, how) = match d.file_name().and_then(|n| n.to_str()) {
+                Some("orchestrator") => ("the orchestrator's machine".to_owned(), "launch"),
+                Some(h) => (format!("{h}'s machine"), "orchestrator host"),
+                None => (String::new(), ""),
+            };
+            out!("{}: to {to} ({how} --keys {})", d.display(), d.display());
+        }
+        out!("keep the authority (its ca.key signs new hosts) off the hosts; every file is owner-only");
+    }
+    Ok(Exit::Safe)
 }

@@ -1,7 +1,8 @@
 //! One team over two "hosts": two network namespaces joined by a veth pair
 //! (10.77.0.1/24 and 10.77.0.2/24). Host A runs the orchestrator and its share of the members;
 //! host B runs `orchestrator host` and the other share with its own /dev/shm (a tmpfs mounted in
-//! a private mount namespace), so only the network joins them.
+//! a private mount namespace), so only the network joins them, over mutual TLS with the team's
+//! keys (`support::netns`) as a user runs it.
 //!
 //! - Lockstep over zenoh writes exactly `simulate`'s telemetry; the subscription graph, read on
 //!   both hosts, is the communication graph, and the edges that cross hosts are recorded.
@@ -22,13 +23,14 @@
 
 use std::collections::BTreeSet;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
 use serde_json::Value;
 
 mod support;
+use support::netns::{left_on_b, Hosts};
 use support::*;
 
 /// A 10-agent team over two hosts runs a few thousand ticks in seconds; the rest is slack.
@@ -38,104 +40,11 @@ const LINK_TIMEOUT_S: &str = "2";
 /// From a fault (partition, kill) to every process of the team gone: the link deadline, the
 /// team's bounded stop, and slack for a loaded machine.
 const STOP_DEADLINE: Duration = integration_tests::deadline::REFUSE;
-const ENDPOINT: &str = "tcp/10.77.0.1:7447";
 /// A daemon exits at once when it is refused.
 const REFUSE_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 
-/// Two network namespaces joined by a veth pair; deleted on drop (processes inside were killed
-/// by their own guards first: fields drop after the test body's guards).
-struct Hosts {
-    a: String,
-    b: String,
-}
-
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .map_err(|e| format!("ip {}: {e}", args.join(" ")))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!(
-            "ip {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ))
-    }
-}
-
-impl Hosts {
-    /// The pair, or `None` (printed) when this machine cannot create namespaces.
-    fn create(tag: &str) -> Option<Self> {
-        let stem = format!("cdm{tag}{}", std::process::id());
-        let h = Self {
-            a: format!("{stem}a"),
-            b: format!("{stem}b"),
-        };
-        if let Err(e) = ip(&["netns", "add", &h.a]) {
-            eprintln!("SKIPPED: cannot create network namespaces here (needs root): {e}");
-            return None;
-        }
-        let setup = || -> Result<(), String> {
-            ip(&["netns", "add", &h.b])?;
-            let (a, b) = (h.a.as_str(), h.b.as_str());
-            ip(&[
-                "-n", a, "link", "add", "veth0", "type", "veth", "peer", "name", "veth1", "netns",
-                b,
-            ])?;
-            ip(&["-n", a, "addr", "add", "10.77.0.1/24", "dev", "veth0"])?;
-            ip(&["-n", b, "addr", "add", "10.77.0.2/24", "dev", "veth1"])?;
-            for (ns, dev) in [(a, "veth0"), (b, "veth1"), (a, "lo"), (b, "lo")] {
-                ip(&["-n", ns, "link", "set", dev, "up"])?;
-            }
-            Ok(())
-        };
-        // Once one namespace exists, failing to build the rest is a failure, not a skip.
-        setup().unwrap_or_else(|e| panic!("network namespaces: {e}"));
-        Some(h)
-    }
-
-    /// `orchestrator ARGS` on host A.
-    fn on_a(&self, args: &[&str]) -> Command {
-        let mut c = Command::new("ip");
-        c.args(["netns", "exec", &self.a])
-            .arg(bin("orchestrator"))
-            .args(args);
-        c
-    }
-
-    /// `orchestrator ARGS` on host B, with B's own /dev/shm; once the daemon exits, the shell
-    /// lists what is left in that /dev/shm after `LEFT:` (files only).
-    fn on_b(&self, args: &[&str]) -> Command {
-        let script = r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm || exit 97
-"$0" "$@"; rc=$?
-echo "LEFT:$(find /dev/shm -type f | tr '\n' ' ')"
-exit $rc"#;
-        let mut c = Command::new("ip");
-        c.args([
-            "netns", "exec", &self.b, "unshare", "--mount", "sh", "-c", script,
-        ])
-        .arg(bin("orchestrator"))
-        .args(args);
-        c
-    }
-
-    /// The veth link down: a partition.
-    fn cut(&self) {
-        ip(&["-n", &self.a, "link", "set", "veth0", "down"]).expect("cut the link");
-    }
-}
-
-impl Drop for Hosts {
-    fn drop(&mut self) {
-        let _ = ip(&["netns", "del", &self.a]);
-        let _ = ip(&["netns", "del", &self.b]);
-    }
-}
-
-/// The orchestrator's `launch` on two hosts.
-fn launch_args<'a>(team: &'a str, out: &'a str, source: &[&'a str]) -> Vec<&'a str> {
+/// The orchestrator's `launch` on two hosts, over mutual TLS with the pair's keys.
+fn launch_args(h: &Hosts, team: &str, out: &str, source: &[&str]) -> Vec<String> {
     let mut v = vec!["launch"];
     v.extend_from_slice(source);
     v.extend_from_slice(&[
@@ -146,26 +55,12 @@ fn launch_args<'a>(team: &'a str, out: &'a str, source: &[&'a str]) -> Vec<&'a s
         "--quiet",
         "--hosts",
         "2",
-        "--listen",
-        ENDPOINT,
         "--link-timeout",
         LINK_TIMEOUT_S,
     ]);
+    let mut v: Vec<String> = v.into_iter().map(str::to_owned).collect();
+    v.extend(h.listen_args());
     v
-}
-
-/// B's files left in its private /dev/shm, from the wrapper's `LEFT:` line. iceoryx2's global
-/// management segment (`<prefix>..._node.0_10_0.global_mgmt`) is per user, not per team: it stays.
-fn left_on_b(out: &Output) -> Vec<String> {
-    let text = String::from_utf8_lossy(&out.stdout);
-    let line = text
-        .lines()
-        .find_map(|l| l.strip_prefix("LEFT:"))
-        .unwrap_or_else(|| panic!("host B's wrapper printed no LEFT: line\n{}", describe(out)));
-    line.split_whitespace()
-        .filter(|f| !f.ends_with(".global_mgmt"))
-        .map(str::to_owned)
-        .collect()
 }
 
 /// Waits until no process names `team` (bounded).
@@ -206,8 +101,8 @@ fn two_hosts_fly_lockstep_exactly_as_simulate() {
     let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
     let source = ["--n", "10", "--t-total", "20"];
     let out_s = out.to_string_lossy().into_owned();
-    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
-    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", &team]));
+    let orch = spawn(&mut h.on_a(&launch_args(&h, &team, &out_s, &source)));
+    let daemon = spawn(&mut h.daemon(&["--team", &team]));
     let s = run(&mut simulate(&sim, &source), RUN_DEADLINE);
     assert_exit(&s, 0, "simulate");
     let o = orch.finish(RUN_DEADLINE);
@@ -278,8 +173,8 @@ fn two_hosts_fly_in_real_time() {
         "2",
         "--no-figures",
     ];
-    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
-    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", &team]));
+    let orch = spawn(&mut h.on_a(&launch_args(&h, &team, &out_s, &source)));
+    let daemon = spawn(&mut h.daemon(&["--team", &team]));
     let o = orch.finish(RUN_DEADLINE);
     let d = daemon.finish(RUN_DEADLINE);
     assert_exit(&o, 0, "launch --realtime --hosts 2");
@@ -339,12 +234,9 @@ const LONG_REALTIME: &[&str] = &[
 /// temporary directory (`TMPDIR`, its work directory's parent) is `b_tmp`.
 fn running(h: &Hosts, team: &str, out: &Path, source: &[&str], b_tmp: &Path) -> (Running, Running) {
     let out_s = out.to_string_lossy().into_owned();
-    let mut orch = spawn(&mut h.on_a(&launch_args(team, &out_s, source)));
+    let mut orch = spawn(&mut h.on_a(&launch_args(h, team, &out_s, source)));
     std::fs::create_dir_all(b_tmp).expect("host B's TMPDIR");
-    let daemon = spawn(
-        h.on_b(&["host", "--connect", ENDPOINT, "--team", team])
-            .env("TMPDIR", b_tmp),
-    );
+    let daemon = spawn(h.daemon(&["--team", team]).env("TMPDIR", b_tmp));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 200);
     (orch, daemon)
 }
@@ -504,8 +396,7 @@ fn a_killed_daemon_is_like_killed_members() {
     );
     // The next daemon (here one that finds no orchestrator) removes it.
     let next = run(
-        h.on_b(&["host", "--connect", ENDPOINT, "--join-timeout", "1"])
-            .env("TMPDIR", &b_tmp),
+        h.daemon(&["--join-timeout", "1"]).env("TMPDIR", &b_tmp),
         REFUSE_DEADLINE,
     );
     assert_exit(&next, 3, "a daemon with no orchestrator");
@@ -646,9 +537,9 @@ fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
         (&["--team", &team, "--host", "1"], "host 1 of team"),
     ];
     for (extra, needle) in refusals {
-        let mut args = vec!["host", "--connect", ENDPOINT, "--join-timeout", "20"];
+        let mut args = vec!["--join-timeout", "20"];
         args.extend_from_slice(extra);
-        let r = run(&mut h.on_b(&args), REFUSE_DEADLINE);
+        let r = run(&mut h.daemon(&args), REFUSE_DEADLINE);
         assert_exit(&r, 2, &format!("host {extra:?}"));
         assert_stderr_has(&r, "host", &["refused by the orchestrator", needle]);
     }
@@ -739,8 +630,8 @@ fn a_scripted_loss_across_hosts_flies_exactly_as_simulate() {
     let when = format!("{lost}@5");
     let source = ["--n", "10", "--t-total", "20", "--lose", &when];
     let out_s = out.to_string_lossy().into_owned();
-    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
-    let daemon = spawn(&mut h.on_b(&["host", "--connect", ENDPOINT, "--team", &team]));
+    let orch = spawn(&mut h.on_a(&launch_args(&h, &team, &out_s, &source)));
+    let daemon = spawn(&mut h.daemon(&["--team", &team]));
     let s = run(&mut simulate(&sim, &source), RUN_DEADLINE);
     assert_exit(&s, 0, "simulate --lose");
     let o = orch.finish(RUN_DEADLINE);
@@ -775,14 +666,11 @@ fn a_killed_member_on_another_host_is_repaired() {
     let at = 800u64;
     let source = ["--n", "10", "--t-total", "20"];
     let out_s = out.to_string_lossy().into_owned();
-    let orch = spawn(&mut h.on_a(&launch_args(&team, &out_s, &source)));
-    let daemon = spawn(
-        h.on_b(&["host", "--connect", ENDPOINT, "--team", &team])
-            .env(
-                cdm_process::fault_inject::ENV,
-                format!("{victim}:kill@{at}"),
-            ),
-    );
+    let orch = spawn(&mut h.on_a(&launch_args(&h, &team, &out_s, &source)));
+    let daemon = spawn(h.daemon(&["--team", &team]).env(
+        cdm_process::fault_inject::ENV,
+        format!("{victim}:kill@{at}"),
+    ));
     let o = orch.finish(RUN_DEADLINE);
     let d = daemon.finish(RUN_DEADLINE);
     assert_exit(&o, 0, "launch --hosts 2 with a member killed on host B");

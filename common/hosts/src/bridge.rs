@@ -49,6 +49,8 @@ struct Ctx {
     links: SharedLinks,
     /// No loss yet: each host's link follows the repairs from here.
     repairs: CrossRepairs,
+    /// Mutual TLS: every daemon must ask as the host its certificate names.
+    tls: bool,
 }
 
 impl Ctx {
@@ -84,6 +86,7 @@ impl Ctx {
                 ..Links::default()
             })),
             repairs: CrossRepairs::new(s),
+            tls: false,
         }
     }
 }
@@ -162,11 +165,13 @@ impl Bridge {
         flight: TeamFlight,
         quiet: bool,
     ) -> Result<Self, Failure> {
+        let tls = matches!(h.transport, crate::Transport::Tls(_));
         let desk = net
-            .join_desk(team.as_str())
+            .join_desk(team.as_str(), tls.then(|| regions.hosts() - 1))
             .map_err(|e| Failure::fault(format!("--listen: {e}")))?;
         let crossing = regions.crossing(&placed(s));
-        let ctx = Ctx::new(s, team, regions, h.link_timeout, flight, quiet);
+        let mut ctx = Ctx::new(s, team, regions, h.link_timeout, flight, quiet);
+        ctx.tls = tls;
         let links = ctx.links.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
@@ -346,12 +351,14 @@ fn run(net: Net, desk: JoinDesk, ctx: Ctx, stop: &AtomicBool) -> Vec<HostReport>
 
 /// Answers one join request: refused with the reason, or accepted with the host's share.
 fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJoin, now: Instant) {
-    let key = cdm_zenoh::join_key(Some(ctx.team.as_str()));
     let q = p.request.clone();
     let refuse = |p: PendingJoin, why: Refusal| {
         tracing::warn!(daemon = %q.who, "refused a daemon: {why}");
-        p.answer(&JoinReply::Refused(why.to_string()), &key);
+        p.answer(&JoinReply::Refused(why.to_string()));
     };
+    if let Err(why) = bound(ctx, p.slot, q.host) {
+        return refuse(p, why);
+    }
     let host = match which_host(ctx, remotes, &q) {
         Ok(h) => h,
         Err(why) => return refuse(p, why),
@@ -366,13 +373,23 @@ fn admit(net: &Net, ctx: &Ctx, remotes: &mut BTreeMap<u32, Remote>, p: PendingJo
             return refuse(p, Refusal::NoLink { host, detail });
         }
     };
-    p.answer(&JoinReply::Accepted(Box::new(assignment(ctx, host))), &key);
+    p.answer(&JoinReply::Accepted(Box::new(assignment(ctx, host))));
     let r = Remote::joined(ctx, host, q.who, chan, now);
     if !ctx.quiet {
         out!("host {host} joined: {} (agents {:?})", r.who, r.members);
     }
     heard(&r, ctx);
     remotes.insert(host, r);
+}
+
+/// A request asks on its own host's key (`join/k` for `host: Some(k)`): with TLS, access control
+/// lets only host k's certificate ask there, so the host number is the certificate's.
+fn bound(ctx: &Ctx, slot: Option<u32>, host: Option<u32>) -> Result<(), Refusal> {
+    match (slot, host) {
+        (None, _) if ctx.tls => Err(Refusal::Unbound),
+        (s, h) if s != h => Err(Refusal::Slot { slot, host }),
+        _ => Ok(()),
+    }
 }
 
 /// Host `host`'s share of the team, as its daemon needs it.

@@ -31,6 +31,8 @@ type OrchestratorLink = ZenohLink<Down, Up>;
 /// `orchestrator host`'s options, validated.
 pub struct DaemonOptions {
     pub connect: String,
+    /// Mutual TLS with `--keys` (the host number is its certificate's), or `--insecure`.
+    pub transport: crate::Transport,
     /// Join only this team.
     pub team: Option<TeamName>,
     /// Be this host of the team (1..K); default: the first free one.
@@ -64,12 +66,25 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
         ),
         None => None,
     };
-    let net =
-        Net::connect(&o.connect).map_err(|e| Failure::bad_input(format!("--connect: {e}")))?;
+    let (security, bound) = crate::security::daemon(&o.transport)?;
+    let host = match (bound, o.host) {
+        (Some(k), Some(h)) if h != k => {
+            return Err(Failure::bad_input(format!(
+                "--host {h}: the certificate in --keys is host {k}'s (a daemon is the host its certificate names)"
+            )))
+        }
+        (Some(k), _) => Some(k),
+        (None, h) => h,
+    };
+    if let Some(w) = o.transport.warning(&o.connect) {
+        tracing::warn!("{w}");
+    }
+    let net = Net::connect(&o.connect, &security)
+        .map_err(|e| Failure::bad_input(format!("--connect: {e}")))?;
     let request = JoinRequest {
         version: PROTOCOL_VERSION,
         team: o.team.as_ref().map(|t| t.as_str().to_owned()),
-        host: o.host,
+        host,
         scenario_hash: expected_hash,
         who: who(),
     };

@@ -17,6 +17,9 @@ pub enum LinkLost {
     /// The daemon's session closed: the daemon is gone, its members with it.
     #[error("the daemon is gone, {0}: killed or exited")]
     DaemonGone(#[source] LinkError),
+    /// The daemon sent a frame that does not decode.
+    #[error("the daemon sent a frame that does not decode (its protocol error): {0}")]
+    Protocol(#[source] LinkError),
     /// The link failed otherwise.
     #[error(transparent)]
     Link(LinkError),
@@ -57,6 +60,7 @@ impl From<LinkError> for LinkLost {
     fn from(e: LinkError) -> Self {
         match e {
             e @ LinkError::PeerGone(_) => LinkLost::DaemonGone(e),
+            e @ LinkError::Protocol(_) => LinkLost::Protocol(e),
             e => LinkLost::Link(e),
         }
     }
@@ -83,6 +87,13 @@ pub enum Refusal {
     Full { others: u32, team: String },
     #[error("the orchestrator cannot open host {host}'s link: {detail}")]
     NoLink { host: u32, detail: String },
+    #[error("with TLS a daemon joins as the host its certificate names, not as any free host")]
+    Unbound,
+    #[error("the request for host {host:?} came on the key of host {slot:?}")]
+    Slot {
+        slot: Option<u32>,
+        host: Option<u32>,
+    },
 }
 
 /// What ends a daemon's bridging before the orchestrator's stop.
@@ -99,6 +110,9 @@ pub enum DaemonStop {
     /// The orchestrator's session closed.
     #[error("the orchestrator is gone, {0}: killed or exited")]
     OrchestratorGone(#[source] LinkError),
+    /// The orchestrator sent a frame that does not decode.
+    #[error("the orchestrator sent a frame that does not decode (its protocol error): {0}")]
+    Protocol(#[source] LinkError),
     #[error(transparent)]
     Link(LinkError),
     #[error(
@@ -140,6 +154,7 @@ impl From<LinkError> for DaemonStop {
     fn from(e: LinkError) -> Self {
         match e {
             e @ LinkError::PeerGone(_) => DaemonStop::OrchestratorGone(e),
+            e @ LinkError::Protocol(_) => DaemonStop::Protocol(e),
             e => DaemonStop::Link(e),
         }
     }
@@ -166,6 +181,13 @@ mod tests {
             gone.to_string(),
             "the daemon is gone, its zenoh session closed: killed or exited"
         );
+        let bad: LinkLost =
+            LinkError::Protocol("frame on cdm/t/host/1/up: truncated".into()).into();
+        assert_eq!(
+            bad.to_string(),
+            "the daemon sent a frame that does not decode (its protocol error): frame on cdm/t/host/1/up: truncated"
+        );
+        assert!(!bad.daemon_gone());
         let r = Refusal::Taken {
             host: 1,
             team: "t".into(),

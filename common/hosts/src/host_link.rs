@@ -15,7 +15,11 @@ pub enum LinkError {
     /// nothing; the silence deadline covers it).
     #[error(transparent)]
     PeerGone(BoxError),
-    /// Anything else: a frame that cannot be sent or decoded.
+    /// A frame from the peer that does not decode: the peer's protocol error (with TLS only
+    /// the peer's certificate may send on its key, so nobody else can be blamed).
+    #[error(transparent)]
+    Protocol(BoxError),
+    /// Anything else: a frame that cannot be sent.
     #[error(transparent)]
     Broken(BoxError),
 }
@@ -66,6 +70,7 @@ mod zenoh_link {
     fn link_error(e: NetError) -> LinkError {
         match e {
             e @ NetError::PeerGone { .. } => LinkError::PeerGone(Box::new(e)),
+            e @ NetError::Decode { .. } => LinkError::Protocol(Box::new(e)),
             e => LinkError::Broken(Box::new(e)),
         }
     }

@@ -29,6 +29,9 @@ pub mod regions;
 #[cfg(feature = "hosts")]
 mod repairs;
 #[cfg(feature = "hosts")]
+mod security;
+pub mod transport;
+#[cfg(feature = "hosts")]
 mod workdir;
 
 #[cfg(feature = "hosts")]
@@ -36,6 +39,7 @@ pub use bridge::Bridge;
 pub use other_hosts::{OneHost, OtherHosts};
 pub use plan::HostPlan;
 pub use regions::{Placed, Regions};
+pub use transport::Transport;
 
 use std::time::Duration;
 
@@ -62,6 +66,8 @@ pub struct HostOptions {
     pub listen: Option<String>,
     /// Silence on a host link for this long means the link is lost (a partition, a dead peer).
     pub link_timeout: Duration,
+    /// Mutual TLS with `--keys`, or plain TCP with `--insecure`.
+    pub transport: Transport,
 }
 
 impl Default for HostOptions {
@@ -70,6 +76,7 @@ impl Default for HostOptions {
             hosts: 1,
             listen: None,
             link_timeout: Duration::from_secs(3),
+            transport: Transport::Insecure,
         }
     }
 }

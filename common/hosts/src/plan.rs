@@ -10,7 +10,7 @@ use cdm_team::Failure;
 use crate::other_hosts::{OneHost, OtherHosts};
 use crate::placed::placed;
 use crate::regions::{Placed, Regions};
-use crate::{HostOptions, TeamFlight};
+use crate::{HostOptions, TeamFlight, Transport};
 
 /// The split of a team over its hosts (host 0 is this one).
 pub struct HostPlan {
@@ -43,7 +43,7 @@ impl HostPlan {
         }
         if h.hosts > 1 && h.listen.is_none() {
             return Err(Failure::bad_input(
-                "--hosts needs --listen ENDPOINT (e.g. tcp/10.77.0.1:7447)",
+                "--hosts needs --listen ENDPOINT (e.g. tls/10.77.0.1:7447 with --keys DIR)",
             ));
         }
         let placed = placed(s);
@@ -60,8 +60,12 @@ impl HostPlan {
                 out!("host {host}{here}: agents {:?}", plan.regions.members(host));
             }
             let crossing = plan.crossing();
+            let how = match &h.transport {
+                Transport::Tls(_) => "--keys DIR/host-K",
+                Transport::Insecure => "--insecure",
+            };
             out!(
-                "team {team}: {} of {} communication edges cross hosts; start each daemon with:\n  orchestrator host --connect {} --team {team}",
+                "team {team}: {} of {} communication edges cross hosts; start each daemon with:\n  orchestrator host --connect {} --team {team} {how}",
                 crossing.len(),
                 plan.placed.iter().map(|p| p.in_neighbors.len()).sum::<usize>(),
                 h.listen.as_deref().unwrap_or_default(),
@@ -121,7 +125,11 @@ impl HostPlan {
         team: &TeamName,
         flight: TeamFlight,
     ) -> Result<Box<dyn OtherHosts>, Failure> {
-        let net = cdm_zenoh::Net::listen(endpoint)
+        let security = crate::security::listener(&self.options)?;
+        if let Some(w) = self.options.transport.warning(endpoint) {
+            tracing::warn!("{w}");
+        }
+        let net = cdm_zenoh::Net::listen(endpoint, &security)
             .map_err(|e| Failure::bad_input(format!("--listen: {e}")))?;
         let (regions, h) = (&self.regions, &self.options);
         let bridge = crate::bridge::Bridge::start(net, s, team, regions, h, flight, self.quiet)?;

@@ -4,7 +4,7 @@
 //!
 //! | key | frames | from -> to |
 //! |---|---|---|
-//! | `cdm/<team>/join` | [`JoinRequest`] / [`JoinReply`] (a query) | daemon -> orchestrator |
+//! | `cdm/<team>/join/<k or any>` | [`JoinRequest`] / [`JoinReply`] (a query) | daemon -> orchestrator |
 //! | `cdm/<team>/host/<k>/down` | [`Down`]: clock, crossing states, heartbeat | orchestrator -> daemon k |
 //! | `cdm/<team>/host/<k>/up` | [`Up`]: ready, every member's state, exits, heartbeat | daemon k -> orchestrator |
 
@@ -15,4 +15,7 @@ pub use frame::{
     decode, encode, Assignment, DecodeError, Down, JoinReply, JoinRequest, NetClock, NetState, Up,
     PROTOCOL_VERSION,
 };
-pub use link::{down_key, join_key, up_key, Channel, JoinDesk, Net, NetError, PendingJoin};
+pub use link::{
+    down_key, host_key_exprs, join_key, orchestrator_key_exprs, up_key, Channel, JoinDesk, Net,
+    NetError, Peer, PendingJoin, Security,
+};

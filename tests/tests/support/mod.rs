@@ -21,6 +21,8 @@ pub const PROGRESS_DEADLINE: Duration = integration_tests::deadline::SHORT;
 #[allow(unused_imports)] // each test file uses a different part
 pub use integration_tests::{launch, launch_loud, simulate};
 
+pub mod netns;
+
 /// `leader` or `agent` (by `role`) joining `team` as `id` with `scenario`.
 pub fn member(binary: &str, scenario: &Path, team: &str, id: u32) -> Command {
     let mut c = Command::new(bin(binary));

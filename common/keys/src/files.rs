@@ -1,0 +1,96 @@
+//! The key files on disk: owner-only directories and files, created new, never overwritten.
+
+use std::io::Write;
+use std::os::unix::fs::{DirBuilderExt, MetadataExt, OpenOptionsExt};
+use std::path::{Path, PathBuf};
+
+/// What went wrong with a team's keys, naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum KeyError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: already exists and is not empty (keys are never overwritten)", path.display())]
+    Exists { path: PathBuf },
+    #[error("{}: mode {mode:04o} lets others read it; keys must be their owner's only (chmod 600)", path.display())]
+    Readable { path: PathBuf, mode: u32 },
+    #[error("{}: {detail}", path.display())]
+    Certificate { path: PathBuf, detail: String },
+    #[error("cannot make {what}: {source}")]
+    Make {
+        what: &'static str,
+        #[source]
+        source: rcgen::Error,
+    },
+}
+
+impl KeyError {
+    pub(crate) fn rcgen(what: &'static str) -> impl FnOnce(rcgen::Error) -> KeyError {
+        move |source| KeyError::Make { what, source }
+    }
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> KeyError + '_ {
+    move |source| KeyError::Io {
+        path: path.to_owned(),
+        source,
+    }
+}
+
+/// `dir` made (0700), or already there and empty.
+pub(crate) fn new_empty_dir(dir: &Path) -> Result<(), KeyError> {
+    match std::fs::read_dir(dir).map(|mut e| e.next().is_some()) {
+        Ok(true) => Err(KeyError::Exists {
+            path: dir.to_owned(),
+        }),
+        Ok(false) => {
+            use std::os::unix::fs::PermissionsExt;
+            let owner_only = std::fs::Permissions::from_mode(0o700);
+            std::fs::set_permissions(dir, owner_only).map_err(io(dir))
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => make_dir(dir),
+        Err(e) => Err(io(dir)(e)),
+    }
+}
+
+/// A new directory, 0700 (its parents as needed).
+pub(crate) fn make_dir(dir: &Path) -> Result<(), KeyError> {
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir)
+        .map_err(io(dir))
+}
+
+/// A new file, 0600 from its creation on (never a moment readable by others).
+pub(crate) fn write_new(path: &Path, bytes: &[u8]) -> Result<(), KeyError> {
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(path)
+        .map_err(io(path))?;
+    f.write_all(bytes)
+        .and_then(|_| f.sync_all())
+        .map_err(io(path))
+}
+
+pub(crate) fn read(path: &Path) -> Result<Vec<u8>, KeyError> {
+    std::fs::read(path).map_err(io(path))
+}
+
+/// `path` is a file that only its owner can read or write.
+pub(crate) fn check_private(path: &Path) -> Result<(), KeyError> {
+    let m = std::fs::metadata(path).map_err(io(path))?;
+    let mode = m.mode() & 0o7777;
+    if mode & 0o077 != 0 {
+        return Err(KeyError::Readable {
+            path: path.to_owned(),
+            mode,
+        });
+    }
+    Ok(())
+}
