@@ -10,8 +10,8 @@
 //!   TCP, or of a host not in the team are refused (exit 3) and the orchestrator's log names
 //!   each by its address or certificate; every outsider also forges host 1's frames, and the
 //!   team is not disturbed.
-//! - Over `tcp/ --insecure`, where anyone can send, such a forgery stops the team named as host
-//!   1's protocol error (the frame does not decode), not as a partition or another host.
+//! - A frame that does not decode from a peer holding host 1's own certificate stops the team
+//!   named as host 1's protocol error, not as a partition or another host.
 //! - The control: over `tcp/ --insecure`, both sides warn, the capture holds the team's name in
 //!   clear and an outsider on plain TCP receives the team's frames. Without it the checks
 //!   above could pass by capturing or peeking nothing.
@@ -158,7 +158,7 @@ fn over_tls_outsiders_get_nothing_and_the_team_flies_as_simulate() {
     let (mut cap, cap_file) = capture(&h, dir.path(), &stop);
     let orch = spawn(&mut h.on_a(&launch_args(&team, &out, &h.listen_args())));
     // Each also forges host 1's frames: one that got through would stop the team, blaming
-    // host 1 (`over_insecure_tcp_a_forged_frame_is_named_as_its_hosts_protocol_error`).
+    // host 1 (`an_undecodable_frame_from_an_authenticated_host_is_its_protocol_error`).
     let up = format!("cdm/{team}/host/1/up");
     let forge = |endpoint, tls: &[String]| forger(&h, endpoint, tls, &stop, Some(&up));
     let outsiders = [
@@ -293,30 +293,30 @@ fn over_insecure_tcp_both_sides_warn_and_an_outsider_reads_the_team() {
     }
 }
 
-/// Where anyone can send (`--insecure`), a frame on host 1's key that does not decode stops the
-/// team named as host 1's protocol error (over TLS only host 1's certificate can send there:
-/// the forgeries of the TLS test above get nowhere).
+/// A frame on host 1's key that does not decode, from a peer with host 1's own certificate
+/// (over TLS nobody else can publish there: the forgeries of the test above get nowhere), stops
+/// the team named as host 1's protocol error, not as a partition or another host's fault.
 #[test]
-fn over_insecure_tcp_a_forged_frame_is_named_as_its_hosts_protocol_error() {
+fn an_undecodable_frame_from_an_authenticated_host_is_its_protocol_error() {
     let Some(h) = Hosts::create("fg") else { return };
     let dir = TempDir::new();
     let team = unique_team("forge");
     let out = dir.path().join("run");
     let stop = dir.path().join("stop");
-    let link = Hosts::listen_insecure();
-    // A long strict-lockstep flight: the forgery ends it.
+    // A long strict-lockstep flight: the bad frame ends it.
     let source = ["--n", "10", "--t-total", "600", "--window", "1"];
-    let args = launch_flying(&source, &team, &out, &link);
+    let args = launch_flying(&source, &team, &out, &h.listen_args());
     let mut orch = spawn(&mut h.on_a(&args));
-    let daemon = spawn(&mut h.insecure_daemon(&team));
+    let daemon = spawn(&mut h.daemon(&["--team", &team]));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 200);
     let up = format!("cdm/{team}/host/1/up");
-    let f = forger(&h, TCP_ENDPOINT, &[], &stop, Some(&up));
+    let host1 = tls_args(&h.keys.join("host-1"), true);
+    let f = forger(&h, ENDPOINT, &host1, &stop, Some(&up));
     let o = orch.finish(RUN_DEADLINE);
     std::fs::write(&stop, "").expect("the stop file");
     let _ = daemon.finish(RUN_DEADLINE);
     let _ = f.finish(REFUSE_DEADLINE);
-    assert_exit(&o, 3, "launch with a forged frame on host 1's key");
+    assert_exit(&o, 3, "launch with an undecodable frame on host 1's key");
     assert_stderr_has(
         &o,
         "launch",
