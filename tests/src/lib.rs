@@ -100,6 +100,26 @@ fn build_command(profile_dir: &Path, what: &[&str]) -> Command {
     if let Some(t) = triple {
         cmd.arg("--target").arg(t);
     }
+    // Cargo gives a running test its package's variables (CARGO_MANIFEST_DIR, CARGO_PKG_*...).
+    // Passed on, they make this build differ from the developer's `cargo test`: ring's build
+    // script asks to rerun when CARGO_MANIFEST_DIR changes, so each of the two builds would
+    // compile ring and everything above it again (4 minutes per run here).
+    for (k, _) in std::env::vars_os() {
+        let k = k.to_string_lossy();
+        let per_test = [
+            "CARGO_MANIFEST_",
+            "CARGO_PKG_",
+            "CARGO_BIN_",
+            "CARGO_CRATE_NAME",
+        ]
+        .iter()
+        .any(|p| k.starts_with(p))
+            || k == "CARGO_PRIMARY_PACKAGE"
+            || k == "CARGO_TARGET_TMPDIR";
+        if per_test {
+            cmd.env_remove(k.as_ref());
+        }
+    }
     cmd.stdin(Stdio::null());
     cmd
 }
