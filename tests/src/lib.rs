@@ -189,6 +189,13 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// A test peer or reader script of `tests/python/`.
+pub fn python_script(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("python")
+        .join(name)
+}
+
 /// The Python of the test virtual environment (`.venv` at the workspace root, made by
 /// `scripts/test-deps.sh` with the pinned readers of `python/requirements-test.txt`). Panics,
 /// naming the script to run, when it is missing: tests that need a reader never skip.

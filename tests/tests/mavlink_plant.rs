@@ -27,7 +27,7 @@ const START_NED: &str = "0,0,-2";
 const GOAL_NED: [f64; 3] = [1.0, 2.0, -3.0];
 
 fn vehicle_script() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("python/mavlink_vehicle.py")
+    integration_tests::python_script("mavlink_vehicle.py")
 }
 
 /// A UDP port that was free a moment ago, at least `INDEX`, below the ephemeral range.

@@ -44,7 +44,7 @@ fn team(t_total_s: f64) -> ScenarioFile {
 }
 
 fn vehicle_script() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("python/mavlink_vehicle.py")
+    integration_tests::python_script("mavlink_vehicle.py")
 }
 
 /// ENU scenario point -> the NED of a vehicle whose origin is `origin` (subtracted; north = y,

@@ -27,7 +27,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use integration_tests::{bin, describe, run, spawn, unique_team, venv_python, Running, TempDir};
+use integration_tests::{
+    bin, describe, python_script, run, spawn, unique_team, venv_python, Running, TempDir,
+};
 use serde_json::Value;
 
 mod support;
@@ -38,12 +40,6 @@ const RUN_DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 const REFUSE_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 /// A 10-member team for 20 s of plan: 2,000 lockstep ticks across the link.
 const SOURCE: &[&str] = &["--n", "10", "--t-total", "20"];
-
-fn python_script(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("python")
-        .join(name)
-}
 
 /// A raw packet capture on host A's end of the link, until `stop` exists.
 fn capture(h: &Hosts, dir: &Path, stop: &Path) -> (Running, PathBuf) {
@@ -378,12 +374,8 @@ fn keys_are_owner_only_and_bad_security_options_are_refused() {
 
     let team = unique_team("keysbad");
     let launch_with = |link: &[&str]| {
-        let mut args = vec!["launch", "--n", "10", "--team", &team, "--hosts", "2"];
-        args.extend_from_slice(link);
-        run(
-            Command::new(bin("orchestrator")).args(&args),
-            REFUSE_DEADLINE,
-        )
+        let launch = ["launch", "--n", "10", "--team", &team, "--hosts", "2"];
+        orchestrator(&[&launch[..], link].concat())
     };
     let (orch_keys, host_keys) = (arg(&keys.join("orchestrator")), arg(&keys.join("host-1")));
     let cases: [(&[&str], &[&str]); 3] = [
@@ -402,14 +394,8 @@ fn keys_are_owner_only_and_bad_security_options_are_refused() {
         assert_exit(&r, 2, &format!("launch {link:?}"));
         assert_stderr_has(&r, "launch", needles);
     }
-    let host = |extra: &[&str]| {
-        let mut args = vec!["host", "--join-timeout", "1"];
-        args.extend_from_slice(extra);
-        run(
-            Command::new(bin("orchestrator")).args(&args),
-            REFUSE_DEADLINE,
-        )
-    };
+    let host =
+        |extra: &[&str]| orchestrator(&[&["host", "--join-timeout", "1"][..], extra].concat());
     let r = host(&["--connect", "tcp/127.0.0.1:7447"]);
     assert_exit(&r, 2, "host tcp/ without --insecure");
     assert_stderr_has(&r, "host", &["--insecure"]);
@@ -422,6 +408,14 @@ fn keys_are_owner_only_and_bad_security_options_are_refused() {
     let r = host(&["--connect", "tls/127.0.0.1:7447", "--keys", &host_keys]);
     assert_exit(&r, 2, "host with a readable key");
     assert_stderr_has(&r, "host", &[&arg(&key), "0644", "chmod 600"]);
+}
+
+/// `orchestrator ARGS` on this host, to its end.
+fn orchestrator(args: &[&str]) -> Output {
+    run(
+        Command::new(bin("orchestrator")).args(args),
+        REFUSE_DEADLINE,
+    )
 }
 
 fn mode(p: &Path) -> u32 {

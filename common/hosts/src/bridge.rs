@@ -58,7 +58,7 @@ impl Ctx {
         s: &Scenario,
         team: &TeamName,
         regions: &Regions,
-        link_timeout: Duration,
+        h: &HostOptions,
         flight: TeamFlight,
         quiet: bool,
     ) -> Self {
@@ -78,15 +78,15 @@ impl Ctx {
             regions: regions.clone(),
             ins,
             outs,
-            link_timeout,
+            link_timeout: h.link_timeout,
             quiet,
             links: Arc::new(Mutex::new(Links {
                 host_of: regions.pairs().into_iter().collect(),
-                link_timeout: Some(link_timeout),
+                link_timeout: Some(h.link_timeout),
                 ..Links::default()
             })),
             repairs: CrossRepairs::new(s),
-            tls: false,
+            tls: matches!(h.transport, crate::Transport::Tls(_)),
         }
     }
 }
@@ -165,13 +165,11 @@ impl Bridge {
         flight: TeamFlight,
         quiet: bool,
     ) -> Result<Self, Failure> {
-        let tls = matches!(h.transport, crate::Transport::Tls(_));
+        let ctx = Ctx::new(s, team, regions, h, flight, quiet);
         let desk = net
-            .join_desk(team.as_str(), tls.then(|| regions.hosts() - 1))
+            .join_desk(team.as_str(), ctx.tls.then(|| regions.hosts() - 1))
             .map_err(|e| Failure::fault(format!("--listen: {e}")))?;
         let crossing = regions.crossing(&placed(s));
-        let mut ctx = Ctx::new(s, team, regions, h.link_timeout, flight, quiet);
-        ctx.tls = tls;
         let links = ctx.links.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
@@ -876,7 +874,7 @@ mod tests {
             repair,
         };
         let team = TeamName::new("unit").unwrap();
-        Ctx::new(&s, &team, &regions, Duration::from_secs(3), flight, true)
+        Ctx::new(&s, &team, &regions, &HostOptions::default(), flight, true)
     }
 
     fn joined(ctx: &Ctx, t0: Instant) -> Remote<Fake> {
