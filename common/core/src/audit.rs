@@ -11,7 +11,6 @@ use crate::formation::Role;
 use crate::frame::deformation_eigenvalues;
 use crate::math::{Real, Vec3};
 use crate::outcome::{FaultKind, LossCause, Verdict, ViolationKind};
-use crate::plan::Segment;
 use crate::repair::Retriangulation;
 use crate::safety::{self, Prism};
 use crate::scenario::Scenario;
@@ -39,11 +38,16 @@ pub struct SafetyNumbers {
 impl SafetyNumbers {
     /// Compute them for a validated scenario.
     pub fn of(s: &Scenario) -> Self {
-        let l = s.plan.lambda1_min().unwrap_or(crate::plan::Lambda1Min {
-            lambda1: 0.0,
-            s: 0.0,
-            t_s: 0.0,
-        });
+        // Over every deformation segment of a mission (take-off and landing are certified by
+        // their ground separation instead: ARCHITECTURE.md).
+        let l = s.plan.lambda1_min_segments().map_or(
+            crate::plan::Lambda1Min {
+                lambda1: 0.0,
+                s: 0.0,
+                t_s: 0.0,
+            },
+            |(l, _)| l,
+        );
         let d_b_m = safety::d_b(&s.formation);
         let d_s_m = safety::d_s(&s.formation);
         let eps = s.file.eps_m;
@@ -458,14 +462,14 @@ impl Auditor {
                 self.failing.containment[k] = outside;
             }
         }
-        // Deformation (eq. 37).
-        let seg = if t <= self.scenario.plan.quintic.t_total_s {
-            Segment::Motion
-        } else {
-            Segment::Hold
-        };
-        let s = self.scenario.plan.quintic.derivatives(t, seg)[0];
-        let l1 = match self.scenario.plan.q_d_at_s(s) {
+        // Deformation (eq. 37), in the deformation segments only: take-off and landing flatten
+        // the team onto the ground, where separation, not lambda_1, is the argument.
+        let plan = &self.scenario.plan;
+        if plan.phases()[plan.piece_at(t).phase].kind.is_ground() {
+            self.failing.deformation = false;
+            return;
+        }
+        let l1 = match plan.q_d_at(t) {
             Ok((q, _)) => deformation_eigenvalues(&q)[0],
             Err(_) => 0.0,
         };

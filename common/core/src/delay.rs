@@ -100,22 +100,11 @@ pub fn max_link_delay(
 ) -> DelayBound {
     let dt_ms = s.dt_s() * 1000.0;
     let cap = s.last_tick().min((MAX_DELAY_MS / dt_ms) as u64);
-    let t = s.file.t_total_s;
     // Delays below a quarter of a second pass on every team measured (BENCHMARKS.md): starting
     // the doubling there saves the flights of 1, 2, 4, .. ticks.
     let first = (0.25 / s.dt_s()).round() as u64;
     match linear {
-        // Only "E_max <= delta?" is asked: `meets` answers it without computing E_max.
-        Some(team) => max_delay_ticks(
-            |d| match d {
-                0 => e0_m,
-                _ if team.meets(t, d, delta_m) => 0.0,
-                _ => Real::INFINITY,
-            },
-            delta_m,
-            cap,
-            first,
-        ),
+        Some(team) => max_link_delay_linear(team, s.file.t_total_s, delta_m, e0_m, (cap, first)),
         None => max_delay_ticks(
             |d| match d {
                 0 => e0_m,
@@ -126,6 +115,36 @@ pub fn max_link_delay(
             first,
         ),
     }
+}
+
+/// [`max_link_delay`] of one motion of `t_s` seconds on its linear team (a mission's phase),
+/// searched over `(cap, first)` ticks. Only "E_max <= delta?" is asked: `meets` answers it
+/// without computing E_max.
+pub fn max_link_delay_linear(
+    team: &LinearTeam,
+    t_s: Real,
+    delta_m: Real,
+    e0_m: Real,
+    (cap, first): (u64, u64),
+) -> DelayBound {
+    max_delay_ticks(
+        |d| match d {
+            0 => e0_m,
+            _ if team.meets(t_s, d, delta_m) => 0.0,
+            _ => Real::INFINITY,
+        },
+        delta_m,
+        cap,
+        first,
+    )
+}
+
+/// The largest delay searched for a motion of `t_s` seconds at ticks of `dt_s`, and the first
+/// delay tried (ticks).
+pub fn delay_search(t_s: Real, dt_s: Real) -> (u64, u64) {
+    let cap =
+        crate::scenario::last_tick_of(t_s, 1.0 / dt_s).min((MAX_DELAY_MS / (dt_s * 1000.0)) as u64);
+    (cap, (0.25 / dt_s).round() as u64)
 }
 
 /// A [`DelayBound`] in milliseconds at ticks of `dt_s`: (delay, "at least") or `None`.

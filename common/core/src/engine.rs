@@ -80,7 +80,7 @@ impl<P: Plant> Engine<P> {
             neighbor_idx.push(ids.map(|id| f.index_of(id).unwrap_or(k)));
             neighbor_ids.push(ids);
         }
-        let states: Vec<P> = f.members.iter().map(|m| init(m.position)).collect();
+        let states: Vec<P> = f.members.iter().map(|m| init(m.start)).collect();
         let flats: Vec<Flat> = states.iter().map(|p| p.flat()).collect();
         let links = Links::new(scenario.link_model(), &neighbor_idx, &flats);
         Engine {
@@ -114,7 +114,7 @@ impl<P: Plant> Engine<P> {
             // it started (as at tick 0).
             for (slot, &j) in idx.iter().enumerate() {
                 if idx[slot] != self.neighbor_idx[k][slot] {
-                    let flat = Flat::rest(self.scenario.formation.members[j].position);
+                    let flat = Flat::rest(self.scenario.formation.members[j].start);
                     self.links.held[k][slot] = Heard { tick: 0, flat };
                 }
             }

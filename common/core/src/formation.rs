@@ -50,8 +50,11 @@ impl Role {
 pub struct Member {
     pub id: u32,
     pub role: Role,
-    /// Initial position r_i0 (on the leaders' plane).
+    /// Initial position r_i0 (on the leaders' plane): the reference formation of eqs. 11-18.
     pub position: Vec3,
+    /// Where the member is at t = 0: `position`, or the ground below it when the mission takes
+    /// off (issue 26).
+    pub start: Vec3,
     /// In-plane coordinates (gamma_i, beta_i) at t0 (eq. 12).
     pub planar: Vec2,
     /// alpha_i1..3 (eq. 14): r_i,HT = sum_j alpha_ij r_j,HT (eq. 13).
@@ -155,6 +158,7 @@ impl Formation {
                 id: m.id,
                 role: m.role,
                 position: m.position,
+                start: m.position,
                 planar: planar[k],
                 alpha,
                 link: None,

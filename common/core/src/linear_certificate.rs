@@ -123,16 +123,19 @@ struct Chains {
 impl LinearTeam {
     /// Reduce a scenario (validated) to its chains, or say why the linear model does not apply.
     pub fn new(s: &Scenario) -> Result<Self, NotLinear> {
+        Self::of_motion(s, &s.plan.start, &s.plan.goal)
+    }
+
+    /// The team flying one motion of its primary leaders from `start` to `goal` (a mission's
+    /// phase: every member's displacement is the same affine combination, eq. 13), from rest
+    /// on its plan.
+    pub fn of_motion(s: &Scenario, start: &[Vec3; 3], goal: &[Vec3; 3]) -> Result<Self, NotLinear> {
         let f = &s.formation;
         let plan = &s.plan;
         let delta: Vec<Vec3> = f
             .members
             .iter()
-            .map(|m| {
-                (0..3)
-                    .map(|p| (plan.goal[p] - plan.start[p]) * m.alpha[p])
-                    .sum()
-            })
+            .map(|m| (0..3).map(|p| (goal[p] - start[p]) * m.alpha[p]).sum())
             .collect();
         for m in &f.members {
             let at: Vec3 = (0..3).map(|p| plan.start[p] * m.alpha[p]).sum();

@@ -149,6 +149,10 @@ pub struct Certificate {
     /// `plan --losses`: the loss of every single member, certified (`losscert`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub losses: Option<LossCertificate>,
+    /// A mission (issue 26): every phase's certificate in flight order; the verdict above is
+    /// the worst of them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub segments: Option<Vec<crate::mission_certificate::PhaseCertificate>>,
 }
 
 /// Max follower deviation at a given travel time (infinite when the flight faults).
@@ -165,10 +169,19 @@ pub fn deviation_at(s: &Scenario, t_total_s: Real) -> Real {
 /// bisection to 0.1 % (E falls monotonically with T in practice; the bracket is checked).
 /// `e_of` gives E(T).
 pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real, e_of: impl Fn(Real) -> Real) -> Real {
+    t_threshold_from(s.file.t_total_s, delta_m, e_at_t, e_of)
+}
+
+/// [`t_threshold`] of a motion whose travel time is `t0` now (a mission's phase).
+pub fn t_threshold_from(
+    t0: Real,
+    delta_m: Real,
+    e_at_t: Real,
+    e_of: impl Fn(Real) -> Real,
+) -> Real {
     if delta_m.is_nan() || delta_m <= 0.0 {
         return Real::INFINITY;
     }
-    let t0 = s.file.t_total_s;
     let guess = if e_at_t.is_finite() && e_at_t > 0.0 {
         t0 * (e_at_t / delta_m).sqrt()
     } else {
@@ -206,6 +219,9 @@ pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real, e_of: impl Fn(Real
 
 /// The certificate of a scenario validated with `Checks::Full`.
 pub fn certify(s: &Scenario) -> Certificate {
+    if s.plan.is_mission() {
+        return crate::mission_certificate::certify_mission(s);
+    }
     let n = SafetyNumbers::of(s);
     // E(T) on the exactly linear error dynamics when the graph allows (linear_certificate.rs),
     // otherwise by flying the nonlinear team at every trial T.
@@ -263,5 +279,6 @@ pub fn certify(s: &Scenario) -> Certificate {
         max_link_delay_at_least,
         notes: s.notes.clone(),
         losses: None,
+        segments: None,
     }
 }

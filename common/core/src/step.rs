@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::control::ControlFault;
 use crate::dynamics::{Flat, Plant};
 use crate::math::{Real, Vec3};
-use crate::plan::{Segment, TeamPlan};
+use crate::plan::{Piece, TeamPlan};
 
 /// What a follower assumes about a neighbour between two exchanges.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -148,15 +148,34 @@ pub fn step_at<P: Plant>(
     for i in 0..sub {
         let ts = (tick as Real + i as Real / sub as Real) * cfg.dt_s + offset_s;
         let te = (tick as Real + (i + 1) as Real / sub as Real) * cfg.dt_s + offset_s;
-        match plan.quintic.segment_of(ts, te) {
-            Some(seg) => x = substep(cfg, plan, law, t_k, &x, ts, te, seg, neighbors)?,
-            None => {
-                // ERRATA 12: split at T_total so that no RK4 step straddles the jump of s'''.
-                let tt = plan.quintic.t_total_s;
-                x = substep(cfg, plan, law, t_k, &x, ts, tt, Segment::Motion, neighbors)?;
-                x = substep(cfg, plan, law, t_k, &x, tt, te, Segment::Hold, neighbors)?;
-            }
+        // ERRATA 12: split at every phase's start and end (T_total for the paper's one plan) so
+        // that no RK4 step straddles a jump of s'''.
+        let mut from = ts;
+        while let Some(b) = plan.break_inside(from, te) {
+            x = substep(
+                cfg,
+                plan,
+                law,
+                t_k,
+                &x,
+                from,
+                b,
+                plan.piece_of(from, b),
+                neighbors,
+            )?;
+            from = b;
         }
+        x = substep(
+            cfg,
+            plan,
+            law,
+            t_k,
+            &x,
+            from,
+            te,
+            plan.piece_of(from, te),
+            neighbors,
+        )?;
     }
     Ok(x)
 }
@@ -171,7 +190,7 @@ fn substep<P: Plant>(
     x: &P,
     ts: Real,
     te: Real,
-    seg: Segment,
+    seg: Piece,
     neighbors: &[Flat; 3],
 ) -> Result<P, StepFault> {
     let [k1, k2, k3, k4] = cfg.gains;

@@ -4,7 +4,7 @@
 use cdm_core::dynamics::{Flat, Plant};
 use cdm_core::engine::{chain_engine, max_follower_deviation, quad_engine, AgentFault};
 use cdm_core::math::{Real, Vec3};
-use cdm_core::plan::Segment;
+use cdm_core::plan::Piece;
 use cdm_core::scenario::{Checks, Scenario};
 use cdm_core::step::{law_for, Law, NeighborModel};
 
@@ -92,8 +92,8 @@ fn exchange_error(s: &Scenario, model: NeighborModel) -> Result<Real, AgentFault
         .map(|(k, m)| law_for(m).1.map(|id| f.index_of(id).unwrap_or(k)))
         .collect();
     let [k1, k2, k3, k4] = s.file.gains;
-    let plan = s.plan;
-    let deriv = |t: Real, seg: Segment, x: &[Flat]| -> Vec<Flat> {
+    let plan = &s.plan;
+    let deriv = |t: Real, seg: Piece, x: &[Flat]| -> Vec<Flat> {
         (0..n)
             .map(|k| {
                 let f = &x[k];
@@ -142,12 +142,12 @@ fn exchange_error(s: &Scenario, model: NeighborModel) -> Result<Real, AgentFault
         for i in 0..sub {
             let ts = (tick as Real + i as Real / sub as Real) * dt;
             let te = (tick as Real + (i + 1) as Real / sub as Real) * dt;
-            let pieces: Vec<(Real, Real, Segment)> = match plan.quintic.segment_of(ts, te) {
-                Some(seg) => vec![(ts, te, seg)],
-                None => {
-                    let tt = plan.quintic.t_total_s;
-                    vec![(ts, tt, Segment::Motion), (tt, te, Segment::Hold)]
-                }
+            let pieces: Vec<(Real, Real, Piece)> = match plan.break_inside(ts, te) {
+                None => vec![(ts, te, plan.piece_of(ts, te))],
+                Some(tt) => vec![
+                    (ts, tt, plan.piece_of(ts, tt)),
+                    (tt, te, plan.piece_of(tt, te)),
+                ],
             };
             for (a, b, seg) in pieces {
                 let h = b - a;

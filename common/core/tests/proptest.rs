@@ -330,6 +330,9 @@ proptest! {
                 weight_floor: floor,
                 plane_tolerance_m: tolerance,
                 link: None,
+                takeoff: None,
+                segments: Vec::new(),
+                landing: None,
                 agents: own,
             }
         };

@@ -1,5 +1,6 @@
 //! The pre-flight certificate as `plan`, `simulate` and `export` print it.
 
+use cdm_core::mission_certificate::PhaseCertificate;
 use cdm_core::simulate::Certificate;
 use cdm_team::out;
 
@@ -42,8 +43,35 @@ pub fn print_certificate(c: &Certificate) {
         ),
         (None, _) => out!("  max link delay          none (E_max > delta even without delay)"),
     }
+    if let Some(rows) = &c.segments {
+        print_phases(rows);
+    }
     out!("verdict: {}", c.verdict);
     for r in &c.reasons {
         out!("  - {r}");
+    }
+}
+
+/// A mission's phases, one line each (issue 26).
+fn print_phases(rows: &[PhaseCertificate]) {
+    out!("  mission phases:");
+    out!(
+        "    phase        from (s)  to (s)   lambda_1 min (t s)    E_max (m)  T_threshold  verdict"
+    );
+    for r in rows {
+        out!(
+            "    {:<11} {:>8.1}  {:>7.1}  {:>7.4} ({:>7.1})  {:>10.4}  {:>9.2} s  {}",
+            r.name,
+            r.t_start_s,
+            r.t_end_s,
+            r.lambda1_min,
+            r.t_lambda1_min_s,
+            r.max_follower_deviation_m,
+            r.t_threshold_s,
+            r.verdict
+        );
+        if let Some(d) = r.min_ground_separation_m {
+            out!("      ground spots at least {d:.3} m apart (needs 2 (eps + delta))");
+        }
     }
 }

@@ -151,6 +151,14 @@ fn to_skybrush(
 /// again (`Checks::Full`: the gains' stability is part of the certificate).
 fn scaled(source: &Source, frame: &ExportFrame) -> Result<Scaled, Failure> {
     let base = load(source)?;
+    if base.plan.is_mission() {
+        // The exporters cut one quintic per member; a mission's chain of phases is not written
+        // yet (issue 26): refuse rather than export only its first segment.
+        return Err(Failure::bad_input(format!(
+            "{}: exporting a mission ([takeoff], [[segment]], [landing]) is not supported yet; export a scenario without those tables",
+            base.origin
+        )));
+    }
     let origin = match &frame.origin {
         Some(text) => TargetFrame::parse_origin(text).map_err(Failure::bad_input)?,
         None => Vec3::zeros(),

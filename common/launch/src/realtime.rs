@@ -230,7 +230,7 @@ fn announce(
         .formation
         .members
         .iter()
-        .map(|m| (m.id, m.position, m.role == Role::Follower))
+        .map(|m| (m.id, m.start, m.role == Role::Follower))
         .collect();
     let hash = s.content_hash();
     let history = (s.dt_s(), rt.stale_after.as_secs_f64());

@@ -133,7 +133,7 @@ impl<'a> MavlinkPlant<'a> {
         let clock = Instant::now();
         let shared = Arc::new(Mutex::new(Shared {
             vehicle: MavlinkVehicle::new(config.vehicle),
-            setpoint: hold_at(member.position),
+            setpoint: hold_at(member.start),
             fault: None,
             stop: false,
             team_ready: false,
@@ -154,7 +154,7 @@ impl<'a> MavlinkPlant<'a> {
             neighbor_ids,
             shared,
             streamer: Some(streamer),
-            x0: QuadState::hover(member.position),
+            x0: QuadState::hover(member.start),
         };
         plant.wait_ready(interrupted)?;
         Ok(plant)

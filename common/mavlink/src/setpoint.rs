@@ -3,7 +3,7 @@
 //! the very law the engine integrates.
 
 use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::plan::{Segment, TeamPlan};
+use cdm_core::plan::TeamPlan;
 use cdm_core::step::{extrapolate, Law, StepConfig};
 use cdm_math::{Real, Vec3, GRAVITY_MPS2};
 
@@ -27,12 +27,7 @@ pub fn setpoint_for(
     match law {
         Law::Leader { alpha } => {
             let t = t_k_s + cfg.dt_s;
-            let seg = if t <= plan.quintic.t_total_s {
-                Segment::Motion
-            } else {
-                Segment::Hold
-            };
-            let d = plan.agent_derivs(alpha, t, seg);
+            let d = plan.agent_derivs(alpha, t, plan.piece_at(t));
             Setpoint {
                 position: d[0],
                 velocity: d[1],
@@ -133,7 +128,7 @@ mod tests {
         let law = Law::Leader { alpha };
         let c = cfg();
         let sp = setpoint_for(&c, &plan, &law, 0.9, &[Flat::rest(Vec3::zeros()); 3]);
-        let d = plan.agent_derivs(&alpha, 1.0, Segment::Motion);
+        let d = plan.agent_derivs(&alpha, 1.0, plan.piece_at(1.0));
         assert_eq!(
             (sp.position, sp.velocity, sp.acceleration),
             (d[0], d[1], d[2])
@@ -141,7 +136,7 @@ mod tests {
         // Past T_total the leader holds its goal.
         let end = plan.quintic.t_total_s + 1.0;
         let sp = setpoint_for(&c, &plan, &law, end, &[Flat::rest(Vec3::zeros()); 3]);
-        let goal = plan.agent_derivs(&alpha, plan.quintic.t_total_s, Segment::Hold);
+        let goal = plan.agent_derivs(&alpha, end, plan.piece_at(end));
         assert_eq!(sp.position, goal[0]);
         assert_eq!(sp.velocity, Vec3::zeros());
     }

@@ -185,9 +185,8 @@ impl Joined<'_> {
             .map_err(|e| MemberError::from_loop(e, id, team));
         }
         let parts = (vehicle, LockstepClock::default());
-        let starts = in_neighbors(me).map(|n| {
-            QuadState::hover(s.formation.member(n).map_or(me.position, |m| m.position)).flat()
-        });
+        let starts = in_neighbors(me)
+            .map(|n| QuadState::hover(s.formation.member(n).map_or(me.start, |m| m.start)).flat());
         let mut core = LockstepCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
             .with_links(s.link_model(), &s.step_config(), starts)
             .with_losses(MemberLosses::new(me, LossLog::new(s), &ins, &outs));

@@ -8,8 +8,8 @@ use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use cdm_core::formation::Role;
+use cdm_core::frame::deformation_eigenvalues;
 use cdm_core::math::{vec3, Real, Vec3};
-use cdm_core::plan::Segment;
 use cdm_core::safety::{min_separation, Prism};
 use cdm_core::scenario::{Checks, Scenario};
 use cdm_core::telemetry::{Row, TelemetryFormat, HEADER};
@@ -246,13 +246,9 @@ pub fn deepest_follower(s: &Scenario) -> Option<u32> {
 
 /// Eigenvalues of U_D at time t, exactly as the audit computes them (eq. 37).
 pub fn lambdas_at(s: &Scenario, t: Real) -> [Real; 3] {
-    let seg = if t <= s.plan.quintic.t_total_s {
-        Segment::Motion
-    } else {
-        Segment::Hold
-    };
-    let sp = s.plan.quintic.derivatives(t, seg)[0];
-    s.plan.lambdas_at_s(sp).unwrap_or([0.0; 3])
+    s.plan
+        .q_d_at(t)
+        .map_or([0.0; 3], |(q, _)| deformation_eigenvalues(&q))
 }
 
 /// Read a run directory. `follow` overrides the followed member (it must be in the scenario).

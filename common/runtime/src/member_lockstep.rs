@@ -63,7 +63,7 @@ impl<V: Vehicle, C: TickClock> MemberCore<V, Lockstep<C>> {
         deadlines: Deadlines,
         now: Duration,
     ) -> Self {
-        let rest = Flat::rest(member.position);
+        let rest = Flat::rest(member.start);
         let lockstep = Lockstep {
             clock,
             rest,

@@ -154,9 +154,9 @@ impl MemberLosses {
         self.links_from(tick).any(|j| j == id)
     }
 
-    /// Where member `id` started (the scenario's position), if it is in the team.
+    /// Where member `id` started (the scenario's start), if it is in the team.
     pub(crate) fn start_of(&self, id: u32) -> Option<cdm_core::math::Vec3> {
-        self.notices.log().original().member(id).map(|m| m.position)
+        self.notices.log().original().member(id).map(|m| m.start)
     }
 
     /// Keeps the states of a neighbour the link applied now drops (see `due`).

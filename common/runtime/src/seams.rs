@@ -193,7 +193,7 @@ impl<'a> ModelVehicle<'a> {
             plan,
             law,
             neighbor_ids,
-            x: QuadState::hover(member.position),
+            x: QuadState::hover(member.start),
         }
     }
 }

@@ -131,7 +131,6 @@ pub fn pieces(traj: &AgentTrajectory, count: usize) -> Vec<Piece> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::Segment;
 
     /// The paper's Sec. VII leaders over a 200 s plan (the plan tests' own team).
     fn paper_plan() -> TeamPlan {
@@ -149,7 +148,7 @@ mod tests {
                 for k in 0..=20 {
                     let u = p.duration_s * k as Real / 20.0;
                     let t = p.t0_s + u;
-                    let want = plan.agent_derivs(&alpha, t, Segment::Motion)[0];
+                    let want = plan.agent_derivs(&alpha, t, plan.piece_at(t))[0];
                     assert!((p.eval(u) - want).norm() < 1e-9, "count={count} t={t}");
                 }
             }

@@ -1,6 +1,6 @@
 //! Built-in scenarios: `paper40` (Sec. VII) and generated teams of any size.
 
-use super::{AgentSpec, ScenarioFile};
+use super::{AgentSpec, GroundSpec, ScenarioFile, SegmentSpec};
 use crate::formation::Role;
 use crate::frame::Frame;
 use crate::geometry::{convex_hull, signed_boundary_distance};
@@ -44,6 +44,40 @@ pub fn paper40() -> ScenarioFile {
     f
 }
 
+/// paper40 as a whole flight (issue 26): take off from the ground (z = 0) below the paper's start
+/// formation, fly the paper's descent (segment 1), hover, turn the team by 30 degrees about the
+/// vertical through its centre while moving 60 m west, 120 m south and 60 m down (segment 2, a
+/// rigid motion of segment 1's goals, so it deforms no more than the paper's descent), hover,
+/// and land below the final formation.
+pub fn paper40_mission() -> ScenarioFile {
+    let mut f = paper40();
+    f.name = "paper40-mission".into();
+    f.takeoff = Some(GroundSpec {
+        ground_z_m: 0.0,
+        t_s: MISSION_TAKEOFF_S,
+        hold_s: Some(5.0),
+    });
+    f.segments = vec![SegmentSpec {
+        hold_s: Some(5.0),
+        t_s: 150.0,
+        goals: vec![
+            [94.0, 295.2, 500.0],
+            [114.1, 64.4, 500.0],
+            [283.9, 162.4, 500.0],
+        ],
+    }];
+    f.landing = Some(GroundSpec {
+        ground_z_m: 0.0,
+        t_s: MISSION_LANDING_S,
+        hold_s: Some(5.0),
+    });
+    f
+}
+
+/// paper40-mission's climb and descent times (about a kilometre up, half of one down).
+const MISSION_TAKEOFF_S: Real = 200.0;
+const MISSION_LANDING_S: Real = 150.0;
+
 /// A generated team of `n` members (4 <= n <= MAX_AGENTS) flying a manoeuvre of the paper's kind:
 /// the paper's primary leaders and goals, the paper's secondary leaders when n >= 10, followers
 /// on a hexagonal lattice inside the leading polygon. Beyond 34 followers each configuration is
@@ -68,31 +102,7 @@ fn generated_unchecked(n: usize) -> ScenarioFile {
     let scale = (n_followers as Real / PAPER_FOLLOWERS as Real)
         .sqrt()
         .max(1.0);
-    let centroid = |ps: &[[Real; 3]; 3]| (vec3(ps[0]) + vec3(ps[1]) + vec3(ps[2])) / 3.0;
-    let (c0, cg) = (centroid(&PRIMARY_START), centroid(&PRIMARY_GOAL));
-    let scaled = |p: [Real; 3], c: &Vec3| {
-        let q = c + (vec3(p) - c) * scale;
-        [q.x, q.y, q.z]
-    };
-    let mut agents = Vec::with_capacity(n);
-    for k in 0..3 {
-        agents.push(AgentSpec {
-            id: k as u32 + 1,
-            role: Role::Primary,
-            position: scaled(PRIMARY_START[k], &c0),
-            goal: Some(scaled(PRIMARY_GOAL[k], &cg)),
-            in_neighbors: None,
-        });
-    }
-    for (k, p) in SECONDARY_START.iter().take(n_secondary).enumerate() {
-        agents.push(AgentSpec {
-            id: k as u32 + 4,
-            role: Role::Secondary,
-            position: scaled(*p, &c0),
-            goal: None,
-            in_neighbors: None,
-        });
-    }
+    let mut agents = leaders(n, n_secondary, scale);
     let prim: Vec<Vec3> = agents.iter().take(3).map(|a| vec3(a.position)).collect();
     // The paper's primaries are never collinear; fall back to an identity frame defensively.
     let frame = Frame::new(&prim[0], &prim[1], &prim[2]).unwrap_or(Frame {
@@ -139,8 +149,42 @@ fn generated_unchecked(n: usize) -> ScenarioFile {
         weight_floor: None,
         plane_tolerance_m: None,
         link: None,
+        takeoff: None,
+        segments: Vec::new(),
+        landing: None,
         agents,
     }
+}
+
+/// The paper's primary leaders (with goals) and `n_secondary` of its secondary leaders, each
+/// configuration scaled by `scale` about its centroid; room for `n` agents.
+fn leaders(n: usize, n_secondary: usize, scale: Real) -> Vec<AgentSpec> {
+    let centroid = |ps: &[[Real; 3]; 3]| (vec3(ps[0]) + vec3(ps[1]) + vec3(ps[2])) / 3.0;
+    let (c0, cg) = (centroid(&PRIMARY_START), centroid(&PRIMARY_GOAL));
+    let scaled = |p: [Real; 3], c: &Vec3| {
+        let q = c + (vec3(p) - c) * scale;
+        [q.x, q.y, q.z]
+    };
+    let mut agents = Vec::with_capacity(n);
+    for k in 0..3 {
+        agents.push(AgentSpec {
+            id: k as u32 + 1,
+            role: Role::Primary,
+            position: scaled(PRIMARY_START[k], &c0),
+            goal: Some(scaled(PRIMARY_GOAL[k], &cg)),
+            in_neighbors: None,
+        });
+    }
+    for (k, p) in SECONDARY_START.iter().take(n_secondary).enumerate() {
+        agents.push(AgentSpec {
+            id: k as u32 + 4,
+            role: Role::Secondary,
+            position: scaled(*p, &c0),
+            goal: None,
+            in_neighbors: None,
+        });
+    }
+    agents
 }
 
 /// `n` points on a hexagonal lattice inside a convex polygon, at least 0.8 spacing from its

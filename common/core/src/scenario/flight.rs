@@ -3,7 +3,6 @@
 //! both, so the runtime does not reach into the engine for them.
 
 use crate::math::{Real, Vec3};
-use crate::plan::Segment;
 use crate::step::{NeighborModel, StepConfig};
 
 use super::Scenario;
@@ -21,12 +20,7 @@ impl Scenario {
 
     /// The desired position r_HT of every member at time t (eqs. 13, 23), in member order.
     pub fn desired_positions(&self, t: Real, out: &mut Vec<Vec3>) {
-        let seg = if t <= self.plan.quintic.t_total_s {
-            Segment::Motion
-        } else {
-            Segment::Hold
-        };
-        let prim = self.plan.primary_derivs(t, seg);
+        let prim = self.plan.primary_derivs(t, self.plan.piece_at(t));
         out.clear();
         for m in &self.formation.members {
             let a = m.alpha;

@@ -7,6 +7,7 @@
 mod builtin;
 mod flight;
 mod locate;
+mod mission;
 mod validate;
 
 use std::path::Path;
@@ -21,6 +22,7 @@ use crate::math::Real;
 use crate::plan::TeamPlan;
 
 pub use builtin::{generated, paper40, MAX_AGENTS};
+pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
 
 /// Default tolerance for members off the primary leaders' plane (ERRATA 10): within it a member
 /// is projected onto the plane (and the tool says so); beyond it the scenario is refused.
@@ -61,6 +63,16 @@ pub struct ScenarioFile {
     /// content hash covers it and a member with other links is refused.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link: Option<LinkSpec>,
+    /// `[takeoff]`: start on the ground below the start formation (issue 26).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub takeoff: Option<GroundSpec>,
+    /// `[[segment]]`: further deformations after the agents' own goals, in flight order
+    /// (segment 2, 3, ...).
+    #[serde(default, rename = "segment", skip_serializing_if = "Vec::is_empty")]
+    pub segments: Vec<SegmentSpec>,
+    /// `[landing]`: land below the final formation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landing: Option<GroundSpec>,
     pub agents: Vec<AgentSpec>,
 }
 
@@ -223,11 +235,16 @@ impl Scenario {
     pub fn builtin(name: &str) -> Result<Self, ScenarioError> {
         match name {
             "paper40" => Self::from_file(paper40(), "built-in paper40", Checks::Full),
+            "paper40-mission" => Self::from_file(
+                builtin::paper40_mission(),
+                "built-in paper40-mission",
+                Checks::Full,
+            ),
             other => Err(ScenarioError {
                 origin: format!("built-in {other}"),
                 kind: ScenarioErrorKind::Invalid {
                     field: "scenario".into(),
-                    reason: "is not a built-in scenario (known: paper40)".into(),
+                    reason: "is not a built-in scenario (known: paper40, paper40-mission)".into(),
                 },
             }),
         }
@@ -275,9 +292,10 @@ impl Scenario {
         1.0 / self.file.comm_hz
     }
 
-    /// The last tick of the plan: ceil(T_total * comm_hz). Ticks run 0..=last_tick.
+    /// The last tick of the plan: ceil(T_total * comm_hz), over the whole mission when there is
+    /// one (its last phase's end). Ticks run 0..=last_tick.
     pub fn last_tick(&self) -> u64 {
-        last_tick_of(self.file.t_total_s, self.file.comm_hz)
+        last_tick_of(self.plan.flight_end_s(), self.file.comm_hz)
     }
 
     /// The links at this scenario's tick length (perfect unless `[link]` says otherwise).

@@ -10,7 +10,7 @@ use crate::graph::{synthesize, DEFAULT_WEIGHT_FLOOR};
 use crate::math::{vec3, Real, Vec3};
 use crate::plan::TeamPlan;
 
-fn finite(field: impl Into<String>, value: Real) -> Result<Real, E> {
+pub(super) fn finite(field: impl Into<String>, value: Real) -> Result<Real, E> {
     if value.is_finite() {
         Ok(value)
     } else {
@@ -21,7 +21,7 @@ fn finite(field: impl Into<String>, value: Real) -> Result<Real, E> {
     }
 }
 
-fn positive(field: &str, value: Real) -> Result<Real, E> {
+pub(super) fn positive(field: &str, value: Real) -> Result<Real, E> {
     finite(field, value)?;
     if value > 0.0 {
         Ok(value)
@@ -187,7 +187,19 @@ pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenari
     check_roles(&file)?;
     let (frame, plan) = leaders_plan(&file)?;
     let notes = project_onto_plane(&mut file, &frame)?;
-    let formation = formation_of(&mut file, frame)?;
+    let mut formation = formation_of(&mut file, frame)?;
+    let plan = if super::mission::has_mission(&file) {
+        let phases = super::mission::phases(&file, &plan, &formation)?;
+        if let Some(to) = &file.takeoff {
+            // Every member starts on the ground below its place in the formation.
+            for m in &mut formation.members {
+                m.start = Vec3::new(m.position.x, m.position.y, to.ground_z_m);
+            }
+        }
+        plan.with_phases(phases)
+    } else {
+        plan
+    };
     let gains_margin = match checks {
         Checks::Member => None,
         Checks::Full => {

@@ -57,6 +57,7 @@ fn member(role: Role) -> Member {
         id: ME,
         role,
         position: Vec3::zeros(),
+        start: Vec3::zeros(),
         planar: Vec2::zeros(),
         alpha: [1.0, 0.0, 0.0],
         link: (role == Role::Follower).then_some(Link {

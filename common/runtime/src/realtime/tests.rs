@@ -55,6 +55,7 @@ fn follower() -> Member {
         id: ME,
         role: Role::Follower,
         position: Vec3::zeros(),
+        start: Vec3::zeros(),
         planar: Vec2::zeros(),
         alpha: [1.0, 0.0, 0.0],
         link: Some(Link {
