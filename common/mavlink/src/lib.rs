@@ -33,6 +33,7 @@ pub use messages::Setpoint;
 pub use ned::VehicleOrigin;
 pub use plant::{ArmProgress, LinkFigures, MavlinkPlant, PlantConfig, PlantError, SendTimes};
 pub use report::{Reporting, VehicleReport};
+pub use setpoint::FeedForward;
 pub use signing::{KeyError, SigningKey};
 pub use team_arm::{before_start, TeamArmError};
 pub use udp::{member_addr, Received, UdpError, UdpLink, DEFAULT_BASE_PORT};

@@ -402,6 +402,7 @@ mod tests {
             position: Vec3::new(10.0, 20.0, 2.0),
             velocity: Vec3::zeros(),
             acceleration: Vec3::zeros(),
+            jerk: Vec3::zeros(),
         }
     }
 
