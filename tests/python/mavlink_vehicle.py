@@ -220,6 +220,10 @@ class Vehicle:
         # Where it holds once out of OFFBOARD/GUIDED (Position mode, sticks centred).
         self.hold = None
         self.setpoints_after_loss = 0
+        # Setpoints that arrived after its first HEARTBEAT showing the take-over or the disarm
+        # had left (the member can know only from then on).
+        self.loss_shown = False
+        self.setpoints_after_shown = 0
 
     def guided(self):
         if self.args.autopilot == "px4":
@@ -243,6 +247,8 @@ class Vehicle:
             self.setpoint_stamps_ms.append(msg.time_boot_ms)
             if self.taken_over_at is not None or self.disarmed_at is not None:
                 self.setpoints_after_loss += 1
+            if self.loss_shown:
+                self.setpoints_after_shown += 1
             self.type_masks.add(msg.type_mask)
             self.frames.add(msg.coordinate_frame)
             self.setpoint = ([msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz],
@@ -394,6 +400,7 @@ class Vehicle:
             "taken_over_at_s": self.taken_over_at,
             "disarmed_at_s": self.disarmed_at,
             "setpoints_after_loss": self.setpoints_after_loss,
+            "setpoints_after_shown": self.setpoints_after_shown,
             "last_setpoint_s": self.setpoint_times[-1] if self.setpoint_times else None,
         }
 
@@ -457,6 +464,9 @@ class Streams:
             else:
                 conn.mav.send(msg)
                 self.sent[msg.get_type()] += 1
+                if msg.get_type() == "HEARTBEAT" and (vehicle.taken_over_at is not None
+                                                     or vehicle.disarmed_at is not None):
+                    vehicle.loss_shown = True
                 if msg.get_type() == "LOCAL_POSITION_NED":
                     vehicle.injector.after_position(conn, msg.time_boot_ms)
 
