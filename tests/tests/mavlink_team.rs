@@ -437,7 +437,7 @@ const ARMED: [&str; 4] = ["--require-arm", "--exact", "--heartbeat-hz", "1"];
 #[test]
 fn a_vehicle_taken_over_by_its_pilot_is_lost_naming_the_mode() {
     const TAKEN: usize = 5;
-    let (_, _, summaries) = lost_vehicle(
+    let (audit, _, summaries) = lost_vehicle(
         "mav10pilot",
         TAKEN,
         (&ARMED, &["--take-over-after", "4"]),
@@ -445,6 +445,15 @@ fn a_vehicle_taken_over_by_its_pilot_is_lost_naming_the_mode() {
         "it left OFFBOARD: now POSCTL",
     );
     stopped_streaming(&summaries[TAKEN], "taken_over_at_s");
+    // audit.json names the mode it left for (the vehicle report sent before the fault).
+    let id = team(20.0).agents[TAKEN].id.to_string();
+    assert_eq!(audit["vehicles"][&id]["mode"], "POSCTL", "{audit:#}");
+    assert_eq!(audit["vehicles"][&id]["armed"], true, "{audit:#}");
+    for (k, v) in audit["vehicles"].as_object().expect("vehicles") {
+        if *k != id {
+            assert_eq!(v["mode"], "OFFBOARD", "agent {k}: {audit:#}");
+        }
+    }
 }
 
 /// The vehicle of `v` (a summary) was taken over or disarmed (`key` is when), and the member
@@ -460,7 +469,7 @@ fn stopped_streaming(v: &Value, key: &str) {
 #[test]
 fn a_vehicle_disarmed_in_flight_is_lost() {
     const DISARMED: usize = 2;
-    let (_, _, summaries) = lost_vehicle(
+    let (audit, _, summaries) = lost_vehicle(
         "mav10disarm",
         DISARMED,
         (&ARMED, &["--disarm-after", "4"]),
@@ -468,6 +477,9 @@ fn a_vehicle_disarmed_in_flight_is_lost() {
         "disarmed in flight (in OFFBOARD)",
     );
     stopped_streaming(&summaries[DISARMED], "disarmed_at_s");
+    let id = team(20.0).agents[DISARMED].id.to_string();
+    assert_eq!(audit["vehicles"][&id]["armed"], false, "{audit:#}");
+    assert_eq!(audit["vehicles"][&id]["mode"], "OFFBOARD", "{audit:#}");
 }
 
 /// Once the team flies, another process floods one member's port from its own socket for 3 s:

@@ -31,7 +31,9 @@ pub use flight_mode::FlightMode;
 pub use health::{LinkFault, LinkTimeouts, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT};
 pub use messages::Setpoint;
 pub use ned::VehicleOrigin;
-pub use plant::{ArmProgress, LinkFigures, MavlinkPlant, PlantConfig, PlantError, SendTimes};
+pub use plant::{
+    ArmProgress, LinkFigures, LinkRead, MavlinkPlant, PlantConfig, PlantError, SendTimes,
+};
 pub use report::{Reporting, VehicleReport};
 pub use setpoint::FeedForward;
 pub use signing::{KeyError, SigningKey};

@@ -22,7 +22,7 @@ use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
 use cdm_math::Vec3;
 use cdm_runtime::seams::{Vehicle, VehicleFault};
 
-use crate::arming::ArmStage;
+use crate::arming::{ArmStage, VehicleMode};
 use crate::battery::BatteryFigures;
 use crate::messages::Setpoint;
 use crate::setpoint::{hold_at, measured_state, setpoint_for, FeedForward};
@@ -317,21 +317,34 @@ impl Drop for MavlinkPlant<'_> {
     }
 }
 
+/// What [`LinkFigures::read`] reads.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkRead {
+    pub counters: LinkCounters,
+    pub attitude: AttitudeFigures,
+    pub battery: BatteryFigures,
+    pub sends: SendTimes,
+    /// The last HEARTBEAT's mode and armed state (`None` before the first).
+    pub mode: Option<VehicleMode>,
+}
+
 /// A read-only view of a plant's link for the vehicle report (`crate::report`).
 #[derive(Debug, Clone)]
 pub struct LinkFigures(Arc<Mutex<Shared>>);
 
 impl LinkFigures {
-    /// The link's counters, newest attitude and extremes, and the stream's punctuality.
-    pub fn read(&self) -> (LinkCounters, AttitudeFigures, BatteryFigures, SendTimes) {
+    /// The link's counters, newest attitude and extremes, battery, the stream's punctuality,
+    /// and the last HEARTBEAT's mode and armed state.
+    pub fn read(&self) -> LinkRead {
         let g = lock(&self.0);
         let v = &g.vehicle;
-        (
-            *v.counters(),
-            v.attitude_figures(),
-            v.battery_figures(),
-            g.sends,
-        )
+        LinkRead {
+            counters: *v.counters(),
+            attitude: v.attitude_figures(),
+            battery: v.battery_figures(),
+            sends: g.sends,
+            mode: v.mode().copied(),
+        }
     }
 }
 

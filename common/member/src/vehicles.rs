@@ -34,6 +34,8 @@ pub fn vehicle_figures(r: &VehicleReport) -> cdm_core::audit::VehicleFigures {
         bad_signatures: r.bad_signatures,
         lowest_battery_pct: r.battery.lowest_pct,
         lowest_battery_v: r.battery.lowest_voltage_v,
+        mode: r.mode_name(),
+        armed: r.mode.map(|m| m.armed),
     }
 }
 
