@@ -105,7 +105,9 @@ pub fn measured_state(position: Vec3, velocity: Vec3, acceleration: Vec3, jerk: 
     debug_assert!(x.0[6] == GRAVITY_MPS2);
     let w = acceleration + Vec3::new(0.0, 0.0, GRAVITY_MPS2);
     let f = w.norm();
-    if !(f >= MIN_THRUST_MPS2) || !jerk.iter().all(|c| c.is_finite()) {
+    // Written so that a NaN (norm of a non-finite acceleration) publishes hover.
+    let thrust_ok = f >= MIN_THRUST_MPS2;
+    if !thrust_ok || !jerk.iter().all(|c| c.is_finite()) {
         return x;
     }
     let u = w / f;
