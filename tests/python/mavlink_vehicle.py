@@ -9,8 +9,9 @@ HEARTBEAT at --heartbeat-hz (1 Hz), LOCAL_POSITION_NED at --position-hz and ATTI
 --attitude-hz (both --rate-hz unless given). It answers
 DO_SET_MODE / COMPONENT_ARM_DISARM like a strict PX4, counts what it received and the frames that
 failed their checksum, stamps every command and its own readiness (its first HEARTBEAT and
-position) on the wall clock, can go silent after --silent-after seconds, and prints one JSON
-summary on stdout at exit.
+position) on the wall clock, can go silent after --silent-after seconds, can be taken over by a
+pilot (--take-over-after) or disarmed (--disarm-after), and prints one JSON summary on stdout at
+exit.
 
 What it reproduces of PX4 (v1.14+ defaults):
 - HEARTBEAT once a second (PX4 and ArduPilot send it at 1 Hz whatever the link), with
@@ -22,9 +23,18 @@ What it reproduces of PX4 (v1.14+ defaults):
   sequence number). Seeded by --seed (default: the system id), so a run is reproducible.
   --exact turns all three off: every stream at exactly its rate.
 - OFFBOARD is accepted only while setpoints stream, arming only in OFFBOARD (or GUIDED with
-  --autopilot ardupilot), and the vehicle falls back to POSCTL when setpoints stop (after 0.5 s;
-  PX4's COM_OF_LOSS_T is 1 s by default, stricter here to see it in short tests). Every command
-  gets a COMMAND_ACK.
+  --autopilot ardupilot), and the vehicle falls back to POSCTL when setpoints stop for PX4's
+  COM_OF_LOSS_T (1 s by default; COM_OBL_RC_ACT's default with an RC link is Position mode).
+  Every command gets a COMMAND_ACK.
+- A pilot taking over (--take-over-after S: S seconds after the vehicle was first armed in
+  OFFBOARD/GUIDED): PX4's COM_RC_OVERRIDE switches "from offboard mode (or any mode) to Position
+  mode if the RC sticks are moved" (PX4 user guide, Offboard Control), so the HEARTBEAT's main
+  mode becomes POSCTL (ArduCopter: the pilot's mode switch to LOITER, mode 5). From then on the
+  vehicle ignores every setpoint (PX4 flies offboard setpoints only in OFFBOARD, ArduCopter
+  position targets only in GUIDED) and, sticks centred, brakes and holds where it is.
+- Disarmed in flight (--disarm-after S, counted the same way): the armed flag leaves the
+  HEARTBEAT, the motors stop and the point mass falls to its frame's ground (NED z = 0), where
+  it rests; setpoints are ignored.
 
 What it does not reproduce:
 - PX4's own stream rates on an onboard link (LOCAL_POSITION_NED 30 Hz, ATTITUDE 100 Hz in
@@ -71,9 +81,10 @@ ARDUCOPTER_GUIDED = 4
 KP = 9.0
 KD = 6.0
 GRAVITY = 9.81
-# PX4 drops out of OFFBOARD when setpoints stop for this long (COM_OF_LOSS_T default 1 s; we are
-# stricter to see it in short tests).
-OFFBOARD_LOSS_S = 0.5
+# PX4 drops out of OFFBOARD when setpoints stop for this long (COM_OF_LOSS_T, default 1 s).
+OFFBOARD_LOSS_S = 1.0
+PX4_MAIN_MODE_POSCTL = 3
+ARDUCOPTER_LOITER = 5
 
 
 def vec3(text):
@@ -134,6 +145,12 @@ def parse_args():
                    help="battery_remaining lost per second, %%/s (voltage follows, 4S: 16.8 V full, 13.2 V empty)")
     p.add_argument("--failsafe-after", type=float, default=None,
                    help="from this many seconds on, HEARTBEAT reports MAV_STATE_CRITICAL (PX4 in a failsafe)")
+    p.add_argument("--take-over-after", type=float, default=None,
+                   help="this many seconds after it was first armed in OFFBOARD/GUIDED, a pilot "
+                        "takes over: POSCTL (PX4) or LOITER (ArduCopter), setpoints ignored, hold")
+    p.add_argument("--disarm-after", type=float, default=None,
+                   help="this many seconds after it was first armed in OFFBOARD/GUIDED, the "
+                        "vehicle disarms in flight and falls to its ground")
     return p.parse_args()
 
 
@@ -196,6 +213,17 @@ class Vehicle:
         self.streams = Streams(args)
         self.injector = Injector(args)
         self.lowest_battery = args.battery_start
+        # When it was first armed in OFFBOARD/GUIDED, taken over, disarmed (its own clock, s).
+        self.engaged_at = None
+        self.taken_over_at = None
+        self.disarmed_at = None
+        # Where it holds once out of OFFBOARD/GUIDED (Position mode, sticks centred).
+        self.hold = None
+        self.setpoints_after_loss = 0
+        # Setpoints that arrived after its first HEARTBEAT showing the take-over or the disarm
+        # had left (the member can know only from then on).
+        self.loss_shown = False
+        self.setpoints_after_shown = 0
 
     def guided(self):
         if self.args.autopilot == "px4":
@@ -217,6 +245,10 @@ class Vehicle:
                 return
             self.setpoint_times.append(now)
             self.setpoint_stamps_ms.append(msg.time_boot_ms)
+            if self.taken_over_at is not None or self.disarmed_at is not None:
+                self.setpoints_after_loss += 1
+            if self.loss_shown:
+                self.setpoints_after_shown += 1
             self.type_masks.add(msg.type_mask)
             self.frames.add(msg.coordinate_frame)
             self.setpoint = ([msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz],
@@ -232,6 +264,8 @@ class Vehicle:
                 self.custom_mode = (int(msg.param2) & 0xFF) << 16 | (int(msg.param3) & 0xFF) << 24
             else:
                 self.custom_mode = int(msg.param2)
+            if self.guided():
+                self.hold = None
             result = mavlink.MAV_RESULT_ACCEPTED
         elif msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and self.guided():
             self.armed = msg.param1 == 1.0
@@ -242,13 +276,41 @@ class Vehicle:
                               "t_unix": time.time()})
         conn.mav.command_ack_send(msg.command, result)
 
+    def leave_guided(self, mode):
+        """Out of OFFBOARD/GUIDED into `mode`: hold where it is from now on."""
+        self.custom_mode = mode
+        self.hold = list(self.pos)
+
+    def take_over(self, now):
+        """A pilot's take-over or disarm, once due (counted from the first engagement)."""
+        if self.engaged_at is None and self.armed and self.guided():
+            self.engaged_at = now
+        if self.engaged_at is None:
+            return
+        a = self.args
+        since = now - self.engaged_at
+        if a.take_over_after is not None and since >= a.take_over_after and self.taken_over_at is None:
+            self.taken_over_at = now
+            self.leave_guided(PX4_MAIN_MODE_POSCTL << 16 if a.autopilot == "px4" else ARDUCOPTER_LOITER)
+            print(f"mavlink_vehicle {a.sysid}: taken over at {now:.2f} s", file=sys.stderr, flush=True)
+        if a.disarm_after is not None and since >= a.disarm_after and self.disarmed_at is None:
+            self.disarmed_at = now
+            self.armed = False
+            print(f"mavlink_vehicle {a.sysid}: disarmed at {now:.2f} s", file=sys.stderr, flush=True)
+
     def step(self, dt, now):
-        flying = self.setpoint is not None and (not self.args.require_arm or
-                                                (self.armed and self.guided()))
+        self.take_over(now)
         if self.args.autopilot == "px4" and self.guided() and (
                 not self.setpoint_times or now - self.setpoint_times[-1] > OFFBOARD_LOSS_S):
-            self.custom_mode = 3 << 16  # PX4 falls back to POSCTL when the stream stops
-        if flying:
+            self.leave_guided(PX4_MAIN_MODE_POSCTL << 16)  # COM_OF_LOSS_T, then Position mode
+        flying = self.setpoint is not None and self.hold is None and (
+            not self.args.require_arm or (self.armed and self.guided()))
+        if self.disarmed_at is not None:
+            # Motors off: free fall (NED z down) to the ground of its frame, then at rest.
+            self.acc = [0.0, 0.0, GRAVITY if self.pos[2] < 0.0 else 0.0]
+        elif self.hold is not None:
+            self.acc = [KP * (self.hold[k] - self.pos[k]) - KD * self.vel[k] for k in range(3)]
+        elif flying:
             p, v, a = self.setpoint
             self.acc = [a[k] + KP * (p[k] - self.pos[k]) + KD * (v[k] - self.vel[k])
                         for k in range(3)]
@@ -257,6 +319,9 @@ class Vehicle:
         # Semi-implicit Euler at the fixed step: the vehicle's own time, not the wall clock.
         self.vel = [self.vel[k] + self.acc[k] * dt for k in range(3)]
         self.pos = [self.pos[k] + self.vel[k] * dt for k in range(3)]
+        if self.disarmed_at is not None and self.pos[2] >= 0.0:
+            self.pos[2] = 0.0
+            self.vel = [0.0, 0.0, 0.0]
 
     def build(self, conn, kind, boot_ms, silent, now):
         """The `kind` message with the vehicle's state now, or None while that stream is muted."""
@@ -331,6 +396,12 @@ class Vehicle:
             },
             "injected": self.injector.sent,
             "lowest_battery_pct": int(self.lowest_battery),
+            "engaged_at_s": self.engaged_at,
+            "taken_over_at_s": self.taken_over_at,
+            "disarmed_at_s": self.disarmed_at,
+            "setpoints_after_loss": self.setpoints_after_loss,
+            "setpoints_after_shown": self.setpoints_after_shown,
+            "last_setpoint_s": self.setpoint_times[-1] if self.setpoint_times else None,
         }
 
 
@@ -393,6 +464,9 @@ class Streams:
             else:
                 conn.mav.send(msg)
                 self.sent[msg.get_type()] += 1
+                if msg.get_type() == "HEARTBEAT" and (vehicle.taken_over_at is not None
+                                                     or vehicle.disarmed_at is not None):
+                    vehicle.loss_shown = True
                 if msg.get_type() == "LOCAL_POSITION_NED":
                     vehicle.injector.after_position(conn, msg.time_boot_ms)
 

@@ -318,16 +318,17 @@ fn a_vehicle_that_stops_sending_is_named() {
     assert_no_team_resources(&team_name);
 }
 
-/// Flies a team whose member `which` has a vehicle started with `vehicle_extra`, launched with
-/// `team_extra`, and checks that the team stops on that vehicle's loss (exit 3, `vehicle-lost`
-/// naming the member, `needle` on stderr). Returns audit.json and the orchestrator's output.
+/// Flies a team whose member `which` has a vehicle started with `vehicle_extra` (every vehicle
+/// also with `all`), launched with `team_extra`, and checks that the team stops on that
+/// vehicle's loss (exit 3, `vehicle-lost` naming the member, `needle` on stderr). Returns
+/// audit.json, the orchestrator's output and the vehicles' summaries.
 fn lost_vehicle(
     name: &str,
     which: usize,
-    vehicle_extra: &[&str],
+    (all, vehicle_extra): (&[&str], &[&str]),
     team_extra: &[&str],
     needle: &str,
-) -> (Value, Output) {
+) -> (Value, Output, Vec<Value>) {
     let dir = TempDir::new();
     // Long enough that the loss comes mid-flight even on a loaded machine.
     let file = team(20.0);
@@ -336,28 +337,31 @@ fn lost_vehicle(
     let team_name = unique_team(name);
     let id = file.agents[which].id;
     let origins = [ORIGIN; N];
-    let mut vehicles = start_vehicles(&file, (base, &origins), 0..which, None, &[]);
+    let special: Vec<&str> = all.iter().chain(vehicle_extra).copied().collect();
+    let mut vehicles = start_vehicles(&file, (base, &origins), 0..which, None, all);
     vehicles.extend(start_vehicles(
         &file,
         (base, &origins),
         which..which + 1,
         None,
-        vehicle_extra,
+        &special,
     ));
     vehicles.extend(start_vehicles(
         &file,
         (base, &origins),
         which + 1..N,
         None,
-        &[],
+        all,
     ));
     let mut at = vec!["--vehicle-origin".to_string(), csv(ORIGIN)];
     at.extend(team_extra.iter().map(|a| a.to_string()));
     let at: Vec<&str> = at.iter().map(String::as_str).collect();
     let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
-    for v in vehicles {
-        v.finish(DEADLINE);
-    }
+    let summaries: Vec<Value> = vehicles
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
+        .collect();
     let audit = read_json(&dir.path().join("run/audit.json"));
     let why = format!("{audit:#}\n{}", describe(&o));
     assert_eq!(o.status.code(), Some(3), "{why}");
@@ -370,7 +374,7 @@ fn lost_vehicle(
         "{why}"
     );
     assert_no_team_resources(&team_name);
-    (audit, o)
+    (audit, o, summaries)
 }
 
 /// `--min-battery 20`: one vehicle's SYS_STATUS battery (PX4's 5 Hz onboard stream) drains
@@ -380,10 +384,10 @@ fn lost_vehicle(
 fn a_vehicle_below_min_battery_is_lost_named_after_a_warning() {
     const LOW: usize = 4;
     let drain = ["--battery-start", "45", "--battery-drain", "4"];
-    let (audit, o) = lost_vehicle(
+    let (audit, o, _) = lost_vehicle(
         "mav10batt",
         LOW,
-        &drain,
+        (&[], &drain),
         &["--min-battery", "20"],
         "battery at 19 % (below --min-battery 20 %)",
     );
@@ -417,10 +421,65 @@ fn a_vehicle_reporting_its_own_failsafe_is_lost_named() {
     lost_vehicle(
         "mav10fsafe",
         6,
-        &["--failsafe-after", "7"],
+        (&[], &["--failsafe-after", "7"]),
         &[],
         "its autopilot reports MAV_STATE_CRITICAL (a failsafe)",
     );
+}
+
+/// Vehicles that move only armed in OFFBOARD (like PX4), armed by the team (`--arm`), with
+/// HEARTBEAT at exactly PX4's 1 Hz.
+const ARMED: [&str; 4] = ["--require-arm", "--exact", "--heartbeat-hz", "1"];
+
+/// A pilot takes one vehicle over 4 s after it was armed in OFFBOARD (PX4's RC override,
+/// COM_RC_OVERRIDE: Position mode; the script then ignores setpoints and holds). Its member
+/// names the mode it saw and stops; under `--on-loss stop` the team stops on it (exit 3).
+#[test]
+fn a_vehicle_taken_over_by_its_pilot_is_lost_naming_the_mode() {
+    const TAKEN: usize = 5;
+    let (audit, _, summaries) = lost_vehicle(
+        "mav10pilot",
+        TAKEN,
+        (&ARMED, &["--take-over-after", "4"]),
+        &["--arm", "--on-loss", "stop"],
+        "it left OFFBOARD: now POSCTL",
+    );
+    stopped_streaming(&summaries[TAKEN], "taken_over_at_s");
+    // audit.json names the mode it left for (the vehicle report sent before the fault).
+    let id = team(20.0).agents[TAKEN].id.to_string();
+    assert_eq!(audit["vehicles"][&id]["mode"], "POSCTL", "{audit:#}");
+    assert_eq!(audit["vehicles"][&id]["armed"], true, "{audit:#}");
+    for (k, v) in audit["vehicles"].as_object().expect("vehicles") {
+        if *k != id {
+            assert_eq!(v["mode"], "OFFBOARD", "agent {k}: {audit:#}");
+        }
+    }
+}
+
+/// The vehicle of `v` (a summary) was taken over or disarmed (`key` is when), and the member
+/// stopped streaming once it could know: no more than the setpoints already on their way (one
+/// tick, and one the vehicle read only after sending its HEARTBEAT) arrived after the vehicle's
+/// first HEARTBEAT that showed it.
+fn stopped_streaming(v: &Value, key: &str) {
+    assert!(v[key].is_f64(), "{v}");
+    assert!(num(v, "setpoints_after_shown") <= 3.0, "{v}");
+}
+
+/// A vehicle disarmed in flight 4 s after it was armed in OFFBOARD is lost the same way.
+#[test]
+fn a_vehicle_disarmed_in_flight_is_lost() {
+    const DISARMED: usize = 2;
+    let (audit, _, summaries) = lost_vehicle(
+        "mav10disarm",
+        DISARMED,
+        (&ARMED, &["--disarm-after", "4"]),
+        &["--arm"],
+        "disarmed in flight (in OFFBOARD)",
+    );
+    stopped_streaming(&summaries[DISARMED], "disarmed_at_s");
+    let id = team(20.0).agents[DISARMED].id.to_string();
+    assert_eq!(audit["vehicles"][&id]["armed"], false, "{audit:#}");
+    assert_eq!(audit["vehicles"][&id]["mode"], "OFFBOARD", "{audit:#}");
 }
 
 /// Once the team flies, another process floods one member's port from its own socket for 3 s:
@@ -618,6 +677,48 @@ fn a_signed_team_drops_unsigned_wrongly_signed_and_replayed_frames() {
     assert_no_team_resources(&team_name);
 }
 
+/// Issue 24 item 6, the measurement behind README "Fly real vehicles" and BENCHMARKS.md (not a
+/// check: a benchmark on a shared machine): ten members arm ten exact point-mass vehicles and
+/// fly the 1.9 m translation in `T_TOTAL_S`, `RUNS` times with the acceleration and jerk the
+/// members commanded published as their measured states' feed-forward, and as many times with
+/// zero (`--vehicle-feed-forward zero`, the earlier behaviour), alternating. Prints audit.json's
+/// largest follower and overall deviation from r_HT per run. Run it with
+/// `cargo test --release -p integration-tests --test mavlink_team -- --ignored --nocapture feed_forward`.
+#[test]
+#[ignore = "a measurement (several team flights); run by hand"]
+fn feed_forward_from_measured_neighbours_measured() {
+    const RUNS: usize = 3;
+    const T_TOTAL_S: f64 = 3.0;
+    for run in 0..RUNS {
+        for ff in ["commanded", "zero"] {
+            let dir = TempDir::new();
+            let file = team(T_TOTAL_S);
+            let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+            let base = free_udp_ports(N as u16);
+            let team_name = unique_team("mav10ff");
+            let origins = [ORIGIN; N];
+            let vehicles = start_vehicles(&file, (base, &origins), 0..N, None, &ARMED);
+            let at = [
+                "--vehicle-origin",
+                &csv(ORIGIN),
+                "--arm",
+                "--vehicle-feed-forward",
+                ff,
+            ];
+            let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+            let (_, audit, _) = finished_safe(orch, vehicles, dir.path());
+            let rt = &audit["realtime"];
+            println!(
+                "run {run} feed-forward {ff:9}: max follower deviation {:.4} m, max deviation {:.4} m, late ticks {}",
+                num(&audit, "max_follower_deviation_m"),
+                num(&audit, "max_deviation_m"),
+                rt["late_ticks"]
+            );
+            assert_no_team_resources(&team_name);
+        }
+    }
+}
+
 #[test]
 fn bad_vehicle_options_exit_2_naming_them() {
     let dir = TempDir::new();
@@ -670,8 +771,14 @@ fn bad_vehicle_options_exit_2_naming_them() {
     };
     let (open_case, short_case) = (with_key(open_key), with_key(short_key));
     let min0 = mav("--min-battery", "0");
-    let cases: [(&[&str], &str); 13] = [
+    let ff_bad = mav("--vehicle-feed-forward", "imu");
+    let cases: [(&[&str], &str); 15] = [
         (&min0, "--min-battery 0: must be a percentage in 1..=99"),
+        (&ff_bad, "--vehicle-feed-forward"),
+        (
+            &["--vehicle-feed-forward", "zero"],
+            "need --vehicles mavlink",
+        ),
         (&open_case, &open_needle),
         (&short_case, &short_needle),
         (

@@ -193,7 +193,7 @@ pub struct AuditReport {
 /// One member's real vehicle, from its newest vehicle report (cdm-mavlink `report`): the
 /// stream's punctuality and the vehicle's ATTITUDE. The tracking error against r_HT is in the
 /// audit's own deviation figures, from the measured states.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct VehicleFigures {
     /// Setpoints sent to the vehicle (SET_POSITION_TARGET_LOCAL_NED).
     pub setpoints_sent: u64,
@@ -217,6 +217,11 @@ pub struct VehicleFigures {
     /// The lowest battery the vehicle reported in SYS_STATUS (%, V); absent if none.
     pub lowest_battery_pct: Option<u8>,
     pub lowest_battery_v: Option<Real>,
+    /// The last HEARTBEAT's flight mode as its autopilot names it ("OFFBOARD", "POSCTL",
+    /// "AUTO.RTL", "GUIDED", "LOITER") and whether it was armed; absent before any HEARTBEAT.
+    /// A vehicle taken over shows the mode it left for.
+    pub mode: Option<String>,
+    pub armed: Option<bool>,
 }
 
 /// The pacing figures of a real-time flight, from the members' own reports (their pacing

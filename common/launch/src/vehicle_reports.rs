@@ -64,6 +64,7 @@ mod tests {
             foreign_packets: 0,
             bad_signatures: 0,
             battery: Default::default(),
+            mode: None,
         };
         assert!(book.take(&r.to_msg(4, 9)));
         assert!(

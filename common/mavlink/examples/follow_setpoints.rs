@@ -138,19 +138,20 @@ fn validate(a: &Args) -> anyhow::Result<Run> {
     })
 }
 
-/// r_d(t) on the line and its first two derivatives (eq. 16 scaled by to - from).
+/// r_d(t) on the line and its first three derivatives (eq. 16 scaled by to - from).
 fn setpoint(run: &Run, t: Real) -> Setpoint {
     let segment = if t <= run.quintic.t_total_s {
         Segment::Motion
     } else {
         Segment::Hold
     };
-    let [s, ds, dds, _, _] = run.quintic.derivatives(t, segment);
+    let [s, ds, dds, ddds, _] = run.quintic.derivatives(t, segment);
     let d = run.to - run.from;
     Setpoint {
         position: run.from + d * s,
         velocity: d * ds,
         acceleration: d * dds,
+        jerk: d * ddds,
     }
 }
 

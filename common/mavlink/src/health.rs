@@ -17,6 +17,8 @@
 
 use std::time::Duration;
 
+use crate::flight_mode::FlightMode;
+
 /// `--heartbeat-timeout`'s default: three missed 1 Hz HEARTBEATs.
 pub const DEFAULT_HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(3);
 /// `--position-timeout`'s default: 15 periods of PX4's 30 Hz LOCAL_POSITION_NED stream.
@@ -66,6 +68,19 @@ pub enum LinkFault {
     /// The autopilot's HEARTBEAT reports its own failsafe or worse (`battery.rs`).
     #[error("agent {agent}: vehicle lost: its autopilot reports {state}")]
     Failsafe { agent: u32, state: &'static str },
+    /// After it was seen guided and armed, the vehicle's HEARTBEAT shows another mode: a pilot,
+    /// a mode switch or the autopilot's failsafe took it (`takeover.rs`).
+    #[error("agent {agent}: vehicle lost: it left {left}: now {now} (a pilot, a mode switch or its autopilot took it over); no more setpoints are sent to it")]
+    LeftMode {
+        agent: u32,
+        /// "OFFBOARD" (PX4) or "GUIDED" (ArduPilot).
+        left: &'static str,
+        now: FlightMode,
+    },
+    /// After it was seen guided and armed, the vehicle's HEARTBEAT shows it disarmed
+    /// (`takeover.rs`).
+    #[error("agent {agent}: vehicle lost: disarmed in flight (in {mode}); no more setpoints are sent to it")]
+    Disarmed { agent: u32, mode: FlightMode },
 }
 
 /// When the vehicle's HEARTBEAT and position were last heard, and the verdict.

@@ -23,12 +23,16 @@ pub const SETPOINT_TYPE_MASK: PositionTargetTypemask = PositionTargetTypemask::f
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE.bits(),
 );
 
-/// A desired state in scenario coordinates (ENU): r_d and its first two derivatives.
+/// A desired state in scenario coordinates (ENU): r_d and its first three derivatives.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Setpoint {
     pub position: Vec3,
     pub velocity: Vec3,
     pub acceleration: Vec3,
+    /// Not sent (SET_POSITION_TARGET_LOCAL_NED has no jerk field): the member publishes it with
+    /// its measured state, as the feed-forward its out-neighbours extrapolate with
+    /// (`setpoint::measured_state`).
+    pub jerk: Vec3,
 }
 
 /// The vehicle a message is addressed to (from its HEARTBEAT's header).
@@ -144,6 +148,7 @@ mod tests {
             position: Vec3::new(12.0, 21.0, 3.0),
             velocity: Vec3::new(0.5, 1.0, 0.25),
             acceleration: Vec3::new(0.0, -0.5, 1.0),
+            jerk: Vec3::new(9.0, 9.0, 9.0),
         };
         let target = Target {
             system: 1,

@@ -19,12 +19,13 @@ use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
 use cdm_core::plan::TeamPlan;
 use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
+use cdm_math::Vec3;
 use cdm_runtime::seams::{Vehicle, VehicleFault};
 
-use crate::arming::ArmStage;
+use crate::arming::{ArmStage, VehicleMode};
 use crate::battery::BatteryFigures;
 use crate::messages::Setpoint;
-use crate::setpoint::{hold_at, measured_state, setpoint_for};
+use crate::setpoint::{hold_at, measured_state, setpoint_for, FeedForward};
 use crate::signing::SigningKey;
 use crate::udp::{UdpError, UdpLink};
 use crate::vehicle::{AttitudeFigures, LinkCounters, MavlinkVehicle, VehicleConfig, VehicleError};
@@ -40,6 +41,8 @@ pub struct PlantConfig {
     pub period: Duration,
     /// `--mavlink-signing-key`: sign what is sent, take only what is signed with it.
     pub signing: Option<SigningKey>,
+    /// `--vehicle-feed-forward`: the acceleration and jerk published with the measured state.
+    pub feed_forward: FeedForward,
 }
 
 /// Why the plant could not start (or stopped).
@@ -112,6 +115,8 @@ pub struct MavlinkPlant<'a> {
     streamer: Option<JoinHandle<()>>,
     /// The state before the first measurement (the scenario start, hovering).
     x0: QuadState,
+    /// `--vehicle-feed-forward`.
+    feed_forward: FeedForward,
 }
 
 impl<'a> MavlinkPlant<'a> {
@@ -155,6 +160,7 @@ impl<'a> MavlinkPlant<'a> {
             shared,
             streamer: Some(streamer),
             x0: QuadState::hover(member.start),
+            feed_forward: config.feed_forward,
         };
         plant.wait_ready(interrupted)?;
         Ok(plant)
@@ -248,13 +254,20 @@ impl SendTimes {
 }
 
 impl Vehicle for MavlinkPlant<'_> {
-    /// The newest measurement (one streaming period old at most), in the wire layout.
+    /// The newest measurement (one streaming period old at most), in the wire layout, with the
+    /// acceleration and jerk of the setpoint in force (`--vehicle-feed-forward commanded`: the
+    /// real-time core publishes tick k's state before it flies tick k, so the setpoint in
+    /// force is tick k - 1's, r_d at t_k, the published state's time) or zero.
     fn state(&self) -> [f64; 12] {
         let g = lock(&self.shared);
+        let (a, j) = match self.feed_forward {
+            FeedForward::Commanded => (g.setpoint.acceleration, g.setpoint.jerk),
+            FeedForward::Zero => (Vec3::zeros(), Vec3::zeros()),
+        };
         let x = g
             .vehicle
             .state()
-            .map_or(self.x0, |m| measured_state(m.position, m.velocity));
+            .map_or(self.x0, |m| measured_state(m.position, m.velocity, a, j));
         x.0
     }
 
@@ -304,21 +317,34 @@ impl Drop for MavlinkPlant<'_> {
     }
 }
 
+/// What [`LinkFigures::read`] reads.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkRead {
+    pub counters: LinkCounters,
+    pub attitude: AttitudeFigures,
+    pub battery: BatteryFigures,
+    pub sends: SendTimes,
+    /// The last HEARTBEAT's mode and armed state (`None` before the first).
+    pub mode: Option<VehicleMode>,
+}
+
 /// A read-only view of a plant's link for the vehicle report (`crate::report`).
 #[derive(Debug, Clone)]
 pub struct LinkFigures(Arc<Mutex<Shared>>);
 
 impl LinkFigures {
-    /// The link's counters, newest attitude and extremes, and the stream's punctuality.
-    pub fn read(&self) -> (LinkCounters, AttitudeFigures, BatteryFigures, SendTimes) {
+    /// The link's counters, newest attitude and extremes, battery, the stream's punctuality,
+    /// and the last HEARTBEAT's mode and armed state.
+    pub fn read(&self) -> LinkRead {
         let g = lock(&self.0);
         let v = &g.vehicle;
-        (
-            *v.counters(),
-            v.attitude_figures(),
-            v.battery_figures(),
-            g.sends,
-        )
+        LinkRead {
+            counters: *v.counters(),
+            attitude: v.attitude_figures(),
+            battery: v.battery_figures(),
+            sends: g.sends,
+            mode: v.mode().copied(),
+        }
     }
 }
 

@@ -7,10 +7,12 @@
 
 use std::time::Duration;
 
-use cdm_runtime::messages::{ClockMsg, StateMsg, STATUS_VEHICLE};
+use cdm_runtime::messages::{ClockMsg, StateMsg, STATUS_FAULT, STATUS_VEHICLE};
 use cdm_runtime::seams::MemberTransport;
 
+use crate::arming::{Autopilot, VehicleMode};
 use crate::battery::BatteryFigures;
+use crate::flight_mode::FlightMode;
 use crate::plant::LinkFigures;
 use crate::vehicle::Attitude;
 
@@ -36,12 +38,16 @@ pub struct VehicleReport {
     pub bad_signatures: u64,
     /// The lowest SYS_STATUS battery_remaining (%) and voltage (V), if reported.
     pub battery: BatteryFigures,
+    /// The last HEARTBEAT's mode and armed state, if any: after a take-over, the mode the
+    /// vehicle left for (the report goes out just before the member's fault report).
+    pub mode: Option<VehicleMode>,
 }
 
 impl VehicleReport {
     /// The figures of a plant's link now.
     pub fn of(link: &LinkFigures) -> Self {
-        let (counters, attitude, battery, sends) = link.read();
+        let r = link.read();
+        let (counters, attitude, battery, sends) = (r.counters, r.attitude, r.battery, r.sends);
         VehicleReport {
             setpoints_sent: counters.setpoints_sent,
             late_setpoints: sends.late,
@@ -55,12 +61,26 @@ impl VehicleReport {
             foreign_packets: counters.foreign_packets,
             bad_signatures: counters.bad_signatures,
             battery,
+            mode: r.mode,
         }
+    }
+
+    /// The mode's name as its autopilot names it (`flight_mode.rs`), if a HEARTBEAT came.
+    pub fn mode_name(&self) -> Option<String> {
+        self.mode.map(|m| {
+            FlightMode {
+                autopilot: m.autopilot,
+                custom_mode: m.custom_mode,
+            }
+            .to_string()
+        })
     }
 
     /// As a message: `tick` = setpoints sent, `state` = [late setpoints, max lateness ms,
     /// attitudes, max |roll|, max |pitch|, last roll, pitch, yaw (NaN without one), foreign
-    /// packets, bad signatures, lowest battery %, lowest battery V (NaN: none reported)].
+    /// packets, bad signatures, lowest battery %, lowest battery V (NaN: none reported)];
+    /// the mode in the fault fields, unused by a report: `fault_code` = custom_mode,
+    /// `fault_peer` = [`MODE_PRESENT`] | armed ([`MODE_ARMED`]) | MAV_AUTOPILOT (low byte).
     /// Counts up to 2^53 are exact in an f64.
     pub fn to_msg(&self, id: u32, hash: u64) -> StateMsg {
         let mut f = [0.0; 12];
@@ -75,8 +95,17 @@ impl VehicleReport {
         f[9] = self.bad_signatures as f64;
         f[10] = self.battery.lowest_pct.map_or(f64::NAN, f64::from);
         f[11] = self.battery.lowest_voltage_v.unwrap_or(f64::NAN);
+        let (fault_code, fault_peer) = self.mode.map_or((0, 0), |m| {
+            let armed = if m.armed { MODE_ARMED } else { 0 };
+            (
+                m.custom_mode,
+                MODE_PRESENT | armed | autopilot_code(m.autopilot),
+            )
+        });
         StateMsg {
             status: STATUS_VEHICLE,
+            fault_code,
+            fault_peer,
             ..StateMsg::ok(self.setpoints_sent, hash, id, f)
         }
     }
@@ -105,8 +134,35 @@ impl VehicleReport {
                     lowest_pct: f[10].is_finite().then(|| f[10].clamp(0.0, 100.0) as u8),
                     lowest_voltage_v: f[11].is_finite().then_some(f[11]),
                 },
+                mode: (m.fault_peer & MODE_PRESENT != 0).then(|| VehicleMode {
+                    autopilot: autopilot_of_code(m.fault_peer & 0xff),
+                    custom_mode: m.fault_code,
+                    armed: m.fault_peer & MODE_ARMED != 0,
+                }),
             },
         ))
+    }
+}
+
+/// A vehicle report's `fault_peer` bit: a mode is present.
+pub const MODE_PRESENT: u32 = 1 << 31;
+/// A vehicle report's `fault_peer` bit: the vehicle is armed.
+pub const MODE_ARMED: u32 = 1 << 30;
+
+/// MAV_AUTOPILOT's number (common.xml): 12 PX4, 3 ArduPilot.
+fn autopilot_code(a: Autopilot) -> u32 {
+    match a {
+        Autopilot::Px4 => 12,
+        Autopilot::ArduPilot => 3,
+        Autopilot::Other(n) => n & 0xff,
+    }
+}
+
+fn autopilot_of_code(n: u32) -> Autopilot {
+    match n {
+        12 => Autopilot::Px4,
+        3 => Autopilot::ArduPilot,
+        other => Autopilot::Other(other),
     }
 }
 
@@ -131,8 +187,10 @@ impl<'t, T: MemberTransport> Reporting<'t, T> {
         }
     }
 
+    /// Before each pacing report, and before a fault report (a lost vehicle's, so the audit has
+    /// the mode it left for).
     fn report_before(&mut self, msg: &StateMsg) -> Result<(), T::Error> {
-        if msg.is_pacing() {
+        if msg.is_pacing() || msg.status == STATUS_FAULT {
             let r = VehicleReport::of(&self.link).to_msg(self.id, self.hash);
             self.inner.publish_quietly(r)?;
         }
@@ -202,6 +260,11 @@ mod tests {
                 lowest_pct: Some(42),
                 lowest_voltage_v: Some(15.25),
             },
+            mode: Some(VehicleMode {
+                autopilot: Autopilot::Px4,
+                custom_mode: 3 << 16,
+                armed: true,
+            }),
         };
         let m = r.to_msg(7, 9);
         assert_eq!(VehicleReport::from_msg(&m), Some((7, r)));
@@ -210,10 +273,24 @@ mod tests {
             m.status(),
             cdm_runtime::messages::AgentStatus::Fault { .. }
         ));
+        assert_eq!(r.mode_name().as_deref(), Some("POSCTL"));
         let none = VehicleReport {
             last_attitude_rad: None,
+            mode: None,
             ..r
         };
+        assert_eq!(none.mode_name(), None);
+        let copter = VehicleReport {
+            mode: Some(VehicleMode {
+                autopilot: Autopilot::ArduPilot,
+                custom_mode: 6,
+                armed: false,
+            }),
+            ..r
+        };
+        let back = VehicleReport::from_msg(&copter.to_msg(7, 9));
+        assert_eq!(back, Some((7, copter)));
+        assert_eq!(copter.mode_name().as_deref(), Some("RTL"));
         assert_eq!(VehicleReport::from_msg(&none.to_msg(7, 9)), Some((7, none)));
         assert_eq!(
             VehicleReport::from_msg(&StateMsg::ok(1, 9, 7, [0.0; 12])),

@@ -12,6 +12,7 @@ use crate::battery::{BatteryFigures, BatteryWatch};
 use crate::health::{LinkFault, LinkHealth, LinkTimeouts};
 use crate::messages::{self, Setpoint, Target};
 use crate::ned::{from_f32, ned_to_enu_vector, VehicleOrigin};
+use crate::takeover::TakeoverWatch;
 use cdm_math::{Real, Vec3};
 
 /// The member sends its own HEARTBEAT this often (MAVLink's 1 Hz convention).
@@ -117,6 +118,7 @@ pub struct MavlinkVehicle {
     state: Option<MeasuredState>,
     attitude: AttitudeFigures,
     battery: BatteryWatch,
+    takeover: TakeoverWatch,
     last_heartbeat_sent: Option<Duration>,
     stream_started: Option<Duration>,
     counters: LinkCounters,
@@ -134,6 +136,7 @@ impl MavlinkVehicle {
             state: None,
             attitude: AttitudeFigures::default(),
             battery: BatteryWatch::new(config.agent, config.min_battery_pct),
+            takeover: TakeoverWatch::new(config.agent),
             last_heartbeat_sent: None,
             stream_started: None,
             counters: LinkCounters::default(),
@@ -169,13 +172,15 @@ impl MavlinkVehicle {
                 self.counters.heartbeats_received += 1;
                 self.health.on_heartbeat(now);
                 self.battery.on_system_status(hb.system_status);
-                self.mode = Some(VehicleMode {
+                let mode = VehicleMode {
                     autopilot: autopilot_of(hb.autopilot),
                     custom_mode: hb.custom_mode,
                     armed: hb
                         .base_mode
                         .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
-                });
+                };
+                self.mode = Some(mode);
+                self.takeover.on_heartbeat(mode);
             }
             MavMessage::LOCAL_POSITION_NED(p) => {
                 self.counters.positions_received += 1;
@@ -210,7 +215,9 @@ impl MavlinkVehicle {
 
     /// One tick at `now`: check the link, then return what to send once the vehicle is known
     /// (a HEARTBEAT when one is due, the setpoint, an `--arm` command when one is due).
-    /// `team_ready` says every vehicle of the team reports ready (gates `--arm`).
+    /// `team_ready` says every vehicle of the team reports ready (gates `--arm`). Once the
+    /// vehicle is lost (silent, taken over, its battery or failsafe) every tick is that fault
+    /// and nothing is sent: a vehicle a pilot has taken gets no more setpoints.
     pub fn on_tick(
         &mut self,
         now: Duration,
@@ -218,6 +225,9 @@ impl MavlinkVehicle {
         team_ready: bool,
     ) -> Result<Vec<MavMessage>, VehicleError> {
         self.health.check(now)?;
+        // Before the battery: an autopilot failsafe both reports MAV_STATE_CRITICAL and
+        // switches mode, and the mode says more (RTL, LAND).
+        self.takeover.check()?;
         self.battery.check()?;
         let mut out = Vec::with_capacity(3);
         // Nothing to say before the vehicle is known: there is no one to address.
@@ -392,6 +402,7 @@ mod tests {
             position: Vec3::new(10.0, 20.0, 2.0),
             velocity: Vec3::zeros(),
             acceleration: Vec3::zeros(),
+            jerk: Vec3::zeros(),
         }
     }
 
@@ -561,5 +572,96 @@ mod tests {
             }
         }
         assert_eq!(v.arm_stage(), ArmStage::Armed);
+    }
+
+    /// A fake PX4 on the fake clock: HEARTBEAT at 1 Hz, positions at 50 Hz, obeying `--arm`;
+    /// from `switch_ms` on its HEARTBEAT says `after` (mode, armed). Returns the first fault,
+    /// when it came, and the setpoints sent from `switch_ms` on.
+    fn fly_until_lost(switch_ms: u64, after: (u32, bool)) -> (u64, VehicleError, u32) {
+        let mut v = MavlinkVehicle::new(config(true));
+        let (mut offboard, mut armed) = (false, false);
+        let mut after_switch = 0;
+        for k in 0..=1000u64 {
+            let now_ms = 20 * k;
+            let now = ms(now_ms);
+            if now_ms % 1000 == 0 {
+                let (mode, armed_now) = if now_ms >= switch_ms {
+                    after
+                } else {
+                    (if offboard { 6 << 16 } else { 3 << 16 }, armed)
+                };
+                let beat = heartbeat(MavAutopilot::MAV_AUTOPILOT_PX4, mode, armed_now);
+                v.on_message(now, &VEHICLE, &beat);
+            }
+            v.on_message(now, &VEHICLE, &position(1.0, 2.0, -3.0));
+            let out = match v.on_tick(now, Some(&hover()), true) {
+                Ok(out) => out,
+                Err(e) => {
+                    // Sticky: every later tick is the same fault, and sends nothing.
+                    assert_eq!(v.on_tick(ms(now_ms + 20), Some(&hover()), true), Err(e));
+                    return (now_ms, e, after_switch);
+                }
+            };
+            for m in out {
+                match m {
+                    MavMessage::COMMAND_LONG(c) => {
+                        use mavlink::dialects::common::MavCmd;
+                        offboard |= c.command == MavCmd::MAV_CMD_DO_SET_MODE;
+                        armed |= c.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM && offboard;
+                    }
+                    MavMessage::SET_POSITION_TARGET_LOCAL_NED(_) if now_ms >= switch_ms => {
+                        after_switch += 1;
+                    }
+                    _ => {}
+                }
+            }
+        }
+        panic!("never lost");
+    }
+
+    #[test]
+    fn a_vehicle_switched_out_of_offboard_is_lost_naming_the_mode() {
+        // Armed in OFFBOARD by 4 s; the pilot switches to POSCTL at 6.5 s, which the 7 s
+        // HEARTBEAT shows: that tick is the loss, and no setpoint goes out on it or after.
+        let (at, e, sent) = fly_until_lost(6500, (3 << 16, true));
+        assert_eq!(at, 7000);
+        // Sent between the switch and the HEARTBEAT that shows it (the member cannot know).
+        assert_eq!(sent, 25);
+        assert!(
+            matches!(e, VehicleError::Link(LinkFault::LeftMode { agent: 12, .. })),
+            "{e:?}"
+        );
+        assert!(
+            e.to_string()
+                .starts_with("agent 12: vehicle lost: it left OFFBOARD: now POSCTL"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_vehicle_disarmed_in_flight_is_lost() {
+        let (at, e, _) = fly_until_lost(8000, (6 << 16, false));
+        assert_eq!(at, 8000);
+        assert!(
+            e.to_string()
+                .starts_with("agent 12: vehicle lost: disarmed in flight (in OFFBOARD"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_vehicle_never_engaged_is_never_lost_for_its_mode() {
+        // Without --arm and no operator: POSCTL, disarmed, then armed in POSCTL, all flight.
+        let mut v = MavlinkVehicle::new(config(false));
+        for k in 0..=500u64 {
+            let now = ms(20 * k);
+            let armed = k > 250;
+            if k % 50 == 0 {
+                let beat = heartbeat(MavAutopilot::MAV_AUTOPILOT_PX4, 3 << 16, armed);
+                v.on_message(now, &VEHICLE, &beat);
+            }
+            v.on_message(now, &VEHICLE, &position(1.0, 2.0, -3.0));
+            assert!(v.on_tick(now, Some(&hover()), true).is_ok(), "tick {k}");
+        }
     }
 }

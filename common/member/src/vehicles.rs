@@ -8,8 +8,8 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use cdm_mavlink::{
-    member_addr, LinkTimeouts, MavlinkPlant, PlantConfig, PlantError, SigningKey, VehicleConfig,
-    VehicleOrigin, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
+    member_addr, FeedForward, LinkTimeouts, MavlinkPlant, PlantConfig, PlantError, SigningKey,
+    VehicleConfig, VehicleOrigin, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
 };
 
 use crate::member_error::MemberError;
@@ -34,6 +34,8 @@ pub fn vehicle_figures(r: &VehicleReport) -> cdm_core::audit::VehicleFigures {
         bad_signatures: r.bad_signatures,
         lowest_battery_pct: r.battery.lowest_pct,
         lowest_battery_v: r.battery.lowest_voltage_v,
+        mode: r.mode_name(),
+        armed: r.mode.map(|m| m.armed),
     }
 }
 
@@ -45,6 +47,26 @@ pub enum VehicleKind {
     Model,
     /// A PX4 or ArduPilot vehicle over MAVLink (UDP): member i listens on H:(P + i).
     Mavlink,
+}
+
+/// `--vehicle-feed-forward`: what acceleration and jerk a member publishes with its vehicle's
+/// measured position and velocity (cdm-mavlink `setpoint.rs` says why).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum FeedForwardArg {
+    /// Those the member commanded (its setpoint's feed-forward).
+    #[default]
+    Commanded,
+    /// Zero (no feed-forward for its out-neighbours).
+    Zero,
+}
+
+impl From<FeedForwardArg> for FeedForward {
+    fn from(a: FeedForwardArg) -> Self {
+        match a {
+            FeedForwardArg::Commanded => FeedForward::Commanded,
+            FeedForwardArg::Zero => FeedForward::Zero,
+        }
+    }
 }
 
 /// The command-line options (flattened into the member binaries and `orchestrator launch`).
@@ -106,6 +128,11 @@ pub struct VehicleArgs {
     /// warning at PCT + 10 %. Without it the battery is only recorded (audit.json `vehicles`).
     #[arg(long, value_name = "PCT")]
     pub min_battery: Option<u8>,
+    /// MAVLink: the acceleration and jerk each member publishes with its vehicle's measured
+    /// position and velocity, the feed-forward its out-neighbours fly: those it commanded (its
+    /// setpoint's), or zero.
+    #[arg(long, value_enum, default_value_t = FeedForwardArg::Commanded)]
+    pub vehicle_feed_forward: FeedForwardArg,
 }
 
 impl Default for VehicleArgs {
@@ -121,6 +148,7 @@ impl Default for VehicleArgs {
             position_timeout_s: DEFAULT_POSITION_TIMEOUT.as_secs_f64(),
             mavlink_signing_key: None,
             min_battery: None,
+            vehicle_feed_forward: FeedForwardArg::Commanded,
         }
     }
 }
@@ -142,6 +170,8 @@ pub struct MavlinkOptions {
     pub signing_key: Option<(PathBuf, SigningKey)>,
     /// `--min-battery`.
     pub min_battery_pct: Option<u8>,
+    /// `--vehicle-feed-forward`.
+    pub feed_forward: FeedForward,
 }
 
 /// What each member flies, validated.
@@ -165,7 +195,7 @@ impl VehicleArgs {
         match self.vehicles {
             VehicleKind::Model => {
                 if *self != (VehicleArgs::default()) {
-                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key and --min-battery need --vehicles mavlink".into());
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key, --min-battery and --vehicle-feed-forward need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
             }
@@ -202,6 +232,7 @@ impl VehicleArgs {
                     }
                     other => other,
                 },
+                feed_forward: self.vehicle_feed_forward.into(),
             })),
         }
     }
@@ -243,6 +274,9 @@ impl Vehicles {
         }
         if let Some(pct) = o.min_battery_pct {
             a.extend(["--min-battery".into(), pct.to_string()]);
+        }
+        if o.feed_forward == FeedForward::Zero {
+            a.extend(["--vehicle-feed-forward".into(), "zero".into()]);
         }
         a
     }
@@ -319,6 +353,7 @@ pub fn connect<'a>(
         bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
         signing: o.signing_key.as_ref().map(|(_, key)| *key),
         period: Duration::from_secs_f64(s.dt_s()),
+        feed_forward: o.feed_forward,
     };
     Ok(MavlinkPlant::connect(
         config,
@@ -370,6 +405,8 @@ mod tests {
             "4.25",
             "--position-timeout",
             "0.1",
+            "--vehicle-feed-forward",
+            "zero",
         ])
         .validate(true)
         .expect("valid");
@@ -378,6 +415,7 @@ mod tests {
         };
         assert_eq!(o.origin, Vec3::new(-1.5, 2.0, 0.25));
         assert_eq!((o.base_port, o.arm), (15000, true));
+        assert_eq!(o.feed_forward, FeedForward::Zero);
         assert_eq!(
             o.timeouts,
             LinkTimeouts {
@@ -409,7 +447,9 @@ mod tests {
             panic!("{v:?}")
         };
         assert_eq!(o.timeouts, LinkTimeouts::default());
+        assert_eq!(o.feed_forward, FeedForward::Commanded);
         let forwarded = v.member_args();
+        assert!(!forwarded.iter().any(|a| a == "--vehicle-feed-forward"));
         let at = |flag: &str| {
             let i = forwarded.iter().position(|a| a == flag).expect(flag);
             forwarded[i + 1].clone()
