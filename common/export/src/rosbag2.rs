@@ -61,9 +61,9 @@ fn read_head(run: &Path) -> Result<(Scenario, AuditNumbers), Failure> {
             run.display()
         )));
     }
-    let path = run.join("scenario.toml");
-    let scenario = Scenario::load(&path, Checks::Member)
-        .map_err(|e| Failure::bad_input(format!("{}: {e}", path.display())))?;
+    // Its errors name the file.
+    let scenario =
+        Scenario::load(&run.join("scenario.toml"), Checks::Member).map_err(Failure::bad_input)?;
     let audit = read_audit(&run.join("audit.json")).map_err(Failure::bad_input)?;
     Ok((scenario, audit))
 }
