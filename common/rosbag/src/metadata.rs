@@ -73,3 +73,40 @@ impl BagInfo<'_> {
         y
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_times_and_the_file_are_written_where_rosbag2_reads_them() {
+        let info = BagInfo {
+            file: "b_0.mcap",
+            start_ns: 5,
+            duration_ns: 10,
+            topics: vec![TopicCount {
+                name: "/tf",
+                type_name: "tf2_msgs/msg/TFMessage",
+                type_hash: "RIHS01_x",
+                count: 3,
+            }],
+        };
+        let y = info.yaml();
+        for line in [
+            "  version: 8\n",
+            "  storage_identifier: mcap\n",
+            "  message_count: 3\n",
+            "        name: \"/tf\"\n",
+            "      message_count: 3\n",
+            "  relative_file_paths:\n    - \"b_0.mcap\"\n",
+            "    nanoseconds_since_epoch: 5\n",
+            "    nanoseconds: 10\n",
+        ] {
+            assert!(y.contains(line), "{line:?} not in\n{y}");
+        }
+        assert!(
+            !OFFERED_QOS.contains("  \n"),
+            "continuation lines kept their indent"
+        );
+    }
+}

@@ -220,3 +220,55 @@ fn role_color(role: Role) -> Rgba {
         Role::Follower => Rgba([0.2, 0.5, 1.0, 1.0]),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn team() -> (Scenario, Team) {
+        let s = Scenario::generated(10).expect("a team of 10");
+        let t = Team::new(&s, Limits::from(&SafetyNumbers::of(&s)));
+        (s, t)
+    }
+
+    #[test]
+    fn a_tick_has_a_pose_per_living_member_then_tf_markers_and_margins() {
+        let (s, team) = team();
+        let n = s.formation.members.len();
+        let pos: Vec<Vec3> = (0..n).map(|k| Vec3::new(k as Real, 0.0, 1.0)).collect();
+        let mut alive = vec![true; n];
+        alive[n - 1] = false;
+        let tick = Tick {
+            tick: 7,
+            t_s: 0.07,
+            pos: &pos,
+            ht: &pos,
+            alive: &alive,
+        };
+        let mut out = Vec::new();
+        team.messages(&tick, &mut out);
+        let topics: Vec<Topic> = out.iter().map(|m| m.topic).collect();
+        let mut want: Vec<Topic> = (0..n - 1).map(Topic::Pose).collect();
+        want.extend([Topic::Tf, Topic::Formation, Topic::Audit]);
+        assert_eq!(topics, want);
+        assert!(out.iter().all(|m| m.time_ns == 70_000_000));
+        let margins = team.margins(&tick);
+        assert_eq!(margins["tick"], 7);
+        assert_eq!(margins["deviation_m"], 0.0);
+        // The same tick gives the same bytes.
+        let mut again = Vec::new();
+        team.messages(&tick, &mut again);
+        assert_eq!(out, again);
+    }
+
+    #[test]
+    fn every_topic_is_named_once_and_typed() {
+        let (s, team) = team();
+        let topics = team.topics();
+        assert_eq!(topics.len(), s.formation.members.len() + 3);
+        let names: std::collections::BTreeSet<&str> = topics.iter().map(|t| t.1.as_str()).collect();
+        assert_eq!(names.len(), topics.len());
+        assert_eq!(topics[0].2, MsgType::PoseStamped);
+        assert_eq!(topics[0].1, format!("/cdm/agent_{}/pose", team.ids()[0]));
+    }
+}
