@@ -279,7 +279,9 @@ pub struct RunOptions {
     /// the graph); checked before the flight.
     #[arg(long, value_name = "ID")]
     pub follow: Option<u32>,
-    /// Telemetry file format: telemetry.csv or telemetry.parquet (same columns and values).
+    /// Telemetry file format: telemetry.csv or telemetry.parquet (same columns and values), or
+    /// mcap: telemetry.csv and the run as a ROS 2 bag written during the run (rosbag2/: the
+    /// messages of `export rosbag2`).
     #[arg(long, value_name = "FORMAT", default_value = "csv", value_parser = telemetry_format())]
     pub telemetry: TelemetryFormat,
     /// Lose member ID once it has published its state of time SECONDS (repeatable). With
@@ -292,11 +294,12 @@ pub struct RunOptions {
     pub on_loss: OnLossArg,
 }
 
-/// `--telemetry csv|parquet` (the format type lives in cdm-core, which has no clap).
+/// `--telemetry csv|parquet|mcap` (the format type lives in cdm-core, which has no clap).
 fn telemetry_format() -> impl clap::builder::TypedValueParser<Value = TelemetryFormat> {
     use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(["csv", "parquet"]).map(|s| match s.as_str() {
+    clap::builder::PossibleValuesParser::new(["csv", "parquet", "mcap"]).map(|s| match s.as_str() {
         "parquet" => TelemetryFormat::Parquet,
+        "mcap" => TelemetryFormat::Mcap,
         _ => TelemetryFormat::Csv,
     })
 }

@@ -92,8 +92,8 @@ fn simulate_command(
         losses: LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?,
         on_loss: run.on_loss.into(),
     };
-    let mut tel =
-        cdm_team::telemetry::open(&dir, run.telemetry, out.every).map_err(Failure::bad_input)?;
+    let mut tel = cdm_team::telemetry::open(&dir, run.telemetry, out.every, &s)
+        .map_err(Failure::bad_input)?;
     let last = run
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));

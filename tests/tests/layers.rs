@@ -1,6 +1,6 @@
 //! The crate layering of ARCHITECTURE.md, held by the manifests and checked here from
 //! `cargo metadata`: only `cdm-iox` depends on iceoryx2, only `cdm-math` on nalgebra,
-//! only `cdm-zenoh` on zenoh, and the core crate's whole dependency tree has no iceoryx2, zenoh,
+//! only `cdm-zenoh` on zenoh, only `cdm-rosbag` on mcap, and the core crate's whole dependency tree has no iceoryx2, zenoh,
 //! clap or tracing-subscriber (it is usable as a library on its own).
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -91,6 +91,7 @@ fn only_the_backends_name_their_libraries_and_the_core_stands_alone() {
         ("iceoryx2", "cdm-iox"),
         ("nalgebra", "cdm-math"),
         ("zenoh", "cdm-zenoh"),
+        ("mcap", "cdm-rosbag"),
     ] {
         let direct: Vec<&String> = members
             .iter()

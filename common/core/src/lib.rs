@@ -30,6 +30,7 @@ pub mod link;
 pub mod loss;
 pub mod loss_log;
 pub mod losscert;
+pub mod margins;
 pub mod mission_certificate;
 pub mod outcome;
 pub mod plan;

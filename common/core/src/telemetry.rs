@@ -12,19 +12,21 @@ pub const HEADER: &str = "tick,t,id,role,x,y,z,vx,vy,vz,x_ht,y_ht,z_ht";
 
 /// The file format of a run's telemetry (`--telemetry`). CSV is the default: it is what the
 /// byte-identical determinism tests compare. Parquet (crate `cdm-parquet`) holds the same
-/// columns and values in a fraction of the bytes.
+/// columns and values in a fraction of the bytes. Mcap is telemetry.csv and, beside it, the run
+/// as a ROS 2 bag written during the run (crate `cdm-rosbag`, directory `rosbag2/`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TelemetryFormat {
     #[default]
     Csv,
     Parquet,
+    Mcap,
 }
 
 impl TelemetryFormat {
-    /// The file name in the run directory.
+    /// The file name in the run directory (of the table: a bag is beside telemetry.csv).
     pub fn file_name(self) -> &'static str {
         match self {
-            TelemetryFormat::Csv => "telemetry.csv",
+            TelemetryFormat::Csv | TelemetryFormat::Mcap => "telemetry.csv",
             TelemetryFormat::Parquet => "telemetry.parquet",
         }
     }

@@ -31,6 +31,20 @@ pub enum ExportTarget {
         #[command(flatten)]
         frame: ExportFrame,
     },
+    /// A finished run (the RUN_DIR of `simulate` or `launch`) as a ROS 2 bag for Foxglove and
+    /// `ros2 bag play`: a rosbag2 directory (metadata.yaml and one .mcap) with each member's
+    /// PoseStamped, /tf, the formation's markers and each tick's safety margins.
+    Rosbag2 {
+        /// The run directory (scenario.toml, audit.json, telemetry.csv or telemetry.parquet).
+        #[arg(value_name = "RUN_DIR")]
+        run: PathBuf,
+        /// The bag directory to write.
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// Write into --out even when it exists and is not empty (the bag's files are replaced).
+        #[arg(long)]
+        force: bool,
+    },
 }
 
 /// Where an exported plan flies: p -> scale p + origin, and the target vehicles' radius.

@@ -1,3 +1,5 @@
+//! `orchestrator export rosbag2` (`rosbag2.rs`): a finished run as a ROS 2 bag.
+//!
 //! `orchestrator export crazyswarm2|skybrush`: the plan in the formats real fleets load, in the
 //! target frame (p -> S p + origin), with the certificate issued again at that scale and the
 //! target vehicles' radius. Steps: load and scale (bad input: exit 2), cut the exact quintics
@@ -7,6 +9,7 @@
 pub mod certificate;
 pub mod cli;
 mod crazyswarm2;
+mod rosbag2;
 mod skybrush;
 
 use std::path::{Path, PathBuf};
@@ -66,6 +69,10 @@ pub fn run(target: ExportTarget, quiet: bool) -> Result<Exit, Failure> {
             to_crazyswarm2(&source, &out, &frame, quiet)
         }
         ExportTarget::Skybrush { source, out, frame } => to_skybrush(&source, &out, &frame, quiet),
+        ExportTarget::Rosbag2 { run, out, force } => {
+            refuse_existing(&out, force)?;
+            rosbag2::export(&run, &out, quiet)
+        }
     }
 }
 

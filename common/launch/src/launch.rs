@@ -348,7 +348,7 @@ fn run_team(
 ) -> Result<(Instant, bool), Stop> {
     gather(s, o, ports, children, interrupted)?;
     write_subscriptions(s, ports, dir);
-    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
+    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every, s).map_err(|e| {
         (
             fault(FaultKind::Io, None, None, 0, e.to_string()),
             StopReason::AgentFault,

@@ -158,7 +158,7 @@ pub fn run(
     crate::launch::gather(s, o, ports, children, interrupted)?;
     crate::team_arm::arm_team(s, o, ports, children, interrupted)?;
     crate::launch::write_subscriptions(s, ports, dir);
-    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every).map_err(|e| {
+    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every, s).map_err(|e| {
         let f = fault(FaultKind::Io, None, None, 0, e.to_string());
         (f, StopReason::AgentFault)
     })?;

@@ -8,11 +8,13 @@ use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use cdm_core::formation::Role;
-use cdm_core::frame::deformation_eigenvalues;
 use cdm_core::math::{vec3, Real, Vec3};
-use cdm_core::safety::{min_separation, Prism};
 use cdm_core::scenario::{Checks, Scenario};
 use cdm_core::telemetry::{Row, TelemetryFormat, HEADER};
+
+// The per-tick margins moved to the core (the ROS 2 bag computes them during a run too); named
+// here as before.
+pub use cdm_core::margins::{boundary_distance, lambdas_at, living_separation};
 
 /// A run directory that cannot be read, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -244,13 +246,6 @@ pub fn deepest_follower(s: &Scenario) -> Option<u32> {
         .map(|(_, id)| id)
 }
 
-/// Eigenvalues of U_D at time t, exactly as the audit computes them (eq. 37).
-pub fn lambdas_at(s: &Scenario, t: Real) -> [Real; 3] {
-    s.plan
-        .q_d_at(t)
-        .map_or([0.0; 3], |(q, _)| deformation_eigenvalues(&q))
-}
-
 /// Read a run directory. `follow` overrides the followed member (it must be in the scenario).
 pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let sc_path = dir.join("scenario.toml");
@@ -355,32 +350,6 @@ fn repaired_members(repairs: &[Repair], index: &BTreeMap<u32, usize>) -> Vec<(us
         .collect()
 }
 
-/// D_S(t): the smallest signed distance of a follower (member indices `followers`) to the sides
-/// of Theorem 3's prism over the leaders' desired polygon, as the audit builds it (infinite
-/// without a polygon). Only living members (`alive`) count: a lost one has left the team.
-pub fn boundary_distance(
-    s: &Scenario,
-    followers: &[usize],
-    half_height_m: Real,
-    pos: &[Vec3],
-    ht: &[Vec3],
-    alive: &[bool],
-) -> Real {
-    let verts: Vec<Vec3> = s.formation.polygon.iter().map(|&k| ht[k]).collect();
-    if verts.len() < 3 {
-        return Real::INFINITY;
-    }
-    let normal = (verts[1] - verts[0])
-        .cross(&(verts[2] - verts[0]))
-        .normalize();
-    let prism = Prism::new(verts, normal, half_height_m);
-    followers
-        .iter()
-        .filter(|&&k| alive[k])
-        .map(|&k| prism.side_distance(&pos[k]))
-        .fold(Real::INFINITY, Real::min)
-}
-
 /// One complete tick of a run's telemetry, in the scenario's member order.
 pub struct TickPositions<'a> {
     pub tick: u64,
@@ -391,21 +360,6 @@ pub struct TickPositions<'a> {
     pub ht: &'a [Vec3],
     /// Members still flying at this tick; a lost member's `pos`/`ht` hold its last row.
     pub alive: &'a [bool],
-}
-
-/// D_B(t) over the living members only (a lost member has no rows after its loss).
-pub fn living_separation(pos: &[Vec3], alive: &[bool]) -> (Real, usize, usize) {
-    if alive.iter().all(|&a| a) {
-        return min_separation(pos);
-    }
-    let living: Vec<usize> = (0..pos.len()).filter(|&k| alive[k]).collect();
-    let at: Vec<Vec3> = living.iter().map(|&k| pos[k]).collect();
-    let (d, a, b) = min_separation(&at);
-    (
-        d,
-        living.get(a).copied().unwrap_or(a),
-        living.get(b).copied().unwrap_or(b),
-    )
 }
 
 /// The telemetry of a run directory, row by row in file order (tick, then id), in whichever

@@ -1,40 +1,128 @@
-//! The run's telemetry file in the format `--telemetry` names: telemetry.csv (common) or
-//! telemetry.parquet (crate cdm-parquet, behind the default `parquet` feature).
+//! The run's telemetry file in the format `--telemetry` names: telemetry.csv (common),
+//! telemetry.parquet (crate cdm-parquet, behind the default `parquet` feature), or telemetry.csv
+//! with the run as a ROS 2 bag beside it, `rosbag2/` (crate cdm-rosbag, behind the default
+//! `rosbag` feature).
+
+use std::io;
+use std::path::Path;
 
 use cdm_core::rundir::{RunDir, RunDirError};
-use cdm_core::telemetry::{TelemetryFormat, TelemetrySink};
+use cdm_core::scenario::Scenario;
+use cdm_core::telemetry::{Row, TelemetryFormat, TelemetrySink};
 
 use crate::Failure;
 
 /// Refuse a format this build cannot write, before anything is created.
 pub fn check_available(format: TelemetryFormat) -> Result<(), Failure> {
-    if format == TelemetryFormat::Parquet && !cfg!(feature = "parquet") {
-        return Err(Failure::bad_input(
-            "--telemetry parquet: this orchestrator was built without its `parquet` feature \
-             (build with default features)",
-        ));
+    let (name, built) = match format {
+        TelemetryFormat::Csv => return Ok(()),
+        TelemetryFormat::Parquet => ("parquet", cfg!(feature = "parquet")),
+        TelemetryFormat::Mcap => ("rosbag", cfg!(feature = "rosbag")),
+    };
+    if built {
+        return Ok(());
     }
-    Ok(())
+    Err(Failure::bad_input(format!(
+        "--telemetry {}: this orchestrator was built without its `{name}` feature \
+         (build with default features)",
+        if format == TelemetryFormat::Mcap {
+            "mcap"
+        } else {
+            name
+        }
+    )))
 }
 
-/// Open the run's telemetry file for streaming, keeping every `every`-th tick.
+/// The bag's directory in a run directory (`--telemetry mcap`).
+pub const BAG_DIR: &str = "rosbag2";
+
+/// Open the run's telemetry file for streaming, keeping every `every`-th tick (`s`: the
+/// scenario flown, whose team and limits the bag's messages show).
 pub fn open(
     dir: &RunDir,
     format: TelemetryFormat,
     every: u64,
+    s: &Scenario,
 ) -> Result<Box<dyn TelemetrySink>, RunDirError> {
     // A reused (--force) directory may hold the other format's file from an earlier run: it is
     // one of the tool's files, and `report` must not read it for this run.
     for other in [TelemetryFormat::Csv, TelemetryFormat::Parquet] {
         let p = dir.path().join(other.file_name());
-        if other != format && p.exists() {
+        if other.file_name() != format.file_name() && p.exists() {
             std::fs::remove_file(&p).map_err(|source| RunDirError::Io { path: p, source })?;
         }
+    }
+    if format != TelemetryFormat::Mcap {
+        remove_bag(&dir.path().join(BAG_DIR))?;
     }
     match format {
         TelemetryFormat::Csv => Ok(Box::new(dir.telemetry(every)?)),
         TelemetryFormat::Parquet => open_parquet(dir, every),
+        TelemetryFormat::Mcap => open_bag(dir, every, s),
     }
+}
+
+/// An earlier run's bag in a reused directory: its two files, and the directory once empty.
+fn remove_bag(bag: &Path) -> Result<(), RunDirError> {
+    let files = [
+        bag.join("metadata.yaml"),
+        bag.join(format!("{BAG_DIR}_0.mcap")),
+    ];
+    for p in files {
+        if p.exists() {
+            std::fs::remove_file(&p).map_err(|source| RunDirError::Io { path: p, source })?;
+        }
+    }
+    let _ = std::fs::remove_dir(bag);
+    Ok(())
+}
+
+/// Two sinks fed the same ticks: telemetry.csv and the bag.
+struct Both<A, B>(A, B);
+
+impl<A: TelemetrySink, B: TelemetrySink> TelemetrySink for Both<A, B> {
+    fn keeps(&self, tick: u64) -> bool {
+        self.0.keeps(tick)
+    }
+
+    fn write_tick(&mut self, rows: &[Row]) -> io::Result<()> {
+        self.0.write_tick(rows)?;
+        self.1.write_tick(rows)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.0.flush()?;
+        self.1.flush()
+    }
+
+    fn finish(&mut self) -> io::Result<()> {
+        let table = self.0.finish();
+        let bag = self.1.finish();
+        table.and(bag)
+    }
+}
+
+#[cfg(feature = "rosbag")]
+fn open_bag(dir: &RunDir, every: u64, s: &Scenario) -> Result<Box<dyn TelemetrySink>, RunDirError> {
+    let table = dir.telemetry(every)?;
+    let path = dir.path().join(BAG_DIR);
+    let bag = cdm_rosbag::BagSink::create(&path, s, every).map_err(|e| RunDirError::Io {
+        path,
+        source: io::Error::other(e),
+    })?;
+    Ok(Box::new(Both(table, bag)))
+}
+
+#[cfg(not(feature = "rosbag"))]
+fn open_bag(
+    dir: &RunDir,
+    _every: u64,
+    _s: &Scenario,
+) -> Result<Box<dyn TelemetrySink>, RunDirError> {
+    Err(RunDirError::Io {
+        path: dir.path().join(BAG_DIR),
+        source: io::Error::other("built without the `rosbag` feature"),
+    })
 }
 
 #[cfg(feature = "parquet")]

@@ -1,0 +1,82 @@
+//! `orchestrator export rosbag2 RUN_DIR --out DIR`: a finished run as a ROS 2 bag (crate
+//! cdm-rosbag). The run is read back by cdm-report's reader (scenario.toml, audit.json, and
+//! telemetry.csv or telemetry.parquet, one tick in memory at a time), each tick becomes the
+//! bag's messages, and the limits of the margins are audit.json's. A run directory that cannot
+//! be read is bad input (exit 2, naming the file); the partial bag is removed.
+
+use std::path::Path;
+
+use cdm_core::scenario::{Checks, Scenario};
+use cdm_report::data::{read_audit, stream_ticks, AuditNumbers};
+use cdm_rosbag::{BagError, BagWriter, Limits, Team, Tick};
+use cdm_team::{out, Exit, Failure};
+
+/// Write the bag of the run in `run` into `out` (already checked: absent, empty or --force).
+pub fn export(run: &Path, out: &Path, quiet: bool) -> Result<Exit, Failure> {
+    let (scenario, audit) = read_head(run)?;
+    let limits = Limits {
+        eps_m: audit.eps_m,
+        delta_m: audit.delta_m,
+        lambda_cd_min: audit.lambda_cd_min,
+    };
+    let team = Team::new(&scenario, limits);
+    let mut bag = BagWriter::create(out, &team).map_err(Failure::bad_input)?;
+    let mut messages = Vec::new();
+    let mut failed: Option<BagError> = None;
+    let read = stream_ticks(run, &scenario, &audit.losses, |tp| {
+        if failed.is_some() {
+            return;
+        }
+        let tick = Tick {
+            tick: tp.tick,
+            t_s: tp.t_s,
+            pos: tp.pos,
+            ht: tp.ht,
+            alive: tp.alive,
+        };
+        messages.clear();
+        team.messages(&tick, &mut messages);
+        failed = messages.iter().find_map(|m| bag.write(m).err());
+    });
+    if let Err(e) = read {
+        bag.abandon();
+        return Err(Failure::bad_input(e));
+    }
+    if let Some(e) = failed {
+        bag.abandon();
+        return Err(Failure::fault(e));
+    }
+    bag.finish().map_err(Failure::fault)?;
+    if !quiet {
+        summary(&bag, out);
+    }
+    Ok(Exit::Safe)
+}
+
+/// scenario.toml and audit.json of a run directory, each error naming its file.
+fn read_head(run: &Path) -> Result<(Scenario, AuditNumbers), Failure> {
+    if !run.is_dir() {
+        return Err(Failure::bad_input(format!(
+            "{}: not a run directory (expected the --out of `simulate` or `launch`)",
+            run.display()
+        )));
+    }
+    // Its errors name the file.
+    let scenario =
+        Scenario::load(&run.join("scenario.toml"), Checks::Member).map_err(Failure::bad_input)?;
+    let audit = read_audit(&run.join("audit.json")).map_err(Failure::bad_input)?;
+    Ok((scenario, audit))
+}
+
+fn summary(bag: &BagWriter, out: &Path) {
+    let counts = bag.counts();
+    let total: u64 = counts.iter().map(|c| c.1).sum();
+    out!(
+        "export rosbag2: {total} messages on {} topics -> {}",
+        counts.len(),
+        out.display()
+    );
+    for (name, n) in counts.iter().rev().take(3).rev() {
+        out!("  {name}: {n}");
+    }
+}

@@ -1,0 +1,274 @@
+//! One tick of a run as the bag's messages, pure: the same positions give the same bytes,
+//! whether they come from a finished run's telemetry (`export rosbag2`) or from the run itself
+//! (`--telemetry mcap`).
+
+use serde_json::json;
+
+use cdm_core::audit::SafetyNumbers;
+use cdm_core::formation::Role;
+use cdm_core::margins::{boundary_distance, lambdas_at, living_separation, max_deviation};
+use cdm_core::math::{Real, Vec3};
+use cdm_core::scenario::Scenario;
+
+use crate::msgs::{self, Marker, MsgType, Rgba, Stamp};
+
+/// The frame every position is in.
+pub const WORLD: &str = "world";
+
+/// A topic of the bag: a member's pose (member index), `/tf`, `/cdm/formation`, `/cdm/audit`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Topic {
+    Pose(usize),
+    Tf,
+    Formation,
+    Audit,
+}
+
+/// The limits the margins are measured against (audit.json's numbers).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub eps_m: Real,
+    pub delta_m: Real,
+    pub lambda_cd_min: Real,
+}
+
+impl From<&SafetyNumbers> for Limits {
+    fn from(n: &SafetyNumbers) -> Self {
+        Limits {
+            eps_m: n.eps_m,
+            delta_m: n.delta_m,
+            lambda_cd_min: n.lambda_cd_min,
+        }
+    }
+}
+
+/// One complete tick, in the scenario's member order.
+pub struct Tick<'a> {
+    pub tick: u64,
+    pub t_s: Real,
+    /// Actual positions r_i.
+    pub pos: &'a [Vec3],
+    /// Desired positions r_i,HT.
+    pub ht: &'a [Vec3],
+    /// Members still flying; a lost member has no pose or frame from its loss on.
+    pub alive: &'a [bool],
+}
+
+/// One message: its topic, time (simulation time, ns) and CDR bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Message {
+    pub topic: Topic,
+    pub time_ns: u64,
+    pub data: Vec<u8>,
+}
+
+/// What the messages of a team need, fixed for a run.
+pub struct Team {
+    scenario: Scenario,
+    ids: Vec<u32>,
+    frames: Vec<String>,
+    roles: Vec<Role>,
+    followers: Vec<usize>,
+    limits: Limits,
+}
+
+impl Team {
+    pub fn new(scenario: &Scenario, limits: Limits) -> Self {
+        let members = &scenario.formation.members;
+        Team {
+            scenario: scenario.clone(),
+            ids: members.iter().map(|m| m.id).collect(),
+            frames: members.iter().map(|m| format!("agent_{}", m.id)).collect(),
+            roles: members.iter().map(|m| m.role).collect(),
+            followers: (0..members.len())
+                .filter(|&k| members[k].role == Role::Follower)
+                .collect(),
+            limits,
+        }
+    }
+
+    /// Member ids, in member order.
+    pub fn ids(&self) -> &[u32] {
+        &self.ids
+    }
+
+    /// Every topic with its name and type, in the bag's order.
+    pub fn topics(&self) -> Vec<(Topic, String, MsgType)> {
+        let poses = self.ids.iter().enumerate().map(|(k, id)| {
+            (
+                Topic::Pose(k),
+                format!("/cdm/agent_{id}/pose"),
+                MsgType::PoseStamped,
+            )
+        });
+        poses
+            .chain([
+                (Topic::Tf, "/tf".to_owned(), MsgType::TfMessage),
+                (
+                    Topic::Formation,
+                    "/cdm/formation".to_owned(),
+                    MsgType::MarkerArray,
+                ),
+                (Topic::Audit, "/cdm/audit".to_owned(), MsgType::String),
+            ])
+            .collect()
+    }
+
+    /// The messages of one tick: each living member's pose (id order), `/tf`, the formation's
+    /// markers and the margins.
+    pub fn messages(&self, t: &Tick<'_>, out: &mut Vec<Message>) {
+        let time_ns = time_ns(t.t_s);
+        let stamp = Stamp::from_ns(time_ns);
+        let living = || (0..self.ids.len()).filter(|&k| t.alive[k]);
+        for k in living() {
+            out.push(Message {
+                topic: Topic::Pose(k),
+                time_ns,
+                data: msgs::pose_stamped(stamp, WORLD, &t.pos[k]),
+            });
+        }
+        let frames: Vec<(&str, Vec3)> = living()
+            .map(|k| (self.frames[k].as_str(), t.pos[k]))
+            .collect();
+        out.push(Message {
+            topic: Topic::Tf,
+            time_ns,
+            data: msgs::tf_message(stamp, WORLD, frames.into_iter()),
+        });
+        out.push(Message {
+            topic: Topic::Formation,
+            time_ns,
+            data: self.formation(stamp, t),
+        });
+        out.push(Message {
+            topic: Topic::Audit,
+            time_ns,
+            data: msgs::string(&self.margins(t).to_string()),
+        });
+    }
+
+    /// A sphere of the safety ball's size (2 eps) per member coloured by role (deleted once
+    /// lost), and the leading polygon through the leaders' positions, closed.
+    fn formation(&self, stamp: Stamp, t: &Tick<'_>) -> Vec<u8> {
+        let d = 2.0 * self.limits.eps_m;
+        let polygon: Vec<Vec3> = self
+            .scenario
+            .formation
+            .polygon
+            .iter()
+            .chain(self.scenario.formation.polygon.first())
+            .map(|&k| t.pos[k])
+            .collect();
+        let mut markers: Vec<Marker<'_>> = (0..self.ids.len())
+            .map(|k| Marker {
+                ns: "members",
+                id: i32::try_from(self.ids[k]).unwrap_or(i32::MAX),
+                kind: msgs::SPHERE,
+                action: if t.alive[k] { msgs::ADD } else { msgs::DELETE },
+                position: t.pos[k],
+                scale: Vec3::new(d, d, d),
+                color: role_color(self.roles[k]),
+                points: &[],
+            })
+            .collect();
+        markers.push(Marker {
+            ns: "polygon",
+            id: 0,
+            kind: msgs::LINE_STRIP,
+            action: msgs::ADD,
+            position: Vec3::zeros(),
+            scale: Vec3::new(d / 4.0, 0.0, 0.0),
+            color: Rgba([1.0, 1.0, 1.0, 1.0]),
+            points: &polygon,
+        });
+        msgs::marker_array(stamp, WORLD, &markers)
+    }
+
+    /// The tick's four margins, each with its value and its distance to the limit (positive:
+    /// safe), as JSON: D_B against 2 eps, the largest follower deviation against delta, D_S
+    /// against 0 and lambda_1(U_D) against lambda_CD,min. Infinite values (no follower) are null.
+    pub fn margins(&self, t: &Tick<'_>) -> serde_json::Value {
+        let l = &self.limits;
+        let sep = living_separation(t.pos, t.alive).0;
+        let dev = max_deviation(&self.followers, t.pos, t.ht, t.alive);
+        let half = l.delta_m + l.eps_m;
+        let bnd = boundary_distance(&self.scenario, &self.followers, half, t.pos, t.ht, t.alive);
+        let l1 = lambdas_at(&self.scenario, t.t_s)[0];
+        json!({
+            "tick": t.tick,
+            "t_s": t.t_s,
+            "separation_m": sep,
+            "separation_margin_m": sep - 2.0 * l.eps_m,
+            "deviation_m": dev,
+            "deviation_margin_m": l.delta_m - dev,
+            "boundary_margin_m": bnd,
+            "lambda1": l1,
+            "lambda1_margin": l1 - l.lambda_cd_min,
+        })
+    }
+}
+
+/// Simulation time in nanoseconds (a time before 0 is 0).
+pub fn time_ns(t_s: Real) -> u64 {
+    (t_s * 1e9).round().max(0.0) as u64
+}
+
+fn role_color(role: Role) -> Rgba {
+    match role {
+        Role::Primary => Rgba([0.9, 0.2, 0.2, 1.0]),
+        Role::Secondary => Rgba([1.0, 0.6, 0.1, 1.0]),
+        Role::Follower => Rgba([0.2, 0.5, 1.0, 1.0]),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn team() -> (Scenario, Team) {
+        let s = Scenario::generated(10).expect("a team of 10");
+        let t = Team::new(&s, Limits::from(&SafetyNumbers::of(&s)));
+        (s, t)
+    }
+
+    #[test]
+    fn a_tick_has_a_pose_per_living_member_then_tf_markers_and_margins() {
+        let (s, team) = team();
+        let n = s.formation.members.len();
+        let pos: Vec<Vec3> = (0..n).map(|k| Vec3::new(k as Real, 0.0, 1.0)).collect();
+        let mut alive = vec![true; n];
+        alive[n - 1] = false;
+        let tick = Tick {
+            tick: 7,
+            t_s: 0.07,
+            pos: &pos,
+            ht: &pos,
+            alive: &alive,
+        };
+        let mut out = Vec::new();
+        team.messages(&tick, &mut out);
+        let topics: Vec<Topic> = out.iter().map(|m| m.topic).collect();
+        let mut want: Vec<Topic> = (0..n - 1).map(Topic::Pose).collect();
+        want.extend([Topic::Tf, Topic::Formation, Topic::Audit]);
+        assert_eq!(topics, want);
+        assert!(out.iter().all(|m| m.time_ns == 70_000_000));
+        let margins = team.margins(&tick);
+        assert_eq!(margins["tick"], 7);
+        assert_eq!(margins["deviation_m"], 0.0);
+        // The same tick gives the same bytes.
+        let mut again = Vec::new();
+        team.messages(&tick, &mut again);
+        assert_eq!(out, again);
+    }
+
+    #[test]
+    fn every_topic_is_named_once_and_typed() {
+        let (s, team) = team();
+        let topics = team.topics();
+        assert_eq!(topics.len(), s.formation.members.len() + 3);
+        let names: std::collections::BTreeSet<&str> = topics.iter().map(|t| t.1.as_str()).collect();
+        assert_eq!(names.len(), topics.len());
+        assert_eq!(topics[0].2, MsgType::PoseStamped);
+        assert_eq!(topics[0].1, format!("/cdm/agent_{}/pose", team.ids()[0]));
+    }
+}
