@@ -3,8 +3,8 @@
 //! follower deviation and lambda_1(U_D). The live audit (`audit.rs`) checks the same conditions
 //! against their limits; these are the numbers behind it, for readers of a run.
 
-use crate::math::{Real, Vec3};
 use crate::frame::deformation_eigenvalues;
+use crate::math::{Real, Vec3};
 use crate::safety::{min_separation, Prism};
 use crate::scenario::Scenario;
 
