@@ -65,6 +65,23 @@ fn first_violation(d: &RunData, scale: Real) -> Option<Rule> {
     })
 }
 
+/// A mission's phase boundaries (issue 26): a vertical line where each phase after the first
+/// starts, named; none for the paper's one manoeuvre.
+fn phase_marks(d: &RunData, scale: Real) -> Vec<Rule> {
+    let plan = &d.scenario.plan;
+    if !plan.is_mission() {
+        return Vec::new();
+    }
+    (plan.phases().iter().skip(1))
+        .map(|p| Rule {
+            label: format!("{} from t = {} s", p.kind.name(), p.t_start_s),
+            at: p.t_start_s / scale,
+            vertical: true,
+            color: GREY,
+        })
+        .collect()
+}
+
 fn csv(dir: &Path, name: &str, text: &str) -> Result<PathBuf, FigureError> {
     let p = dir.join(name);
     write_atomic(&p, text.as_bytes())?;
@@ -121,6 +138,7 @@ fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
                 color: LIMIT,
             })
             .chain(first_violation(d, t_total))
+            .chain(phase_marks(d, t_total))
             .collect(),
             log_y: false,
             legend: SeriesLabelPosition::MiddleLeft,
@@ -162,7 +180,7 @@ fn agent(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
                         dashed: true,
                     },
                 ],
-                rules: Vec::new(),
+                rules: phase_marks(d, 1.0),
                 log_y: false,
                 legend: if rising {
                     SeriesLabelPosition::LowerRight
@@ -239,6 +257,7 @@ fn separation(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
             ]
             .into_iter()
             .chain(first_violation(d, 1.0))
+            .chain(phase_marks(d, 1.0))
             .collect(),
             log_y: false,
             legend: SeriesLabelPosition::UpperRight,

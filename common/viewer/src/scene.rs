@@ -45,6 +45,17 @@ pub struct Scene {
     /// The graph after each loss's repair, from the tick it applies (replay of a run with losses).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub graphs: Vec<GraphChange>,
+    /// A mission's phases (issue 26), marked on the replay's timeline; none for one manoeuvre.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub phases: Vec<PhaseMark>,
+}
+
+/// One phase of a mission: its name and when its motion starts and ends (simulation seconds).
+#[derive(Debug, Clone, Serialize)]
+pub struct PhaseMark {
+    pub name: String,
+    pub t_start_s: Real,
+    pub t_end_s: Real,
 }
 
 /// The communication graph in force from `tick` on, as (in-neighbour, follower) member indices.
@@ -75,6 +86,20 @@ pub struct ShownTick {
     /// Ticks per second of wall time (live frames only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rate: Option<Real>,
+}
+
+/// The phases of a mission, or none for the paper's one manoeuvre.
+fn phase_marks(s: &Scenario) -> Vec<PhaseMark> {
+    if !s.plan.is_mission() {
+        return Vec::new();
+    }
+    (s.plan.phases().iter())
+        .map(|p| PhaseMark {
+            name: p.kind.name(),
+            t_start_s: p.t_start_s,
+            t_end_s: p.t_end_s(),
+        })
+        .collect()
 }
 
 impl Scene {
@@ -115,6 +140,7 @@ impl Scene {
             frames: Vec::new(),
             stride: 1,
             graphs: Vec::new(),
+            phases: phase_marks(s),
         }
     }
 
@@ -247,6 +273,18 @@ mod tests {
             .count();
         assert_eq!(scene.edges.len(), 3 * followers);
         assert_eq!(scene.agents.len(), 40);
+        assert!(scene.phases.is_empty());
+    }
+
+    /// A mission's phases reach the replay's timeline (issue 26), in flight order.
+    #[test]
+    fn a_mission_scene_names_its_phases() {
+        let s = Scenario::builtin("paper40-mission").expect("paper40-mission");
+        let scene = Scene::new(&s, 0.1, 0.2, 0.5);
+        let names: Vec<&str> = scene.phases.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names, ["takeoff", "segment 1", "segment 2", "landing"]);
+        assert_eq!(scene.phases[1].t_start_s, 205.0);
+        assert_eq!(scene.phases[3].t_end_s, 715.0);
     }
 
     #[test]

@@ -241,6 +241,16 @@ function replay() {
     mark.style.left = `${(100 * Math.max(i, 0)) / Math.max(frames.length - 1, 1)}%`;
     $('timeline').appendChild(mark);
   }
+  // A mission's phases (take-off, segments, landing): a named line where each starts.
+  for (const p of scene.phases || []) {
+    const i = frames.findIndex((f) => f.t >= p.t_start_s);
+    const mark = document.createElement('div');
+    mark.className = 'phase';
+    mark.textContent = p.name;
+    mark.title = `${p.name}: t = ${p.t_start_s} to ${p.t_end_s} s`;
+    mark.style.left = `${(100 * Math.max(i, 0)) / Math.max(frames.length - 1, 1)}%`;
+    $('timeline').appendChild(mark);
+  }
   scrub.addEventListener('input', () => { shown = Number(scrub.value); playing = false; $('play').textContent = 'play'; draw(); });
   $('play').addEventListener('click', () => {
     playing = !playing;
