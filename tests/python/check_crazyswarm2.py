@@ -4,7 +4,10 @@ Crazyflie's 4 KiB), and numpy evaluates the pieces at 1,000 instants against the
 from `simulate`'s telemetry: 1e-6 m in double precision, 1 mm (and the exported bound) in
 single precision, evaluated the way the firmware does.
 
-usage: check_crazyswarm2.py EXPORT_DIR TELEMETRY_CSV
+A mission's files are checked over its whole duration (certificate.json `duration_s`); with
+GROUND_Z, every trajectory must start and end on the ground at that height.
+
+usage: check_crazyswarm2.py EXPORT_DIR TELEMETRY_CSV [GROUND_Z]
 """
 import json
 import struct
@@ -95,10 +98,19 @@ def eval_f32(packed, pieces, t):
     return out
 
 
-def main(export_dir, telemetry):
+def on_the_ground(ident, rows, packed, t_total, ground_z, bound):
+    """The first and the last point, in double and in single precision, at the ground's z."""
+    ends = np.array([0.0, t_total])
+    z64 = eval_f64(rows, ends)[:, 2]
+    z32 = eval_f32(packed, rows.shape[0], ends)[:, 2]
+    if np.abs(z64 - ground_z).max() > 1e-9 or np.abs(z32 - ground_z).max() > bound:
+        fail(f"{ident}.csv: z at 0 and {t_total} s is {z64} (f32 {z32}), the ground is {ground_z}")
+
+
+def main(export_dir, telemetry, ground_z=None):
     export_dir = Path(export_dir)
     cert = json.loads((export_dir / "certificate.json").read_text())
-    t_total = cert["certificate"]["t_total_s"]
+    t_total = cert.get("duration_s", cert["certificate"]["t_total_s"])
     bound = cert["f32_bound_m"]
     if not bound <= 1e-3:
         fail(f"certificate.json: f32 bound {bound}")
@@ -118,6 +130,8 @@ def main(export_dir, telemetry):
         if sent != cert["trajectory_bytes"]:
             fail(f"{ident}.csv: {sent} bytes, certificate says {cert['trajectory_bytes']}")
         total_bytes = max(total_bytes, sent)
+        if ground_z is not None:
+            on_the_ground(ident, rows, packed, t_total, float(ground_z), bound)
         idx = pick_instants(t_all, t_total)
         t, want = t_all[idx], r_all[idx]
         worst64 = max(worst64, np.abs(eval_f64(rows, t) - want).max())
@@ -132,9 +146,10 @@ def main(export_dir, telemetry):
     print(
         f"crazyswarm2 ok: {len(ref)} quadcopters, {cert['pieces_per_agent']} pieces, "
         f"{total_bytes} of {MEMORY_BYTES} bytes (cflib), max error f64 {worst64:.3e} m, "
-        f"f32 {worst32:.3e} m (bound {bound:.3e} m)"
+        f"f32 {worst32:.3e} m (bound {bound:.3e} m), {t_total} s"
+        + ("" if ground_z is None else f", from and to the ground at z = {ground_z}")
     )
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:3])
+    main(*sys.argv[1:4])

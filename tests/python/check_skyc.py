@@ -3,7 +3,10 @@ specification, the light program is Skybrush bytecode, and the Bézier segments 
 (de Casteljau, numpy) at 1,000 instants are the plan's r_HT from `simulate`'s telemetry within
 1e-6 m.
 
-usage: check_skyc.py SHOW.skyc TELEMETRY_CSV CERTIFICATE_JSON
+A mission's show is checked over its whole duration (the certificate file's `duration_s`); with
+GROUND_Z, every drone must start and end on the ground at that height.
+
+usage: check_skyc.py SHOW.skyc TELEMETRY_CSV CERTIFICATE_JSON [GROUND_Z]
 """
 import base64
 import json
@@ -48,12 +51,13 @@ def evaluate(segs, t):
     return np.array(segs[-1][2][-1], dtype=np.float64)
 
 
-def main(skyc, telemetry, certificate):
+def main(skyc, telemetry, certificate, ground_z=None):
     with zipfile.ZipFile(skyc) as z:
         if z.testzip() is not None:
             fail("corrupt ZIP member")
         show = json.loads(z.read("show.json"))
-    cert = json.loads(open(certificate).read())["certificate"]
+    record = json.loads(open(certificate).read())
+    cert = record["certificate"]
     if show.get("version") != 1:
         fail(f"show version {show.get('version')}")
     v = show["settings"]["validation"]
@@ -68,7 +72,7 @@ def main(skyc, telemetry, certificate):
         fail(f"{len(drones)} drones, telemetry has {len(ref)} agents")
     worst = 0.0
     top_z = top_vxy = 0.0
-    t_total = cert["t_total_s"]
+    t_total = record.get("duration_s", cert["t_total_s"])
     for drone, (ident, (t_all, r_all)) in zip(drones, sorted(ref.items())):
         if drone["type"] != "generic":
             fail(f"drone type {drone['type']}")
@@ -80,6 +84,12 @@ def main(skyc, telemetry, certificate):
         segs = segments(s["trajectory"])
         if abs(segs[-1][1] - t_total) > 1e-9:
             fail(f"drone {ident}: show ends at {segs[-1][1]} s, plan at {t_total} s")
+        if ground_z is not None:
+            first, last = evaluate(segs, 0.0), evaluate(segs, t_total)
+            if abs(first[2] - float(ground_z)) > 1e-9 or abs(last[2] - float(ground_z)) > 1e-9:
+                fail(f"drone {ident}: z {first[2]} at 0 s and {last[2]} at {t_total} s, ground {ground_z}")
+            if abs(s["home"][2] - float(ground_z)) > 1e-9:
+                fail(f"drone {ident}: home {s['home']} is not on the ground")
         idx = pick_instants(t_all, t_total)
         got = np.array([evaluate(segs, t) for t in t_all[idx]])
         worst = max(worst, np.abs(got - r_all[idx]).max())
@@ -91,8 +101,12 @@ def main(skyc, telemetry, certificate):
         fail(f"Bézier curves are {worst} m from r_HT (limit 1e-6 m)")
     if top_z > v["maxAltitude"] + 1e-9 or top_vxy > v["maxVelocityXY"] + 1e-6:
         fail(f"the plan exceeds its own validation: z {top_z}, v_xy {top_vxy}, {v}")
-    print(f"skyc ok: {len(drones)} drones, {len(segs)} segments each, max error {worst:.3e} m")
+    where = "" if ground_z is None else f", from and to the ground at z = {ground_z}"
+    print(
+        f"skyc ok: {len(drones)} drones, {len(segs)} segments each, max error {worst:.3e} m, "
+        f"{segs[-1][1]} s{where}"
+    )
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:4])
+    main(*sys.argv[1:5])

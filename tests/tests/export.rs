@@ -138,6 +138,77 @@ fn skybrush_show_is_the_plan_as_bezier_curves() {
     assert!(String::from_utf8_lossy(&check.stdout).contains("skyc ok: 40 drones, 4 segments"));
 }
 
+/// A mission (issue 26) is exported whole for both targets: take-off, both segments, the hovers
+/// and the landing, read back by cflib and numpy (Crazyswarm2) and the skyc reader against
+/// `simulate`'s r_HT of the scaled mission, on the ground (z = 0 scaled stays 0) at the first
+/// and the last point, lasting the mission's 200 + 5 + 200 + 5 + 150 + 5 + 150 = 715 s.
+#[test]
+fn a_mission_is_exported_from_the_ground_to_the_ground() {
+    const MISSION_S: f64 = 715.0;
+    let tmp = TempDir::new();
+    let dir = tmp.path().join("cf");
+    let skyc = tmp.path().join("mission.skyc");
+    // eps 0.05 m: with a Crazyflie's 0.1 m the take-off at this scale needs 201.48 s > 200 s.
+    let source = [
+        "--builtin",
+        "paper40-mission",
+        "--scale",
+        "0.01",
+        "--eps",
+        "0.05",
+        "--quiet",
+    ];
+    let out = orchestrator(
+        &[
+            &["export", "crazyswarm2", "--out", dir.to_str().unwrap()][..],
+            &source[..],
+        ]
+        .concat(),
+    );
+    assert_eq!(code(&out), Some(0), "{}", describe(&out));
+    let out = orchestrator(
+        &[
+            &["export", "skybrush", "--out", skyc.to_str().unwrap()][..],
+            &source[..],
+        ]
+        .concat(),
+    );
+    assert_eq!(code(&out), Some(0), "{}", describe(&out));
+    let sky_cert = tmp.path().join("mission.certificate.json");
+    for cert in [dir.join("certificate.json"), sky_cert.clone()] {
+        let c: serde_json::Value = serde_json::from_slice(&std::fs::read(&cert).unwrap()).unwrap();
+        assert_eq!(c["duration_s"].as_f64(), Some(MISSION_S), "{c}");
+        assert_eq!(c["certificate"]["verdict"], "SAFE", "{c}");
+    }
+    let fly = std::fs::read_to_string(dir.join("fly.py")).unwrap();
+    assert!(
+        fly.contains("T_TOTAL_S = 715") && !fly.contains("goTo"),
+        "{fly}"
+    );
+    // Both exports wrote the same scaled scenario: one reference flight serves both.
+    let scenario = std::fs::read(dir.join("scenario.toml")).unwrap();
+    assert_eq!(
+        scenario,
+        std::fs::read(tmp.path().join("mission.scenario.toml")).unwrap()
+    );
+    let telemetry = reference(&dir.join("scenario.toml"), tmp.path());
+    let ground = Path::new("0");
+    let check = python("check_crazyswarm2.py", &[&dir, &telemetry, ground]);
+    assert_eq!(code(&check), Some(0), "{}", describe(&check));
+    let said = String::from_utf8_lossy(&check.stdout).into_owned();
+    assert!(
+        said.contains("crazyswarm2 ok") && said.contains("715.0 s, from and to the ground"),
+        "{said}"
+    );
+    let check = python("check_skyc.py", &[&skyc, &telemetry, &sky_cert, ground]);
+    assert_eq!(code(&check), Some(0), "{}", describe(&check));
+    let said = String::from_utf8_lossy(&check.stdout).into_owned();
+    assert!(
+        said.contains("skyc ok: 40 drones") && said.contains("715.0 s, from and to the ground"),
+        "{said}"
+    );
+}
+
 #[test]
 fn single_precision_too_coarse_is_refused_with_both_numbers() {
     // The paper's frame: coordinates near 1 km, where f32 alone is ~1e-4 m and the bound > 1 mm.

@@ -50,7 +50,8 @@ pub enum ExportTarget {
 /// Where an exported plan flies: p -> scale p + origin, and the target vehicles' radius.
 #[derive(Debug, Args, Clone)]
 pub struct ExportFrame {
-    /// Multiply every position and goal by S (the paper's team is 300 m wide; a lab is 5 m).
+    /// Multiply every position and goal by S (the paper's team is 300 m wide; a lab is 5 m);
+    /// a mission's segment goals and ground heights too.
     #[arg(
         long,
         value_name = "S",

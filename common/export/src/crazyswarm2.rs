@@ -2,7 +2,8 @@
 //! `uav_trajectory.py` (`loadcsv`, read by `uploadTrajectory`): the header
 //! `duration,x^0,...,x^7,y^0,...,y^7,z^0,...,z^7,yaw^0,...,yaw^7`, one row per piece,
 //! coefficients in increasing powers of the time local to the piece (ours stop at degree 5,
-//! yaw is 0); a `crazyflies.yaml` fragment; `fly.py`; and `README.txt`.
+//! yaw is 0); a `crazyflies.yaml` fragment; `fly.py`; and `README.txt`. A mission's file holds
+//! every phase and the hovers between them; with `[takeoff]` it starts on the ground.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -51,7 +52,7 @@ pub fn write(dir: &Path, sc: &Scaled, split: &CrazyflieSplit) -> Result<(), Fail
     for t in &sc.trajs {
         let mut text = head.clone();
         text.push('\n');
-        for p in pieces(t, split.pieces) {
+        for p in pieces(t, split.cut) {
             text.push_str(&row(&p));
             text.push('\n');
         }
@@ -62,8 +63,14 @@ pub fn write(dir: &Path, sc: &Scaled, split: &CrazyflieSplit) -> Result<(), Fail
     put(dir, "README.txt", &readme(sc, split))
 }
 
+/// True when the trajectories start on the ground (a mission's take-off is their first phase).
+fn from_the_ground(sc: &Scaled) -> bool {
+    sc.scenario.file.takeoff.is_some()
+}
+
 /// Each drone on the floor under the start of its trajectory (Crazyswarm2 reads
-/// `initial_position` as where the vehicle sits before take-off).
+/// `initial_position` as where the vehicle sits before take-off): z = 0, or the mission's ground
+/// where the trajectory starts.
 fn yaml(sc: &Scaled) -> String {
     let mut y = String::from(
         "# Fragment of Crazyswarm2's crazyflie/config/crazyflies.yaml, written by `orchestrator export\n\
@@ -71,11 +78,13 @@ fn yaml(sc: &Scaled) -> String {
          # initial_position: on the floor (z = 0) under the start of the drone's trajectory.\n\
          robots:\n",
     );
+    let ground = from_the_ground(sc);
     for t in &sc.trajs {
         let p = t.position(0.0);
+        let z = if ground { p.z } else { 0.0 };
         let _ = write!(
             y,
-            "  cf{id}:\n    enabled: true\n    uri: radio://0/80/2M/E7E7E7E7{id:02X}\n    initial_position: [{x}, {yy}, 0.0]\n    type: cf21\n",
+            "  cf{id}:\n    enabled: true\n    uri: radio://0/80/2M/E7E7E7E7{id:02X}\n    initial_position: [{x}, {yy}, {z:?}]\n    type: cf21\n",
             id = t.id,
             x = p.x,
             yy = p.y
@@ -84,9 +93,21 @@ fn yaml(sc: &Scaled) -> String {
     y
 }
 
-/// The flight script: upload every trajectory, take off, go to the starts, fly, land.
+/// The flight script: upload every trajectory, take off, go to the starts, fly, land. A mission
+/// with `[takeoff]` starts its trajectories on the ground: they take off themselves.
 fn fly_py(sc: &Scaled) -> String {
-    let t_total = sc.scenario.file.t_total_s;
+    let t_total = sc.duration_s;
+    let climb = if from_the_ground(sc) {
+        "    # The trajectories start on the ground: their first phase is the take-off.\n"
+    } else {
+        concat!(
+            "    cfs.takeoff(targetHeight=TAKEOFF_HEIGHT_M, duration=3.0)\n",
+            "    clock.sleep(3.5)\n",
+            "    for ident, start in START.items():\n",
+            "        cfs.crazyfliesByName[f\"cf{ident}\"].goTo(start, 0.0, 5.0)\n",
+            "    clock.sleep(5.5)\n"
+        )
+    };
     let lowest = sc
         .trajs
         .iter()
@@ -120,12 +141,7 @@ def main():
         traj = Trajectory()
         traj.loadcsv(str(HERE / f"{{ident}}.csv"))
         cfs.crazyfliesByName[f"cf{{ident}}"].uploadTrajectory(0, 0, traj)
-    cfs.takeoff(targetHeight=TAKEOFF_HEIGHT_M, duration=3.0)
-    clock.sleep(3.5)
-    for ident, start in START.items():
-        cfs.crazyfliesByName[f"cf{{ident}}"].goTo(start, 0.0, 5.0)
-    clock.sleep(5.5)
-    cfs.startTrajectory(0, timescale=1.0, relative=False)
+{climb}    cfs.startTrajectory(0, timescale=1.0, relative=False)
     clock.sleep(T_TOTAL_S + 1.0)
     cfs.land(targetHeight=0.03, duration=4.0)
     clock.sleep(4.5)
@@ -139,9 +155,27 @@ if __name__ == "__main__":
 }
 
 fn readme(sc: &Scaled, split: &CrazyflieSplit) -> String {
+    let flight = if sc.scenario.plan.is_mission() {
+        let names: Vec<String> = (sc.scenario.plan.phases().iter())
+            .map(|p| p.kind.name())
+            .collect();
+        format!(
+            "a mission of {} phases ({}) lasting {} s",
+            names.len(),
+            names.join(", "),
+            sc.duration_s
+        )
+    } else {
+        format!("travel time {} s", sc.scenario.file.t_total_s)
+    };
+    let steps = if from_the_ground(sc) {
+        "startTrajectory(0,\n   relative=False) from the ground: the trajectory takes off itself, lands"
+    } else {
+        "takes off, goes to\n   the starts, startTrajectory(0, relative=False), lands"
+    };
     let mut r = format!(
         "Continuum-deformation plan `{name}` for Crazyswarm2, written by `orchestrator export crazyswarm2`.\n\
-         Scale {scale}, origin {origin:?} m, vehicle radius eps = {eps} m, travel time {t} s.\n\
+         Scale {scale}, origin {origin:?} m, vehicle radius eps = {eps} m, {flight}.\n\
          Each <id>.csv holds {n} polynomial piece(s) of {d:.3} s ({bytes} of 4096 bytes of trajectory\n\
          memory); float32 evaluation stays within {bound:.3e} m of the exact plan (limit 1 mm).\n\
          certificate.json is the certificate at this scale; scenario.toml the scaled scenario\n\
@@ -149,14 +183,12 @@ fn readme(sc: &Scaled, split: &CrazyflieSplit) -> String {
          Upload and start:\n\
          1. Merge crazyflies.yaml into crazyflie/config/crazyflies.yaml (set each uri).\n\
          2. ros2 launch crazyflie launch.py\n\
-         3. python3 fly.py   (uploads every trajectory with uploadTrajectory, takes off, goes to\n\
-         \x20  the starts, startTrajectory(0, relative=False), lands)\n\n\
+         3. python3 fly.py   (uploads every trajectory with uploadTrajectory, {steps})\n\n\
          agent  role       file     Crazyswarm2 name\n",
         name = sc.scenario.file.name,
         scale = sc.frame.scale,
         origin = [sc.frame.origin.x, sc.frame.origin.y, sc.frame.origin.z],
         eps = sc.scenario.file.eps_m,
-        t = sc.scenario.file.t_total_s,
         n = split.pieces,
         d = split.piece_duration_s,
         bytes = split.bytes,

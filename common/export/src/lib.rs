@@ -2,9 +2,10 @@
 //!
 //! `orchestrator export crazyswarm2|skybrush`: the plan in the formats real fleets load, in the
 //! target frame (p -> S p + origin), with the certificate issued again at that scale and the
-//! target vehicles' radius. Steps: load and scale (bad input: exit 2), cut the exact quintics
-//! into pieces (a plan the target cannot hold: exit 2), certify (UNSAFE: exit 1, and the
-//! trajectory files are written only with --force), write.
+//! target vehicles' radius. A mission is exported whole, from the ground to the ground: every
+//! phase's quintic and the hovers between them. Steps: load and scale (bad input: exit 2), cut
+//! the exact quintics into pieces (a plan the target cannot hold: exit 2), certify (UNSAFE: exit
+//! 1, and the trajectory files are written only with --force), write.
 
 pub mod certificate;
 pub mod cli;
@@ -17,8 +18,8 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use cdm_core::export::{
-    crazyflie_split, float32, skybrush_piece_count, team_trajectories, AgentTrajectory,
-    TargetFrame, DEFAULT_TOLERANCE_M,
+    crazyflie_split, float32, pieces, team_trajectories, AgentTrajectory, Cut, TargetFrame,
+    DEFAULT_TOLERANCE_M, SKYBRUSH_MAX_SEGMENT_S,
 };
 use cdm_core::formation::Role;
 use cdm_core::math::{Real, Vec3};
@@ -42,6 +43,8 @@ pub struct Scaled {
     /// r_HT of every member, in id order.
     pub trajs: Vec<AgentTrajectory>,
     pub roles: Vec<Role>,
+    /// The end of the trajectories: T_total, or a mission's last phase's end.
+    pub duration_s: Real,
 }
 
 /// What certificate.json holds: the target, the cut, and the certificate at the target scale.
@@ -52,6 +55,10 @@ struct Record<'a> {
     origin_m: [Real; 3],
     pieces_per_agent: usize,
     piece_duration_s: Real,
+    /// A mission: how long the trajectories last, take-off to landing (absent otherwise, where
+    /// it is the certificate's t_total_s).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    duration_s: Option<Real>,
     #[serde(skip_serializing_if = "Option::is_none")]
     f32_bound_m: Option<Real>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -94,6 +101,7 @@ fn to_crazyswarm2(
         origin_m: sc.frame.origin.into(),
         pieces_per_agent: split.pieces,
         piece_duration_s: split.piece_duration_s,
+        duration_s: mission_duration(&sc),
         f32_bound_m: Some(split.f32_bound_m),
         f32_tolerance_m: Some(DEFAULT_TOLERANCE_M),
         trajectory_bytes: Some(split.bytes),
@@ -129,15 +137,18 @@ fn to_skybrush(
 ) -> Result<Exit, Failure> {
     refuse_existing(out, frame.force)?;
     let sc = scaled(source, frame)?;
-    let count = skybrush_piece_count(sc.scenario.file.t_total_s);
+    let cut = Cut::MaxDuration(SKYBRUSH_MAX_SEGMENT_S);
+    let cut_pieces = sc.trajs.first().map(|t| pieces(t, cut)).unwrap_or_default();
+    let longest_s = cut_pieces.iter().map(|p| p.duration_s).fold(0.0, Real::max);
     let cert = certify_quietly(&sc.scenario, quiet);
     let (dir, stem) = beside(out)?;
     let record = Record {
         target: "skybrush",
         scale: sc.frame.scale,
         origin_m: sc.frame.origin.into(),
-        pieces_per_agent: count,
-        piece_duration_s: sc.scenario.file.t_total_s / count as Real,
+        pieces_per_agent: cut_pieces.len(),
+        piece_duration_s: longest_s,
+        duration_s: mission_duration(&sc),
         f32_bound_m: None,
         f32_tolerance_m: None,
         trajectory_bytes: None,
@@ -149,7 +160,7 @@ fn to_skybrush(
     if refused(&cert, frame.force, out) {
         return Ok(Exit::Unsafe);
     }
-    skybrush::write(out, &sc, count, &cert)?;
+    skybrush::write(out, &sc, cut, &cert)?;
     draw(&dir, &format!("{stem}.top_view"), &sc, quiet);
     done(out, &cert, quiet)
 }
@@ -158,14 +169,6 @@ fn to_skybrush(
 /// again (`Checks::Full`: the gains' stability is part of the certificate).
 fn scaled(source: &Source, frame: &ExportFrame) -> Result<Scaled, Failure> {
     let base = load(source)?;
-    if base.plan.is_mission() {
-        // The exporters cut one quintic per member; a mission's chain of phases is not written
-        // yet (issue 26): refuse rather than export only its first segment.
-        return Err(Failure::bad_input(format!(
-            "{}: exporting a mission ([takeoff], [[segment]], [landing]) is not supported yet; export a scenario without those tables",
-            base.origin
-        )));
-    }
     let origin = match &frame.origin {
         Some(text) => TargetFrame::parse_origin(text).map_err(Failure::bad_input)?,
         None => Vec3::zeros(),
@@ -183,11 +186,18 @@ fn scaled(source: &Source, frame: &ExportFrame) -> Result<Scaled, Failure> {
         .map(|k| scenario.formation.members[k].role)
         .collect();
     Ok(Scaled {
+        duration_s: scenario.plan.end_s(),
         scenario,
         frame: tf,
         trajs,
         roles,
     })
+}
+
+/// certificate.json's `duration_s`: written for a mission only, so the files of a scenario
+/// without mission tables stay as they were.
+fn mission_duration(sc: &Scaled) -> Option<Real> {
+    sc.scenario.plan.is_mission().then_some(sc.duration_s)
 }
 
 fn certify_quietly(s: &Scenario, quiet: bool) -> Certificate {
@@ -317,7 +327,7 @@ fn draw(dir: &Path, stem: &str, sc: &Scaled, quiet: bool) {
         .map(|(t, r)| TopPath {
             leader: r.is_leader(),
             points: (0..=SAMPLES)
-                .map(|k| t.position(t.t_total_s * k as Real / SAMPLES as Real))
+                .map(|k| t.position(sc.duration_s * k as Real / SAMPLES as Real))
                 .collect(),
         })
         .collect();

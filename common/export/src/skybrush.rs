@@ -1,7 +1,9 @@
 //! A Skybrush show: a `.skyc` ZIP holding `show.json` (Skybrush's show specification): every
 //! drone `{type: "generic", settings: {trajectory: {version: 1, points, takeoffTime}, lights}}`
 //! with each piece as a degree-5 Bézier curve (a quintic is one exactly: `Piece::bezier`),
-//! a constant light program, and `settings.validation` from the certificate and the plan.
+//! a constant light program, and `settings.validation` from the certificate and the plan. A
+//! mission is one show from its first phase to its last (on the ground at both ends with
+//! `[takeoff]` and `[landing]`), each hover a constant segment, the limits over every phase.
 
 use std::io::Write as _;
 use std::path::Path;
@@ -10,7 +12,7 @@ use base64::Engine as _;
 use serde::Serialize;
 use zip::write::SimpleFileOptions;
 
-use cdm_core::export::pieces;
+use cdm_core::export::{pieces, Cut};
 use cdm_core::math::{Real, Vec3};
 use cdm_core::rundir::write_atomic;
 use cdm_core::simulate::Certificate;
@@ -109,8 +111,8 @@ fn constant_light(rgb: [u8; 3], seconds: Real) -> Vec<u8> {
     code
 }
 
-fn show(sc: &Scaled, count: usize, cert: &Certificate) -> Show {
-    let t_total = sc.scenario.file.t_total_s;
+fn show(sc: &Scaled, cut: Cut, cert: &Certificate) -> Show {
+    let t_total = sc.duration_s;
     let light =
         base64::engine::general_purpose::STANDARD.encode(constant_light([255, 255, 255], t_total));
     let drones = sc
@@ -119,7 +121,7 @@ fn show(sc: &Scaled, count: usize, cert: &Certificate) -> Show {
         .map(|t| {
             let start = t.position(0.0);
             let mut points = vec![(0.0, arr(start), Vec::new())];
-            for p in pieces(t, count) {
+            for p in pieces(t, cut) {
                 let cp = p.bezier();
                 points.push((
                     p.t0_s + p.duration_s,
@@ -172,8 +174,8 @@ fn show(sc: &Scaled, count: usize, cert: &Certificate) -> Show {
     }
 }
 
-pub fn write(out: &Path, sc: &Scaled, count: usize, cert: &Certificate) -> Result<(), Failure> {
-    let json = serde_json::to_vec(&show(sc, count, cert)).map_err(Failure::fault)?;
+pub fn write(out: &Path, sc: &Scaled, cut: Cut, cert: &Certificate) -> Result<(), Failure> {
+    let json = serde_json::to_vec(&show(sc, cut, cert)).map_err(Failure::fault)?;
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
     let opts = SimpleFileOptions::default()
         .compression_method(zip::CompressionMethod::Stored)

@@ -15,11 +15,12 @@
 //! + gamma_{K+1} T_total |p'|_max                  piece start drift from K rounded durations
 //! ```
 //!
-//! where |p'|_max <= sum_m m |c_m| d^(m-1) on the piece.
+//! where |p'|_max <= sum_m m |c_m| d^(m-1) on the piece, and T_total is the whole chain's duration
+//! (a mission's, take-off to landing, hovers included).
 
 use crate::math::Real;
 
-use super::poly::{pieces, AgentTrajectory, Piece, DEGREE};
+use super::poly::{pieces, AgentTrajectory, Cut, Piece, DEGREE};
 
 /// Unit roundoff of f32.
 const U: Real = f32::EPSILON as Real / 2.0;
@@ -58,22 +59,29 @@ pub fn piece_bound_m(p: &Piece, count: usize, t_total_s: Real) -> Real {
     worst
 }
 
-/// The f32 error bound of a whole team cut into `count` equal pieces, metres.
-pub fn team_bound_m(trajs: &[AgentTrajectory], count: usize) -> Real {
-    trajs
-        .iter()
-        .flat_map(|t| {
-            pieces(t, count)
-                .into_iter()
-                .map(move |p| piece_bound_m(&p, count, t.t_total_s))
-        })
-        .fold(0.0, Real::max)
+/// The f32 error bound of a whole team cut by `cut`, and the pieces per member, metres.
+pub fn team_bound_m(trajs: &[AgentTrajectory], cut: Cut) -> (Real, usize) {
+    let mut worst: Real = 0.0;
+    let mut count = 0;
+    for t in trajs {
+        let ps = pieces(t, cut);
+        count = count.max(ps.len());
+        // The start drift accumulates over every piece of the chain, to its end.
+        for p in &ps {
+            worst = worst.max(piece_bound_m(p, ps.len(), t.duration_s()));
+        }
+    }
+    (worst, count)
 }
 
 /// The chosen cut of a Crazyflie export.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CrazyflieSplit {
+    /// How each member's chain is cut (`Cut::Count(n)`: the longest motion in n pieces).
+    pub cut: Cut,
+    /// Pieces per member, hovers included.
     pub pieces: usize,
+    /// The longest piece, seconds.
     pub piece_duration_s: Real,
     /// The f32 error bound at that cut (the largest over members, pieces and axes), metres.
     pub f32_bound_m: Real,
@@ -96,20 +104,33 @@ pub struct SplitError {
     pub budget_bytes: usize,
 }
 
-/// The fewest equal pieces (1..=MAX_PIECES, what the memory holds) whose f32 bound is within
-/// `tolerance_m`.
+/// The fewest pieces (`Cut::Count(n)` for n = 1, 2, ... while the memory holds them) whose f32
+/// bound is within `tolerance_m`. A mission's hovers take one piece each.
 pub fn crazyflie_split(
     trajs: &[AgentTrajectory],
     tolerance_m: Real,
 ) -> Result<CrazyflieSplit, SplitError> {
-    let t_total_s = trajs.first().map_or(1.0, |t| t.t_total_s);
     let mut best = (Real::INFINITY, 1);
-    for count in 1..=MAX_PIECES {
-        let bound = team_bound_m(trajs, count);
+    for n in 1..=MAX_PIECES {
+        let cut = Cut::Count(n);
+        let (bound, count) = team_bound_m(trajs, cut);
+        if count > MAX_PIECES {
+            // A mission too long for the memory even at one piece per phase names that count.
+            if n == 1 {
+                best = (bound, count);
+            }
+            break;
+        }
         if bound <= tolerance_m {
+            let longest = trajs
+                .iter()
+                .flat_map(|t| pieces(t, cut))
+                .map(|p| p.duration_s)
+                .fold(0.0, Real::max);
             return Ok(CrazyflieSplit {
+                cut,
                 pieces: count,
-                piece_duration_s: t_total_s / count as Real,
+                piece_duration_s: longest,
                 f32_bound_m: bound,
                 bytes: count * PIECE_BYTES,
             });
@@ -159,7 +180,7 @@ mod tests {
     fn bound_covers_the_f32_evaluation() {
         for (scale, count) in [(1.0, 31), (0.01, 1), (0.01, 4), (0.5, 9)] {
             let tr = traj(scale, 200.0);
-            for p in pieces(&tr, count) {
+            for p in pieces(&tr, Cut::Count(count)) {
                 let bound = piece_bound_m(&p, count, 200.0);
                 for k in 0..=500 {
                     let u = p.duration_s * k as Real / 500.0;
@@ -188,7 +209,7 @@ mod tests {
         let s = crazyflie_split(&lab, 1e-3).unwrap();
         assert!(s.f32_bound_m <= 1e-3 && s.pieces <= MAX_PIECES);
         if s.pieces > 1 {
-            assert!(team_bound_m(&lab, s.pieces - 1) > 1e-3);
+            assert!(team_bound_m(&lab, Cut::Count(s.pieces - 1)).0 > 1e-3);
         }
         assert_eq!(s.bytes, s.pieces * 132);
         // Kilometre coordinates: single precision alone is ~1e-4 m there, so 1 um is impossible

@@ -1,15 +1,15 @@
 //! Exports of a plan to the stacks that fly real fleets (Crazyswarm2, Skybrush): every member's
-//! exact degree-5 trajectory (eqs. 13-16), cut into pieces, in the power basis of each piece or
-//! as Bézier control points, the single-precision error bound that picks a Crazyflie's cut, and
-//! the target frame the plan is scaled into. Pure: no I/O (the files are written by
-//! `orchestrator export`).
+//! exact degree-5 trajectory (eqs. 13-16; for a mission the chain of its phases and the hovers
+//! between them), cut into pieces, in the power basis of each piece or as Bézier control points,
+//! the single-precision error bound that picks a Crazyflie's cut, and the target frame the plan
+//! is scaled into. Pure: no I/O (the files are written by `orchestrator export`).
 
 pub mod float32;
 pub mod poly;
 pub mod scale;
 
 pub use float32::{crazyflie_split, CrazyflieSplit, SplitError, DEFAULT_TOLERANCE_M};
-pub use poly::{pieces, AgentTrajectory, Piece, DEGREE};
+pub use poly::{pieces, AgentTrajectory, Cut, Motion, Piece, DEGREE};
 pub use scale::{FrameError, TargetFrame};
 
 use crate::math::Real;
@@ -28,11 +28,6 @@ pub fn team_trajectories(s: &Scenario) -> Vec<AgentTrajectory> {
             AgentTrajectory::new(&s.plan, m.id, &m.alpha)
         })
         .collect()
-}
-
-/// Equal Skybrush segments of at most `SKYBRUSH_MAX_SEGMENT_S` each.
-pub fn skybrush_piece_count(t_total_s: Real) -> usize {
-    ((t_total_s / SKYBRUSH_MAX_SEGMENT_S).ceil() as usize).max(1)
 }
 
 #[cfg(test)]
@@ -57,7 +52,9 @@ mod tests {
                 );
             }
         }
-        assert_eq!(skybrush_piece_count(200.0), 4);
-        assert_eq!(skybrush_piece_count(60.0), 1);
+        // Skybrush: 200 s in 4 equal segments of at most 60 s.
+        let sky = pieces(&trajs[0], Cut::MaxDuration(SKYBRUSH_MAX_SEGMENT_S));
+        assert_eq!(sky.len(), 4);
+        assert_eq!(sky[0].duration_s, 50.0);
     }
 }

@@ -1,7 +1,8 @@
-//! The target frame of an export: p -> S p + origin for every position and goal. A homogeneous
-//! deformation commutes with it (Q stays, d becomes S d + (I - Q) origin), so Q and lambda(U_D)
-//! are unchanged while D_B, D_S and the linear tracking error scale by S (eqs. 11, 34-38); the
-//! vehicles' radius does not shrink, so the certificate is issued again on the scaled scenario.
+//! The target frame of an export: p -> S p + origin for every position and goal (a mission's
+//! segment goals and ground heights too). A homogeneous deformation commutes with it (Q stays, d
+//! becomes S d + (I - Q) origin), so Q and lambda(U_D) are unchanged while D_B, D_S and the linear
+//! tracking error scale by S (eqs. 11, 34-38); the vehicles' radius does not shrink, so the
+//! certificate is issued again on the scaled scenario.
 
 use crate::math::{Real, Vec3};
 use crate::scenario::ScenarioFile;
@@ -82,6 +83,15 @@ impl TargetFrame {
             a.position = self.map(a.position);
             a.goal = a.goal.map(|g| self.map(g));
         }
+        // A mission's waypoints and ground heights are points of the same frame.
+        for seg in &mut f.segments {
+            for g in &mut seg.goals {
+                *g = self.map(*g);
+            }
+        }
+        for ground in [&mut f.takeoff, &mut f.landing].into_iter().flatten() {
+            ground.ground_z_m = ground.ground_z_m * self.scale + self.origin.z;
+        }
         Ok(f)
     }
 }
@@ -106,6 +116,26 @@ mod tests {
         let d1 = crate::safety::d_b(&scaled.formation);
         assert!((d1 - 0.01 * d0).abs() < 1e-9 * d0);
         assert_eq!(scaled.file.eps_m, 0.1);
+    }
+
+    /// A mission's segment goals and ground heights move with the team.
+    #[test]
+    fn a_mission_scales_with_its_ground() {
+        let base = Scenario::builtin("paper40-mission").unwrap();
+        let frame = TargetFrame::new(0.01, Vec3::new(1.0, -2.0, 0.5)).unwrap();
+        let f = frame.apply(&base.file, 0.1).unwrap();
+        let scaled = Scenario::from_file(f, "scaled", Checks::Member).unwrap();
+        let (p0, p1) = (base.plan.phases(), scaled.plan.phases());
+        assert_eq!(p0.len(), p1.len());
+        for (a, b) in p0.iter().zip(p1) {
+            assert_eq!(a.t_start_s, b.t_start_s);
+            for k in 0..3 {
+                let want = Vec3::from(frame.map(a.goal[k].into()));
+                assert!((b.goal[k] - want).norm() < 1e-9, "{:?}", b.kind);
+            }
+        }
+        assert_eq!(scaled.file.takeoff.as_ref().unwrap().ground_z_m, 0.5);
+        assert_eq!(scaled.file.landing.as_ref().unwrap().ground_z_m, 0.5);
     }
 
     #[test]
