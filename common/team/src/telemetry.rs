@@ -8,7 +8,7 @@ use std::path::Path;
 
 use cdm_core::rundir::{RunDir, RunDirError};
 use cdm_core::scenario::Scenario;
-use cdm_core::telemetry::{Row, TelemetryFormat, TelemetrySink};
+use cdm_core::telemetry::{TelemetryFormat, TelemetrySink};
 
 use crate::Failure;
 
@@ -78,14 +78,16 @@ fn remove_bag(bag: &Path) -> Result<(), RunDirError> {
 }
 
 /// Two sinks fed the same ticks: telemetry.csv and the bag.
+#[cfg(feature = "rosbag")]
 struct Both<A, B>(A, B);
 
+#[cfg(feature = "rosbag")]
 impl<A: TelemetrySink, B: TelemetrySink> TelemetrySink for Both<A, B> {
     fn keeps(&self, tick: u64) -> bool {
         self.0.keeps(tick)
     }
 
-    fn write_tick(&mut self, rows: &[Row]) -> io::Result<()> {
+    fn write_tick(&mut self, rows: &[cdm_core::telemetry::Row]) -> io::Result<()> {
         self.0.write_tick(rows)?;
         self.1.write_tick(rows)
     }
