@@ -149,6 +149,30 @@ fn two_hosts_fly_lockstep_exactly_as_simulate() {
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
 }
 
+/// A mission (take-off, three segments, landing: `support::mission`) over two hosts flies the
+/// telemetry of `simulate`, byte for byte (issue 26).
+#[test]
+fn a_mission_over_two_hosts_flies_as_simulate() {
+    let Some(h) = Hosts::create("lm") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("hmission");
+    let scenario = integration_tests::write_scenario(dir.path(), "mission.toml", &mission());
+    let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
+    let source = ["--scenario", scenario.to_str().unwrap(), "--no-figures"];
+    let out_s = out.to_string_lossy().into_owned();
+    let orch = spawn(&mut h.on_a(&launch_args(&h, &team, &out_s, &source)));
+    let daemon = spawn(&mut h.daemon(&["--team", &team]));
+    assert_exit(
+        &run(&mut simulate(&sim, &source), RUN_DEADLINE),
+        0,
+        "simulate",
+    );
+    assert_exit(&orch.finish(RUN_DEADLINE), 0, "launch --hosts 2");
+    assert_exit(&daemon.finish(RUN_DEADLINE), 0, "orchestrator host");
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+    assert_no_team_resources(&team);
+}
+
 /// Real time over two hosts: the start instant travels as a wall-clock time in the clock's
 /// message, members on both hosts pace on it and states cross as they come. A 3 s plan
 /// (301 audits) completes SAFE with its pacing figures; nothing left on either host.

@@ -16,51 +16,14 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-use cdm_core::scenario::{GroundSpec, ScenarioFile, SegmentSpec};
+use cdm_core::scenario::ScenarioFile;
 use integration_tests::{bin, run, write_scenario, TempDir};
-use support::{assert_exit, assert_stderr_has, assert_windows_match_simulate, read_json, simulate};
+use support::{
+    assert_exit, assert_stderr_has, assert_windows_match_simulate, mission, read_json, simulate,
+    GROUND_Z, SEGMENT_2, SEGMENT_3,
+};
 
 const DEADLINE: std::time::Duration = integration_tests::deadline::FLIGHT;
-const GROUND_Z: f64 = 500.0;
-/// The paper's goals (segment 1) turned by 30 degrees about their centre and moved, then the
-/// paper's goals moved 40 m along each axis (rigid motions: no more deformation than the
-/// paper's descent).
-const SEGMENT_2: [[f64; 3]; 3] = [
-    [94.0, 295.2, 540.0],
-    [114.1, 64.4, 540.0],
-    [283.9, 162.4, 540.0],
-];
-const SEGMENT_3: [[f64; 3]; 3] = [
-    [264.0, 474.0, 600.0],
-    [166.0, 264.0, 600.0],
-    [362.0, 264.0, 600.0],
-];
-
-/// Ten members of the paper's kind: take off from z = 500 m (40 s, 1 s hover), the paper's
-/// descent (60 s), two more segments (30 s each after 1 s), land (30 s after 1 s): 194 s, and
-/// 10 s more on the ground while the followers come to rest.
-fn mission() -> ScenarioFile {
-    let mut f = cdm_core::scenario::generated(10).expect("ten agents generate");
-    f.name = "mission10".into();
-    f.t_total_s = 60.0;
-    let ground = |t_s| GroundSpec {
-        ground_z_m: GROUND_Z,
-        t_s,
-        hold_s: Some(1.0),
-    };
-    f.takeoff = Some(ground(40.0));
-    f.segments = [SEGMENT_2, SEGMENT_3]
-        .into_iter()
-        .map(|g| SegmentSpec {
-            hold_s: Some(1.0),
-            t_s: 30.0,
-            goals: g.to_vec(),
-        })
-        .collect();
-    f.landing = Some(ground(30.0));
-    f
-}
-
 fn orchestrator(args: &[&str]) -> std::process::Output {
     run(Command::new(bin("orchestrator")).args(args), DEADLINE)
 }
