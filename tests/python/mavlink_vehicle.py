@@ -9,9 +9,16 @@ HEARTBEAT at --heartbeat-hz (1 Hz), LOCAL_POSITION_NED at --position-hz and ATTI
 --attitude-hz (both --rate-hz unless given). It answers
 DO_SET_MODE / COMPONENT_ARM_DISARM like a strict PX4, counts what it received and the frames that
 failed their checksum, stamps every command and its own readiness (its first HEARTBEAT and
-position) on the wall clock, can go silent after --silent-after seconds, can be taken over by a
-pilot (--take-over-after) or disarmed (--disarm-after), and prints one JSON summary on stdout at
-exit.
+position) on the wall clock, can go silent (--silent-after), report a failsafe
+(--failsafe-after), drain its battery (--battery-drain), be taken over by a pilot
+(--take-over-after) or disarmed (--disarm-after), and prints one JSON summary on stdout at exit.
+
+Every such time counts from an event of the flight, never from this process's start (on a
+loaded machine the team may start seconds after its vehicles, and a failure due before the
+start would race the team's own start): --take-over-after and --disarm-after from when the
+vehicle was first armed in OFFBOARD/GUIDED; --silent-after, --failsafe-after and
+--battery-drain from the flight's start, the first setpoint that is not the member's initial
+hold (the first setpoint received, repeated while the team gets ready).
 
 What it reproduces of PX4 (v1.14+ defaults):
 - HEARTBEAT once a second (PX4 and ArduPilot send it at 1 Hz whatever the link), with
@@ -123,7 +130,8 @@ def parse_args():
     p.add_argument("--require-arm", action="store_true",
                    help="move only when armed in OFFBOARD/GUIDED (otherwise track any setpoint)")
     p.add_argument("--silent-after", type=float, default=None,
-                   help="stop sending after this many seconds (the member must name the loss)")
+                   help="stop sending this many seconds after the flight started (its first "
+                        "setpoint that is not the initial hold; the member must name the loss)")
     p.add_argument("--mute", choices=["all", "heartbeat", "position"], default="all",
                    help="what --silent-after stops")
     p.add_argument("--max-s", type=float, default=30.0, help="hard bound on the run time")
@@ -142,9 +150,11 @@ def parse_args():
                    help="SYS_STATUS rate (PX4 streams it at 5 Hz on an onboard link)")
     p.add_argument("--battery-start", type=float, default=100.0, help="battery_remaining at start, %%")
     p.add_argument("--battery-drain", type=float, default=0.0,
-                   help="battery_remaining lost per second, %%/s (voltage follows, 4S: 16.8 V full, 13.2 V empty)")
+                   help="battery_remaining lost per second from the flight's start, %%/s "
+                        "(voltage follows, 4S: 16.8 V full, 13.2 V empty)")
     p.add_argument("--failsafe-after", type=float, default=None,
-                   help="from this many seconds on, HEARTBEAT reports MAV_STATE_CRITICAL (PX4 in a failsafe)")
+                   help="this many seconds after the flight started, HEARTBEAT reports "
+                        "MAV_STATE_CRITICAL (PX4 in a failsafe)")
     p.add_argument("--take-over-after", type=float, default=None,
                    help="this many seconds after it was first armed in OFFBOARD/GUIDED, a pilot "
                         "takes over: POSCTL (PX4) or LOITER (ArduCopter), setpoints ignored, hold")
@@ -224,6 +234,26 @@ class Vehicle:
         # had left (the member can know only from then on).
         self.loss_shown = False
         self.setpoints_after_shown = 0
+        # When the flight started: the first setpoint that is not the initial hold (its own
+        # clock, s). --silent-after, --failsafe-after and --battery-drain count from it.
+        self.first_setpoint = None
+        self.flight_started_at = None
+
+    def since_flight(self, now):
+        """Seconds since the flight started, or None before."""
+        return None if self.flight_started_at is None else now - self.flight_started_at
+
+    def on_setpoint_value(self, setpoint, now):
+        """Notes the flight's start: a setpoint 1 mm or 1 mm/s (or 1 mm/s^2) away from the first
+        one, which the member repeats while its team gets ready."""
+        if self.first_setpoint is None:
+            self.first_setpoint = setpoint
+        if self.flight_started_at is None and any(
+                abs(a - b) > 1e-3 for new, first in zip(setpoint, self.first_setpoint)
+                for a, b in zip(new, first)):
+            self.flight_started_at = now
+            print(f"mavlink_vehicle {self.args.sysid}: flight started at {now:.2f} s",
+                  file=sys.stderr, flush=True)
 
     def guided(self):
         if self.args.autopilot == "px4":
@@ -253,6 +283,7 @@ class Vehicle:
             self.frames.add(msg.coordinate_frame)
             self.setpoint = ([msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz],
                              [msg.afx, msg.afy, msg.afz])
+            self.on_setpoint_value(self.setpoint, now)
         elif kind == "COMMAND_LONG":
             self.on_command(conn, msg, now)
 
@@ -337,12 +368,15 @@ class Vehicle:
             base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
             if self.armed:
                 base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-            failsafe = self.args.failsafe_after is not None and now >= self.args.failsafe_after
+            since = self.since_flight(now)
+            failsafe = (self.args.failsafe_after is not None and since is not None
+                        and since >= self.args.failsafe_after)
             state = mavlink.MAV_STATE_CRITICAL if failsafe else mavlink.MAV_STATE_ACTIVE
             return conn.mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, autopilot, base,
                                              self.custom_mode, state)
         if kind == "SYS_STATUS":
-            pct = max(0.0, self.args.battery_start - self.args.battery_drain * now)
+            pct = max(0.0, self.args.battery_start
+                      - self.args.battery_drain * (self.since_flight(now) or 0.0))
             self.lowest_battery = min(self.lowest_battery, pct)
             millivolts = int(13200 + 3600 * pct / 100.0)
             return conn.mav.sys_status_encode(0, 0, 0, 0, millivolts, -1, int(pct),
@@ -402,6 +436,7 @@ class Vehicle:
             "setpoints_after_loss": self.setpoints_after_loss,
             "setpoints_after_shown": self.setpoints_after_shown,
             "last_setpoint_s": self.setpoint_times[-1] if self.setpoint_times else None,
+            "flight_started_at_s": self.flight_started_at,
         }
 
 
@@ -520,7 +555,9 @@ def main():
         if now >= k * dt:
             drain(conn, vehicle, now)
             vehicle.step(dt, now)
-            silent = args.silent_after is not None and now >= args.silent_after
+            since = vehicle.since_flight(now)
+            silent = (args.silent_after is not None and since is not None
+                      and since >= args.silent_after)
             if silent and went_silent_at is None:
                 went_silent_at = now
                 print(f"mavlink_vehicle {args.sysid}: silent ({args.mute}) at {now:.2f} s",

@@ -378,7 +378,8 @@ fn lost_vehicle(
 }
 
 /// `--min-battery 20`: one vehicle's SYS_STATUS battery (PX4's 5 Hz onboard stream) drains
-/// from 45 % at 4 %/s. Its member warns once at 30 % and loses the vehicle below 20 %, named
+/// from 45 % at 4 %/s from the flight's start (not the vehicle's: the same race as the
+/// failsafe's below). Its member warns once at 30 % and loses the vehicle below 20 %, named
 /// with the limit; audit.json records each vehicle's lowest battery (the others stay at 100 %).
 #[test]
 fn a_vehicle_below_min_battery_is_lost_named_after_a_warning() {
@@ -414,8 +415,11 @@ fn a_vehicle_below_min_battery_is_lost_named_after_a_warning() {
     );
 }
 
-/// A vehicle whose HEARTBEAT turns to MAV_STATE_CRITICAL (PX4 in a failsafe) 7 s after it
-/// starts is lost, naming the state.
+/// A vehicle whose HEARTBEAT turns to MAV_STATE_CRITICAL (PX4 in a failsafe) 7 s into the
+/// flight is lost, naming the state. The 7 s count from the vehicle's first setpoint that is
+/// not the initial hold (the script's flight start), not from its own start: counted from its
+/// start, the failsafe came before the team's start on a loaded machine, and the member left
+/// while joining (`agent-exited`).
 #[test]
 fn a_vehicle_reporting_its_own_failsafe_is_lost_named() {
     lost_vehicle(
