@@ -24,6 +24,12 @@ use support::{
 };
 
 const DEADLINE: std::time::Duration = integration_tests::deadline::FLIGHT;
+/// `orchestrator plan --scenario SCENARIO --json JSON`.
+fn plan_json(scenario: &Path, json: &Path) -> std::process::Output {
+    let (scenario, json) = (scenario.to_str().unwrap(), json.to_str().unwrap());
+    orchestrator(&["plan", "--scenario", scenario, "--json", json])
+}
+
 fn orchestrator(args: &[&str]) -> std::process::Output {
     run(Command::new(bin("orchestrator")).args(args), DEADLINE)
 }
@@ -53,13 +59,7 @@ fn a_mission_flies_in_processes_as_in_simulate_and_is_certified_per_phase() {
     let dir = TempDir::new();
     let scenario = write_scenario(dir.path(), "mission.toml", &mission());
     let json = dir.path().join("cert.json");
-    let plan = orchestrator(&[
-        "plan",
-        "--scenario",
-        scenario.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
+    let plan = plan_json(&scenario, &json);
     assert_exit(&plan, 0, "plan of the mission");
     let cert = read_json(&json);
     let names: Vec<&str> = (cert["segments"].as_array().expect("segments"))
@@ -166,13 +166,7 @@ fn a_mission_squeezing_its_leaders_in_segment_2_is_unsafe_and_names_segment_2() 
     ];
     let scenario = write_scenario(dir.path(), "squeezed.toml", &f);
     let json = dir.path().join("cert.json");
-    let plan = orchestrator(&[
-        "plan",
-        "--scenario",
-        scenario.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
+    let plan = plan_json(&scenario, &json);
     assert_exit(&plan, 1, "plan of the squeezed mission");
     let stdout = String::from_utf8_lossy(&plan.stdout);
     assert!(

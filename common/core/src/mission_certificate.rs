@@ -22,7 +22,7 @@ use crate::math::{Real, Vec3};
 use crate::outcome::Verdict;
 use crate::plan::{Phase, PhaseKind};
 use crate::scenario::{closest_ground_pair, Scenario};
-use crate::simulate::{t_threshold_from, Certificate};
+use crate::simulate::{t_threshold_from, verdict_of, Certificate};
 
 /// One phase of a mission, certified.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -95,11 +95,7 @@ pub fn certify_mission(s: &Scenario) -> Certificate {
     }
     let (max_link_delay_ms, max_link_delay_at_least) = bound_ms(delay, s.dt_s());
     Certificate {
-        verdict: if reasons.is_empty() {
-            Verdict::Safe
-        } else {
-            Verdict::Unsafe
-        },
+        verdict: verdict_of(&reasons),
         reasons,
         scenario: s.file.name.clone(),
         agents: s.formation.members.len(),
@@ -199,11 +195,7 @@ fn certify_phase(s: &Scenario, n: &SafetyNumbers, p: &Phase) -> (PhaseCertificat
         t_threshold_s: t_thr,
         max_follower_deviation_m: e,
         min_ground_separation_m: ground,
-        verdict: if reasons.is_empty() {
-            Verdict::Safe
-        } else {
-            Verdict::Unsafe
-        },
+        verdict: verdict_of(&reasons),
         reasons,
     };
     (row, delay)

@@ -155,6 +155,15 @@ pub struct Certificate {
     pub segments: Option<Vec<crate::mission_certificate::PhaseCertificate>>,
 }
 
+/// SAFE when nothing is wrong, UNSAFE otherwise.
+pub fn verdict_of(reasons: &[String]) -> Verdict {
+    if reasons.is_empty() {
+        Verdict::Safe
+    } else {
+        Verdict::Unsafe
+    }
+}
+
 /// Max follower deviation at a given travel time (infinite when the flight faults).
 pub fn deviation_at(s: &Scenario, t_total_s: Real) -> Real {
     let mut f = s.file.clone();
@@ -262,11 +271,7 @@ pub fn certify(s: &Scenario) -> Certificate {
         ));
     }
     Certificate {
-        verdict: if reasons.is_empty() {
-            Verdict::Safe
-        } else {
-            Verdict::Unsafe
-        },
+        verdict: verdict_of(&reasons),
         reasons,
         scenario: s.file.name.clone(),
         agents: s.formation.members.len(),

@@ -151,31 +151,15 @@ pub fn step_at<P: Plant>(
         // ERRATA 12: split at every phase's start and end (T_total for the paper's one plan) so
         // that no RK4 step straddles a jump of s'''.
         let mut from = ts;
-        while let Some(b) = plan.break_inside(from, te) {
-            x = substep(
-                cfg,
-                plan,
-                law,
-                t_k,
-                &x,
-                from,
-                b,
-                plan.piece_of(from, b),
-                neighbors,
-            )?;
-            from = b;
+        loop {
+            let to = plan.break_inside(from, te).unwrap_or(te);
+            let piece = plan.piece_of(from, to);
+            x = substep(cfg, plan, law, t_k, &x, from, to, piece, neighbors)?;
+            if to == te {
+                break;
+            }
+            from = to;
         }
-        x = substep(
-            cfg,
-            plan,
-            law,
-            t_k,
-            &x,
-            from,
-            te,
-            plan.piece_of(from, te),
-            neighbors,
-        )?;
     }
     Ok(x)
 }
