@@ -22,7 +22,7 @@ use crate::math::{Real, Vec3};
 use crate::outcome::Verdict;
 use crate::plan::{Phase, PhaseKind};
 use crate::scenario::{closest_ground_pair, Scenario};
-use crate::simulate::{t_threshold_from, verdict_of, Certificate};
+use crate::simulate::{t_threshold_from, unstable_gains, verdict_of, Certificate};
 
 /// One phase of a mission, certified.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -88,11 +88,7 @@ pub fn certify_mission(s: &Scenario) -> Certificate {
         ));
     }
     let margin = s.gains_margin.unwrap_or(Real::NAN);
-    if margin.is_nan() || margin <= 0.0 {
-        reasons.push(format!(
-            "gains are not stable for this graph (margin {margin:.4}, eq. 26)"
-        ));
-    }
+    reasons.extend(unstable_gains(margin));
     let (max_link_delay_ms, max_link_delay_at_least) = bound_ms(delay, s.dt_s());
     Certificate {
         verdict: verdict_of(&reasons),

@@ -155,6 +155,12 @@ pub struct Certificate {
     pub segments: Option<Vec<crate::mission_certificate::PhaseCertificate>>,
 }
 
+/// The reason a certificate fails when the gains' stability margin (eq. 26) is not positive.
+pub fn unstable_gains(margin: Real) -> Option<String> {
+    (margin.is_nan() || margin <= 0.0)
+        .then(|| format!("gains are not stable for this graph (margin {margin:.4}, eq. 26)"))
+}
+
 /// SAFE when nothing is wrong, UNSAFE otherwise.
 pub fn verdict_of(reasons: &[String]) -> Verdict {
     if reasons.is_empty() {
@@ -265,11 +271,7 @@ pub fn certify(s: &Scenario) -> Certificate {
             s.file.t_total_s, t_thr, e, n.delta_m
         ));
     }
-    if margin.is_nan() || margin <= 0.0 {
-        reasons.push(format!(
-            "gains are not stable for this graph (margin {margin:.4}, eq. 26)"
-        ));
-    }
+    reasons.extend(unstable_gains(margin));
     Certificate {
         verdict: verdict_of(&reasons),
         reasons,

@@ -54,7 +54,8 @@ pub(super) fn phases(
     plan: &TeamPlan,
     formation: &Formation,
 ) -> Result<Vec<Phase>, E> {
-    let order = primary_order(f);
+    let ids = primary_ids(f);
+    let order = primary_order(&ids);
     let mut out = Vec::new();
     let mut t = 0.0;
     if let Some(to) = &f.takeoff {
@@ -79,7 +80,7 @@ pub(super) fn phases(
         let goal = goals_of(seg, &name, &order)?;
         let from = out.last().map_or(plan.goal, |p: &Phase| p.goal);
         let p = phase(PhaseKind::Segment(n), t + hold, t_s, from, goal);
-        check_collinear(f, &p, &name)?;
+        check_collinear(ids, &p, &name)?;
         out.push(p);
         t += hold + t_s;
     }
@@ -132,16 +133,18 @@ fn timing(f: &ScenarioFile, name: &str, t_s: Real, hold: Option<Real>) -> Result
     Ok((t_s, hold))
 }
 
+/// The primary leaders' ids in the plan's order (file order; validation found exactly three).
+fn primary_ids(f: &ScenarioFile) -> [u32; 3] {
+    let mut ids = (f.agents.iter())
+        .filter(|a| a.role == Role::Primary)
+        .map(|a| a.id);
+    std::array::from_fn(|_| ids.next().unwrap_or(0))
+}
+
 /// For each primary leader in the plan's order, its rank in ascending id order (the order of a
 /// segment's `goals`).
-fn primary_order(f: &ScenarioFile) -> [usize; 3] {
-    let ids: Vec<u32> = f
-        .agents
-        .iter()
-        .filter(|a| a.role == Role::Primary)
-        .map(|a| a.id)
-        .collect();
-    let mut sorted = ids.clone();
+fn primary_order(ids: &[u32; 3]) -> [usize; 3] {
+    let mut sorted = *ids;
     sorted.sort_unstable();
     std::array::from_fn(|k| sorted.iter().position(|&id| id == ids[k]).unwrap_or(k))
 }
@@ -165,12 +168,7 @@ fn goals_of(seg: &SegmentSpec, name: &str, order: &[usize; 3]) -> Result<[Vec3; 
 }
 
 /// The primary leaders stay a triangle along the segment and at its goal (eq. 7).
-fn check_collinear(f: &ScenarioFile, p: &Phase, name: &str) -> Result<(), E> {
-    let mut ids: Vec<u32> = (f.agents.iter())
-        .filter(|a| a.role == Role::Primary)
-        .map(|a| a.id)
-        .collect();
-    ids.resize(3, 0);
+fn check_collinear(ids: [u32; 3], p: &Phase, name: &str) -> Result<(), E> {
     // The waypoint first (the likelier mistake, and the clearer message), then the way there.
     for k in std::iter::once(1000).chain(0..1000) {
         let s = k as Real / 1000.0;
@@ -185,11 +183,7 @@ fn check_collinear(f: &ScenarioFile, p: &Phase, name: &str) -> Result<(), E> {
                     p.t_start_s + p.quintic.time_of(s)
                 )
             };
-            return Err(E::Collinear {
-                ids: [ids[0], ids[1], ids[2]],
-                when,
-                sine,
-            });
+            return Err(E::Collinear { ids, when, sine });
         }
     }
     Ok(())
