@@ -122,6 +122,9 @@ fn validate(a: &Args) -> anyhow::Result<Run> {
             position: positive_s("position-timeout", a.position_timeout_s)?,
         },
         min_battery_pct: None,
+        // One member and a straight line: no mission, so no take-off or landing.
+        takeoff: None,
+        disarm_at_end: false,
     };
     // Ticks 0..=ticks cover [0, move + hold] at comm_hz.
     let ticks = ((a.move_s + a.hold_s) * a.comm_hz).round() as u64;

@@ -61,13 +61,20 @@ pub struct VehicleMode {
     pub armed: bool,
 }
 
-/// A command the member must send now.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// A command the member must send now (COMMAND_LONG: `messages::command`).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ArmAction {
     /// MAV_CMD_DO_SET_MODE with the custom-mode flag, `custom_mode` and `sub_mode`.
     SetMode { custom_mode: u32, sub_mode: u32 },
     /// MAV_CMD_COMPONENT_ARM_DISARM with param1 = 1 (arm).
     Arm,
+    /// MAV_CMD_NAV_TAKEOFF with param7 = `altitude_m` above home (ArduCopter, `takeoff.rs`).
+    Takeoff { altitude_m: f32 },
+    /// MAV_CMD_NAV_LAND at the vehicle's position (`--disarm-at-end`: `landing.rs`).
+    Land,
+    /// MAV_CMD_COMPONENT_ARM_DISARM with param1 = 0 and param2 = 0, never forced
+    /// (`--disarm-at-end`: `landing.rs`).
+    Disarm,
 }
 
 /// Why `--arm` failed. Every variant names the member (by id).
@@ -101,9 +108,8 @@ pub enum ArmStage {
 pub struct ArmSequence {
     agent: u32,
     stage: ArmStage,
-    /// When the current stage last sent a request, and how many it sent.
-    last_request: Option<Duration>,
-    requests: u32,
+    /// The current stage's requests.
+    retries: Retries,
 }
 
 impl ArmSequence {
@@ -117,8 +123,7 @@ impl ArmSequence {
         ArmSequence {
             agent,
             stage,
-            last_request: None,
-            requests: 0,
+            retries: Retries::default(),
         }
     }
 
@@ -129,7 +134,7 @@ impl ArmSequence {
 
     /// Requests sent in the current stage (the last action returned was number `requests()`).
     pub fn requests(&self) -> u32 {
-        self.requests
+        self.retries.sent()
     }
 
     /// One step at `now`. `mode` is the vehicle's last HEARTBEAT (`None` before the first),
@@ -194,8 +199,7 @@ impl ArmSequence {
 
     fn enter(&mut self, stage: ArmStage) {
         self.stage = stage;
-        self.last_request = None;
-        self.requests = 0;
+        self.retries = Retries::default();
     }
 
     /// Send `action` if the last request is [`RETRY_INTERVAL`] old (or there was none); fail
@@ -206,18 +210,53 @@ impl ArmSequence {
         action: ArmAction,
         refused: ArmError,
     ) -> Result<Option<ArmAction>, ArmError> {
+        match self.retries.next(now) {
+            Retry::Wait => Ok(None),
+            Retry::Send => Ok(Some(action)),
+            Retry::Exhausted => Err(refused),
+        }
+    }
+}
+
+/// What [`Retries::next`] says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Retry {
+    /// The last request is younger than [`RETRY_INTERVAL`].
+    Wait,
+    /// Send the request now (counted).
+    Send,
+    /// [`MAX_REQUESTS`] went unanswered: give up.
+    Exhausted,
+}
+
+/// One command's requests under MAVLink's command protocol: a COMMAND_LONG over UDP can be lost,
+/// so it is sent again every [`RETRY_INTERVAL`] until answered, [`MAX_REQUESTS`] times at most.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Retries {
+    last: Option<Duration>,
+    sent: u32,
+}
+
+impl Retries {
+    /// Whether to send the request at `now`.
+    pub fn next(&mut self, now: Duration) -> Retry {
         let due = self
-            .last_request
+            .last
             .is_none_or(|t| now.saturating_sub(t) >= RETRY_INTERVAL);
         if !due {
-            return Ok(None);
+            return Retry::Wait;
         }
-        if self.requests >= MAX_REQUESTS {
-            return Err(refused);
+        if self.sent >= MAX_REQUESTS {
+            return Retry::Exhausted;
         }
-        self.requests += 1;
-        self.last_request = Some(now);
-        Ok(Some(action))
+        self.sent += 1;
+        self.last = Some(now);
+        Retry::Send
+    }
+
+    /// Requests sent so far.
+    pub fn sent(&self) -> u32 {
+        self.sent
     }
 }
 

@@ -4,22 +4,26 @@
 //! HEARTBEAT once a second.
 //!
 //! Layers: `ned` (frame conversion), `health` (loss detection), `takeover` (a vehicle leaving
-//! OFFBOARD/GUIDED, named by `flight_mode`), `arming` (`--arm` sequence) and `messages` (what
-//! is sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
+//! OFFBOARD/GUIDED, named by `flight_mode`), `arming` (`--arm` sequence), `takeoff` and
+//! `landing` (ArduCopter's take-off, `--disarm-at-end`; `flight_ends` holds both) and
+//! `messages` (what is sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
 //! without I/O, driven by the caller's clock; `udp` is the socket. `setpoint` (pure) and `plant`
 //! put them behind the member's `Vehicle` seam (cdm-runtime): [`MavlinkPlant`]. The encoding is
 //! the `mavlink` crate's (MAVLink 2, common dialect).
 
 pub mod arming;
 pub mod battery;
+pub mod flight_ends;
 pub mod flight_mode;
 pub mod health;
+pub mod landing;
 pub mod messages;
 pub mod ned;
 pub mod plant;
 pub mod report;
 pub mod setpoint;
 pub mod signing;
+pub mod takeoff;
 pub mod takeover;
 pub mod team_arm;
 pub mod udp;

@@ -84,11 +84,12 @@ pub fn position_target(
     })
 }
 
-/// The COMMAND_LONG of an `--arm` step. `confirmation` counts retransmissions (MAVLink's
+/// The COMMAND_LONG of an `--arm`, take-off or landing step. `confirmation` counts retransmissions (MAVLink's
 /// command protocol: 0 for the first, +1 for each repeat).
 pub fn command(target: Target, action: ArmAction, confirmation: u8) -> MavMessage {
     let custom = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits();
     // COMMAND_LONG params are f32 by definition; mode numbers are small integers, exact in f32.
+    let mut p7 = 0.0;
     let (cmd, p1, p2, p3) = match action {
         ArmAction::SetMode {
             custom_mode,
@@ -100,6 +101,14 @@ pub fn command(target: Target, action: ArmAction, confirmation: u8) -> MavMessag
             sub_mode as f32,
         ),
         ArmAction::Arm => (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, 0.0),
+        // param2 = 0: not forced (21196 would disarm in the air).
+        ArmAction::Disarm => (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0, 0.0, 0.0),
+        // Latitude, longitude and altitude 0: land where the vehicle is (its Land mode).
+        ArmAction::Land => (MavCmd::MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0),
+        ArmAction::Takeoff { altitude_m } => {
+            p7 = altitude_m;
+            (MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0)
+        }
     };
     MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
         param1: p1,
@@ -108,7 +117,7 @@ pub fn command(target: Target, action: ArmAction, confirmation: u8) -> MavMessag
         param4: 0.0,
         param5: 0.0,
         param6: 0.0,
-        param7: 0.0,
+        param7: p7,
         command: cmd,
         target_system: target.system,
         target_component: target.component,
@@ -191,5 +200,20 @@ mod tests {
         };
         assert_eq!(a.command, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM);
         assert_eq!((a.param1, a.confirmation), (1.0, 2));
+        let roundtrip = |action| match round_trip(&command(target, action, 0)) {
+            MavMessage::COMMAND_LONG(c) => c,
+            other => panic!("wrong message type {other:?}"),
+        };
+        let t = roundtrip(ArmAction::Takeoff { altitude_m: 0.35 });
+        assert_eq!((t.command, t.param7), (MavCmd::MAV_CMD_NAV_TAKEOFF, 0.35));
+        let l = roundtrip(ArmAction::Land);
+        assert_eq!(
+            (l.command, l.param5, l.param6),
+            (MavCmd::MAV_CMD_NAV_LAND, 0.0, 0.0)
+        );
+        // A disarm that is never forced (param2 21196 would be).
+        let d = roundtrip(ArmAction::Disarm);
+        assert_eq!(d.command, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM);
+        assert_eq!((d.param1, d.param2), (0.0, 0.0));
     }
 }

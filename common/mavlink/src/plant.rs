@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use cdm_core::dynamics::{Flat, QuadState};
 use cdm_core::formation::Member;
-use cdm_core::plan::TeamPlan;
+use cdm_core::plan::{PhaseKind, TeamPlan};
 use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
 use cdm_math::Vec3;
 use cdm_runtime::seams::{Vehicle, VehicleFault};
@@ -74,6 +74,8 @@ struct Shared {
     team_ready: bool,
     /// The stream's own punctuality (late setpoints), for the vehicle report.
     sends: SendTimes,
+    /// The plan's landing is over (`--disarm-at-end` lands and disarms from then on).
+    landing_over: bool,
 }
 
 /// How punctually the streaming thread sent its setpoints.
@@ -117,6 +119,8 @@ pub struct MavlinkPlant<'a> {
     x0: QuadState,
     /// `--vehicle-feed-forward`.
     feed_forward: FeedForward,
+    /// When the plan's last phase, a landing, ends (none without one).
+    landing_end_s: Option<f64>,
 }
 
 impl<'a> MavlinkPlant<'a> {
@@ -143,6 +147,7 @@ impl<'a> MavlinkPlant<'a> {
             stop: false,
             team_ready: false,
             sends: SendTimes::default(),
+            landing_over: false,
         }));
         let for_thread = Arc::clone(&shared);
         let streamer = std::thread::Builder::new()
@@ -161,6 +166,11 @@ impl<'a> MavlinkPlant<'a> {
             streamer: Some(streamer),
             x0: QuadState::hover(member.start),
             feed_forward: config.feed_forward,
+            landing_end_s: plan
+                .phases()
+                .last()
+                .filter(|p| p.kind == PhaseKind::Landing)
+                .map(|p| p.t_end_s()),
         };
         plant.wait_ready(interrupted)?;
         Ok(plant)
@@ -220,7 +230,7 @@ impl<'a> MavlinkPlant<'a> {
         }
         Ok(match g.vehicle.arm_stage() {
             ArmStage::StreamOnly => ArmProgress::StreamOnly,
-            ArmStage::Armed => ArmProgress::Armed,
+            ArmStage::Armed if g.vehicle.ready_to_fly() => ArmProgress::Armed,
             _ => ArmProgress::Pending,
         })
     }
@@ -296,6 +306,11 @@ impl Vehicle for MavlinkPlant<'_> {
             return Err(Self::link_fault(f));
         }
         g.setpoint = sp;
+        // The plan's landing is over: the streaming thread lands and disarms the vehicle
+        // (`--disarm-at-end`, `landing.rs`).
+        if self.landing_end_s.is_some_and(|end_s| t_k >= end_s) {
+            g.landing_over = true;
+        }
         Ok(())
     }
 }
@@ -346,7 +361,38 @@ impl LinkFigures {
             mode: v.mode().copied(),
         }
     }
+
+    /// After the flight (`--disarm-at-end`): waits until the landing ordered at the end of the
+    /// plan's landing has seen the vehicle disarmed, while the streaming thread goes on. Ok at
+    /// once when no landing was ordered (no `--disarm-at-end`, or a team stopped before its
+    /// landing ended). The landing's own deadline (`landing::LANDING_DEADLINE`, counted from
+    /// its order) ends the wait with the link's fault; this wait is bounded by it too.
+    pub fn wait_landed(&self, interrupted: &AtomicBool) -> Result<(), String> {
+        let until = Instant::now() + crate::landing::LANDING_DEADLINE + LANDED_MARGIN;
+        loop {
+            {
+                let g = lock(&self.0);
+                if let Some(f) = &g.fault {
+                    return Err(f.to_string());
+                }
+                if g.vehicle.landing_done() {
+                    return Ok(());
+                }
+            }
+            if interrupted.load(Ordering::Relaxed) || Instant::now() >= until {
+                let agent = lock(&self.0).vehicle.agent();
+                return Err(format!(
+                    "agent {agent}: --disarm-at-end: the vehicle was not seen disarmed after the flight"
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
 }
+
+/// A margin over the landing's deadline for [`LinkFigures::wait_landed`] (the streaming thread
+/// reports the deadline at its next tick).
+const LANDED_MARGIN: Duration = Duration::from_secs(1);
 
 /// The streaming thread: every `period`, read, check, send. Ends on `stop` or the first fault
 /// (kept in `shared` for the member).
@@ -362,6 +408,9 @@ fn stream(mut link: UdpLink, shared: &Mutex<Shared>, period: Duration, clock: In
             }
             let (sp, team_ready) = (g.setpoint, g.team_ready);
             let g = &mut *g;
+            if g.landing_over {
+                g.vehicle.on_landing_over(now);
+            }
             g.sends.on_send(now.saturating_sub(next), period);
             let r = link.receive(now, &mut g.vehicle).map_err(PlantError::from);
             let r = r.and_then(|got| Ok((got, g.vehicle.on_tick(now, Some(&sp), team_ready)?)));

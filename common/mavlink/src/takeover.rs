@@ -32,6 +32,8 @@ pub struct TakeoverWatch {
     engaged: Option<FlightMode>,
     /// The first verdict (sticky).
     lost: Option<LinkFault>,
+    /// The member disarms its landed vehicle (`--disarm-at-end`): nothing is judged any more.
+    ended: bool,
 }
 
 impl TakeoverWatch {
@@ -41,12 +43,13 @@ impl TakeoverWatch {
             agent,
             engaged: None,
             lost: None,
+            ended: false,
         }
     }
 
     /// The vehicle's HEARTBEAT said `mode`.
     pub fn on_heartbeat(&mut self, mode: VehicleMode) {
-        if self.lost.is_some() {
+        if self.lost.is_some() || self.ended {
             return;
         }
         let now = FlightMode {
@@ -67,6 +70,13 @@ impl TakeoverWatch {
             }
             Some(_) => {}
         }
+    }
+
+    /// The member is about to disarm its landed vehicle (`--disarm-at-end`): that disarm, and
+    /// PX4 leaving OFFBOARD once disarmed, are the end of the flight, not a loss. A verdict
+    /// already reached stays.
+    pub fn end(&mut self) {
+        self.ended = true;
     }
 
     /// Whether the vehicle has been seen guided and armed (from then on it is judged).

@@ -331,6 +331,8 @@ mod tests {
             connect_deadline: Duration::from_secs(5),
             timeouts: crate::health::LinkTimeouts::default(),
             min_battery_pct: None,
+            takeoff: None,
+            disarm_at_end: false,
         });
         let autopilot = UdpSocket::bind((localhost, 0)).unwrap();
         let gcs = UdpSocket::bind((localhost, 0)).unwrap();

@@ -7,11 +7,13 @@ use std::time::Duration;
 use mavlink::dialects::common::{MavAutopilot, MavMessage, MavModeFlag};
 use mavlink::MavHeader;
 
-use crate::arming::{ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
+use crate::arming::{ArmAction, ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
 use crate::battery::{BatteryFigures, BatteryWatch};
+use crate::flight_ends::{EndsError, FlightEnds};
 use crate::health::{LinkFault, LinkHealth, LinkTimeouts};
 use crate::messages::{self, Setpoint, Target};
 use crate::ned::{from_f32, ned_to_enu_vector, VehicleOrigin};
+use crate::takeoff::Takeoff;
 use crate::takeover::TakeoverWatch;
 use cdm_math::{Real, Vec3};
 
@@ -33,6 +35,12 @@ pub struct VehicleConfig {
     pub timeouts: LinkTimeouts,
     /// `--min-battery`: below this SYS_STATUS battery_remaining (%) the vehicle is lost.
     pub min_battery_pct: Option<u8>,
+    /// With `--arm`, when the mission starts with a take-off: an ArduPilot vehicle takes off to
+    /// this altitude before the team flies (`takeoff.rs`).
+    pub takeoff: Option<Takeoff>,
+    /// `--disarm-at-end`: land and disarm the vehicle once the plan's landing is over
+    /// (`landing.rs`).
+    pub disarm_at_end: bool,
 }
 
 /// The vehicle's measured state in scenario coordinates (LOCAL_POSITION_NED converted). The
@@ -98,12 +106,15 @@ pub struct LinkCounters {
 }
 
 /// Why the link to a member's vehicle failed (each variant's source names the member).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum VehicleError {
     #[error(transparent)]
     Link(#[from] LinkFault),
     #[error(transparent)]
     Arm(#[from] ArmError),
+    /// A take-off or a landing failed.
+    #[error(transparent)]
+    Ends(#[from] EndsError),
 }
 
 /// One member's MAVLink vehicle, as pure logic.
@@ -122,6 +133,10 @@ pub struct MavlinkVehicle {
     last_heartbeat_sent: Option<Duration>,
     stream_started: Option<Duration>,
     counters: LinkCounters,
+    /// ArduCopter's take-off and `--disarm-at-end`'s landing.
+    ends: FlightEnds,
+    /// A take-off or landing failure seen in a COMMAND_ACK, reported at the next tick.
+    ends_fault: Option<EndsError>,
 }
 
 impl MavlinkVehicle {
@@ -140,6 +155,8 @@ impl MavlinkVehicle {
             last_heartbeat_sent: None,
             stream_started: None,
             counters: LinkCounters::default(),
+            ends: FlightEnds::new(config.agent, config.takeoff, config.disarm_at_end),
+            ends_fault: None,
         }
     }
 
@@ -196,6 +213,12 @@ impl MavlinkVehicle {
                 self.battery
                     .on_sys_status(st.battery_remaining, st.voltage_battery);
             }
+            MavMessage::COMMAND_ACK(a) => {
+                if let Err(e) = self.ends.on_ack(now, a.command, a.result) {
+                    self.ends_fault.get_or_insert(e);
+                }
+            }
+            MavMessage::EXTENDED_SYS_STATE(e) => self.ends.on_landed_state(e.landed_state),
             MavMessage::ATTITUDE(a) => {
                 self.counters.attitudes_received += 1;
                 self.attitude.on_attitude(Attitude {
@@ -246,22 +269,65 @@ impl MavlinkVehicle {
             let started = *self.stream_started.get_or_insert(now);
             // time_boot_ms is the member's milliseconds since the link started (wraps after 49 days).
             let ms = u32::try_from(now.as_millis() % (1 << 32)).unwrap_or(0);
+            let sp = self.ends.floored(sp, self.mode.as_ref());
             out.push(messages::position_target(
                 target,
                 ms,
                 &self.config.origin,
-                sp,
+                &sp,
             ));
             self.counters.setpoints_sent += 1;
             let streamed = now.saturating_sub(started);
-            if let Some(action) = self.arm.on_tick(now, self.mode, streamed, team_ready)? {
-                let confirmation =
-                    u8::try_from(self.arm.requests().saturating_sub(1)).unwrap_or(u8::MAX);
+            for (action, sent) in self.commands(now, streamed, team_ready)? {
+                let confirmation = u8::try_from(sent.saturating_sub(1)).unwrap_or(u8::MAX);
                 out.push(messages::command(target, action, confirmation));
                 self.counters.commands_sent += 1;
             }
         }
         Ok(out)
+    }
+
+    /// The commands due now, each with how many times it was sent: `--arm`'s, then once armed
+    /// the take-off's or the landing's (`flight_ends.rs`).
+    fn commands(
+        &mut self,
+        now: Duration,
+        streamed: Duration,
+        team_ready: bool,
+    ) -> Result<Vec<(ArmAction, u32)>, VehicleError> {
+        let mut due = Vec::new();
+        if let Some(action) = self.arm.on_tick(now, self.mode, streamed, team_ready)? {
+            due.push((action, self.arm.requests()));
+        }
+        if let Some(e) = self.ends_fault {
+            return Err(e.into());
+        }
+        if self.arm.stage() == ArmStage::Armed {
+            let height = self.state.map(|m| m.position.z);
+            due.extend(self.ends.on_tick(now, self.mode, height)?);
+        }
+        Ok(due)
+    }
+
+    /// The plan's landing is over at `now`: with `--disarm-at-end`, land and disarm. The
+    /// vehicle leaving its guided mode for its Land mode, and disarming, are the flight's end
+    /// from then on, not a take-over.
+    pub fn on_landing_over(&mut self, now: Duration) {
+        if self.ends.order_landing(now) {
+            self.takeover.end();
+        }
+    }
+
+    /// Whether the team may fly: armed in the guided mode (`--arm`) and, for an ArduPilot
+    /// vehicle whose mission takes off, at its take-off altitude (`takeoff.rs`).
+    pub fn ready_to_fly(&self) -> bool {
+        self.arm.stage() == ArmStage::Armed && self.ends.airborne(self.mode.as_ref())
+    }
+
+    /// Whether there is nothing more to wait for at the end: false only while a landing
+    /// `--disarm-at-end` ordered has not yet seen the vehicle disarmed.
+    pub fn landing_done(&self) -> bool {
+        self.ends.landed_or_not_landing()
     }
 
     /// Whether the vehicle has been heard (HEARTBEAT and position): it reports ready.
@@ -366,6 +432,8 @@ mod tests {
             connect_deadline: ms(5000),
             timeouts: LinkTimeouts::default(),
             min_battery_pct: None,
+            takeoff: None,
+            disarm_at_end: false,
         }
     }
 
@@ -663,5 +731,84 @@ mod tests {
             v.on_message(now, &VEHICLE, &position(1.0, 2.0, -3.0));
             assert!(v.on_tick(now, Some(&hover()), true).is_ok(), "tick {k}");
         }
+    }
+    /// A fake ArduCopter on the fake clock, resting on the ground at NED z = 0 (scenario z 0
+    /// with this origin): HEARTBEAT at 1 Hz, positions and EXTENDED_SYS_STATE at 50 Hz; it obeys
+    /// GUIDED and arming, ACKs NAV_TAKEOFF and climbs at 2.5 m/s, ACKs NAV_LAND and descends,
+    /// then disarms itself on the ground. The member (`--arm --disarm-at-end`, a take-off to
+    /// 0.35 m): not ready to fly before the climb, then ready; the landing ordered at 20 s ends
+    /// disarmed with no take-over loss for LAND mode or the disarm.
+    #[test]
+    fn an_ardupilot_takes_off_on_command_and_lands_and_disarms_at_the_end() {
+        use mavlink::dialects::common::{
+            MavCmd, MavLandedState, MavResult, COMMAND_ACK_DATA, EXTENDED_SYS_STATE_DATA,
+        };
+        let mut c = config(true);
+        c.takeoff = Some(Takeoff {
+            ground_z_m: 0.0,
+            altitude_m: 0.35,
+        });
+        c.disarm_at_end = true;
+        let mut v = MavlinkVehicle::new(c);
+        let (mut mode, mut armed, mut z_up) = (0u32, false, 0.0f32);
+        let mut target_up: Option<f32> = None;
+        let (mut acks, mut ready_at) = (Vec::new(), None);
+        for k in 0..=1500u64 {
+            let now = ms(20 * k);
+            if k % 50 == 0 {
+                let beat = heartbeat(MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA, mode, armed);
+                v.on_message(now, &VEHICLE, &beat);
+            }
+            for ack in acks.drain(..) {
+                v.on_message(now, &VEHICLE, &ack);
+            }
+            if let Some(t) = target_up {
+                // Climb (or descend) at 2.5 m/s towards the target height.
+                z_up = (z_up + (t - z_up).clamp(-0.05, 0.05)).max(0.0);
+            }
+            let landed_state = if z_up <= 0.0 {
+                MavLandedState::MAV_LANDED_STATE_ON_GROUND
+            } else {
+                MavLandedState::MAV_LANDED_STATE_IN_AIR
+            };
+            if armed && mode == 9 && z_up <= 0.0 {
+                armed = false; // ArduCopter's LAND disarms at touchdown
+            }
+            let ext = EXTENDED_SYS_STATE_DATA {
+                landed_state,
+                ..EXTENDED_SYS_STATE_DATA::default()
+            };
+            v.on_message(now, &VEHICLE, &MavMessage::EXTENDED_SYS_STATE(ext));
+            v.on_message(now, &VEHICLE, &position(20.0, 10.0, -z_up));
+            if k == 1000 {
+                v.on_landing_over(now);
+            }
+            let out = v.on_tick(now, Some(&hover()), true).expect("no fault");
+            if v.ready_to_fly() && ready_at.is_none() {
+                ready_at = Some((k, z_up));
+            }
+            for m in out {
+                let MavMessage::COMMAND_LONG(cmd) = m else {
+                    continue;
+                };
+                let result = MavResult::MAV_RESULT_ACCEPTED;
+                match cmd.command {
+                    MavCmd::MAV_CMD_DO_SET_MODE => mode = cmd.param2 as u32,
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => armed = cmd.param1 == 1.0,
+                    MavCmd::MAV_CMD_NAV_TAKEOFF => target_up = Some(cmd.param7),
+                    MavCmd::MAV_CMD_NAV_LAND => (mode, target_up) = (9, Some(-1.0)),
+                    _ => {}
+                }
+                let ack = COMMAND_ACK_DATA {
+                    command: cmd.command,
+                    result,
+                };
+                acks.push(MavMessage::COMMAND_ACK(ack));
+            }
+        }
+        let (k, z) = ready_at.expect("ready to fly after the take-off");
+        assert!(z >= 0.9 * 0.35, "ready at tick {k} at {z} m");
+        assert!(!armed && v.landing_done(), "not landed and disarmed");
+        assert_eq!(v.arm_stage(), ArmStage::Armed);
     }
 }

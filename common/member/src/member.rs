@@ -122,6 +122,7 @@ pub fn run_member(
         // The vehicle first: the team starts only once every member's vehicle is heard (and
         // armed with --arm), since a member joins only then.
         Vehicles::Mavlink(o) => {
+            vehicles.check(&s)?;
             let plant = crate::vehicles::connect(&s, &me, o, deadlines.join, interrupted)?;
             member.fly(plant, interrupted)
         }
@@ -175,14 +176,21 @@ impl Joined<'_> {
             let link = vehicle.link();
             let at_rest = neighbor_positions(s, me);
             let mut core = RealtimeCore::realtime(me, at_rest, setup, vehicle, clock.now());
-            return crate::member_vehicle::fly(
+            let done = crate::member_vehicle::fly(
                 &mut core,
                 &mut ports,
-                (first, link),
+                (first, link.clone()),
                 &clock,
                 interrupted,
             )
-            .map_err(|e| MemberError::from_loop(e, id, team));
+            .map_err(|e| MemberError::from_loop(e, id, team))?;
+            // The vehicle (still in `core`, its link streaming) lands and disarms after the
+            // plan's landing (`--disarm-at-end`): the process ends once it has.
+            if let Some(link) = link {
+                link.wait_landed(interrupted)
+                    .map_err(MemberError::Landing)?;
+            }
+            return Ok(done);
         }
         let parts = (vehicle, LockstepClock::default());
         let starts = in_neighbors(me)

@@ -39,9 +39,16 @@ pub enum MemberError {
     /// The MAVLink vehicle could not be reached or armed before the team started.
     #[error(transparent)]
     VehicleLink(#[from] PlantError),
+    /// `--disarm-at-end`: the vehicle was not seen landed and disarmed after a complete flight
+    /// (the message names the member).
+    #[error("{0}")]
+    Landing(String),
     /// A bad `--vehicle-origins` file (names the file, the line and the member).
     #[error(transparent)]
     VehicleOrigins(#[from] crate::vehicle_origins::OriginsError),
+    /// MAVLink options that do not fit the scenario (`--disarm-at-end` without a landing).
+    #[error(transparent)]
+    VehicleCheck(#[from] crate::vehicles::CheckError),
     /// Waiting for the team's arm order failed (the vehicle, the orchestrator, a mismatch).
     #[error(transparent)]
     TeamArm(#[from] TeamArmError<TransportError>),
@@ -107,7 +114,7 @@ impl MemberError {
             )) => 2,
             // --arm on a member of a team launched without it.
             MemberError::TeamArm(TeamArmError::NotOrdered { .. }) => 2,
-            MemberError::VehicleOrigins(_) => 2,
+            MemberError::VehicleOrigins(_) | MemberError::VehicleCheck(_) => 2,
             _ => 3,
         }
     }

@@ -16,7 +16,9 @@ use crate::member_error::MemberError;
 use crate::vehicle_origins::{OriginsError, VehicleOrigins};
 use cdm_core::formation::Member;
 use cdm_core::math::Vec3;
+use cdm_core::plan::PhaseKind;
 use cdm_core::scenario::Scenario;
+use cdm_mavlink::takeoff::Takeoff;
 
 pub use cdm_mavlink::{VehicleReport, DEFAULT_BASE_PORT};
 
@@ -133,6 +135,11 @@ pub struct VehicleArgs {
     /// setpoint's), or zero.
     #[arg(long, value_enum, default_value_t = FeedForwardArg::Commanded)]
     pub vehicle_feed_forward: FeedForwardArg,
+    /// MAVLink: after a mission that ends with a landing, each member disarms its vehicle once
+    /// it rests on the ground (MAV_CMD_COMPONENT_ARM_DISARM) and waits for the HEARTBEAT to
+    /// show it disarmed. Needs --arm and a scenario with [landing].
+    #[arg(long)]
+    pub disarm_at_end: bool,
 }
 
 impl Default for VehicleArgs {
@@ -149,6 +156,7 @@ impl Default for VehicleArgs {
             mavlink_signing_key: None,
             min_battery: None,
             vehicle_feed_forward: FeedForwardArg::Commanded,
+            disarm_at_end: false,
         }
     }
 }
@@ -172,6 +180,8 @@ pub struct MavlinkOptions {
     pub min_battery_pct: Option<u8>,
     /// `--vehicle-feed-forward`.
     pub feed_forward: FeedForward,
+    /// `--disarm-at-end`.
+    pub disarm_at_end: bool,
 }
 
 /// What each member flies, validated.
@@ -195,13 +205,16 @@ impl VehicleArgs {
         match self.vehicles {
             VehicleKind::Model => {
                 if *self != (VehicleArgs::default()) {
-                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key, --min-battery and --vehicle-feed-forward need --vehicles mavlink".into());
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key, --min-battery, --vehicle-feed-forward and --disarm-at-end need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
             }
             VehicleKind::Mavlink if !realtime => {
                 Err("--vehicles mavlink needs --realtime (vehicles fly on the wall clock)".into())
             }
+            VehicleKind::Mavlink if self.disarm_at_end && !self.arm => Err(
+                "--disarm-at-end needs --arm (the member that armed its vehicle disarms it)".into(),
+            ),
             VehicleKind::Mavlink => Ok(Vehicles::Mavlink(MavlinkOptions {
                 base_port: self.mavlink_base_port,
                 host: self.mavlink_host,
@@ -233,6 +246,7 @@ impl VehicleArgs {
                     other => other,
                 },
                 feed_forward: self.vehicle_feed_forward.into(),
+                disarm_at_end: self.disarm_at_end,
             })),
         }
     }
@@ -278,23 +292,44 @@ impl Vehicles {
         if o.feed_forward == FeedForward::Zero {
             a.extend(["--vehicle-feed-forward".into(), "zero".into()]);
         }
+        if o.disarm_at_end {
+            a.push("--disarm-at-end".into());
+        }
         a
     }
 }
 
 impl Vehicles {
     /// Checks the options against the scenario: `--vehicle-origins` must give every member an
-    /// origin (the error names the file, the line and the member).
-    pub fn check(&self, s: &Scenario) -> Result<(), OriginsError> {
-        if let Vehicles::Mavlink(MavlinkOptions {
-            origins: Some(file),
-            ..
-        }) = self
-        {
+    /// origin (the error names the file, the line and the member); `--disarm-at-end` needs a
+    /// mission that ends with a landing.
+    pub fn check(&self, s: &Scenario) -> Result<(), CheckError> {
+        let Vehicles::Mavlink(o) = self else {
+            return Ok(());
+        };
+        if let Some(file) = &o.origins {
             VehicleOrigins::load(file, &member_ids(s))?;
+        }
+        let lands = s
+            .plan
+            .phases()
+            .last()
+            .is_some_and(|p| p.kind == PhaseKind::Landing);
+        if o.disarm_at_end && !lands {
+            return Err(CheckError::DisarmWithoutLanding);
         }
         Ok(())
     }
+}
+
+/// Why the MAVLink options do not fit the scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    #[error(transparent)]
+    Origins(#[from] OriginsError),
+    /// `--disarm-at-end` on a scenario that does not end on the ground.
+    #[error("--disarm-at-end: the scenario has no [landing] (the vehicles would be disarmed in the air)")]
+    DisarmWithoutLanding,
 }
 
 fn member_ids(s: &Scenario) -> Vec<u32> {
@@ -349,6 +384,8 @@ pub fn connect<'a>(
             connect_deadline: connect,
             timeouts: o.timeouts,
             min_battery_pct: o.min_battery_pct,
+            takeoff: takeoff_of(s, me, o.arm),
+            disarm_at_end: o.disarm_at_end,
         },
         bind: member_addr(me.id, o.host, o.base_port, index).map_err(PlantError::from)?,
         signing: o.signing_key.as_ref().map(|(_, key)| *key),
@@ -362,6 +399,15 @@ pub fn connect<'a>(
         me,
         interrupted,
     )?)
+}
+
+/// With `--arm`, when the mission starts with a take-off: member `me`'s take-off on an
+/// ArduPilot vehicle (cdm-mavlink `takeoff.rs`), from its ground spot towards where the take-off
+/// phase ends (its reference position), at most half the scenario's tracking bound delta.
+fn takeoff_of(s: &Scenario, me: &Member, arm: bool) -> Option<Takeoff> {
+    let first = s.plan.phases().first()?;
+    let delta_m = cdm_core::audit::SafetyNumbers::of(s).delta_m;
+    (arm && first.kind == PhaseKind::Takeoff).then(|| Takeoff::new(me.start, me.position, delta_m))
 }
 
 #[cfg(test)]
