@@ -43,6 +43,40 @@ What it reproduces of PX4 (v1.14+ defaults):
   HEARTBEAT, the motors stop and the point mass falls to its frame's ground (NED z = 0), where
   it rests; setpoints are ignored.
 
+Take-off, landing and the ground, with either --autopilot (the ground is its frame's NED z = 0;
+a vehicle started above it is in the air, as the older tests' vehicles are):
+- EXTENDED_SYS_STATE at --ext-state-hz (1 Hz) with landed_state (MAVLink common: ON_GROUND,
+  IN_AIR, TAKEOFF, LANDING), as PX4 and ArduCopter (since ArduPilot PR 8265) send it: ON_GROUND
+  within 5 cm of the ground and slower than 0.1 m/s.
+- PX4 climbs from the ground under OFFBOARD setpoints (PX4's ROS 2 offboard example: stream,
+  switch to Offboard, arm, and it ascends to the setpoint): nothing else is needed.
+- MAV_CMD_NAV_LAND (PX4 user guide, "Land Mode": the command switches to Land mode, which lands
+  where it was engaged at MPC_LAND_SPEED, 0.7 m/s by default; ArduCopter's LAND mode, 9, at
+  LAND_SPEED, 0.5 m/s): accepted armed, refused (FAILED) disarmed.
+- Disarmed by itself after landing, as both do by default: PX4 COM_DISARM_LAND after 2 s on the
+  ground (its docs: "Time-out for auto disarm after landing"; any mode, once it has taken off
+  since arming), ArduCopter's LAND mode at touchdown.
+- A disarm (COMPONENT_ARM_DISARM param1 = 0) in the air is refused (FAILED) unless forced with
+  param2 = 21196 (ArduPilot dev guide, "Arming and Disarming": "disarm the vehicle (may fail if
+  not landed)", 21196 "force disarm the vehicle even if flying"; PX4 likewise); on the ground it
+  is accepted.
+
+With --autopilot ardupilot it is an ArduCopter (4.x) instead, in what the member relies on:
+- GUIDED (mode 4) in HEARTBEAT.custom_mode; arming only in GUIDED.
+- Armed on the ground in GUIDED it stays there whatever position target it is sent
+  (mode_guided.cpp runs its ground handling until a take-off sets auto_armed); those targets
+  are counted (setpoints_ignored_on_ground).
+- MAV_CMD_NAV_TAKEOFF (ArduCopter takeoff.cpp, Mode::do_user_takeoff; ArduPilot dev guide,
+  "Copter Commands in Guided Mode"; param7 the altitude above home, metres) gets a COMMAND_ACK:
+  ACCEPTED only armed, in GUIDED, landed and to an altitude above the current one ("can't
+  takeoff downwards"), otherwise FAILED. The vehicle then climbs vertically above where it armed
+  at WPNAV_SPEED_UP's default, 2.5 m/s; the take-off is complete at the altitude, and position
+  targets are flown from then on. During the climb its targets are counted, not flown: on a real
+  ArduCopter a target during the take-off may replace it, and the member sends only targets at
+  the take-off altitude meanwhile, so either way the vehicle climbs to it.
+- --refuse-takeoff answers every NAV_TAKEOFF with FAILED; --stall-climb stops the climb halfway
+  (a take-off that never completes).
+
 What it does not reproduce:
 - PX4's own stream rates on an onboard link (LOCAL_POSITION_NED 30 Hz, ATTITUDE 100 Hz in
   mavlink_main.cpp's onboard mode): the defaults here are 50 Hz for both; pass --position-hz 30
@@ -50,8 +84,10 @@ What it does not reproduce:
 - Reordering (a late packet here never overtakes a newer one by more than its own delay), loss,
   BATTERY_STATUS (SYS_STATUS is sent, at PX4's onboard 5 Hz, with a battery that drains at
   --battery-drain and a 4S voltage; PX4's own low-battery failsafe is not modelled, only
-  --failsafe-after's MAV_STATE_CRITICAL), preflight checks, take-off, RC, failsafes (data link loss,
-  COM_DL_LOSS_T), TIMESYNC, PX4's list of messages it takes unsigned while signing (RADIO_STATUS
+  --failsafe-after's MAV_STATE_CRITICAL), preflight checks, RC, failsafes (data link loss,
+  COM_DL_LOSS_T), PX4's COM_DISARM_PRFLT (it disarms an armed vehicle that has not taken off
+  within 10 s), ArduCopter's DISARM_DELAY outside LAND, the land detectors' own delays, PX4's
+  take-off mode (NAV_TAKEOFF to --autopilot px4 is answered UNSUPPORTED), TIMESYNC, PX4's list of messages it takes unsigned while signing (RADIO_STATUS
   and the like; here nothing unsigned is taken), and any dynamics beyond a point mass.
 
 With --signing-key it signs as PX4 does with a key on its SD card (pymavlink's MAVLink 2
@@ -92,6 +128,22 @@ GRAVITY = 9.81
 OFFBOARD_LOSS_S = 1.0
 PX4_MAIN_MODE_POSCTL = 3
 ARDUCOPTER_LOITER = 5
+# ArduCopter's default climb speed of a take-off (WPNAV_SPEED_UP, 250 cm/s).
+ARDUCOPTER_TAKEOFF_SPEED = 2.5
+# On the ground (landed_state ON_GROUND): this close to NED z = 0 and this slow.
+GROUND_TOLERANCE_M = 0.05
+GROUND_SPEED_MPS = 0.1
+# Land mode: PX4 AUTO (main mode 4) LAND (sub mode 6); ArduCopter LAND (9); their descent speeds
+# (MPC_LAND_SPEED 0.7 m/s, LAND_SPEED 50 cm/s by default).
+PX4_MAIN_MODE_AUTO = 4
+PX4_SUB_MODE_AUTO_LAND = 6
+ARDUCOPTER_LAND = 9
+PX4_LAND_SPEED = 0.7
+ARDUCOPTER_LAND_SPEED = 0.5
+# PX4's COM_DISARM_LAND default: disarmed this long after landing.
+PX4_DISARM_LAND_S = 2.0
+# COMPONENT_ARM_DISARM param2 that forces a disarm in the air.
+FORCE_DISARM = 21196
 
 
 def vec3(text):
@@ -161,6 +213,12 @@ def parse_args():
     p.add_argument("--disarm-after", type=float, default=None,
                    help="this many seconds after it was first armed in OFFBOARD/GUIDED, the "
                         "vehicle disarms in flight and falls to its ground")
+    p.add_argument("--ext-state-hz", type=float, default=1.0,
+                   help="EXTENDED_SYS_STATE rate (landed_state)")
+    p.add_argument("--refuse-takeoff", action="store_true",
+                   help="answer every MAV_CMD_NAV_TAKEOFF with FAILED")
+    p.add_argument("--stall-climb", action="store_true",
+                   help="an accepted take-off climbs only halfway and stays there")
     return p.parse_args()
 
 
@@ -238,6 +296,48 @@ class Vehicle:
         # clock, s). --silent-after, --failsafe-after and --battery-drain count from it.
         self.first_setpoint = None
         self.flight_started_at = None
+        # ArduCopter's take-off: where it armed (home), whether a take-off set auto_armed, the
+        # climb's target height (NED z), when it completed (wall clock), and the position
+        # targets that arrived on the ground before it or during the climb (not flown).
+        self.home = None
+        self.auto_armed = False
+        self.takeoff_z = None
+        self.climb_z = None
+        self.airborne_unix = None
+        self.setpoints_ignored_on_ground = 0
+        self.setpoints_during_climb = 0
+        self.flight_started_unix = None
+        # Land mode (MAV_CMD_NAV_LAND accepted), whether it has taken off since arming, since
+        # when it has been on the ground armed (its own clock), and how it was disarmed.
+        self.landing = False
+        self.took_off = False
+        self.on_ground_since = None
+        self.disarmed_on_ground_unix = None
+        self.disarmed_by = None
+
+    def ardupilot(self):
+        return self.args.autopilot == "ardupilot"
+
+    def on_ground(self):
+        """landed_state ON_GROUND: at its frame's ground (NED z = 0), at rest."""
+        return (self.pos[2] >= -GROUND_TOLERANCE_M
+                and math.sqrt(sum(v * v for v in self.vel)) <= GROUND_SPEED_MPS)
+
+    def ground_handling(self):
+        """ArduCopter armed on the ground before a take-off: position targets are not flown."""
+        return self.ardupilot() and not self.auto_armed and self.on_ground()
+
+    def climbing(self):
+        return self.takeoff_z is not None and self.airborne_unix is None and self.armed
+
+    def landed_state(self):
+        if self.on_ground():
+            return mavlink.MAV_LANDED_STATE_ON_GROUND
+        if self.climbing():
+            return mavlink.MAV_LANDED_STATE_TAKEOFF
+        if self.landing and self.armed:
+            return mavlink.MAV_LANDED_STATE_LANDING
+        return mavlink.MAV_LANDED_STATE_IN_AIR
 
     def since_flight(self, now):
         """Seconds since the flight started, or None before."""
@@ -252,6 +352,7 @@ class Vehicle:
                 abs(a - b) > 1e-3 for new, first in zip(setpoint, self.first_setpoint)
                 for a, b in zip(new, first)):
             self.flight_started_at = now
+            self.flight_started_unix = time.time()
             print(f"mavlink_vehicle {self.args.sysid}: flight started at {now:.2f} s",
                   file=sys.stderr, flush=True)
 
@@ -274,6 +375,10 @@ class Vehicle:
                 self.wrong_target += 1
                 return
             self.setpoint_times.append(now)
+            if self.armed and self.ground_handling():
+                self.setpoints_ignored_on_ground += 1
+            elif self.climbing():
+                self.setpoints_during_climb += 1
             self.setpoint_stamps_ms.append(msg.time_boot_ms)
             if self.taken_over_at is not None or self.disarmed_at is not None:
                 self.setpoints_after_loss += 1
@@ -298,14 +403,91 @@ class Vehicle:
             if self.guided():
                 self.hold = None
             result = mavlink.MAV_RESULT_ACCEPTED
-        elif msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and self.guided():
-            self.armed = msg.param1 == 1.0
-            result = mavlink.MAV_RESULT_ACCEPTED
+        elif msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and msg.param1 == 1.0:
+            if self.guided():
+                self.armed = True
+                self.home = list(self.pos)
+                result = mavlink.MAV_RESULT_ACCEPTED
+        elif msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            # In the air only when forced (21196); on the ground always.
+            if self.armed and (self.on_ground() or msg.param2 == FORCE_DISARM):
+                self.disarm("command")
+                result = mavlink.MAV_RESULT_ACCEPTED
+            elif self.armed:
+                result = mavlink.MAV_RESULT_FAILED
+        elif msg.command == mavlink.MAV_CMD_NAV_TAKEOFF:
+            result = self.on_takeoff(msg.param7)
+        elif msg.command == mavlink.MAV_CMD_NAV_LAND:
+            result = self.on_land()
         # The wall clock (not `now`, this process's own): tests compare it across vehicles.
         self.commands.append({"command": msg.command, "param1": msg.param1, "param2": msg.param2,
                               "confirmation": msg.confirmation, "result": result,
                               "t_unix": time.time()})
         conn.mav.command_ack_send(msg.command, result)
+
+    def on_takeoff(self, altitude_m):
+        """ArduCopter's Mode::do_user_takeoff: armed, GUIDED, landed, upwards; else FAILED."""
+        if not self.ardupilot():
+            return mavlink.MAV_RESULT_UNSUPPORTED
+        home = self.home
+        if (self.args.refuse_takeoff or not self.armed or not self.guided() or home is None
+                or not self.on_ground() or not math.isfinite(altitude_m)
+                or altitude_m <= home[2] - self.pos[2]):
+            return mavlink.MAV_RESULT_FAILED
+        self.auto_armed = True
+        self.takeoff_z = home[2] - altitude_m
+        self.climb_z = self.pos[2]
+        print(f"mavlink_vehicle {self.args.sysid}: take-off to {altitude_m:.2f} m",
+              file=sys.stderr, flush=True)
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def climb(self, dt):
+        """The take-off's target height rises at ARDUCOPTER_TAKEOFF_SPEED (halfway only with
+        --stall-climb); complete once both it and the vehicle are at the altitude. Returns the
+        target (NED) to track."""
+        top = self.takeoff_z
+        if self.args.stall_climb:
+            top = 0.5 * (self.home[2] + self.takeoff_z)
+        self.climb_z = max(top, self.climb_z - ARDUCOPTER_TAKEOFF_SPEED * dt)
+        if self.climb_z == self.takeoff_z and abs(self.pos[2] - self.takeoff_z) <= 0.05:
+            self.airborne_unix = time.time()
+            print(f"mavlink_vehicle {self.args.sysid}: take-off complete", file=sys.stderr,
+                  flush=True)
+        return [self.home[0], self.home[1], self.climb_z]
+
+    def on_land(self):
+        """MAV_CMD_NAV_LAND: Land mode where it is, armed only."""
+        if not self.armed:
+            return mavlink.MAV_RESULT_FAILED
+        self.custom_mode = (ARDUCOPTER_LAND if self.ardupilot() else
+                            PX4_MAIN_MODE_AUTO << 16 | PX4_SUB_MODE_AUTO_LAND << 24)
+        self.landing = True
+        self.hold = [self.pos[0], self.pos[1], 0.0]
+        print(f"mavlink_vehicle {self.args.sysid}: landing", file=sys.stderr, flush=True)
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def disarm(self, by):
+        self.armed = False
+        self.disarmed_by = by
+        if self.on_ground():
+            self.disarmed_on_ground_unix = time.time()
+        print(f"mavlink_vehicle {self.args.sysid}: disarmed ({by})", file=sys.stderr, flush=True)
+
+    def auto_disarm(self, now):
+        """Disarmed by itself on the ground after a flight: PX4 after COM_DISARM_LAND (any
+        mode), ArduCopter at touchdown in LAND."""
+        if not self.armed or not self.on_ground():
+            self.on_ground_since = None
+            self.took_off |= self.armed and not self.on_ground()
+            return
+        if self.on_ground_since is None:
+            self.on_ground_since = now
+        if not self.took_off:
+            return
+        if self.ardupilot() and self.landing:
+            self.disarm("autopilot")
+        elif not self.ardupilot() and now - self.on_ground_since >= PX4_DISARM_LAND_S:
+            self.disarm("autopilot")
 
     def leave_guided(self, mode):
         """Out of OFFBOARD/GUIDED into `mode`: hold where it is from now on."""
@@ -331,17 +513,29 @@ class Vehicle:
 
     def step(self, dt, now):
         self.take_over(now)
+        self.auto_disarm(now)
         if self.args.autopilot == "px4" and self.guided() and (
                 not self.setpoint_times or now - self.setpoint_times[-1] > OFFBOARD_LOSS_S):
             self.leave_guided(PX4_MAIN_MODE_POSCTL << 16)  # COM_OF_LOSS_T, then Position mode
         flying = self.setpoint is not None and self.hold is None and (
             not self.args.require_arm or (self.armed and self.guided()))
-        if self.disarmed_at is not None:
-            # Motors off: free fall (NED z down) to the ground of its frame, then at rest.
+        motors_off = self.disarmed_at is not None or (
+            self.args.require_arm and not self.armed and self.home is not None)
+        if motors_off:
+            # Motors off (disarmed in flight, or on the ground at the end): free fall (NED z
+            # down) to the ground, then at rest.
             self.acc = [0.0, 0.0, GRAVITY if self.pos[2] < 0.0 else 0.0]
+        elif self.climbing():
+            target = self.climb(dt)
+            self.acc = [KP * (target[k] - self.pos[k]) - KD * self.vel[k] for k in range(3)]
+        elif self.landing:
+            # Land mode: hold x, y and descend at the land speed to the ground.
+            speed = ARDUCOPTER_LAND_SPEED if self.ardupilot() else PX4_LAND_SPEED
+            self.acc = [KP * (self.hold[k] - self.pos[k]) - KD * self.vel[k] for k in range(2)]
+            self.acc.append(KD * (speed - self.vel[2]))
         elif self.hold is not None:
             self.acc = [KP * (self.hold[k] - self.pos[k]) - KD * self.vel[k] for k in range(3)]
-        elif flying:
+        elif flying and not (self.armed and self.ground_handling()):
             p, v, a = self.setpoint
             self.acc = [a[k] + KP * (p[k] - self.pos[k]) + KD * (v[k] - self.vel[k])
                         for k in range(3)]
@@ -350,9 +544,16 @@ class Vehicle:
         # Semi-implicit Euler at the fixed step: the vehicle's own time, not the wall clock.
         self.vel = [self.vel[k] + self.acc[k] * dt for k in range(3)]
         self.pos = [self.pos[k] + self.vel[k] * dt for k in range(3)]
-        if self.disarmed_at is not None and self.pos[2] >= 0.0:
+        # The ground holds it: nothing goes below NED z = 0.
+        if self.pos[2] >= 0.0 and self.vel[2] >= 0.0 and self.was_above_ground(dt):
             self.pos[2] = 0.0
-            self.vel = [0.0, 0.0, 0.0]
+            self.vel = [0.0, 0.0, 0.0] if motors_off or self.landing else [
+                self.vel[0], self.vel[1], 0.0]
+
+    def was_above_ground(self, dt):
+        """Whether it came down to the ground this step (a vehicle started below NED z = 0, as
+        none of the tests' is, is left alone)."""
+        return self.pos[2] - self.vel[2] * dt <= 0.0
 
     def build(self, conn, kind, boot_ms, silent, now):
         """The `kind` message with the vehicle's state now, or None while that stream is muted."""
@@ -381,6 +582,9 @@ class Vehicle:
             millivolts = int(13200 + 3600 * pct / 100.0)
             return conn.mav.sys_status_encode(0, 0, 0, 0, millivolts, -1, int(pct),
                                               0, 0, 0, 0, 0, 0)
+        if kind == "EXTENDED_SYS_STATE":
+            return conn.mav.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED,
+                                                      self.landed_state())
         if kind == "LOCAL_POSITION_NED":
             return conn.mav.local_position_ned_encode(boot_ms, *self.pos, *self.vel)
         # Small-angle attitude that would produce the commanded horizontal acceleration.
@@ -437,6 +641,14 @@ class Vehicle:
             "setpoints_after_shown": self.setpoints_after_shown,
             "last_setpoint_s": self.setpoint_times[-1] if self.setpoint_times else None,
             "flight_started_at_s": self.flight_started_at,
+            "flight_started_unix": self.flight_started_unix,
+            "airborne_unix": self.airborne_unix,
+            "setpoints_ignored_on_ground": self.setpoints_ignored_on_ground,
+            "setpoints_during_climb": self.setpoints_during_climb,
+            "disarmed_on_ground_unix": self.disarmed_on_ground_unix,
+            "disarmed_by": self.disarmed_by,
+            "landed_state": self.landed_state(),
+            "height_m": -self.pos[2],
         }
 
 
@@ -448,6 +660,7 @@ class Streams:
         self.rng = random.Random(args.sysid if args.seed is None else args.seed)
         self.periods = {"HEARTBEAT": 1.0 / args.heartbeat_hz,
                         "SYS_STATUS": 1.0 / args.sys_status_hz,
+                        "EXTENDED_SYS_STATE": 1.0 / args.ext_state_hz,
                         "LOCAL_POSITION_NED": 1.0 / (args.position_hz or args.rate_hz),
                         "ATTITUDE": 1.0 / (args.attitude_hz or args.rate_hz)}
         # The index of the last period each stream was sent for (-1: none yet).

@@ -91,6 +91,9 @@ fn start_vehicles(
     silent: Option<(usize, f64)>,
     extra: &[&str],
 ) -> Vec<Running> {
+    // The harness builds the binaries at its first `bin()` (minutes on a loaded machine):
+    // before the vehicles start, so that their --max-s is not spent waiting for it.
+    integration_tests::bin("orchestrator");
     let mut vehicles: Vec<Running> = which
         .map(|i| {
             let a = &s.agents[i];
@@ -776,7 +779,20 @@ fn bad_vehicle_options_exit_2_naming_them() {
     let (open_case, short_case) = (with_key(open_key), with_key(short_key));
     let min0 = mav("--min-battery", "0");
     let ff_bad = mav("--vehicle-feed-forward", "imu");
-    let cases: [(&[&str], &str); 15] = [
+    let no_arm = ["--realtime", "--vehicles", "mavlink", "--disarm-at-end"];
+    let no_landing = [
+        "--realtime",
+        "--vehicles",
+        "mavlink",
+        "--arm",
+        "--disarm-at-end",
+    ];
+    let cases: [(&[&str], &str); 17] = [
+        (&no_arm, "--disarm-at-end needs --arm"),
+        (
+            &no_landing,
+            "--disarm-at-end: the scenario has no [landing]",
+        ),
         (&min0, "--min-battery 0: must be a percentage in 1..=99"),
         (&ff_bad, "--vehicle-feed-forward"),
         (
@@ -876,5 +892,178 @@ fn launch_no_spawn_prints_the_link_timeouts_for_hand_started_members() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let flags = " --heartbeat-timeout 4.5 --position-timeout 0.25";
     assert_eq!(stdout.matches(flags).count(), 2, "{}", describe(&out));
+    assert_no_team_resources(&team_name);
+}
+
+/// The commands a vehicle received, as (MAV_CMD number, param1, result, wall-clock time).
+fn commands(v: &Value) -> Vec<(u64, f64, u64, f64)> {
+    v["commands"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default()
+        .iter()
+        .map(|c| {
+            let n = |k: &str| c[k].as_u64().unwrap_or(u64::MAX);
+            (
+                n("command"),
+                num(c, "param1"),
+                n("result"),
+                num(c, "t_unix"),
+            )
+        })
+        .collect()
+}
+
+const MAV_CMD_NAV_LAND: u64 = 21;
+const MAV_CMD_NAV_TAKEOFF: u64 = 22;
+const MAV_CMD_COMPONENT_ARM_DISARM: u64 = 400;
+const MAV_RESULT_ACCEPTED: u64 = 0;
+const MAV_LANDED_STATE_ON_GROUND: u64 = 1;
+
+/// The vehicles of [`support::lab_mission`] on the ground below their members (NED origin at the
+/// scenario's origin, so NED z = 0 is the ground), members `which` of them (in scenario order:
+/// the first two PX4-like, the last two ArduCopter-like), each with `extra`; returns them once
+/// all are sending.
+fn lab_vehicles(
+    file: &ScenarioFile,
+    base: u16,
+    which: std::ops::Range<usize>,
+    extra: &[&str],
+) -> Vec<Running> {
+    integration_tests::bin("orchestrator"); // built before the vehicles start (above)
+    let mut vehicles: Vec<Running> = which
+        .map(|i| {
+            let a = &file.agents[i];
+            let spot = [a.position[0], a.position[1], 0.0];
+            let autopilot = if i < 2 { "px4" } else { "ardupilot" };
+            let mut c = std::process::Command::new(venv_python());
+            c.arg(vehicle_script())
+                .args(["--port", &(base + i as u16).to_string()])
+                .args(["--sysid", &(i + 1).to_string()])
+                .arg(format!("--start-ned={}", csv(to_ned(spot, [0.0; 3]))))
+                .args(["--max-s", "90", "--autopilot", autopilot])
+                .args(ARMED)
+                .args(extra);
+            spawn(&mut c)
+        })
+        .collect();
+    for v in &mut vehicles {
+        v.wait_for_output("sending to", DEADLINE);
+    }
+    vehicles
+}
+
+/// Issue 24 item 5, issue 26's `--vehicles mavlink`: a mission with take-off and landing flown
+/// by a team of two PX4-like and two ArduCopter-like vehicles resting on their ground spots,
+/// launched with `--arm --disarm-at-end`. The PX4s climb under OFFBOARD setpoints (no take-off
+/// command); each ArduCopter, armed in GUIDED on the team's order, is sent MAV_CMD_NAV_TAKEOFF,
+/// ACKs it and climbs, and the team starts only once every one of them has completed its
+/// take-off. After the plan's landing each member sends MAV_CMD_NAV_LAND, and every vehicle ends
+/// on the ground (landed_state ON_GROUND) and disarmed (by the member's disarm or the
+/// autopilot's own), within the flight: audit.json's last vehicle reports show them disarmed;
+/// SAFE, exit 0.
+#[test]
+fn a_mission_takes_off_and_lands_px4_and_ardupilot_vehicles_ending_disarmed_on_the_ground() {
+    let dir = TempDir::new();
+    let file = support::lab_mission();
+    let scenario = write_scenario(dir.path(), "lab4.toml", &file);
+    let base = free_udp_ports(file.agents.len() as u16);
+    let team_name = unique_team("mavmission");
+    let vehicles = lab_vehicles(&file, base, 0..file.agents.len(), &[]);
+    let at = ["--vehicle-origin", "0,0,0", "--arm", "--disarm-at-end"];
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+    let (outs, audit, why) = finished_safe(orch, vehicles, dir.path());
+    let summaries: Vec<Value> = outs
+        .iter()
+        .enumerate()
+        .map(|(i, o)| summary(o, &format!("vehicle {i}")))
+        .collect();
+    let mut last_airborne = f64::MIN;
+    for (i, (v, a)) in summaries.iter().zip(&file.agents).enumerate() {
+        let cmds = commands(v);
+        let accepted = |cmd| {
+            cmds.iter()
+                .find(|c| c.0 == cmd && c.2 == MAV_RESULT_ACCEPTED)
+        };
+        let armed_at = cmds
+            .iter()
+            .find(|c| c.0 == MAV_CMD_COMPONENT_ARM_DISARM && c.1 == 1.0)
+            .map(|c| c.3);
+        if i < 2 {
+            assert!(
+                accepted(MAV_CMD_NAV_TAKEOFF).is_none(),
+                "vehicle {i}: {v}\n{why}"
+            );
+        } else {
+            let takeoff = accepted(MAV_CMD_NAV_TAKEOFF);
+            assert!(
+                takeoff.is_some_and(|c| armed_at.is_some_and(|t| t <= c.3)),
+                "vehicle {i}: no take-off accepted after arming: {v}\n{why}"
+            );
+            last_airborne = last_airborne.max(num(v, "airborne_unix"));
+        }
+        assert!(
+            accepted(MAV_CMD_NAV_LAND).is_some(),
+            "vehicle {i}: {v}\n{why}"
+        );
+        // On the ground and disarmed at the end (the script's own final state).
+        assert_eq!(v["armed"], false, "vehicle {i}: {v}\n{why}");
+        assert_eq!(
+            v["landed_state"], MAV_LANDED_STATE_ON_GROUND,
+            "vehicle {i}: {v}"
+        );
+        assert!(num(v, "height_m").abs() < 0.05, "vehicle {i}: {v}");
+        assert!(v["disarmed_on_ground_unix"].is_f64(), "vehicle {i}: {v}");
+        // The member saw it disarmed during the flight (its last vehicle report).
+        let id = a.id.to_string();
+        assert_eq!(audit["vehicles"][&id]["armed"], false, "agent {id}: {why}");
+    }
+    // The team waited for every ArduCopter's climb: no vehicle saw the flight start before the
+    // last take-off completed (causal order on the vehicles' own stamps, not a timing).
+    for (i, v) in summaries.iter().enumerate() {
+        let started = num(v, "flight_started_unix");
+        assert!(
+            started >= last_airborne,
+            "vehicle {i}: the flight started at {started}, before the last take-off completed at {last_airborne}\n{why}"
+        );
+    }
+    assert_no_team_resources(&team_name);
+}
+
+/// The take-off refused (issue 24 item 5): one ArduCopter-like vehicle of [`support::lab_mission`]
+/// answers MAV_CMD_NAV_TAKEOFF with FAILED (`--refuse-takeoff`). Its member names the refusal
+/// and the result, the team never starts (no vehicle saw the flight start), `vehicle-lost`
+/// naming that member, exit 3.
+#[test]
+fn an_ardupilot_vehicle_refusing_its_take_off_is_named_and_nothing_starts() {
+    let dir = TempDir::new();
+    let file = support::lab_mission();
+    let scenario = write_scenario(dir.path(), "lab4.toml", &file);
+    let base = free_udp_ports(file.agents.len() as u16);
+    let team_name = unique_team("mavtakeoff");
+    let mut vehicles = lab_vehicles(&file, base, 0..3, &[]);
+    vehicles.extend(lab_vehicles(&file, base, 3..4, &["--refuse-takeoff"]));
+    let at = ["--vehicle-origin", "0,0,0", "--arm"];
+    let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
+    let summaries: Vec<Value> = vehicles
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
+        .collect();
+    let audit = read_json(&dir.path().join("run/audit.json"));
+    let why = format!("{audit:#}\n{}", describe(&o));
+    assert_eq!(o.status.code(), Some(3), "{why}");
+    assert_eq!(audit["fault"]["kind"], "vehicle-lost", "{why}");
+    assert_eq!(audit["fault"]["agent"], 4, "{why}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let needle =
+        "agent 4: take-off refused: MAV_CMD_NAV_TAKEOFF (to 0.35 m) answered MAV_RESULT_FAILED";
+    assert!(stderr.contains(needle), "{why}");
+    for (i, v) in summaries.iter().enumerate() {
+        assert!(
+            v["flight_started_unix"].is_null(),
+            "vehicle {i} flew: {v}\n{why}"
+        );
+    }
     assert_no_team_resources(&team_name);
 }

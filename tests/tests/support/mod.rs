@@ -559,3 +559,52 @@ pub fn mission() -> ScenarioFile {
     f.landing = Some(ground(30.0));
     f
 }
+
+/// A lab-sized mission (issue 24 item 5; issue 26's real-time and MAVLink flights): four members 3 m apart take off from z = 0 to 1.5 m
+/// (4 s), translate by (0.3, 0.2, 0.2) m (2.5 s), land (4 s after 0.5 s), then the plan's 10 s
+/// on the ground: 21 s. Certified SAFE (delta 0.70 m: `orchestrator plan`).
+pub const LAB_MISSION: &str = r#"
+name = "lab4"
+t_total_s = 2.5
+eps_m = 0.15
+comm_hz = 50.0
+gains = [8.0, 24.0, 51.5625, 23.4375]
+
+[takeoff]
+ground_z_m = 0.0
+t_s = 4.0
+
+[landing]
+ground_z_m = 0.0
+t_s = 4.0
+hold_s = 0.5
+
+[[agents]]
+id = 1
+role = "primary"
+position = [0.0, 0.0, 1.5]
+goal = [0.3, 0.2, 1.7]
+
+[[agents]]
+id = 2
+role = "primary"
+position = [3.0, 0.0, 1.5]
+goal = [3.3, 0.2, 1.7]
+
+[[agents]]
+id = 3
+role = "primary"
+position = [1.5, 2.6, 1.5]
+goal = [1.8, 2.8, 1.7]
+
+[[agents]]
+id = 4
+role = "follower"
+position = [1.5, 0.9, 1.5]
+in_neighbors = [1, 2, 3]
+"#;
+
+/// [`LAB_MISSION`] parsed.
+pub fn lab_mission() -> ScenarioFile {
+    toml::from_str(LAB_MISSION).expect("the lab mission parses")
+}
