@@ -7,20 +7,24 @@
 //!   member is on the ground at t = 0 and at the end.
 //! - A mission whose segment 2 squeezes the leaders nearly collinear is UNSAFE, naming segment 2.
 //! - Bad mission tables are refused with exit 2, naming the phase and the field.
+//! - The same mission with its members started by hand (`launch --no-spawn`, one process each)
+//!   flies `simulate`'s telemetry byte for byte; a tiny mission in real time is SAFE and its
+//!   telemetry covers the whole mission.
 //!
 //! How to run: `cargo test --release -p integration-tests --test mission`.
 
 mod support;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
 use cdm_core::scenario::ScenarioFile;
-use integration_tests::{bin, run, write_scenario, TempDir};
+use integration_tests::{bin, run, spawn, unique_team, write_scenario, Running, TempDir};
 use support::{
-    assert_exit, assert_stderr_has, assert_windows_match_simulate, mission, read_json, simulate,
-    GROUND_Z, SEGMENT_2, SEGMENT_3,
+    assert_exit, assert_no_process_of, assert_same_file, assert_stderr_has,
+    assert_windows_match_simulate, binary_for, launch, launch_loud, member, mission, read_json,
+    simulate, GROUND_Z, SEGMENT_2, SEGMENT_3,
 };
 
 const DEADLINE: std::time::Duration = integration_tests::deadline::FLIGHT;
@@ -85,6 +89,75 @@ fn a_mission_flies_in_processes_as_in_simulate_and_is_certified_per_phase() {
     );
     let audit = read_json(&dir.path().join("mission1").join("audit.json"));
     assert_eq!(audit["ticks"], 20_401, "{audit:#}");
+    // README "By hand: one terminal per process": the same mission with every member started
+    // by hand as its own process flies the same telemetry, byte for byte.
+    let by_hand = dir.path().join("by-hand");
+    fly_by_hand(&scenario, &by_hand);
+    assert_same_file(&by_hand.join("telemetry.csv"), &sim.join("telemetry.csv"));
+}
+
+/// `launch --no-spawn` on `scenario` into `out`, with each member started by hand (`leader` or
+/// `agent`, one process each, on the run directory's scenario.toml as the README says); every
+/// process exits 0 and nothing of the team is left.
+fn fly_by_hand(scenario: &Path, out: &Path) {
+    let team = unique_team("mission_hand");
+    let source = ["--scenario", scenario.to_str().unwrap(), "--no-figures"];
+    let mut launch = launch_loud(&team, out, &source);
+    let mut orch = spawn(launch.args(["--no-spawn", "--join-timeout", "60"]));
+    orch.wait_for_output("waits for", DEADLINE);
+    let file = support::flown_scenario(out);
+    let flown = out.join("scenario.toml");
+    let members: Vec<(u32, Running)> = (file.agents.iter())
+        .map(|a| {
+            let cmd = &mut member(binary_for(a.role), &flown, &team, a.id);
+            (a.id, spawn(cmd))
+        })
+        .collect();
+    assert_exit(
+        &orch.finish(DEADLINE),
+        0,
+        "launch --no-spawn of the mission",
+    );
+    for (id, m) in members {
+        assert_exit(&m.finish(DEADLINE), 0, &format!("hand-started member {id}"));
+    }
+    assert_no_process_of(&team);
+}
+
+/// Issue 26 item 4, real time: a tiny mission (the lab mission's take-off and its one segment,
+/// 6.5 s) launched with `--realtime` is SAFE and complete, exit 0, and its telemetry covers the
+/// whole mission: every member at every audit instant from t = 0, on the ground, to the
+/// mission's end. Nothing about how fast it ran.
+#[test]
+fn a_tiny_mission_flies_safe_in_real_time_over_the_whole_mission() {
+    let dir = TempDir::new();
+    let mut f = support::lab_mission();
+    f.landing = None;
+    let scenario = write_scenario(dir.path(), "lab.toml", &f);
+    let out = dir.path().join("rt");
+    let team = unique_team("mission_rt");
+    let source = [
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--no-figures",
+        "--realtime",
+    ];
+    let o = run(&mut launch(&team, &out, &source), DEADLINE);
+    assert_exit(&o, 0, "launch --realtime of a tiny mission");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    // Take-off 4 s and segment 1's 2.5 s at comm_hz 50: ticks 0..=325.
+    let rows = telemetry(&out);
+    let times: BTreeSet<String> = rows.iter().map(|r| r["t"].clone()).collect();
+    assert_eq!(times.len(), 326, "{audit:#}");
+    assert_eq!(rows.len(), 326 * f.agents.len(), "{audit:#}");
+    let t_end = rows.iter().map(|r| num(r, "t")).fold(f64::MIN, f64::max);
+    assert!((t_end - 6.5).abs() < 1e-9, "telemetry ends at t = {t_end}");
+    for r in rows.iter().filter(|r| num(r, "t") == 0.0) {
+        assert_eq!(num(r, "z"), 0.0, "{r:?} is not on the ground at t = 0");
+    }
+    assert_no_process_of(&team);
 }
 
 #[test]
