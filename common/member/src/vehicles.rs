@@ -135,9 +135,10 @@ pub struct VehicleArgs {
     /// setpoint's), or zero.
     #[arg(long, value_enum, default_value_t = FeedForwardArg::Commanded)]
     pub vehicle_feed_forward: FeedForwardArg,
-    /// MAVLink: after a mission that ends with a landing, each member disarms its vehicle once
-    /// it rests on the ground (MAV_CMD_COMPONENT_ARM_DISARM) and waits for the HEARTBEAT to
-    /// show it disarmed. Needs --arm and a scenario with [landing].
+    /// MAVLink: after a mission that ends with a landing, each member lands its vehicle
+    /// (MAV_CMD_NAV_LAND), waits for it on the ground (EXTENDED_SYS_STATE) and disarmed (by the
+    /// autopilot or a MAV_CMD_COMPONENT_ARM_DISARM it sends, never forced), within 8 s. Needs
+    /// --arm and a scenario with [landing].
     #[arg(long)]
     pub disarm_at_end: bool,
 }
@@ -453,6 +454,7 @@ mod tests {
             "0.1",
             "--vehicle-feed-forward",
             "zero",
+            "--disarm-at-end",
         ])
         .validate(true)
         .expect("valid");
@@ -462,6 +464,7 @@ mod tests {
         assert_eq!(o.origin, Vec3::new(-1.5, 2.0, 0.25));
         assert_eq!((o.base_port, o.arm), (15000, true));
         assert_eq!(o.feed_forward, FeedForward::Zero);
+        assert!(o.disarm_at_end);
         assert_eq!(
             o.timeouts,
             LinkTimeouts {
