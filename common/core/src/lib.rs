@@ -12,6 +12,7 @@
 /// The numeric facade, re-exported so `crate::math::Vec3` reads as before the split.
 pub use cdm_math as math;
 
+pub mod airspace;
 pub mod audit;
 pub mod control;
 pub mod delay;
