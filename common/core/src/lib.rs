@@ -13,6 +13,9 @@
 pub use cdm_math as math;
 
 pub mod airspace;
+pub mod airspace_audit;
+pub mod airspace_certificate;
+pub mod airspace_suggest;
 pub mod audit;
 pub mod control;
 pub mod delay;

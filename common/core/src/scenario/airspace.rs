@@ -238,7 +238,7 @@ fn check_fence(g: &GeofenceSpec) -> Result<(), E> {
         return Err(bad(
             what,
             format!(
-                "`polygon` is self-intersecting: edge {} crosses edge {} (edges numbered from 1, edge k from vertex k to k + 1)",
+                "`polygon` is self-intersecting: edge {} crosses edge {} (edge K joins vertices K and K + 1, counted from 1)",
                 i + 1,
                 j + 1
             ),
