@@ -92,14 +92,13 @@ fn print_airspace(a: &AirspaceCertificate) {
         .chain(a.clearances.iter().filter(|c| c.kind == "obstacle"));
     for c in rows {
         let what = if c.kind == "fence" {
-            "fence".to_string()
+            format!("fence ({})", c.name)
         } else {
             c.label()
         };
         out!(
-            "    {what:<22} {:>10.3} m  {}, member {} at t = {:.2} s ({})",
+            "    {what:<22} {:>10.3} m  member {} at t = {:.2} s ({})",
             c.margin_m,
-            c.label(),
             c.agent,
             c.t_s,
             c.phase
