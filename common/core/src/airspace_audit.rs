@@ -153,7 +153,7 @@ fn note(
     make: impl FnOnce() -> Breach,
     breach: &mut impl FnMut(Breach),
 ) {
-    let bad = !(margin_m >= 0.0);
+    let bad = margin_m.is_nan() || margin_m < 0.0;
     if bad && !*failing {
         breach(make());
     }

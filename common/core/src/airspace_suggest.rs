@@ -55,7 +55,7 @@ pub struct Suggestion {
 pub fn suggest(s: &Scenario, radius_m: Real) -> Suggestion {
     let base = worst_margins(s, &tracks(s, 0.0), radius_m);
     let breached: Vec<Boundary> = (base.iter())
-        .filter(|(_, w)| !(w.margin_m >= 0.0))
+        .filter(|(_, w)| w.margin_m.is_nan() || w.margin_m < 0.0)
         .map(|(b, _)| *b)
         .collect();
     let mut out = Suggestion {

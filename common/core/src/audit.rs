@@ -514,14 +514,18 @@ impl Auditor {
         let plan = &self.scenario.plan;
         let ground = plan.phases()[plan.piece_at(t).phase].kind.is_ground();
         self.observe_airspace(at, pos, ground);
-        // Deformation (eq. 37), in the deformation segments only: take-off and landing flatten
-        // the team onto the ground, where separation, not lambda_1, is the argument.
-        let plan = &self.scenario.plan;
+        self.observe_deformation(at, ground);
+    }
+
+    /// Deformation (eq. 37), in the deformation segments only: take-off and landing flatten the
+    /// team onto the ground, where separation, not lambda_1, is the argument.
+    fn observe_deformation(&mut self, at: (u64, Real), ground: bool) {
+        let n = self.numbers;
         if ground {
             self.failing.deformation = false;
             return;
         }
-        let l1 = match plan.q_d_at(t) {
+        let l1 = match self.scenario.plan.q_d_at(at.1) {
             Ok((q, _)) => deformation_eigenvalues(&q)[0],
             Err(_) => 0.0,
         };
