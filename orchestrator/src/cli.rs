@@ -58,6 +58,11 @@ pub enum Command {
         /// (exit 1 when there is one).
         #[arg(long)]
         losses: bool,
+        /// With `[geofence]` or `[[obstacle]]`: also report the smallest altitude offset (up and
+        /// down) that clears each breached boundary and the whole airspace, and why no uniform
+        /// time scaling can.
+        #[arg(long)]
+        suggest: bool,
     },
     /// Fly the team with the deterministic in-process engine into a run directory. Exit 0 safe
     /// and complete, 1 violation, 2 bad input, 3 runtime fault (a control fault, a full disk).

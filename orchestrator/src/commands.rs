@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use cdm_core::airspace_suggest::suggest;
 use cdm_core::audit::AuditReport;
 use cdm_core::delay::deviation_at_delay;
 use cdm_core::link::MAX_DELAY_MS;
@@ -35,6 +36,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             sweep_delay,
             out,
             losses,
+            suggest,
         } => {
             let sweeps = Sweeps {
                 travel_s: sweep
@@ -45,7 +47,13 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                     .transpose()?,
                 out,
             };
-            plan(&source, json.as_deref(), sweeps, losses, cli.quiet)
+            plan(
+                &source,
+                json.as_deref(),
+                sweeps,
+                PlanAlso { losses, suggest },
+                cli.quiet,
+            )
         }
         Command::Simulate { source, out, run } => simulate_command(&source, &out, &run, cli.quiet),
         Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
@@ -523,11 +531,19 @@ fn write_sweeps(
     Ok(())
 }
 
+/// What `plan` certifies beyond the plan itself.
+struct PlanAlso {
+    /// `--losses`: the loss of every single member.
+    losses: bool,
+    /// `--suggest`: the offsets that clear the airspace's breaches.
+    suggest: bool,
+}
+
 fn plan(
     source: &Source,
     json: Option<&Path>,
     sweeps: Sweeps,
-    losses: bool,
+    also: PlanAlso,
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let s = load(source)?;
@@ -542,7 +558,16 @@ fn plan(
     );
     let mut c = certify(&s);
     spinner.finish();
-    if losses {
+    if also.suggest {
+        match &mut c.airspace {
+            Some(a) => a.suggestion = Some(suggest(&s, a.radius_m)),
+            None if !quiet => {
+                out!("suggest: the scenario has no [geofence] or [[obstacle]]: nothing to clear")
+            }
+            None => {}
+        }
+    }
+    if also.losses {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let spinner = Spinner::new(
             &format!("loss certificate: losing each of {} members", c.agents),
@@ -662,7 +687,7 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
         out!(
             "  {} violation(s), first: {} at tick {} (t = {:.2} s), agents {:?}, value {:.4} against the limit {:.4}",
             r.violations.len(),
-            v.kind,
+            v.label(),
             v.tick,
             v.t_s,
             v.agents,
@@ -670,6 +695,7 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
             v.limit
         );
     }
+    airspace_summary(r);
     if let Some(f) = &r.fault {
         out!("  fault: {}", f.message);
     }
@@ -688,6 +714,32 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
         );
     }
     out!("  run directory: {}", dir.display());
+}
+
+/// The airspace's smallest margins and its breaches by name (issue 27): the first breach of
+/// each fence side and obstacle; nothing without a fence or obstacles.
+fn airspace_summary(r: &AuditReport) {
+    let margins: Vec<String> = [
+        ("fence", r.min_fence_margin_m),
+        ("obstacle", r.min_obstacle_margin_m),
+    ]
+    .into_iter()
+    .filter_map(|(what, m)| m.map(|m| format!("{what} margin {m:.4} m")))
+    .collect();
+    if r.ticks > 0 && !margins.is_empty() {
+        out!("  airspace (balls of eps): {}", margins.join(", "));
+    }
+    let mut named = std::collections::BTreeSet::new();
+    for v in r.violations.iter().filter(|v| v.name.is_some()) {
+        if named.insert(v.label()) {
+            out!(
+                "  {}: agent {:?} from t = {:.2} s",
+                v.label(),
+                v.agents,
+                v.t_s
+            );
+        }
+    }
 }
 
 /// `orchestrator host`: validates the options and runs the daemon.

@@ -871,6 +871,114 @@ fn long_names_are_refused_without_printing_them() {
     }
 }
 
+// ---- the airspace (issue 27) -----------------------------------------------------------------
+
+/// `[geofence]` and `[[obstacle]]` tables that cannot be flown: each refused naming the fence or
+/// the obstacle (paper40 starts at z 900-1197 m around x -198..360, y -72..117).
+#[test]
+fn bad_geofences_and_obstacles_are_refused_naming_them() {
+    use cdm_core::scenario::{GeofenceSpec, ObstacleSpec, Shape};
+    let fence = |polygon: Vec<[f64; 2]>, min_z_m, max_z_m| GeofenceSpec {
+        polygon,
+        min_z_m,
+        max_z_m,
+    };
+    let square = vec![
+        [-300.0, -200.0],
+        [500.0, -200.0],
+        [500.0, 600.0],
+        [-300.0, 600.0],
+    ];
+    let block = |name: &str, min, max| ObstacleSpec {
+        name: name.into(),
+        shape: Shape::Box { min, max },
+    };
+    let cylinder = |radius_m| ObstacleSpec {
+        name: "mast".into(),
+        shape: Shape::Cylinder {
+            center: [0.0, 0.0],
+            radius_m,
+            min_z_m: 0.0,
+            max_z_m: 10.0,
+        },
+    };
+    let cases: Vec<(Option<GeofenceSpec>, Vec<ObstacleSpec>, &str)> = vec![
+        (
+            Some(fence(square[..2].to_vec(), 0.0, 2000.0)),
+            vec![],
+            "geofence: `polygon` needs at least 3 vertices, got 2",
+        ),
+        (
+            Some(fence(
+                vec![square[0], square[2], square[1], square[3]],
+                0.0,
+                2000.0,
+            )),
+            vec![],
+            "geofence: `polygon` is self-intersecting: edge 1 crosses edge 3",
+        ),
+        (
+            Some(fence(square.clone(), 2000.0, 0.0)),
+            vec![],
+            "geofence: `min_z_m` = 2000 must be below `max_z_m` = 0",
+        ),
+        (
+            Some(fence(square.clone(), 0.0, f64::INFINITY)),
+            vec![],
+            "geofence: `max_z_m` must be a finite number, got inf",
+        ),
+        (
+            Some(fence(square.clone(), 0.0, 1000.0)),
+            vec![],
+            "geofence: agent 2 starts above its ceiling at [72.000, 108.000, 1008.000]",
+        ),
+        (
+            None,
+            vec![
+                block("tower", [0.0; 3], [1.0; 3]),
+                block("tower", [5.0; 3], [6.0; 3]),
+            ],
+            "obstacle \"tower\": appears more than once",
+        ),
+        (
+            None,
+            vec![block("tower", [0.0, 0.0, 5.0], [1.0, 1.0, 1.0])],
+            "obstacle \"tower\": `min[2]` = 5 must be below `max[2]` = 1",
+        ),
+        (
+            None,
+            vec![cylinder(0.0)],
+            "obstacle \"mast\": `radius_m` must be > 0, got 0",
+        ),
+        (
+            None,
+            vec![block("tower", [f64::NAN, 0.0, 0.0], [1.0; 3])],
+            "obstacle \"tower\": `min[0]` must be a finite number, got NaN",
+        ),
+        (
+            // Agent 1 starts at (360, 0, 900).
+            None,
+            vec![block("hangar", [350.0, -10.0, 0.0], [370.0, 10.0, 950.0])],
+            "obstacle \"hangar\": agent 1 starts inside it at [360.000, 0.000, 900.000]",
+        ),
+    ];
+    for (k, (geofence, obstacles, want)) in cases.into_iter().enumerate() {
+        let mut f = paper40();
+        f.geofence = geofence;
+        f.obstacles = obstacles;
+        assert_scenario_refused(&format!("airspace{k}.toml"), &f, &[want]);
+    }
+    // Both shapes in one table: the parser names the obstacle.
+    let dir = TempDir::new();
+    let both = "[[obstacle]]\nname = \"tower\"\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nradius_m = 2.0\n";
+    let text = format!("{}\n{both}", scenario_toml(&paper40()));
+    let path = write_text(dir.path(), "both.toml", &text);
+    assert_refused(
+        &path,
+        &["obstacle \"tower\": give either `min` and `max` (a box) or"],
+    );
+}
+
 // ---- numbers ---------------------------------------------------------------------------------
 
 #[test]

@@ -1,12 +1,13 @@
 //! The examples run as their docs say: `two_members` of cdm-iox started as two processes (the
 //! leader side first, as Terminal 1, then the follower, as Terminal 2) over real iceoryx2 shared
 //! memory, each under a watchdog deadline; both exit 0 having exchanged every tick's state, and
-//! the team leaves nothing behind.
+//! the team leaves nothing behind. The example scenarios under `examples/` are certified SAFE
+//! by `orchestrator plan`, with the margins the README quotes.
 
 use std::process::Command;
 use std::time::Duration;
 
-use integration_tests::{describe, example, spawn, unique_team};
+use integration_tests::{bin, describe, example, run, spawn, unique_team};
 
 mod support;
 use support::Footprint;
@@ -67,4 +68,28 @@ fn two_members_exchange_every_tick_and_leave_nothing() {
         describe(&f)
     );
     footprint.assert_nothing_left();
+}
+
+/// `examples/airspace10.toml` (README "Geofences and obstacles"): SAFE, with the fence's and
+/// each obstacle's smallest margin printed.
+#[test]
+fn the_airspace_example_is_certified_safe_with_its_margins() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/airspace10.toml");
+    let out = run(
+        Command::new(bin("orchestrator")).args(["plan", "--scenario", path]),
+        integration_tests::deadline::FLIGHT,
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    for line in [
+        "    fence (edge 1)             59.343 m  member 3 at t = 0.00 s (segment 1)",
+        "    obstacle \"tower\"           41.014 m  member 9 at t = 60.00 s (segment 1)",
+        "    obstacle \"mast\"           194.797 m  member 2 at t = 60.00 s (segment 1)",
+    ] {
+        assert!(
+            stdout.lines().any(|l| l == line),
+            "no line `{line}` in:\n{}",
+            describe(&out)
+        );
+    }
 }

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::airspace_audit::AirspaceAudit;
 use crate::formation::Role;
 use crate::frame::deformation_eigenvalues;
 use crate::math::{Real, Vec3};
@@ -76,14 +77,29 @@ impl SafetyNumbers {
 /// One safety violation (the tick at which a condition starts to fail for these members).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Violation {
-    /// `collision`, `containment`, `tracking` or `deformation`.
+    /// `collision`, `containment`, `tracking`, `deformation`, `geofence` or `obstacle`.
     pub kind: ViolationKind,
+    /// `geofence`: the side (`floor`, `ceiling`, `edge K`); `obstacle`: its name (absent for
+    /// the other kinds, whose records are as they were).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
     pub tick: u64,
     pub t_s: Real,
     pub agents: Vec<u32>,
     /// The measured value and the limit it crossed.
     pub value: Real,
     pub limit: Real,
+}
+
+impl Violation {
+    /// How messages name it: `collision`, `obstacle "tower"`, `geofence ceiling`.
+    pub fn label(&self) -> String {
+        match (&self.name, self.kind) {
+            (Some(n), ViolationKind::Obstacle) => format!("obstacle {n:?}"),
+            (Some(n), k) => format!("{k} {n}"),
+            (None, k) => k.to_string(),
+        }
+    }
 }
 
 /// A runtime fault that ended a run early.
@@ -171,6 +187,13 @@ pub struct AuditReport {
     pub min_separation_m: Real,
     /// Smallest signed distance of a follower to the prism's side faces over the run.
     pub min_boundary_distance_m: Real,
+    /// With `[geofence]`: the smallest margin of a member's ball of radius eps inside the fence
+    /// over the run (negative: breached); absent without a fence.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_fence_margin_m: Option<Real>,
+    /// With `[[obstacle]]`: the smallest distance of a member's ball to an obstacle.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_obstacle_margin_m: Option<Real>,
     pub violations: Vec<Violation>,
     pub violations_dropped: u64,
     /// The run was ended at its first violation (`--stop-on-violation`).
@@ -296,6 +319,8 @@ pub struct Auditor {
     report: AuditReport,
     /// Buffers of the collision sweep, kept from tick to tick (no allocation per tick).
     sweep: Sweep,
+    /// The geofence and the obstacles, when the scenario has them.
+    airspace: Option<AirspaceAudit>,
 }
 
 /// The collision sweep's buffers: the bodies' order along x (last tick's order sorts in about
@@ -342,6 +367,8 @@ impl Auditor {
                 max_follower_deviation_m: 0.0,
                 min_separation_m: Real::INFINITY,
                 min_boundary_distance_m: Real::INFINITY,
+                min_fence_margin_m: None,
+                min_obstacle_margin_m: None,
                 violations: Vec::new(),
                 violations_dropped: 0,
                 stopped_on_violation: false,
@@ -351,6 +378,7 @@ impl Auditor {
                 vehicles: BTreeMap::new(),
             },
             sweep: Sweep::default(),
+            airspace: AirspaceAudit::new(scenario, numbers.delta_m),
         }
     }
 
@@ -381,6 +409,9 @@ impl Auditor {
             self.alive[k] = false;
             self.failing.tracking[k] = false;
             self.failing.containment[k] = false;
+            if let Some(a) = &mut self.airspace {
+                a.lose(k);
+            }
         }
         tracing::warn!(id = loss.id, tick = loss.tick, retriangulated = loss.retriangulated.len(), degraded = ?loss.degraded, "member lost, graph repaired");
         self.report.losses.push(loss);
@@ -395,11 +426,24 @@ impl Auditor {
         value: Real,
         limit: Real,
     ) {
+        self.record_named(kind, None, agents, at, (value, limit));
+    }
+
+    /// [`Self::record`] with the name of what was breached (a fence side, an obstacle).
+    fn record_named(
+        &mut self,
+        kind: ViolationKind,
+        name: Option<String>,
+        agents: &[u32],
+        at: (u64, Real),
+        (value, limit): (Real, Real),
+    ) {
         let (tick, t) = at;
         if self.report.violations.len() < MAX_VIOLATION_RECORDS {
-            tracing::warn!(kind = kind.as_str(), tick, t_s = t, agents = ?agents, value, limit, "safety violation");
+            tracing::warn!(kind = kind.as_str(), name = ?name, tick, t_s = t, agents = ?agents, value, limit, "safety violation");
             self.report.violations.push(Violation {
                 kind,
+                name,
                 tick,
                 t_s: t,
                 agents: agents.to_vec(),
@@ -467,14 +511,21 @@ impl Auditor {
                 self.failing.containment[k] = outside;
             }
         }
-        // Deformation (eq. 37), in the deformation segments only: take-off and landing flatten
-        // the team onto the ground, where separation, not lambda_1, is the argument.
         let plan = &self.scenario.plan;
-        if plan.phases()[plan.piece_at(t).phase].kind.is_ground() {
+        let ground = plan.phases()[plan.piece_at(t).phase].kind.is_ground();
+        self.observe_airspace(at, pos, ground);
+        self.observe_deformation(at, ground);
+    }
+
+    /// Deformation (eq. 37), in the deformation segments only: take-off and landing flatten the
+    /// team onto the ground, where separation, not lambda_1, is the argument.
+    fn observe_deformation(&mut self, at: (u64, Real), ground: bool) {
+        let n = self.numbers;
+        if ground {
             self.failing.deformation = false;
             return;
         }
-        let l1 = match plan.q_d_at(t) {
+        let l1 = match self.scenario.plan.q_d_at(at.1) {
             Ok((q, _)) => deformation_eigenvalues(&q)[0],
             Err(_) => 0.0,
         };
@@ -491,6 +542,27 @@ impl Auditor {
             );
         }
         self.failing.deformation = bad;
+    }
+
+    /// The geofence and the obstacles (`airspace_audit.rs`); nothing without them.
+    fn observe_airspace(&mut self, at: (u64, Real), pos: &[Vec3], ground: bool) {
+        let Some(mut a) = self.airspace.take() else {
+            return;
+        };
+        // Empty (no allocation) on a tick without a new breach.
+        let mut breaches = Vec::new();
+        a.observe(pos, &self.alive, ground, |b| breaches.push(b));
+        for b in breaches {
+            let id = self.ids[b.member];
+            self.record_named(b.kind, Some(b.name), &[id], at, (b.margin_m, 0.0));
+        }
+        if a.has_fence() {
+            self.report.min_fence_margin_m = Some(a.min_fence_margin_m);
+        }
+        if a.has_obstacles() {
+            self.report.min_obstacle_margin_m = Some(a.min_obstacle_margin_m);
+        }
+        self.airspace = Some(a);
     }
 
     /// Collisions (every pair of living bodies closer than 2 eps) and the smallest separation.

@@ -12,6 +12,10 @@
 /// The numeric facade, re-exported so `crate::math::Vec3` reads as before the split.
 pub use cdm_math as math;
 
+pub mod airspace;
+pub mod airspace_audit;
+pub mod airspace_certificate;
+pub mod airspace_suggest;
 pub mod audit;
 pub mod control;
 pub mod delay;

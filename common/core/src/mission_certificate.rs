@@ -108,6 +108,7 @@ pub fn certify_mission(s: &Scenario) -> Certificate {
         notes: s.notes.clone(),
         losses: None,
         segments: Some(rows),
+        airspace: None,
     }
 }
 

@@ -129,6 +129,10 @@ pub enum ViolationKind {
     Tracking,
     /// lambda_1(U_D) < lambda_CD,min (eq. 37).
     Deformation,
+    /// A member's ball of radius eps beyond the geofence (issue 27).
+    Geofence,
+    /// A member's ball of radius eps inside an obstacle (issue 27).
+    Obstacle,
 }
 
 impl ViolationKind {
@@ -139,6 +143,8 @@ impl ViolationKind {
             ViolationKind::Containment => "containment",
             ViolationKind::Tracking => "tracking",
             ViolationKind::Deformation => "deformation",
+            ViolationKind::Geofence => "geofence",
+            ViolationKind::Obstacle => "obstacle",
         }
     }
 }
@@ -201,6 +207,8 @@ mod tests {
             ViolationKind::Containment,
             ViolationKind::Tracking,
             ViolationKind::Deformation,
+            ViolationKind::Geofence,
+            ViolationKind::Obstacle,
         ] {
             assert_eq!(
                 serde_json::to_string(&v).unwrap(),

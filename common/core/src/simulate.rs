@@ -153,6 +153,10 @@ pub struct Certificate {
     /// the worst of them.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub segments: Option<Vec<crate::mission_certificate::PhaseCertificate>>,
+    /// `[geofence]` and `[[obstacle]]` (issue 27): each boundary's smallest margin; absent
+    /// without them, so other certificates keep the JSON they had.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub airspace: Option<crate::airspace_certificate::AirspaceCertificate>,
 }
 
 /// The reason a certificate fails when the gains' stability margin (eq. 26) is not positive.
@@ -232,11 +236,24 @@ pub fn t_threshold_from(
     hi
 }
 
-/// The certificate of a scenario validated with `Checks::Full`.
+/// The certificate of a scenario validated with `Checks::Full`: the paper's (or the mission's)
+/// and, with a geofence or obstacles, the airspace's, whose breaches are reasons too.
 pub fn certify(s: &Scenario) -> Certificate {
-    if s.plan.is_mission() {
-        return crate::mission_certificate::certify_mission(s);
+    let mut c = if s.plan.is_mission() {
+        crate::mission_certificate::certify_mission(s)
+    } else {
+        certify_one(s)
+    };
+    c.airspace = crate::airspace_certificate::certify_airspace(s, c.numbers.delta_m);
+    if let Some(a) = &c.airspace {
+        c.reasons.extend(a.reasons());
+        c.verdict = verdict_of(&c.reasons);
     }
+    c
+}
+
+/// The certificate of the paper's one manoeuvre.
+fn certify_one(s: &Scenario) -> Certificate {
     let n = SafetyNumbers::of(s);
     // E(T) on the exactly linear error dynamics when the graph allows (linear_certificate.rs),
     // otherwise by flying the nonlinear team at every trial T.
@@ -287,5 +304,6 @@ pub fn certify(s: &Scenario) -> Certificate {
         notes: s.notes.clone(),
         losses: None,
         segments: None,
+        airspace: None,
     }
 }

@@ -333,6 +333,8 @@ proptest! {
                 takeoff: None,
                 segments: Vec::new(),
                 landing: None,
+                geofence: None,
+                obstacles: Vec::new(),
                 agents: own,
             }
         };

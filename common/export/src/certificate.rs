@@ -1,5 +1,6 @@
 //! The pre-flight certificate as `plan`, `simulate` and `export` print it.
 
+use cdm_core::airspace_certificate::AirspaceCertificate;
 use cdm_core::mission_certificate::PhaseCertificate;
 use cdm_core::simulate::Certificate;
 use cdm_team::out;
@@ -46,6 +47,9 @@ pub fn print_certificate(c: &Certificate) {
     if let Some(rows) = &c.segments {
         print_phases(rows);
     }
+    if let Some(a) = &c.airspace {
+        print_airspace(a);
+    }
     out!("verdict: {}", c.verdict);
     for r in &c.reasons {
         out!("  - {r}");
@@ -73,5 +77,60 @@ fn print_phases(rows: &[PhaseCertificate]) {
         if let Some(d) = r.min_ground_separation_m {
             out!("      ground spots at least {d:.3} m apart (needs 2 (eps + delta))");
         }
+    }
+}
+
+/// The airspace's smallest margins (issue 27): the fence's worst side, then every obstacle.
+fn print_airspace(a: &AirspaceCertificate) {
+    out!(
+        "  airspace: smallest margins of the balls of eps + delta = {:.4} m (negative: breached)",
+        a.radius_m
+    );
+    let rows = a
+        .fence()
+        .into_iter()
+        .chain(a.clearances.iter().filter(|c| c.kind == "obstacle"));
+    for c in rows {
+        let what = if c.kind == "fence" {
+            format!("fence ({})", c.name)
+        } else {
+            c.label()
+        };
+        out!(
+            "    {what:<22} {:>10.3} m  member {} at t = {:.2} s ({})",
+            c.margin_m,
+            c.agent,
+            c.t_s,
+            c.phase
+        );
+    }
+    if let Some(s) = &a.suggestion {
+        print_suggestion(s);
+    }
+}
+
+/// `plan --suggest`: the offsets that clear each breach, and why no time scaling does.
+fn print_suggestion(s: &cdm_core::airspace_suggest::Suggestion) {
+    if s.offsets.is_empty() {
+        out!("  suggest: nothing to clear (no margin is negative)");
+        return;
+    }
+    out!("  suggest (every height above the ground moved; ground spots kept):");
+    let offset = |v: Option<f64>, verb: &str| {
+        v.map_or(format!("no {verb} clears it"), |d| {
+            format!("{verb} by {d:.3} m")
+        })
+    };
+    for o in &s.offsets {
+        out!(
+            "    {:<22} {}; {}",
+            o.what,
+            offset(o.raise_m, "raise"),
+            offset(o.lower_m, "lower")
+        );
+    }
+    out!("    time: {}", s.time_scaling_note);
+    for n in &s.notes {
+        out!("    - {n}");
     }
 }

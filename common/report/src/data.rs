@@ -201,6 +201,8 @@ pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
                     "containment" => "containment",
                     "tracking" => "tracking",
                     "deformation" => "deformation",
+                    "geofence" => "geofence",
+                    "obstacle" => "obstacle",
                     _ => "violation",
                 };
                 Some((kind, f.get("t_s")?.as_f64()?))

@@ -39,8 +39,19 @@ pub fn margins(r: &AuditReport) -> String {
     let v = r.violations.len() as u64 + r.violations_dropped;
     let mut text =
         format!("margin sep {sep:+.2} m, track {track:+.2} m, side {side:+.2} m, λ1 {lambda:+.3}");
+    // The airspace (issue 27), only when the scenario has one.
+    if let Some(m) = r.min_fence_margin_m {
+        text.push_str(&format!(", fence {m:+.2} m"));
+    }
+    if let Some(m) = r.min_obstacle_margin_m {
+        text.push_str(&format!(", obstacle {m:+.2} m"));
+    }
     if v > 0 {
         text.push_str(&format!(", {v} VIOLATION(S)"));
+        // Name what the airspace's first breach was (a fence side, an obstacle).
+        if let Some(b) = r.violations.iter().find(|b| b.name.is_some()) {
+            text.push_str(&format!(" ({} by agent {:?})", b.label(), b.agents));
+        }
     }
     text
 }

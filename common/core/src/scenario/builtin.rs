@@ -152,6 +152,8 @@ fn generated_unchecked(n: usize) -> ScenarioFile {
         takeoff: None,
         segments: Vec::new(),
         landing: None,
+        geofence: None,
+        obstacles: Vec::new(),
         agents,
     }
 }

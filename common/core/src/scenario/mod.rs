@@ -4,6 +4,7 @@
 //! after validation, projection onto the leaders' plane and graph synthesis. Writing
 //! `Scenario::file` back out gives the scenario actually flown (`scenario.toml`).
 
+mod airspace;
 mod builtin;
 mod flight;
 mod locate;
@@ -21,6 +22,7 @@ use crate::link::{LinkModel, LinkSpec};
 use crate::math::Real;
 use crate::plan::TeamPlan;
 
+pub use airspace::{has_airspace, GeofenceSpec, ObstacleSpec, Shape};
 pub use builtin::{generated, paper40, MAX_AGENTS};
 pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
 
@@ -73,6 +75,12 @@ pub struct ScenarioFile {
     /// `[landing]`: land below the final formation.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub landing: Option<GroundSpec>,
+    /// `[geofence]`: the airspace the team may use (issue 27).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geofence: Option<GeofenceSpec>,
+    /// `[[obstacle]]`: solids the team must not touch, each named.
+    #[serde(default, rename = "obstacle", skip_serializing_if = "Vec::is_empty")]
+    pub obstacles: Vec<ObstacleSpec>,
     pub agents: Vec<AgentSpec>,
 }
 
@@ -137,6 +145,9 @@ pub enum ScenarioErrorKind {
     Formation(#[from] FormationError),
     #[error(transparent)]
     Synthesis(#[from] SynthesisError),
+    /// `[geofence]` or an `[[obstacle]]` (`what`: `geofence`, `obstacle "NAME"`).
+    #[error("{what}: {reason}")]
+    Airspace { what: String, reason: String },
     #[error("gains {gains:?} are unstable for this graph: a root of eq. 26 has real part {worst_real:.4} >= 0")]
     UnstableGains { gains: [Real; 4], worst_real: Real },
 }

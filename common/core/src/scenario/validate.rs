@@ -71,6 +71,7 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
         positive("delta_m", d)?;
     }
     check_optional(f)?;
+    super::airspace::check_tables(f)?;
     if f.name.len() > MAX_NAME_BYTES {
         return Err(E::Invalid {
             field: "name".into(),
@@ -200,6 +201,7 @@ pub(super) fn validate(mut file: ScenarioFile, checks: Checks) -> Result<Scenari
     } else {
         plan
     };
+    super::airspace::check_starts(&file, &formation)?;
     let gains_margin = match checks {
         Checks::Member => None,
         Checks::Full => {
