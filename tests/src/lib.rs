@@ -199,7 +199,12 @@ pub fn python_script(name: &str) -> PathBuf {
 /// The Python of the test virtual environment (`.venv` at the workspace root, made by
 /// `scripts/test-deps.sh` with the pinned readers of `python/requirements-test.txt`). Panics,
 /// naming the script to run, when it is missing: tests that need a reader never skip.
+///
+/// It builds the workspace first, as [`bin`] does: a test that starts a Python peer (a vehicle
+/// with `--max-s`, a subscriber) before its first `bin` call would otherwise have the build run
+/// while the peer's clock does, and a slow build outlasts the peer.
 pub fn venv_python() -> PathBuf {
+    ensure_built();
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
         .join(".venv")
@@ -675,6 +680,40 @@ pub fn write_scenario(dir: &Path, name: &str, file: &ScenarioFile) -> PathBuf {
 /// with goals), 3 secondary leaders (ids 4-6), 34 followers (ids 7-40).
 pub fn paper40() -> ScenarioFile {
     cdm_core::scenario::paper40()
+}
+
+/// paper40 inside a geofence, with a box ("tower") and a vertical cylinder ("mast") well aside
+/// of its path (issue 27): SAFE, and every airspace table has something in it.
+pub fn fenced_paper40() -> ScenarioFile {
+    use cdm_core::scenario::{GeofenceSpec, ObstacleSpec, Shape};
+    let mut f = paper40();
+    f.geofence = Some(GeofenceSpec {
+        polygon: vec![
+            [-400.0, -300.0],
+            [600.0, -300.0],
+            [600.0, 700.0],
+            [-400.0, 700.0],
+        ],
+        min_z_m: 400.0,
+        max_z_m: 1400.0,
+    });
+    let tower = Shape::Box {
+        min: [450.0, -250.0, 400.0],
+        max: [550.0, -150.0, 1300.0],
+    };
+    let mast = Shape::Cylinder {
+        center: [-300.0, 600.0],
+        radius_m: 30.0,
+        min_z_m: 400.0,
+        max_z_m: 1000.0,
+    };
+    for (name, shape) in [("tower", tower), ("mast", mast)] {
+        f.obstacles.push(ObstacleSpec {
+            name: name.into(),
+            shape,
+        });
+    }
+    f
 }
 
 #[cfg(test)]

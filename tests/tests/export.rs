@@ -9,7 +9,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use integration_tests::{bin, describe, run, venv_python, TempDir};
+use integration_tests::{bin, describe, fenced_paper40, run, venv_python, write_scenario, TempDir};
 
 const DEADLINE: Duration = integration_tests::deadline::LONG;
 /// paper40 in a 9 m x 9 m arena: 300 m -> 4.5 m, the descent ends 0.5 m above the floor.
@@ -280,4 +280,43 @@ fn bad_flags_are_named() {
     let out = orchestrator(&["export", "skybrush", "--out", ds, "--n", "3"]);
     assert_eq!(code(&out), Some(2), "{}", describe(&out));
     assert!(!d.exists(), "nothing written on bad input");
+}
+
+/// The fence and the obstacles go with the plan into the target frame: Crazyswarm2's
+/// airspace.yaml (PyYAML), the Skybrush show's geofence (as skybrush-server reads it) and the
+/// scaled scenario.toml (tomllib) all equal the file's tables mapped by p -> S p + origin.
+#[test]
+fn the_airspace_goes_with_the_exports_at_their_scale() {
+    let tmp = TempDir::new();
+    let scenario = write_scenario(tmp.path(), "fenced.toml", &fenced_paper40());
+    let (cf, skyc) = (tmp.path().join("cf"), tmp.path().join("show.skyc"));
+    for (target, dest) in [("crazyswarm2", &cf), ("skybrush", &skyc)] {
+        let args = ["export", target, "--scenario", scenario.to_str().unwrap()];
+        let out = orchestrator(&[&args[..], &["--out", dest.to_str().unwrap()], &LAB[..]].concat());
+        assert_eq!(code(&out), Some(0), "{target}: {}", describe(&out));
+    }
+    let readme = std::fs::read_to_string(cf.join("README.txt")).unwrap();
+    assert!(readme.contains("airspace.yaml:"), "{readme}");
+    let check = |cf: &Path| {
+        let args = [&scenario, cf, &skyc].map(|p| p.as_os_str().to_owned());
+        let frame = ["0.015", "-1.2", "-2.7", "-7.9"].map(std::ffi::OsString::from);
+        let all: Vec<&Path> = args.iter().chain(&frame).map(Path::new).collect();
+        python("check_airspace.py", &all)
+    };
+    let ok = check(&cf);
+    assert_eq!(code(&ok), Some(0), "{}", describe(&ok));
+    assert!(
+        String::from_utf8_lossy(&ok.stdout).contains("airspace ok: 2 obstacles"),
+        "{}",
+        describe(&ok)
+    );
+    // The check can fail: a ceiling 1 mm off is caught.
+    let yaml = cf.join("airspace.yaml");
+    let text = std::fs::read_to_string(&yaml).unwrap();
+    let line = text.lines().find(|l| l.starts_with("  max_z_m:")).unwrap();
+    let z: f64 = line.split(':').nth(1).unwrap().trim().parse().unwrap();
+    let tampered = text.replacen(line, &format!("  max_z_m: {}", z + 1e-3), 1);
+    std::fs::write(&yaml, tampered).unwrap();
+    let bad = check(&cf);
+    assert_eq!(code(&bad), Some(1), "{}", describe(&bad));
 }

@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
+use integration_tests::{
+    bin, describe, fenced_paper40, run, spawn, unique_team, write_scenario, Running, TempDir,
+};
 use serde_json::Value;
 
 /// One headless Chromium page load; the page renders in well under a second on an idle machine.
@@ -109,6 +111,7 @@ fn status(url: &str, dir: &Path, offline: bool) -> Status {
             .then(|| num("data-first-tick")),
         verdict: attr("data-verdict"),
         lost: num("data-lost"),
+        airspace: attr("data-airspace").replace("&quot;", "\""),
     }
 }
 
@@ -120,6 +123,8 @@ struct Status {
     verdict: String,
     /// Members lost by the shown tick.
     lost: i64,
+    /// What the page drew of the airspace: the fence's sides and the obstacles' names (JSON).
+    airspace: String,
 }
 
 /// Takes a screenshot and asserts it is not blank: several colours, and the agents drawn (many
@@ -195,10 +200,12 @@ fn file_url(path: &Path) -> String {
     format!("file://{}", abs.display())
 }
 
+/// paper40 inside its fence, beside a tower and a mast (issue 27): all three are drawn.
 #[test]
 fn replay_html_works_from_file_with_the_network_disabled() {
     let tmp = TempDir::new();
-    let (out, audit) = paper40_run(&tmp, &[]);
+    let fenced = write_scenario(tmp.path(), "fenced.toml", &fenced_paper40());
+    let (out, audit) = paper40_run(&tmp, &["--scenario", fenced.to_str().unwrap()]);
     let replay = out.join("replay.html");
     let page = std::fs::read_to_string(&replay).unwrap_or_else(|e| panic!("{e}"));
     // Self-contained: nothing is loaded from anywhere else.
@@ -211,6 +218,10 @@ fn replay_html_works_from_file_with_the_network_disabled() {
     assert_eq!(s.tick, 2000, "{s:?}");
     assert_eq!(s.verdict, audit["verdict"].as_str().unwrap_or("?"), "{s:?}");
     assert_eq!(s.lost, 0, "{s:?}");
+    assert_eq!(
+        s.airspace, r#"{"fence":4,"obstacles":["tower","mast"]}"#,
+        "{s:?}"
+    );
     screenshot(&file_url(&replay), tmp.path(), true);
 }
 

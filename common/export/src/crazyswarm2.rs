@@ -11,6 +11,7 @@ use std::path::Path;
 use cdm_core::export::{pieces, CrazyflieSplit, Piece};
 use cdm_core::math::Real;
 use cdm_core::rundir::write_atomic;
+use cdm_core::scenario::{has_airspace, ScenarioFile, Shape};
 
 use super::Scaled;
 use cdm_team::Failure;
@@ -60,7 +61,86 @@ pub fn write(dir: &Path, sc: &Scaled, split: &CrazyflieSplit) -> Result<(), Fail
     }
     put(dir, "crazyflies.yaml", &yaml(sc))?;
     put(dir, "fly.py", &fly_py(sc))?;
+    if let Some(text) = airspace_yaml(&sc.scenario.file) {
+        put(dir, AIRSPACE_FILE, &text)?;
+    }
     put(dir, "README.txt", &readme(sc, split))
+}
+
+/// Where the scenario's fence and obstacles go (issue 27): Crazyswarm2 has no airspace file of
+/// its own, so this one is ours, explained in README.txt and the project README.
+const AIRSPACE_FILE: &str = "airspace.yaml";
+
+/// A number as YAML reads it back: Rust's `Display` never writes an exponent, which YAML 1.1
+/// readers (PyYAML) would take for a string (`1e-5`).
+fn num(v: Real) -> String {
+    format!("{v}")
+}
+
+fn nums(v: &[Real]) -> String {
+    let cells: Vec<String> = v.iter().map(|c| num(*c)).collect();
+    format!("[{}]", cells.join(", "))
+}
+
+/// The scenario's `[geofence]` and `[[obstacle]]`s in the target frame (the scaled scenario has
+/// them moved already), or None without either.
+fn airspace_yaml(file: &ScenarioFile) -> Option<String> {
+    if !has_airspace(file) {
+        return None;
+    }
+    let mut y = String::from(
+        "# The airspace of this plan, written by `orchestrator export crazyswarm2`, in the frame of the\n\
+         # trajectories (metres, z up). certificate.json proves that every drone's ball (radius eps plus\n\
+         # its tracking bound) stays inside the geofence and clear of every obstacle for the whole flight.\n\
+         # geofence: a vertical prism over `polygon` (x, y) from min_z_m to max_z_m.\n\
+         # obstacles: an axis-aligned `box` (corners min, max) or a vertical `cylinder`.\n",
+    );
+    if let Some(f) = &file.geofence {
+        let polygon: Vec<String> = f.polygon.iter().map(|v| nums(v)).collect();
+        let _ = write!(
+            y,
+            "geofence:
+  polygon: [{}]
+  min_z_m: {}
+  max_z_m: {}
+",
+            polygon.join(", "),
+            num(f.min_z_m),
+            num(f.max_z_m)
+        );
+    }
+    y.push_str(if file.obstacles.is_empty() {
+        "obstacles: []
+"
+    } else {
+        "obstacles:
+"
+    });
+    for o in &file.obstacles {
+        // A JSON string is a YAML double-quoted scalar: any name survives.
+        let name = serde_json::to_string(&o.name).unwrap_or_default();
+        let shape = match o.shape() {
+            Shape::Box { min, max } => format!("box: {{min: {}, max: {}}}", nums(&min), nums(&max)),
+            Shape::Cylinder {
+                center,
+                radius_m,
+                min_z_m,
+                max_z_m,
+            } => format!(
+                "cylinder: {{center: {}, radius_m: {}, min_z_m: {}, max_z_m: {}}}",
+                nums(&center),
+                num(radius_m),
+                num(min_z_m),
+                num(max_z_m)
+            ),
+        };
+        let _ = writeln!(
+            y,
+            "  - name: {name}
+    {shape}"
+        );
+    }
+    Some(y)
 }
 
 /// True when the trajectories start on the ground (a mission's take-off is their first phase).
@@ -202,6 +282,13 @@ fn readme(sc: &Scaled, split: &CrazyflieSplit) -> String {
             role.as_str(),
             format!("{}.csv", t.id),
             t.id
+        );
+    }
+    if has_airspace(&sc.scenario.file) {
+        let _ = write!(
+            r,
+            "\n{AIRSPACE_FILE}: the scenario's geofence and obstacles at this scale, which the certificate\n\
+             checked. Crazyswarm2 reads no such file: set your arena's limits and obstacles from it.\n"
         );
     }
     r

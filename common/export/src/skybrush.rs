@@ -3,7 +3,8 @@
 //! with each piece as a degree-5 Bézier curve (a quintic is one exactly: `Piece::bezier`),
 //! a constant light program, and `settings.validation` from the certificate and the plan. A
 //! mission is one show from its first phase to its last (on the ground at both ends with
-//! `[takeoff]` and `[landing]`), each hover a constant segment, the limits over every phase.
+//! `[takeoff]` and `[landing]`), each hover a constant segment, the limits over every phase. A
+//! scenario's `[geofence]` becomes the show's `geofence`.
 
 use std::io::Write as _;
 use std::path::Path;
@@ -15,6 +16,7 @@ use zip::write::SimpleFileOptions;
 use cdm_core::export::{pieces, Cut};
 use cdm_core::math::{Real, Vec3};
 use cdm_core::rundir::write_atomic;
+use cdm_core::scenario::GeofenceSpec;
 use cdm_core::simulate::Certificate;
 
 use super::Scaled;
@@ -25,7 +27,49 @@ struct Show {
     version: u32,
     settings: ShowSettings,
     swarm: Swarm,
+    /// The scenario's `[geofence]` (issue 27), absent without one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    geofence: Option<Geofence>,
     meta: Meta,
+}
+
+/// A show's geofence as skybrush-server reads it (`show.geofence`, version 1): inclusion
+/// polygons in the show's own x, y frame, and the altitude range. Skybrush's polygons have no
+/// height, so the scenario's obstacles (boxes and cylinders the team may fly over) have no
+/// place here; they are certified at the target scale instead, and written by the Crazyswarm2
+/// export.
+#[derive(Serialize)]
+struct Geofence {
+    version: u32,
+    enabled: bool,
+    #[serde(rename = "minAltitude")]
+    min_altitude: Real,
+    #[serde(rename = "maxAltitude")]
+    max_altitude: Real,
+    polygons: Vec<FencePolygon>,
+}
+
+#[derive(Serialize)]
+struct FencePolygon {
+    #[serde(rename = "isInclusion")]
+    is_inclusion: bool,
+    points: Vec<[Real; 2]>,
+}
+
+impl Geofence {
+    /// The scenario's fence, already in the target frame (`TargetFrame::apply` moved it).
+    fn of(spec: &GeofenceSpec) -> Self {
+        Geofence {
+            version: 1,
+            enabled: true,
+            min_altitude: spec.min_z_m,
+            max_altitude: spec.max_z_m,
+            polygons: vec![FencePolygon {
+                is_inclusion: true,
+                points: spec.polygon.clone(),
+            }],
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -165,6 +209,7 @@ fn show(sc: &Scaled, cut: Cut, cert: &Certificate) -> Show {
             },
         },
         swarm: Swarm { drones },
+        geofence: sc.scenario.file.geofence.as_ref().map(Geofence::of),
         meta: Meta {
             title: format!(
                 "{} (continuum deformation, scale {}, certificate {})",

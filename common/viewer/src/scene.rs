@@ -6,7 +6,7 @@ use serde::Serialize;
 
 use cdm_core::formation::Role;
 use cdm_core::math::Real;
-use cdm_core::scenario::Scenario;
+use cdm_core::scenario::{GeofenceSpec, ObstacleSpec, Scenario};
 
 use cdm_report::data::{
     boundary_distance, lambdas_at, living_separation, Repair, TickPositions, ViolationMark,
@@ -48,6 +48,12 @@ pub struct Scene {
     /// A mission's phases (issue 26), marked on the replay's timeline; none for one manoeuvre.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub phases: Vec<PhaseMark>,
+    /// The scenario's `[geofence]` (issue 27), drawn as a wire prism.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub geofence: Option<GeofenceSpec>,
+    /// The scenario's `[[obstacle]]`s, drawn as translucent solids with their names.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub obstacles: Vec<ObstacleSpec>,
 }
 
 /// One phase of a mission: its name and when its motion starts and ends (simulation seconds).
@@ -141,6 +147,8 @@ impl Scene {
             stride: 1,
             graphs: Vec::new(),
             phases: phase_marks(s),
+            geofence: s.file.geofence.clone(),
+            obstacles: s.file.obstacles.clone(),
         }
     }
 

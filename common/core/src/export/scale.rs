@@ -4,6 +4,7 @@
 //! tracking error scale by S (eqs. 11, 34-38); the vehicles' radius does not shrink, so the
 //! certificate is issued again on the scaled scenario.
 
+use crate::airspace::Shape;
 use crate::math::{Real, Vec3};
 use crate::scenario::ScenarioFile;
 
@@ -90,9 +91,53 @@ impl TargetFrame {
             }
         }
         for ground in [&mut f.takeoff, &mut f.landing].into_iter().flatten() {
-            ground.ground_z_m = ground.ground_z_m * self.scale + self.origin.z;
+            ground.ground_z_m = self.map_z(ground.ground_z_m);
+        }
+        // The airspace (issue 27) is of the same frame: the fence and the obstacles scale with
+        // the plan, so the certificate at the target scale checks them again.
+        if let Some(fence) = &mut f.geofence {
+            for v in &mut fence.polygon {
+                *v = self.map_xy(*v);
+            }
+            fence.min_z_m = self.map_z(fence.min_z_m);
+            fence.max_z_m = self.map_z(fence.max_z_m);
+        }
+        for o in &mut f.obstacles {
+            o.shape = self.map_shape(o.shape);
         }
         Ok(f)
+    }
+
+    fn map_z(&self, z: Real) -> Real {
+        z * self.scale + self.origin.z
+    }
+
+    fn map_xy(&self, v: [Real; 2]) -> [Real; 2] {
+        [
+            v[0] * self.scale + self.origin.x,
+            v[1] * self.scale + self.origin.y,
+        ]
+    }
+
+    /// An obstacle in the target frame: the scale is positive, so a box's corners stay ordered.
+    fn map_shape(&self, shape: Shape) -> Shape {
+        match shape {
+            Shape::Box { min, max } => Shape::Box {
+                min: self.map(min),
+                max: self.map(max),
+            },
+            Shape::Cylinder {
+                center,
+                radius_m,
+                min_z_m,
+                max_z_m,
+            } => Shape::Cylinder {
+                center: self.map_xy(center),
+                radius_m: radius_m * self.scale,
+                min_z_m: self.map_z(min_z_m),
+                max_z_m: self.map_z(max_z_m),
+            },
+        }
     }
 }
 
@@ -136,6 +181,63 @@ mod tests {
         }
         assert_eq!(scaled.file.takeoff.as_ref().unwrap().ground_z_m, 0.5);
         assert_eq!(scaled.file.landing.as_ref().unwrap().ground_z_m, 0.5);
+    }
+
+    /// The fence and the obstacles move with the team: every margin scales by S, so a point
+    /// inside (outside) stays inside (outside) by S times as much.
+    #[test]
+    fn the_airspace_scales_with_the_team() {
+        use crate::scenario::{GeofenceSpec, ObstacleSpec};
+        let mut file = paper40();
+        file.geofence = Some(GeofenceSpec {
+            polygon: vec![
+                [-50.0, -50.0],
+                [300.0, -50.0],
+                [300.0, 200.0],
+                [-50.0, 200.0],
+            ],
+            min_z_m: 0.0,
+            max_z_m: 600.0,
+        });
+        let tower = Shape::Box {
+            min: [75.0, 20.0, 0.0],
+            max: [85.0, 45.0, 100.0],
+        };
+        let mast = Shape::Cylinder {
+            center: [250.0, 150.0],
+            radius_m: 4.0,
+            min_z_m: 0.0,
+            max_z_m: 80.0,
+        };
+        for (name, shape) in [("tower", tower), ("mast", mast)] {
+            file.obstacles.push(ObstacleSpec {
+                name: name.into(),
+                shape,
+            });
+        }
+        let frame = TargetFrame::new(0.02, Vec3::new(1.0, -2.0, 0.5)).unwrap();
+        let f = frame.apply(&file, 0.1).unwrap();
+        let (fence0, fence1) = (
+            file.geofence.as_ref().unwrap().fence(),
+            f.geofence.as_ref().unwrap().fence(),
+        );
+        for p in [
+            [0.0, 0.0, 10.0],
+            [80.0, 30.0, 50.0],
+            [251.0, 149.0, 79.0],
+            [310.0, 0.0, 5.0],
+        ] {
+            let q = Vec3::from(frame.map(p));
+            let p = Vec3::from(p);
+            for (a, b) in fence0.margins_at(&p).iter().zip(fence1.margins_at(&q)) {
+                assert_eq!(a.0, b.0);
+                assert!((a.1 * 0.02 - b.1).abs() < 1e-9, "{a:?} {b:?}");
+            }
+            for (o0, o1) in file.obstacles.iter().zip(&f.obstacles) {
+                let (d0, d1) = (o0.shape.signed_distance(&p), o1.shape.signed_distance(&q));
+                assert!((d0 * 0.02 - d1).abs() < 1e-9, "{}: {d0} {d1}", o0.name);
+            }
+        }
     }
 
     #[test]

@@ -1,7 +1,8 @@
 // The cdm viewer: a team of quadcopters in 3-D (three.js), its four safety margins, the live
 // curves of Figs. 8 and 11, and either a replay timeline or a live Server-Sent Events stream.
 // DOM contract for tests: #cdm-status carries data-agents, data-tick, data-verdict and data-lost
-// (members lost by the shown tick: hidden, and the graph drawn is the repaired one).
+// (members lost by the shown tick: hidden, and the graph drawn is the repaired one), and
+// data-airspace (the fence's sides drawn, then the obstacles drawn, by name).
 import * as THREE from 'three';
 import { OrbitControls } from 'orbit';
 
@@ -60,6 +61,47 @@ $('graph').addEventListener('change', (e) => { graph.visible = e.target.checked;
 const track = new THREE.Line(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0xffffff }));
 track.frustumCulled = false;
 world.add(track);
+
+// --- airspace (issue 27): the geofence as a wire prism, obstacles as translucent solids --------
+const FENCE_COLOUR = 0x5fd3f3, OBSTACLE_COLOUR = 0xc77dff;
+const drawn = { fence: 0, obstacles: [] }; // data-airspace, for tests: what was added
+function wire(points, colour) {
+  const g = new THREE.BufferGeometry().setFromPoints(points);
+  const obj = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: colour }));
+  world.add(obj);
+  return obj;
+}
+if (scene.geofence) {
+  const f = scene.geofence, m = f.polygon.length, pts = [];
+  const at = (k, z) => new THREE.Vector3(f.polygon[k % m][0], f.polygon[k % m][1], z);
+  for (let k = 0; k < m; k++) {
+    pts.push(at(k, f.min_z_m), at(k + 1, f.min_z_m), at(k, f.max_z_m), at(k + 1, f.max_z_m));
+    pts.push(at(k, f.min_z_m), at(k, f.max_z_m));
+  }
+  drawn.fence = wire(pts, FENCE_COLOUR).geometry.attributes.position.count / 6;
+}
+for (const o of scene.obstacles ?? []) {
+  // A box has `min` and `max`; a vertical cylinder `center`, `radius_m`, `min_z_m`, `max_z_m`.
+  const box = o.min !== undefined;
+  const lo = box ? o.min : [o.center[0], o.center[1], o.min_z_m];
+  const hi = box ? o.max : [o.center[0], o.center[1], o.max_z_m];
+  const height = hi[2] - lo[2];
+  const geometry = box
+    ? new THREE.BoxGeometry(hi[0] - lo[0], hi[1] - lo[1], height)
+    : new THREE.CylinderGeometry(o.radius_m, o.radius_m, height, 32).rotateX(Math.PI / 2);
+  const solid = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({
+    color: OBSTACLE_COLOUR, transparent: true, opacity: 0.35, depthWrite: false,
+  }));
+  solid.position.set((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2);
+  solid.name = o.name;
+  world.add(solid);
+  // 20 degrees: a box's twelve edges, a cylinder's two rims (not its 32 side seams).
+  const edges = new THREE.LineSegments(new THREE.EdgesGeometry(geometry, 20),
+    new THREE.LineBasicMaterial({ color: OBSTACLE_COLOUR }));
+  edges.position.copy(solid.position);
+  world.add(edges);
+  drawn.obstacles.push(o.name);
+}
 
 const pos = (f, k) => new THREE.Vector3(f.p[3 * k] / 1000, f.p[3 * k + 1] / 1000, f.p[3 * k + 2] / 1000);
 
@@ -175,6 +217,7 @@ let rate = null;
 function status(f) {
   const s = $('cdm-status');
   s.dataset.agents = String(n);
+  s.dataset.airspace = JSON.stringify(drawn);
   s.dataset.tick = String(f.tick);
   s.dataset.verdict = verdict;
   const lost = (f.lost ?? []).length;
