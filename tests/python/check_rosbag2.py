@@ -14,6 +14,7 @@ import json
 import math
 import os
 import sys
+import tomllib
 from collections import defaultdict
 
 from mcap.reader import make_reader
@@ -101,7 +102,58 @@ def check_poses(msgs, info, rows):
     return by_id
 
 
-def check_tf_markers_audit(msgs, rows, by_id):
+def expected_airspace(run_dir):
+    """(type, ns, position, scale or points) of the markers the run's scenario.toml (tomllib)
+    asks for: its geofence as a LINE_LIST (each edge at floor and ceiling, a post per vertex),
+    boxes as CUBEs and cylinders as CYLINDERs, centred, scale the full size."""
+    with open(os.path.join(run_dir, "scenario.toml"), "rb") as f:
+        sc = tomllib.load(f)
+    out = []
+    fence = sc.get("geofence")
+    if fence:
+        poly, lo, hi = fence["polygon"], fence["min_z_m"], fence["max_z_m"]
+        pts = []
+        for k, (x, y) in enumerate(poly):
+            nx, ny = poly[(k + 1) % len(poly)]
+            pts += [(x, y, lo), (nx, ny, lo), (x, y, hi), (nx, ny, hi), (x, y, lo), (x, y, hi)]
+        out.append((5, "geofence", None, pts))
+    for o in sc.get("obstacle", []):
+        if "min" in o:
+            lo, hi = o["min"], o["max"]
+            kind = 1
+        else:
+            (cx, cy), r = o["center"], o["radius_m"]
+            lo, hi = (cx - r, cy - r, o["min_z_m"]), (cx + r, cy + r, o["max_z_m"])
+            kind = 3
+        centre = tuple((a + b) / 2 for a, b in zip(lo, hi))
+        out.append((kind, "obstacles", centre, tuple(b - a for a, b in zip(lo, hi))))
+    return out
+
+
+def check_airspace(arr, airspace):
+    got = [m for m in arr.markers if m.ns in ("geofence", "obstacles")]
+    if len(got) != len(airspace):
+        fail(f"/cdm/formation: {len(got)} airspace markers, the scenario has {len(airspace)}")
+    for m, (kind, ns, centre, extent) in zip(got, airspace):
+        if (m.type, m.ns) != (kind, ns):
+            fail(f"/cdm/formation: marker {m.ns}/{m.id} type {m.type}, expected {ns} type {kind}")
+        if centre is None:
+            pts = [(p.x, p.y, p.z) for p in m.points]
+            if len(pts) != len(extent) or any(
+                    math.dist(a, b) > 1e-9 for a, b in zip(pts, extent)):
+                fail(f"/cdm/formation: geofence points {pts[:6]}..., expected {extent[:6]}...")
+        else:
+            pos = (m.pose.position.x, m.pose.position.y, m.pose.position.z)
+            size = (m.scale.x, m.scale.y, m.scale.z)
+            if math.dist(pos, centre) > 1e-9 or math.dist(size, extent) > 1e-9:
+                fail(f"/cdm/formation: obstacle {m.id} at {pos} size {size}, "
+                     f"expected {centre} size {extent}")
+    if airspace:
+        fences = sum(1 for a in airspace if a[1] == "geofence")
+        print(f"/cdm/formation: {fences} geofence and {len(airspace) - fences} obstacles as markers")
+
+
+def check_tf_markers_audit(msgs, rows, by_id, run_dir):
     ticks = sorted({r["tick"] for r in rows})
     last_tick = [r for r in rows if r["tick"] == ticks[-1]]
     for topic in ("/tf", "/cdm/formation", "/cdm/audit"):
@@ -112,9 +164,10 @@ def check_tf_markers_audit(msgs, rows, by_id):
     want = sorted(f"agent_{r['id']}" for r in last_tick)
     if kids != want or {t.header.frame_id for t in tf.transforms} != {"world"}:
         fail(f"/tf: last frames {kids}, want {want} in world")
+    airspace = expected_airspace(run_dir)
     for stamp, _, _, arr in msgs["/cdm/formation"][:: max(1, len(ticks) // 7)]:
         kinds = sorted(m.type for m in arr.markers)
-        if kinds != [2] * len(by_id) + [4]:
+        if kinds != sorted([2] * len(by_id) + [4] + [k for k, _, _, _ in airspace]):
             fail(f"/cdm/formation at {stamp}: marker types {kinds}")
     arr = msgs["/cdm/formation"][-1][3]
     roles = {r["id"]: r["role"] for r in rows}
@@ -127,6 +180,7 @@ def check_tf_markers_audit(msgs, rows, by_id):
     strip = [m for m in arr.markers if m.type == 4][0]
     if len(strip.points) < 4 or plain(strip.points[0]) != plain(strip.points[-1]):
         fail(f"/cdm/formation: the polygon is not a closed LINE_STRIP: {len(strip.points)} points")
+    check_airspace(arr, airspace)
     margins = [json.loads(m[3].data) for m in msgs["/cdm/audit"]]
     if [m["tick"] for m in margins] != ticks:
         fail("/cdm/audit: ticks differ from telemetry")
@@ -188,7 +242,7 @@ def main():
     msgs, info = decode(bag)
     rows = telemetry(run_dir)
     by_id = check_poses(msgs, info, rows)
-    check_tf_markers_audit(msgs, rows, by_id)
+    check_tf_markers_audit(msgs, rows, by_id, run_dir)
     if info["count"] != sum(len(v) for v in msgs.values()):
         fail("metadata.yaml message_count differs from the messages read")
     check_mcap(bag, info)

@@ -2,7 +2,8 @@
 //! code nobody here wrote. `rosbags` opens the rosbag2 directory and decodes every message with
 //! its ROS 2 Humble typestore (one PoseStamped topic per member with one message per telemetry
 //! row, the last pose equal to telemetry to 1e-6 m; /tf, the MarkerArray, the margins), Foxglove's
-//! `mcap` reads the summary, the schemas (equal to the ROS 2 definitions) and the channels. The
+//! `mcap` reads the summary, the schemas (equal to the ROS 2 definitions) and the channels; a
+//! fenced paper40's geofence and obstacles are markers where its scenario.toml puts them. The
 //! bag written during a run (`simulate` and `launch --telemetry mcap`) equals, message for
 //! message, the export of that run. A bad RUN_DIR or an existing --out exits 2 naming it.
 
@@ -11,7 +12,8 @@ use std::process::{Command, Output};
 use std::time::Duration;
 
 use integration_tests::{
-    bin, describe, launch, python_script, run, simulate, unique_team, venv_python, TempDir,
+    bin, describe, fenced_paper40, launch, python_script, run, simulate, unique_team, venv_python,
+    write_scenario, TempDir,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
@@ -59,11 +61,19 @@ fn export_of_a_csv_run_is_read_by_rosbags_and_mcap() {
     check("check", &bag, &run_dir);
 }
 
+/// paper40 in its airspace (issue 27): the fence and the obstacles are markers too.
 #[test]
 fn export_of_a_parquet_run_with_every_is_read_by_rosbags_and_mcap() {
     let tmp = TempDir::new();
     let (run_dir, bag) = (tmp.path().join("run"), tmp.path().join("bag"));
-    fly(&run_dir, &["--telemetry", "parquet", "--every", "3"]);
+    let fenced = write_scenario(tmp.path(), "fenced.toml", &fenced_paper40());
+    let source = ["--scenario", fenced.to_str().unwrap(), "--max-ticks", "300"];
+    let flags = ["--no-figures", "--telemetry", "parquet", "--every", "3"];
+    let o = run(
+        &mut simulate(&run_dir, &[&source[..], &flags[..]].concat()),
+        DEADLINE,
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
     let out = export(&run_dir, &bag, &["--quiet"]);
     assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
     check("check", &bag, &run_dir);

@@ -6,7 +6,9 @@
 //!   simulation time), one per telemetry row;
 //! - `/tf` (tf2_msgs/msg/TFMessage): a frame `agent_<id>` per member, parent `world`;
 //! - `/cdm/formation` (visualization_msgs/msg/MarkerArray): a sphere per member coloured by
-//!   role, and the leading polygon (LINE_STRIP);
+//!   role, the leading polygon (LINE_STRIP), and with a scenario's airspace the geofence
+//!   (LINE_LIST, ns `geofence`) and each obstacle (CUBE or CYLINDER, ns `obstacles`, id in file
+//!   order);
 //! - `/cdm/audit` (std_msgs/msg/String): the tick's margins as JSON.
 //!
 //! `tick.rs` turns one tick into those messages (pure), `msgs.rs` encodes them with the one CDR

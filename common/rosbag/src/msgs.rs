@@ -151,8 +151,11 @@ impl Stamp {
 pub struct Rgba(pub [f32; 4]);
 
 /// `Marker.type` and `Marker.action` values used here.
+pub const CUBE: i32 = 1;
 pub const SPHERE: i32 = 2;
+pub const CYLINDER: i32 = 3;
 pub const LINE_STRIP: i32 = 4;
+pub const LINE_LIST: i32 = 5;
 pub const ADD: i32 = 0;
 pub const DELETE: i32 = 2;
 

@@ -8,7 +8,7 @@ use cdm_core::audit::SafetyNumbers;
 use cdm_core::formation::Role;
 use cdm_core::margins::{boundary_distance, lambdas_at, living_separation, max_deviation};
 use cdm_core::math::{Real, Vec3};
-use cdm_core::scenario::Scenario;
+use cdm_core::scenario::{Scenario, Shape};
 
 use crate::msgs::{self, Marker, MsgType, Rgba, Stamp};
 
@@ -70,6 +70,79 @@ pub struct Team {
     roles: Vec<Role>,
     followers: Vec<usize>,
     limits: Limits,
+    airspace: Vec<Solid>,
+}
+
+/// A static marker of the airspace (issue 27): the geofence's edges or one obstacle.
+struct Solid {
+    ns: &'static str,
+    id: i32,
+    kind: i32,
+    position: Vec3,
+    scale: Vec3,
+    color: Rgba,
+    points: Vec<Vec3>,
+}
+
+const FENCE_COLOR: Rgba = Rgba([0.37, 0.83, 0.95, 1.0]);
+const OBSTACLE_COLOR: Rgba = Rgba([0.78, 0.49, 1.0, 0.35]);
+
+/// The scenario's fence as a LINE_LIST (each polygon edge at the floor and the ceiling, and a
+/// post at each vertex) and its obstacles as CUBE and CYLINDER markers (RViz and Foxglove draw
+/// both centred on `position`, `scale` being the full size, the cylinder's axis along z).
+fn airspace(s: &Scenario, line_width: Real) -> Vec<Solid> {
+    let mut out = Vec::new();
+    if let Some(f) = &s.file.geofence {
+        let m = f.polygon.len();
+        let at = |k: usize, z: Real| Vec3::new(f.polygon[k % m][0], f.polygon[k % m][1], z);
+        let points = (0..m)
+            .flat_map(|k| {
+                let (lo, hi) = (f.min_z_m, f.max_z_m);
+                [
+                    at(k, lo),
+                    at(k + 1, lo),
+                    at(k, hi),
+                    at(k + 1, hi),
+                    at(k, lo),
+                    at(k, hi),
+                ]
+            })
+            .collect();
+        out.push(Solid {
+            ns: "geofence",
+            id: 0,
+            kind: msgs::LINE_LIST,
+            position: Vec3::zeros(),
+            scale: Vec3::new(line_width, 0.0, 0.0),
+            color: FENCE_COLOR,
+            points,
+        });
+    }
+    for (k, o) in s.file.obstacles.iter().enumerate() {
+        let (kind, lo, hi) = match o.shape() {
+            Shape::Box { min, max } => (msgs::CUBE, Vec3::from(min), Vec3::from(max)),
+            Shape::Cylinder {
+                center,
+                radius_m,
+                min_z_m,
+                max_z_m,
+            } => (
+                msgs::CYLINDER,
+                Vec3::new(center[0] - radius_m, center[1] - radius_m, min_z_m),
+                Vec3::new(center[0] + radius_m, center[1] + radius_m, max_z_m),
+            ),
+        };
+        out.push(Solid {
+            ns: "obstacles",
+            id: i32::try_from(k).unwrap_or(i32::MAX),
+            kind,
+            position: (lo + hi) / 2.0,
+            scale: hi - lo,
+            color: OBSTACLE_COLOR,
+            points: Vec::new(),
+        });
+    }
+    out
 }
 
 impl Team {
@@ -83,6 +156,7 @@ impl Team {
             followers: (0..members.len())
                 .filter(|&k| members[k].role == Role::Follower)
                 .collect(),
+            airspace: airspace(scenario, 0.5 * limits.eps_m),
             limits,
         }
     }
@@ -148,7 +222,7 @@ impl Team {
     }
 
     /// A sphere of the safety ball's size (2 eps) per member coloured by role (deleted once
-    /// lost), and the leading polygon through the leaders' positions, closed.
+    /// lost), the leading polygon through the leaders' positions, closed, and the airspace.
     fn formation(&self, stamp: Stamp, t: &Tick<'_>) -> Vec<u8> {
         let d = 2.0 * self.limits.eps_m;
         let polygon: Vec<Vec3> = self
@@ -181,6 +255,16 @@ impl Team {
             color: Rgba([1.0, 1.0, 1.0, 1.0]),
             points: &polygon,
         });
+        markers.extend(self.airspace.iter().map(|a| Marker {
+            ns: a.ns,
+            id: a.id,
+            kind: a.kind,
+            action: msgs::ADD,
+            position: a.position,
+            scale: a.scale,
+            color: a.color,
+            points: &a.points,
+        }));
         msgs::marker_array(stamp, WORLD, &markers)
     }
 
