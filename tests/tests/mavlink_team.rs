@@ -288,6 +288,8 @@ fn a_vehicle_that_stops_sending_is_named() {
         &csv(ORIGIN),
         "--position-timeout",
         "0.75",
+        "--on-loss",
+        "stop",
     ];
     let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
     let o = orch.finish(DEADLINE);
@@ -319,7 +321,8 @@ fn a_vehicle_that_stops_sending_is_named() {
 }
 
 /// Flies a team whose member `which` has a vehicle started with `vehicle_extra` (every vehicle
-/// also with `all`), launched with `team_extra`, and checks that the team stops on that
+/// also with `all`), launched with `team_extra` (and `--on-loss stop` unless it says otherwise:
+/// by default a lost vehicle is repaired around), and checks that the team stops on that
 /// vehicle's loss (exit 3, `vehicle-lost` naming the member, `needle` on stderr). Returns
 /// audit.json, the orchestrator's output and the vehicles' summaries.
 fn lost_vehicle(
@@ -355,6 +358,9 @@ fn lost_vehicle(
     ));
     let mut at = vec!["--vehicle-origin".to_string(), csv(ORIGIN)];
     at.extend(team_extra.iter().map(|a| a.to_string()));
+    if !team_extra.contains(&"--on-loss") {
+        at.extend(["--on-loss".to_string(), "stop".to_string()]);
+    }
     let at: Vec<&str> = at.iter().map(String::as_str).collect();
     let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
     let summaries: Vec<Value> = vehicles
@@ -876,5 +882,84 @@ fn launch_no_spawn_prints_the_link_timeouts_for_hand_started_members() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let flags = " --heartbeat-timeout 4.5 --position-timeout 0.25";
     assert_eq!(stdout.matches(flags).count(), 2, "{}", describe(&out));
+    assert_no_team_resources(&team_name);
+}
+
+/// The same take-over under the default `--on-loss repair`: a pilot takes secondary leader 6's
+/// vehicle 1.5 s after it was armed in OFFBOARD, on a 4 s plan. Its member names the mode and
+/// stops streaming; the orchestrator records the loss (`cause: vehicle-mode`, with the tick its
+/// readers switch at) and announces it; readers 7, 9 and 10 fly their new triangles, and the
+/// team finishes the plan SAFE, exit 0. (Under `--on-loss stop` the test above: exit 3.)
+#[test]
+fn a_vehicle_taken_over_mid_flight_is_repaired_around_and_the_team_finishes_safe() {
+    const TAKEN: usize = 5;
+    let dir = TempDir::new();
+    let file = team(4.0);
+    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+    let base = free_udp_ports(N as u16);
+    let team_name = unique_team("mav10repair");
+    let id = file.agents[TAKEN].id;
+    let origins = [ORIGIN; N];
+    // As ARMED, with HEARTBEAT at 5 Hz: the arming (confirmed by HEARTBEATs) takes less of
+    // the test's time; the 1 Hz take-over is the test above.
+    let armed = ["--require-arm", "--exact", "--heartbeat-hz", "5"];
+    let special: Vec<&str> = armed
+        .iter()
+        .chain(&["--take-over-after", "1.5"])
+        .copied()
+        .collect();
+    let mut vehicles = start_vehicles(&file, (base, &origins), 0..TAKEN, None, &armed);
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        TAKEN..TAKEN + 1,
+        None,
+        &special,
+    ));
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        TAKEN + 1..N,
+        None,
+        &armed,
+    ));
+    let at = ["--vehicle-origin", &csv(ORIGIN), "--arm"];
+    let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
+    let summaries: Vec<Value> = vehicles
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
+        .collect();
+    let audit = read_json(&dir.path().join("run/audit.json"));
+    let why = format!("{audit:#}\n{}", describe(&o));
+    assert_eq!(o.status.code(), Some(0), "{why}");
+    assert_eq!(audit["verdict"], "SAFE", "{why}");
+    assert_eq!(audit["complete"], true, "{why}");
+    let losses = audit["losses"].as_array().expect("losses");
+    assert_eq!(losses.len(), 1, "{why}");
+    let l = &losses[0];
+    assert_eq!(l["id"], id, "{why}");
+    assert_eq!(l["cause"], "vehicle-mode", "{why}");
+    assert!(num(l, "repair_tick") > num(l, "last_tick"), "{why}");
+    let readers: Vec<u64> = l["retriangulated"]
+        .as_array()
+        .expect("retriangulated")
+        .iter()
+        .filter_map(|x| x["id"].as_u64())
+        .collect();
+    assert_eq!(readers, [7, 9, 10], "{why}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains(&format!(
+            "agent {id}: vehicle lost: it left OFFBOARD: now POSCTL"
+        )),
+        "{why}"
+    );
+    stopped_streaming(&summaries[TAKEN], "taken_over_at_s");
+    assert_eq!(
+        audit["vehicles"][&id.to_string()]["mode"],
+        "POSCTL",
+        "{why}"
+    );
     assert_no_team_resources(&team_name);
 }
