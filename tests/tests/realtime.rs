@@ -190,13 +190,8 @@ fn a_scripted_loss_in_real_time_is_repaired_and_the_team_finishes_safe() {
     );
     let (last, from, repair) = (num(l, "last_tick"), num(l, "tick"), num(l, "repair_tick"));
     assert!(last >= 100.0 && from > last && repair > last, "{l:#}");
-    let readers: BTreeSet<u64> = l["retriangulated"]
-        .as_array()
-        .expect("retriangulated")
-        .iter()
-        .filter_map(|x| x["id"].as_u64())
-        .collect();
-    assert_eq!(readers, [7, 9, 10].into(), "{l:#}");
+    let readers = retriangulated(l);
+    assert_eq!(readers, [7, 9, 10], "{l:#}");
     let stderr = String::from_utf8_lossy(&o.stderr);
     for r in &readers {
         let said = stderr

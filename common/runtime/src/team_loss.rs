@@ -309,6 +309,13 @@ impl TeamLosses {
             .map_or_else(Vec::new, |l| l.links.iter().copied().collect())
     }
 
+    /// True when the loop should ask which awaited links are connected, `since` the last time
+    /// it asked: a loss to announce (or a repair with no new link) at once; awaited links
+    /// every `slice`.
+    pub fn links_to_check(&self, since: Duration, slice: Duration) -> bool {
+        self.busy() && (self.awaited().is_empty() || since >= slice)
+    }
+
     /// True while an announced repair waits for its links, or a loss waits to be announced.
     pub fn busy(&self) -> bool {
         self.linking.is_some() || self.announced < self.lost.len()

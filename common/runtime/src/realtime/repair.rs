@@ -238,6 +238,11 @@ mod tests {
         ClockMsg::realtime(UNIX_START + 1_000_000_000, HASH, PHASES_ALIGNED).with_loss(Some(n))
     }
 
+    /// Hands `c` the clock message `m` (it does not end the flight).
+    fn told(c: &mut RealtimeCore<Relinked>, m: ClockMsg) {
+        assert_eq!(c.on_clock(&m, Duration::ZERO, 0), Ok(None));
+    }
+
     /// Flies up to tick `to` (exclusive), `senders` publishing every tick; returns the port
     /// work asked for meanwhile.
     fn fly_to(c: &mut RealtimeCore<Relinked>, to: u64, senders: &[u32]) -> Vec<LossWork> {
@@ -267,20 +272,14 @@ mod tests {
         let mut c = reader(&s);
         fly_to(&mut c, 10, &[1, 6, 8]);
         // Member 6 is lost: the repair applies from tick 20, linked at once.
-        assert_eq!(
-            c.on_clock(&notice(1, 6, 20, 0), Duration::ZERO, 0),
-            Ok(None)
-        );
+        told(&mut c, notice(1, 6, 20, 0));
         let work = fly_to(&mut c, 12, &[1, 8]);
         let connect = LossWork::Connect {
             subscribe: vec![3],
             notify: vec![],
         };
         assert_eq!(work, [connect]);
-        assert_eq!(
-            c.on_clock(&notice(1, 6, 20, 1), Duration::ZERO, 0),
-            Ok(None)
-        );
+        told(&mut c, notice(1, 6, 20, 1));
         // Its new in-neighbour 3 is heard from tick 15: flown from tick 20 exactly.
         let mut work = fly_to(&mut c, 15, &[1, 8]);
         assert!(c.m.vehicle.links.is_empty());
@@ -296,20 +295,14 @@ mod tests {
         let mut c = reader(&s);
         fly_to(&mut c, 30, &[1, 6, 8]);
         // A notice of tick 20 that arrives at 30 (a starved member): followed, not a fault.
-        assert_eq!(
-            c.on_clock(&notice(1, 6, 20, 1), Duration::ZERO, 0),
-            Ok(None)
-        );
+        told(&mut c, notice(1, 6, 20, 1));
         // Until 3 is heard the old link flies on (6 brought forward from its last state).
         fly_to(&mut c, 33, &[1, 8]);
         assert!(c.m.vehicle.links.is_empty());
         fly_to(&mut c, 36, &[1, 3, 8]);
         assert_eq!(c.m.vehicle.links, [(33, Some([1, 3, 8]))]);
         // A notice naming this member: it was declared lost, it stops.
-        assert_eq!(
-            c.on_clock(&notice(2, ME, 50, 1), Duration::ZERO, 0),
-            Ok(None)
-        );
+        told(&mut c, notice(2, ME, 50, 1));
         match c.poll(Duration::from_secs_f64(1.36)) {
             Action::Fail { fault, .. } => {
                 assert_eq!(fault, MemberFault::Loss(LossFault::SelfLost { tick: 36 }))

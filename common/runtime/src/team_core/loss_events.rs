@@ -92,10 +92,9 @@ impl TeamCore {
                 return Some(TeamAction::Kill(vec![id]));
             }
         }
-        // A loss to announce (or a repair with no new link) goes at once; awaited links are
-        // asked about every wait slice.
-        let at_once = l.book.awaited().is_empty();
-        if l.book.busy() && (at_once || now.saturating_sub(l.last_link_check) >= WAIT_SLICE) {
+        if l.book
+            .links_to_check(now.saturating_sub(l.last_link_check), WAIT_SLICE)
+        {
             l.last_link_check = now;
             return Some(TeamAction::CheckLinks);
         }

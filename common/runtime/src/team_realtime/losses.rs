@@ -205,10 +205,9 @@ impl RealtimeTeam {
             l.dying.push(id, cause);
             return Some(MonitorAction::Kill(vec![id]));
         }
-        // A loss to announce (or a repair with no new link) goes at once; awaited links are
-        // asked about every wait slice.
-        let at_once = l.book.awaited().is_empty();
-        if l.book.busy() && (at_once || now.saturating_sub(l.last_link_check) >= WAIT_SLICE) {
+        if l.book
+            .links_to_check(now.saturating_sub(l.last_link_check), WAIT_SLICE)
+        {
             l.last_link_check = now;
             return Some(MonitorAction::CheckLinks);
         }
