@@ -202,11 +202,11 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
     }
     check_follow(&s, a.run.follow)?;
     let losses = LossSchedule::new(&s, &a.run.lose).map_err(Failure::bad_input)?;
-    if realtime.is_some() && !a.run.lose.is_empty() {
-        // Real time repairs no loss (a member's exit is a fault there, as on one host), and a
-        // scripted loss applied as a crash would only stop the team: refused, not ignored.
+    if realtime.is_some() && a.hosts.hosts > 1 && !a.run.lose.is_empty() {
+        // Real time repairs losses on one host only (across hosts a loss is the host's fault):
+        // a scripted loss would only stop the team: refused, not ignored.
         return Err(Failure::bad_input(
-            "--lose is not available with --realtime: real time does not repair a lost member (fly the losses in lockstep)",
+            "--lose with --realtime needs one host: real time repairs a lost member only on one host (fly the losses in lockstep, or on one host)",
         ));
     }
     if a.no_spawn && !a.run.lose.is_empty() {

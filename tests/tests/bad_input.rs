@@ -529,7 +529,8 @@ fn export_scales_out_of_range_are_refused_naming_the_limit() {
 
 /// Scripted losses the runtime cannot fly as asked are refused up front, the same in every
 /// mode: losing every member (nobody left to fly; simulate called it SAFE while the processes
-/// stopped on "no state"), and --lose in real time (which repairs no loss).
+/// stopped on "no state"), and --lose in real time over several hosts (real time repairs a
+/// loss on one host only).
 #[test]
 fn scripted_losses_that_cannot_be_flown_are_refused() {
     let dir = TempDir::new();
@@ -553,10 +554,12 @@ fn scripted_losses_that_cannot_be_flown_are_refused() {
     let o = refused_cmd(
         integration_tests::launch(&team, &out, &["--n", "10"]).args([
             "--realtime",
+            "--hosts",
+            "2",
             "--lose",
             "8@5",
         ]),
-        &["--lose is not available with --realtime"],
+        &["--lose with --realtime needs one host"],
     );
     assert!(o.stdout.is_empty(), "{}", describe(&o));
     assert_no_team_resources(&team);

@@ -291,6 +291,8 @@ fn a_vehicle_that_stops_sending_is_named() {
         &csv(ORIGIN),
         "--position-timeout",
         "0.75",
+        "--on-loss",
+        "stop",
     ];
     let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
     let o = orch.finish(DEADLINE);
@@ -322,7 +324,8 @@ fn a_vehicle_that_stops_sending_is_named() {
 }
 
 /// Flies a team whose member `which` has a vehicle started with `vehicle_extra` (every vehicle
-/// also with `all`), launched with `team_extra`, and checks that the team stops on that
+/// also with `all`), launched with `team_extra` (and `--on-loss stop` unless it says otherwise:
+/// by default a lost vehicle is repaired around), and checks that the team stops on that
 /// vehicle's loss (exit 3, `vehicle-lost` naming the member, `needle` on stderr). Returns
 /// audit.json, the orchestrator's output and the vehicles' summaries.
 fn lost_vehicle(
@@ -332,41 +335,13 @@ fn lost_vehicle(
     team_extra: &[&str],
     needle: &str,
 ) -> (Value, Output, Vec<Value>) {
-    let dir = TempDir::new();
+    let mut extra = team_extra.to_vec();
+    if !extra.contains(&"--on-loss") {
+        extra.extend(["--on-loss", "stop"]);
+    }
     // Long enough that the loss comes mid-flight even on a loaded machine.
-    let file = team(20.0);
-    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
-    let base = free_udp_ports(N as u16);
-    let team_name = unique_team(name);
-    let id = file.agents[which].id;
-    let origins = [ORIGIN; N];
-    let special: Vec<&str> = all.iter().chain(vehicle_extra).copied().collect();
-    let mut vehicles = start_vehicles(&file, (base, &origins), 0..which, None, all);
-    vehicles.extend(start_vehicles(
-        &file,
-        (base, &origins),
-        which..which + 1,
-        None,
-        &special,
-    ));
-    vehicles.extend(start_vehicles(
-        &file,
-        (base, &origins),
-        which + 1..N,
-        None,
-        all,
-    ));
-    let mut at = vec!["--vehicle-origin".to_string(), csv(ORIGIN)];
-    at.extend(team_extra.iter().map(|a| a.to_string()));
-    let at: Vec<&str> = at.iter().map(String::as_str).collect();
-    let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
-    let summaries: Vec<Value> = vehicles
-        .into_iter()
-        .enumerate()
-        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
-        .collect();
-    let audit = read_json(&dir.path().join("run/audit.json"));
-    let why = format!("{audit:#}\n{}", describe(&o));
+    let f = fly_one_special(name, 20.0, which, (all, vehicle_extra), &extra);
+    let (audit, o, why, id) = (&f.audit, &f.o, &f.why, f.id);
     assert_eq!(o.status.code(), Some(3), "{why}");
     assert_eq!(audit["verdict"], "FAULT", "{why}");
     assert_eq!(audit["fault"]["kind"], "vehicle-lost", "{why}");
@@ -376,8 +351,8 @@ fn lost_vehicle(
         stderr.contains(&format!("agent {id}: vehicle lost: {needle}")),
         "{why}"
     );
-    assert_no_team_resources(&team_name);
-    (audit, o, summaries)
+    assert_no_team_resources(&f.team);
+    (f.audit, f.o, f.summaries)
 }
 
 /// `--min-battery 20`: one vehicle's SYS_STATUS battery (PX4's 5 Hz onboard stream) drains
@@ -1066,4 +1041,102 @@ fn an_ardupilot_vehicle_refusing_its_take_off_is_named_and_nothing_starts() {
         );
     }
     assert_no_team_resources(&team_name);
+}
+
+/// The same take-over under the default `--on-loss repair`: a pilot takes secondary leader 6's
+/// vehicle 1.5 s after it was armed in OFFBOARD, on a 4 s plan. Its member names the mode and
+/// stops streaming; the orchestrator records the loss (`cause: vehicle-mode`, with the tick its
+/// readers switch at) and announces it; readers 7, 9 and 10 fly their new triangles, and the
+/// team finishes the plan SAFE, exit 0. (Under `--on-loss stop` the test above: exit 3.)
+#[test]
+fn a_vehicle_taken_over_mid_flight_is_repaired_around_and_the_team_finishes_safe() {
+    const TAKEN: usize = 5;
+    // As ARMED, with HEARTBEAT at 5 Hz: the arming (confirmed by HEARTBEATs) takes less of
+    // the test's time; the 1 Hz take-over is the test above.
+    let armed = ["--require-arm", "--exact", "--heartbeat-hz", "5"];
+    let special = ["--take-over-after", "1.5"];
+    let f = fly_one_special("mav10repair", 4.0, TAKEN, (&armed, &special), &["--arm"]);
+    let (audit, o, why, id) = (&f.audit, &f.o, &f.why, f.id);
+    assert_eq!(o.status.code(), Some(0), "{why}");
+    assert_eq!(audit["verdict"], "SAFE", "{why}");
+    assert_eq!(audit["complete"], true, "{why}");
+    let losses = audit["losses"].as_array().expect("losses");
+    assert_eq!(losses.len(), 1, "{why}");
+    let l = &losses[0];
+    assert_eq!(l["id"], id, "{why}");
+    assert_eq!(l["cause"], "vehicle-mode", "{why}");
+    assert!(num(l, "repair_tick") > num(l, "last_tick"), "{why}");
+    // What README "What if one is lost?" quotes (`-- --nocapture`).
+    println!(
+        "agent {id} lost (vehicle-mode) after its tick {}; its readers switch at their tick {}",
+        l["last_tick"], l["repair_tick"]
+    );
+    assert_eq!(support::retriangulated(l), [7, 9, 10], "{why}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let needle = format!("agent {id}: vehicle lost: it left OFFBOARD: now POSCTL");
+    assert!(stderr.contains(&needle), "{why}");
+    stopped_streaming(&f.summaries[TAKEN], "taken_over_at_s");
+    let mode = &audit["vehicles"][&id.to_string()]["mode"];
+    assert_eq!(mode, "POSCTL", "{why}");
+    assert_no_team_resources(&f.team);
+}
+
+/// One team flight of [`fly_one_special`].
+struct Flown {
+    /// The orchestrator's output, audit.json and a diagnosis for assertions.
+    o: Output,
+    audit: Value,
+    why: String,
+    /// The vehicles' summaries, in member order.
+    summaries: Vec<Value>,
+    team: String,
+    /// The special vehicle's member.
+    id: u32,
+}
+
+/// Flies the ten-member team on a `t_total_s` plan, member `which`'s vehicle started with
+/// `vehicle_extra` (every vehicle also with `all`), launched (team `name`) with `team_extra`.
+fn fly_one_special(
+    name: &str,
+    t_total_s: f64,
+    which: usize,
+    (all, vehicle_extra): (&[&str], &[&str]),
+    team_extra: &[&str],
+) -> Flown {
+    let dir = TempDir::new();
+    let file = team(t_total_s);
+    let scenario = write_scenario(dir.path(), "mavlink10.toml", &file);
+    let base = free_udp_ports(N as u16);
+    let team_name = unique_team(name);
+    let origins = [ORIGIN; N];
+    let special: Vec<&str> = all.iter().chain(vehicle_extra).copied().collect();
+    let mut vehicles = start_vehicles(&file, (base, &origins), 0..which, None, all);
+    let one = which..which + 1;
+    vehicles.extend(start_vehicles(&file, (base, &origins), one, None, &special));
+    vehicles.extend(start_vehicles(
+        &file,
+        (base, &origins),
+        which + 1..N,
+        None,
+        all,
+    ));
+    let origin = csv(ORIGIN);
+    let mut at = vec!["--vehicle-origin", origin.as_str()];
+    at.extend(team_extra);
+    let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
+    let summaries: Vec<Value> = vehicles
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
+        .collect();
+    let audit = read_json(&dir.path().join("run/audit.json"));
+    let why = format!("{audit:#}\n{}", describe(&o));
+    Flown {
+        o,
+        audit,
+        why,
+        summaries,
+        team: team_name,
+        id: file.agents[which].id,
+    }
 }

@@ -5,8 +5,10 @@
 //!
 //! - A real-time run of a short plan is SAFE, its `realtime` figures are present and sane, its
 //!   telemetry has a row per agent at every audit instant, and it tracks like `simulate`.
-//! - A member stopped with SIGSTOP is named (agent-silent) and the team stopped, nothing left;
-//!   a killed member is named (agent-exited) the same way.
+//! - Under `--on-loss stop`, a member stopped with SIGSTOP is named (agent-silent) and the team
+//!   stopped, nothing left; a killed member is named (agent-exited) the same way.
+//! - Under `--on-loss repair` (the default) a member lost in flight (`--lose`) is repaired
+//!   around: its readers fly their new triangles, the team finishes SAFE, exit 0.
 //! - SIGINT to the orchestrator stops the team, nothing left.
 //! - A member started by hand in the other mode is refused with exit 2.
 //! - `--rt-priority P` puts the orchestrator and every member under SCHED_FIFO at P (read back
@@ -37,10 +39,11 @@ fn realtime_launch(team: &str, out: &Path, extra: &[&str]) -> Command {
     launch(team, out, &args)
 }
 
-/// A real-time team of 10 flying a long plan, seen with its 11 processes: the orchestrator and
-/// the team's footprint (for the "nothing left" check).
+/// A real-time team of 10 flying a long plan under `--on-loss stop` (a dead or silent member
+/// stops it), seen with its 11 processes: the orchestrator and the team's footprint (for the
+/// "nothing left" check).
 fn flying(team: &str, out: &Path) -> (integration_tests::Running, Footprint) {
-    let mut orch = spawn(&mut realtime_launch(team, out, &[]));
+    let mut orch = spawn(&mut realtime_launch(team, out, &["--on-loss", "stop"]));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
     let procs = team_processes(team);
     assert_eq!(procs.len(), 11, "{procs:#?}");
@@ -156,6 +159,64 @@ fn impaired_links_hold_real_deliveries_back_and_drop_some() {
     );
     assert_exit(&o, 2, "a delay at the stale bound");
     assert_stderr_has(&o, "launch", &["--link-delay-ms 500", "--stale-after"]);
+}
+
+/// `--lose 6@1` in real time (default `--on-loss repair`): the orchestrator kills secondary
+/// leader 6 once it has published its tick of 1 s, records the loss (`scripted`, its last tick,
+/// the repair tick a lead later) and announces it; its readers 7, 9 and 10 open their new
+/// in-neighbours' states and each says it flies the repaired link; the short plan finishes
+/// SAFE and complete, exit 0. telemetry.csv has all 10 members up to the audit instant the loss
+/// gives and the 9 others from it on (the report's and the replay's reader accept it: no error).
+#[test]
+fn a_scripted_loss_in_real_time_is_repaired_and_the_team_finishes_safe() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_lose");
+    let out = dir.path().join("rt");
+    let mut extra = SHORT.to_vec();
+    extra.extend(["--lose", "6@1"]);
+    let mut cmd = realtime_launch(&team, &out, &extra);
+    cmd.env("RUST_LOG", "warn,cdm_runtime::realtime::repair=info");
+    let o = run(&mut cmd, DEADLINE);
+    assert_exit(&o, 0, "launch --realtime --lose 6@1");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    let losses = audit["losses"].as_array().expect("losses");
+    assert_eq!(losses.len(), 1, "{audit:#}");
+    let l = &losses[0];
+    assert_eq!(
+        (l["id"].as_u64(), l["cause"].as_str()),
+        (Some(6), Some("scripted"))
+    );
+    let (last, from, repair) = (num(l, "last_tick"), num(l, "tick"), num(l, "repair_tick"));
+    assert!(last >= 100.0 && from > last && repair > last, "{l:#}");
+    let readers = retriangulated(l);
+    assert_eq!(readers, [7, 9, 10], "{l:#}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    for r in &readers {
+        let said = stderr
+            .lines()
+            .any(|s| s.contains("flying the repaired link") && s.contains(&format!(" id={r} ")));
+        assert!(said, "agent {r} never flew its repaired link:\n{stderr}");
+    }
+    // Rows: every member before the loss's instant, the nine others from it on.
+    let text = std::fs::read_to_string(out.join("telemetry.csv")).expect("telemetry.csv");
+    let mut rows: std::collections::BTreeMap<u64, BTreeSet<u32>> = Default::default();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let (tick, id) = (f[0].parse().expect("tick"), f[2].parse().expect("id"));
+        rows.entry(tick).or_default().insert(id);
+    }
+    assert_eq!(rows.len(), 301);
+    for (tick, ids_at) in &rows {
+        let want: BTreeSet<u32> = ids(10)
+            .into_iter()
+            .filter(|&i| i != 6 || (*tick as f64) < from)
+            .collect();
+        assert_eq!(ids_at, &want, "tick {tick}");
+    }
+    assert!(!stderr.contains("not written"), "{stderr}");
+    assert_no_process_of(&team);
 }
 
 /// SIGSTOP of follower 9 in real time: its newest state ages past the bound (0.5 s), so the

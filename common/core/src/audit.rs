@@ -139,14 +139,21 @@ pub struct LossRecord {
     #[serde(serialize_with = "role_or_unknown")]
     pub role: Option<Role>,
     /// Why it was lost: `scripted` (`--lose`); in `launch` also `killed` (a signal from
-    /// outside), `exited` (the process ended by itself) or `silent` (past `--agent-timeout`).
+    /// outside), `exited` (the process ended by itself) or `silent` (past `--agent-timeout`);
+    /// in real time with MAVLink vehicles `vehicle-lost`, `vehicle-mode` (a pilot took it over)
+    /// or `vehicle-disarmed`.
     pub cause: LossCause,
-    /// The tick of its last published state.
+    /// The tick of its last published state (real time: the newest the orchestrator heard).
     pub last_tick: u64,
     /// The repair applies, and its body is out of the audit (separation, tracking,
-    /// containment), from this tick: last_tick + 1.
+    /// containment) and telemetry, from this tick: last_tick + 1. In real time the first
+    /// audit instant (telemetry's `tick`) after the loss was found.
     pub tick: u64,
     pub t_s: Real,
+    /// Real time only: the tick, on each member's own clock, from which its readers fly the
+    /// repaired link (a lead after the loss was found, `cdm_runtime::team_realtime`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub repair_tick: Option<u64>,
     /// Followers that switched triangles, with old and new in-neighbours.
     pub retriangulated: Vec<Retriangulation>,
     /// Followers left with no valid triangle: they fly their own plan from this tick.

@@ -177,24 +177,71 @@ impl LossState {
         cause: LossCause,
         audit: &mut Auditor,
     ) -> Repair {
+        let at = LossAt {
+            last_tick: tick.saturating_sub(1),
+            tick,
+            t_s: tick_time(tick, s.dt_s()),
+            repair_tick: None,
+        };
+        self.record_at(s, at, ids, cause, audit)
+    }
+
+    /// [`Self::record`] for a loss found after the fact (real time: `at` says when).
+    pub fn record_at(
+        &mut self,
+        s: &Scenario,
+        at: LossAt,
+        ids: &[u32],
+        cause: LossCause,
+        audit: &mut Auditor,
+    ) -> Repair {
+        let (r, records) = self.repair(s, at, ids, cause);
+        for rec in records {
+            audit.lose(rec);
+        }
+        r
+    }
+
+    /// Lose `ids`: the repair of the graph in force for every member lost so far, and the
+    /// records the audit takes (`Auditor::lose`) once its body leaves (real time: at
+    /// `at.tick`, which may come after a later loss's).
+    pub fn repair(
+        &mut self,
+        s: &Scenario,
+        at: LossAt,
+        ids: &[u32],
+        cause: LossCause,
+    ) -> (Repair, Vec<LossRecord>) {
         self.lost.extend(ids.iter().copied());
         // Incremental: the graph in force is repaired, so only the readers of the members lost
         // now switch (a process that ran ahead never has to change a link it already flew).
         let r = repair(&self.current, self.floor, &self.lost);
-        for rec in records(s, (tick, cause), ids, &self.current, &r) {
-            audit.lose(rec);
-        }
+        let out = records(s, (at, cause), ids, &self.current, &r);
         self.current = r.formation.clone();
-        r
+        (r, out)
     }
 }
 
-/// One record per id lost at `tick`; a follower whose link changed is told under the lost
+/// When a loss happened, as the audit records it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LossAt {
+    /// The lost member's last state.
+    pub last_tick: u64,
+    /// The first tick (real time: audit instant) without its body in the audit and telemetry.
+    pub tick: u64,
+    /// That tick's (instant's) time.
+    pub t_s: Real,
+    /// Real time: the tick (the members' own) from which its readers fly the repair, a lead
+    /// after the loss was found; `None` in lockstep, where it is `tick`.
+    pub repair_tick: Option<u64>,
+}
+
+/// One record per id lost at `at`; a follower whose link changed is told under the lost
 /// member it read (under the first id when it read none of them: a follower degraded because
 /// it was left unreachable).
 fn records(
     s: &Scenario,
-    (tick, cause): (u64, LossCause),
+    (at, cause): (LossAt, LossCause),
     ids: &[u32],
     before: &Formation,
     r: &Repair,
@@ -205,9 +252,10 @@ fn records(
             id,
             role: s.role_of(id),
             cause,
-            last_tick: tick - 1,
-            tick,
-            t_s: tick_time(tick, s.dt_s()),
+            last_tick: at.last_tick,
+            tick: at.tick,
+            t_s: at.t_s,
+            repair_tick: at.repair_tick,
             retriangulated: Vec::new(),
             degraded: Vec::new(),
             host: None,

@@ -93,7 +93,7 @@ impl FaultKind {
 
 /// Why a member was lost in flight (`losses[].cause` in audit.json).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
-#[serde(rename_all = "lowercase")]
+#[serde(rename_all = "kebab-case")]
 pub enum LossCause {
     /// `--lose ID@SECONDS`: `simulate` drops it; `launch` kills it once it published that tick.
     Scripted,
@@ -101,8 +101,17 @@ pub enum LossCause {
     Killed,
     /// Its process ended by itself.
     Exited,
-    /// It sent nothing for `--agent-timeout`; the orchestrator killed it.
+    /// It sent nothing for `--agent-timeout` (real time: `--stale-after`); the orchestrator
+    /// killed it.
     Silent,
+    /// Its MAVLink vehicle was lost: no HEARTBEAT or position in time, a low battery, the
+    /// autopilot's own failsafe state (real time, `--vehicles mavlink`).
+    VehicleLost,
+    /// Its MAVLink vehicle left OFFBOARD/GUIDED after it was engaged: a pilot, a mode switch or
+    /// an autopilot failsafe took it over.
+    VehicleMode,
+    /// Its MAVLink vehicle was disarmed in flight.
+    VehicleDisarmed,
 }
 
 impl LossCause {
@@ -113,6 +122,9 @@ impl LossCause {
             LossCause::Killed => "killed",
             LossCause::Exited => "exited",
             LossCause::Silent => "silent",
+            LossCause::VehicleLost => "vehicle-lost",
+            LossCause::VehicleMode => "vehicle-mode",
+            LossCause::VehicleDisarmed => "vehicle-disarmed",
         }
     }
 }
@@ -196,6 +208,9 @@ mod tests {
             LossCause::Killed,
             LossCause::Exited,
             LossCause::Silent,
+            LossCause::VehicleLost,
+            LossCause::VehicleMode,
+            LossCause::VehicleDisarmed,
         ] {
             assert_eq!(
                 serde_json::to_string(&c).unwrap(),

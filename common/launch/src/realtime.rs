@@ -2,15 +2,18 @@
 //! never grants or waits for anyone: it audits at its own rate from the newest state of every
 //! member brought to common instants, writes telemetry with the usual columns (rows at the
 //! audit instants, through `TickRecorder` as lockstep does), and stops the team at the end of
-//! the plan, on a fault, a stale or exited member, or a signal. Every decision is cdm-runtime's
-//! `RealtimeTeam` (no I/O, driven by the clock passed in); this file moves messages, reads the
-//! clock, sleeps, and writes files.
+//! the plan, on a fault, a stale or exited member, or a signal. With `--on-loss repair` (the
+//! default, members spawned on one host) a dead, stale or vehicle-lost member, or `--lose`, is a
+//! loss instead: killed if need be, recorded, announced on the clock channel, and repaired
+//! around by its readers. Every decision is cdm-runtime's `RealtimeTeam` (no I/O, driven by the
+//! clock passed in); this file moves messages, reads the clock, sleeps, and writes files.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::{Auditor, RealtimeFigures};
+use cdm_core::audit::{Auditor, LossRecord, RealtimeFigures};
 use cdm_core::formation::Role;
+use cdm_core::loss::{LossAt, LossSchedule, LossState, OnLoss};
 use cdm_core::math::Vec3;
 use cdm_core::outcome::FaultKind;
 use cdm_core::record::{write_fault, TickRecorder};
@@ -21,14 +24,17 @@ use cdm_iox::OrchestratorPorts;
 use cdm_runtime::messages::{ClockMsg, StopReason};
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
-use cdm_runtime::team_realtime::{MonitorAction, RealtimePlan, RealtimeTeam};
+use cdm_runtime::team_loss::TeamLosses;
+use cdm_runtime::team_realtime::{
+    LostMember, MonitorAction, RealtimePlan, RealtimeTeam, MEMBER_STALE_FACTOR,
+};
 use cdm_viewer::live::LiveView;
 
 use cdm_team::out;
 
 use crate::launch::LaunchOptions;
 use crate::vehicle_reports::VehicleBook;
-use cdm_team::team::{fault, first_exited, Spawned, Stop};
+use cdm_team::team::{fault, first_exited_but, Spawned, Stop};
 use cdm_team::Failure;
 
 /// Which members run on other hosts and may still send reports (`launch --hosts`: those whose
@@ -117,14 +123,23 @@ impl RealtimeArgs {
     }
 }
 
+/// Whether a real-time launch repairs its losses: `--on-loss repair` with members it spawned
+/// (it kills a silent one) on one host (a loss across hosts stays the host's fault in real time).
+pub fn repairs(o: &LaunchOptions) -> bool {
+    o.on_loss == OnLoss::Repair && o.spawn && o.hosts.hosts <= 1
+}
+
 /// The member flags of a real-time launch (spawned members get them; hand-started ones are told).
+/// A team that repairs its losses gives its members [`MEMBER_STALE_FACTOR`] times the stale
+/// bound: the monitor finds a silent member first, and its readers switch before they give up.
 pub fn member_flags(o: &LaunchOptions) -> Vec<String> {
     match &o.realtime {
         Some(rt) => {
+            let factor = if repairs(o) { MEMBER_STALE_FACTOR } else { 1 };
             let mut flags = vec![
                 "--realtime".into(),
                 "--stale-after".into(),
-                rt.stale_after.as_secs_f64().to_string(),
+                (rt.stale_after * factor).as_secs_f64().to_string(),
             ];
             if let Some(p) = rt.rt_priority {
                 flags.extend(["--rt-priority".into(), p.to_string()]);
@@ -162,7 +177,7 @@ pub fn run(
         let f = fault(FaultKind::Io, None, None, 0, e.to_string());
         (f, StopReason::AgentFault)
     })?;
-    let (mut core, clock, start) = announce(s, o, rt, ports)?;
+    let (mut core, clock, start, start_msg) = announce(s, o, rt, ports)?;
     let hash = s.content_hash();
     let mut m = Monitor {
         s,
@@ -175,6 +190,10 @@ pub fn run(
         rec: TickRecorder::new(s),
         at: Vec::with_capacity(s.formation.members.len()),
         vehicles: VehicleBook::new(hash),
+        losses: LossState::new(s, LossSchedule::default()),
+        lost: Vec::new(),
+        out: vec![false; s.formation.members.len()],
+        start_msg,
     };
     let cpu_at_start = team_cpu_s(children);
     let result = m.fly(ports, children, interrupted);
@@ -218,14 +237,14 @@ pub fn run(
     }
 }
 
-/// The monitor of `s`'s team on a clock started now, and the start instant it announced (tick
-/// 0's instant on this process's monotonic clock) with the phase seed.
+/// The monitor of `s`'s team on a clock started now, the start instant it announced (tick 0's
+/// instant on this process's monotonic clock) and the clock message that announced it.
 fn announce(
     s: &Scenario,
     o: &LaunchOptions,
     rt: &RealtimeOptions,
     ports: &mut OrchestratorPorts,
-) -> Result<(RealtimeTeam, Instant, Instant), Stop> {
+) -> Result<(RealtimeTeam, Instant, Instant, ClockMsg), Stop> {
     let members: Vec<_> = s
         .formation
         .members
@@ -240,11 +259,14 @@ fn announce(
     let clock = Instant::now();
     let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let plan = RealtimePlan::new(lead, (last, s.dt_s()), rt.audit_hz, rt.stale_after);
+    let start_msg = ClockMsg::realtime(start_ns, hash, rt.phase_seed);
     ports
-        .publish_clock(ClockMsg::realtime(start_ns, hash, rt.phase_seed))
+        .publish_clock(start_msg)
         .map_err(|e| transport(e, 0))?;
-    let core = RealtimeTeam::new(plan, book, clock.elapsed());
-    Ok((core, clock, clock + lead))
+    let scripted = cdm_team::loss::scripted_kills(&o.losses);
+    let core = RealtimeTeam::new(plan, book, clock.elapsed())
+        .with_losses(TeamLosses::new(s, &scripted), repairs(o));
+    Ok((core, clock, clock + lead, start_msg))
 }
 
 /// The pacing line of the summary (and what the links dropped, when they are impaired).
@@ -351,6 +373,15 @@ struct Monitor<'a> {
     at: Vec<(Vec3, Vec3)>,
     /// The members' vehicle reports (MAVLink), kept out of the monitor.
     vehicles: VehicleBook,
+    /// The losses' audit records (the repair `simulate` records, loss after loss).
+    losses: LossState,
+    /// The audit records of losses found whose member is still audited (up to its newest
+    /// state), with the instant it leaves from.
+    lost: Vec<(u64, Vec<LossRecord>)>,
+    /// Members out of the audit and telemetry (formation order).
+    out: Vec<bool>,
+    /// The start's clock message: loss notices ride on copies of it.
+    start_msg: ClockMsg,
 }
 
 impl Monitor<'_> {
@@ -372,6 +403,7 @@ impl Monitor<'_> {
             if interrupted.load(Ordering::Relaxed) {
                 self.core.on_interrupt(cdm_process::signals::received());
             }
+            self.core.on_turn();
             self.drain(ports)?;
             loop {
                 match self.core.next_action(self.clock.elapsed()) {
@@ -380,9 +412,28 @@ impl Monitor<'_> {
                         progress.tick(index, self.audit.report());
                     }
                     MonitorAction::CheckExited => {
-                        if let Some((id, how)) = first_exited(children) {
+                        let gone = |id| self.core.is_gone(id);
+                        if let Some((id, how)) = first_exited_but(children, gone) {
                             self.core.on_exited(id, how);
                         }
+                    }
+                    MonitorAction::Kill(ids) => {
+                        for id in ids {
+                            cdm_team::loss::kill_and_reap(children, id);
+                        }
+                        // Their last states are drained before they are lost.
+                        break;
+                    }
+                    MonitorAction::Lost(lost) => self.lost(lost),
+                    MonitorAction::Announce(notice) => {
+                        let msg = self.start_msg.with_loss(Some(notice));
+                        let tick = self.core.audits();
+                        ports.publish_clock(msg).map_err(|e| transport(e, tick))?;
+                    }
+                    MonitorAction::CheckLinks => {
+                        let now = self.clock.elapsed();
+                        let linked = |r, w| ports.linked(r, w).unwrap_or(false);
+                        self.core.on_links(now, linked);
                     }
                     MonitorAction::Flush => {
                         let _ = self.tel.flush();
@@ -395,9 +446,13 @@ impl Monitor<'_> {
                     }
                     MonitorAction::Finished => {
                         progress.finish();
+                        self.record_losses(u64::MAX);
                         return Ok(true);
                     }
-                    MonitorAction::Stop(stop) => return Err(stop),
+                    MonitorAction::Stop(stop) => {
+                        self.record_losses(u64::MAX);
+                        return Err(stop);
+                    }
                 }
             }
         }
@@ -418,23 +473,64 @@ impl Monitor<'_> {
     }
 
     /// Audits and writes the instant `t_s` (audit index `index`) with the recorder `simulate`
-    /// and lockstep `launch` use: the same audit, the same columns.
+    /// and lockstep `launch` use: the same audit, the same columns. Lost members have no row.
     fn audit_once(&mut self, index: u64, t_s: f64) -> Result<(), Stop> {
+        self.record_losses(index);
         let n = self.s.formation.members.len();
         let book = self.core.book();
         self.at.clear();
         self.at.extend((0..n).map(|k| book.state_at(k, t_s)));
-        let at = &self.at;
+        let (at, out) = (&self.at, &self.out);
+        let member = |k: usize| (!out[k]).then(|| at[k]);
         self.rec
-            .record_at(self.s, (index, t_s), self.audit, self.tel, |k| Some(at[k]))
+            .record_at(self.s, (index, t_s), self.audit, self.tel, member)
             .map_err(|f| (f, StopReason::AgentFault))?;
         if let Some(v) = self.live.as_mut() {
             // The page counts ticks of the plan (dt), as in lockstep; an audit instant is at
-            // most half a tick from its nearest one. Real time loses no member mid-flight.
+            // most half a tick from its nearest one.
             let tick = (t_s / self.s.dt_s()).round() as u64;
             let shown = (self.rec.positions(), self.rec.desired());
-            v.tick(tick, t_s, shown, |_| true, self.audit.report());
+            v.tick(tick, t_s, shown, |k| !out[k], self.audit.report());
         }
         Ok(())
+    }
+
+    /// A member lost: the repair is computed now, in the order the losses were found (each
+    /// repairs the graph the one before left, as the members do), and said; the audit takes
+    /// the record at the instant the body leaves ([`Self::record_losses`]).
+    fn lost(&mut self, l: LostMember) {
+        let at = LossAt {
+            last_tick: l.last_tick.unwrap_or(0),
+            tick: l.index,
+            t_s: l.t_s,
+            repair_tick: Some(l.tick),
+        };
+        let (r, records) = self.losses.repair(self.s, at, &[l.id], l.cause);
+        if !self.o.quiet {
+            let switched: Vec<u32> = r.retriangulated.iter().map(|x| x.id).collect();
+            out!(
+                "agent {} lost ({}) after its tick {}: its readers {switched:?} fly the repaired graph from their tick {}",
+                l.id,
+                l.cause,
+                at.last_tick,
+                l.tick
+            );
+        }
+        self.lost.push((l.index, records));
+    }
+
+    /// The losses whose member leaves the audit at or before instant `index`: from now on its
+    /// body is out of the audit and telemetry.
+    fn record_losses(&mut self, index: u64) {
+        let (now, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.lost)
+            .into_iter()
+            .partition(|(from, _)| *from <= index);
+        self.lost = later;
+        for rec in now.into_iter().flat_map(|(_, records)| records) {
+            if let Some(k) = self.s.formation.members.iter().position(|m| m.id == rec.id) {
+                self.out[k] = true;
+            }
+            self.audit.lose(rec);
+        }
     }
 }

@@ -20,7 +20,7 @@ use cdm_core::formation::Member;
 use cdm_core::plan::{PhaseKind, TeamPlan};
 use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
 use cdm_math::Vec3;
-use cdm_runtime::seams::{Vehicle, VehicleFault};
+use cdm_runtime::seams::{RelinkUnsupported, Vehicle, VehicleFault, VehicleLoss};
 
 use crate::arming::{ArmStage, VehicleMode};
 use crate::battery::BatteryFigures;
@@ -245,10 +245,22 @@ impl<'a> MavlinkPlant<'a> {
         *lock(&self.shared).vehicle.counters()
     }
 
-    /// The link's failure as the member reports it (the message names the member).
+    /// The link's failure as the member reports it (the message names the member; a take-over
+    /// or a disarm is a loss of its own kind, recorded as its cause).
     fn link_fault(f: &PlantError) -> VehicleFault {
+        use crate::health::LinkFault;
+        let loss = match f {
+            PlantError::Vehicle(VehicleError::Link(LinkFault::LeftMode { .. })) => {
+                VehicleLoss::LeftMode
+            }
+            PlantError::Vehicle(VehicleError::Link(LinkFault::Disarmed { .. })) => {
+                VehicleLoss::Disarmed
+            }
+            _ => VehicleLoss::Lost,
+        };
         VehicleFault::Link {
             what: f.to_string(),
+            loss,
         }
     }
 }
@@ -311,6 +323,13 @@ impl Vehicle for MavlinkPlant<'_> {
         if self.landing_end_s.is_some_and(|end_s| t_k >= end_s) {
             g.landing_over = true;
         }
+        Ok(())
+    }
+
+    /// A repair after a team-mate's loss: the setpoints follow the new in-neighbours with the
+    /// new weights (or the plan, for a follower left with no triangle) from the next tick.
+    fn relink(&mut self, member: &Member) -> Result<(), RelinkUnsupported> {
+        (self.law, self.neighbor_ids) = law_for(member);
         Ok(())
     }
 }

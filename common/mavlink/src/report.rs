@@ -238,6 +238,14 @@ impl<T: MemberTransport> MemberTransport for Reporting<'_, T> {
     fn receive_clock(&mut self, f: impl FnMut(ClockMsg)) -> Result<usize, Self::Error> {
         self.inner.receive_clock(f)
     }
+
+    fn connect(&mut self, subscribe: &[u32], notify: &[u32]) -> Result<bool, Self::Error> {
+        self.inner.connect(subscribe, notify)
+    }
+
+    fn hand_over(&mut self) -> Result<bool, Self::Error> {
+        self.inner.hand_over()
+    }
 }
 
 #[cfg(test)]

@@ -175,7 +175,9 @@ impl Joined<'_> {
             let first = vehicle.before_start(&mut ports, hash, waits, interrupted)?;
             let link = vehicle.link();
             let at_rest = neighbor_positions(s, me);
-            let mut core = RealtimeCore::realtime(me, at_rest, setup, vehicle, clock.now());
+            let losses = MemberLosses::new(me, LossLog::new(s), &ins, &outs);
+            let mut core = RealtimeCore::realtime(me, at_rest, setup, vehicle, clock.now())
+                .with_losses(losses);
             let done = crate::member_vehicle::fly(
                 &mut core,
                 &mut ports,

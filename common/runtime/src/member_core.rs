@@ -310,8 +310,8 @@ pub(crate) fn report_of(tick: u64, fault: VehicleFault) -> (FaultCode, u32, Memb
             };
             (code, peer, MemberFault::Step { tick, fault })
         }
-        VehicleFault::Link { what } => (
-            FaultCode::VehicleLost,
+        VehicleFault::Link { what, loss } => (
+            FaultCode::of_vehicle(loss),
             NO_PEER,
             MemberFault::Vehicle { tick, what },
         ),

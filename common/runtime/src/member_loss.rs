@@ -135,6 +135,11 @@ impl MemberLosses {
         None
     }
 
+    /// The next link change, if any: its tick and the member with that link.
+    pub fn upcoming(&self) -> Option<(u64, &Member)> {
+        self.schedule.first().map(|(t, m)| (*t, m))
+    }
+
     /// The in-neighbours of the links still to come, and of the link flown before one applied
     /// at `tick` and not flown yet.
     fn links_from(&self, tick: u64) -> impl Iterator<Item = u32> + '_ {
@@ -167,6 +172,30 @@ impl MemberLosses {
     /// Keeps a future in-neighbour's state.
     pub(crate) fn keep(&mut self, id: u32, tick: u64, state: cdm_core::dynamics::Flat) {
         self.kept(id).insert(tick, state);
+    }
+
+    /// Keeps a future in-neighbour's state, and only its last `count` ticks (a real-time
+    /// member flies on the newest state its links deliver).
+    pub(crate) fn keep_last(
+        &mut self,
+        id: u32,
+        (tick, state): (u64, cdm_core::dynamics::Flat),
+        count: u64,
+    ) {
+        let kept = self.kept(id);
+        kept.insert(tick, state);
+        if let Some(last) = kept.last_tick() {
+            kept.drop_before((last + 1).saturating_sub(count));
+        }
+    }
+
+    /// The states kept of `id`, oldest first.
+    pub(crate) fn kept_states(
+        &self,
+        id: u32,
+    ) -> impl Iterator<Item = (u64, cdm_core::dynamics::Flat)> + '_ {
+        let kept = self.ahead.iter().find(|(j, _)| *j == id).map(|(_, k)| k);
+        kept.into_iter().flat_map(|k| k.upto(u64::MAX))
     }
 
     /// The states kept of `id` (a new, empty inbox the first time).

@@ -58,6 +58,13 @@ pub const FAULT_HOST_LOST: u32 = 10;
 /// host's daemon saw it and the orchestrator's bridge publishes this on its behalf.
 pub const FAULT_REMOTE_EXITED: u32 = 11;
 
+/// `StateMsg::fault_code`: the member's real vehicle left OFFBOARD/GUIDED after it was engaged
+/// (a pilot, a mode switch or an autopilot failsafe took it over): [`FAULT_VEHICLE_LOST`] of
+/// that kind.
+pub const FAULT_VEHICLE_MODE: u32 = 12;
+/// `StateMsg::fault_code`: the member's real vehicle was disarmed in flight.
+pub const FAULT_VEHICLE_DISARMED: u32 = 13;
+
 /// `StateMsg::fault_peer` when the fault involves no other member.
 pub const NO_PEER: u32 = u32::MAX;
 
@@ -174,6 +181,10 @@ pub enum FaultCode {
     Control,
     /// [`FAULT_VEHICLE_LOST`]
     VehicleLost,
+    /// [`FAULT_VEHICLE_MODE`]
+    VehicleMode,
+    /// [`FAULT_VEHICLE_DISARMED`]
+    VehicleDisarmed,
     /// [`FAULT_HOST_LOST`]
     HostLost,
     /// [`FAULT_REMOTE_EXITED`]
@@ -195,6 +206,8 @@ impl FaultCode {
             FaultCode::OrchestratorLost => FAULT_ORCHESTRATOR_LOST,
             FaultCode::Control => FAULT_CONTROL,
             FaultCode::VehicleLost => FAULT_VEHICLE_LOST,
+            FaultCode::VehicleMode => FAULT_VEHICLE_MODE,
+            FaultCode::VehicleDisarmed => FAULT_VEHICLE_DISARMED,
             FaultCode::HostLost => FAULT_HOST_LOST,
             FaultCode::RemoteExited => FAULT_REMOTE_EXITED,
             FaultCode::Unknown(c) => c,
@@ -207,11 +220,23 @@ impl FaultCode {
         use cdm_core::outcome::FaultKind;
         match self {
             FaultCode::Control => FaultKind::Control,
-            FaultCode::VehicleLost => FaultKind::VehicleLost,
+            FaultCode::VehicleLost | FaultCode::VehicleMode | FaultCode::VehicleDisarmed => {
+                FaultKind::VehicleLost
+            }
             FaultCode::HostLost => FaultKind::HostLost,
             // A member on another host exited: as a member here would (its daemon saw it).
             FaultCode::RemoteExited => FaultKind::AgentExited,
             _ => FaultKind::AgentFault,
+        }
+    }
+
+    /// The code a member reports for its vehicle's `loss`.
+    pub fn of_vehicle(loss: crate::seams::VehicleLoss) -> Self {
+        use crate::seams::VehicleLoss;
+        match loss {
+            VehicleLoss::Lost => FaultCode::VehicleLost,
+            VehicleLoss::LeftMode => FaultCode::VehicleMode,
+            VehicleLoss::Disarmed => FaultCode::VehicleDisarmed,
         }
     }
 
@@ -228,6 +253,8 @@ impl FaultCode {
             FAULT_ORCHESTRATOR_LOST => FaultCode::OrchestratorLost,
             FAULT_CONTROL => FaultCode::Control,
             FAULT_VEHICLE_LOST => FaultCode::VehicleLost,
+            FAULT_VEHICLE_MODE => FaultCode::VehicleMode,
+            FAULT_VEHICLE_DISARMED => FaultCode::VehicleDisarmed,
             FAULT_HOST_LOST => FaultCode::HostLost,
             FAULT_REMOTE_EXITED => FaultCode::RemoteExited,
             other => FaultCode::Unknown(other),
@@ -487,6 +514,21 @@ mod tests {
                 peer: None
             }
         );
+    }
+
+    #[test]
+    fn a_vehicles_loss_is_reported_by_its_kind_and_audited_as_vehicle_lost() {
+        use crate::seams::VehicleLoss;
+        for (loss, wire) in [
+            (VehicleLoss::Lost, FAULT_VEHICLE_LOST),
+            (VehicleLoss::LeftMode, FAULT_VEHICLE_MODE),
+            (VehicleLoss::Disarmed, FAULT_VEHICLE_DISARMED),
+        ] {
+            let code = FaultCode::of_vehicle(loss);
+            assert_eq!(code.code(), wire);
+            assert_eq!(FaultCode::from_code(wire), Some(code));
+            assert_eq!(code.kind(), cdm_core::outcome::FaultKind::VehicleLost);
+        }
     }
 
     #[test]

@@ -20,6 +20,11 @@
 //! Over imperfect links (`--link-delay-ms`, `--link-jitter-ms`, `--link-loss`) a received state
 //! is held back, or dropped, as lockstep's seeded draws say, in milliseconds of wall time
 //! ([`crate::realtime_links`]); the follower extrapolates from the newest state it has.
+//!
+//! Losses (`--on-loss repair`): the orchestrator's notices ride on the clock channel as in
+//! lockstep, and the member follows them with the same [`MemberLosses`] (the same repair, the
+//! same ports to open, the same hand-over); a reader of a lost member flies its repaired link
+//! from the notice's tick, which the orchestrator chose a lead ahead (`realtime/repair.rs`).
 
 use std::time::Duration;
 
@@ -32,6 +37,7 @@ use cdm_core::step::{extrapolate_flat, NeighborModel, TickAt};
 use crate::member_core::{
     in_neighbors, Action, Deadlines, MemberCore, MemberFault, Shared, Timing, Wiring,
 };
+use crate::member_loss::MemberLosses;
 use crate::member_protocol::WaitingFor;
 use crate::messages::{ClockCommand, ClockMsg, FaultCode, StateMsg, PHASES_ALIGNED, STATUS_PACING};
 use crate::realtime_links::DelayLine;
@@ -180,6 +186,8 @@ impl Pacing {
 struct Start {
     /// Tick 0's instant (phase 0) on this member's clock.
     at: Duration,
+    /// The phase seed announced with the start (a repair's new in-neighbours' phases).
+    seed: u32,
     phase_s: f64,
     neighbor_phase_s: [f64; 3],
 }
@@ -219,6 +227,10 @@ pub struct Realtime {
     start: Option<Start>,
     pacing: Pacing,
     created: Duration,
+    /// Loss notices and repairs (`None`: a loss notice is a fault).
+    losses: Option<Box<MemberLosses>>,
+    /// The repair tick whose wait for a new in-neighbour's state was logged.
+    waited_at: Option<u64>,
 }
 
 impl<V: Vehicle> MemberCore<V, Realtime> {
@@ -240,9 +252,18 @@ impl<V: Vehicle> MemberCore<V, Realtime> {
             start: None,
             pacing: Pacing::default(),
             created: now,
+            losses: None,
+            waited_at: None,
         };
         let plan = (setup.hash, setup.last);
         Self::with_timing(member, plan, vehicle, setup.deadlines, (timing, now))
+    }
+
+    /// The same core, following the orchestrator's loss notices with `losses` (repair in
+    /// flight, `realtime/repair.rs`); without it a notice is a fault.
+    pub fn with_losses(mut self, losses: MemberLosses) -> Self {
+        self.timing.losses = Some(Box::new(losses));
+        self
     }
 
     /// The pacing figures so far.
@@ -253,19 +274,25 @@ impl<V: Vehicle> MemberCore<V, Realtime> {
 
 impl<V: Vehicle> Timing<V> for Realtime {
     const WIRING: Wiring = Wiring {
-        every_clock_message: false,
+        // Every one: a loss notice must not be skipped (the start and the stop are the only
+        // other clock messages of a real-time flight).
+        every_clock_message: true,
         flush_each_publish: true,
         fine_waits: true,
     };
 
     /// The start places tick 0 on this member's clock (read as `now` while the system clock
-    /// read `unix_now_ns`); a lockstep grant is a mode mismatch.
+    /// read `unix_now_ns`); a loss notice is followed (or is a fault); a lockstep grant is a
+    /// mode mismatch.
     fn on_clock(
         &mut self,
         m: &mut Shared<V>,
         c: &ClockMsg,
         (now, unix_now_ns): (Duration, u64),
     ) -> Result<(), MemberFault> {
+        if let Some(n) = c.loss() {
+            self.on_notice(m, n);
+        }
         match c.command() {
             ClockCommand::Run => Err(MemberFault::ModeMismatch {
                 member_realtime: true,
@@ -285,6 +312,7 @@ impl<V: Vehicle> Timing<V> for Realtime {
                     let dt = self.dt_s;
                     self.start = Some(Start {
                         at,
+                        seed: phase_seed,
                         phase_s: phase_offset_s(phase_seed, m.id, dt),
                         neighbor_phase_s: m.neighbor_ids.map(|j| phase_offset_s(phase_seed, j, dt)),
                     });
@@ -304,10 +332,19 @@ impl<V: Vehicle> Timing<V> for Realtime {
         self.pacing.link_states = self.links.counts();
     }
 
+    /// A repair's future in-neighbour: its newest states are kept until its link applies.
+    fn on_stranger(&mut self, m: &mut Shared<V>, msg: &StateMsg) {
+        self.keep_future_neighbor(m, msg);
+    }
+
     /// Waits for the start, then for each tick's instant: publishes the state of that time and
-    /// flies the tick at once; after the last tick, waits for the stop.
+    /// flies the tick at once (on a repaired link from its tick); after the last tick, waits
+    /// for the stop. A loss's port work goes first.
     fn poll(&mut self, m: &mut Shared<V>, now: Duration) -> Action {
-        let Some(start) = self.start else {
+        if let Some(w) = self.losses.as_mut().and_then(|l| l.next_work()) {
+            return Action::Repair(w);
+        }
+        let Some(mut start) = self.start else {
             let join = self.created.saturating_add(m.deadlines.join);
             return self.idle(m, now, Some(join), None);
         };
@@ -324,6 +361,11 @@ impl<V: Vehicle> Timing<V> for Realtime {
             let silence = due.saturating_add(m.deadlines.silence);
             return self.idle(m, now, Some(silence), None);
         }
+        if let Some(a) = self.relink_if_due(m, t_own) {
+            return a;
+        }
+        // A repair may have moved the in-neighbours' phases.
+        start = self.start.unwrap_or(start);
         self.fly(m, start, t_own, (now - due).as_secs_f64())
     }
 
@@ -432,5 +474,6 @@ fn hear(slot: &mut Option<(u64, Flat)>, tick: u64, flat: Flat) {
     }
 }
 
+mod repair;
 #[cfg(test)]
 mod tests;

@@ -90,6 +90,31 @@ impl DelayLine {
         }
     }
 
+    /// The links now come from `from` (a repair after a loss): the states held back for the
+    /// in-neighbours kept move to their new slots, those of the dropped ones are forgotten.
+    pub fn relink(&mut self, from: [u32; 3]) {
+        let mut held: [VecDeque<Held>; 3] = Default::default();
+        for (slot, j) in from.iter().enumerate() {
+            if let Some(k) = self.from.iter().position(|o| o == j) {
+                held[slot] = std::mem::take(&mut self.held[k]);
+            }
+        }
+        self.held = held;
+        self.from = from;
+    }
+
+    /// True when the state of in-neighbour `from` sampled at its tick `tick` (stamped
+    /// `stamp_s`) is usable at the receiver's own time `t_s`: the link does not lose it and its
+    /// delay has passed (always, over perfect links).
+    pub fn delivered_by(&self, from: u32, tick: u64, stamp_s: f64, t_s: f64) -> bool {
+        if !self.impaired {
+            return true;
+        }
+        self.model
+            .delay_ms(from, self.to, tick)
+            .is_some_and(|ms| stamp_s + ms * 1e-3 <= t_s)
+    }
+
     /// States received, and how many of them the links lost.
     pub fn counts(&self) -> (u64, u64) {
         (self.received, self.lost)

@@ -46,6 +46,8 @@ struct Seen {
     pacing: Option<PacingFigures>,
     /// A pacing report arrived after the stop (its final figures).
     final_report: bool,
+    /// Lost in flight (`--on-loss repair`): no longer waited for, judged stale or audited.
+    lost: bool,
 }
 
 /// The monitor's state.
@@ -80,6 +82,7 @@ impl MonitorCore {
                 states: VecDeque::with_capacity(ring),
                 pacing: None,
                 final_report: false,
+                lost: false,
             })
             .collect();
         let ids: Vec<u32> = members.iter().map(|m| m.id).collect();
@@ -137,6 +140,33 @@ impl MonitorCore {
         self.index.get(id)
     }
 
+    /// Member `k` (formation order) is lost: from now on no audit instant waits for it, it is
+    /// never stale, and it is out of the audit ([`Self::is_lost`]). Its states are still kept.
+    pub fn lose(&mut self, k: usize) {
+        if let Some(m) = self.members.get_mut(k) {
+            m.lost = true;
+        }
+    }
+
+    /// True once member `k` (formation order) is lost.
+    pub fn is_lost(&self, k: usize) -> bool {
+        self.members.get(k).is_some_and(|m| m.lost)
+    }
+
+    /// The stamp of member `k`'s newest state (formation order), if any arrived.
+    pub fn newest_stamp_of(&self, k: usize) -> Option<f64> {
+        let m = self.members.get(k)?;
+        m.states
+            .back()
+            .map(|(t, _)| stamp_s(*t, m.phase_s, self.dt_s))
+    }
+
+    /// The tick of member `id`'s newest state, if any arrived.
+    pub fn newest_tick(&self, id: u32) -> Option<u64> {
+        let k = self.index.get(id)?;
+        self.members[k].states.back().map(|(t, _)| *t)
+    }
+
     /// The team was told to stop: pacing reports from now on are final.
     pub fn stopping(&mut self) {
         self.stopped = true;
@@ -144,7 +174,10 @@ impl MonitorCore {
 
     /// True when every member in `alive` (formation order) sent its final pacing report.
     pub fn final_reports_in(&self, alive: impl Fn(u32) -> bool) -> bool {
-        self.members.iter().all(|m| m.final_report || !alive(m.id))
+        // A lost member that still runs (its vehicle lost) reports nothing more.
+        self.members
+            .iter()
+            .all(|m| m.final_report || m.lost || !alive(m.id))
     }
 
     /// The stamp of member `k`'s newest state (0, the start, before its first).
@@ -156,9 +189,10 @@ impl MonitorCore {
     }
 
     /// The member whose newest state is the oldest, if older than `bound_s` at time `now_s` of
-    /// the common time line: its id and that age (s).
+    /// the common time line: its id, its newest tick and that age (s). Lost members are not.
     pub fn stale(&self, now_s: f64, bound_s: f64) -> Option<(u32, u64, f64)> {
         (0..self.members.len())
+            .filter(|&k| !self.members[k].lost)
             .map(|k| (k, now_s - self.newest_stamp(k)))
             .filter(|(_, age)| *age > bound_s)
             .max_by(|a, b| a.1.total_cmp(&b.1))
@@ -169,10 +203,11 @@ impl MonitorCore {
     }
 
     /// The instant up to which every member has been heard: the oldest of the members' newest
-    /// stamps (0, the start, while one has sent nothing). An audit instant at or before it is
+    /// stamps (0, the start, while one has sent nothing), lost members left out. An audit instant at or before it is
     /// audited from states that bracket it, not extrapolated from a late one.
     pub fn heard_until(&self) -> f64 {
         (0..self.members.len())
+            .filter(|&k| !self.members[k].lost)
             .map(|k| self.newest_stamp(k))
             .fold(f64::INFINITY, f64::min)
     }

@@ -117,17 +117,30 @@ impl TickClock for LockstepClock {
 pub enum VehicleFault {
     /// The model's tick failed (controller, or a neighbour's non-finite state).
     Step(StepFault),
-    /// The link to a real vehicle failed: lost (no HEARTBEAT for 1 s, no position for 0.5 s),
-    /// never heard, or it refused to arm. `what` is the link's own message, which names the
-    /// member (the link's typed error lives in its crate, which this one does not know).
-    Link { what: String },
+    /// The link to a real vehicle failed: lost (no HEARTBEAT for `--heartbeat-timeout`, no
+    /// position for `--position-timeout`), never heard, refused to arm, or taken over. `what`
+    /// is the link's own message, which names the member (the link's typed error lives in its
+    /// crate, which this one does not know); `loss` what kind of loss it is for the team.
+    Link { what: String, loss: VehicleLoss },
+}
+
+/// What kind of loss a real vehicle's failure is for the team (`FaultCode` on the wire, the
+/// loss cause in audit.json): the team repairs around each alike, and says which it was.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VehicleLoss {
+    /// The link itself: silence, a low battery, the autopilot's own failsafe state, arming.
+    Lost,
+    /// The vehicle left the mode that flies the member's setpoints (a pilot took it over).
+    LeftMode,
+    /// The vehicle was disarmed in flight.
+    Disarmed,
 }
 
 impl fmt::Display for VehicleFault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             VehicleFault::Step(s) => s.fmt(f),
-            VehicleFault::Link { what } => f.write_str(what),
+            VehicleFault::Link { what, .. } => f.write_str(what),
         }
     }
 }

@@ -19,7 +19,7 @@ use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
 use crate::stall::StallWatch;
 pub use crate::team_fault::FaultRank;
 use crate::team_fault::{InterruptedAt, TeamFault, TickClock};
-use crate::team_loss::{LossCause, TeamLosses};
+use crate::team_loss::{Dying, TeamLosses};
 use crate::team_slots::{IdIndex, TickSlots};
 
 /// Why a run stops early: the fault to record and the reason sent to the members.
@@ -136,8 +136,8 @@ struct LossEvents {
     book: TeamLosses,
     /// Dead or silent members are lost and repaired around (`--on-loss repair`, spawned team).
     repairs: bool,
-    /// Killed or found dead: (id, cause, drained once since).
-    dying: Vec<(u32, LossCause, bool)>,
+    /// Killed or found dead, their last states not yet drained.
+    dying: Dying,
     last_link_check: Duration,
     /// The loss notice changed: grant again so the clock carries it.
     republish: bool,
@@ -189,7 +189,7 @@ impl TeamCore {
             self.last_progress = now;
         }
         if let Some(l) = &mut self.losses {
-            l.dying.iter_mut().for_each(|d| d.2 = true);
+            l.dying.turn();
         }
     }
 

@@ -13,7 +13,60 @@ use cdm_core::loss_log::LossLog;
 pub use cdm_core::outcome::LossCause;
 use cdm_core::scenario::Scenario;
 
-use crate::messages::LossNotice;
+use crate::messages::{FaultCode, LossNotice};
+
+/// Why a member process that ended is lost: `killed` by a signal, else `exited`. `how` is
+/// `cdm_team::team::describe_exit`'s wording ("was killed by signal 9", "exited with code 3").
+pub fn exit_cause(how: &str) -> LossCause {
+    if how.starts_with("was killed") {
+        LossCause::Killed
+    } else {
+        LossCause::Exited
+    }
+}
+
+/// The loss a member's fault report announces, if it is one: its real vehicle lost, taken over
+/// or disarmed (the member stops flying it; the team repairs around it, real time).
+pub fn reported_loss(code: FaultCode) -> Option<LossCause> {
+    match code {
+        FaultCode::VehicleLost => Some(LossCause::VehicleLost),
+        FaultCode::VehicleMode => Some(LossCause::VehicleMode),
+        FaultCode::VehicleDisarmed => Some(LossCause::VehicleDisarmed),
+        _ => None,
+    }
+}
+
+/// Members killed or found dead whose last states are still to be drained: each is lost
+/// after one more drain of the transport (the loop marks a drain with [`Self::turn`]), so
+/// every state it published is in first.
+#[derive(Debug, Clone, Default)]
+pub struct Dying(Vec<(u32, LossCause, bool)>);
+
+impl Dying {
+    /// Member `id` is dying of `cause` (a repeat changes nothing).
+    pub fn push(&mut self, id: u32, cause: LossCause) {
+        if !self.contains(id) {
+            self.0.push((id, cause, false));
+        }
+    }
+
+    /// True while `id` is dying.
+    pub fn contains(&self, id: u32) -> bool {
+        self.0.iter().any(|d| d.0 == id)
+    }
+
+    /// A new turn of the loop: the transport is drained next.
+    pub fn turn(&mut self) {
+        self.0.iter_mut().for_each(|d| d.2 = true);
+    }
+
+    /// The members drained once since they were pushed, taken (in the order they died).
+    pub fn take_drained(&mut self) -> Vec<(u32, LossCause)> {
+        let (drained, rest): (Vec<_>, Vec<_>) = self.0.drain(..).partition(|d| d.2);
+        self.0 = rest;
+        drained.into_iter().map(|(id, c, _)| (id, c)).collect()
+    }
+}
 
 /// A repair whose new links did not all connect in time.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -109,8 +162,13 @@ impl TeamLosses {
     /// Member `id` is lost after its tick-`last_tick` state (`None`: it published nothing).
     /// Returns the tick from which its repair applies.
     pub fn lose(&mut self, id: u32, last_tick: Option<u64>, cause: LossCause) -> u64 {
+        self.lose_from(id, last_tick.map_or(0, |t| t + 1), cause)
+    }
+
+    /// Member `id` is lost, its repair applying from tick `from` (lockstep: the tick after its
+    /// last state; real time: a lead after the loss was found, `team_realtime`).
+    pub fn lose_from(&mut self, id: u32, from: u64, cause: LossCause) -> u64 {
         self.scripted.retain(|&(_, j)| j != id);
-        let from = last_tick.map_or(0, |t| t + 1);
         if self.is_lost(id) {
             return from;
         }
@@ -249,6 +307,13 @@ impl TeamLosses {
         self.linking
             .as_ref()
             .map_or_else(Vec::new, |l| l.links.iter().copied().collect())
+    }
+
+    /// True when the loop should ask which awaited links are connected, `since` the last time
+    /// it asked: a loss to announce (or a repair with no new link) at once; awaited links
+    /// every `slice`.
+    pub fn links_to_check(&self, since: Duration, slice: Duration) -> bool {
+        self.busy() && (self.awaited().is_empty() || since >= slice)
     }
 
     /// True while an announced repair waits for its links, or a loss waits to be announced.

@@ -8,14 +8,18 @@
 //! What it decides: when an audit instant is due (it lags the clock by one member period, and
 //! waits until every member has been heard at or after it), which member is stale, which fault
 //! report names the root cause ([`FaultRank`], as in lockstep), and when to look for exited
-//! members and flush.
+//! members and flush. With `--on-loss repair` a dead, stale or vehicle-lost member is lost
+//! instead, and its readers repaired around it (`team_realtime/losses.rs`).
 
 use std::time::Duration;
 
-use crate::messages::{FaultCode, StateMsg};
+use crate::messages::{FaultCode, LossNotice, StateMsg};
 use crate::realtime_monitor::{MonitorCore, MonitorEvent};
 use crate::team_core::{Stop, EXIT_CHECK};
 use crate::team_fault::{FaultRank, InterruptedAt, TeamFault, TickClock};
+
+mod losses;
+pub use losses::{LostMember, RealtimeLosses, MEMBER_STALE_FACTOR, REPAIR_LEAD_OF_STALE};
 
 /// How often telemetry is flushed while flying.
 pub const FLUSH_EVERY: Duration = Duration::from_millis(100);
@@ -40,6 +44,8 @@ pub struct RealtimePlan {
     pub last_audit: u64,
     /// The bound on a member's newest state's age.
     pub stale_after: Duration,
+    /// The members' period (s).
+    pub dt_s: f64,
 }
 
 impl RealtimePlan {
@@ -60,6 +66,7 @@ impl RealtimePlan {
             // hair below a multiple of the period after rounding).
             last_audit: (t_end / period_s + 1e-9).floor() as u64,
             stale_after,
+            dt_s,
         }
     }
 }
@@ -80,6 +87,17 @@ pub enum MonitorAction {
     Finished,
     /// Stop the team: record the fault and send the reason.
     Stop(Stop),
+    /// SIGKILL these members and reap them (a scripted loss, or stale past the bound), then
+    /// receive again: their last states are drained before they are lost.
+    Kill(Vec<u32>),
+    /// A member is lost: record it in the audit (its body leaves the audit and telemetry from
+    /// the next instant on).
+    Lost(LostMember),
+    /// Publish the clock message again with this loss notice (a new loss, or its links joined).
+    Announce(LossNotice),
+    /// Ask which awaited links of a repair are connected: answer with
+    /// [`RealtimeTeam::on_links`].
+    CheckLinks,
 }
 
 /// The real-time monitor's protocol state (see the module doc).
@@ -95,6 +113,8 @@ pub struct RealtimeTeam {
     fault: Option<(FaultRank, TeamFault)>,
     interrupt: Option<String>,
     exited: Option<(u32, String)>,
+    /// Losses (`with_losses`): `None` keeps every dead or stale member a fault.
+    losses: Option<RealtimeLosses>,
 }
 
 impl RealtimeTeam {
@@ -109,6 +129,7 @@ impl RealtimeTeam {
             fault: None,
             interrupt: None,
             exited: None,
+            losses: None,
         }
     }
 
@@ -135,7 +156,11 @@ impl RealtimeTeam {
     /// A message from a member's state service. A fault report or a non-finite state is kept
     /// when it names the root cause better than the one kept so far.
     pub fn on_state(&mut self, msg: &StateMsg) {
-        let (rank, fault) = match self.book.on_state(msg) {
+        let event = self.book.on_state(msg);
+        if self.is_gone(msg.id) || self.lost_on_report(&event) {
+            return;
+        }
+        let (rank, fault) = match event {
             MonitorEvent::Nothing => return,
             MonitorEvent::Fault {
                 id,
@@ -170,7 +195,7 @@ impl RealtimeTeam {
                 peer: p,
                 reporter: id,
                 tick,
-                bound_s: self.plan.stale_after.as_secs_f64(),
+                bound_s: self.member_stale_after().as_secs_f64(),
             },
             _ => TeamFault::Reported {
                 id,
@@ -182,8 +207,12 @@ impl RealtimeTeam {
         }
     }
 
-    /// Member `id`'s process was seen exited (`how`: "exited with code 1").
+    /// Member `id`'s process was seen exited (`how`: "exited with code 1"): lost when losses
+    /// are repaired, else the fault that stops the team.
     pub fn on_exited(&mut self, id: u32, how: String) {
+        if self.is_gone(id) || self.lost_on_exit(id, &how) {
+            return;
+        }
         self.exited.get_or_insert((id, how));
     }
 
@@ -208,6 +237,14 @@ impl RealtimeTeam {
     /// The next action at `now`: a signal, a fault report, a stale member, an exited member
     /// stop the team in that order; then the audit instants due; then a flush; then a wait.
     pub fn next_action(&mut self, now: Duration) -> MonitorAction {
+        if let Some(signal) = self.interrupt.take() {
+            let (index, t_s) = (self.audits, self.instant_s(self.audits));
+            let at = InterruptedAt::Instant { index, t_s };
+            return MonitorAction::Stop(TeamFault::Interrupted { signal, at }.stop());
+        }
+        if let Some(a) = self.loss_action(now) {
+            return a;
+        }
         if let Some(a) = self.stop_action(now) {
             return MonitorAction::Stop(a.stop());
         }
@@ -248,14 +285,9 @@ impl RealtimeTeam {
         })
     }
 
-    /// The fault that stops the team now, if any.
+    /// The fault that stops the team now, if any (after a signal and the losses).
     fn stop_action(&mut self, now: Duration) -> Option<TeamFault> {
         let index = self.audits;
-        if let Some(signal) = self.interrupt.take() {
-            let t_s = self.instant_s(index);
-            let at = InterruptedAt::Instant { index, t_s };
-            return Some(TeamFault::Interrupted { signal, at });
-        }
         if let Some((_, f)) = self.fault.take() {
             return Some(f);
         }

@@ -15,6 +15,16 @@ use cdm_iox::TeamName;
 use integration_tests::{bin, describe, Running};
 use serde_json::Value;
 
+/// The followers a loss of audit.json's `losses` re-triangulated, in its order.
+pub fn retriangulated(loss: &Value) -> Vec<u64> {
+    loss["retriangulated"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no retriangulated list: {loss:#}"))
+        .iter()
+        .filter_map(|x| x["id"].as_u64())
+        .collect()
+}
+
 /// How long a team may take to start and write its first ticks.
 pub const PROGRESS_DEADLINE: Duration = integration_tests::deadline::SHORT;
 

@@ -37,7 +37,8 @@ impl Vehicle for Still {
     fn fly_tick(&mut self, tick: u64, _: &[Flat; 3]) -> Result<(), VehicleFault> {
         if self.fail_at == Some(tick) && self.link_lost {
             let what = format!("agent {ME}: vehicle lost");
-            return Err(VehicleFault::Link { what });
+            let loss = crate::seams::VehicleLoss::Lost;
+            return Err(VehicleFault::Link { what, loss });
         }
         if self.fail_at == Some(tick) {
             return Err(VehicleFault::Step(StepFault::Control(

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use super::{first_grant, FaultRank, LossEvents, Stopping, TeamAction, TeamCore, WAIT_SLICE};
 use crate::team_fault::TeamFault;
-use crate::team_loss::{LossCause, TeamLosses};
+use crate::team_loss::{exit_cause, Dying, LossCause, TeamLosses};
 
 impl TeamCore {
     /// The same core handling `book`'s losses. `repairs`: dead or silent members are lost and
@@ -21,7 +21,7 @@ impl TeamCore {
         self.losses = Some(LossEvents {
             book,
             repairs,
-            dying: Vec::new(),
+            dying: Dying::default(),
             last_link_check: Duration::ZERO,
             republish: false,
         });
@@ -87,15 +87,14 @@ impl TeamCore {
         }
         let book = &l.book;
         if let Some(id) = book.scripted_due(|id| book.seen(id)) {
-            if l.dying.iter().all(|d| d.0 != id) {
-                l.dying.push((id, LossCause::Scripted, false));
+            if !l.dying.contains(id) {
+                l.dying.push(id, LossCause::Scripted);
                 return Some(TeamAction::Kill(vec![id]));
             }
         }
-        // A loss to announce (or a repair with no new link) goes at once; awaited links are
-        // asked about every wait slice.
-        let at_once = l.book.awaited().is_empty();
-        if l.book.busy() && (at_once || now.saturating_sub(l.last_link_check) >= WAIT_SLICE) {
+        if l.book
+            .links_to_check(now.saturating_sub(l.last_link_check), WAIT_SLICE)
+        {
             l.last_link_check = now;
             return Some(TeamAction::CheckLinks);
         }
@@ -106,9 +105,7 @@ impl TeamCore {
     /// tick received. With `--on-loss stop` the first is a fault (ticks before it complete).
     fn announce_dead(&mut self, now: Duration) {
         let Some(l) = &mut self.losses else { return };
-        let (drained, rest): (Vec<_>, Vec<_>) = l.dying.drain(..).partition(|d| d.2);
-        l.dying = rest;
-        for (id, cause, _) in drained {
+        for (id, cause) in l.dying.take_drained() {
             let from = l.book.lose(id, l.book.seen(id), cause);
             self.last_progress = now;
             if l.repairs {
@@ -137,13 +134,8 @@ impl TeamCore {
         let Some(l) = self.losses.as_mut().filter(|l| l.repairs && !blamed) else {
             return false;
         };
-        if !l.book.is_lost(id) && l.dying.iter().all(|d| d.0 != id) {
-            let cause = if how.starts_with("was killed") {
-                LossCause::Killed
-            } else {
-                LossCause::Exited
-            };
-            l.dying.push((id, cause, false));
+        if !l.book.is_lost(id) {
+            l.dying.push(id, exit_cause(how));
         }
         true
     }
@@ -157,8 +149,9 @@ impl TeamCore {
         if missing.is_empty() {
             return None;
         }
-        l.dying
-            .extend(missing.iter().map(|&id| (id, LossCause::Silent, false)));
+        for &id in &missing {
+            l.dying.push(id, LossCause::Silent);
+        }
         self.last_progress = now;
         Some(TeamAction::Kill(missing))
     }
