@@ -115,3 +115,57 @@ impl Publish for DdsOut {
         p.publish(RawCdr(cdr.to_vec())).map_err(|e| e.to_string())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use ros2_client::dds::rustdds::no_key::SerializerAdapter;
+    use ros2_client::dds::rustdds::CDRSerializerAdapter;
+
+    use cdm_core::audit::SafetyNumbers;
+    use cdm_core::math::Vec3;
+    use cdm_core::scenario::Scenario;
+    use cdm_rosbag::{Limits, Team, Tick};
+
+    use super::*;
+
+    /// What the publishers' writer (RustDDS's CDR_LE adapter, as ros2-client's `Publisher`
+    /// uses it) puts in a DATA submessage's payload: its encapsulation header, zero options,
+    /// the body it serializes.
+    fn on_the_wire(m: &RawCdr) -> Vec<u8> {
+        let mut wire = CDRSerializerAdapter::<RawCdr>::output_encoding()
+            .to_bytes()
+            .to_vec();
+        wire.extend_from_slice(&[0, 0]);
+        wire.extend_from_slice(&CDRSerializerAdapter::<RawCdr>::to_bytes(m).unwrap());
+        wire
+    }
+
+    #[test]
+    fn the_wire_carries_the_bags_bytes_for_every_topic() {
+        let s = Scenario::generated(6).unwrap();
+        let team = Team::new(&s, Limits::from(&SafetyNumbers::of(&s)));
+        let n = s.formation.members.len();
+        let pos: Vec<Vec3> = (0..n)
+            .map(|k| Vec3::new(k as f64 + 0.1, -2.5, 1.0 / 3.0))
+            .collect();
+        let alive = vec![true; n];
+        let tick = Tick {
+            tick: 12,
+            t_s: 0.12,
+            pos: &pos,
+            ht: &pos,
+            alive: &alive,
+        };
+        let mut messages = Vec::new();
+        team.messages(&tick, &mut messages);
+        assert_eq!(messages.len(), n + 3);
+        for m in messages {
+            assert_eq!(
+                on_the_wire(&RawCdr(m.data.clone())),
+                m.data,
+                "{:?}",
+                m.topic
+            );
+        }
+    }
+}
