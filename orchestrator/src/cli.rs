@@ -196,6 +196,8 @@ pub struct LaunchArgs {
     #[command(flatten)]
     pub realtime: cdm_launch::realtime::RealtimeArgs,
     #[command(flatten)]
+    pub ros2: cdm_launch::feeds::Ros2Args,
+    #[command(flatten)]
     pub run: RunOptions,
 }
 

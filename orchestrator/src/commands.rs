@@ -250,6 +250,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             .map(crate::cli::serve_addr)
             .transpose()
             .map_err(Failure::bad_input)?,
+        ros2: a.ros2.options()?,
         hosts: host_options(a)?,
         realtime,
         losses,

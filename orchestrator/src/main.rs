@@ -23,10 +23,15 @@ fn main() {
     };
     // zenoh's TLS link warns on every connection that it skips name verification: we check
     // peers by the team's authority and their certificate's common name instead (cdm-zenoh).
+    // The DDS stack of `--ros2 dds` logs every discovery step at info and, with
+    // ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, fails to leave a multicast group it never needed
+    // on loopback as it closes: its errors only (RUST_LOG shows the rest).
+    const QUIETER: &str =
+        "zenoh_link_tls::utils=error,rustdds=error,rustdds::network::udp_listener=off,ros2_client=error";
     let default = if cli.quiet {
-        "warn,zenoh_link_tls::utils=error"
+        format!("warn,{QUIETER}")
     } else {
-        "info,zenoh_link_tls::utils=error"
+        format!("info,{QUIETER}")
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));

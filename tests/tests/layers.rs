@@ -1,7 +1,8 @@
 //! The crate layering of ARCHITECTURE.md, held by the manifests and checked here from
 //! `cargo metadata`: only `cdm-iox` depends on iceoryx2, only `cdm-math` on nalgebra,
-//! only `cdm-zenoh` on zenoh, only `cdm-rosbag` on mcap, and the core crate's whole dependency tree has no iceoryx2, zenoh,
-//! clap or tracing-subscriber (it is usable as a library on its own).
+//! only `cdm-zenoh` on zenoh, only `cdm-rosbag` on mcap, only `cdm-ros2` on ros2-client, and the
+//! core crate's whole dependency tree has no iceoryx2, zenoh, ros2-client, clap or
+//! tracing-subscriber (it is usable as a library on its own).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::process::Command;
@@ -92,6 +93,7 @@ fn only_the_backends_name_their_libraries_and_the_core_stands_alone() {
         ("nalgebra", "cdm-math"),
         ("zenoh", "cdm-zenoh"),
         ("mcap", "cdm-rosbag"),
+        ("ros2-client", "cdm-ros2"),
     ] {
         let direct: Vec<&String> = members
             .iter()
@@ -104,7 +106,13 @@ fn only_the_backends_name_their_libraries_and_the_core_stands_alone() {
         );
     }
     let core = closure(&deps, "cdm-core");
-    for banned in ["iceoryx2", "zenoh", "clap", "tracing-subscriber"] {
+    for banned in [
+        "iceoryx2",
+        "zenoh",
+        "ros2-client",
+        "clap",
+        "tracing-subscriber",
+    ] {
         assert!(!core.contains(banned), "cdm-core's tree has {banned}");
     }
     assert!(

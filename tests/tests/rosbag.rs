@@ -6,14 +6,22 @@
 //! fenced paper40's geofence and obstacles are markers where its scenario.toml puts them. The
 //! bag written during a run (`simulate` and `launch --telemetry mcap`) equals, message for
 //! message, the export of that run. A bad RUN_DIR or an existing --out exits 2 naming it.
+//!
+//! Live (`launch --ros2`): a real ROS 2 node (rclpy from PyPI over rmw_fastrtps) receives
+//! /cdm/agent_1/pose over DDS, and an eclipse-zenoh router stand-in receives it on rmw_zenoh's
+//! key expression with rmw_zenoh's attachment and liveliness tokens; every pose received equals a
+//! telemetry row. The team flies in real time (a long plan) until the subscriber has its poses,
+//! then is interrupted: the flight lasts as long as discovery takes, not a guessed time.
+
+mod support;
 
 use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
 use integration_tests::{
-    bin, describe, fenced_paper40, launch, python_script, run, simulate, unique_team, venv_python,
-    write_scenario, TempDir,
+    bin, describe, fenced_paper40, free_udp_ports, launch, python_script, run, simulate, spawn,
+    unique_team, venv_python, write_scenario, TempDir,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
@@ -143,4 +151,135 @@ fn bad_run_dirs_and_an_existing_out_exit_2_naming_them() {
     refused(&export(&run_dir, &partial, &[]), "audit.json");
     std::fs::write(run_dir.join("scenario.toml"), "n = ").unwrap();
     refused(&export(&run_dir, &partial, &[]), "scenario.toml");
+}
+
+/// Poses the live subscriber waits for (about 0.7 s of the default 30 Hz).
+const LIVE_POSES: &str = "20";
+/// Seconds the subscriber waits for them (discovery included), well inside the plan.
+const LIVE_WAIT_S: &str = "60";
+/// A small team in real time over a plan longer than any wait: interrupted once the poses are
+/// in. A member's state may be old by 5 s before it is a fault (a loaded machine).
+const LIVE_TEAM: [&str; 8] = [
+    "--n",
+    "6",
+    "--t-total",
+    "120",
+    "--realtime",
+    "--stale-after",
+    "5",
+    "--no-figures",
+];
+
+/// A DDS domain of this test process (0..=232 are ROS 2's), so parallel runs do not meet.
+fn ros_domain(offset: u32) -> String {
+    (1 + (std::process::id() + offset) % 200).to_string()
+}
+
+/// A TCP port on 127.0.0.1 that nothing listens on (below the ephemeral range).
+fn free_tcp_port() -> u16 {
+    loop {
+        let port = free_udp_ports(1);
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return port;
+        }
+    }
+}
+
+/// `launch --ros2 BACKEND` with the subscriber of `tests/python/ros2_live.py` started first, both
+/// in `env`; the team is interrupted (exit 3) once the subscriber has its poses, which must equal
+/// the run's telemetry.
+fn live(backend: &str, extra: &[&str], env: &[(&str, String)]) {
+    let tmp = TempDir::new();
+    let (run_dir, got) = (tmp.path().join("run"), tmp.path().join("received.json"));
+    let mut sub = Command::new(venv_python());
+    sub.arg(python_script("ros2_live.py"))
+        .args([backend, got.to_str().unwrap(), LIVE_POSES, LIVE_WAIT_S])
+        .args(extra)
+        .env("PYTHONDONTWRITEBYTECODE", "1");
+    let mut orch = launch(&unique_team("ros2live"), &run_dir, &LIVE_TEAM);
+    orch.args(["--ros2", backend]);
+    for (k, v) in env {
+        sub.env(k, v);
+        orch.env(k, v);
+    }
+    let mut sub = spawn(&mut sub);
+    sub.wait_for_output("subscribed", integration_tests::deadline::SHORT);
+    let mut orch = spawn(&mut orch);
+    let received = sub.finish(DEADLINE);
+    assert!(
+        received.status.success(),
+        "ros2_live.py {backend}: {}",
+        describe(&received)
+    );
+    support::signal(orch.id(), libc::SIGINT);
+    let o = orch.finish(DEADLINE);
+    support::assert_exit(&o, 3, "launch --ros2 after SIGINT");
+    let mut c = Command::new(venv_python());
+    c.arg(python_script("ros2_live.py"))
+        .args(["check".as_ref(), got.as_os_str(), run_dir.as_os_str()])
+        .env("PYTHONDONTWRITEBYTECODE", "1");
+    let checked = run(&mut c, DEADLINE);
+    assert!(checked.status.success(), "{}", describe(&checked));
+}
+
+/// DDS on loopback: rmw_fastrtps and RustDDS both discover by unicast to localhost with
+/// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` (no multicast, nothing leaves the machine).
+#[test]
+fn launch_ros2_dds_is_received_by_rclpy_equal_to_telemetry() {
+    let env = [
+        ("ROS_DOMAIN_ID", ros_domain(0)),
+        ("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST".to_owned()),
+    ];
+    live("dds", &[], &env);
+}
+
+/// zenoh: the subscriber listens where rmw_zenohd would, and the launch's session connects to
+/// it through rmw_zenoh's `ZENOH_SESSION_CONFIG_URI`.
+#[test]
+fn launch_ros2_zenoh_is_received_on_rmw_zenohs_key_expression() {
+    let tmp = TempDir::new();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_tcp_port());
+    let config = tmp.path().join("zenoh.json5");
+    let text = format!(
+        "{{ mode: \"peer\", connect: {{ endpoints: [\"{endpoint}\"] }}, listen: {{ endpoints: [] }}, scouting: {{ multicast: {{ enabled: false }} }} }}"
+    );
+    std::fs::write(&config, text).unwrap();
+    let env = [
+        ("ROS_DOMAIN_ID", ros_domain(1)),
+        ("ZENOH_SESSION_CONFIG_URI", config.display().to_string()),
+    ];
+    live("zenoh", &[&endpoint], &env);
+}
+
+/// A bad `--ros2`, `--ros2-hz` or ROS 2 environment is refused before the team exists (exit 2,
+/// naming it).
+#[test]
+fn bad_ros2_settings_exit_2_naming_them() {
+    let tmp = TempDir::new();
+    let out = tmp.path().join("run");
+    let refuse = |args: &[&str], env: &[(&str, &str)], names: &str| {
+        let mut c = launch(&unique_team("ros2bad"), &out, &[&TEAM[..], args].concat());
+        c.envs(env.iter().copied());
+        refused(&run(&mut c, DEADLINE), names);
+        assert!(
+            !out.exists(),
+            "{} written by a refused launch",
+            out.display()
+        );
+    };
+    refuse(&["--ros2", "ros1"], &[], "ros1");
+    refuse(&["--ros2-hz", "10"], &[], "--ros2-hz needs --ros2");
+    refuse(&["--ros2", "dds", "--ros2-hz", "0"], &[], "--ros2-hz");
+    refuse(
+        &["--ros2", "dds"],
+        &[("ROS_DOMAIN_ID", "999")],
+        "ROS_DOMAIN_ID",
+    );
+    let missing = tmp.path().join("no-such-zenoh.json5");
+    let uri = missing.to_str().unwrap();
+    refuse(
+        &["--ros2", "zenoh"],
+        &[("ZENOH_SESSION_CONFIG_URI", uri)],
+        uri,
+    );
 }

@@ -27,6 +27,8 @@ use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_runtime::team_loss::TeamLosses;
 use cdm_viewer::live::LiveView;
 
+use crate::feeds::Feeds;
+
 use cdm_team::team::{
     check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
     Spawned, Stop,
@@ -52,6 +54,8 @@ pub struct LaunchOptions {
     pub max_ticks: Option<u64>,
     /// Serve the live view on this address.
     pub serve: Option<std::net::SocketAddr>,
+    /// Publish the run live on ROS 2 (`--ros2`, `--ros2-hz`).
+    pub ros2: Option<cdm_ros2::Ros2Options>,
     /// Across hosts (`--hosts`, `--listen`; issue 12).
     pub hosts: cdm_hosts::HostOptions,
     /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
@@ -83,21 +87,12 @@ pub struct Launched {
     pub live: Option<LiveView>,
 }
 
-/// What watches every completed tick: the audit, and the live view when `--serve` asked for one.
+/// What watches every completed tick: the audit, and the live feeds (`--serve`, `--ros2`).
 struct Watchers<'a> {
     audit: &'a mut Auditor,
-    live: &'a mut Option<LiveView>,
+    live: &'a mut Feeds,
     /// The other hosts' members, through the bridge (`--hosts`): their exits, kills and links.
     hosts: &'a dyn OtherHosts,
-}
-
-/// Starts the live view before the team, so a bad address stops nothing (exit 2).
-fn start_live(s: &Scenario, addr: &str, quiet: bool) -> Result<LiveView, Failure> {
-    let view = LiveView::start(addr, s, Auditor::new(s).numbers()).map_err(Failure::bad_input)?;
-    if !quiet {
-        out!("live view: http://{}/", view.addr());
-    }
-    Ok(view)
 }
 
 /// Run a launch to the end.
@@ -165,29 +160,25 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     others.finish(&dir, report.ticks, o.quiet);
     dir.write_audit(&report).map_err(Failure::fault)?;
-    if let Some(v) = &live {
-        v.finish(&report);
-    }
+    live.finish(&report, o.quiet);
     Ok(Launched {
         report,
         ticking: first_tick.map_or(Duration::ZERO, |t| ended - t),
         startup: startup(first_tick),
         member_peak_rss,
-        live,
+        live: live.view,
     })
 }
 
 /// Before anything is created: the member binaries are there, the real-time scheduling asked
-/// for is granted, the live view (`--serve`) is started, the file-descriptor limit is raised.
-fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Option<LiveView>, Failure> {
+/// for is granted, the live feeds (`--serve`, `--ros2`) are started, the file-descriptor limit
+/// is raised.
+fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Feeds, Failure> {
     if o.spawn {
         member_binaries_present()?;
     }
     crate::realtime::schedule(o)?;
-    let live = match o.serve {
-        Some(addr) => Some(start_live(s, &addr.to_string(), o.quiet)?),
-        None => None,
-    };
+    let live = Feeds::start(s, o.serve, o.ros2.as_ref(), o.quiet)?;
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
@@ -617,7 +608,7 @@ impl Recorder {
         tick: u64,
         states: &[Option<StateMsg>],
         audit: &mut Auditor,
-        live: &mut Option<LiveView>,
+        live: &mut Feeds,
         tel: &mut dyn TelemetrySink,
     ) -> Result<(), Stop> {
         let member = |k: usize| {
@@ -630,10 +621,8 @@ impl Recorder {
             .tick
             .record(s, tick, audit, tel, member)
             .map_err(|f| (f, StopReason::AgentFault))?;
-        if let Some(v) = live.as_mut() {
-            let (pos, ht) = (self.tick.positions(), self.tick.desired());
-            v.tick(tick, t, (pos, ht), |k| states[k].is_some(), audit.report());
-        }
+        let (pos, ht) = (self.tick.positions(), self.tick.desired());
+        live.tick(tick, t, (pos, ht), |k| states[k].is_some(), audit.report());
         self.progress.tick(tick, audit.report());
         Ok(())
     }

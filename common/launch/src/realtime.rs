@@ -11,6 +11,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use crate::feeds::Feeds;
 use cdm_core::audit::{Auditor, LossRecord, RealtimeFigures};
 use cdm_core::formation::Role;
 use cdm_core::loss::{LossAt, LossSchedule, LossState, OnLoss};
@@ -28,7 +29,6 @@ use cdm_runtime::team_loss::TeamLosses;
 use cdm_runtime::team_realtime::{
     LostMember, MonitorAction, RealtimePlan, RealtimeTeam, MEMBER_STALE_FACTOR,
 };
-use cdm_viewer::live::LiveView;
 
 use cdm_team::out;
 
@@ -166,7 +166,7 @@ pub fn run(
     rt: &RealtimeOptions,
     dir: &RunDir,
     team: (&mut OrchestratorPorts, &mut [Spawned], Elsewhere),
-    (audit, live): (&mut Auditor, &mut Option<LiveView>),
+    (audit, live): (&mut Auditor, &mut Feeds),
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
     let (ports, children, elsewhere) = team;
@@ -363,9 +363,9 @@ struct Monitor<'a> {
     clock: Instant,
     core: &'a mut RealtimeTeam,
     audit: &'a mut Auditor,
-    /// The live view (`--serve`): every audited instant is offered to it (it sends at most
-    /// its frame rate, 10 Hz).
-    live: &'a mut Option<LiveView>,
+    /// The live feeds (`--serve`, `--ros2`): every audited instant is offered to them (each
+    /// sends at most its own rate).
+    live: &'a mut Feeds,
     tel: &'a mut dyn TelemetrySink,
     /// The shared per-tick audit and telemetry (`cdm_core::record`).
     rec: TickRecorder,
@@ -485,13 +485,12 @@ impl Monitor<'_> {
         self.rec
             .record_at(self.s, (index, t_s), self.audit, self.tel, member)
             .map_err(|f| (f, StopReason::AgentFault))?;
-        if let Some(v) = self.live.as_mut() {
-            // The page counts ticks of the plan (dt), as in lockstep; an audit instant is at
-            // most half a tick from its nearest one.
-            let tick = (t_s / self.s.dt_s()).round() as u64;
-            let shown = (self.rec.positions(), self.rec.desired());
-            v.tick(tick, t_s, shown, |k| !out[k], self.audit.report());
-        }
+        // The feeds count ticks of the plan (dt), as in lockstep; an audit instant is at most
+        // half a tick from its nearest one. A lost member is no longer shown.
+        let tick = (t_s / self.s.dt_s()).round() as u64;
+        let shown = (self.rec.positions(), self.rec.desired());
+        self.live
+            .tick(tick, t_s, shown, |k| !out[k], self.audit.report());
         Ok(())
     }
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use crate::metadata::{BagInfo, TopicCount, OFFERED_QOS};
 use crate::msgs::MsgType;
-use crate::tick::{Message, Team, Topic};
+use crate::tick::{Message, Team};
 
 /// Why a bag could not be written, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -122,19 +122,10 @@ impl BagWriter {
         self.dir.join(&self.file)
     }
 
-    fn channel_index(&self, topic: Topic) -> usize {
-        match topic {
-            Topic::Pose(k) => k,
-            Topic::Tf => self.members,
-            Topic::Formation => self.members + 1,
-            Topic::Audit => self.members + 2,
-        }
-    }
-
     /// Append one message (log and publish time: its simulation time).
     pub fn write(&mut self, m: &Message) -> Result<(), BagError> {
         let path = self.path();
-        let k = self.channel_index(m.topic);
+        let k = m.topic.index(self.members);
         let Some(w) = self.mcap.as_mut() else {
             return Err(BagError::Finished { path });
         };

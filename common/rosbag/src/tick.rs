@@ -24,6 +24,19 @@ pub enum Topic {
     Audit,
 }
 
+impl Topic {
+    /// Its place in [`Team::topics`] of a team of `members`: poses in member order, then
+    /// `/tf`, `/cdm/formation` and `/cdm/audit` (the bag's channels, the live publishers).
+    pub fn index(self, members: usize) -> usize {
+        match self {
+            Topic::Pose(k) => k,
+            Topic::Tf => members,
+            Topic::Formation => members + 1,
+            Topic::Audit => members + 2,
+        }
+    }
+}
+
 /// The limits the margins are measured against (audit.json's numbers).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
@@ -354,5 +367,8 @@ mod tests {
         assert_eq!(names.len(), topics.len());
         assert_eq!(topics[0].2, MsgType::PoseStamped);
         assert_eq!(topics[0].1, format!("/cdm/agent_{}/pose", team.ids()[0]));
+        for (k, (topic, _, _)) in topics.iter().enumerate() {
+            assert_eq!(topic.index(team.ids().len()), k, "{topic:?}");
+        }
     }
 }

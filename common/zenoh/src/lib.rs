@@ -1,6 +1,8 @@
 //! Across hosts: the zenoh link between a team's orchestrator and the daemon of each
 //! other host. The only library crate that names zenoh; members never see it (a daemon re-publishes
-//! what crosses hosts into its host's iceoryx2 services, `common/hosts/src/lib.rs`).
+//! what crosses hosts into its host's iceoryx2 services, `common/hosts/src/lib.rs`). Also the
+//! zenoh side of live ROS 2 (`rmw.rs`: rmw_zenoh's session, tokens and attachment, for
+//! cdm-ros2's `launch --ros2 zenoh`).
 //!
 //! | key | frames | from -> to |
 //! |---|---|---|
@@ -10,6 +12,7 @@
 
 pub mod frame;
 pub mod link;
+pub mod rmw;
 
 pub use frame::{
     decode, encode, Assignment, DecodeError, Down, JoinReply, JoinRequest, NetClock, NetState, Up,

@@ -1,0 +1,126 @@
+//! What sees each audited tick besides the audit and telemetry, in lockstep and real time
+//! alike: the live view (`--serve`, cdm-viewer) and the live ROS 2 topics (`--ros2`, cdm-ros2).
+//! Both pace themselves by the wall clock and never make the loop wait.
+
+use cdm_core::audit::{AuditReport, Auditor};
+use cdm_core::math::Vec3;
+use cdm_core::scenario::Scenario;
+use cdm_ros2::{Backend, Live, Ros2Options};
+use cdm_team::{out, Failure};
+use cdm_viewer::live::LiveView;
+
+/// `--ros2` and `--ros2-hz`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct Ros2Args {
+    /// Publish the run live on ROS 2 over MIDDLEWARE (dds: DDS/RTPS as rmw_fastrtps and
+    /// rmw_cyclonedds speak it; zenoh: rmw_zenoh's format): the topics of its bag, each
+    /// member's pose, /tf, /cdm/formation and /cdm/audit. Output only: nothing is subscribed.
+    #[arg(long, value_name = "MIDDLEWARE")]
+    pub ros2: Option<Backend>,
+    /// With --ros2: ticks published per second of wall time, at most (default 30).
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
+    pub ros2_hz: Option<f64>,
+}
+
+/// `--ros2-hz` when not given.
+pub const DEFAULT_ROS2_HZ: f64 = 30.0;
+
+impl Ros2Args {
+    /// The options, or `None` without --ros2; a bad value is bad input naming its flag.
+    pub fn options(&self) -> Result<Option<Ros2Options>, Failure> {
+        let Some(backend) = self.ros2 else {
+            if self.ros2_hz.is_some() {
+                return Err(Failure::bad_input("--ros2-hz needs --ros2"));
+            }
+            return Ok(None);
+        };
+        let hz = self.ros2_hz.unwrap_or(DEFAULT_ROS2_HZ);
+        if !(hz.is_finite() && hz > 0.0 && hz <= 1000.0) {
+            return Err(Failure::bad_input(format!(
+                "--ros2-hz must be in (0, 1000], got {hz}"
+            )));
+        }
+        Ok(Some(Ros2Options { backend, hz }))
+    }
+}
+
+/// The live feeds of a launch.
+#[derive(Default)]
+pub struct Feeds {
+    pub view: Option<LiveView>,
+    pub ros2: Option<Live>,
+}
+
+impl Feeds {
+    /// Starts what `--serve` and `--ros2` ask for, before the team: a bad address or a bad
+    /// ROS 2 environment stops nothing (exit 2).
+    pub fn start(
+        s: &Scenario,
+        serve: Option<std::net::SocketAddr>,
+        ros2: Option<&Ros2Options>,
+        quiet: bool,
+    ) -> Result<Self, Failure> {
+        let view = match serve {
+            Some(addr) => {
+                let auditor = Auditor::new(s);
+                let view = LiveView::start(&addr.to_string(), s, auditor.numbers())
+                    .map_err(Failure::bad_input)?;
+                if !quiet {
+                    out!("live view: http://{}/", view.addr());
+                }
+                Some(view)
+            }
+            None => None,
+        };
+        let ros2 = match ros2 {
+            Some(o) => Some(Live::start(o, s).map_err(Failure::bad_input)?),
+            None => None,
+        };
+        Ok(Feeds { view, ros2 })
+    }
+
+    /// One audited tick: offered to each feed (`flying(k)` false for a member lost by then).
+    pub fn tick(
+        &mut self,
+        tick: u64,
+        t_s: f64,
+        (pos, ht): (&[Vec3], &[Vec3]),
+        flying: impl Fn(usize) -> bool,
+        report: &AuditReport,
+    ) {
+        if let Some(v) = self.view.as_mut() {
+            v.tick(tick, t_s, (pos, ht), &flying, report);
+        }
+        if let Some(r) = self.ros2.as_mut() {
+            r.tick(tick, t_s, (pos, ht), &flying);
+        }
+    }
+
+    /// The run is over: the page gets its verdict, the ROS 2 topics their last messages (the
+    /// view keeps serving until the caller drops it).
+    pub fn finish(&mut self, report: &AuditReport, quiet: bool) {
+        if let Some(v) = &self.view {
+            v.finish(report);
+        }
+        if let Some(r) = self.ros2.take() {
+            let s = r.finish();
+            let failed = match &s.first_error {
+                Some(e) => format!(", {} messages refused (first: {e})", s.failed),
+                None => String::new(),
+            };
+            let unfinished = if s.unfinished {
+                "; still publishing when the launch ended"
+            } else {
+                ""
+            };
+            if !quiet {
+                out!(
+                    "  ros2 ({}): {} ticks published, {} dropped (queue full){failed}{unfinished}",
+                    s.backend,
+                    s.ticks,
+                    s.dropped
+                );
+            }
+        }
+    }
+}
