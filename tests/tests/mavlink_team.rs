@@ -870,6 +870,24 @@ fn launch_no_spawn_prints_the_link_timeouts_for_hand_started_members() {
     assert_no_team_resources(&team_name);
 }
 
+/// The team's end, whatever its exit: the orchestrator's output, each vehicle's summary (in
+/// vehicle order), audit.json, and both for a failing assertion's message.
+fn collected(
+    orch: Running,
+    vehicles: Vec<Running>,
+    dir: &Path,
+) -> (Output, Vec<Value>, Value, String) {
+    let o = orch.finish(DEADLINE);
+    let summaries: Vec<Value> = vehicles
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
+        .collect();
+    let audit = read_json(&dir.join("run/audit.json"));
+    let why = format!("{audit:#}\n{}", describe(&o));
+    (o, summaries, audit, why)
+}
+
 /// The commands a vehicle received, as (MAV_CMD number, param1, result, wall-clock time).
 fn commands(v: &Value) -> Vec<(u64, f64, u64, f64)> {
     v["commands"]
@@ -1019,14 +1037,8 @@ fn an_ardupilot_vehicle_refusing_its_take_off_is_named_and_nothing_starts() {
     let mut vehicles = lab_vehicles(&file, base, 0..3, &[]);
     vehicles.extend(lab_vehicles(&file, base, 3..4, &["--refuse-takeoff"]));
     let at = ["--vehicle-origin", "0,0,0", "--arm"];
-    let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
-    let summaries: Vec<Value> = vehicles
-        .into_iter()
-        .enumerate()
-        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
-        .collect();
-    let audit = read_json(&dir.path().join("run/audit.json"));
-    let why = format!("{audit:#}\n{}", describe(&o));
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+    let (o, summaries, audit, why) = collected(orch, vehicles, dir.path());
     assert_eq!(o.status.code(), Some(3), "{why}");
     assert_eq!(audit["fault"]["kind"], "vehicle-lost", "{why}");
     assert_eq!(audit["fault"]["agent"], 4, "{why}");
@@ -1123,14 +1135,8 @@ fn fly_one_special(
     let origin = csv(ORIGIN);
     let mut at = vec!["--vehicle-origin", origin.as_str()];
     at.extend(team_extra);
-    let o = launch_team(dir.path(), &team_name, &scenario, base, &at).finish(DEADLINE);
-    let summaries: Vec<Value> = vehicles
-        .into_iter()
-        .enumerate()
-        .map(|(i, v)| summary(&v.finish(DEADLINE), &format!("vehicle {i}")))
-        .collect();
-    let audit = read_json(&dir.path().join("run/audit.json"));
-    let why = format!("{audit:#}\n{}", describe(&o));
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+    let (o, summaries, audit, why) = collected(orch, vehicles, dir.path());
     Flown {
         o,
         audit,
