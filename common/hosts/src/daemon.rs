@@ -418,10 +418,9 @@ impl<'a, L: HostLink<In = Down, Out = Up>> Link<'a, L> {
             self.before_start(now)?;
             let _ = ports.wait(Duration::from_millis(20));
         }
-        let mut subscriptions = BTreeMap::new();
-        for &id in &self.j.mine {
-            subscriptions.insert(id, ports.subscriber_nodes(id).unwrap_or_default());
-        }
+        let subscriptions = ports
+            .subscriber_graph(self.j.mine.iter().copied())
+            .unwrap_or_default();
         self.send(&Up::Ready { subscriptions }, Instant::now())
     }
 

@@ -351,13 +351,12 @@ impl MemberPorts {
         // Nothing published may stay behind while this member sleeps (callers notify first;
         // this keeps a forgotten notify from holding states back until the next one).
         self.flush()?;
-        let service = self.team.wake_service(self.id);
         wait_on(
             &self.listener,
             timeout,
             &self.team,
             TeamProcess::Agent(self.id),
-            &service,
+            || self.team.wake_service(self.id),
         )
     }
 

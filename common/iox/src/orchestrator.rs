@@ -329,8 +329,9 @@ impl OrchestratorPorts {
     /// Blocks until a member notifies `wake/orch` or `timeout` passes; true when woken. Then
     /// drain with [`receive_states`](Self::receive_states): notifications merge.
     pub fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
-        let service = self.team.orchestrator_wake_service();
-        wait_on(&self.ports().listener, timeout, &self.team, WHO, &service)
+        wait_on(&self.ports().listener, timeout, &self.team, WHO, || {
+            self.team.orchestrator_wake_service()
+        })
     }
 
     /// Port counts of every service: lets the orchestrator wait until all members are up.
@@ -380,6 +381,51 @@ impl OrchestratorPorts {
             CallbackProgression::Continue
         });
         self.node_names(&node_ids, |f| reader.service.nodes(f).map(|_| ()))
+    }
+
+    /// `subscriber_nodes` for every id at once (subscriptions.json): the nodes' names are read
+    /// once for the whole registry instead of once per service and node. Per service that was
+    /// about five node-detail files per member, 0.44 s of start-up at N = 1000.
+    pub fn subscriber_graph(
+        &self,
+        ids: impl IntoIterator<Item = u32>,
+    ) -> Result<BTreeMap<u32, Vec<String>>, TransportError> {
+        let mut names = BTreeMap::new();
+        Node::<ipc::Service>::list(self.ports().node.config(), |state| {
+            let (node_id, name) = match &state {
+                NodeState::Alive(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
+                NodeState::Dead(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
+                NodeState::Inaccessible(_) | NodeState::Undefined(_) => {
+                    return CallbackProgression::Continue
+                }
+            };
+            if let Some(name) = name {
+                names.insert(node_id, name.to_string());
+            }
+            CallbackProgression::Continue
+        })
+        .map_err(|e| TransportError::NodeList {
+            team: self.team.clone(),
+            detail: format!("{e:?}"),
+        })?;
+        let mut graph = BTreeMap::new();
+        for id in ids {
+            let mut nodes = vec![];
+            if let Some(reader) = self.ports().states.get(&id) {
+                reader.service.dynamic_config().list_subscribers(|s| {
+                    nodes.push(
+                        names
+                            .get(&s.node_id)
+                            .cloned()
+                            .unwrap_or_else(|| format!("<node {}>", s.node_id)),
+                    );
+                    CallbackProgression::Continue
+                });
+            }
+            nodes.sort();
+            graph.insert(id, nodes);
+        }
+        Ok(graph)
     }
 
     /// Names of the nodes notifying `wake/<id>`, sorted (the orchestrator's own included, if it

@@ -390,11 +390,17 @@ pub(crate) fn gather(
 
 /// The subscription graph as iceoryx2 sees it (subscriptions.json, best effort).
 pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: &RunDir) {
-    let mut subs = BTreeMap::new();
-    for m in &s.formation.members {
-        let nodes = ports.subscriber_nodes(m.id).unwrap_or_default();
-        subs.insert(m.id.to_string(), nodes);
-    }
+    let ids = s.formation.members.iter().map(|m| m.id);
+    let subs: BTreeMap<String, Vec<String>> = match ports.subscriber_graph(ids) {
+        Ok(graph) => graph
+            .into_iter()
+            .map(|(id, nodes)| (id.to_string(), nodes))
+            .collect(),
+        Err(e) => {
+            tracing::warn!("subscriptions.json not written: {e}");
+            return;
+        }
+    };
     let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
     let _ = cdm_core::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
 }

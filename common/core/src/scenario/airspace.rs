@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use super::{ScenarioErrorKind as E, ScenarioFile};
 use crate::airspace::{self_intersection, signed_area2, Fence};
 use crate::formation::Formation;
-use crate::math::{Real, Vec2};
+use crate::math::{Real, Vec2, Vec3};
 
 pub use crate::airspace::Shape;
 
@@ -289,9 +289,11 @@ fn check_shape(what: &str, shape: &Shape) -> Result<(), E> {
 /// spot below it with a take-off). Touching is left to the certificate (its ball, eps + delta).
 pub(super) fn check_starts(f: &ScenarioFile, formation: &Formation) -> Result<(), E> {
     let fence = f.geofence.as_ref().map(GeofenceSpec::fence);
+    // Every member process runs this over the whole team at start-up: the position's text is
+    // built only for an error (formatting it eagerly was O(N) per member, O(N^2) per launch).
+    let at = |p: &Vec3| format!("[{:.3}, {:.3}, {:.3}]", p.x, p.y, p.z);
     for m in &formation.members {
         let p = m.start;
-        let at = format!("[{:.3}, {:.3}, {:.3}]", p.x, p.y, p.z);
         if let Some(fence) = &fence {
             if !fence.contains(&p) {
                 let side = if p.z < fence.min_z_m {
@@ -303,7 +305,7 @@ pub(super) fn check_starts(f: &ScenarioFile, formation: &Formation) -> Result<()
                 };
                 return Err(bad(
                     "geofence",
-                    format!("agent {} starts {side} at {at}", m.id),
+                    format!("agent {} starts {side} at {}", m.id, at(&p)),
                 ));
             }
         }
@@ -311,7 +313,7 @@ pub(super) fn check_starts(f: &ScenarioFile, formation: &Formation) -> Result<()
             if o.shape.signed_distance(&p) < 0.0 {
                 return Err(bad(
                     o.label(),
-                    format!("agent {} starts inside it at {at}", m.id),
+                    format!("agent {} starts inside it at {}", m.id, at(&p)),
                 ));
             }
         }
