@@ -74,6 +74,7 @@ mod dead_teams;
 mod error;
 mod limits;
 mod member;
+mod notified;
 mod orchestrator;
 mod orphan_nodes;
 mod ownership;
@@ -310,13 +311,13 @@ fn fd_limit_reached(
 /// Blocks on `listener` until a notification arrives or `timeout` passes; true when woken.
 fn wait_on(
     listener: &iceoryx2::port::listener::Listener<ipc::Service>,
-    timeout: Duration,
+    (timeout, on_event): (Duration, impl FnMut(iceoryx2::port::EventActivation)),
     team: &TeamName,
     who: TeamProcess,
     service: impl FnOnce() -> String,
 ) -> Result<bool, TransportError> {
     use iceoryx2::port::listener::ListenerWaitError;
-    match listener.timed_wait(|_| {}, timeout) {
+    match listener.timed_wait(on_event, timeout) {
         Ok(n) => Ok(n > 0),
         // A signal (SIGCONT after SIGSTOP, a debugger attaching, SIGINT) interrupts the wait:
         // that is a spurious wake-up, not an error. Callers check their stop flag every loop.

@@ -117,11 +117,11 @@ impl MemberPorts {
         let mut out_wakes = BTreeMap::new();
         for &peer in out_neighbors {
             let name = team.wake_service(peer);
-            let writer = open_wake_writer(&node, team, who, &name, peer)?;
+            let writer = open_wake_writer(&node, team, who, &name, (peer, false))?;
             out_wakes.insert(peer, writer);
         }
         let name = team.orchestrator_wake_service();
-        let wake_orch = open_wake_writer(&node, team, who, &name, id)?;
+        let wake_orch = open_wake_writer(&node, team, who, &name, (id, true))?;
         // The clock subscriber last: once the orchestrator counts it (and the notifier on
         // wake/orch), every other port of this member is in place.
         let clock_subscriber = clock
@@ -318,7 +318,7 @@ impl MemberPorts {
                 continue;
             }
             let name = self.team.wake_service(peer);
-            let writer = open_wake_writer(&self._node, &self.team, who, &name, peer)?;
+            let writer = open_wake_writer(&self._node, &self.team, who, &name, (peer, false))?;
             self.out_wakes.insert(peer, writer);
         }
         Ok(())
@@ -353,7 +353,7 @@ impl MemberPorts {
         self.flush()?;
         wait_on(
             &self.listener,
-            timeout,
+            (timeout, |_| {}),
             &self.team,
             TeamProcess::Agent(self.id),
             || self.team.wake_service(self.id),
@@ -580,18 +580,21 @@ fn open_wake_writer(
     team: &TeamName,
     who: TeamProcess,
     name: &str,
-    peer: u32,
+    (peer, orchestrator): (u32, bool),
 ) -> Result<WakeWriter, TransportError> {
     let service = open_event(node, team, who, name)?;
-    let notifier = service
-        .notifier_builder()
-        .create()
-        .map_err(|e| match (e, who) {
-            (NotifierCreateError::ExceedsMaxSupportedNotifiers, TeamProcess::Agent(me)) => {
-                not_a_neighbor(team, me, peer, name, "notifier")
-            }
-            (e, _) => service_error(team, who, name, "create notifier", e),
-        })?;
+    let mut builder = service.notifier_builder();
+    if orchestrator {
+        // `wake/orch` learns who woke it (crate::notified): the id + 1 when the service has room.
+        let max = service.static_config().event_id_max_value();
+        builder = builder.default_event_id(EventId::new(crate::notified::event_id_of(peer, max)));
+    }
+    let notifier = builder.create().map_err(|e| match (e, who) {
+        (NotifierCreateError::ExceedsMaxSupportedNotifiers, TeamProcess::Agent(me)) => {
+            not_a_neighbor(team, me, peer, name, "notifier")
+        }
+        (e, _) => service_error(team, who, name, "create notifier", e),
+    })?;
     Ok(WakeWriter {
         _service: service,
         notifier,

@@ -1,7 +1,7 @@
 //! The orchestrator's side: creates every service of a team and owns the clock.
 
 use std::collections::BTreeMap;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
@@ -15,6 +15,7 @@ use iceoryx2::service::port_factory::event::PortFactory as EventService;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubService;
 
 use super::dead_teams::{remove_dead, scan_teams};
+use super::notified::{max_event_id, Notified, Sweep};
 use super::{
     create_node, init_logging, process_config, service_error, service_name, wait_on, TeamLayout,
     TeamName, TeamProcess, TransportError, CLOCK_BUFFER, OBSERVER_SLOTS, SPARE_NODES,
@@ -70,6 +71,8 @@ pub struct OrchestratorPorts {
     team: TeamName,
     layout: TeamLayout,
     stale_nodes_removed: usize,
+    /// Who woke the orchestrator since its last read ([`Self::receive_notified_states`]).
+    notified: Notified,
 }
 
 /// How far one member has connected its ports (see [`OrchestratorPorts::readiness`]).
@@ -210,6 +213,7 @@ impl OrchestratorPorts {
             team: team.clone(),
             layout: layout.clone(),
             stale_nodes_removed,
+            notified: Notified::new(Instant::now()),
         })
     }
 
@@ -313,25 +317,90 @@ impl OrchestratorPorts {
     pub fn receive_states(&mut self, mut f: impl FnMut(StateMsg)) -> Result<usize, TransportError> {
         let mut count = 0;
         for (&id, reader) in &self.ports().states {
-            while let Some(sample) = reader
-                .subscriber
-                .receive()
-                .map_err(|e| self.error(&self.team.state_service(id), "receive", e))?
-            {
-                let states = sample.payload().0.states();
-                states.iter().for_each(|m| f(*m));
-                count += states.len();
+            count += Self::drain(&self.team, id, reader, &mut f)?;
+        }
+        Ok(count)
+    }
+
+    /// [`receive_states`](Self::receive_states) for the members that woke the orchestrator
+    /// since the last read (lockstep: each member sends its states before it wakes
+    /// `wake/orch` with its own id), and for every member at the first read, after a wake-up
+    /// without an id, and at least every [`FULL_SWEEP`](crate::notified::FULL_SWEEP).
+    pub fn receive_notified_states(
+        &mut self,
+        mut f: impl FnMut(StateMsg),
+    ) -> Result<usize, TransportError> {
+        // Wake-ups that came while the orchestrator was busy (it did not wait for them).
+        let notified = &mut self.notified;
+        let ports = self
+            .ports
+            .as_ref()
+            .expect("orchestrator ports are present until shutdown");
+        let pending = ports.listener.try_wait(|a| notified.note(a.id.as_value()));
+        pending.map_err(|e| {
+            service_error(
+                &self.team,
+                WHO,
+                &self.team.orchestrator_wake_service(),
+                "wait",
+                e,
+            )
+        })?;
+        let now = Instant::now();
+        let (count, all) = match self.notified.sweep(now) {
+            Sweep::All => (self.receive_states(&mut f)?, true),
+            Sweep::Only(ids) => {
+                let states = &ports.states;
+                let mut count = 0;
+                for id in ids {
+                    if let Some(reader) = states.get(id) {
+                        count += Self::drain(&self.team, *id, reader, &mut f)?;
+                    }
+                }
+                (count, false)
             }
+        };
+        self.notified.read(all, now);
+        Ok(count)
+    }
+
+    /// Every state member `id` sent, oldest first.
+    fn drain(
+        team: &TeamName,
+        id: u32,
+        reader: &StateReader,
+        f: &mut impl FnMut(StateMsg),
+    ) -> Result<usize, TransportError> {
+        let mut count = 0;
+        while let Some(sample) = reader
+            .subscriber
+            .receive()
+            .map_err(|e| service_error(team, WHO, &team.state_service(id), "receive", e))?
+        {
+            let states = sample.payload().0.states();
+            states.iter().for_each(|m| f(*m));
+            count += states.len();
         }
         Ok(count)
     }
 
     /// Blocks until a member notifies `wake/orch` or `timeout` passes; true when woken. Then
-    /// drain with [`receive_states`](Self::receive_states): notifications merge.
+    /// drain with [`receive_states`](Self::receive_states) or
+    /// [`receive_notified_states`](Self::receive_notified_states): notifications merge.
     pub fn wait(&mut self, timeout: Duration) -> Result<bool, TransportError> {
-        wait_on(&self.ports().listener, timeout, &self.team, WHO, || {
-            self.team.orchestrator_wake_service()
-        })
+        let notified = &mut self.notified;
+        let on_event = |a: iceoryx2::port::EventActivation| notified.note(a.id.as_value());
+        let ports = self
+            .ports
+            .as_ref()
+            .expect("orchestrator ports are present until shutdown");
+        wait_on(
+            &ports.listener,
+            (timeout, on_event),
+            &self.team,
+            WHO,
+            || self.team.orchestrator_wake_service(),
+        )
     }
 
     /// Port counts of every service: lets the orchestrator wait until all members are up.
@@ -570,6 +639,7 @@ impl Ports {
             .max_listeners(1)
             .max_notifiers(n)
             .max_nodes(n + 1 + SPARE_NODES)
+            .event_id_max_value(max_event_id(layout.ids()))
             .create()
             .map_err(|e| event_create_error(team, &name, e))?;
         let listener = wake_orch

@@ -466,7 +466,7 @@ fn fly_team(
         }
         core.on_turn(now);
         ports
-            .receive_states(|msg| core.on_state(msg, now))
+            .receive_notified_states(|msg| core.on_state(msg, now))
             .map_err(transport_stop(core.next_tick()))?;
         loop {
             match core.next_action(clock.now()) {
