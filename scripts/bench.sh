@@ -28,16 +28,17 @@
 # BENCH_N_FLAGS: extra launch flags for BENCH_N's flight only (e.g. "--agent-timeout 60").
 # SCALE_ONLY=1 runs only this section.
 #
-# Before and after (issue 17), with BEFORE_BIN=DIR (the binaries of a build from before issue 17,
-# e.g. `git worktree add /tmp/before17 ff2bbc2 && (cd /tmp/before17 && cargo build --release
-# --bins)`): the same commands with both builds, one after the other in this run: the certificate
-# (`plan --n FORMATS_N` against `simulate --every 1000` of the same build), `launch --n 40` (full
-# plan) and `launch --n 1000 --max-ticks 2999` against each build's engine, and their start-up
-# (CSV telemetry on both sides: the older build has no Parquet). BEFORE_ONLY=1 runs only this section.
+# Before and after, with BEFORE_BIN=DIR (the binaries of an older build, e.g. `git worktree add
+# /tmp/before <commit> && (cd /tmp/before && cargo build --release --bins)`): the same commands
+# with both builds in this run, alternated ROUNDS times (default 3; medians and every run): the
+# certificate (`plan --n FORMATS_N` against `simulate --every 1000` of the same build),
+# `launch --n 40` (full plan) and `launch --n 1000 --max-ticks 2999` against each build's engine,
+# and their start-up (command to first tick, default `--on-loss repair`; CSV telemetry on both
+# sides). BEFORE_ONLY=1 runs only this section.
 #
 # Usage: [BIN=DIR] [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
 #        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [BENCH_N_FLAGS=...] [SCALE_ONLY=1]
-#        [BEFORE_BIN=DIR] [BEFORE_ONLY=1] scripts/bench.sh [N ...]
+#        [BEFORE_BIN=DIR] [ROUNDS=3] [BEFORE_ONLY=1] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
@@ -144,14 +145,17 @@ scale_section() {
     rm -rf "$out/sc$n" "$out/sc$n.log"
   done
 }
-# Before and after issue 17 (see the header): each target's figure from both builds, in this run.
+# Before and after (see the header): each figure from both builds, in this run. The launches
+# alternate before / after, ROUNDS times (default 3), and the table gives each side's median with
+# its runs: this machine drifts by 20 % or more between minutes, so only interleaved medians compare.
 before_after_section() {
   [ -n "${BEFORE_BIN:-}" ] || return 0
   local fn=${FORMATS_N:-1000}; [ "$fn" -gt 0 ] || fn=1000
+  local rounds=${ROUNDS:-3}
   echo
-  echo "Before and after issue 17 (before: $BEFORE_BIN, $("$BEFORE_BIN/orchestrator" --version 2>/dev/null || echo '?'); load average before: $(cut -d' ' -f1-3 /proc/loadavg)):"
+  echo "Before and after (before: $BEFORE_BIN, $("$BEFORE_BIN/orchestrator" --version 2>/dev/null || echo '?'); $rounds rounds, before and after alternated; load average before: $(cut -d' ' -f1-3 /proc/loadavg)):"
   echo
-  echo "| figure | before | after | after / before |"
+  echo "| figure | before: median (runs) | after: median (runs) | after / before (medians) |"
   echo "|---|---|---|---|"
   local b a
   cert() { # plan's wall time over one --every 1000 flight's, for the build in $1
@@ -164,20 +168,27 @@ before_after_section() {
   read -r bp bs < <(cert "$BEFORE_BIN"); read -r ap as < <(cert "$bin")
   b=$(awk -v p="$bp" -v s="$bs" 'BEGIN{printf "%.3f", p/s}'); a=$(awk -v p="$ap" -v s="$as" 'BEGIN{printf "%.3f", p/s}')
   echo "| \`plan --n $fn\` / \`simulate --n $fn --every 1000\` (wall s) | $b ($bp / $bs) | $a ($ap / $as) | $(awk -v a="$a" -v b="$b" 'BEGIN{printf "%.3f", a/b}') |"
+  median() { tr ' ' '\n' | grep -v '^$' | sort -g | awk '{v[NR]=$1} END{if (NR%2) print v[(NR+1)/2]; else printf "%.3f\n", (v[NR/2]+v[NR/2+1])/2}'; }
   for n in 40 1000; do
     local limit=() label="full plan" eng_ticks=5000
     [ "$n" = 40 ] || { limit=(--max-ticks 2999); label="3000 ticks"; eng_ticks=1000; }
-    local side r=() su=()
-    for side in "$BEFORE_BIN" "$bin"; do
-      local e l
-      e=$("$side/cdm-bench" engine --n "$n" --ticks "$eng_ticks" | rate)
-      l=$("$side/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --team "ba$n-$$" --out "$out/ba" 2>/dev/null | grep "ticking:")
-      rm -rf "$out/ba"
-      r+=("$(awk -v l="$(rate <<<"$l")" -v e="$e" 'BEGIN{printf "%.3f", l/e}') ($(rate <<<"$l") / $e ticks/s)")
-      su+=("$(sed -E 's/.*start-up ([0-9.]+) s.*/\1/' <<<"$l")")
+    local side i rb=() ra=() sb=() sa=()
+    for i in $(seq "$rounds"); do
+      for side in "$BEFORE_BIN" "$bin"; do
+        local e l r su
+        e=$("$side/cdm-bench" engine --n "$n" --ticks "$eng_ticks" | rate)
+        l=$("$side/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --team "ba$n-$$" --out "$out/ba" 2>/dev/null | grep "ticking:")
+        rm -rf "$out/ba"
+        r=$(awk -v l="$(rate <<<"$l")" -v e="$e" 'BEGIN{printf "%.3f", l/e}')
+        su=$(sed -E 's/.*start-up ([0-9.]+) s.*/\1/' <<<"$l")
+        if [ "$side" = "$bin" ]; then ra+=("$r"); sa+=("$su"); else rb+=("$r"); sb+=("$su"); fi
+      done
     done
-    echo "| \`launch --n $n\` / engine, $label | ${r[0]} | ${r[1]} | $(awk -v a="${r[1]%% *}" -v b="${r[0]%% *}" 'BEGIN{printf "%.2f", a/b}') |"
-    echo "| start-up s, \`launch --n $n\` (command to first tick) | ${su[0]} | ${su[1]} | $(awk -v a="${su[1]}" -v b="${su[0]}" 'BEGIN{printf "%.2f", a/b}') |"
+    local mb ma
+    mb=$(median <<<"${rb[*]}"); ma=$(median <<<"${ra[*]}")
+    echo "| \`launch --n $n\` / engine, $label | $mb (${rb[*]}) | $ma (${ra[*]}) | $(awk -v a="$ma" -v b="$mb" 'BEGIN{printf "%.2f", a/b}') |"
+    mb=$(median <<<"${sb[*]}"); ma=$(median <<<"${sa[*]}")
+    echo "| start-up s, \`launch --n $n\` (command to first tick) | $mb (${sb[*]}) | $ma (${sa[*]}) | $(awk -v a="$ma" -v b="$mb" 'BEGIN{printf "%.2f", a/b}') |"
   done
 }
 secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }

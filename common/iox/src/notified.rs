@@ -12,7 +12,7 @@
 use std::time::{Duration, Instant};
 
 /// At least this often every subscriber is read, whatever woke the orchestrator.
-pub(crate) const FULL_SWEEP: Duration = Duration::from_millis(50);
+pub(crate) const FULL_SWEEP: Duration = Duration::from_millis(250);
 
 /// The event id with which member `id` wakes the orchestrator, given the service's largest
 /// (`max`): 0 (read everyone) when `id + 1` does not fit.

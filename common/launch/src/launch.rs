@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use cdm_core::audit::{AuditReport, Auditor};
 use cdm_team::out;
+use cdm_team::telemetry_thread::ThreadedSink;
 
 use crate::realtime::Elsewhere;
 use cdm_core::formation::Role;
@@ -22,7 +23,7 @@ use cdm_hosts::OtherHosts;
 use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{ClockMsg, StateMsg, StopReason};
 use cdm_runtime::seams::{Clock, MonotonicClock};
-use cdm_runtime::team_core::{TeamAction, TeamConfig, TeamCore, TickStates};
+use cdm_runtime::team_core::{nap_before_wait, TeamAction, TeamConfig, TeamCore, TickStates};
 use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_runtime::team_loss::TeamLosses;
 use cdm_viewer::live::LiveView;
@@ -339,13 +340,20 @@ fn run_team(
 ) -> Result<(Instant, bool), Stop> {
     gather(s, o, ports, children, interrupted)?;
     write_subscriptions(s, ports, dir);
-    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every, s).map_err(|e| {
+    let io_fault = |e: String| {
         (
-            fault(FaultKind::Io, None, None, 0, e.to_string()),
+            fault(FaultKind::Io, None, None, 0, e),
             StopReason::AgentFault,
         )
-    })?;
-    fly_team(s, o, ports, children, tel.as_mut(), watchers, interrupted)
+    };
+    let tel = cdm_team::telemetry::open(dir, o.telemetry, o.every, s)
+        .map_err(|e| io_fault(e.to_string()))?;
+    // The file is written on its own thread: the loop the members wait for only hands the
+    // rows over (cdm_team::telemetry_thread).
+    let members = s.formation.members.len();
+    let mut tel =
+        ThreadedSink::start(tel, o.every, members).map_err(|e| io_fault(e.to_string()))?;
+    fly_team(s, o, ports, children, &mut tel, watchers, interrupted)
 }
 
 /// Readiness: every process opened its ports, within a deadline.
@@ -480,7 +488,9 @@ fn fly_team(
                         return Ok((ticking.unwrap_or_else(Instant::now), tick >= last));
                     }
                 }
-                TeamAction::CheckExited => check_exited(&mut core, children, w.hosts, clock.now()),
+                TeamAction::CheckExited => {
+                    read_all_then_check_exited(&mut core, ports, children, w.hosts, clock.now())?;
+                }
                 TeamAction::Kill(ids) => {
                     for id in ids {
                         cdm_team::loss::kill_and_reap(children, id);
@@ -498,7 +508,7 @@ fn fly_team(
                     break;
                 }
                 TeamAction::Wait(d) => {
-                    let _ = ports.wait(d);
+                    wait_for_members(ports, &core, o.window, d);
                     break;
                 }
                 TeamAction::Finished => {
@@ -513,6 +523,32 @@ fn fly_team(
             }
         }
     }
+}
+
+/// Waits at most `d` for the members' wake-ups, after a nap when they are far from the grant
+/// (`nap_before_wait`: their wake-ups then cost the orchestrator one).
+fn wait_for_members(ports: &mut OrchestratorPorts, core: &TeamCore, window: u32, d: Duration) {
+    let nap = nap_before_wait(core.granted(), core.next_tick(), u64::from(window)).min(d);
+    if !nap.is_zero() {
+        std::thread::sleep(nap);
+    }
+    let _ = ports.wait(d - nap);
+}
+
+/// [`check_exited`] after a read of every member: one that died after sending states, before
+/// it would have woken the orchestrator, is read here (reads otherwise go by wake-ups).
+fn read_all_then_check_exited(
+    core: &mut TeamCore,
+    ports: &mut OrchestratorPorts,
+    children: &mut [Spawned],
+    hosts: &dyn OtherHosts,
+    now: Duration,
+) -> Result<(), Stop> {
+    ports
+        .receive_states(|msg| core.on_state(msg, now))
+        .map_err(transport_stop(core.next_tick()))?;
+    check_exited(core, children, hosts, now);
+    Ok(())
 }
 
 /// Hands the team core the first member that exited and is not already lost: one of ours, or

@@ -20,5 +20,6 @@ pub mod member_priority;
 pub mod progress;
 pub mod team;
 pub mod telemetry;
+pub mod telemetry_thread;
 
 pub use failure::{BoxError, Exit, Failure};

@@ -43,7 +43,7 @@ pub fn open(
     format: TelemetryFormat,
     every: u64,
     s: &Scenario,
-) -> Result<Box<dyn TelemetrySink>, RunDirError> {
+) -> Result<Box<dyn TelemetrySink + Send>, RunDirError> {
     // A reused (--force) directory may hold the other format's file from an earlier run: it is
     // one of the tool's files, and `report` must not read it for this run.
     for other in [TelemetryFormat::Csv, TelemetryFormat::Parquet] {
@@ -105,7 +105,11 @@ impl<A: TelemetrySink, B: TelemetrySink> TelemetrySink for Both<A, B> {
 }
 
 #[cfg(feature = "rosbag")]
-fn open_bag(dir: &RunDir, every: u64, s: &Scenario) -> Result<Box<dyn TelemetrySink>, RunDirError> {
+fn open_bag(
+    dir: &RunDir,
+    every: u64,
+    s: &Scenario,
+) -> Result<Box<dyn TelemetrySink + Send>, RunDirError> {
     let table = dir.telemetry(every)?;
     let path = dir.path().join(BAG_DIR);
     let bag = cdm_rosbag::BagSink::create(&path, s, every).map_err(|e| RunDirError::Io {
@@ -120,7 +124,7 @@ fn open_bag(
     dir: &RunDir,
     _every: u64,
     _s: &Scenario,
-) -> Result<Box<dyn TelemetrySink>, RunDirError> {
+) -> Result<Box<dyn TelemetrySink + Send>, RunDirError> {
     Err(RunDirError::Io {
         path: dir.path().join(BAG_DIR),
         source: io::Error::other("built without the `rosbag` feature"),
@@ -128,10 +132,10 @@ fn open_bag(
 }
 
 #[cfg(feature = "parquet")]
-fn open_parquet(dir: &RunDir, every: u64) -> Result<Box<dyn TelemetrySink>, RunDirError> {
+fn open_parquet(dir: &RunDir, every: u64) -> Result<Box<dyn TelemetrySink + Send>, RunDirError> {
     let path = dir.path().join(TelemetryFormat::Parquet.file_name());
     cdm_parquet::ParquetTelemetryWriter::create(&path, every)
-        .map(|w| Box::new(w) as Box<dyn TelemetrySink>)
+        .map(|w| Box::new(w) as Box<dyn TelemetrySink + Send>)
         .map_err(|e| RunDirError::Io {
             path,
             source: std::io::Error::other(e),
@@ -139,7 +143,7 @@ fn open_parquet(dir: &RunDir, every: u64) -> Result<Box<dyn TelemetrySink>, RunD
 }
 
 #[cfg(not(feature = "parquet"))]
-fn open_parquet(dir: &RunDir, _every: u64) -> Result<Box<dyn TelemetrySink>, RunDirError> {
+fn open_parquet(dir: &RunDir, _every: u64) -> Result<Box<dyn TelemetrySink + Send>, RunDirError> {
     Err(RunDirError::Io {
         path: dir.path().join(TelemetryFormat::Parquet.file_name()),
         source: std::io::Error::other("built without the `parquet` feature"),
