@@ -208,6 +208,9 @@ for n in "${ns[@]}"; do
   s=$("$bin/orchestrator" simulate --n "$n" "${limit[@]}" --no-figures --out "$out/s$n" 2>/dev/null | grep "^simulate:")
   sim=$(rate <<<"$s")
   ticks=$(sed -E 's/.* ([0-9]+) ticks in .*/\1/' <<<"$s")
+  # simulate's telemetry (about 9 GB at N = 1000) is still being written back to disk: without
+  # this, launch's start-up below would time the kernel's writeback too.
+  sync
   l=$("$bin/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --window "$window" \
       --team "bench$n-$$" --out "$out/l$n" 2>/dev/null)
   lt=$(grep "ticking:" <<<"$l" | rate)
