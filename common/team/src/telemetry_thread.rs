@@ -245,15 +245,23 @@ mod tests {
 
     #[test]
     fn a_failed_write_comes_back_by_a_later_call_and_at_the_end() {
-        let mut t = ThreadedSink::start(Box::new(Failing(0)), 1, 1).unwrap();
+        // A team this large gets the shortest queue (MIN_TICKS = 4 ticks), so the loop cannot
+        // run ahead of the writer: once the send of tick 7 returns, the writer has taken tick 3,
+        // so it has failed on tick 2, whatever the scheduler did. (With a long queue the loop
+        // could hand over every tick before the writer ran at all.)
+        let mut t = ThreadedSink::start(Box::new(Failing(0)), 1, QUEUE_ROWS).unwrap();
         let mut first_error = None;
         for tick in 0..1000 {
             if let Err(e) = t.write_tick(&[row(tick, 1)]) {
-                first_error = Some(e);
+                first_error = Some((tick, e));
                 break;
             }
         }
-        let e = first_error.expect("the failure came back");
+        let (tick, e) = first_error.expect("the failure came back");
+        assert!(
+            tick <= 8,
+            "the failure of tick 2 came back only at tick {tick}"
+        );
         assert_eq!(e.kind(), io::ErrorKind::StorageFull);
         assert_eq!(t.finish().unwrap_err().kind(), io::ErrorKind::StorageFull);
     }
