@@ -100,6 +100,7 @@ PY
 
 # Scale: start-up and a full plan with Parquet telemetry at large N (see the header).
 rate() { sed -E 's/.*\(([0-9]+) ticks\/s\).*/\1/'; }
+startup_s() { sed -E 's/.*start-up ([0-9.]+) s.*/\1/'; }  # from launch's "ticking:" line
 used_kib() { awk '/^Mem:/ {print $3}' < <(free -k); }
 scale_section() {
   local sns=(${SCALE_NS:-1000})
@@ -116,7 +117,7 @@ scale_section() {
     eng=$("$bin/cdm-bench" engine --n "$n" --ticks 1000 | rate)
     startup() {
       "$bin/orchestrator" launch --n "$n" --max-ticks 9 --no-figures --team "scale$n-$$" \
-        --out "$out/su$n" --force "$@" 2>/dev/null | grep "ticking:" | sed -E 's/.*start-up ([0-9.]+) s.*/\1/'
+        --out "$out/su$n" --force "$@" 2>/dev/null | grep "ticking:" | startup_s
       rm -rf "$out/su$n"
     }
     # BENCH_N's row is long enough already: its start-up is the full flight's (repair) only.
@@ -135,7 +136,7 @@ scale_section() {
     l=$(cat "$out/sc$n.log")
     local lt ticks member orch all
     lt=$(grep "ticking:" <<<"$l" | rate)
-    su_rep=$(grep "ticking:" <<<"$l" | sed -E 's/.*start-up ([0-9.]+) s.*/\1/')
+    su_rep=$(grep "ticking:" <<<"$l" | startup_s)
     ticks=$(grep -E "^launch:" <<<"$l" | sed -E 's/.* ([0-9]+) ticks in .*/\1/')
     mem=$(grep "peak resident memory" <<<"$l")
     member=$(sed -E 's/.*largest member ([0-9.]+) MiB.*/\1/' <<<"$mem")
@@ -180,7 +181,7 @@ before_after_section() {
         l=$("$side/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --team "ba$n-$$" --out "$out/ba" 2>/dev/null | grep "ticking:")
         rm -rf "$out/ba"
         r=$(awk -v l="$(rate <<<"$l")" -v e="$e" 'BEGIN{printf "%.3f", l/e}')
-        su=$(sed -E 's/.*start-up ([0-9.]+) s.*/\1/' <<<"$l")
+        su=$(startup_s <<<"$l")
         if [ "$side" = "$bin" ]; then ra+=("$r"); sa+=("$su"); else rb+=("$r"); sb+=("$su"); fi
       done
     done
@@ -214,7 +215,7 @@ for n in "${ns[@]}"; do
   l=$("$bin/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --window "$window" \
       --team "bench$n-$$" --out "$out/l$n" 2>/dev/null)
   lt=$(grep "ticking:" <<<"$l" | rate)
-  su=$(grep "ticking:" <<<"$l" | sed -E 's/.*start-up ([0-9.]+) s.*/\1/')
+  su=$(grep "ticking:" <<<"$l" | startup_s)
   mem=$(grep "peak resident memory" <<<"$l")
   member=$(sed -E 's/.*largest member ([0-9.]+) MiB.*/\1/' <<<"$mem")
   orch=$(sed -E 's/.*orchestrator ([0-9.]+) MiB.*/\1/' <<<"$mem")

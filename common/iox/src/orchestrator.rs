@@ -150,6 +150,17 @@ impl Readiness {
     }
 }
 
+/// A node's id and, when its details can be read, its name.
+fn id_and_name(
+    state: &NodeState<ipc::Service>,
+) -> (iceoryx2::identifiers::UniqueNodeId, Option<String>) {
+    match state {
+        NodeState::Alive(v) => (*v.id(), v.details().as_ref().map(|d| d.name().to_string())),
+        NodeState::Dead(v) => (*v.id(), v.details().as_ref().map(|d| d.name().to_string())),
+        NodeState::Inaccessible(i) | NodeState::Undefined(i) => (*i, None),
+    }
+}
+
 impl OrchestratorPorts {
     /// Creates the team: refuses when a live process of `team` exists, removes the files of
     /// every team of this user whose processes are all dead (this team's previous run included;
@@ -461,15 +472,8 @@ impl OrchestratorPorts {
     ) -> Result<BTreeMap<u32, Vec<String>>, TransportError> {
         let mut names = BTreeMap::new();
         Node::<ipc::Service>::list(self.ports().node.config(), |state| {
-            let (node_id, name) = match &state {
-                NodeState::Alive(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
-                NodeState::Dead(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
-                NodeState::Inaccessible(_) | NodeState::Undefined(_) => {
-                    return CallbackProgression::Continue
-                }
-            };
-            if let Some(name) = name {
-                names.insert(node_id, name.to_string());
+            if let (node_id, Some(name)) = id_and_name(&state) {
+                names.insert(node_id, name);
             }
             CallbackProgression::Continue
         })
@@ -544,14 +548,10 @@ impl OrchestratorPorts {
     ) -> Result<Vec<String>, TransportError> {
         let mut names = vec![];
         nodes(&mut |state| {
-            let (node_id, name) = match &state {
-                NodeState::Alive(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
-                NodeState::Dead(v) => (*v.id(), v.details().as_ref().map(|d| d.name())),
-                NodeState::Inaccessible(i) | NodeState::Undefined(i) => (*i, None),
-            };
+            let (node_id, name) = id_and_name(&state);
             // A node with several subscribers on one service would be listed once per port.
             let ports = node_ids.iter().filter(|&&n| n == node_id).count();
-            let name = name.map_or_else(|| format!("<node {node_id}>"), |n| n.to_string());
+            let name = name.unwrap_or_else(|| format!("<node {node_id}>"));
             names.extend(std::iter::repeat_n(name, ports));
             CallbackProgression::Continue
         })

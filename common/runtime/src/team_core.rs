@@ -462,6 +462,8 @@ mod core_tests;
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn the_orchestrator_naps_only_far_from_the_grant_with_a_wide_window() {
         assert_eq!(nap_before_wait(300, 100, 256), NAP);
@@ -469,8 +471,6 @@ mod tests {
         assert_eq!(nap_before_wait(300, 100, 8), Duration::ZERO);
         assert_eq!(nap_before_wait(100, 300, 256), Duration::ZERO);
     }
-
-    use super::*;
 
     #[test]
     fn grant_window_grants_half_windows_and_always_the_last_tick() {
