@@ -379,7 +379,7 @@ fn a_live_launch_is_served_and_its_tick_advances() {
     let shot_url = format!("{base}?frames=5&graph=1");
     let shot = screenshot(&shot_url, tmp.path(), false);
     if let Some(keep) = std::env::var_os("CDM_VIEWER_SCREENSHOT") {
-        // The README's picture comes from here: CDM_VIEWER_SCREENSHOT=docs/viewer-live.png.
+        // The book's picture (docs/src/guide/viewer.md) comes from here: CDM_VIEWER_SCREENSHOT=docs/src/figures/viewer-live.png.
         std::fs::copy(&shot, &keep)
             .unwrap_or_else(|e| panic!("{}: {e}", Path::new(&keep).display()));
     }
