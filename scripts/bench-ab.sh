@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Before/after tick rates of `launch` in one run (issue 9's row in BENCHMARKS.md): this tree's
+# Before/after tick rates of `launch` in one run (docs/src/benchmarks/history.md): this tree's
 # binaries against another build's (OLD_BIN, e.g. a worktree of an older commit built with
 # `cargo build --release --bins`), alternating old and new ROUNDS times so both see the same
 # drift of a shared machine. N = 40 flies its full plan; N = 1000 flies TICKS_1000 ticks (default

@@ -1,5 +1,5 @@
 #!/bin/sh
-# CPU of an idle team over two "hosts" (issue 12; BENCHMARKS.md): the orchestrator and the daemon
+# CPU of an idle team over two "hosts" (docs/src/benchmarks/hosts.md): the orchestrator and the daemon
 # of a 10-agent team whose members are all stopped (SIGSTOP), so nothing moves and every cycle
 # the two processes spend is their own waiting (bridges, heartbeats, deadlines). Reads utime +
 # stime from /proc/<pid>/stat over WINDOW seconds (default 10). Needs root and release binaries.

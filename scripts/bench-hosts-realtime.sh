@@ -1,5 +1,5 @@
 #!/bin/sh
-# Real time over two "hosts" against one host, in the same session (issue 12; BENCHMARKS.md):
+# Real time over two "hosts" against one host, in the same session (docs/src/benchmarks/hosts.md):
 # `launch --realtime` with the members paced on one wall-clock start instant, host B's half
 # behind a daemon with its own /dev/shm, crossing states over zenoh on a veth pair. Prints the
 # pacing figures of the summary line (audit.json's `realtime`). Both "hosts" share this

@@ -1,5 +1,5 @@
 #!/bin/sh
-# One team over two "hosts" against one host, in the same session (issue 12; BENCHMARKS.md).
+# One team over two "hosts" against one host, in the same session (docs/src/benchmarks/hosts.md).
 # Two network namespaces joined by a veth pair (10.77.0.1/24, 10.77.0.2/24); host B gets its own
 # /dev/shm. Needs root and release binaries (cargo build --release). Usage:
 #   [BIN_DIR=DIR] scripts/bench-hosts.sh [N ...]   (default: 40 250; BIN_DIR: other binaries)

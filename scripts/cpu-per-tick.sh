@@ -2,7 +2,7 @@
 # CPU time per tick of `orchestrator launch` (orchestrator + members; the replay drawing, measured
 # again with `orchestrator view`, subtracted) against the in-process engine's, for the binaries in
 # BIN at N = N, one line per run. CPU time does not depend on what else the machine runs, so on a
-# shared machine it compares builds where wall-clock rates cannot (BENCHMARKS.md, issue 17).
+# shared machine it compares builds where wall-clock rates cannot (docs/src/benchmarks/history.md).
 #
 # Usage: scripts/cpu-per-tick.sh BIN N   (e.g. scripts/cpu-per-tick.sh target/release 40)
 # Environment: ENGINE_TICKS (default 20000) ticks of `cdm-bench engine`; MAX_TICKS flies only

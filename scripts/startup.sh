@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Start-up of `launch` before/after in one run (issue 17 target 4's subsection in BENCHMARKS.md):
+# Start-up of `launch` before/after in one run (docs/src/benchmarks/history.md, "Start-up and scale"):
 # this tree's binaries against another build's (OLD_BIN, e.g. a worktree of an older commit
 # built with `cargo build --release --bins`), alternating old and new ROUNDS times for each
 # `--on-loss` mode so both see the same drift of a shared machine. Each run is

@@ -1,8 +1,8 @@
 //! The docs hold together, checked on the files (no network, no mdBook): every page that the
 //! book's `docs/src/SUMMARY.md` lists exists and every page under `docs/src` is listed; every
-//! relative link of README.md, ARCHITECTURE.md and the book resolves to a file in the
-//! repository, and its `#anchor` to a heading of the page it names (the ids mdBook and GitHub
-//! give headings); every repository path the docs name in backticks or in a link
+//! relative link of README.md, ARCHITECTURE.md, BENCHMARKS.md and the book resolves to a file in
+//! the repository, and its `#anchor` to a heading of the page it names (the ids mdBook and
+//! GitHub give headings); every repository path the docs name in backticks or in a link
 //! (`common/x/src/y.rs`, `scripts/bench.sh`) exists. Each checker is unit-tested below on inline
 //! text, so a broken link, a missing page or a stale path fails.
 
@@ -300,9 +300,11 @@ fn summary_problems(listed: &[String], files: &[PathBuf]) -> Vec<String> {
     out
 }
 
-/// README.md, ARCHITECTURE.md and every page of the book, relative to the root, with their text.
+/// README.md, ARCHITECTURE.md, BENCHMARKS.md and every page of the book, relative to the root, with their text.
 fn doc_pages(root: &Path) -> Vec<(PathBuf, String)> {
-    let mut pages: Vec<PathBuf> = vec!["README.md".into(), "ARCHITECTURE.md".into()];
+    let mut pages: Vec<PathBuf> = ["README.md", "ARCHITECTURE.md", "BENCHMARKS.md"]
+        .map(PathBuf::from)
+        .to_vec();
     pages.extend(
         md_files(&root.join("docs/src"))
             .into_iter()

@@ -1,4 +1,4 @@
-//! Geofences and obstacles (issue 27), on a 4-member team of the paper's kind flying its
+//! Geofences and obstacles, on a 4-member team of the paper's kind flying its
 //! descent in 20 s (2,001 ticks; T_threshold 8.26 s, delta 32.03 m):
 //!
 //! - A box across primary leader 1's path makes `plan` UNSAFE (exit 1) naming the obstacle, the

@@ -1,4 +1,4 @@
-//! Missions (issue 26): take off, fly several deformations, land, certified as one flight.
+//! Missions: take off, fly several deformations, land, certified as one flight.
 //!
 //! - A 10-member mission (take-off, 3 segments, landing) flies the same telemetry, byte for
 //!   byte, as 10 processes (lockstep windows 1 and 256) as in `simulate`.

@@ -1,4 +1,4 @@
-//! `orchestrator export rosbag2` and `--telemetry mcap` (issue 29): the bag of a run, read by
+//! `orchestrator export rosbag2` and `--telemetry mcap`: the bag of a run, read by
 //! code nobody here wrote. `rosbags` opens the rosbag2 directory and decodes every message with
 //! its ROS 2 Humble typestore (one PoseStamped topic per member with one message per telemetry
 //! row, the last pose equal to telemetry to 1e-6 m; /tf, the MarkerArray, the margins), Foxglove's

@@ -1,4 +1,4 @@
-//! The vehicle's battery and its own failsafe, as pure logic (issue 24 item 4).
+//! The vehicle's battery and its own failsafe, as pure logic.
 //!
 //! - SYS_STATUS carries `battery_remaining` (%, -1 when the autopilot does not know) and
 //!   `voltage_battery` (mV, `u16::MAX` when unknown); PX4 streams it at 5 Hz on an onboard link

@@ -1,5 +1,5 @@
-//! What the orchestrator records of a MAVLink member's vehicle (issue 13: "what the team
-//! measures on the vehicles ... appears in audit.json"): the stream's late setpoints and the
+//! What the orchestrator records of a MAVLink member's vehicle (what the team measures
+//! on the vehicles appears in audit.json): the stream's late setpoints and the
 //! vehicle's ATTITUDE (largest |roll| and |pitch|, the newest). The member publishes it as a
 //! [`STATUS_VEHICLE`] message just before each of its pacing reports ([`Reporting`] wraps the
 //! member's transport), so the orchestrator has the newest one whatever stops the team; the

@@ -2,7 +2,7 @@
 //! the same inputs the model's tick takes (`cdm_core::step::step`), so a real vehicle is flown by
 //! the very law the engine integrates.
 //!
-//! The published state of a measured vehicle (issue 24 item 6): position and velocity as
+//! The published state of a measured vehicle: position and velocity as
 //! LOCAL_POSITION_NED measured them; acceleration and jerk as the member commanded them, the
 //! feed-forward of the setpoint in force (by default, [`FeedForward::Commanded`]). Why the
 //! commanded ones and not HIGHRES_IMU's: the IMU's accelerometer gives the specific force in

@@ -1,4 +1,4 @@
-//! A pilot taking over is a loss, not a crash (issue 24 item 2), as pure logic over the
+//! A pilot taking over is a loss, not a crash, as pure logic over the
 //! vehicle's HEARTBEATs.
 //!
 //! Once the member has seen its vehicle in the mode that flies its setpoints (PX4 OFFBOARD,

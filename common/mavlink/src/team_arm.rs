@@ -1,5 +1,5 @@
-//! `--arm` on the team's order (issue 13: "the mode change and the arm command when all
-//! vehicles report ready"). A member joins its team only once its vehicle is heard, so the
+//! `--arm` on the team's order: the mode change and the arm command once all
+//! vehicles report ready. A member joins its team only once its vehicle is heard, so the
 //! orchestrator knows every vehicle is ready when every member has joined; it then sends
 //! [`COMMAND_ARM`](cdm_runtime::messages::COMMAND_ARM) once. Each member switches its vehicle
 //! to OFFBOARD/GUIDED and arms it (the plant's `--arm` sequence), answers with

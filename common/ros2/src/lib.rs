@@ -1,4 +1,4 @@
-//! Live ROS 2 (issue 29): `launch --ros2 dds|zenoh` publishes, while the team flies, the topics
+//! Live ROS 2: `launch --ros2 dds|zenoh` publishes, while the team flies, the topics
 //! of the run's bag (cdm-rosbag: each member's PoseStamped, `/tf`, the formation's MarkerArray,
 //! the margins on `/cdm/audit`) with the very bytes the bag holds, at most `--ros2-hz` ticks a
 //! second. Output only: nothing is subscribed, so nothing on the ROS side can steer the team.

@@ -1,4 +1,4 @@
-//! A run as a ROS 2 bag (issue 29): a rosbag2 directory (metadata.yaml and one MCAP file, the
+//! A run as a ROS 2 bag: a rosbag2 directory (metadata.yaml and one MCAP file, the
 //! default storage since ROS 2 Iron) of standard messages with their `ros2msg` schemas embedded
 //! and CDR payloads, for Foxglove and `ros2 bag play`:
 //!

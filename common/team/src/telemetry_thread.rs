@@ -1,7 +1,7 @@
 //! A telemetry sink on its own thread, for `launch`: the orchestrator's loop hands each
 //! complete tick's rows over and goes on receiving and granting, while the writer thread makes
 //! the text (or Parquet) and writes it. At N = 40 the CSV text was about three quarters of the
-//! orchestrator's CPU and a fifth of the whole team's (perf, issue 28), all of it on the loop
+//! orchestrator's CPU and a fifth of the whole team's (perf), all of it on the loop
 //! that the members wait for. The file is the same, byte for byte: one writer, the ticks in
 //! the order they were handed over.
 //!

@@ -1,4 +1,4 @@
-//! Live ROS 2 over zenoh (`launch --ros2 zenoh`, issue 29): a zenoh session that speaks
+//! Live ROS 2 over zenoh (`launch --ros2 zenoh`): a zenoh session that speaks
 //! rmw_zenoh's wire format, so ROS 2 nodes running `rmw_zenoh_cpp` see our topics. This module
 //! only moves bytes: the key expressions, liveliness keys and GIDs are built by the caller
 //! (cdm-ros2 `rmw_zenoh.rs`, pure); here are the session, the tokens, the publishers and the
