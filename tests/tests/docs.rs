@@ -300,7 +300,8 @@ fn summary_problems(listed: &[String], files: &[PathBuf]) -> Vec<String> {
     out
 }
 
-/// README.md, ARCHITECTURE.md, BENCHMARKS.md and every page of the book, relative to the root, with their text.
+/// README.md, ARCHITECTURE.md, BENCHMARKS.md and every page of the book, relative to the root,
+/// with their text.
 fn doc_pages(root: &Path) -> Vec<(PathBuf, String)> {
     let mut pages: Vec<PathBuf> = ["README.md", "ARCHITECTURE.md", "BENCHMARKS.md"]
         .map(PathBuf::from)
