@@ -340,52 +340,48 @@ fn every_page_of_the_summary_exists_and_every_page_is_in_the_summary() {
     );
 }
 
-#[test]
-fn every_relative_link_and_anchor_of_the_docs_resolves() {
+/// Runs a checker over every page: `count` says how many things a page names (more than 50 in
+/// all, or the checker is blind), `problems` what is wrong with them.
+fn check_every_page(
+    what: &str,
+    count: impl Fn(&str) -> usize,
+    problems: impl Fn(&Path, &Path, &str) -> Vec<String>,
+) {
     let root = repo_root();
     let pages = doc_pages(&root);
-    let relative = pages
-        .iter()
-        .flat_map(|(_, t)| {
-            prose_lines(t)
-                .into_iter()
-                .flat_map(|(_, l)| link_targets(l))
-        })
-        .filter(|t| !t.contains("://"))
-        .count();
+    let named: usize = pages.iter().map(|(_, text)| count(text)).sum();
     assert!(
-        relative > 50,
-        "the docs hold only {relative} relative links: is the checker blind?"
+        named > 50,
+        "the docs name only {named} {what}: is the checker blind?"
     );
-    let problems: Vec<String> = pages
+    let found: Vec<String> = pages
         .iter()
-        .flat_map(|(p, text)| broken_links(&root, p, text))
+        .flat_map(|(p, text)| problems(&root, p, text))
         .collect();
-    assert!(problems.is_empty(), "{}", problems.join("\n"));
+    assert!(found.is_empty(), "{}", found.join("\n"));
+}
+
+#[test]
+fn every_relative_link_and_anchor_of_the_docs_resolves() {
+    let relative = |text: &str| {
+        prose_lines(text)
+            .into_iter()
+            .flat_map(|(_, l)| link_targets(l))
+            .filter(|t| !t.contains("://"))
+            .count()
+    };
+    check_every_page("relative links", relative, broken_links);
 }
 
 #[test]
 fn every_repository_path_the_docs_name_exists() {
-    let root = repo_root();
-    let pages = doc_pages(&root);
-    let named: usize = pages
-        .iter()
-        .map(|(_, t)| {
-            prose_lines(t)
-                .iter()
-                .map(|(_, l)| repo_paths(l).len())
-                .sum::<usize>()
-        })
-        .sum();
-    assert!(
-        named > 50,
-        "the docs name only {named} repository paths: is the checker blind?"
-    );
-    let problems: Vec<String> = pages
-        .iter()
-        .flat_map(|(p, text)| missing_paths(&root, p, text))
-        .collect();
-    assert!(problems.is_empty(), "{}", problems.join("\n"));
+    let paths = |text: &str| {
+        prose_lines(text)
+            .into_iter()
+            .map(|(_, l)| repo_paths(l).len())
+            .sum()
+    };
+    check_every_page("repository paths", paths, missing_paths);
 }
 
 #[test]
