@@ -1,4 +1,4 @@
-"""Check that the exports carry the scenario's airspace (issue 27) in the target frame: the
+"""Check that the exports carry the scenario's airspace in the target frame: the
 Crazyswarm2 export's airspace.yaml (read with PyYAML) and the Skybrush show's `geofence` (read
 as skybrush-server reads `show["geofence"]`: version 1, inclusion polygons of [x, y], minAltitude
 and maxAltitude) both equal the original scenario's [geofence] and [[obstacle]] tables mapped by

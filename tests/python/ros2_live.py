@@ -1,4 +1,4 @@
-"""The live ROS 2 topics of `orchestrator launch --ros2` (issue 29), received by code nobody here
+"""The live ROS 2 topics of `orchestrator launch --ros2`, received by code nobody here
 wrote, then compared with the run's telemetry.
 
 Usage:
