@@ -1,8 +1,8 @@
 //! The pre-flight certificate as `plan`, `simulate` and `export` print it.
 
-use cdm_core::airspace_certificate::AirspaceCertificate;
-use cdm_core::mission_certificate::PhaseCertificate;
-use cdm_core::simulate::Certificate;
+use cdm_certificates::airspace_certificate::AirspaceCertificate;
+use cdm_certificates::mission_certificate::PhaseCertificate;
+use cdm_simulate::Certificate;
 use cdm_team::out;
 
 pub fn print_certificate(c: &Certificate) {
@@ -110,7 +110,7 @@ fn print_airspace(a: &AirspaceCertificate) {
 }
 
 /// `plan --suggest`: the offsets that clear each breach, and why no time scaling does.
-fn print_suggestion(s: &cdm_core::airspace_suggest::Suggestion) {
+fn print_suggestion(s: &cdm_certificates::airspace_suggest::Suggestion) {
     if s.offsets.is_empty() {
         out!("  suggest: nothing to clear (no margin is negative)");
         return;

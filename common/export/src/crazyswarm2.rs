@@ -8,10 +8,10 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use cdm_core::export::{pieces, CrazyflieSplit, Piece};
-use cdm_core::math::Real;
-use cdm_core::rundir::write_atomic;
-use cdm_core::scenario::{has_airspace, ScenarioFile, Shape};
+use cdm_trajectory::{pieces, CrazyflieSplit, Piece};
+use cdm_math::Real;
+use cdm_records::rundir::write_atomic;
+use cdm_scenario::{has_airspace, ScenarioFile, Shape};
 
 use super::Scaled;
 use cdm_team::Failure;

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use cdm_core::scenario::{Checks, Scenario};
+use cdm_scenario::{Checks, Scenario};
 use cdm_report::data::{read_audit, stream_ticks, AuditNumbers};
 use cdm_rosbag::{BagError, BagWriter, Limits, Team, Tick};
 use cdm_team::{out, Exit, Failure};

@@ -13,11 +13,11 @@ use base64::Engine as _;
 use serde::Serialize;
 use zip::write::SimpleFileOptions;
 
-use cdm_core::export::{pieces, Cut};
-use cdm_core::math::{Real, Vec3};
-use cdm_core::rundir::write_atomic;
-use cdm_core::scenario::GeofenceSpec;
-use cdm_core::simulate::Certificate;
+use cdm_trajectory::{pieces, Cut};
+use cdm_math::{Real, Vec3};
+use cdm_records::rundir::write_atomic;
+use cdm_scenario::GeofenceSpec;
+use cdm_simulate::Certificate;
 
 use super::Scaled;
 use cdm_team::Failure;

@@ -9,8 +9,8 @@ use std::collections::BTreeSet;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use cdm_core::outcome::FaultKind;
-use cdm_core::scenario::Scenario;
+use cdm_model::outcome::FaultKind;
+use cdm_scenario::Scenario;
 use cdm_iox::OrchestratorPorts;
 use cdm_member::vehicles::Vehicles;
 use cdm_runtime::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason, STATUS_FAULT};

@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use cdm_core::audit::Auditor;
+use cdm_records::audit::Auditor;
 use cdm_member::vehicles::{vehicle_figures, VehicleReport};
 use cdm_runtime::messages::StateMsg;
 

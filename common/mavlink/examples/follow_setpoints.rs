@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use cdm_core::plan::{Quintic, Segment};
+use cdm_model::plan::{Quintic, Segment};
 use cdm_math::{Real, Vec3};
 use cdm_mavlink::{
     member_addr, LinkTimeouts, MavlinkVehicle, Setpoint, UdpLink, VehicleConfig, VehicleOrigin,

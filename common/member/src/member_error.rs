@@ -4,8 +4,8 @@
 
 use std::time::Duration;
 
-use cdm_core::scenario::ScenarioError;
-use cdm_core::step::StepFault;
+use cdm_scenario::ScenarioError;
+use cdm_model::step::StepFault;
 use cdm_iox::{TeamName, TransportError};
 use cdm_mavlink::udp::UdpError;
 use cdm_mavlink::{PlantError, TeamArmError};

@@ -7,14 +7,14 @@ use std::collections::{BTreeMap, VecDeque};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
-use cdm_core::formation::Role;
-use cdm_core::math::{vec3, Real, Vec3};
-use cdm_core::scenario::{Checks, Scenario};
-use cdm_core::telemetry::{Row, TelemetryFormat, HEADER};
+use cdm_model::formation::Role;
+use cdm_math::{vec3, Real, Vec3};
+use cdm_scenario::{Checks, Scenario};
+use cdm_records::telemetry::{Row, TelemetryFormat, HEADER};
 
 // The per-tick margins moved to the core (the ROS 2 bag computes them during a run too); named
 // here as before.
-pub use cdm_core::margins::{boundary_distance, lambdas_at, living_separation};
+pub use cdm_records::margins::{boundary_distance, lambdas_at, living_separation};
 
 /// A run directory that cannot be read, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -29,7 +29,7 @@ pub enum ReadError {
     Invalid { path: PathBuf, message: String },
     /// Not a regular file, or too large to read whole.
     #[error(transparent)]
-    File(#[from] cdm_core::files::FileError),
+    File(#[from] cdm_files::FileError),
 }
 
 /// The longest telemetry line read (a row is about 250 bytes).
@@ -175,7 +175,7 @@ fn invalid(path: &Path, message: impl Into<String>) -> ReadError {
 
 /// Read audit.json's safety numbers.
 pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
-    let text = cdm_core::files::read_input(path, cdm_core::files::MAX_INPUT_BYTES)?;
+    let text = cdm_files::read_input(path, cdm_files::MAX_INPUT_BYTES)?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
     let repairs = read_repairs(&v);
@@ -379,7 +379,7 @@ pub fn read_telemetry(
         return Ok(parquet);
     }
     let path = dir.join(TelemetryFormat::Csv.file_name());
-    let mut reader = BufReader::with_capacity(1 << 20, cdm_core::files::open_input(&path)?);
+    let mut reader = BufReader::with_capacity(1 << 20, cdm_files::open_input(&path)?);
     let mut line = String::new();
     match next_line(&mut reader, &mut line) {
         Ok(Some(())) if line.trim() == HEADER => {}

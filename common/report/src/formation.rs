@@ -6,8 +6,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use cdm_core::formation::Role;
-use cdm_core::math::{Real, Vec3};
+use cdm_model::formation::Role;
+use cdm_math::{Real, Vec3};
 
 use super::data::RunData;
 use super::plot::{e, Figure, FAMILY, GREY, PALETTE};

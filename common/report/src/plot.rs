@@ -8,8 +8,8 @@ use std::sync::OnceLock;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use cdm_core::math::Real;
-use cdm_core::rundir::write_atomic;
+use cdm_math::Real;
+use cdm_records::rundir::write_atomic;
 
 /// DejaVu Sans (assets/DejaVuSans-LICENSE.txt: Bitstream Vera license, redistributable).
 const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
@@ -51,7 +51,7 @@ pub enum FigureError {
     },
     /// Writing the file failed (names the file).
     #[error(transparent)]
-    Write(#[from] cdm_core::rundir::RunDirError),
+    Write(#[from] cdm_records::rundir::RunDirError),
 }
 
 /// Register the font once per process.

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use cdm_core::math::{Real, Vec3};
+use cdm_math::{Real, Vec3};
 
 use super::plot::{e, write_figure, Figure, FAMILY, GREY, PALETTE};
 

@@ -4,11 +4,11 @@
 
 use serde_json::json;
 
-use cdm_core::audit::SafetyNumbers;
-use cdm_core::formation::Role;
-use cdm_core::margins::{boundary_distance, lambdas_at, living_separation, max_deviation};
-use cdm_core::math::{Real, Vec3};
-use cdm_core::scenario::{Scenario, Shape};
+use cdm_records::audit::SafetyNumbers;
+use cdm_model::formation::Role;
+use cdm_records::margins::{boundary_distance, lambdas_at, living_separation, max_deviation};
+use cdm_math::{Real, Vec3};
+use cdm_scenario::{Scenario, Shape};
 
 use crate::msgs::{self, Marker, MsgType, Rgba, Stamp};
 

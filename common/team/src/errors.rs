@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use cdm_core::export::SplitError;
+use cdm_trajectory::SplitError;
 use cdm_iox::TransportError;
 
 /// A failure of a command that no library error describes alone.

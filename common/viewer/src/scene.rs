@@ -4,9 +4,9 @@
 
 use serde::Serialize;
 
-use cdm_core::formation::Role;
-use cdm_core::math::Real;
-use cdm_core::scenario::{GeofenceSpec, ObstacleSpec, Scenario};
+use cdm_model::formation::Role;
+use cdm_math::Real;
+use cdm_scenario::{GeofenceSpec, ObstacleSpec, Scenario};
 
 use cdm_report::data::{
     boundary_distance, lambdas_at, living_separation, Repair, TickPositions, ViolationMark,
