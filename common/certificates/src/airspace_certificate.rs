@@ -21,15 +21,22 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use cdm_model::airspace::{segments_distance, Boundary, Fence};
 use cdm_math::{Real, Vec2, Vec3};
+use cdm_model::airspace::{segments_distance, Boundary, Fence};
 use cdm_scenario::Scenario;
+
+/// What a clearance is to: a side of the geofence or an obstacle (`fence`, `obstacle` in JSON).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClearanceKind {
+    Fence,
+    Obstacle,
+}
 
 /// The smallest margin to one boundary of the airspace: where and who.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Clearance {
-    /// `fence` or `obstacle`.
-    pub kind: &'static str,
+    pub kind: ClearanceKind,
     /// The fence's side (`floor`, `ceiling`, `edge K`, K from 1) or the obstacle's name.
     pub name: String,
     /// The ball's distance to the boundary (metres): negative when it reaches inside an
@@ -46,18 +53,17 @@ impl Clearance {
     /// How messages name the boundary: `fence ceiling`, `obstacle "tower"`.
     pub fn label(&self) -> String {
         match self.kind {
-            "fence" => format!("fence {}", self.name),
-            _ => format!("obstacle {:?}", self.name),
+            ClearanceKind::Fence => format!("fence {}", self.name),
+            ClearanceKind::Obstacle => format!("obstacle {:?}", self.name),
         }
     }
 
     /// The breach as an UNSAFE reason: `obstacle "tower": member 1 at t = 31.40 s (segment 1),
     /// 2.10 m inside`.
     pub fn reason(&self) -> String {
-        let how = if self.kind == "fence" {
-            "beyond it"
-        } else {
-            "inside"
+        let how = match self.kind {
+            ClearanceKind::Fence => "beyond it",
+            ClearanceKind::Obstacle => "inside",
         };
         format!(
             "{}: member {} at t = {:.2} s ({}), {:.2} m {how}",
@@ -80,14 +86,42 @@ pub struct AirspaceCertificate {
     pub clearances: Vec<Clearance>,
     /// `plan --suggest`: what would clear the breaches.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub suggestion: Option<crate::airspace_suggest::Suggestion>,
+    pub suggestion: Option<Suggestion>,
+}
+
+/// Why no uniform time scaling is suggested.
+pub const NO_TIME_SCALING: &str = "no uniform time scaling clears it: each member's desired path is the same segment per phase whatever the travel times (eqs. 13, 15), and its ball of eps + delta does not depend on them (eq. 38)";
+
+/// What would clear one breached boundary, or all of them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Offsets {
+    /// `fence ceiling`, `obstacle "tower"`, or `the whole airspace`.
+    pub what: String,
+    /// The smallest raise of every height (metres) that clears it, if one exists.
+    pub raise_m: Option<Real>,
+    /// The smallest descent, if one exists.
+    pub lower_m: Option<Real>,
+}
+
+/// `plan --suggest`'s answer.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Suggestion {
+    /// One row per breached boundary (each on its own), then the whole airspace at once,
+    /// re-validated and re-certified.
+    pub offsets: Vec<Offsets>,
+    /// Always `None` (module docs); `time_scaling_note` says why.
+    pub time_scale: Option<Real>,
+    pub time_scaling_note: &'static str,
+    /// Offsets that cleared the margins but were refused when the shifted plan was validated
+    /// again (a member below its take-off ground, a start outside the fence), and why.
+    pub notes: Vec<String>,
 }
 
 impl AirspaceCertificate {
     /// The fence's smallest margin (its worst side), if there is a fence.
     pub fn fence(&self) -> Option<&Clearance> {
         (self.clearances.iter())
-            .filter(|c| c.kind == "fence")
+            .filter(|c| c.kind == ClearanceKind::Fence)
             .min_by(|a, b| a.margin_m.total_cmp(&b.margin_m))
     }
 
@@ -264,10 +298,10 @@ pub fn certify_airspace(s: &Scenario, delta_m: Real) -> Option<AirspaceCertifica
 /// One boundary's smallest margin, named, with its member, instant and phase.
 pub(crate) fn clearance(s: &Scenario, tracks: &[Track], b: Boundary, w: &Worst) -> Clearance {
     let (kind, name) = match b {
-        Boundary::Floor => ("fence", "floor".to_string()),
-        Boundary::Ceiling => ("fence", "ceiling".to_string()),
-        Boundary::Edge(k) => ("fence", format!("edge {}", k + 1)),
-        Boundary::Obstacle(k) => ("obstacle", s.file.obstacles[k].name.clone()),
+        Boundary::Floor => (ClearanceKind::Fence, "floor".to_string()),
+        Boundary::Ceiling => (ClearanceKind::Fence, "ceiling".to_string()),
+        Boundary::Edge(k) => (ClearanceKind::Fence, format!("edge {}", k + 1)),
+        Boundary::Obstacle(k) => (ClearanceKind::Obstacle, s.file.obstacles[k].name.clone()),
     };
     let t = &tracks[w.track];
     let p = &s.plan.phases()[t.phase];
@@ -343,7 +377,10 @@ mod tests {
         let phase = s.plan.phases()[0];
         let at_tick = |k: u64| {
             let t = k as Real * s.dt_s();
-            a + (b - a) * phase.quintic.derivatives(t, cdm_model::plan::Segment::Motion)[0]
+            a + (b - a)
+                * phase
+                    .quintic
+                    .derivatives(t, cdm_model::plan::Segment::Motion)[0]
         };
         // Half way between ticks 10000 and 10001 (t = 100 s, the fastest instant).
         let mid = (at_tick(10_000) + at_tick(10_001)) * 0.5;

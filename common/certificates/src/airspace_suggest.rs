@@ -10,46 +10,18 @@
 //!   desired position runs along the same segment per phase, eqs. 13, 15) and the balls'
 //!   radius eps + delta does not either (eq. 38), so the suggestion says so.
 
-use serde::Serialize;
-
-use cdm_model::airspace::{Boundary, Shape};
-use crate::airspace_certificate::{certify_airspace, clearance, tracks, worst_margins};
+use crate::airspace_certificate::{
+    certify_airspace, clearance, tracks, worst_margins, Offsets, Suggestion, NO_TIME_SCALING,
+};
 use cdm_math::Real;
-use cdm_scenario::{Checks, Scenario};
+use cdm_model::airspace::{Boundary, Shape};
+use cdm_scenario::{Checks, Scenario, ScenarioErrorKind};
 
 /// The smallest step of the offset search (metres): the suggested offset is within this of
 /// the smallest one.
 pub const MIN_STEP_M: Real = 1e-3;
 /// The most margin evaluations one search makes.
 const MAX_STEPS: usize = 10_000;
-
-/// Why no uniform time scaling is suggested.
-pub const NO_TIME_SCALING: &str = "no uniform time scaling clears it: each member's desired path is the same segment per phase whatever the travel times (eqs. 13, 15), and its ball of eps + delta does not depend on them (eq. 38)";
-
-/// What would clear one breached boundary, or all of them.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Offsets {
-    /// `fence ceiling`, `obstacle "tower"`, or `the whole airspace`.
-    pub what: String,
-    /// The smallest raise of every height (metres) that clears it, if one exists.
-    pub raise_m: Option<Real>,
-    /// The smallest descent, if one exists.
-    pub lower_m: Option<Real>,
-}
-
-/// `plan --suggest`'s answer.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Suggestion {
-    /// One row per breached boundary (each on its own), then the whole airspace at once,
-    /// re-validated and re-certified.
-    pub offsets: Vec<Offsets>,
-    /// Always `None` (module docs); `time_scaling_note` says why.
-    pub time_scale: Option<Real>,
-    pub time_scaling_note: &'static str,
-    /// Offsets that cleared the margins but were refused when the shifted plan was validated
-    /// again (a member below its take-off ground, a start outside the fence), and why.
-    pub notes: Vec<String>,
-}
 
 /// The suggestion for `s` with balls of `radius_m`; empty rows when nothing is breached.
 pub fn suggest(s: &Scenario, radius_m: Real) -> Suggestion {
@@ -92,7 +64,7 @@ pub fn suggest(s: &Scenario, radius_m: Real) -> Suggestion {
     for (dz, sign) in [(&mut whole.raise_m, 1.0), (&mut whole.lower_m, -1.0)] {
         if let Some(d) = *dz {
             if let Err(why) = recertify(s, sign * d, delta) {
-                out.notes.push(why);
+                out.notes.push(why.to_string());
                 *dz = None;
             }
         }
@@ -141,10 +113,21 @@ fn vertical_span(s: &Scenario, radius_m: Real) -> Real {
     hi - lo + 2.0 * radius_m + 1.0
 }
 
+/// Why moving every height does not clear the airspace (a note of the suggestion).
+#[derive(Debug, thiserror::Error)]
+enum ShiftRefused {
+    /// The shifted plan fails validation.
+    #[error("moving every height by {dz_m:+.3} m is refused: {kind}")]
+    Invalid { dz_m: Real, kind: ScenarioErrorKind },
+    /// The shifted plan validates but still breaches a boundary.
+    #[error("moved by {dz_m:+.3} m the plan still breaches {reason}")]
+    Breaches { dz_m: Real, reason: String },
+}
+
 /// The plan with every height above the ground moved by `dz_m`, validated and certified again
 /// (with the same delta: a translation changes no D_B, D_S or lambda_1); the reason when it is
 /// refused or still breaches.
-fn recertify(s: &Scenario, dz_m: Real, delta_m: Real) -> Result<(), String> {
+fn recertify(s: &Scenario, dz_m: Real, delta_m: Real) -> Result<(), ShiftRefused> {
     let mut f = s.file.clone();
     for a in &mut f.agents {
         a.position[2] += dz_m;
@@ -158,11 +141,14 @@ fn recertify(s: &Scenario, dz_m: Real, delta_m: Real) -> Result<(), String> {
         }
     }
     let shifted = Scenario::from_file(f, &s.origin, Checks::Member)
-        .map_err(|e| format!("moving every height by {dz_m:+.3} m is refused: {}", e.kind))?;
+        .map_err(|e| ShiftRefused::Invalid { dz_m, kind: e.kind })?;
     let reasons = certify_airspace(&shifted, delta_m).map_or(Vec::new(), |c| c.reasons());
     match reasons.first() {
         None => Ok(()),
-        Some(r) => Err(format!("moved by {dz_m:+.3} m the plan still breaches {r}")),
+        Some(r) => Err(ShiftRefused::Breaches {
+            dz_m,
+            reason: r.clone(),
+        }),
     }
 }
 

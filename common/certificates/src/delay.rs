@@ -12,10 +12,10 @@
 
 use serde::Serialize;
 
-use cdm_engine::engine::max_follower_deviation_within;
 use crate::linear_certificate::LinearTeam;
-use cdm_model::link::{LinkSpec, MAX_DELAY_MS};
+use cdm_engine::engine::max_follower_deviation_within;
 use cdm_math::Real;
+use cdm_model::link::{LinkSpec, MAX_DELAY_MS};
 use cdm_scenario::Scenario;
 
 /// The outcome of the search, in whole ticks.
@@ -30,15 +30,27 @@ pub enum DelayBound {
     AtLeast(u64),
 }
 
+/// Where a delay search stops and where its doubling starts (ticks).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DelaySearch {
+    /// The largest delay searched.
+    pub cap_ticks: u64,
+    /// The first delay tried after none (at least one).
+    pub first_ticks: u64,
+}
+
 /// The largest whole-tick delay d in [0, cap_ticks] with `fly(d) <= delta_m`: doubling from
-/// `first` ticks (at least one) to the first failure, then bisection. It assumes E_max grows with the delay (true in
+/// `first_ticks` (at least one) to the first failure, then bisection. It assumes E_max grows with the delay (true in
 /// every flight measured, BENCHMARKS.md); a non-finite E_max (a faulted flight) fails.
 pub fn max_delay_ticks(
     mut fly: impl FnMut(u64) -> Real,
     delta_m: Real,
-    cap_ticks: u64,
-    first: u64,
+    search: DelaySearch,
 ) -> DelayBound {
+    let DelaySearch {
+        cap_ticks,
+        first_ticks: first,
+    } = search;
     let mut ok = |d: u64| {
         let e = fly(d);
         e.is_finite() && e <= delta_m
@@ -99,33 +111,34 @@ pub fn max_link_delay(
     linear: Option<&LinearTeam>,
 ) -> DelayBound {
     let dt_ms = s.dt_s() * 1000.0;
-    let cap = s.last_tick().min((MAX_DELAY_MS / dt_ms) as u64);
-    // Delays below a quarter of a second pass on every team measured (BENCHMARKS.md): starting
-    // the doubling there saves the flights of 1, 2, 4, .. ticks.
-    let first = (0.25 / s.dt_s()).round() as u64;
+    let search = DelaySearch {
+        cap_ticks: s.last_tick().min((MAX_DELAY_MS / dt_ms) as u64),
+        // Delays below a quarter of a second pass on every team measured (BENCHMARKS.md):
+        // starting the doubling there saves the flights of 1, 2, 4, .. ticks.
+        first_ticks: (0.25 / s.dt_s()).round() as u64,
+    };
     match linear {
-        Some(team) => max_link_delay_linear(team, s.file.t_total_s, delta_m, e0_m, (cap, first)),
+        Some(team) => max_link_delay_linear(team, s.file.t_total_s, delta_m, e0_m, search),
         None => max_delay_ticks(
             |d| match d {
                 0 => e0_m,
                 _ => deviation_at_delay(s, d as Real * dt_ms, delta_m),
             },
             delta_m,
-            cap,
-            first,
+            search,
         ),
     }
 }
 
 /// [`max_link_delay`] of one motion of `t_s` seconds on its linear team (a mission's phase),
-/// searched over `(cap, first)` ticks. Only "E_max <= delta?" is asked: `meets` answers it
+/// searched over `search`. Only "E_max <= delta?" is asked: `meets` answers it
 /// without computing E_max.
 pub fn max_link_delay_linear(
     team: &LinearTeam,
     t_s: Real,
     delta_m: Real,
     e0_m: Real,
-    (cap, first): (u64, u64),
+    search: DelaySearch,
 ) -> DelayBound {
     max_delay_ticks(
         |d| match d {
@@ -134,17 +147,18 @@ pub fn max_link_delay_linear(
             _ => Real::INFINITY,
         },
         delta_m,
-        cap,
-        first,
+        search,
     )
 }
 
 /// The largest delay searched for a motion of `t_s` seconds at ticks of `dt_s`, and the first
 /// delay tried (ticks).
-pub fn delay_search(t_s: Real, dt_s: Real) -> (u64, u64) {
-    let cap =
-        cdm_scenario::last_tick_of(t_s, 1.0 / dt_s).min((MAX_DELAY_MS / (dt_s * 1000.0)) as u64);
-    (cap, (0.25 / dt_s).round() as u64)
+pub fn delay_search(t_s: Real, dt_s: Real) -> DelaySearch {
+    DelaySearch {
+        cap_ticks: cdm_scenario::last_tick_of(t_s, 1.0 / dt_s)
+            .min((MAX_DELAY_MS / (dt_s * 1000.0)) as u64),
+        first_ticks: (0.25 / dt_s).round() as u64,
+    }
 }
 
 /// A [`DelayBound`] in milliseconds at ticks of `dt_s`: (delay, "at least") or `None`.
@@ -165,6 +179,13 @@ mod tests {
         search_from(breaks_at, cap, 1)
     }
 
+    fn range(cap_ticks: u64, first_ticks: u64) -> DelaySearch {
+        DelaySearch {
+            cap_ticks,
+            first_ticks,
+        }
+    }
+
     fn search_from(breaks_at: u64, cap: u64, first: u64) -> (DelayBound, usize) {
         let mut flights = 0;
         let b = max_delay_ticks(
@@ -177,8 +198,7 @@ mod tests {
                 }
             },
             1.5,
-            cap,
-            first,
+            range(cap, first),
         );
         (b, flights)
     }
@@ -217,9 +237,13 @@ mod tests {
 
     #[test]
     fn a_faulted_flight_fails() {
-        let b = max_delay_ticks(|d| if d >= 5 { Real::INFINITY } else { 0.0 }, 1.0, 50, 1);
+        let b = max_delay_ticks(
+            |d| if d >= 5 { Real::INFINITY } else { 0.0 },
+            1.0,
+            range(50, 1),
+        );
         assert_eq!(b, DelayBound::Ticks(4));
-        let nan = max_delay_ticks(|d| if d >= 3 { Real::NAN } else { 0.0 }, 1.0, 50, 2);
+        let nan = max_delay_ticks(|d| if d >= 3 { Real::NAN } else { 0.0 }, 1.0, range(50, 2));
         assert_eq!(nan, DelayBound::Ticks(2));
     }
 }

@@ -8,7 +8,7 @@
 //! with its in-neighbours' tick-k states extrapolated by a cubic (`step::extrapolate`). Over one
 //! tick that is a linear ODE with polynomial input, so its exact discretisation is one matrix
 //! exponential ([`TickMaps`]); the engine's RK4 differs from it by O((k dt)^5) per tick. The
-//! test `common/core/tests/certificate.rs` bounds the difference against the full flight.
+//! test `common/certificates/tests/certificate.rs` bounds the difference against the full flight.
 //!
 //! How it stays cheap at N = 1000. Every member's desired position is r_i,HT(t) = r_i0 + s(t) D_i
 //! with D_i = sum_p alpha_ip (goal_p - start_p) (eqs. 13, 15), and the weights reproduce it
@@ -32,11 +32,11 @@
 //! it still commutes with W: only the scalar chains change (`chains` with a delay), and E_max at
 //! a delay costs what it costs without one.
 
-use cdm_model::formation::Role;
 use cdm_math::{Mat4, Mat8, Real, Vec3, Vec4};
+use cdm_model::formation::Role;
 use cdm_model::plan::{Quintic, Segment};
-use cdm_scenario::Scenario;
 use cdm_model::step::{tick_time, NeighborModel};
+use cdm_scenario::Scenario;
 
 /// Why a scenario's certificate cannot use the linear model (it then flies the plan instead).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -20,17 +20,17 @@ use std::collections::BTreeSet;
 
 use serde::Serialize;
 
-use cdm_records::audit::Auditor;
-use cdm_model::dynamics::{Flat, QuadState};
 use cdm_engine::engine::{quad_engine, Engine};
+use cdm_math::{Real, Vec3};
+use cdm_model::dynamics::{Flat, QuadState};
 use cdm_model::formation::{Formation, Role};
 use cdm_model::graph::DEFAULT_WEIGHT_FLOOR;
-use cdm_math::{Real, Vec3};
 use cdm_model::outcome::Verdict;
 use cdm_model::repair::{repair, Repair, Retriangulation};
 use cdm_model::safety::Prism;
-use cdm_scenario::Scenario;
 use cdm_model::step::{law_for, step, tick_time, Law, StepConfig};
+use cdm_records::audit::Auditor;
+use cdm_scenario::Scenario;
 
 /// One member's loss, certified.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -14,14 +14,14 @@
 
 use serde::Serialize;
 
-use cdm_records::audit::SafetyNumbers;
 use crate::certificate::{t_threshold_from, unstable_gains, verdict_of, Certificate, Findings};
 use crate::delay::{delay_search, max_link_delay_linear, DelayBound};
-use cdm_engine::engine::max_follower_deviation;
 use crate::linear_certificate::LinearTeam;
+use cdm_engine::engine::max_follower_deviation;
 use cdm_math::{Real, Vec3};
 use cdm_model::outcome::Verdict;
 use cdm_model::plan::{Phase, PhaseKind};
+use cdm_records::audit::SafetyNumbers;
 use cdm_scenario::{closest_ground_pair, Scenario};
 
 /// One phase of a mission, certified.

@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
-use cdm_records::audit::SafetyNumbers;
+use cdm_certificates::certificate::{certify, deviation_at, t_threshold};
 use cdm_certificates::linear_certificate::{LinearTeam, NotLinear};
+use cdm_records::audit::SafetyNumbers;
 use cdm_scenario::{Checks, Scenario};
-use cdm_simulate::{certify, deviation_at, t_threshold};
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/certificate");
 

@@ -1,10 +1,10 @@
-//! Imperfect links in the engine (`common/core/src/link.rs`): nothing lost and no delay is the
+//! Imperfect links in the engine (`common/model/src/link.rs`): nothing lost and no delay is the
 //! paper's model bit for bit; delay, jitter and loss change the flight deterministically.
 
 use cdm_certificates::delay::deviation_at_delay;
-use cdm_model::dynamics::QuadState;
-use cdm_engine::engine::{max_follower_deviation, quad_engine};
 use cdm_certificates::linear_certificate::LinearTeam;
+use cdm_engine::engine::{max_follower_deviation, quad_engine};
+use cdm_model::dynamics::QuadState;
 use cdm_model::link::LinkSpec;
 use cdm_scenario::{Checks, Scenario};
 

@@ -1,14 +1,14 @@
 //! Micro-benchmarks of the hot math: one agent's tick (controller + RK4), Q/d and lambda(U_D),
-//! and one audit of a whole team. Run: `cargo bench -p cdm-core --bench hot_math`.
+//! and one audit of a whole team. Run: `cargo bench -p cdm-engine --bench hot_math`.
 
 use std::hint::black_box;
 
-use cdm_records::audit::Auditor;
-use cdm_model::dynamics::QuadState;
 use cdm_engine::engine::quad_engine;
+use cdm_model::dynamics::QuadState;
 use cdm_model::frame::deformation_eigenvalues;
-use cdm_scenario::Scenario;
 use cdm_model::step::{law_for, step};
+use cdm_records::audit::Auditor;
+use cdm_scenario::Scenario;
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn hot_math(c: &mut Criterion) {

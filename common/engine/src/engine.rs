@@ -2,13 +2,13 @@
 //! per-member `step` the member processes run, in member order. It is the reference the
 //! multi-process runtime must match bit for bit.
 
+use cdm_math::{Real, Vec3};
 use cdm_model::dynamics::{Chain, Flat, Plant, QuadState};
 use cdm_model::formation::Role;
 use cdm_model::link::{Heard, LinkModel};
-use cdm_math::{Real, Vec3};
 use cdm_model::repair::Repair;
-use cdm_scenario::Scenario;
 use cdm_model::step::{law_for, step, tick_time, Law, NeighborModel, StepConfig, StepFault};
+use cdm_scenario::Scenario;
 
 /// A member failed to complete a tick.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

@@ -8,16 +8,16 @@
 
 use std::collections::BTreeSet;
 
-use cdm_records::audit::{Auditor, LossRecord};
-use cdm_model::dynamics::Plant;
 use crate::engine::Engine;
+use cdm_math::Real;
+use cdm_model::dynamics::Plant;
 use cdm_model::formation::Formation;
 use cdm_model::graph::DEFAULT_WEIGHT_FLOOR;
-use cdm_math::Real;
 use cdm_model::outcome::LossCause;
 use cdm_model::repair::{repair, Repair, Retriangulation};
-use cdm_scenario::Scenario;
 use cdm_model::step::tick_time;
+use cdm_records::audit::{Auditor, LossRecord};
+use cdm_scenario::Scenario;
 
 /// What a loss does to the run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -1,12 +1,12 @@
 //! The in-process engine: the nonlinear team equals the linear model (feedback linearisation,
 //! eqs. 43-46), determinism, and the error of exchanging states once per tick.
 
-use cdm_model::dynamics::{Flat, Plant};
 use cdm_engine::engine::{chain_engine, max_follower_deviation, quad_engine, AgentFault};
 use cdm_math::{Real, Vec3};
+use cdm_model::dynamics::{Flat, Plant};
 use cdm_model::plan::Piece;
-use cdm_scenario::{Checks, Scenario};
 use cdm_model::step::{law_for, Law, NeighborModel};
+use cdm_scenario::{Checks, Scenario};
 
 fn paper40_with(t_total_s: f64) -> Scenario {
     let mut f = cdm_scenario::paper40();

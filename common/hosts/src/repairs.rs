@@ -7,11 +7,11 @@
 
 use std::collections::BTreeSet;
 
-use cdm_records::loss_log::{links, LossLog};
 use cdm_model::repair::{repair_in_order, synthesis_order};
-use cdm_scenario::Scenario;
+use cdm_records::loss_log::{links, LossLog};
 use cdm_runtime::messages::LossNotice;
 use cdm_runtime::notices::{NoticeGap, Notices};
+use cdm_scenario::Scenario;
 
 /// What one clock message's notice asks of a bridge.
 #[derive(Debug, Default, Clone, PartialEq, Eq)]

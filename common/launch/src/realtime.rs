@@ -12,16 +12,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::feeds::Feeds;
-use cdm_records::audit::{Auditor, LossRecord, RealtimeFigures};
-use cdm_model::formation::Role;
 use cdm_engine::loss::{LossAt, LossSchedule, LossState, OnLoss};
+use cdm_iox::OrchestratorPorts;
 use cdm_math::Vec3;
+use cdm_model::formation::Role;
 use cdm_model::outcome::FaultKind;
+use cdm_records::audit::{Auditor, LossRecord, RealtimeFigures};
 use cdm_records::record::{write_fault, TickRecorder};
 use cdm_records::rundir::RunDir;
-use cdm_scenario::Scenario;
 use cdm_records::telemetry::TelemetrySink;
-use cdm_iox::OrchestratorPorts;
 use cdm_runtime::messages::{ClockMsg, StopReason};
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
@@ -29,6 +28,7 @@ use cdm_runtime::team_loss::TeamLosses;
 use cdm_runtime::team_realtime::{
     LostMember, MonitorAction, RealtimePlan, RealtimeTeam, MEMBER_STALE_FACTOR,
 };
+use cdm_scenario::Scenario;
 
 use cdm_team::out;
 

@@ -16,10 +16,10 @@
 //! publishes an acceleration it does not have; `--vehicle-feed-forward zero` publishes zero
 //! instead (thrust g, level), as before.
 
+use cdm_math::{Real, Vec3, GRAVITY_MPS2};
 use cdm_model::dynamics::{Flat, QuadState};
 use cdm_model::plan::TeamPlan;
 use cdm_model::step::{extrapolate, Law, StepConfig};
-use cdm_math::{Real, Vec3, GRAVITY_MPS2};
 
 use crate::messages::Setpoint;
 

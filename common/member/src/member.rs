@@ -16,11 +16,11 @@ use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 use crate::member_vehicle::BeforeStart;
 use crate::options::LinkArgs;
 use crate::vehicles::Vehicles;
+use cdm_iox::{MemberPorts, TeamName};
 use cdm_model::dynamics::QuadState;
 use cdm_model::formation::{Member, Role};
 use cdm_records::loss_log::LossLog;
 use cdm_scenario::{Checks, Scenario};
-use cdm_iox::{MemberPorts, TeamName};
 
 pub use crate::member_error::MemberError;
 pub use cdm_runtime::member_core::{Deadlines, Finished, MemberFault};

@@ -14,11 +14,11 @@ use cdm_mavlink::{
 
 use crate::member_error::MemberError;
 use crate::vehicle_origins::{OriginsError, VehicleOrigins};
-use cdm_model::formation::Member;
 use cdm_math::Vec3;
+use cdm_mavlink::takeoff::Takeoff;
+use cdm_model::formation::Member;
 use cdm_model::plan::PhaseKind;
 use cdm_scenario::Scenario;
-use cdm_mavlink::takeoff::Takeoff;
 
 pub use cdm_mavlink::{VehicleReport, DEFAULT_BASE_PORT};
 

@@ -22,8 +22,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::dynamics::Flat;
-use cdm_math::Real;
 use crate::step::{extrapolate, NeighborModel};
+use cdm_math::Real;
 
 /// A neighbour's state as a follower has heard it: the flat output and the tick it was
 /// sampled at (the current tick with perfect links, older over delayed or lossy ones).

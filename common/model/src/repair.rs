@@ -244,9 +244,12 @@ mod tests {
     use super::*;
     use crate::formation::MemberInput;
     use crate::frame::Frame;
-    use crate::graph::{synthesize, DEFAULT_WEIGHT_FLOOR};
+    use crate::graph::synthesize;
     use crate::link::splitmix64;
     use cdm_math::Vec3;
+
+    /// The weight floor of [`team`]'s graph: a grid's middle followers get thin triangles.
+    const FLOOR: Real = 0.005;
 
     /// A team of `n` built here, below the scenario files: three primary leaders and a secondary
     /// at a square's corners, followers on a jittered grid inside, links synthesised as a
@@ -266,14 +269,20 @@ mod tests {
         ];
         let side = ((n - 4) as Real).sqrt().ceil() as usize;
         for k in 0..n - 4 {
-            let jitter = |salt: u64| (splitmix64(k as u64 * 2 + salt) % 1000) as Real / 1000.0;
+            // Within the middle half of its cell: no three members near a line.
+            let jitter =
+                |salt: u64| 0.25 + 0.5 * (splitmix64(k as u64 * 2 + salt) % 1000) as Real / 1000.0;
             let x = 5.0 + 90.0 * ((k % side) as Real + jitter(0)) / side as Real;
             let y = 5.0 + 90.0 * ((k / side) as Real + jitter(1)) / side as Real;
             inputs.push(corner(5 + k as u32, Role::Follower, x, y));
         }
-        let frame = Frame::new(&inputs[0].position, &inputs[1].position, &inputs[2].position);
+        let frame = Frame::new(
+            &inputs[0].position,
+            &inputs[1].position,
+            &inputs[2].position,
+        );
         let mut f = Formation::new(frame.unwrap(), &inputs).unwrap();
-        synthesize(&mut f, DEFAULT_WEIGHT_FLOOR).unwrap();
+        synthesize(&mut f, FLOOR).unwrap();
         f
     }
 
@@ -328,7 +337,7 @@ mod tests {
     fn a_relinked_reader_table_is_the_table_of_the_new_graph() {
         let team = team(120);
         let lost: BTreeSet<u32> = team.members.iter().map(|m| m.id).take(1).collect();
-        let r = repair(&team, DEFAULT_WEIGHT_FLOOR, &lost);
+        let r = repair(&team, FLOOR, &lost);
         assert!(!r.retriangulated.is_empty());
         let mut f = team.clone();
         let mut table = ReaderTable::of(&f);

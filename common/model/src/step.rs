@@ -6,14 +6,14 @@
 //! hold its neighbours still: it extrapolates each neighbour's position with the neighbour's own
 //! velocity, acceleration and jerk at t_k (all exact functions of its 12-state),
 //! r_j(t_k + tau) ~ r + v tau + a tau^2 / 2 + j tau^3 / 6. The error this adds against the
-//! continuously coupled model of eqs. 24-25 is measured by `the exchange-error test (common/core/tests/engine.rs)`.
+//! continuously coupled model of eqs. 24-25 is measured by `the exchange-error test (common/engine/tests/engine.rs)`.
 
 use serde::{Deserialize, Serialize};
 
 use crate::control::ControlFault;
 use crate::dynamics::{Flat, Plant};
-use cdm_math::{Real, Vec3};
 use crate::plan::{Piece, TeamPlan};
+use cdm_math::{Real, Vec3};
 
 /// What a follower assumes about a neighbour between two exchanges.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

@@ -10,8 +10,8 @@
 //! vehicle model has no ground contact: a follower settling onto the ground after a landing
 //! dips below it (0.1 m on paper40-mission with a fence whose floor is its ground).
 
-use cdm_model::airspace::{Boundary, Fence, Shape};
 use cdm_math::{Real, Vec3};
+use cdm_model::airspace::{Boundary, Fence, Shape};
 use cdm_model::outcome::ViolationKind;
 use cdm_scenario::Scenario;
 

@@ -8,9 +8,9 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::airspace_audit::AirspaceAudit;
+use cdm_math::{Real, Vec3};
 use cdm_model::formation::Role;
 use cdm_model::frame::deformation_eigenvalues;
-use cdm_math::{Real, Vec3};
 use cdm_model::outcome::{FaultKind, LossCause, Verdict, ViolationKind};
 use cdm_model::repair::Retriangulation;
 use cdm_model::safety::{self, Prism};
@@ -313,6 +313,13 @@ struct Failing {
     deformation: bool,
 }
 
+/// A violation's measured value and the limit it crossed.
+#[derive(Debug, Clone, Copy)]
+struct Measured {
+    value: Real,
+    limit: Real,
+}
+
 /// The audit accumulator.
 pub struct Auditor {
     numbers: SafetyNumbers,
@@ -425,15 +432,8 @@ impl Auditor {
     }
 
     /// Record a violation that starts at this tick (allocates only then).
-    fn record(
-        &mut self,
-        kind: ViolationKind,
-        agents: &[u32],
-        at: (u64, Real),
-        value: Real,
-        limit: Real,
-    ) {
-        self.record_named(kind, None, agents, at, (value, limit));
+    fn record(&mut self, kind: ViolationKind, agents: &[u32], at: (u64, Real), m: Measured) {
+        self.record_named(kind, None, agents, at, m);
     }
 
     /// [`Self::record`] with the name of what was breached (a fence side, an obstacle).
@@ -443,7 +443,7 @@ impl Auditor {
         name: Option<String>,
         agents: &[u32],
         at: (u64, Real),
-        (value, limit): (Real, Real),
+        Measured { value, limit }: Measured,
     ) {
         let (tick, t) = at;
         if self.report.violations.len() < MAX_VIOLATION_RECORDS {
@@ -479,7 +479,15 @@ impl Auditor {
             r.max_deviation_inf_m = r.max_deviation_inf_m.max(e.amax());
             let bad = d2 > n.delta_m;
             if bad && !self.failing.tracking[k] {
-                self.record(ViolationKind::Tracking, &[self.ids[k]], at, d2, n.delta_m);
+                self.record(
+                    ViolationKind::Tracking,
+                    &[self.ids[k]],
+                    at,
+                    Measured {
+                        value: d2,
+                        limit: n.delta_m,
+                    },
+                );
             }
             self.failing.tracking[k] = bad;
         }
@@ -513,7 +521,8 @@ impl Auditor {
                     } else {
                         prism.half_height_m - height
                     };
-                    self.record(ViolationKind::Containment, &[self.ids[k]], at, value, 0.0);
+                    let m = Measured { value, limit: 0.0 };
+                    self.record(ViolationKind::Containment, &[self.ids[k]], at, m);
                 }
                 self.failing.containment[k] = outside;
             }
@@ -544,8 +553,10 @@ impl Auditor {
                 ViolationKind::Deformation,
                 &primaries,
                 at,
-                l1,
-                n.lambda_cd_min,
+                Measured {
+                    value: l1,
+                    limit: n.lambda_cd_min,
+                },
             );
         }
         self.failing.deformation = bad;
@@ -561,7 +572,11 @@ impl Auditor {
         a.observe(pos, &self.alive, ground, |b| breaches.push(b));
         for b in breaches {
             let id = self.ids[b.member];
-            self.record_named(b.kind, Some(b.name), &[id], at, (b.margin_m, 0.0));
+            let m = Measured {
+                value: b.margin_m,
+                limit: 0.0,
+            };
+            self.record_named(b.kind, Some(b.name), &[id], at, m);
         }
         if a.has_fence() {
             self.report.min_fence_margin_m = Some(a.min_fence_margin_m);
@@ -603,7 +618,11 @@ impl Auditor {
         sw.pairs.sort_unstable_by_key(|p| p.0);
         for &((a, b), d) in &sw.pairs {
             if self.failing.collisions.binary_search(&(a, b)).is_err() {
-                self.record(ViolationKind::Collision, &[a, b], at, d, 2.0 * n.eps_m);
+                let m = Measured {
+                    value: d,
+                    limit: 2.0 * n.eps_m,
+                };
+                self.record(ViolationKind::Collision, &[a, b], at, m);
             }
         }
         std::mem::swap(&mut self.failing.collisions, &mut sw.seen);

@@ -6,9 +6,9 @@
 
 use std::collections::BTreeSet;
 
+use cdm_math::Real;
 use cdm_model::formation::{Formation, Link};
 use cdm_model::graph::DEFAULT_WEIGHT_FLOOR;
-use cdm_math::Real;
 use cdm_model::repair::{repair, Repair};
 use cdm_scenario::Scenario;
 

@@ -3,8 +3,8 @@
 //! follower deviation and lambda_1(U_D). The live audit (`audit.rs`) checks the same conditions
 //! against their limits; these are the numbers behind it, for readers of a run.
 
-use cdm_model::frame::deformation_eigenvalues;
 use cdm_math::{Real, Vec3};
+use cdm_model::frame::deformation_eigenvalues;
 use cdm_model::safety::{min_separation, Prism};
 use cdm_scenario::Scenario;
 

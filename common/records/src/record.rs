@@ -3,11 +3,11 @@
 //! audit of the tick, and its telemetry rows sorted by id. Buffers are reused from tick to tick.
 
 use crate::audit::{Auditor, FaultRecord};
+use crate::telemetry::{Row, TelemetrySink};
 use cdm_math::{Real, Vec3};
 use cdm_model::outcome::FaultKind;
-use cdm_scenario::Scenario;
 use cdm_model::step::tick_time;
-use crate::telemetry::{Row, TelemetrySink};
+use cdm_scenario::Scenario;
 
 /// Audits and writes one tick at a time.
 #[derive(Debug, Clone)]

@@ -1,7 +1,7 @@
 //! A run directory: scenario.toml (as flown), telemetry.csv (streamed, complete ticks only) and
 //! audit.json (written atomically: temporary file, then rename; its room reserved when the
 //! directory is opened, so a run that fills the disk still records its outcome). Nothing here
-//! follows a symbolic link (`files::create_file`).
+//! follows a symbolic link (`cdm_files::create_file`).
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, Write};
@@ -9,9 +9,9 @@ use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 use crate::audit::AuditReport;
-use cdm_files::{self, FileError};
-use cdm_scenario::Scenario;
 use crate::telemetry::{Rewind, TelemetryWriter};
+use cdm_files::FileError;
+use cdm_scenario::Scenario;
 
 /// Room reserved for audit.json when a run directory is opened (a paper40 audit with a few
 /// hundred violations is about 60 KiB).
@@ -33,7 +33,7 @@ pub enum RunDirError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{}: {}", path.display(), files::describe(path, source))]
+    #[error("{}: {}", path.display(), cdm_files::describe(path, source))]
     Io {
         path: PathBuf,
         #[source]
@@ -48,7 +48,7 @@ impl RunDirError {
     pub fn is_disk_full(&self) -> bool {
         match self {
             RunDirError::Io { source, .. } | RunDirError::Unwritable { source, .. } => {
-                files::is_disk_full(source)
+                cdm_files::is_disk_full(source)
             }
             RunDirError::File(f) => f.is_disk_full(),
             _ => false,
@@ -96,7 +96,7 @@ impl RunDir {
             path: path.to_path_buf(),
         };
         dir.reserve_audit().map_err(|e| match e {
-            FileError::Io { source, .. } if !files::is_disk_full(&source) => {
+            FileError::Io { source, .. } if !cdm_files::is_disk_full(&source) => {
                 RunDirError::Unwritable {
                     path: path.to_path_buf(),
                     what: "write into",
@@ -111,8 +111,8 @@ impl RunDir {
     /// Allocate audit.json's temporary file (`audit.json.tmp`) at its full reserved size, so the
     /// final audit is written into blocks the run's telemetry cannot take.
     fn reserve_audit(&self) -> Result<(), FileError> {
-        let tmp = files::temporary_of(&self.path.join("audit.json"));
-        let f = files::create_file(&tmp)?;
+        let tmp = cdm_files::temporary_of(&self.path.join("audit.json"));
+        let f = cdm_files::create_file(&tmp)?;
         let at = |source| FileError::Io {
             path: tmp.clone(),
             source,
@@ -157,7 +157,7 @@ impl RunDir {
     /// Open telemetry.csv for streaming (whole ticks only, even when the disk fills up).
     pub fn telemetry(&self, every: u64) -> Result<TelemetryWriter<RunFile>, RunDirError> {
         let p = self.path.join("telemetry.csv");
-        let file = files::create_file(&p)?;
+        let file = cdm_files::create_file(&p)?;
         TelemetryWriter::new(
             RunFile {
                 file,
@@ -176,7 +176,7 @@ impl RunDir {
             path: p.clone(),
             source: std::io::Error::other(e),
         })?;
-        let tmp = files::temporary_of(&p);
+        let tmp = cdm_files::temporary_of(&p);
         // The reservation is our own regular file; O_NOFOLLOW refuses a link put in its place.
         let reserved = OpenOptions::new()
             .write(true)
@@ -187,7 +187,7 @@ impl RunDir {
         let Some(f) = reserved else {
             return write_atomic(&p, text.as_bytes());
         };
-        let done = files::fill(f, &tmp, text.as_bytes()).and_then(|()| {
+        let done = cdm_files::fill(f, &tmp, text.as_bytes()).and_then(|()| {
             fs::rename(&tmp, &p).map_err(|source| FileError::Io {
                 path: p.clone(),
                 source,
@@ -211,7 +211,7 @@ impl RunFile {
         let what = format!(
             "{}: {}",
             self.path.display(),
-            files::describe(&self.path, &e)
+            cdm_files::describe(&self.path, &e)
         );
         io::Error::new(e.kind(), what)
     }
@@ -234,7 +234,7 @@ impl Rewind for RunFile {
 }
 
 /// Write a file through a temporary sibling and a rename, so readers never see half a file (see
-/// [`files::write_atomic`]: never follows a link, keeps the old file on failure).
+/// [`cdm_files::write_atomic`]: never follows a link, keeps the old file on failure).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunDirError> {
-    Ok(files::write_atomic(path, bytes)?)
+    Ok(cdm_files::write_atomic(path, bytes)?)
 }

@@ -4,8 +4,8 @@
 
 use std::io::{self, Write};
 
-use cdm_model::formation::Role;
 use cdm_math::{Real, Vec3};
+use cdm_model::formation::Role;
 
 /// The header line.
 pub const HEADER: &str = "tick,t,id,role,x,y,z,vx,vy,vz,x_ht,y_ht,z_ht";

@@ -50,7 +50,7 @@ fn draw_all(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
     files.extend(write_figure(
         dir,
         "fig_formation",
-        &formation::Formation::new(d),
+        &formation::FormationFigure::new(d),
     )?);
     Ok(files)
 }

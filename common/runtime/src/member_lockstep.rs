@@ -11,10 +11,10 @@
 
 use std::time::Duration;
 
+use cdm_math::Real;
 use cdm_model::dynamics::{Flat, QuadState};
 use cdm_model::formation::Member;
 use cdm_model::link::{Heard, LinkModel};
-use cdm_math::Real;
 use cdm_model::step::{law_for, Law, NeighborModel, StepConfig};
 
 use crate::inbox::Inbox;

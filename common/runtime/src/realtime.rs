@@ -28,10 +28,10 @@
 
 use std::time::Duration;
 
+use cdm_math::Vec3;
 use cdm_model::dynamics::{Flat, QuadState};
 use cdm_model::formation::Member;
 use cdm_model::link::{splitmix64, LinkModel};
-use cdm_math::Vec3;
 use cdm_model::step::{extrapolate_flat, NeighborModel, TickAt};
 
 use crate::member_core::{

@@ -124,8 +124,8 @@ impl DelayLine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cdm_model::link::LinkSpec;
     use cdm_math::Vec3;
+    use cdm_model::link::LinkSpec;
 
     const DT: f64 = 0.01;
 

@@ -6,8 +6,8 @@
 use std::fmt;
 use std::time::Duration;
 
-use cdm_records::audit::FaultRecord;
 use cdm_model::outcome::FaultKind;
+use cdm_records::audit::FaultRecord;
 
 use crate::messages::{FaultCode, StopReason};
 

@@ -9,8 +9,8 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-use cdm_records::loss_log::LossLog;
 pub use cdm_model::outcome::LossCause;
+use cdm_records::loss_log::LossLog;
 use cdm_scenario::Scenario;
 
 use crate::messages::{FaultCode, LossNotice};

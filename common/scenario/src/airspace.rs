@@ -6,11 +6,11 @@ use std::collections::BTreeSet;
 use serde::{Deserialize, Serialize};
 
 use super::{ScenarioErrorKind as E, ScenarioFile};
+use cdm_math::{Real, Vec2, Vec3};
 use cdm_model::airspace::{self_intersection, signed_area2, Fence};
 use cdm_model::formation::Formation;
-use cdm_math::{Real, Vec2, Vec3};
 
-pub use cdm_model::airspace::Shape;
+use cdm_model::airspace::Shape;
 
 /// `[geofence]`: the team stays inside the vertical prism over `polygon` (x, y in metres, a
 /// simple polygon in either orientation), between `min_z_m` and `max_z_m`.
@@ -74,10 +74,18 @@ struct ObstacleTable {
     max_z_m: Option<Real>,
 }
 
-impl TryFrom<ObstacleTable> for ObstacleSpec {
-    type Error = String;
+/// An obstacle table that is neither a box nor a vertical cylinder.
+#[derive(Debug, thiserror::Error)]
+#[error("obstacle {name:?}: give either `min` and `max` (a box) or `center`, `radius_m`, `min_z_m` and `max_z_m` (a vertical cylinder)")]
+pub struct ObstacleShapeError {
+    /// The obstacle's name.
+    pub name: String,
+}
 
-    fn try_from(t: ObstacleTable) -> Result<Self, String> {
+impl TryFrom<ObstacleTable> for ObstacleSpec {
+    type Error = ObstacleShapeError;
+
+    fn try_from(t: ObstacleTable) -> Result<Self, ObstacleShapeError> {
         let shape = match t {
             ObstacleTable {
                 min: Some(min),
@@ -102,12 +110,7 @@ impl TryFrom<ObstacleTable> for ObstacleSpec {
                 min_z_m,
                 max_z_m,
             },
-            _ => {
-                return Err(format!(
-                    "obstacle {:?}: give either `min` and `max` (a box) or `center`, `radius_m`, `min_z_m` and `max_z_m` (a vertical cylinder)",
-                    t.name
-                ))
-            }
+            _ => return Err(ObstacleShapeError { name: t.name }),
         };
         Ok(ObstacleSpec {
             name: t.name,

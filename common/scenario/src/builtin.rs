@@ -1,10 +1,10 @@
 //! Built-in scenarios: `paper40` (Sec. VII) and generated teams of any size.
 
 use super::{AgentSpec, GroundSpec, ScenarioFile, SegmentSpec};
+use cdm_math::{vec3, Real, Vec2, Vec3};
 use cdm_model::formation::Role;
 use cdm_model::frame::Frame;
 use cdm_model::geometry::{convex_hull, signed_boundary_distance};
-use cdm_math::{vec3, Real, Vec2, Vec3};
 
 /// The largest team the tools accept (file or `--n`).
 pub const MAX_AGENTS: usize = 2000;
@@ -84,16 +84,25 @@ const MISSION_LANDING_S: Real = 150.0;
 /// scaled about its own centroid by sqrt(n_f / 34) so that spacing stays as in the paper, and
 /// T_total grows by the square root of that scale (deviations grow with the deformation's size
 /// and fall as 1 / T_total^2, Sec. VII-D).
-pub fn generated(n: usize) -> Result<ScenarioFile, String> {
+pub fn generated(n: usize) -> Result<ScenarioFile, TeamSizeError> {
     if n < 4 {
-        return Err(format!(
-            "must be at least 4 (3 primary leaders and a follower), got {n}"
-        ));
+        return Err(TeamSizeError::TooFew { n });
     }
     if n > super::MAX_AGENTS {
-        return Err(format!("must be at most {}, got {n}", super::MAX_AGENTS));
+        return Err(TeamSizeError::TooMany { n });
     }
     Ok(generated_unchecked(n))
+}
+
+/// A generated team's size out of range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum TeamSizeError {
+    /// Fewer than 3 primary leaders and a follower.
+    #[error("must be at least 4 (3 primary leaders and a follower), got {n}")]
+    TooFew { n: usize },
+    /// More than [`MAX_AGENTS`].
+    #[error("must be at most {}, got {n}", MAX_AGENTS)]
+    TooMany { n: usize },
 }
 
 fn generated_unchecked(n: usize) -> ScenarioFile {

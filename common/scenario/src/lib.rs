@@ -6,6 +6,7 @@
 
 mod airspace;
 mod builtin;
+mod fields;
 mod flight;
 mod locate;
 mod mission;
@@ -16,14 +17,14 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use cdm_math::Real;
 use cdm_model::formation::{Formation, FormationError, Role};
 use cdm_model::graph::SynthesisError;
 use cdm_model::link::{LinkModel, LinkSpec};
-use cdm_math::Real;
 use cdm_model::plan::TeamPlan;
 
-pub use airspace::{has_airspace, GeofenceSpec, ObstacleSpec, Shape};
-pub use builtin::{generated, paper40, MAX_AGENTS};
+pub use airspace::{has_airspace, GeofenceSpec, ObstacleShapeError, ObstacleSpec};
+pub use builtin::{generated, paper40, TeamSizeError, MAX_AGENTS};
 pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
 
 /// Default tolerance for members off the primary leaders' plane (ERRATA 10): within it a member
@@ -182,12 +183,11 @@ impl Scenario {
     pub fn load(path: &Path, checks: Checks) -> Result<Self, ScenarioError> {
         let origin = path.display().to_string();
         // Regular files only, and at most 64 MiB: `/dev/zero` or a FIFO is refused at once.
-        let text = cdm_files::read_input(path, cdm_files::MAX_INPUT_BYTES).map_err(|e| {
-            ScenarioError {
+        let text =
+            cdm_files::read_input(path, cdm_files::MAX_INPUT_BYTES).map_err(|e| ScenarioError {
                 origin: origin.clone(),
                 kind: ScenarioErrorKind::Io(e.reason()),
-            }
-        })?;
+            })?;
         if path.extension().is_some_and(|e| e == "json") {
             return Self::parse_json(&text, &origin, checks);
         }
@@ -201,7 +201,7 @@ impl Scenario {
     pub fn parse_json(text: &str, origin: &str, checks: Checks) -> Result<Self, ScenarioError> {
         let parsed = serde_json::from_str(text).map_err(|e| {
             let who = locate::json_agent(text);
-            locate::named(who, e.to_string())
+            ScenarioErrorKind::Parse(locate::named(who, e.to_string()))
         });
         Self::from_parsed(parsed, origin, checks)
     }
@@ -210,20 +210,20 @@ impl Scenario {
     pub fn parse(text: &str, origin: &str, checks: Checks) -> Result<Self, ScenarioError> {
         let parsed = toml::from_str(text).map_err(|e: toml::de::Error| {
             let who = locate::toml_agent(text, e.span().map(|r| r.start));
-            locate::named(who, e.to_string())
+            ScenarioErrorKind::Parse(locate::named(who, e.to_string()))
         });
         Self::from_parsed(parsed, origin, checks)
     }
 
     /// A parser's result, validated; a parse error becomes `Parse`, naming `origin`.
     fn from_parsed(
-        parsed: Result<ScenarioFile, String>,
+        parsed: Result<ScenarioFile, ScenarioErrorKind>,
         origin: &str,
         checks: Checks,
     ) -> Result<Self, ScenarioError> {
-        let file = parsed.map_err(|e| ScenarioError {
+        let file = parsed.map_err(|kind| ScenarioError {
             origin: origin.to_string(),
-            kind: ScenarioErrorKind::Parse(e),
+            kind,
         })?;
         Self::from_file(file, origin, checks)
     }
@@ -264,11 +264,11 @@ impl Scenario {
     /// A generated team of `n` members (see `builtin::generated`).
     pub fn generated(n: usize) -> Result<Self, ScenarioError> {
         let origin = format!("generated --n {n}");
-        let file = generated(n).map_err(|reason| ScenarioError {
+        let file = generated(n).map_err(|e| ScenarioError {
             origin: origin.clone(),
             kind: ScenarioErrorKind::Invalid {
                 field: "--n".into(),
-                reason,
+                reason: e.to_string(),
             },
         })?;
         Self::from_file(file, &origin, Checks::Full)

@@ -9,11 +9,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::validate::{finite, positive, MIN_MOTION_TICKS};
 use super::{ScenarioErrorKind as E, ScenarioFile};
+use crate::fields::{finite, positive, MIN_MOTION_TICKS};
+use cdm_math::{vec3, Real, Vec3};
 use cdm_model::formation::{Formation, Role};
 use cdm_model::frame::{leader_sine, MIN_LEADER_SINE};
-use cdm_math::{vec3, Real, Vec3};
 use cdm_model::plan::{Phase, PhaseKind, Quintic, TeamPlan};
 
 /// `[takeoff]` or `[landing]`: every member rises from, or lands on, the ground below it.

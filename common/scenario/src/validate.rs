@@ -3,35 +3,14 @@
 use std::collections::BTreeSet;
 
 use super::{Checks, Scenario, ScenarioErrorKind as E, ScenarioFile, DEFAULT_PLANE_TOLERANCE_M};
+use cdm_math::{vec3, Real, Vec3};
 use cdm_model::formation::{Formation, MemberInput, Role};
 use cdm_model::frame::{leader_sine, Frame, MIN_LEADER_SINE};
 use cdm_model::gains::stability_margin;
 use cdm_model::graph::{synthesize, DEFAULT_WEIGHT_FLOOR};
-use cdm_math::{vec3, Real, Vec3};
 use cdm_model::plan::TeamPlan;
 
-pub(super) fn finite(field: impl Into<String>, value: Real) -> Result<Real, E> {
-    if value.is_finite() {
-        Ok(value)
-    } else {
-        Err(E::NonFinite {
-            field: field.into(),
-            value,
-        })
-    }
-}
-
-pub(super) fn positive(field: &str, value: Real) -> Result<Real, E> {
-    finite(field, value)?;
-    if value > 0.0 {
-        Ok(value)
-    } else {
-        Err(E::Invalid {
-            field: field.into(),
-            reason: format!("must be > 0, got {value}"),
-        })
-    }
-}
+use crate::fields::{finite, positive, MIN_MOTION_TICKS};
 
 fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
     positive("t_total_s", f.t_total_s)?;
@@ -133,9 +112,6 @@ fn check_optional(f: &ScenarioFile) -> Result<(), E> {
 
 /// The longest scenario name (it is printed, hashed and carried by every member).
 pub const MAX_NAME_BYTES: usize = 256;
-/// The fewest ticks over the motion (T_total * comm_hz): fewer cannot resolve the quintic
-/// (eq. 15), and the controller faults at tick 0.
-pub const MIN_MOTION_TICKS: Real = 10.0;
 /// The fastest clock: beyond it a tick is shorter than a process wake-up (BENCHMARKS.md), and
 /// the certificate's flights grow without bound.
 pub const MAX_COMM_HZ: Real = 10_000.0;

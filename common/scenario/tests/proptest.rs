@@ -8,7 +8,7 @@
 //!   naming the follower. Never a silent bad graph.
 //!
 //! Case counts keep the file to a few seconds in release; a watchdog ends the process if a test
-//! hangs. How to run: `cargo test --release -p cdm-core --test proptest`.
+//! hangs. How to run: `cargo test --release -p cdm-scenario --test proptest`.
 
 use cdm_test_support::Watchdog;
 
@@ -31,9 +31,7 @@ fn names_the_place(msg: &str) -> bool {
         .any(|n| msg.contains(n))
 }
 
-fn check_outcome(
-    result: Result<Scenario, cdm_scenario::ScenarioError>,
-) -> Result<(), String> {
+fn check_outcome(result: Result<Scenario, cdm_scenario::ScenarioError>) -> Result<(), String> {
     match result {
         Ok(s) => check_graph(&s),
         Err(e) => {

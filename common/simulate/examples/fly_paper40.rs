@@ -1,12 +1,13 @@
 //! The core alone, no processes and no shared memory: certify the paper's 40-quadcopter
 //! scenario, then fly it with the whole-team engine and audit every tick.
 //!
-//! How to run: `cargo run --release -p cdm-core --example fly_paper40`
+//! How to run: `cargo run --release -p cdm-simulate --example fly_paper40`
 
+use cdm_certificates::certificate::certify;
 use cdm_model::outcome::Verdict;
 use cdm_records::rundir::RunDir;
 use cdm_scenario::{Checks, Scenario};
-use cdm_simulate::{certify, simulate, SimulateOptions};
+use cdm_simulate::{simulate, SimulateOptions};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let s = Scenario::from_file(cdm_scenario::paper40(), "paper40", Checks::Full)?;

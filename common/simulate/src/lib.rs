@@ -5,14 +5,14 @@
 //! engine, the records and the scenario together. The pre-flight certificate of `plan` is
 //! `cdm_certificates::certificate`.
 
-use cdm_records::audit::{AuditReport, Auditor, FaultRecord};
 use cdm_engine::engine::{quad_engine, AgentFault};
 use cdm_engine::loss::{LossSchedule, LossState, OnLoss};
 use cdm_model::outcome::FaultKind;
+use cdm_records::audit::{AuditReport, Auditor, FaultRecord};
 use cdm_records::record::{write_fault, TickRecorder};
 use cdm_records::rundir::{RunDir, RunDirError};
-use cdm_scenario::Scenario;
 use cdm_records::telemetry::{TelemetryFormat, TelemetrySink};
+use cdm_scenario::Scenario;
 
 /// How `simulate` runs.
 #[derive(Debug, Clone, PartialEq, Default)]

@@ -5,10 +5,10 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use cdm_engine::loss::LossSchedule;
-use cdm_records::loss_log::LossLog;
-use cdm_model::repair::{repair_in_order, synthesis_order};
-use cdm_scenario::Scenario;
 use cdm_iox::RepairRoom;
+use cdm_model::repair::{repair_in_order, synthesis_order};
+use cdm_records::loss_log::LossLog;
+use cdm_scenario::Scenario;
 
 use crate::team::Spawned;
 

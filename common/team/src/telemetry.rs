@@ -7,8 +7,8 @@ use std::io;
 use std::path::Path;
 
 use cdm_records::rundir::{RunDir, RunDirError};
-use cdm_scenario::Scenario;
 use cdm_records::telemetry::{TelemetryFormat, TelemetrySink};
+use cdm_scenario::Scenario;
 
 use crate::Failure;
 

@@ -20,7 +20,7 @@
 
 use cdm_math::Real;
 
-use super::poly::{pieces, AgentTrajectory, Cut, Piece, DEGREE};
+use super::poly::{pieces, AgentTrajectory, Cut, PolyPiece, DEGREE};
 
 /// Unit roundoff of f32.
 const U: Real = f32::EPSILON as Real / 2.0;
@@ -42,7 +42,7 @@ pub const MAX_PIECES: usize = TRAJECTORY_MEMORY_BYTES / PIECE_BYTES;
 pub const DEFAULT_TOLERANCE_M: Real = 1e-3;
 
 /// The f32 error bound of one piece (the largest of its three axes), metres.
-pub fn piece_bound_m(p: &Piece, count: usize, t_total_s: Real) -> Real {
+pub fn piece_bound_m(p: &PolyPiece, count: usize, t_total_s: Real) -> Real {
     let d = p.duration_s;
     let d_hat = d * (1.0 + U);
     let mut worst: Real = 0.0;

@@ -9,7 +9,7 @@ pub mod poly;
 pub mod scale;
 
 pub use float32::{crazyflie_split, CrazyflieSplit, SplitError, DEFAULT_TOLERANCE_M};
-pub use poly::{pieces, AgentTrajectory, Cut, Motion, Piece, DEGREE};
+pub use poly::{pieces, AgentTrajectory, Cut, Motion, PolyPiece, DEGREE};
 pub use scale::{FrameError, TargetFrame};
 
 use cdm_math::Real;

@@ -51,7 +51,7 @@ impl Motion {
     /// The piece on [t0, t0 + duration] (inside the motion) in increasing powers of the time
     /// local to the piece: s re-expanded around tau0 = (t0 - t_start) / T by the binomial
     /// theorem, then scaled from tau to seconds. Exact up to rounding: no fitting.
-    pub fn piece(&self, t0_s: Real, duration_s: Real) -> Piece {
+    pub fn piece(&self, t0_s: Real, duration_s: Real) -> PolyPiece {
         let tt = self.t_total_s;
         let tau0 = (t0_s - self.t_start_s) / tt;
         let mut coeffs = [Vec3::zeros(); DEGREE + 1];
@@ -62,7 +62,7 @@ impl Motion {
             *c = self.b * (shifted / tt.powi(m as i32));
         }
         coeffs[0] += self.a;
-        Piece {
+        PolyPiece {
             t0_s,
             duration_s,
             coeffs,
@@ -157,18 +157,18 @@ impl AgentTrajectory {
 
 /// One polynomial piece: position = sum_m coeffs[m] u^m for the local time u in [0, duration].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Piece {
+pub struct PolyPiece {
     pub t0_s: Real,
     pub duration_s: Real,
     pub coeffs: [Vec3; DEGREE + 1],
 }
 
-impl Piece {
+impl PolyPiece {
     /// A hover: `at` for the whole piece.
     pub fn constant(t0_s: Real, duration_s: Real, at: Vec3) -> Self {
         let mut coeffs = [Vec3::zeros(); DEGREE + 1];
         coeffs[0] = at;
-        Piece {
+        PolyPiece {
             t0_s,
             duration_s,
             coeffs,
@@ -210,7 +210,7 @@ fn count_of(cut: Cut, total_s: Real, longest_s: Real, hover: bool) -> usize {
 /// The chain cut by `cut` into pieces in time order covering [0, duration]: each motion in
 /// equal pieces, each hover between motions in constant ones; no piece straddles a motion's
 /// start or end (where s''' jumps).
-pub fn pieces(traj: &AgentTrajectory, cut: Cut) -> Vec<Piece> {
+pub fn pieces(traj: &AgentTrajectory, cut: Cut) -> Vec<PolyPiece> {
     let longest_s = traj
         .motions
         .iter()
@@ -226,7 +226,7 @@ pub fn pieces(traj: &AgentTrajectory, cut: Cut) -> Vec<Piece> {
             let at = at_rest.unwrap_or(m.a);
             let n = count_of(cut, hover_s, longest_s, true);
             let d = hover_s / n as Real;
-            out.extend((0..n).map(|k| Piece::constant(covered_s + k as Real * d, d, at)));
+            out.extend((0..n).map(|k| PolyPiece::constant(covered_s + k as Real * d, d, at)));
         }
         let n = count_of(cut, m.t_total_s, longest_s, false);
         let d = m.t_total_s / n as Real;
@@ -242,9 +242,11 @@ mod tests {
     use super::*;
     use cdm_scenario::Scenario;
 
-    /// The paper's Sec. VII leaders over a 200 s plan (the plan tests' own team).
+    /// The paper's Sec. VII leaders over its 200 s plan.
     fn paper_plan() -> TeamPlan {
-        cdm_model::plan::tests::paper_plan(200.0)
+        Scenario::builtin("paper40")
+            .expect("the paper's scenario is valid")
+            .plan
     }
 
     #[test]
@@ -346,7 +348,7 @@ mod tests {
         }
         assert!((pts[0] - p.eval(15.0)).norm() < 1e-9);
         // A hover is a constant curve: every control point is the point.
-        let h = Piece::constant(3.0, 5.0, Vec3::new(1.0, 2.0, 3.0));
+        let h = PolyPiece::constant(3.0, 5.0, Vec3::new(1.0, 2.0, 3.0));
         assert!(h.bezier().iter().all(|c| *c == Vec3::new(1.0, 2.0, 3.0)));
     }
 

@@ -4,8 +4,8 @@
 //! tracking error scale by S (eqs. 11, 34-38); the vehicles' radius does not shrink, so the
 //! certificate is issued again on the scaled scenario.
 
-use cdm_model::airspace::Shape;
 use cdm_math::{Real, Vec3};
+use cdm_model::airspace::Shape;
 use cdm_scenario::ScenarioFile;
 
 /// Scale and origin of the target frame (metres, z up, like the scenario's own frame).

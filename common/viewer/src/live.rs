@@ -5,8 +5,8 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use cdm_records::audit::{AuditReport, SafetyNumbers};
 use cdm_math::Vec3;
+use cdm_records::audit::{AuditReport, SafetyNumbers};
 use cdm_scenario::Scenario;
 
 use super::scene::{Scene, ShownTickMaker};

@@ -5,9 +5,9 @@ use std::cell::Cell;
 use std::collections::VecDeque;
 use std::sync::atomic::AtomicBool;
 
+use cdm_math::{Vec2, Vec3};
 use cdm_model::control::ControlFault;
 use cdm_model::formation::{Link, Member, Role};
-use cdm_math::{Vec2, Vec3};
 
 use super::*;
 use crate::member_core::{Finished, ALIVE_CHECK};

@@ -152,9 +152,9 @@ mod tests {
     use std::time::Duration;
 
     use cdm_model::link::LinkModel;
+    use cdm_model::step::TickAt;
     use cdm_records::loss_log::LossLog;
     use cdm_scenario::Scenario;
-    use cdm_model::step::TickAt;
 
     use super::*;
     use crate::member_core::{subscriptions, Deadlines};

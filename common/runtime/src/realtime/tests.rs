@@ -1,10 +1,10 @@
 //! Every real-time decision of a member and of the monitor with a fake clock (a `Duration`
 //! passed in) and a fake vehicle: no process, no shared memory, no sleeping.
 
+use cdm_math::{vec3, Vec2};
 use cdm_model::control::ControlFault;
 use cdm_model::formation::{Link, Role};
 use cdm_model::link::LinkSpec;
-use cdm_math::{vec3, Vec2};
 
 use super::*;
 use crate::member_core::Finished;
