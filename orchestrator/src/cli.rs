@@ -3,9 +3,9 @@
 
 use std::path::PathBuf;
 
-use cdm_core::loss::{OnLoss, ScriptedLoss};
-use cdm_core::telemetry::TelemetryFormat;
+use cdm_engine::loss::{OnLoss, ScriptedLoss};
 use cdm_export::cli::{ExportTarget, Source};
+use cdm_records::telemetry::TelemetryFormat;
 use clap::{Args, Parser, Subcommand};
 
 /// Safe continuum deformation of quadcopter teams: plan, simulate and launch a team.
@@ -301,7 +301,7 @@ pub struct RunOptions {
     pub on_loss: OnLossArg,
 }
 
-/// `--telemetry csv|parquet|mcap` (the format type lives in cdm-core, which has no clap).
+/// `--telemetry csv|parquet|mcap` (the format type lives in cdm-records, which has no clap).
 fn telemetry_format() -> impl clap::builder::TypedValueParser<Value = TelemetryFormat> {
     use clap::builder::TypedValueParser;
     clap::builder::PossibleValuesParser::new(["csv", "parquet", "mcap"]).map(|s| match s.as_str() {

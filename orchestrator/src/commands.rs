@@ -3,16 +3,17 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use cdm_core::airspace_suggest::suggest;
-use cdm_core::audit::AuditReport;
-use cdm_core::delay::deviation_at_delay;
-use cdm_core::link::MAX_DELAY_MS;
-use cdm_core::loss::LossSchedule;
-use cdm_core::losscert::{certify_losses, LossCertificate};
-use cdm_core::outcome::Verdict;
-use cdm_core::rundir::RunDir;
-use cdm_core::scenario::{Checks, Scenario};
-use cdm_core::simulate::{certify, deviation_at, simulate, Certificate, SimulateOptions};
+use cdm_certificates::airspace_suggest::suggest;
+use cdm_certificates::certificate::{certify, deviation_at, Certificate};
+use cdm_certificates::delay::deviation_at_delay;
+use cdm_certificates::losscert::{certify_losses, LossCertificate};
+use cdm_engine::loss::LossSchedule;
+use cdm_model::link::MAX_DELAY_MS;
+use cdm_model::outcome::Verdict;
+use cdm_records::audit::AuditReport;
+use cdm_records::rundir::RunDir;
+use cdm_scenario::{Checks, Scenario};
+use cdm_simulate::{simulate, SimulateOptions};
 use cdm_team::out;
 
 use cdm_iox::TeamName;
@@ -154,9 +155,8 @@ fn scenario_export(
     };
     let s = load(&source)?;
     match out {
-        Some(p) => {
-            cdm_core::rundir::write_atomic(p, s.to_toml().as_bytes()).map_err(Failure::bad_input)?
-        }
+        Some(p) => cdm_records::rundir::write_atomic(p, s.to_toml().as_bytes())
+            .map_err(Failure::bad_input)?,
         None => {
             use std::io::Write as _;
             let _ = std::io::stdout().write_all(s.to_toml().as_bytes());
@@ -401,7 +401,7 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     let scene = cdm_viewer::replay_scene(dir).map_err(Failure::bad_input)?;
     let page = cdm_viewer::page(Some(&scene));
     let path = dir.join("replay.html");
-    cdm_core::rundir::write_atomic(&path, page.as_bytes()).map_err(Failure::bad_input)?;
+    cdm_records::rundir::write_atomic(&path, page.as_bytes()).map_err(Failure::bad_input)?;
     if !quiet {
         out!(
             "view: {} ({} frames, every {} tick(s) of telemetry, {:.1} MB)",
@@ -594,7 +594,7 @@ fn plan(
     }
     if let Some(p) = json {
         let text = serde_json::to_string_pretty(&c).map_err(Failure::fault)?;
-        cdm_core::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
+        cdm_records::rundir::write_atomic(p, text.as_bytes()).map_err(Failure::bad_input)?;
     }
     let loses = c
         .losses

@@ -21,7 +21,7 @@ use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use cdm_core::scenario::ScenarioFile;
+use cdm_scenario::ScenarioFile;
 
 /// How often `run` and `Running` poll a child for exit or output.
 const POLL: Duration = Duration::from_millis(10);
@@ -676,16 +676,17 @@ pub fn write_scenario(dir: &Path, name: &str, file: &ScenarioFile) -> PathBuf {
     write_text(dir, name, &scenario_toml(file))
 }
 
-/// The paper's 40-agent scenario (`cdm_core::scenario::paper40()`): 3 primary leaders (ids 1-3,
+/// The paper's 40-agent scenario (`cdm_scenario::paper40()`): 3 primary leaders (ids 1-3,
 /// with goals), 3 secondary leaders (ids 4-6), 34 followers (ids 7-40).
 pub fn paper40() -> ScenarioFile {
-    cdm_core::scenario::paper40()
+    cdm_scenario::paper40()
 }
 
 /// paper40 inside a geofence, with a box ("tower") and a vertical cylinder ("mast") well aside
 /// of its path (issue 27): SAFE, and every airspace table has something in it.
 pub fn fenced_paper40() -> ScenarioFile {
-    use cdm_core::scenario::{GeofenceSpec, ObstacleSpec, Shape};
+    use cdm_model::airspace::Shape;
+    use cdm_scenario::{GeofenceSpec, ObstacleSpec};
     let mut f = paper40();
     f.geofence = Some(GeofenceSpec {
         polygon: vec![

@@ -19,10 +19,10 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use cdm_core::formation::Role;
-use cdm_core::plan::Segment;
-use cdm_core::scenario::{Checks, Scenario, ScenarioFile};
-use cdm_core::step::tick_time;
+use cdm_model::formation::Role;
+use cdm_model::plan::Segment;
+use cdm_model::step::tick_time;
+use cdm_scenario::{Checks, Scenario, ScenarioFile};
 use integration_tests::{bin, describe, paper40, run, unique_team, write_scenario, TempDir};
 use serde_json::Value;
 
@@ -343,20 +343,20 @@ fn containment_is_flagged_for_the_followers_and_ticks_outside_the_prism() {
     let mut outside: BTreeMap<u32, bool> = BTreeMap::new();
     let mut expected = Vec::new();
     for tick_rows in rows.chunks(members.len()) {
-        let mut ht = vec![cdm_core::math::Vec3::zeros(); members.len()];
+        let mut ht = vec![cdm_math::Vec3::zeros(); members.len()];
         for r in tick_rows {
-            ht[index[&r.id]] = cdm_core::math::vec3(r.ht);
+            ht[index[&r.id]] = cdm_math::vec3(r.ht);
         }
         let verts: Vec<_> = s.formation.polygon.iter().map(|&k| ht[k]).collect();
         let normal = (verts[1] - verts[0])
             .cross(&(verts[2] - verts[0]))
             .normalize();
-        let prism = cdm_core::safety::Prism::new(verts, normal, half_height);
+        let prism = cdm_model::safety::Prism::new(verts, normal, half_height);
         for r in tick_rows {
             if members[index[&r.id]].role != Role::Follower {
                 continue;
             }
-            let p = cdm_core::math::vec3(r.r);
+            let p = cdm_math::vec3(r.r);
             let bad = prism.side_distance(&p) < 0.0 || prism.height(&p).abs() > half_height;
             let was = outside.insert(r.id, bad).unwrap_or(false);
             if bad && !was {

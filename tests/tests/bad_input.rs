@@ -9,12 +9,12 @@
 //!   an `error:` line that names the file and the agent(s) or field at fault. Each test starts
 //!   from the paper's 40-agent scenario (`paper40`: primary leaders 1-3, secondary leaders 4-6,
 //!   followers 7-40) and breaks one thing, or writes raw TOML for parse errors. The expected
-//!   phrases are those of `cdm_core::scenario` (`mod.rs`, `validate.rs`) and
-//!   `cdm_core::formation`.
+//!   phrases are those of `cdm_scenario` (`mod.rs`, `validate.rs`) and
+//!   `cdm_model::formation`.
 //! - A hand-started team that does not assemble: the launch names the members that did not join.
 //!
 //! (Full disks and closed pipes: `hardening_files.rs`; property tests of the parser:
-//! `common/core/tests/proptest.rs`.)
+//! `common/scenario/tests/proptest.rs`.)
 
 mod support;
 
@@ -24,8 +24,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use cdm_core::formation::Role;
-use cdm_core::scenario::{AgentSpec, ScenarioFile};
+use cdm_model::formation::Role;
+use cdm_scenario::{AgentSpec, ScenarioFile};
 use integration_tests::{
     bin, describe, paper40, run, scenario_toml, spawn, unique_team, write_scenario, write_text,
     TempDir,
@@ -880,7 +880,8 @@ fn long_names_are_refused_without_printing_them() {
 /// the obstacle (paper40 starts at z 900-1197 m around x -198..360, y -72..117).
 #[test]
 fn bad_geofences_and_obstacles_are_refused_naming_them() {
-    use cdm_core::scenario::{GeofenceSpec, ObstacleSpec, Shape};
+    use cdm_model::airspace::Shape;
+    use cdm_scenario::{GeofenceSpec, ObstacleSpec};
     let fence = |polygon: Vec<[f64; 2]>, min_z_m, max_z_m| GeofenceSpec {
         polygon,
         min_z_m,

@@ -9,8 +9,8 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use cdm_core::formation::Role;
-use cdm_core::scenario::ScenarioFile;
+use cdm_model::formation::Role;
+use cdm_scenario::ScenarioFile;
 use integration_tests::{bin, describe, run, spawn, write_text, TempDir};
 use serde_json::Value;
 
@@ -163,7 +163,7 @@ fn plan_certifies_paper40_and_refuses_a_plan_faster_than_t_threshold() {
         25.0 < threshold && threshold <= 200.0,
         "T_threshold {threshold} s must lie between the UNSAFE 25 s and the SAFE 200 s"
     );
-    // T_threshold is found by bisection to 0.1 % (cdm_core::simulate::t_threshold), starting from
+    // T_threshold is found by bisection to 0.1 % (cdm_certificates::certificate::t_threshold), starting from
     // the scenario's t_total: two plans agree to that precision, not to the last bit.
     let other = number(&safe, "t_threshold_s");
     assert!(

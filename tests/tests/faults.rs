@@ -24,9 +24,9 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use cdm_core::formation::Role;
-use cdm_core::scenario::{Checks, Scenario, ScenarioFile};
 use cdm_iox::{ClockWire, MemberPorts, StateBatchWire, TeamName, TransportError};
+use cdm_model::formation::Role;
+use cdm_scenario::{Checks, Scenario, ScenarioFile};
 use integration_tests::{bin, describe, run, spawn, unique_team, Running, TempDir};
 use serde_json::Value;
 use support::*;

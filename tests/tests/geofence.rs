@@ -14,7 +14,8 @@ mod support;
 use std::path::Path;
 use std::process::{Command, Output};
 
-use cdm_core::scenario::{generated, GeofenceSpec, ObstacleSpec, ScenarioFile, Shape};
+use cdm_model::airspace::Shape;
+use cdm_scenario::{generated, GeofenceSpec, ObstacleSpec, ScenarioFile};
 use integration_tests::{bin, describe, run, write_scenario, TempDir};
 use support::{assert_exit, read_json, simulate};
 

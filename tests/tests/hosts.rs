@@ -390,9 +390,7 @@ fn a_killed_daemon_is_like_killed_members() {
     );
     // One host, the same members killed after the same ticks (each its own: members run up to
     // a window apart).
-    let dt = cdm_core::scenario::Scenario::generated(n_members)
-        .unwrap()
-        .dt_s();
+    let dt = cdm_scenario::Scenario::generated(n_members).unwrap().dt_s();
     let mut lose = vec![];
     for l in &losses {
         assert_eq!(
@@ -592,9 +590,9 @@ fn foreign_daemons_are_refused_and_a_killed_orchestrator_takes_the_team_down() {
 /// hosts, preferring one that opens a link read on host B from host A: (its id, host B's
 /// members, those links as (source, reader)).
 fn loss_across_hosts(n: usize, on_b_only: bool) -> (u32, BTreeSet<u32>, Vec<(u32, u32)>) {
-    use cdm_core::formation::Role;
-    use cdm_core::loss_log::LossLog;
-    let s = cdm_core::scenario::Scenario::generated(n).expect("a generated team");
+    use cdm_model::formation::Role;
+    use cdm_records::loss_log::LossLog;
+    let s = cdm_scenario::Scenario::generated(n).expect("a generated team");
     let placed: Vec<cdm_hosts::Placed> = s
         .formation
         .members
@@ -711,7 +709,7 @@ fn a_killed_member_on_another_host_is_repaired() {
         ),
         "{audit:#}"
     );
-    let dt = cdm_core::scenario::Scenario::generated(10).unwrap().dt_s();
+    let dt = cdm_scenario::Scenario::generated(10).unwrap().dt_s();
     let when = format!("{victim}@{}", (at - 1) as f64 * dt);
     let mut replay = source.to_vec();
     replay.extend(["--lose", &when]);

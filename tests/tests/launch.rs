@@ -27,8 +27,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use cdm_core::formation::Role;
-use cdm_core::scenario::ScenarioFile;
+use cdm_model::formation::Role;
+use cdm_scenario::ScenarioFile;
 use integration_tests::{bin, run, spawn, unique_team, write_scenario, Running, TempDir};
 use serde_json::Value;
 

@@ -10,8 +10,8 @@
 use std::process::Command;
 use std::time::Duration;
 
-use cdm_core::formation::Role;
-use cdm_core::scenario::ScenarioFile;
+use cdm_model::formation::Role;
+use cdm_scenario::ScenarioFile;
 use integration_tests::{bin, describe, run, spawn, unique_team, write_scenario, TempDir};
 
 mod support;

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::time::Duration;
 
-use cdm_core::scenario::{Checks, Scenario, ScenarioFile};
+use cdm_scenario::{Checks, Scenario, ScenarioFile};
 use integration_tests::{
     describe, free_udp_ports, spawn, unique_team, venv_python, write_scenario, Running, TempDir,
 };
@@ -30,7 +30,7 @@ const ORIGIN: [f64; 3] = [5.0, -3.0, 0.0];
 /// Ten agents (the generated team of the paper's kind) flying a `t_total_s` translation of
 /// (1.5, 1, 0.5) m at 50 Hz.
 fn team(t_total_s: f64) -> ScenarioFile {
-    let mut f = cdm_core::scenario::generated(N).expect("ten agents generate");
+    let mut f = cdm_scenario::generated(N).expect("ten agents generate");
     f.name = "mavlink10".into();
     f.t_total_s = t_total_s;
     f.comm_hz = COMM_HZ;

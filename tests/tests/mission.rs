@@ -19,7 +19,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
-use cdm_core::scenario::ScenarioFile;
+use cdm_scenario::ScenarioFile;
 use integration_tests::{bin, run, spawn, unique_team, write_scenario, Running, TempDir};
 use support::{
     assert_exit, assert_no_process_of, assert_same_file, assert_stderr_has,
@@ -170,7 +170,7 @@ fn the_leaders_reach_every_waypoint_and_every_member_starts_and_ends_on_the_grou
     assert_exit(&run(&mut simulate(&sim, &source), DEADLINE), 0, "simulate");
     let rows = telemetry(&sim);
     // Primary leaders by ascending id, and their waypoints: start, then each segment's goals.
-    let mut primaries: Vec<&cdm_core::scenario::AgentSpec> =
+    let mut primaries: Vec<&cdm_scenario::AgentSpec> =
         (f.agents.iter()).filter(|a| a.goal.is_some()).collect();
     primaries.sort_by_key(|a| a.id);
     let start: Vec<[f64; 3]> = primaries.iter().map(|a| a.position).collect();

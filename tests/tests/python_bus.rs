@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use cdm_core::math::{vec3, Vec3};
+use cdm_math::{vec3, Vec3};
 use integration_tests::{describe, run, spawn, unique_team, venv_python, TempDir};
 
 /// A Python start-up and one query.
@@ -157,7 +157,7 @@ fn watch_py_reads_a_live_team_like_the_audit() {
             .unwrap_or_else(|| panic!("tick {tick} is not in telemetry.csv"));
         assert_eq!(pos.len(), 40, "tick {tick}");
         // The audit's own function over the same states.
-        let (audit_sep, _, _) = cdm_core::safety::min_separation(pos);
+        let (audit_sep, _, _) = cdm_model::safety::min_separation(pos);
         assert!(
             (sep - audit_sep).abs() <= 1e-9,
             "tick {tick}: watch.py {sep} m, audit {audit_sep} m"

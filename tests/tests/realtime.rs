@@ -419,10 +419,7 @@ fn a_member_in_the_other_mode_is_refused() {
 }
 
 /// Waits for the orchestrator to write the flown scenario (a --no-spawn team prints it first).
-fn wait_for_file(
-    orch: &mut integration_tests::Running,
-    path: &Path,
-) -> cdm_core::scenario::ScenarioFile {
+fn wait_for_file(orch: &mut integration_tests::Running, path: &Path) -> cdm_scenario::ScenarioFile {
     let until = std::time::Instant::now() + DEADLINE;
     while !path.exists() {
         assert!(

@@ -1,8 +1,8 @@
 //! The pre-flight certificate as `plan`, `simulate` and `export` print it.
 
-use cdm_core::airspace_certificate::AirspaceCertificate;
-use cdm_core::mission_certificate::PhaseCertificate;
-use cdm_core::simulate::Certificate;
+use cdm_certificates::airspace_certificate::{AirspaceCertificate, ClearanceKind};
+use cdm_certificates::certificate::Certificate;
+use cdm_certificates::mission_certificate::PhaseCertificate;
 use cdm_team::out;
 
 pub fn print_certificate(c: &Certificate) {
@@ -86,12 +86,13 @@ fn print_airspace(a: &AirspaceCertificate) {
         "  airspace: smallest margins of the balls of eps + delta = {:.4} m (negative: breached)",
         a.radius_m
     );
-    let rows = a
-        .fence()
-        .into_iter()
-        .chain(a.clearances.iter().filter(|c| c.kind == "obstacle"));
+    let rows = a.fence().into_iter().chain(
+        a.clearances
+            .iter()
+            .filter(|c| c.kind == ClearanceKind::Obstacle),
+    );
     for c in rows {
-        let what = if c.kind == "fence" {
+        let what = if c.kind == ClearanceKind::Fence {
             format!("fence ({})", c.name)
         } else {
             c.label()
@@ -110,7 +111,7 @@ fn print_airspace(a: &AirspaceCertificate) {
 }
 
 /// `plan --suggest`: the offsets that clear each breach, and why no time scaling does.
-fn print_suggestion(s: &cdm_core::airspace_suggest::Suggestion) {
+fn print_suggestion(s: &cdm_certificates::airspace_certificate::Suggestion) {
     if s.offsets.is_empty() {
         out!("  suggest: nothing to clear (no margin is negative)");
         return;

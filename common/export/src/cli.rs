@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use cdm_core::scenario::{Checks, Scenario};
+use cdm_scenario::{Checks, Scenario};
 use cdm_team::Failure;
 use clap::{Args, Subcommand};
 

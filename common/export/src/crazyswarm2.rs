@@ -8,10 +8,11 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use cdm_core::export::{pieces, CrazyflieSplit, Piece};
-use cdm_core::math::Real;
-use cdm_core::rundir::write_atomic;
-use cdm_core::scenario::{has_airspace, ScenarioFile, Shape};
+use cdm_math::Real;
+use cdm_model::airspace::Shape;
+use cdm_records::rundir::write_atomic;
+use cdm_scenario::{has_airspace, ScenarioFile};
+use cdm_trajectory::{pieces, CrazyflieSplit, PolyPiece};
 
 use super::Scaled;
 use cdm_team::Failure;
@@ -30,7 +31,7 @@ fn header() -> String {
 }
 
 /// One row: the duration, then x, y, z and yaw coefficients, 8 each.
-fn row(p: &Piece) -> String {
+fn row(p: &PolyPiece) -> String {
     let mut r = format!("{}", p.duration_s);
     for axis in 0..3 {
         for k in 0..COEFFS {

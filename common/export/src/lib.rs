@@ -17,17 +17,17 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use cdm_core::export::{
+use cdm_certificates::certificate::{certify, Certificate};
+use cdm_math::{Real, Vec3};
+use cdm_model::formation::Role;
+use cdm_model::outcome::Verdict;
+use cdm_records::rundir::write_atomic;
+use cdm_scenario::{Checks, Scenario};
+use cdm_team::out;
+use cdm_trajectory::{
     crazyflie_split, float32, pieces, team_trajectories, AgentTrajectory, Cut, TargetFrame,
     DEFAULT_TOLERANCE_M, SKYBRUSH_MAX_SEGMENT_S,
 };
-use cdm_core::formation::Role;
-use cdm_core::math::{Real, Vec3};
-use cdm_core::outcome::Verdict;
-use cdm_core::rundir::write_atomic;
-use cdm_core::scenario::{Checks, Scenario};
-use cdm_core::simulate::{certify, Certificate};
-use cdm_team::out;
 
 use crate::certificate::print_certificate;
 use crate::cli::{load, ExportFrame, ExportTarget, Source};

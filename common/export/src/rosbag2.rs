@@ -6,9 +6,9 @@
 
 use std::path::Path;
 
-use cdm_core::scenario::{Checks, Scenario};
 use cdm_report::data::{read_audit, stream_ticks, AuditNumbers};
 use cdm_rosbag::{BagError, BagWriter, Limits, Team, Tick};
+use cdm_scenario::{Checks, Scenario};
 use cdm_team::{out, Exit, Failure};
 
 /// Write the bag of the run in `run` into `out` (already checked: absent, empty or --force).

@@ -1,6 +1,6 @@
 //! A Skybrush show: a `.skyc` ZIP holding `show.json` (Skybrush's show specification): every
 //! drone `{type: "generic", settings: {trajectory: {version: 1, points, takeoffTime}, lights}}`
-//! with each piece as a degree-5 Bézier curve (a quintic is one exactly: `Piece::bezier`),
+//! with each piece as a degree-5 Bézier curve (a quintic is one exactly: `PolyPiece::bezier`),
 //! a constant light program, and `settings.validation` from the certificate and the plan. A
 //! mission is one show from its first phase to its last (on the ground at both ends with
 //! `[takeoff]` and `[landing]`), each hover a constant segment, the limits over every phase. A
@@ -13,11 +13,11 @@ use base64::Engine as _;
 use serde::Serialize;
 use zip::write::SimpleFileOptions;
 
-use cdm_core::export::{pieces, Cut};
-use cdm_core::math::{Real, Vec3};
-use cdm_core::rundir::write_atomic;
-use cdm_core::scenario::GeofenceSpec;
-use cdm_core::simulate::Certificate;
+use cdm_certificates::certificate::Certificate;
+use cdm_math::{Real, Vec3};
+use cdm_records::rundir::write_atomic;
+use cdm_scenario::GeofenceSpec;
+use cdm_trajectory::{pieces, Cut};
 
 use super::Scaled;
 use cdm_team::Failure;

@@ -7,10 +7,10 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::FaultRecord;
-use cdm_core::scenario::Scenario;
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamName, TeamProcess};
+use cdm_records::audit::FaultRecord;
 use cdm_runtime::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, LossNotice, StateMsg};
+use cdm_scenario::Scenario;
 use cdm_team::out;
 use cdm_team::Failure;
 use cdm_zenoh::{
@@ -272,7 +272,7 @@ impl OtherHosts for Bridge {
 
     /// After the team's stop: lets the daemons stop their members (bounded), then writes
     /// `hosts.json` and says how many bytes a tick cost on the wire.
-    fn finish(mut self: Box<Self>, dir: &cdm_core::rundir::RunDir, ticks: u64, quiet: bool) {
+    fn finish(mut self: Box<Self>, dir: &cdm_records::rundir::RunDir, ticks: u64, quiet: bool) {
         let hosts = self.join();
         // The edges that crossed hosts by the end: a repair may have added some.
         let added = self.links().crossing_added;
@@ -289,7 +289,7 @@ impl OtherHosts for Bridge {
             "bytes_per_tick": per_tick,
         });
         let text = serde_json::to_string_pretty(&doc).unwrap_or_default();
-        let _ = cdm_core::rundir::write_atomic(&dir.path().join("hosts.json"), text.as_bytes());
+        let _ = cdm_records::rundir::write_atomic(&dir.path().join("hosts.json"), text.as_bytes());
         if !quiet {
             out!(
                 "  hosts: {} crossing edges, {:.0} bytes per tick on the network ({} sent, {} received)",

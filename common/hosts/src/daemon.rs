@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use cdm_core::scenario::{Checks, Scenario};
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{ClockCommand, ClockMsg, StopReason};
+use cdm_scenario::{Checks, Scenario};
 use cdm_team::out;
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
 use cdm_team::{Exit, Failure};
@@ -261,7 +261,7 @@ fn fly(
         relays.insert(g, relay);
     }
     let file = dir.join("scenario.json");
-    cdm_core::rundir::write_atomic(&file, j.a.scenario_json.as_bytes())
+    cdm_records::rundir::write_atomic(&file, j.a.scenario_json.as_bytes())
         .map_err(|e| Failure::fault(format!("cannot write {}: {e}", file.display())))?;
     let mut children = Vec::new();
     let flags = member_flags(&j.a);

@@ -6,8 +6,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::FaultRecord;
-use cdm_core::outcome::FaultKind;
+use cdm_model::outcome::FaultKind;
+use cdm_records::audit::FaultRecord;
 
 /// How long a remote member's silence waits at least for the bridge's verdict on its host: a
 /// closed session is reported after zenoh's grace (150 ms); the rest is slack for a loaded

@@ -2,7 +2,7 @@
 //! by the bridge (which finds the links that cross hosts).
 
 use crate::regions::Placed;
-use cdm_core::scenario::Scenario;
+use cdm_scenario::Scenario;
 
 /// The formation as the split sees it (plain data).
 pub fn placed(s: &Scenario) -> Vec<Placed> {

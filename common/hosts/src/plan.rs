@@ -2,8 +2,8 @@
 
 use std::collections::BTreeSet;
 
-use cdm_core::scenario::Scenario;
 use cdm_iox::{TeamLayout, TeamName};
+use cdm_scenario::Scenario;
 use cdm_team::out;
 use cdm_team::Failure;
 

@@ -7,11 +7,11 @@
 
 use std::collections::BTreeSet;
 
-use cdm_core::loss_log::{links, LossLog};
-use cdm_core::repair::{repair_in_order, synthesis_order};
-use cdm_core::scenario::Scenario;
+use cdm_model::repair::{repair_in_order, synthesis_order};
+use cdm_records::loss_log::{links, LossLog};
 use cdm_runtime::messages::LossNotice;
 use cdm_runtime::notices::{NoticeGap, Notices};
+use cdm_scenario::Scenario;
 
 /// What one clock message's notice asks of a bridge.
 #[derive(Debug, Default, Clone, PartialEq, Eq)]
@@ -76,7 +76,7 @@ pub fn single_loss_links(s: &Scenario) -> BTreeSet<(u32, u32)> {
     let floor = s
         .file
         .weight_floor
-        .unwrap_or(cdm_core::graph::DEFAULT_WEIGHT_FLOOR);
+        .unwrap_or(cdm_model::graph::DEFAULT_WEIGHT_FLOOR);
     let order = synthesis_order(&s.formation);
     let original = links(&s.formation, &BTreeSet::new());
     let mut out = BTreeSet::new();

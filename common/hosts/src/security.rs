@@ -1,7 +1,7 @@
 //! The zenoh session's security from the checked options: the keys of this machine's role, and
 //! who may speak to it on which keys (each host on its own; a daemon with the orchestrator only).
 
-use cdm_keys::{KeyDir, Role};
+use cdm_keys::{Holder, KeyDir};
 use cdm_team::Failure;
 use cdm_zenoh::{host_key_exprs, orchestrator_key_exprs, Peer, Security};
 
@@ -13,7 +13,7 @@ pub(crate) fn listener(h: &HostOptions) -> Result<Security, Failure> {
         return Ok(Security::Insecure);
     };
     let keys = open(dir, "--keys")?;
-    if keys.role != Role::Orchestrator {
+    if keys.role != Holder::Orchestrator {
         return Err(Failure::bad_input(format!(
             "--keys {}: this is {}'s certificate; launch needs the orchestrator's (DIR/orchestrator of `keys new`)",
             dir.display(),
@@ -22,7 +22,7 @@ pub(crate) fn listener(h: &HostOptions) -> Result<Security, Failure> {
     }
     let peers = (1..h.hosts)
         .map(|k| Peer {
-            common_name: Role::Host(k).common_name(),
+            common_name: Holder::Host(k).common_name(),
             key_exprs: host_key_exprs(k),
         })
         .collect();
@@ -35,14 +35,14 @@ pub(crate) fn daemon(t: &Transport) -> Result<(Security, Option<u32>), Failure> 
         return Ok((Security::Insecure, None));
     };
     let keys = open(dir, "--keys")?;
-    let Role::Host(k) = keys.role else {
+    let Holder::Host(k) = keys.role else {
         return Err(Failure::bad_input(format!(
             "--keys {}: this is the orchestrator's certificate; a daemon needs its host's (DIR/host-K of `keys new`)",
             dir.display()
         )));
     };
     let peers = vec![Peer {
-        common_name: Role::Orchestrator.common_name(),
+        common_name: Holder::Orchestrator.common_name(),
         key_exprs: orchestrator_key_exprs(),
     }];
     Ok((tls(keys, peers), Some(k)))

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 /// What went wrong with a team's keys, naming the file.
 #[derive(Debug, thiserror::Error)]
-pub enum KeyError {
+pub enum KeyDirError {
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -27,23 +27,23 @@ pub enum KeyError {
     },
 }
 
-impl KeyError {
-    pub(crate) fn rcgen(what: &'static str) -> impl FnOnce(rcgen::Error) -> KeyError {
-        move |source| KeyError::Make { what, source }
+impl KeyDirError {
+    pub(crate) fn rcgen(what: &'static str) -> impl FnOnce(rcgen::Error) -> KeyDirError {
+        move |source| KeyDirError::Make { what, source }
     }
 }
 
-fn io(path: &Path) -> impl FnOnce(std::io::Error) -> KeyError + '_ {
-    move |source| KeyError::Io {
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> KeyDirError + '_ {
+    move |source| KeyDirError::Io {
         path: path.to_owned(),
         source,
     }
 }
 
 /// `dir` made (0700), or already there and empty.
-pub(crate) fn new_empty_dir(dir: &Path) -> Result<(), KeyError> {
+pub(crate) fn new_empty_dir(dir: &Path) -> Result<(), KeyDirError> {
     match std::fs::read_dir(dir).map(|mut e| e.next().is_some()) {
-        Ok(true) => Err(KeyError::Exists {
+        Ok(true) => Err(KeyDirError::Exists {
             path: dir.to_owned(),
         }),
         Ok(false) => {
@@ -57,7 +57,7 @@ pub(crate) fn new_empty_dir(dir: &Path) -> Result<(), KeyError> {
 }
 
 /// A new directory, 0700 (its parents as needed).
-pub(crate) fn make_dir(dir: &Path) -> Result<(), KeyError> {
+pub(crate) fn make_dir(dir: &Path) -> Result<(), KeyDirError> {
     std::fs::DirBuilder::new()
         .recursive(true)
         .mode(0o700)
@@ -66,7 +66,7 @@ pub(crate) fn make_dir(dir: &Path) -> Result<(), KeyError> {
 }
 
 /// A new file, 0600 from its creation on (never a moment readable by others).
-pub(crate) fn write_new(path: &Path, bytes: &[u8]) -> Result<(), KeyError> {
+pub(crate) fn write_new(path: &Path, bytes: &[u8]) -> Result<(), KeyDirError> {
     let mut f = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -78,16 +78,16 @@ pub(crate) fn write_new(path: &Path, bytes: &[u8]) -> Result<(), KeyError> {
         .map_err(io(path))
 }
 
-pub(crate) fn read(path: &Path) -> Result<Vec<u8>, KeyError> {
+pub(crate) fn read(path: &Path) -> Result<Vec<u8>, KeyDirError> {
     std::fs::read(path).map_err(io(path))
 }
 
 /// `path` is a file that only its owner can read or write.
-pub(crate) fn check_private(path: &Path) -> Result<(), KeyError> {
+pub(crate) fn check_private(path: &Path) -> Result<(), KeyDirError> {
     let m = std::fs::metadata(path).map_err(io(path))?;
     let mode = m.mode() & 0o7777;
     if mode & 0o077 != 0 {
-        return Err(KeyError::Readable {
+        return Err(KeyDirError::Readable {
             path: path.to_owned(),
             mode,
         });

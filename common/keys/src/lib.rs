@@ -23,49 +23,49 @@ use rcgen::{
     KeyPair, KeyUsagePurpose,
 };
 
-pub use files::KeyError;
+pub use files::KeyDirError;
 use files::{make_dir, read, write_new};
 
 /// Who a certificate speaks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Role {
+pub enum Holder {
     Orchestrator,
     /// A host daemon, by its host number (1..; the orchestrator's host is 0).
     Host(u32),
 }
 
-impl Role {
+impl Holder {
     /// The certificate's common name, which zenoh's access control matches on.
     pub fn common_name(self) -> String {
         match self {
-            Role::Orchestrator => "cdm orchestrator".to_owned(),
-            Role::Host(k) => format!("cdm host {k}"),
+            Holder::Orchestrator => "cdm orchestrator".to_owned(),
+            Holder::Host(k) => format!("cdm host {k}"),
         }
     }
 
     /// The role a common name stands for, if it is one of ours.
     pub fn from_common_name(cn: &str) -> Option<Self> {
         if cn == "cdm orchestrator" {
-            return Some(Role::Orchestrator);
+            return Some(Holder::Orchestrator);
         }
         let k: u32 = cn.strip_prefix("cdm host ")?.parse().ok()?;
-        (k >= 1 && cn == Role::Host(k).common_name()).then_some(Role::Host(k))
+        (k >= 1 && cn == Holder::Host(k).common_name()).then_some(Holder::Host(k))
     }
 
     /// The directory `keys new` writes this role's files into.
     pub fn dir_name(self) -> String {
         match self {
-            Role::Orchestrator => "orchestrator".to_owned(),
-            Role::Host(k) => format!("host-{k}"),
+            Holder::Orchestrator => "orchestrator".to_owned(),
+            Holder::Host(k) => format!("host-{k}"),
         }
     }
 }
 
-impl std::fmt::Display for Role {
+impl std::fmt::Display for Holder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Role::Orchestrator => f.write_str("the orchestrator"),
-            Role::Host(k) => write!(f, "host {k}"),
+            Holder::Orchestrator => f.write_str("the orchestrator"),
+            Holder::Host(k) => write!(f, "host {k}"),
         }
     }
 }
@@ -77,7 +77,7 @@ const AUTHORITY_CN: &str = "cdm team authority";
 /// certificate names a role.
 #[derive(Debug, Clone)]
 pub struct KeyDir {
-    pub role: Role,
+    pub role: Holder,
     /// The team's authority certificate (checks the peer).
     pub ca: PathBuf,
     /// This machine's certificate (shown to the peer).
@@ -88,7 +88,7 @@ pub struct KeyDir {
 
 impl KeyDir {
     /// Opens `dir` as written by `keys new` / `keys add-host`.
-    pub fn open(dir: &Path) -> Result<Self, KeyError> {
+    pub fn open(dir: &Path) -> Result<Self, KeyDirError> {
         let (ca, cert, key) = (
             dir.join("ca.pem"),
             dir.join("cert.pem"),
@@ -98,11 +98,11 @@ impl KeyDir {
             files::check_private(p)?;
         }
         let pem = read(&cert)?;
-        let cn = common_name_of(&pem).map_err(|detail| KeyError::Certificate {
+        let cn = common_name_of(&pem).map_err(|e| KeyDirError::Certificate {
             path: cert.clone(),
-            detail,
+            detail: e.to_string(),
         })?;
-        let role = Role::from_common_name(&cn).ok_or_else(|| KeyError::Certificate {
+        let role = Holder::from_common_name(&cn).ok_or_else(|| KeyDirError::Certificate {
             path: cert.clone(),
             detail: format!(
                 "common name {cn:?} is neither \"cdm orchestrator\" nor \"cdm host K\""
@@ -117,23 +117,40 @@ impl KeyDir {
     }
 }
 
+/// Why a certificate's common name could not be read (x509-parser's errors, as their text).
+#[derive(Debug, thiserror::Error)]
+enum CommonNameError {
+    #[error("not PEM: {0}")]
+    NotPem(String),
+    #[error("not X.509: {0}")]
+    NotX509(String),
+    #[error("no common name")]
+    Missing,
+    #[error("common name: {0}")]
+    NotText(String),
+}
+
 /// The subject common name of the first certificate in `pem`.
-fn common_name_of(pem: &[u8]) -> Result<String, String> {
-    let (_, p) = x509_parser::pem::parse_x509_pem(pem).map_err(|e| format!("not PEM: {e}"))?;
-    let x = p.parse_x509().map_err(|e| format!("not X.509: {e}"))?;
+fn common_name_of(pem: &[u8]) -> Result<String, CommonNameError> {
+    let (_, p) = x509_parser::pem::parse_x509_pem(pem)
+        .map_err(|e| CommonNameError::NotPem(e.to_string()))?;
+    let x = p
+        .parse_x509()
+        .map_err(|e| CommonNameError::NotX509(e.to_string()))?;
     let cn = x.subject().iter_common_name().next();
-    let cn = cn.ok_or("no common name")?;
+    let cn = cn.ok_or(CommonNameError::Missing)?;
     cn.as_str()
         .map(str::to_owned)
-        .map_err(|e| format!("common name: {e}"))
+        .map_err(|e| CommonNameError::NotText(e.to_string()))
 }
 
 /// Creates a team's keys in `dir` (which must not exist or be empty): the authority, the
 /// orchestrator's and hosts 1..=`daemons`. Returns the directories written, in order.
-pub fn new_team(dir: &Path, daemons: u32) -> Result<Vec<PathBuf>, KeyError> {
+pub fn new_team(dir: &Path, daemons: u32) -> Result<Vec<PathBuf>, KeyDirError> {
     files::new_empty_dir(dir)?;
-    let ca_key = KeyPair::generate().map_err(KeyError::rcgen("an authority key"))?;
-    let mut params = CertificateParams::new(Vec::new()).map_err(KeyError::rcgen("parameters"))?;
+    let ca_key = KeyPair::generate().map_err(KeyDirError::rcgen("an authority key"))?;
+    let mut params =
+        CertificateParams::new(Vec::new()).map_err(KeyDirError::rcgen("parameters"))?;
     params
         .distinguished_name
         .push(DnType::CommonName, AUTHORITY_CN);
@@ -141,7 +158,7 @@ pub fn new_team(dir: &Path, daemons: u32) -> Result<Vec<PathBuf>, KeyError> {
     params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
     let ca_cert = params
         .self_signed(&ca_key)
-        .map_err(KeyError::rcgen("the authority certificate"))?;
+        .map_err(KeyDirError::rcgen("the authority certificate"))?;
     let authority = dir.join("authority");
     make_dir(&authority)?;
     write_new(&authority.join("ca.pem"), ca_cert.pem().as_bytes())?;
@@ -149,20 +166,20 @@ pub fn new_team(dir: &Path, daemons: u32) -> Result<Vec<PathBuf>, KeyError> {
     let issuer = Issuer::new(params, ca_key);
     let ca_pem = ca_cert.pem();
     let mut out = Vec::new();
-    for role in std::iter::once(Role::Orchestrator).chain((1..=daemons).map(Role::Host)) {
+    for role in std::iter::once(Holder::Orchestrator).chain((1..=daemons).map(Holder::Host)) {
         out.push(issue(dir, role, &issuer, &ca_pem)?);
     }
     Ok(out)
 }
 
 /// Adds the next host to the team whose keys are in `dir`; returns its number and directory.
-pub fn add_host(dir: &Path) -> Result<(u32, PathBuf), KeyError> {
+pub fn add_host(dir: &Path) -> Result<(u32, PathBuf), KeyDirError> {
     let authority = dir.join("authority");
     let (ca_path, key_path) = (authority.join("ca.pem"), authority.join("ca.key"));
     files::check_private(&key_path)?;
     let ca_pem = String::from_utf8_lossy(&read(&ca_path)?).into_owned();
     let key_pem = String::from_utf8_lossy(&read(&key_path)?).into_owned();
-    let bad = |path: &Path, detail: String| KeyError::Certificate {
+    let bad = |path: &Path, detail: String| KeyDirError::Certificate {
         path: path.to_owned(),
         detail,
     };
@@ -170,36 +187,36 @@ pub fn add_host(dir: &Path) -> Result<(u32, PathBuf), KeyError> {
     let issuer =
         Issuer::from_ca_cert_pem(&ca_pem, ca_key).map_err(|e| bad(&ca_path, e.to_string()))?;
     let next = (1..)
-        .find(|k| !dir.join(Role::Host(*k).dir_name()).exists())
+        .find(|k| !dir.join(Holder::Host(*k).dir_name()).exists())
         .unwrap_or(1);
-    let written = issue(dir, Role::Host(next), &issuer, &ca_pem)?;
+    let written = issue(dir, Holder::Host(next), &issuer, &ca_pem)?;
     Ok((next, written))
 }
 
 /// Writes `role`'s directory: the authority's certificate, its own, and its key.
 fn issue(
     dir: &Path,
-    role: Role,
+    role: Holder,
     issuer: &Issuer<'_, KeyPair>,
     ca_pem: &str,
-) -> Result<PathBuf, KeyError> {
-    let key = KeyPair::generate().map_err(KeyError::rcgen("a key"))?;
+) -> Result<PathBuf, KeyDirError> {
+    let key = KeyPair::generate().map_err(KeyDirError::rcgen("a key"))?;
     // The subject alternative name repeats the role; peers are not checked by address (daemons
     // reach the orchestrator by whatever address the field network gives it) but by the
     // authority and the common name.
     let san = role.common_name().replace(' ', "-");
-    let mut params = CertificateParams::new(vec![san]).map_err(KeyError::rcgen("parameters"))?;
+    let mut params = CertificateParams::new(vec![san]).map_err(KeyDirError::rcgen("parameters"))?;
     params
         .distinguished_name
         .push(DnType::CommonName, DnValue::Utf8String(role.common_name()));
     params.key_usages = vec![KeyUsagePurpose::DigitalSignature];
     params.extended_key_usages = vec![match role {
-        Role::Orchestrator => ExtendedKeyUsagePurpose::ServerAuth,
-        Role::Host(_) => ExtendedKeyUsagePurpose::ClientAuth,
+        Holder::Orchestrator => ExtendedKeyUsagePurpose::ServerAuth,
+        Holder::Host(_) => ExtendedKeyUsagePurpose::ClientAuth,
     }];
     let cert = params
         .signed_by(&key, issuer)
-        .map_err(KeyError::rcgen("a certificate"))?;
+        .map_err(KeyDirError::rcgen("a certificate"))?;
     let out = dir.join(role.dir_name());
     make_dir(&out)?;
     write_new(&out.join("ca.pem"), ca_pem.as_bytes())?;

@@ -47,8 +47,8 @@ fn a_new_team_has_owner_only_files_and_each_directory_names_its_role() {
             );
         }
     }
-    assert_eq!(KeyDir::open(&dirs[0]).unwrap().role, Role::Orchestrator);
-    assert_eq!(KeyDir::open(&dirs[2]).unwrap().role, Role::Host(2));
+    assert_eq!(KeyDir::open(&dirs[0]).unwrap().role, Holder::Orchestrator);
+    assert_eq!(KeyDir::open(&dirs[2]).unwrap().role, Holder::Host(2));
     // The authority's key is never in a machine's directory.
     assert!(!dirs.iter().any(|d| d.join("ca.key").exists()));
 }
@@ -58,7 +58,7 @@ fn keys_are_never_overwritten() {
     let t = Scratch::new("again");
     new_team(&t.0, 1).unwrap();
     let before = std::fs::read(t.0.join("host-1/key.pem")).unwrap();
-    assert!(matches!(new_team(&t.0, 1), Err(KeyError::Exists { .. })));
+    assert!(matches!(new_team(&t.0, 1), Err(KeyDirError::Exists { .. })));
     assert_eq!(std::fs::read(t.0.join("host-1/key.pem")).unwrap(), before);
 }
 
@@ -68,7 +68,7 @@ fn add_host_signs_the_next_number_with_the_same_authority() {
     new_team(&t.0, 1).unwrap();
     let (k, dir) = add_host(&t.0).unwrap();
     assert_eq!(k, 2);
-    assert_eq!(KeyDir::open(&dir).unwrap().role, Role::Host(2));
+    assert_eq!(KeyDir::open(&dir).unwrap().role, Holder::Host(2));
     let ca = |d: &str| std::fs::read(t.0.join(d).join("ca.pem")).unwrap();
     assert_eq!(ca("host-2"), ca("orchestrator"));
     assert_eq!(add_host(&t.0).unwrap().0, 3);
@@ -107,8 +107,8 @@ fn a_missing_or_foreign_certificate_is_named() {
 
 #[test]
 fn common_names_round_trip_and_nothing_else_is_a_role() {
-    for r in [Role::Orchestrator, Role::Host(1), Role::Host(63)] {
-        assert_eq!(Role::from_common_name(&r.common_name()), Some(r));
+    for r in [Holder::Orchestrator, Holder::Host(1), Holder::Host(63)] {
+        assert_eq!(Holder::from_common_name(&r.common_name()), Some(r));
     }
     for cn in [
         "cdm host 0",
@@ -117,6 +117,6 @@ fn common_names_round_trip_and_nothing_else_is_a_role() {
         "orchestrator",
         "cdm host  1",
     ] {
-        assert_eq!(Role::from_common_name(cn), None, "{cn}");
+        assert_eq!(Holder::from_common_name(cn), None, "{cn}");
     }
 }

@@ -2,10 +2,10 @@
 //! alike: the live view (`--serve`, cdm-viewer) and the live ROS 2 topics (`--ros2`, cdm-ros2).
 //! Both pace themselves by the wall clock and never make the loop wait.
 
-use cdm_core::audit::{AuditReport, Auditor};
-use cdm_core::math::Vec3;
-use cdm_core::scenario::Scenario;
+use cdm_math::Vec3;
+use cdm_records::audit::{AuditReport, Auditor};
 use cdm_ros2::{Backend, Live, Ros2Options};
+use cdm_scenario::Scenario;
 use cdm_team::{out, Failure};
 use cdm_viewer::live::LiveView;
 

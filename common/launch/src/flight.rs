@@ -11,6 +11,6 @@ pub fn flight_of(o: &LaunchOptions) -> TeamFlight {
         window: o.window,
         realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
         realtime_priority: o.realtime.as_ref().and_then(|rt| rt.rt_priority),
-        repair: o.on_loss == cdm_core::loss::OnLoss::Repair && o.spawn && o.realtime.is_none(),
+        repair: o.on_loss == cdm_engine::loss::OnLoss::Repair && o.spawn && o.realtime.is_none(),
     }
 }

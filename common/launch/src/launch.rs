@@ -6,26 +6,26 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::{AuditReport, Auditor};
+use cdm_records::audit::{AuditReport, Auditor};
 use cdm_team::out;
 use cdm_team::telemetry_thread::ThreadedSink;
 
 use crate::realtime::Elsewhere;
-use cdm_core::formation::Role;
-use cdm_core::loss::{LossSchedule, LossState};
-use cdm_core::math::vec3;
-use cdm_core::outcome::FaultKind;
-use cdm_core::record::TickRecorder;
-use cdm_core::rundir::RunDir;
-use cdm_core::scenario::Scenario;
-use cdm_core::telemetry::TelemetrySink;
+use cdm_engine::loss::{LossSchedule, LossState};
 use cdm_hosts::OtherHosts;
 use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
+use cdm_math::vec3;
+use cdm_model::formation::Role;
+use cdm_model::outcome::FaultKind;
+use cdm_records::record::TickRecorder;
+use cdm_records::rundir::RunDir;
+use cdm_records::telemetry::TelemetrySink;
 use cdm_runtime::messages::{ClockMsg, StateMsg, StopReason};
 use cdm_runtime::seams::{Clock, MonotonicClock};
 use cdm_runtime::team_core::{nap_before_wait, TeamAction, TeamConfig, TeamCore, TickStates};
 use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_runtime::team_loss::TeamLosses;
+use cdm_scenario::Scenario;
 use cdm_viewer::live::LiveView;
 
 use crate::feeds::Feeds;
@@ -43,7 +43,7 @@ pub struct LaunchOptions {
     pub force: bool,
     pub every: u64,
     /// The telemetry file's format.
-    pub telemetry: cdm_core::telemetry::TelemetryFormat,
+    pub telemetry: cdm_records::telemetry::TelemetryFormat,
     pub window: u32,
     pub spawn: bool,
     pub agent_timeout: Duration,
@@ -64,9 +64,9 @@ pub struct LaunchOptions {
     /// What the members fly (forwarded to the spawned members; printed for hand-started ones).
     pub vehicles: cdm_member::vehicles::Vehicles,
     /// Members to kill once they have published a tick (`--lose`, validated).
-    pub losses: cdm_core::loss::LossSchedule,
+    pub losses: cdm_engine::loss::LossSchedule,
     /// What a lost member does to the run (`--on-loss`).
-    pub on_loss: cdm_core::loss::OnLoss,
+    pub on_loss: cdm_engine::loss::OnLoss,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -209,7 +209,7 @@ fn team_layout(
     let mut layout = TeamLayout::new(ids.clone(), ins, buffers)
         .map_err(Failure::fault)?
         .with_scenario_hash(s.content_hash());
-    if o.on_loss == cdm_core::loss::OnLoss::Repair {
+    if o.on_loss == cdm_engine::loss::OnLoss::Repair {
         let room = cdm_team::loss::repair_room(s, buffers);
         // A killed daemon loses its host's members at once (lockstep repair across hosts).
         let room = cdm_team::loss::with_group_losses(room, s, &hosts.remote_groups());
@@ -410,7 +410,8 @@ pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: 
         }
     };
     let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
-    let _ = cdm_core::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
+    let _ =
+        cdm_records::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
 }
 
 /// A telemetry write or flush that failed (a full disk) at `tick`: a fault, the file keeps its
@@ -418,7 +419,7 @@ pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: 
 fn io_stop(tick: u64) -> impl Fn(std::io::Error) -> Stop {
     move |e| {
         (
-            cdm_core::record::write_fault(tick, &e),
+            cdm_records::record::write_fault(tick, &e),
             StopReason::AgentFault,
         )
     }
@@ -443,7 +444,7 @@ fn team_core(s: &Scenario, o: &LaunchOptions, last: u64, now: Duration) -> TeamC
         last_tick: last,
         agent_timeout: o.agent_timeout,
     };
-    let repairs = o.on_loss == cdm_core::loss::OnLoss::Repair && o.spawn;
+    let repairs = o.on_loss == cdm_engine::loss::OnLoss::Repair && o.spawn;
     let book = TeamLosses::new(s, &cdm_team::loss::scripted_kills(&o.losses));
     TeamCore::new(cfg, now).with_losses(book, repairs)
 }

@@ -12,16 +12,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::feeds::Feeds;
-use cdm_core::audit::{Auditor, LossRecord, RealtimeFigures};
-use cdm_core::formation::Role;
-use cdm_core::loss::{LossAt, LossSchedule, LossState, OnLoss};
-use cdm_core::math::Vec3;
-use cdm_core::outcome::FaultKind;
-use cdm_core::record::{write_fault, TickRecorder};
-use cdm_core::rundir::RunDir;
-use cdm_core::scenario::Scenario;
-use cdm_core::telemetry::TelemetrySink;
+use cdm_engine::loss::{LossAt, LossSchedule, LossState, OnLoss};
 use cdm_iox::OrchestratorPorts;
+use cdm_math::Vec3;
+use cdm_model::formation::Role;
+use cdm_model::outcome::FaultKind;
+use cdm_records::audit::{Auditor, LossRecord, RealtimeFigures};
+use cdm_records::record::{write_fault, TickRecorder};
+use cdm_records::rundir::RunDir;
+use cdm_records::telemetry::TelemetrySink;
 use cdm_runtime::messages::{ClockMsg, StopReason};
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
@@ -29,6 +28,7 @@ use cdm_runtime::team_loss::TeamLosses;
 use cdm_runtime::team_realtime::{
     LostMember, MonitorAction, RealtimePlan, RealtimeTeam, MEMBER_STALE_FACTOR,
 };
+use cdm_scenario::Scenario;
 
 use cdm_team::out;
 
@@ -367,7 +367,7 @@ struct Monitor<'a> {
     /// sends at most its own rate).
     live: &'a mut Feeds,
     tel: &'a mut dyn TelemetrySink,
-    /// The shared per-tick audit and telemetry (`cdm_core::record`).
+    /// The shared per-tick audit and telemetry (`cdm_records::record`).
     rec: TickRecorder,
     /// Every member's position and velocity at the instant being audited (formation order).
     at: Vec<(Vec3, Vec3)>,

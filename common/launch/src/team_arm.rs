@@ -9,12 +9,12 @@ use std::collections::BTreeSet;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use cdm_core::outcome::FaultKind;
-use cdm_core::scenario::Scenario;
 use cdm_iox::OrchestratorPorts;
 use cdm_member::vehicles::Vehicles;
+use cdm_model::outcome::FaultKind;
 use cdm_runtime::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason, STATUS_FAULT};
 use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
+use cdm_scenario::Scenario;
 use cdm_team::out;
 
 use crate::launch::LaunchOptions;

@@ -5,8 +5,8 @@
 
 use std::collections::BTreeMap;
 
-use cdm_core::audit::Auditor;
 use cdm_member::vehicles::{vehicle_figures, VehicleReport};
+use cdm_records::audit::Auditor;
 use cdm_runtime::messages::StateMsg;
 
 /// The newest vehicle report of each member.

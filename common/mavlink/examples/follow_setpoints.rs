@@ -15,12 +15,12 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use cdm_core::plan::{Quintic, Segment};
 use cdm_math::{Real, Vec3};
 use cdm_mavlink::{
     member_addr, LinkTimeouts, MavlinkVehicle, Setpoint, UdpLink, VehicleConfig, VehicleOrigin,
     DEFAULT_BASE_PORT, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
 };
+use cdm_model::plan::{Quintic, Segment};
 use clap::Parser;
 
 #[derive(Debug, Parser)]

@@ -15,11 +15,11 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::formation::Member;
-use cdm_core::plan::{PhaseKind, TeamPlan};
-use cdm_core::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
 use cdm_math::Vec3;
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::formation::Member;
+use cdm_model::plan::{PhaseKind, TeamPlan};
+use cdm_model::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
 use cdm_runtime::seams::{RelinkUnsupported, Vehicle, VehicleFault, VehicleLoss};
 
 use crate::arming::{ArmStage, VehicleMode};

@@ -1,5 +1,5 @@
 //! What a member asks of its vehicle each tick, and what it publishes of it: pure functions over
-//! the same inputs the model's tick takes (`cdm_core::step::step`), so a real vehicle is flown by
+//! the same inputs the model's tick takes (`cdm_model::step::step`), so a real vehicle is flown by
 //! the very law the engine integrates.
 //!
 //! The published state of a measured vehicle: position and velocity as
@@ -16,10 +16,10 @@
 //! publishes an acceleration it does not have; `--vehicle-feed-forward zero` publishes zero
 //! instead (thrust g, level), as before.
 
-use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::plan::TeamPlan;
-use cdm_core::step::{extrapolate, Law, StepConfig};
 use cdm_math::{Real, Vec3, GRAVITY_MPS2};
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::plan::TeamPlan;
+use cdm_model::step::{extrapolate, Law, StepConfig};
 
 use crate::messages::Setpoint;
 
@@ -135,7 +135,7 @@ pub const MIN_THRUST_MPS2: Real = 0.1 * GRAVITY_MPS2;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cdm_core::step::NeighborModel;
+    use cdm_model::step::NeighborModel;
 
     fn cfg() -> StepConfig {
         StepConfig {
@@ -227,7 +227,7 @@ mod tests {
     }
 
     fn paper_plan() -> TeamPlan {
-        cdm_core::scenario::Scenario::builtin("paper40")
+        cdm_scenario::Scenario::builtin("paper40")
             .expect("the paper's scenario is valid")
             .plan
     }

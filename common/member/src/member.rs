@@ -16,11 +16,11 @@ use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 use crate::member_vehicle::BeforeStart;
 use crate::options::LinkArgs;
 use crate::vehicles::Vehicles;
-use cdm_core::dynamics::QuadState;
-use cdm_core::formation::{Member, Role};
-use cdm_core::loss_log::LossLog;
-use cdm_core::scenario::{Checks, Scenario};
 use cdm_iox::{MemberPorts, TeamName};
+use cdm_model::dynamics::QuadState;
+use cdm_model::formation::{Member, Role};
+use cdm_records::loss_log::LossLog;
+use cdm_scenario::{Checks, Scenario};
 
 pub use crate::member_error::MemberError;
 pub use cdm_runtime::member_core::{Deadlines, Finished, MemberFault};
@@ -210,8 +210,8 @@ impl Joined<'_> {
 
 /// A follower's in-neighbours' initial positions, in the order of its law (a real-time follower
 /// assumes them at rest there until their first state arrives); zeros for a leader.
-fn neighbor_positions(s: &Scenario, me: &cdm_core::formation::Member) -> [cdm_core::math::Vec3; 3] {
-    let mut at = [cdm_core::math::Vec3::zeros(); 3];
+fn neighbor_positions(s: &Scenario, me: &cdm_model::formation::Member) -> [cdm_math::Vec3; 3] {
+    let mut at = [cdm_math::Vec3::zeros(); 3];
     if let Some(link) = me.link.filter(|_| me.role == Role::Follower) {
         for (p, j) in at.iter_mut().zip(link.in_neighbors) {
             if let Some(m) = s.formation.member(j) {

@@ -4,14 +4,14 @@
 
 use std::time::Duration;
 
-use cdm_core::scenario::ScenarioError;
-use cdm_core::step::StepFault;
 use cdm_iox::{TeamName, TransportError};
 use cdm_mavlink::udp::UdpError;
 use cdm_mavlink::{PlantError, TeamArmError};
+use cdm_model::step::StepFault;
 use cdm_runtime::member_core::MemberFault;
 use cdm_runtime::member_loop::LoopError;
 use cdm_runtime::member_loss::LossFault;
+use cdm_scenario::ScenarioError;
 
 /// Why a member stopped without finishing.
 #[derive(Debug, thiserror::Error)]

@@ -79,7 +79,7 @@ pub enum LinkArgsError {
     },
     /// The scenario refused the resulting `[link]` table (names the scenario's field).
     #[error(transparent)]
-    Scenario(#[from] cdm_core::scenario::ScenarioError),
+    Scenario(#[from] cdm_scenario::ScenarioError),
 }
 
 impl LinkArgs {
@@ -87,8 +87,8 @@ impl LinkArgs {
     /// A bad value is refused naming its flag (or the scenario's field, when it came from there).
     pub fn apply(
         &self,
-        s: &cdm_core::scenario::Scenario,
-    ) -> Result<cdm_core::scenario::Scenario, LinkArgsError> {
+        s: &cdm_scenario::Scenario,
+    ) -> Result<cdm_scenario::Scenario, LinkArgsError> {
         let flags = [
             ("link.delay_ms", "--link-delay-ms", self.link_delay_ms),
             ("link.jitter_ms", "--link-jitter-ms", self.link_jitter_ms),
@@ -99,7 +99,7 @@ impl LinkArgs {
             return Ok(s.clone());
         }
         let old = s.file.link.unwrap_or_default();
-        let spec = cdm_core::link::LinkSpec {
+        let spec = cdm_model::link::LinkSpec {
             delay_ms: self.link_delay_ms.unwrap_or(old.delay_ms),
             jitter_ms: self.link_jitter_ms.unwrap_or(old.jitter_ms),
             loss: self.link_loss.unwrap_or(old.loss),
@@ -126,7 +126,7 @@ impl LinkArgs {
 /// Real time holds every state back by the link delay, so a delay at or beyond the stale bound
 /// would make every neighbour a fault at its first tick: refused up front, naming both.
 pub fn realtime_links_refusal(
-    s: &cdm_core::scenario::Scenario,
+    s: &cdm_scenario::Scenario,
     stale_after: std::time::Duration,
 ) -> Option<String> {
     let delay_ms = s.link_model().spec().delay_ms;

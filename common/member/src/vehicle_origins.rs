@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use cdm_core::math::Vec3;
+use cdm_math::Vec3;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

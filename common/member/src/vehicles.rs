@@ -14,17 +14,17 @@ use cdm_mavlink::{
 
 use crate::member_error::MemberError;
 use crate::vehicle_origins::{OriginsError, VehicleOrigins};
-use cdm_core::formation::Member;
-use cdm_core::math::Vec3;
-use cdm_core::plan::PhaseKind;
-use cdm_core::scenario::Scenario;
+use cdm_math::Vec3;
 use cdm_mavlink::takeoff::Takeoff;
+use cdm_model::formation::Member;
+use cdm_model::plan::PhaseKind;
+use cdm_scenario::Scenario;
 
 pub use cdm_mavlink::{VehicleReport, DEFAULT_BASE_PORT};
 
 /// A member's vehicle report as audit.json records it (angles in degrees).
-pub fn vehicle_figures(r: &VehicleReport) -> cdm_core::audit::VehicleFigures {
-    cdm_core::audit::VehicleFigures {
+pub fn vehicle_figures(r: &VehicleReport) -> cdm_records::audit::VehicleFigures {
+    cdm_records::audit::VehicleFigures {
         setpoints_sent: r.setpoints_sent,
         late_setpoints: r.late_setpoints,
         max_setpoint_late_ms: r.max_late_ms,
@@ -407,7 +407,7 @@ pub fn connect<'a>(
 /// phase ends (its reference position), at most half the scenario's tracking bound delta.
 fn takeoff_of(s: &Scenario, me: &Member, arm: bool) -> Option<Takeoff> {
     let first = s.plan.phases().first()?;
-    let delta_m = cdm_core::audit::SafetyNumbers::of(s).delta_m;
+    let delta_m = cdm_records::audit::SafetyNumbers::of(s).delta_m;
     (arm && first.kind == PhaseKind::Takeoff).then(|| Takeoff::new(me.start, me.position, delta_m))
 }
 

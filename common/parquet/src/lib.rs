@@ -1,4 +1,4 @@
-//! telemetry.parquet: the columns of telemetry.csv (`cdm_core::telemetry::HEADER`) as a Parquet
+//! telemetry.parquet: the columns of telemetry.csv (`cdm_records::telemetry::HEADER`) as a Parquet
 //! file, written and read with the `parquet` and `arrow` crates, so pandas, polars, DuckDB and
 //! pyarrow read it as they are.
 //!
@@ -16,10 +16,10 @@ use std::sync::Arc;
 
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
-use cdm_core::files::describe;
-use cdm_core::formation::Role;
-use cdm_core::math::Vec3;
-use cdm_core::telemetry::{Row, TelemetrySink};
+use cdm_files::describe;
+use cdm_math::Vec3;
+use cdm_model::formation::Role;
+use cdm_records::telemetry::{Row, TelemetrySink};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::arrow_writer::ArrowWriterOptions;
 use parquet::arrow::{add_encoded_arrow_schema_to_metadata, ArrowSchemaConverter, ArrowWriter};

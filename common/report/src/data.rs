@@ -7,14 +7,14 @@ use std::collections::{BTreeMap, VecDeque};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
-use cdm_core::formation::Role;
-use cdm_core::math::{vec3, Real, Vec3};
-use cdm_core::scenario::{Checks, Scenario};
-use cdm_core::telemetry::{Row, TelemetryFormat, HEADER};
+use cdm_math::{vec3, Real, Vec3};
+use cdm_model::formation::Role;
+use cdm_records::margins::{boundary_distance, lambdas_at, living_separation};
+use cdm_records::telemetry::{Row, TelemetryFormat, HEADER};
+use cdm_scenario::{Checks, Scenario};
 
 // The per-tick margins moved to the core (the ROS 2 bag computes them during a run too); named
 // here as before.
-pub use cdm_core::margins::{boundary_distance, lambdas_at, living_separation};
 
 /// A run directory that cannot be read, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -29,7 +29,7 @@ pub enum ReadError {
     Invalid { path: PathBuf, message: String },
     /// Not a regular file, or too large to read whole.
     #[error(transparent)]
-    File(#[from] cdm_core::files::FileError),
+    File(#[from] cdm_files::FileError),
 }
 
 /// The longest telemetry line read (a row is about 250 bytes).
@@ -67,13 +67,13 @@ pub struct AuditNumbers {
     /// Members lost in flight: (id, the first tick without its row in telemetry.csv).
     pub losses: Vec<(u32, u64)>,
     /// What each loss changed, in loss order (audit.json `losses`).
-    pub repairs: Vec<Repair>,
+    pub repairs: Vec<RepairRecord>,
 }
 
 /// One loss as audit.json records it: the followers that switched triangles (eq. 18 weights
 /// of the new triangle) and those left flying their plan.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Repair {
+pub struct RepairRecord {
     pub id: u32,
     /// The first tick the repair applies to.
     pub tick: u64,
@@ -83,7 +83,7 @@ pub struct Repair {
 }
 
 /// audit.json's `losses` list (absent in a run that lost nobody).
-fn read_repairs(v: &serde_json::Value) -> Vec<Repair> {
+fn read_repairs(v: &serde_json::Value) -> Vec<RepairRecord> {
     let ids = |x: &serde_json::Value| -> Vec<u32> {
         x.as_array()
             .map(|a| {
@@ -93,7 +93,7 @@ fn read_repairs(v: &serde_json::Value) -> Vec<Repair> {
             })
             .unwrap_or_default()
     };
-    let one = |l: &serde_json::Value| -> Option<Repair> {
+    let one = |l: &serde_json::Value| -> Option<RepairRecord> {
         let retriangulated = l
             .get("retriangulated")?
             .as_array()?
@@ -104,7 +104,7 @@ fn read_repairs(v: &serde_json::Value) -> Vec<Repair> {
                 Some((id, new))
             })
             .collect();
-        Some(Repair {
+        Some(RepairRecord {
             id: u32::try_from(l.get("id")?.as_u64()?).ok()?,
             tick: l.get("tick")?.as_u64()?,
             retriangulated,
@@ -175,7 +175,7 @@ fn invalid(path: &Path, message: impl Into<String>) -> ReadError {
 
 /// Read audit.json's safety numbers.
 pub fn read_audit(path: &Path) -> Result<AuditNumbers, ReadError> {
-    let text = cdm_core::files::read_input(path, cdm_core::files::MAX_INPUT_BYTES)?;
+    let text = cdm_files::read_input(path, cdm_files::MAX_INPUT_BYTES)?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
     let repairs = read_repairs(&v);
@@ -331,7 +331,10 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
 /// The followers any loss re-triangulated or left flying its plan, as (member index, id, first
 /// tick repaired) in id order. An id audit.json names that the scenario lacks has no row to
 /// draw: skipped.
-fn repaired_members(repairs: &[Repair], index: &BTreeMap<u32, usize>) -> Vec<(usize, u32, u64)> {
+fn repaired_members(
+    repairs: &[RepairRecord],
+    index: &BTreeMap<u32, usize>,
+) -> Vec<(usize, u32, u64)> {
     let mut first: BTreeMap<u32, u64> = BTreeMap::new();
     for r in repairs {
         let ids = r
@@ -379,7 +382,7 @@ pub fn read_telemetry(
         return Ok(parquet);
     }
     let path = dir.join(TelemetryFormat::Csv.file_name());
-    let mut reader = BufReader::with_capacity(1 << 20, cdm_core::files::open_input(&path)?);
+    let mut reader = BufReader::with_capacity(1 << 20, cdm_files::open_input(&path)?);
     let mut line = String::new();
     match next_line(&mut reader, &mut line) {
         Ok(Some(())) if line.trim() == HEADER => {}

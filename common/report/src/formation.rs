@@ -6,14 +6,14 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use cdm_core::formation::Role;
-use cdm_core::math::{Real, Vec3};
+use cdm_math::{Real, Vec3};
+use cdm_model::formation::Role;
 
 use super::data::RunData;
-use super::plot::{e, Figure, FAMILY, GREY, PALETTE};
+use super::plot::{e, DrawError, Figure, FAMILY, GREY, PALETTE};
 
 /// Drawn data: members' roles, edges as member-index pairs, positions at both ends.
-pub struct Formation {
+pub struct FormationFigure {
     roles: Vec<Role>,
     edges: Vec<(usize, usize)>,
     polygon: Vec<usize>,
@@ -24,7 +24,7 @@ pub struct Formation {
     primary_paths: [Vec<Vec3>; 3],
 }
 
-impl Formation {
+impl FormationFigure {
     pub fn new(d: &RunData) -> Self {
         let members = &d.scenario.formation.members;
         let index = |id: u32| members.iter().position(|m| m.id == id);
@@ -38,7 +38,7 @@ impl Formation {
                 }
             }
         }
-        Formation {
+        FormationFigure {
             roles: members.iter().map(|m| m.role).collect(),
             edges,
             polygon: d.scenario.formation.polygon.clone(),
@@ -80,14 +80,14 @@ const ROLE_NAMES: [(Role, &str); 3] = [
     (Role::Follower, "follower"),
 ];
 
-impl Formation {
+impl FormationFigure {
     fn planar<DB: DrawingBackend>(
         &self,
         area: &DrawingArea<DB, Shift>,
         pos: &[Vec3],
         title: &str,
         legend: bool,
-    ) -> Result<(), String> {
+    ) -> Result<(), DrawError> {
         let p = project(pos);
         let Some((xs, ys)) = square_view(&p) else {
             return Ok(());
@@ -159,7 +159,7 @@ impl Formation {
         chart: &mut ChartContext<'_, DB, Plane>,
         p: &[(Real, Real)],
         legend: bool,
-    ) -> Result<(), String> {
+    ) -> Result<(), DrawError> {
         for (role, name) in ROLE_NAMES {
             let (color, size) = style_of(role);
             let pts: Vec<(Real, Real)> = p
@@ -186,7 +186,7 @@ impl Formation {
         Ok(())
     }
 
-    fn view3d<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn view3d<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         let all = self
             .first
             .iter()
@@ -260,13 +260,13 @@ impl Formation {
     }
 }
 
-impl Formation {
+impl FormationFigure {
     /// The team at `pos` in the 3-D view: its graph's edges, then a dot per member by role.
     fn team_3d<DB: DrawingBackend>(
         &self,
         chart: &mut ChartContext<'_, DB, Space>,
         pos: &[Vec3],
-    ) -> Result<(), String> {
+    ) -> Result<(), DrawError> {
         let to3 = |p: &Vec3| (p.x, p.z, p.y);
         let edge_style = GREY.mix(0.5).stroke_width(1);
         chart
@@ -324,12 +324,12 @@ fn square_view(p: &[(Real, Real)]) -> Option<(std::ops::Range<Real>, std::ops::R
     ))
 }
 
-impl Figure for Formation {
+impl Figure for FormationFigure {
     fn size(&self) -> (u32, u32) {
         (1560, 540)
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         let areas = root.split_evenly((1, 3));
         self.planar(
             &areas[0],

@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::SeriesLabelPosition;
 
-use cdm_core::math::Real;
-use cdm_core::rundir::write_atomic;
+use cdm_math::Real;
+use cdm_records::rundir::write_atomic;
 
 pub use data::{read_run, ReadError, RunData};
 pub use plot::FigureError;
@@ -50,7 +50,7 @@ fn draw_all(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
     files.extend(write_figure(
         dir,
         "fig_formation",
-        &formation::Formation::new(d),
+        &formation::FormationFigure::new(d),
     )?);
     Ok(files)
 }

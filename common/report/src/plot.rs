@@ -8,8 +8,8 @@ use std::sync::OnceLock;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use cdm_core::math::Real;
-use cdm_core::rundir::write_atomic;
+use cdm_math::Real;
+use cdm_records::rundir::write_atomic;
 
 /// DejaVu Sans (assets/DejaVuSans-LICENSE.txt: Bitstream Vera license, redistributable).
 const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
@@ -28,9 +28,15 @@ pub const PALETTE: [RGBColor; 6] = [
 pub const LIMIT: RGBColor = RGBColor(200, 0, 0);
 pub const GREY: RGBColor = RGBColor(150, 150, 150);
 
-/// A drawing failure as text (plotters' errors are generic over the backend).
-pub fn e(x: impl std::fmt::Display) -> String {
-    x.to_string()
+/// A drawing failure. plotters' errors are generic over the backend (SVG, bitmap), so one type
+/// carries any of them, as its message.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct DrawError(String);
+
+/// Any backend's drawing failure as a [`DrawError`].
+pub fn e(x: impl std::fmt::Display) -> DrawError {
+    DrawError(x.to_string())
 }
 
 /// Why a figure could not be made (each variant names the file).
@@ -39,9 +45,13 @@ pub enum FigureError {
     /// The embedded font could not be registered with plotters.
     #[error("the embedded font DejaVuSans.ttf could not be loaded")]
     Font,
-    /// Drawing failed. plotters' errors are generic over the backend, so they travel as text.
+    /// Drawing failed.
     #[error("{}: {detail}", file.display())]
-    Draw { file: PathBuf, detail: String },
+    Draw {
+        file: PathBuf,
+        #[source]
+        detail: DrawError,
+    },
     /// The PNG encoder refused the image.
     #[error("{}: {source}", file.display())]
     Png {
@@ -51,7 +61,7 @@ pub enum FigureError {
     },
     /// Writing the file failed (names the file).
     #[error(transparent)]
-    Write(#[from] cdm_core::rundir::RunDirError),
+    Write(#[from] cdm_records::rundir::RunDirError),
 }
 
 /// Register the font once per process.
@@ -70,7 +80,7 @@ pub fn ensure_font() -> Result<(), FigureError> {
 pub trait Figure {
     /// Pixel size of the PNG (and the SVG's view box).
     fn size(&self) -> (u32, u32);
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError>;
 }
 
 /// Write `<stem>.svg` and `<stem>.png` into `dir`; returns both paths. Both are drawn in memory
@@ -84,7 +94,7 @@ pub fn write_figure<F: Figure>(
     ensure_font()?;
     let svg = dir.join(format!("{stem}.svg"));
     let png = dir.join(format!("{stem}.png"));
-    let named = |p: &Path, detail: String| FigureError::Draw {
+    let named = |p: &Path, detail: DrawError| FigureError::Draw {
         file: p.to_path_buf(),
         detail,
     };
@@ -184,7 +194,7 @@ impl Panel {
     }
 
     /// Draw the panel on an area.
-    pub fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    pub fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         let (x0, x1) = self.x_range();
         let (y0, y1) = self.y_range();
         let mut builder = ChartBuilder::on(area);
@@ -206,7 +216,7 @@ impl Panel {
                     .light_line_style(WHITE.mix(0.0))
                     .draw()
                     .map_err(e)?;
-                self.series(&mut chart, (x0, x1), (y0, y1))
+                self.series(&mut chart, x0..x1, y0..y1)
             }};
         }
         if self.log_y {
@@ -219,9 +229,9 @@ impl Panel {
     fn series<'a, DB, X, Y>(
         &self,
         chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
-        (x0, x1): (Real, Real),
-        (y0, y1): (Real, Real),
-    ) -> Result<(), String>
+        x: std::ops::Range<Real>,
+        y: std::ops::Range<Real>,
+    ) -> Result<(), DrawError>
     where
         DB: DrawingBackend + 'a,
         X: Ranged<ValueType = Real>,
@@ -256,9 +266,9 @@ impl Panel {
         }
         for r in &self.rules {
             let pts = if r.vertical {
-                vec![(r.at, y0), (r.at, y1)]
+                vec![(r.at, y.start), (r.at, y.end)]
             } else {
-                vec![(x0, r.at), (x1, r.at)]
+                vec![(x.start, r.at), (x.end, r.at)]
             };
             let color = r.color;
             chart
@@ -292,7 +302,7 @@ impl Figure for Stack {
         (self.width, self.panel_height * self.panels.len() as u32)
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         let areas = root.split_evenly((self.panels.len(), 1));
         for (p, a) in self.panels.iter().zip(&areas) {
             p.draw(a)?;

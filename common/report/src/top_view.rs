@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use cdm_core::math::{Real, Vec3};
+use cdm_math::{Real, Vec3};
 
-use super::plot::{e, write_figure, Figure, FAMILY, GREY, PALETTE};
+use super::plot::{e, write_figure, DrawError, Figure, FAMILY, GREY, PALETTE};
 
 /// One member's path from above.
 pub struct TopPath {
@@ -50,7 +50,7 @@ impl Figure for TopView {
         (820, 820)
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         let (cx, cy, span) = self.square();
         let mut chart = ChartBuilder::on(root)
             .caption(&self.title, (FAMILY, 18))

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::SeriesLabelPosition;
 
-use cdm_core::math::Real;
+use cdm_math::Real;
 
 use super::data::{RunData, Transient};
 use super::plot::{thin, write_figure, FigureError, Line, Panel, Rule, Stack, GREY, PALETTE};

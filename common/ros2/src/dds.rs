@@ -121,10 +121,10 @@ mod tests {
     use ros2_client::dds::rustdds::no_key::SerializerAdapter;
     use ros2_client::dds::rustdds::CDRSerializerAdapter;
 
-    use cdm_core::audit::SafetyNumbers;
-    use cdm_core::math::Vec3;
-    use cdm_core::scenario::Scenario;
+    use cdm_math::Vec3;
+    use cdm_records::audit::SafetyNumbers;
     use cdm_rosbag::{Limits, Team, Tick};
+    use cdm_scenario::Scenario;
 
     use super::*;
 

@@ -7,10 +7,10 @@ use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::SafetyNumbers;
-use cdm_core::math::Vec3;
-use cdm_core::scenario::Scenario;
+use cdm_math::Vec3;
+use cdm_records::audit::SafetyNumbers;
 use cdm_rosbag::{Limits, Team, Tick};
+use cdm_scenario::Scenario;
 
 use crate::pace::Pacer;
 use crate::{Backend, Env, Publish, Ros2Error, Ros2Options};

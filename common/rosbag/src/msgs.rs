@@ -3,7 +3,7 @@
 //! encoding. Layouts are those of Humble's current interfaces, which Iron and Jazzy share
 //! (visualization_msgs/Marker with its texture and mesh_file fields).
 
-use cdm_core::math::Vec3;
+use cdm_math::Vec3;
 
 use crate::cdr::Cdr;
 

@@ -5,10 +5,10 @@ use std::collections::BTreeMap;
 use std::io;
 use std::path::Path;
 
-use cdm_core::audit::SafetyNumbers;
-use cdm_core::math::Vec3;
-use cdm_core::scenario::Scenario;
-use cdm_core::telemetry::{Row, TelemetrySink};
+use cdm_math::Vec3;
+use cdm_records::audit::SafetyNumbers;
+use cdm_records::telemetry::{Row, TelemetrySink};
+use cdm_scenario::Scenario;
 
 use crate::bag::{BagError, BagWriter};
 use crate::tick::{Limits, Message, Team, Tick};

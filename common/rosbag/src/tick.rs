@@ -4,11 +4,12 @@
 
 use serde_json::json;
 
-use cdm_core::audit::SafetyNumbers;
-use cdm_core::formation::Role;
-use cdm_core::margins::{boundary_distance, lambdas_at, living_separation, max_deviation};
-use cdm_core::math::{Real, Vec3};
-use cdm_core::scenario::{Scenario, Shape};
+use cdm_math::{Real, Vec3};
+use cdm_model::airspace::Shape;
+use cdm_model::formation::Role;
+use cdm_records::audit::SafetyNumbers;
+use cdm_records::margins::{boundary_distance, lambdas_at, living_separation, max_deviation};
+use cdm_scenario::Scenario;
 
 use crate::msgs::{self, Marker, MsgType, Rgba, Stamp};
 

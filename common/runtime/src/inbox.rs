@@ -2,7 +2,7 @@
 
 use std::collections::VecDeque;
 
-use cdm_core::dynamics::Flat;
+use cdm_model::dynamics::Flat;
 
 /// A neighbour publishes its ticks in order, so states are appended and taken from the front: no
 /// allocation per tick (a `BTreeMap` here took a sixth of a member's time at N = 40).

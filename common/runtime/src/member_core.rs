@@ -6,7 +6,7 @@
 //!
 //! One core, two timings ([`Timing`]): in lockstep ([`crate::member_lockstep`]) the orchestrator
 //! grants ticks and a follower waits for its in-neighbours' states of each tick (over the link
-//! model of `cdm_core::link`); in real time ([`crate::realtime`]) the wall clock with this
+//! model of `cdm_model::link`); in real time ([`crate::realtime`]) the wall clock with this
 //! member's phase offset says when a tick is due, and a follower flies on the newest state it
 //! has of each in-neighbour. What both do alike lives here: the scenario check and the stop of
 //! a clock message, which states are an in-neighbour's, the orchestrator watch and the pending
@@ -14,8 +14,8 @@
 
 use std::time::Duration;
 
-use cdm_core::formation::Member;
-use cdm_core::step::{law_for, Law, StepFault};
+use cdm_model::formation::Member;
+use cdm_model::step::{law_for, Law, StepFault};
 
 use crate::member_watch::{report_fault, Watch};
 use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};

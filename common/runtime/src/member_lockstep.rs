@@ -3,7 +3,7 @@
 //! in-neighbours' tick-k states are in (ARCHITECTURE.md). Every state carries its tick, so a
 //! neighbour that runs ahead is buffered, never confused. Every wait has a deadline.
 //!
-//! Over imperfect links (`cdm_core::link`, set by [`MemberCore::with_links`]) tick k + 1 waits
+//! Over imperfect links (`cdm_model::link`, set by [`MemberCore::with_links`]) tick k + 1 waits
 //! only for the in-neighbours' states that may be usable at k (those of tick k - min delay),
 //! and the follower flies on the newest state of each that the link model delivered, brought to
 //! t_k: the same [`LinkModel::hear`] the engine calls, so both fly the same bits. Loss notices
@@ -11,11 +11,11 @@
 
 use std::time::Duration;
 
-use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::formation::Member;
-use cdm_core::link::{Heard, LinkModel};
-use cdm_core::math::Real;
-use cdm_core::step::{law_for, Law, NeighborModel, StepConfig};
+use cdm_math::Real;
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::formation::Member;
+use cdm_model::link::{Heard, LinkModel};
+use cdm_model::step::{law_for, Law, NeighborModel, StepConfig};
 
 use crate::inbox::Inbox;
 use crate::member_core::{Action, Deadlines, MemberCore, MemberFault, Shared, Timing, Wiring};

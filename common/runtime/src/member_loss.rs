@@ -1,15 +1,15 @@
 //! A member's side of losing a team-mate, with no I/O: it takes the orchestrator's loss notices
 //! (on the clock channel), keeps the run's [`LossLog`], and says which ports to open and from
 //! which tick to fly which link. The repair is computed here, locally, by the same function as
-//! `simulate` (`cdm_core::repair::repair` over the whole lost set), so no link travels on the wire.
+//! `simulate` (`cdm_model::repair::repair` over the whole lost set), so no link travels on the wire.
 //!
 //! Timing (as `simulate`): member k lost after its tick-L state; its readers use that state for
 //! their tick-L step and fly the repaired link from tick L + 1 = the notice's tick.
 
 use std::collections::BTreeSet;
 
-use cdm_core::formation::{Formation, Member};
-use cdm_core::loss_log::LossLog;
+use cdm_model::formation::{Formation, Member};
+use cdm_records::loss_log::LossLog;
 
 use crate::inbox::Inbox;
 use crate::messages::LossNotice;
@@ -160,7 +160,7 @@ impl MemberLosses {
     }
 
     /// Where member `id` started (the scenario's start), if it is in the team.
-    pub(crate) fn start_of(&self, id: u32) -> Option<cdm_core::math::Vec3> {
+    pub(crate) fn start_of(&self, id: u32) -> Option<cdm_math::Vec3> {
         self.notices.log().original().member(id).map(|m| m.start)
     }
 
@@ -170,7 +170,7 @@ impl MemberLosses {
     }
 
     /// Keeps a future in-neighbour's state.
-    pub(crate) fn keep(&mut self, id: u32, tick: u64, state: cdm_core::dynamics::Flat) {
+    pub(crate) fn keep(&mut self, id: u32, tick: u64, state: cdm_model::dynamics::Flat) {
         self.kept(id).insert(tick, state);
     }
 
@@ -179,7 +179,7 @@ impl MemberLosses {
     pub(crate) fn keep_last(
         &mut self,
         id: u32,
-        (tick, state): (u64, cdm_core::dynamics::Flat),
+        (tick, state): (u64, cdm_model::dynamics::Flat),
         count: u64,
     ) {
         let kept = self.kept(id);
@@ -193,7 +193,7 @@ impl MemberLosses {
     pub(crate) fn kept_states(
         &self,
         id: u32,
-    ) -> impl Iterator<Item = (u64, cdm_core::dynamics::Flat)> + '_ {
+    ) -> impl Iterator<Item = (u64, cdm_model::dynamics::Flat)> + '_ {
         let kept = self.ahead.iter().find(|(j, _)| *j == id).map(|(_, k)| k);
         kept.into_iter().flat_map(|k| k.upto(u64::MAX))
     }
@@ -291,7 +291,7 @@ impl MemberLosses {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cdm_core::scenario::Scenario;
+    use cdm_scenario::Scenario;
 
     fn setup(s: &Scenario, id: u32) -> MemberLosses {
         let me = s.formation.member(id).unwrap();
@@ -318,9 +318,9 @@ mod tests {
         let Some(LossWork::Connect { subscribe, .. }) = m.next_work() else {
             panic!("no connect");
         };
-        let r = cdm_core::repair::repair(
+        let r = cdm_model::repair::repair(
             &s.formation,
-            cdm_core::graph::DEFAULT_WEIGHT_FLOOR,
+            cdm_model::graph::DEFAULT_WEIGHT_FLOOR,
             &[lost].into(),
         );
         let new = r.formation.member(reader).unwrap().clone();
@@ -356,9 +356,9 @@ mod tests {
     fn a_new_in_neighbour_running_ahead_of_the_loss_still_notifies_its_new_reader() {
         let s = Scenario::builtin("paper40").unwrap();
         let lost = s.formation.members[0].id;
-        let r = cdm_core::repair::repair(
+        let r = cdm_model::repair::repair(
             &s.formation,
-            cdm_core::graph::DEFAULT_WEIGHT_FLOOR,
+            cdm_model::graph::DEFAULT_WEIGHT_FLOOR,
             &[lost].into(),
         );
         let x = r.retriangulated[0];
@@ -480,7 +480,7 @@ mod tests {
 #[cfg(test)]
 mod sequence_tests {
     use super::*;
-    use cdm_core::scenario::Scenario;
+    use cdm_scenario::Scenario;
 
     #[test]
     fn a_reader_of_the_second_loss_is_not_late_because_of_the_first() {

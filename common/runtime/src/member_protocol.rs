@@ -6,7 +6,7 @@
 use std::fmt;
 use std::time::Duration;
 
-use cdm_core::step::StepFault;
+use cdm_model::step::StepFault;
 
 use crate::member_loss::{LossFault, LossWork};
 use crate::messages::StateMsg;

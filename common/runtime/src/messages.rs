@@ -216,8 +216,8 @@ impl FaultCode {
 
     /// The kind audit.json records for a member that reported this code (the same kind as
     /// `simulate` records for a controller fault).
-    pub fn kind(self) -> cdm_core::outcome::FaultKind {
-        use cdm_core::outcome::FaultKind;
+    pub fn kind(self) -> cdm_model::outcome::FaultKind {
+        use cdm_model::outcome::FaultKind;
         match self {
             FaultCode::Control => FaultKind::Control,
             FaultCode::VehicleLost | FaultCode::VehicleMode | FaultCode::VehicleDisarmed => {
@@ -527,7 +527,7 @@ mod tests {
             let code = FaultCode::of_vehicle(loss);
             assert_eq!(code.code(), wire);
             assert_eq!(FaultCode::from_code(wire), Some(code));
-            assert_eq!(code.kind(), cdm_core::outcome::FaultKind::VehicleLost);
+            assert_eq!(code.kind(), cdm_model::outcome::FaultKind::VehicleLost);
         }
     }
 

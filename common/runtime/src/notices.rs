@@ -9,7 +9,7 @@
 //! changed. A notice number that jumps means a notice was missed, and the lost set (hence the
 //! graph) would silently differ from everyone else's: it is an error, never skipped.
 
-use cdm_core::loss_log::LossLog;
+use cdm_records::loss_log::LossLog;
 
 use crate::messages::LossNotice;
 
@@ -90,7 +90,7 @@ impl Notices {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cdm_core::scenario::Scenario;
+    use cdm_scenario::Scenario;
 
     fn notice(seq: u32, id: u32, tick: u64, linked: u32) -> LossNotice {
         LossNotice {

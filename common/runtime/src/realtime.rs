@@ -28,11 +28,11 @@
 
 use std::time::Duration;
 
-use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::formation::Member;
-use cdm_core::link::{splitmix64, LinkModel};
-use cdm_core::math::Vec3;
-use cdm_core::step::{extrapolate_flat, NeighborModel, TickAt};
+use cdm_math::Vec3;
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::formation::Member;
+use cdm_model::link::{splitmix64, LinkModel};
+use cdm_model::step::{extrapolate_flat, NeighborModel, TickAt};
 
 use crate::member_core::{
     in_neighbors, Action, Deadlines, MemberCore, MemberFault, Shared, Timing, Wiring,

@@ -1,7 +1,7 @@
 //! Imperfect links on real deliveries (`--realtime` with `--link-delay-ms`, `--link-jitter-ms`,
 //! `--link-loss`, `--seed`), as a plain type with no I/O or clock of its own.
 //!
-//! The draws are lockstep's (`cdm_core::link`): the state sampled at its sender's tick m on link
+//! The draws are lockstep's (`cdm_model::link`): the state sampled at its sender's tick m on link
 //! j -> i is lost with probability P, else delayed by `delay_ms + u * jitter_ms`, both drawn from
 //! the seeded generator keyed by (seed, j, i, m). Lockstep rounds that delay to whole ticks; in
 //! real time it is milliseconds of wall time, unrounded: a state received over the transport is
@@ -13,8 +13,8 @@
 
 use std::collections::VecDeque;
 
-use cdm_core::dynamics::Flat;
-use cdm_core::link::LinkModel;
+use cdm_model::dynamics::Flat;
+use cdm_model::link::LinkModel;
 
 /// A received state not yet usable.
 #[derive(Debug, Clone, Copy)]
@@ -124,8 +124,8 @@ impl DelayLine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cdm_core::link::LinkSpec;
-    use cdm_core::math::Vec3;
+    use cdm_math::Vec3;
+    use cdm_model::link::LinkSpec;
 
     const DT: f64 = 0.01;
 

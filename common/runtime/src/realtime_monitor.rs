@@ -5,10 +5,10 @@
 
 use std::collections::VecDeque;
 
-use cdm_core::audit::{RealtimeFigures, SlowMember};
-use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::math::Vec3;
-use cdm_core::step::{extrapolate_flat, NeighborModel};
+use cdm_math::Vec3;
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::step::{extrapolate_flat, NeighborModel};
+use cdm_records::audit::{RealtimeFigures, SlowMember};
 
 use crate::messages::{AgentStatus, FaultCode, StateMsg};
 use crate::realtime::{phase_offset_s, stamp_s, Pacing, PacingFigures};

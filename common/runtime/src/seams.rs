@@ -5,10 +5,10 @@
 use std::fmt;
 use std::time::{Duration, Instant};
 
-use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::formation::Member;
-use cdm_core::plan::TeamPlan;
-use cdm_core::step::{law_for, step_at, Law, StepConfig, StepFault, TickAt};
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::formation::Member;
+use cdm_model::plan::TeamPlan;
+use cdm_model::step::{law_for, step_at, Law, StepConfig, StepFault, TickAt};
 
 use crate::messages::{ClockMsg, StateMsg};
 

@@ -7,8 +7,8 @@
 
 use std::time::Duration;
 
-use cdm_core::audit::FaultRecord;
-use cdm_core::outcome::FaultKind;
+use cdm_model::outcome::FaultKind;
+use cdm_records::audit::FaultRecord;
 
 /// A gap between two turns of the loop that counts as a stall of the orchestrator itself.
 pub const STALL_MIN: Duration = Duration::from_secs(2);

@@ -13,7 +13,7 @@
 
 use std::time::Duration;
 
-use cdm_core::audit::FaultRecord;
+use cdm_records::audit::FaultRecord;
 
 use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
 use crate::stall::StallWatch;

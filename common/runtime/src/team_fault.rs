@@ -6,8 +6,8 @@
 use std::fmt;
 use std::time::Duration;
 
-use cdm_core::audit::FaultRecord;
-use cdm_core::outcome::FaultKind;
+use cdm_model::outcome::FaultKind;
+use cdm_records::audit::FaultRecord;
 
 use crate::messages::{FaultCode, StopReason};
 

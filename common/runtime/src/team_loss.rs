@@ -9,9 +9,9 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-use cdm_core::loss_log::LossLog;
-pub use cdm_core::outcome::LossCause;
-use cdm_core::scenario::Scenario;
+pub use cdm_model::outcome::LossCause;
+use cdm_records::loss_log::LossLog;
+use cdm_scenario::Scenario;
 
 use crate::messages::{FaultCode, LossNotice};
 
@@ -117,7 +117,7 @@ impl TeamLosses {
             announced: 0,
             linked: 0,
             linking: None,
-            connected: cdm_core::loss_log::links(&s.formation, &BTreeSet::new()),
+            connected: cdm_records::loss_log::links(&s.formation, &BTreeSet::new()),
             seen: vec![None; s.formation.members.len()],
         }
     }

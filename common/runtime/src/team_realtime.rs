@@ -1,7 +1,7 @@
 //! The orchestrator's side of a real-time flight as a plain type, with no I/O, the counterpart
 //! of [`crate::team_core::TeamCore`]: events in (a member's state or report, a member process
 //! seen exited, an interrupt, "now" from a clock the caller drives), actions out (audit and
-//! write an instant through `cdm_core::record::TickRecorder`, check the processes, flush, wait,
+//! write an instant through `cdm_records::record::TickRecorder`, check the processes, flush, wait,
 //! finish, stop with a fault). The loop around it (`orchestrator/src/realtime.rs`) owns the
 //! ports, the processes and the files.
 //!
@@ -312,8 +312,8 @@ impl RealtimeTeam {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cdm_core::math::Vec3;
-    use cdm_core::outcome::FaultKind;
+    use cdm_math::Vec3;
+    use cdm_model::outcome::FaultKind;
 
     use crate::messages::{AgentStatus, StopReason};
 

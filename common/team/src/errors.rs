@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
-use cdm_core::export::SplitError;
 use cdm_iox::TransportError;
+use cdm_trajectory::SplitError;
 
 /// A failure of a command that no library error describes alone.
 #[derive(Debug, thiserror::Error)]

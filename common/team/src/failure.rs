@@ -53,8 +53,8 @@ impl Failure {
 
 /// A run directory that cannot be used: a full disk is a runtime fault (exit 3), anything else
 /// (a file in the way, permissions) bad input.
-impl From<cdm_core::rundir::RunDirError> for Failure {
-    fn from(e: cdm_core::rundir::RunDirError) -> Self {
+impl From<cdm_records::rundir::RunDirError> for Failure {
+    fn from(e: cdm_records::rundir::RunDirError) -> Self {
         if e.is_disk_full() {
             Failure::fault(e)
         } else {

@@ -4,11 +4,11 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use cdm_core::loss::LossSchedule;
-use cdm_core::loss_log::LossLog;
-use cdm_core::repair::{repair_in_order, synthesis_order};
-use cdm_core::scenario::Scenario;
+use cdm_engine::loss::LossSchedule;
 use cdm_iox::RepairRoom;
+use cdm_model::repair::{repair_in_order, synthesis_order};
+use cdm_records::loss_log::LossLog;
+use cdm_scenario::Scenario;
 
 use crate::team::Spawned;
 
@@ -43,7 +43,7 @@ pub fn repair_room(s: &Scenario, window: u32) -> RepairRoom {
     let floor = s
         .file
         .weight_floor
-        .unwrap_or(cdm_core::graph::DEFAULT_WEIGHT_FLOOR);
+        .unwrap_or(cdm_model::graph::DEFAULT_WEIGHT_FLOOR);
     let order = synthesis_order(&s.formation);
     // A member nobody reads changes no link when it is lost: only the others need a repair
     // (three quarters of them at N = 1000).
@@ -170,7 +170,7 @@ fn loss_orders(group: &[u32]) -> Vec<Vec<(u32, u64)>> {
     }
     for seed in 0..SHUFFLES {
         let mut ids = ascending.clone();
-        let draw = |k: u64| cdm_core::link::splitmix64(seed.wrapping_mul(1 << 32) ^ k);
+        let draw = |k: u64| cdm_model::link::splitmix64(seed.wrapping_mul(1 << 32) ^ k);
         // Fisher-Yates, then ticks that stay put or step by one at random (ties: one epoch).
         for k in (1..ids.len()).rev() {
             ids.swap(k, (draw(k as u64) % (k as u64 + 1)) as usize);
@@ -191,7 +191,7 @@ fn loss_orders(group: &[u32]) -> Vec<Vec<(u32, u64)>> {
 fn most_gained(
     s: &Scenario,
     floor: f64,
-    order: &[(u32, cdm_core::math::Vec2)],
+    order: &[(u32, cdm_math::Vec2)],
     lost_one_by_one: &[u32],
 ) -> BTreeMap<u32, usize> {
     let mut most: BTreeMap<u32, usize> = BTreeMap::new();
@@ -251,7 +251,7 @@ mod tests {
     #[test]
     fn members_nobody_reads_need_no_repair() {
         let s = Scenario::generated(80).unwrap();
-        let floor = cdm_core::graph::DEFAULT_WEIGHT_FLOOR;
+        let floor = cdm_model::graph::DEFAULT_WEIGHT_FLOOR;
         let order = synthesis_order(&s.formation);
         let all: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
         let most = most_gained(&s, floor, &order, &all);

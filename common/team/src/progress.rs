@@ -5,7 +5,7 @@
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::AuditReport;
+use cdm_records::audit::AuditReport;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Seconds between plain log lines when stderr is not a terminal.

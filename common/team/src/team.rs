@@ -5,12 +5,12 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::FaultRecord;
-use cdm_core::formation::Role;
-use cdm_core::outcome::FaultKind;
-use cdm_core::scenario::Scenario;
 use cdm_iox::{remove_dead_nodes, OrchestratorPorts, TeamName};
+use cdm_model::formation::Role;
+use cdm_model::outcome::FaultKind;
+use cdm_records::audit::FaultRecord;
 use cdm_runtime::messages::{ClockMsg, StopReason};
+use cdm_scenario::Scenario;
 
 use crate::Failure;
 

@@ -6,9 +6,9 @@
 use std::io;
 use std::path::Path;
 
-use cdm_core::rundir::{RunDir, RunDirError};
-use cdm_core::scenario::Scenario;
-use cdm_core::telemetry::{TelemetryFormat, TelemetrySink};
+use cdm_records::rundir::{RunDir, RunDirError};
+use cdm_records::telemetry::{TelemetryFormat, TelemetrySink};
+use cdm_scenario::Scenario;
 
 use crate::Failure;
 
@@ -87,7 +87,7 @@ impl<A: TelemetrySink, B: TelemetrySink> TelemetrySink for Both<A, B> {
         self.0.keeps(tick)
     }
 
-    fn write_tick(&mut self, rows: &[cdm_core::telemetry::Row]) -> io::Result<()> {
+    fn write_tick(&mut self, rows: &[cdm_records::telemetry::Row]) -> io::Result<()> {
         self.0.write_tick(rows)?;
         self.1.write_tick(rows)
     }

@@ -15,7 +15,7 @@ use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
-use cdm_core::telemetry::{Row, TelemetrySink};
+use cdm_records::telemetry::{Row, TelemetrySink};
 
 /// Rows queued at most (whole ticks; at least [`MIN_TICKS`] of them).
 const QUEUE_ROWS: usize = 1 << 16;
@@ -162,17 +162,17 @@ impl Drop for ThreadedSink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cdm_core::telemetry::{Rewind, TelemetryWriter};
+    use cdm_records::telemetry::{Rewind, TelemetryWriter};
 
     fn row(tick: u64, id: u32) -> Row {
         Row {
             tick,
             t_s: tick as f64 * 0.01,
             id,
-            role: cdm_core::formation::Role::Follower,
-            r: cdm_core::math::Vec3::new(1.0, 2.0, 3.0),
-            v: cdm_core::math::Vec3::zeros(),
-            ht: cdm_core::math::Vec3::new(0.1, 0.2, 0.3),
+            role: cdm_model::formation::Role::Follower,
+            r: cdm_math::Vec3::new(1.0, 2.0, 3.0),
+            v: cdm_math::Vec3::zeros(),
+            ht: cdm_math::Vec3::new(0.1, 0.2, 0.3),
         }
     }
 

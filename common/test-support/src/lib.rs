@@ -1,4 +1,4 @@
-//! Test-only helpers shared by the integration tests of cdm-core and cdm-iox (a dev-dependency
+//! Test-only helpers shared by the integration tests of cdm-scenario and cdm-iox (a dev-dependency
 //! only: nothing ships with it).
 
 use std::sync::mpsc;

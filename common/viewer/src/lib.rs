@@ -12,7 +12,7 @@ mod serve;
 
 use std::path::{Path, PathBuf};
 
-use cdm_core::scenario::{Checks, Scenario};
+use cdm_scenario::{Checks, Scenario};
 
 use cdm_report::data::{read_audit, read_timeline, stream_ticks, ReadError};
 use scene::{frame_stride, Scene, ShownTickMaker};
@@ -35,7 +35,7 @@ pub enum ViewerError {
     #[error(transparent)]
     Read(#[from] ReadError),
     #[error(transparent)]
-    Write(#[from] cdm_core::rundir::RunDirError),
+    Write(#[from] cdm_records::rundir::RunDirError),
 }
 
 /// The whole run, decimated to [`REPLAY_BUDGET_BYTES`] (the last tick is always kept).
@@ -105,6 +105,6 @@ pub fn page(scene: Option<&Scene>) -> String {
 pub fn write_replay(dir: &Path) -> Result<PathBuf, ViewerError> {
     let scene = replay_scene(dir)?;
     let path = dir.join("replay.html");
-    cdm_core::rundir::write_atomic(&path, page(Some(&scene)).as_bytes())?;
+    cdm_records::rundir::write_atomic(&path, page(Some(&scene)).as_bytes())?;
     Ok(path)
 }

@@ -5,9 +5,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use cdm_core::audit::{AuditReport, SafetyNumbers};
-use cdm_core::math::Vec3;
-use cdm_core::scenario::Scenario;
+use cdm_math::Vec3;
+use cdm_records::audit::{AuditReport, SafetyNumbers};
+use cdm_scenario::Scenario;
 
 use super::scene::{Scene, ShownTickMaker};
 use super::serve::{serve_page, Hub, ServeError, Server};

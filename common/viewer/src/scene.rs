@@ -4,13 +4,12 @@
 
 use serde::Serialize;
 
-use cdm_core::formation::Role;
-use cdm_core::math::Real;
-use cdm_core::scenario::{GeofenceSpec, ObstacleSpec, Scenario};
+use cdm_math::Real;
+use cdm_model::formation::Role;
+use cdm_scenario::{GeofenceSpec, ObstacleSpec, Scenario};
 
-use cdm_report::data::{
-    boundary_distance, lambdas_at, living_separation, Repair, TickPositions, ViolationMark,
-};
+use cdm_records::margins::{boundary_distance, lambdas_at, living_separation};
+use cdm_report::data::{RepairRecord, TickPositions, ViolationMark};
 
 /// One member as the viewer lists it.
 #[derive(Debug, Clone, Serialize)]
@@ -155,7 +154,7 @@ impl Scene {
     /// Adds the graph each loss left (audit.json's repairs, in loss order): the lost member
     /// reads nobody any more, a re-triangulated follower reads its new triangle (eq. 18) and a
     /// degraded one, flying its plan, nobody. Ids the scenario lacks are skipped.
-    pub fn with_repairs(mut self, s: &Scenario, repairs: &[Repair]) -> Self {
+    pub fn with_repairs(mut self, s: &Scenario, repairs: &[RepairRecord]) -> Self {
         let members = &s.formation.members;
         let index = |id: u32| members.iter().position(|m| m.id == id);
         let mut reads: Vec<Vec<usize>> = members
@@ -309,7 +308,7 @@ mod tests {
             .iter()
             .find(|m| m.role == Role::Follower && m.id != reader.id)
             .expect("another follower");
-        let repair = Repair {
+        let repair = RepairRecord {
             id: lost.id,
             tick: 77,
             retriangulated: vec![(reader.id, [2, 3, 4])],

@@ -12,9 +12,9 @@
 use std::process::ExitCode;
 use std::time::Instant;
 
-use cdm_core::engine::quad_engine;
-use cdm_core::scenario::Scenario;
+use cdm_engine::engine::quad_engine;
 use cdm_iox::bench_barrier::{barrier, barrier_member};
+use cdm_scenario::Scenario;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]

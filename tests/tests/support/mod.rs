@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use cdm_core::formation::Role;
-use cdm_core::scenario::ScenarioFile;
 use cdm_iox::TeamName;
+use cdm_model::formation::Role;
+use cdm_scenario::ScenarioFile;
 use integration_tests::{bin, describe, Running};
 use serde_json::Value;
 
@@ -549,10 +549,10 @@ pub const SEGMENT_3: [[f64; 3]; 3] = [
 /// descent (60 s), two more segments (30 s each after 1 s), land (30 s after 1 s): 194 s, and
 /// 10 s more on the ground while the followers come to rest.
 pub fn mission() -> ScenarioFile {
-    let mut f = cdm_core::scenario::generated(10).expect("ten agents generate");
+    let mut f = cdm_scenario::generated(10).expect("ten agents generate");
     f.name = "mission10".into();
     f.t_total_s = 60.0;
-    let ground = |t_s| cdm_core::scenario::GroundSpec {
+    let ground = |t_s| cdm_scenario::GroundSpec {
         ground_z_m: GROUND_Z,
         t_s,
         hold_s: Some(1.0),
@@ -560,7 +560,7 @@ pub fn mission() -> ScenarioFile {
     f.takeoff = Some(ground(40.0));
     f.segments = [SEGMENT_2, SEGMENT_3]
         .into_iter()
-        .map(|g| cdm_core::scenario::SegmentSpec {
+        .map(|g| cdm_scenario::SegmentSpec {
             hold_s: Some(1.0),
             t_s: 30.0,
             goals: g.to_vec(),

@@ -5,16 +5,16 @@ use std::cell::Cell;
 use std::collections::VecDeque;
 use std::sync::atomic::AtomicBool;
 
-use cdm_core::control::ControlFault;
-use cdm_core::formation::{Link, Member, Role};
-use cdm_core::math::{Vec2, Vec3};
+use cdm_math::{Vec2, Vec3};
+use cdm_model::control::ControlFault;
+use cdm_model::formation::{Link, Member, Role};
 
 use super::*;
 use crate::member_core::{Finished, ALIVE_CHECK};
 use crate::member_loop::{fly, LoopError};
 use crate::messages::{StopReason, STATUS_FAULT};
 use crate::seams::{Clock, MemberTransport, VehicleFault};
-use cdm_core::step::StepFault;
+use cdm_model::step::StepFault;
 
 const HASH: u64 = 0xc0ffee;
 const LAST: u64 = 100;
@@ -452,7 +452,7 @@ fn the_loop_flies_a_leader_to_the_stop_and_notices_a_lost_orchestrator() {
 /// still in flight), not taken for a gap.
 #[test]
 fn delayed_links_wait_only_for_the_states_usable_at_the_tick() {
-    use cdm_core::link::{LinkModel, LinkSpec};
+    use cdm_model::link::{LinkModel, LinkSpec};
     let spec = LinkSpec {
         delay_ms: 20.0,
         ..LinkSpec::default()

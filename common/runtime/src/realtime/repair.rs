@@ -11,9 +11,9 @@
 //! is followed as if at T, and the link switches at the next tick it flies: later, logged, the
 //! same link.
 
-use cdm_core::dynamics::{Flat, QuadState};
-use cdm_core::formation::Member;
-use cdm_core::step::{law_for, Law};
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::formation::Member;
+use cdm_model::step::{law_for, Law};
 
 use super::{hear, phase_offset_s, stamp_s, Realtime};
 use crate::member_core::{Action, MemberFault, Shared};
@@ -151,10 +151,10 @@ impl Realtime {
 mod tests {
     use std::time::Duration;
 
-    use cdm_core::link::LinkModel;
-    use cdm_core::loss_log::LossLog;
-    use cdm_core::scenario::Scenario;
-    use cdm_core::step::TickAt;
+    use cdm_model::link::LinkModel;
+    use cdm_model::step::TickAt;
+    use cdm_records::loss_log::LossLog;
+    use cdm_scenario::Scenario;
 
     use super::*;
     use crate::member_core::{subscriptions, Deadlines};
@@ -219,7 +219,7 @@ mod tests {
         let ins = subscriptions(me);
         let outs = s.formation.readers_of(ME);
         let losses = MemberLosses::new(me, LossLog::new(s), &ins, &outs);
-        let at_rest = [cdm_core::math::Vec3::zeros(); 3];
+        let at_rest = [cdm_math::Vec3::zeros(); 3];
         let mut c = RealtimeCore::realtime(me, at_rest, setup, Relinked::default(), Duration::ZERO)
             .with_losses(losses);
         let start = ClockMsg::realtime(UNIX_START + 1_000_000_000, HASH, PHASES_ALIGNED);

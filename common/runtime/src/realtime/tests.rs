@@ -1,17 +1,17 @@
 //! Every real-time decision of a member and of the monitor with a fake clock (a `Duration`
 //! passed in) and a fake vehicle: no process, no shared memory, no sleeping.
 
-use cdm_core::control::ControlFault;
-use cdm_core::formation::{Link, Role};
-use cdm_core::link::LinkSpec;
-use cdm_core::math::{vec3, Vec2};
+use cdm_math::{vec3, Vec2};
+use cdm_model::control::ControlFault;
+use cdm_model::formation::{Link, Role};
+use cdm_model::link::LinkSpec;
 
 use super::*;
 use crate::member_core::Finished;
 use crate::messages::{AgentStatus, StopReason, STATUS_FAULT};
 use crate::realtime_monitor::{MonitorCore, MonitorEvent, RunFigures};
 use crate::seams::VehicleFault;
-use cdm_core::step::StepFault;
+use cdm_model::step::StepFault;
 
 const HASH: u64 = 0xc0ffee;
 const DT: f64 = 0.01;

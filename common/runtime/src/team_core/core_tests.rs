@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use super::*;
 use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
-use cdm_core::outcome::FaultKind;
+use cdm_model::outcome::FaultKind;
 
 const HASH: u64 = 7;
 

@@ -162,8 +162,8 @@ mod tests {
     use super::*;
     use crate::messages::{StateMsg, StopReason};
     use crate::team_core::TeamConfig;
-    use cdm_core::outcome::FaultKind;
-    use cdm_core::scenario::Scenario;
+    use cdm_model::outcome::FaultKind;
+    use cdm_scenario::Scenario;
 
     fn ms(t: u64) -> Duration {
         Duration::from_millis(t)

@@ -1,7 +1,7 @@
 //! The real-time monitor's side of losing members (`--on-loss repair`, on one host), with no
 //! I/O: the counterpart of the lockstep team core's `team_core/loss_events.rs`, over the same
 //! book ([`TeamLosses`]: the notices, one at a time, and when a repair's new links are in) and
-//! the same repair (`cdm_core::repair`, which every member computes from the notices with its
+//! the same repair (`cdm_model::repair`, which every member computes from the notices with its
 //! `LossLog`, as `simulate` does).
 //!
 //! A member is lost when its process exits (`killed`, `exited`), when its newest state grows
@@ -273,8 +273,8 @@ mod tests {
     use crate::messages::{AgentStatus, FaultCode, StateMsg};
     use crate::realtime_monitor::MonitorCore;
     use crate::team_realtime::RealtimePlan;
-    use cdm_core::outcome::FaultKind;
-    use cdm_core::scenario::Scenario;
+    use cdm_model::outcome::FaultKind;
+    use cdm_scenario::Scenario;
 
     fn ms(t: u64) -> Duration {
         Duration::from_millis(t)
