@@ -97,7 +97,7 @@ fn simulate_command(
         stop_on_violation: run.stop_on_violation,
         max_ticks: run.max_ticks,
         telemetry: run.telemetry,
-        losses: LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?,
+        losses: LossSchedule::new(&s, &run.lose, run.max_ticks).map_err(Failure::bad_input)?,
         on_loss: run.on_loss.into(),
     };
     let mut tel = cdm_team::telemetry::open(&dir, run.telemetry, out.every, &s)
@@ -201,7 +201,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         return Err(Failure::bad_input(why));
     }
     check_follow(&s, a.run.follow)?;
-    let losses = LossSchedule::new(&s, &a.run.lose).map_err(Failure::bad_input)?;
+    let losses = LossSchedule::new(&s, &a.run.lose, a.run.max_ticks).map_err(Failure::bad_input)?;
     if realtime.is_some() && a.hosts.hosts > 1 && !a.run.lose.is_empty() {
         // Real time repairs losses on one host only (across hosts a loss is the host's fault):
         // a scripted loss would only stop the team: refused, not ignored.

@@ -21,6 +21,20 @@ pub(super) fn finite(field: impl Into<String>, value: Real) -> Result<Real, E> {
     }
 }
 
+/// A coordinate (a position, a goal, a ground height): finite and at most [`MAX_COORD_M`] from
+/// the origin along each axis.
+pub(super) fn coordinate(field: impl Into<String>, value: Real) -> Result<Real, E> {
+    let field = field.into();
+    let value = finite(field.clone(), value)?;
+    if value.abs() > MAX_COORD_M {
+        return Err(E::Invalid {
+            field,
+            reason: format!("= {value:.3e} m is more than {MAX_COORD_M:e} m from the origin"),
+        });
+    }
+    Ok(value)
+}
+
 pub(super) fn positive(field: &str, value: Real) -> Result<Real, E> {
     finite(field, value)?;
     if value > 0.0 {
@@ -82,11 +96,11 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
         });
     }
     check_resolution(f)?;
-    if f.comm_hz * f.t_total_s > 1e8 {
+    if f.comm_hz * f.t_total_s > MAX_TICKS {
         return Err(E::Invalid {
             field: "t_total_s".into(),
             reason: format!(
-                "times comm_hz gives {} ticks; at most 1e8 are supported",
+                "times comm_hz gives {:.3e} ticks; at most {MAX_TICKS:e} are supported",
                 f.comm_hz * f.t_total_s
             ),
         });
@@ -130,6 +144,14 @@ fn check_optional(f: &ScenarioFile) -> Result<(), E> {
     }
     Ok(())
 }
+
+/// The most ticks a motion, a hold or a whole flight may last.
+pub const MAX_TICKS: Real = 1e8;
+
+/// How far from the origin a position, goal or ground may be, metres: a team spread over a
+/// continent is not a team, and the certificate's cost grows with the distances flown (its
+/// travel-time threshold grows as their square root, Sec. VII-D).
+pub const MAX_COORD_M: Real = 1e6;
 
 /// The longest scenario name (it is printed, hashed and carried by every member).
 pub const MAX_NAME_BYTES: usize = 256;
@@ -254,14 +276,14 @@ fn check_agents(file: &ScenarioFile) -> Result<(), E> {
         // The field's name is formatted only for a bad value: every member of a team runs this
         // for every agent at start (3,000 names at N = 1000).
         for (c, v) in a.position.iter().enumerate() {
-            if !v.is_finite() {
-                finite(format!("agents[id={}].position[{c}]", a.id), *v)?;
+            if !(v.abs() <= MAX_COORD_M) {
+                coordinate(format!("agents[id={}].position[{c}]", a.id), *v)?;
             }
         }
         if let Some(g) = a.goal {
             for (c, v) in g.iter().enumerate() {
-                if !v.is_finite() {
-                    finite(format!("agents[id={}].goal[{c}]", a.id), *v)?;
+                if !(v.abs() <= MAX_COORD_M) {
+                    coordinate(format!("agents[id={}].goal[{c}]", a.id), *v)?;
                 }
             }
         }
