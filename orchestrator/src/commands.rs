@@ -90,6 +90,8 @@ fn simulate_command(
     cdm_team::telemetry::check_available(run.telemetry)?;
     let s = run.link.apply(&load(source)?).map_err(Failure::bad_input)?;
     check_follow(&s, run.follow)?;
+    // Checked before the run directory exists: a refused loss writes nothing.
+    let losses = LossSchedule::new(&s, &run.lose, run.max_ticks).map_err(Failure::bad_input)?;
     let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
     let started = Instant::now();
     let opts = SimulateOptions {
@@ -97,7 +99,7 @@ fn simulate_command(
         stop_on_violation: run.stop_on_violation,
         max_ticks: run.max_ticks,
         telemetry: run.telemetry,
-        losses: LossSchedule::new(&s, &run.lose, run.max_ticks).map_err(Failure::bad_input)?,
+        losses,
         on_loss: run.on_loss.into(),
     };
     let mut tel = cdm_team::telemetry::open(&dir, run.telemetry, out.every, &s)

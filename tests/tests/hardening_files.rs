@@ -239,15 +239,17 @@ fn a_full_disk_ends_the_bag_where_the_table_ends() {
         "in {}",
         bag.display()
     );
-    let script = "import json, sys\n\
-from mcap.reader import make_reader\n\
-from rosbags.rosbag2 import Reader\n\
-with open(sys.argv[1] + '/rosbag2_0.mcap', 'rb') as f:\n\
-    summary = make_reader(f).get_summary()\n\
-with Reader(sys.argv[1]) as r:\n\
-    stamps = [t for _, t, _ in r.messages()]\n\
-    poses = sum(c.msgcount for c in r.connections if c.topic == '/cdm/agent_1/pose')\n\
-print(json.dumps({'summary': summary is not None, 'last_ns': max(stamps), 'poses': poses}))\n";
+    let script = r#"
+import json, sys
+from mcap.reader import make_reader
+from rosbags.rosbag2 import Reader
+with open(sys.argv[1] + '/rosbag2_0.mcap', 'rb') as f:
+    summary = make_reader(f).get_summary()
+with Reader(sys.argv[1]) as r:
+    stamps = [t for _, t, _ in r.messages()]
+    poses = sum(c.msgcount for c in r.connections if c.topic == '/cdm/agent_1/pose')
+print(json.dumps({'summary': summary is not None, 'last_ns': max(stamps), 'poses': poses}))
+"#;
     let py = run(
         Command::new(integration_tests::venv_python())
             .args(["-c", script])

@@ -41,7 +41,7 @@ impl Ros2Args {
         let hz = self.ros2_hz.unwrap_or(DEFAULT_ROS2_HZ);
         if !ROS2_HZ_RANGE.contains(&hz) {
             return Err(Failure::bad_input(format!(
-                "--ros2-hz must be in [{}, {}], got {hz}",
+                "--ros2-hz must be in [{}, {}], got {hz:e}",
                 ROS2_HZ_RANGE.start(),
                 ROS2_HZ_RANGE.end()
             )));

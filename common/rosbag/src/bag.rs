@@ -190,6 +190,7 @@ impl BagWriter {
     pub fn abandon(mut self) {
         // Dropping the MCAP writer writes its summary into the file removed next.
         drop(self.mcap.take());
+        self.room.give_back();
         let _ = std::fs::remove_file(self.path());
         let _ = std::fs::remove_file(self.dir.join("metadata.yaml"));
         let _ = std::fs::remove_dir(&self.dir);
