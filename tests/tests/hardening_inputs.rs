@@ -71,7 +71,7 @@ fn ros2_hz_outside_its_range_is_refused() {
     ] {
         let team = unique_team("ros2hz");
         let o = run(
-            &mut launch(&team, &out, &["--n", "4", "--no-figures"]).args([
+            launch(&team, &out, &["--n", "4", "--no-figures"]).args([
                 "--ros2",
                 middleware,
                 "--ros2-hz",

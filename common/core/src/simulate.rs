@@ -213,7 +213,7 @@ pub fn t_threshold_from(
     let (mut lo, mut hi) = (guess * 0.9, guess * 1.1);
     let mut grow = 0;
     loop {
-        if !(hi <= t_max_s) {
+        if hi.is_nan() || hi > t_max_s {
             return Real::INFINITY;
         }
         if e_of(hi) < delta_m {

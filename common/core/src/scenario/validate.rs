@@ -276,13 +276,13 @@ fn check_agents(file: &ScenarioFile) -> Result<(), E> {
         // The field's name is formatted only for a bad value: every member of a team runs this
         // for every agent at start (3,000 names at N = 1000).
         for (c, v) in a.position.iter().enumerate() {
-            if !(v.abs() <= MAX_COORD_M) {
+            if !v.is_finite() || v.abs() > MAX_COORD_M {
                 coordinate(format!("agents[id={}].position[{c}]", a.id), *v)?;
             }
         }
         if let Some(g) = a.goal {
             for (c, v) in g.iter().enumerate() {
-                if !(v.abs() <= MAX_COORD_M) {
+                if !v.is_finite() || v.abs() > MAX_COORD_M {
                     coordinate(format!("agents[id={}].goal[{c}]", a.id), *v)?;
                 }
             }
