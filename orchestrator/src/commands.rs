@@ -91,6 +91,8 @@ fn simulate_command(
     cdm_team::telemetry::check_available(run.telemetry)?;
     let s = run.link.apply(&load(source)?).map_err(Failure::bad_input)?;
     check_follow(&s, run.follow)?;
+    // Checked before the run directory exists: a refused loss writes nothing.
+    let losses = LossSchedule::new(&s, &run.lose, run.max_ticks).map_err(Failure::bad_input)?;
     let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
     let started = Instant::now();
     let opts = SimulateOptions {
@@ -98,7 +100,7 @@ fn simulate_command(
         stop_on_violation: run.stop_on_violation,
         max_ticks: run.max_ticks,
         telemetry: run.telemetry,
-        losses: LossSchedule::new(&s, &run.lose).map_err(Failure::bad_input)?,
+        losses,
         on_loss: run.on_loss.into(),
     };
     let mut tel = cdm_team::telemetry::open(&dir, run.telemetry, out.every, &s)
@@ -201,7 +203,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         return Err(Failure::bad_input(why));
     }
     check_follow(&s, a.run.follow)?;
-    let losses = LossSchedule::new(&s, &a.run.lose).map_err(Failure::bad_input)?;
+    let losses = LossSchedule::new(&s, &a.run.lose, a.run.max_ticks).map_err(Failure::bad_input)?;
     if realtime.is_some() && a.hosts.hosts > 1 && !a.run.lose.is_empty() {
         // Real time repairs losses on one host only (across hosts a loss is the host's fault):
         // a scripted loss would only stop the team: refused, not ignored.

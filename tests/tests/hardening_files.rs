@@ -187,6 +187,92 @@ print(json.dumps({'row_groups': f.num_row_groups, 'rows': t.num_rows,\n\
     );
 }
 
+/// `--telemetry mcap` into a full file system: the message names the bag's file or the table's
+/// and the free space; the bag is ended (summary, footer, metadata.yaml: `rosbags` and Foxglove's
+/// `mcap` read it) and ends on the very tick where telemetry.csv ends; nothing but its two files
+/// is left in its directory; exit 3. Ten members write about 1 MiB of bag per 200 ticks, and
+/// the bag keeps about 2 MiB free to end itself, so a 3 MiB disk is full within the flight.
+/// Before the fix the bag had no summary, footer or metadata.yaml and went on 4 s past the
+/// table's end.
+#[test]
+fn a_full_disk_ends_the_bag_where_the_table_ends() {
+    const N: u32 = 10;
+    let tmp = TempDir::new();
+    let Some(disk) = SmallDisk::mount(&tmp.path().join("disk"), "3m") else {
+        eprintln!("skipped: cannot mount a tmpfs here (needs root)");
+        return;
+    };
+    let out = disk.dir.join("run");
+    let o = run(
+        simulate(&out, &["--n", "10", "--t-total", "20", "--no-figures"])
+            .args(["--telemetry", "mcap"]),
+        DEADLINE,
+    );
+    assert_exit(&o, 3, "simulate --telemetry mcap into a full disk");
+    let all = text(&o);
+    let (tel, bag) = (out.join("telemetry.csv"), out.join("rosbag2"));
+    assert!(
+        [&tel, &bag.join("rosbag2_0.mcap")]
+            .iter()
+            .any(|f| all.contains(&f.display().to_string()))
+            && all.contains("KiB free"),
+        "the message names the file and the free space\n{}",
+        describe(&o)
+    );
+    let ticks = complete_ticks(&tel, &(1..=N).collect());
+    assert!(ticks > 0, "no whole tick was kept");
+    let last_t: f64 = fs::read_to_string(&tel)
+        .expect("telemetry.csv")
+        .lines()
+        .last()
+        .and_then(|l| l.split(',').nth(1)?.parse().ok())
+        .expect("the last row's time");
+    let mut left: Vec<String> = fs::read_dir(&bag)
+        .expect("the bag's directory")
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        ["metadata.yaml", "rosbag2_0.mcap"],
+        "in {}",
+        bag.display()
+    );
+    let script = r#"
+import json, sys
+from mcap.reader import make_reader
+from rosbags.rosbag2 import Reader
+with open(sys.argv[1] + '/rosbag2_0.mcap', 'rb') as f:
+    summary = make_reader(f).get_summary()
+with Reader(sys.argv[1]) as r:
+    stamps = [t for _, t, _ in r.messages()]
+    poses = sum(c.msgcount for c in r.connections if c.topic == '/cdm/agent_1/pose')
+print(json.dumps({'summary': summary is not None, 'last_ns': max(stamps), 'poses': poses}))
+"#;
+    let py = run(
+        Command::new(integration_tests::venv_python())
+            .args(["-c", script])
+            .arg(&bag),
+        DEADLINE,
+    );
+    assert_exit(&py, 0, "rosbags and mcap read the bag the full disk kept");
+    let got: serde_json::Value =
+        serde_json::from_slice(&py.stdout).unwrap_or_else(|e| panic!("{e}: {}", describe(&py)));
+    assert_eq!(got["summary"], true, "{got}");
+    let last_s = got["last_ns"].as_f64().unwrap_or(-1.0) * 1e-9;
+    assert!(
+        (last_s - last_t).abs() < 1e-6,
+        "the bag ends at {last_s} s, telemetry.csv at {last_t} s ({ticks} ticks): {got}"
+    );
+    assert_eq!(
+        got["poses"], ticks,
+        "one pose of agent 1 per tick kept: {got}"
+    );
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "FAULT", "{audit}");
+}
+
 /// Item 8: `--force` into a run directory whose telemetry.csv and audit.json are symbolic links:
 /// the links are replaced by files, their targets are untouched.
 #[test]

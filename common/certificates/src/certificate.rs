@@ -77,12 +77,15 @@ pub fn deviation_at(s: &Scenario, t_total_s: Real) -> Real {
 /// bisection to 0.1 % (E falls monotonically with T in practice; the bracket is checked).
 /// `e_of` gives E(T).
 pub fn t_threshold(s: &Scenario, delta_m: Real, e_at_t: Real, e_of: impl Fn(Real) -> Real) -> Real {
-    t_threshold_from(s.file.t_total_s, delta_m, e_at_t, e_of)
+    t_threshold_from(s.file.t_total_s, s.file.comm_hz, delta_m, e_at_t, e_of)
 }
 
-/// [`t_threshold`] of a motion whose travel time is `t0` now (a mission's phase).
+/// [`t_threshold`] of a motion whose travel time is `t0` now (a mission's phase), at ticks of
+/// `comm_hz`. A threshold longer than a scenario may fly (`MAX_TICKS` ticks) is infinite: every
+/// E(T) costs its ticks, so the search never tries a T longer than that, whatever the numbers.
 pub fn t_threshold_from(
     t0: Real,
+    comm_hz: Real,
     delta_m: Real,
     e_at_t: Real,
     e_of: impl Fn(Real) -> Real,
@@ -90,6 +93,7 @@ pub fn t_threshold_from(
     if delta_m.is_nan() || delta_m <= 0.0 {
         return Real::INFINITY;
     }
+    let t_max_s = cdm_scenario::MAX_TICKS / comm_hz;
     let guess = if e_at_t.is_finite() && e_at_t > 0.0 {
         t0 * (e_at_t / delta_m).sqrt()
     } else {
@@ -97,7 +101,13 @@ pub fn t_threshold_from(
     };
     let (mut lo, mut hi) = (guess * 0.9, guess * 1.1);
     let mut grow = 0;
-    while e_of(hi) >= delta_m {
+    loop {
+        if hi.is_nan() || hi > t_max_s {
+            return Real::INFINITY;
+        }
+        if e_of(hi) < delta_m {
+            break;
+        }
         lo = hi;
         hi *= 2.0;
         grow += 1;

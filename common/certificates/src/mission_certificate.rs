@@ -135,7 +135,9 @@ fn certify_phase(s: &Scenario, n: &SafetyNumbers, p: &Phase) -> (PhaseCertificat
     let (e, t_thr, delay) = match &linear {
         Ok(team) => {
             let e = team.max_follower_deviation(t_s);
-            let t_thr = t_threshold_from(t_s, n.delta_m, e, |t| team.max_follower_deviation(t));
+            let t_thr = t_threshold_from(t_s, s.file.comm_hz, n.delta_m, e, |t| {
+                team.max_follower_deviation(t)
+            });
             let d = max_link_delay_linear(team, t_s, n.delta_m, e, delay_search(t_s, s.dt_s()));
             (e, t_thr, d)
         }

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use cdm_certificates::certificate::{certify, deviation_at, t_threshold};
+use cdm_certificates::certificate::{certify, deviation_at, t_threshold, t_threshold_from};
 use cdm_certificates::linear_certificate::{LinearTeam, NotLinear};
 use cdm_records::audit::SafetyNumbers;
 use cdm_scenario::{Checks, Scenario};
@@ -75,6 +75,29 @@ fn linear_certificate_matches_the_nonlinear_flight_on_a_small_team() {
     let flown = t_threshold(&s, delta, e, |t| deviation_at(&s, t));
     println!("T_threshold linear {lin:.9} s, flown {flown:.9} s");
     assert!(relative(lin, flown) <= 1e-3, "{lin} against {flown}");
+}
+
+/// Whatever the numbers, the T_threshold search never asks for E(T) at a T longer than a
+/// scenario may fly (1e8 ticks): a deviation a billion times delta, or a delta of 1e-300 m, is
+/// an infinite threshold found without a single E(T) that long. Each E(T) costs its ticks:
+/// before the bound a take-off from 1e12 m below ran for hours.
+#[test]
+fn the_threshold_search_never_tries_a_travel_time_longer_than_a_flight() {
+    let comm_hz = 10.0;
+    let t_max_s = cdm_scenario::MAX_TICKS / comm_hz;
+    for (delta_m, e_m) in [(1.0, 1e18), (1e-300, 1.0), (1.0, f64::INFINITY)] {
+        let longest = std::cell::Cell::new(0.0_f64);
+        // E(T) ~ 1 / T^2 (Sec. VII-D), far above delta at every T a flight may last.
+        let t = t_threshold_from(200.0, comm_hz, delta_m, e_m, |t| {
+            longest.set(longest.get().max(t));
+            e_m * (200.0 / t).powi(2)
+        });
+        assert_eq!(t, f64::INFINITY, "delta {delta_m}, E {e_m}");
+        assert!(longest.get() <= t_max_s, "E({}) asked", longest.get());
+    }
+    // A threshold within reach is still found.
+    let t = t_threshold_from(200.0, comm_hz, 1.0, 4.0, |t| 4.0 * (200.0 / t).powi(2));
+    assert!((t - 400.0).abs() < 1.0, "{t}");
 }
 
 /// A cycle among followers (scenario files may give one) has no finite series: the linear model

@@ -43,8 +43,13 @@ pub enum LossError {
     Syntax { text: String },
     #[error("--lose {id}@{at_s}: no agent with id {id}")]
     UnknownAgent { id: u32, at_s: Real },
-    #[error("--lose {id}@{at_s}: the time must be in [0, {end_s}) s, the flight's last tick")]
-    OutOfFlight { id: u32, at_s: Real, end_s: Real },
+    #[error("--lose {id}@{at_s}: the time must be in [0, {end_s}) s: the flight's last tick is {last_tick} (t = {end_s} s)")]
+    OutOfFlight {
+        id: u32,
+        at_s: Real,
+        end_s: Real,
+        last_tick: u64,
+    },
     #[error("--lose {id}: given twice")]
     Twice { id: u32 },
     #[error("--lose names all {agents} agents of the team: nobody would be left to fly the plan")]
@@ -71,10 +76,17 @@ pub struct LossSchedule {
 }
 
 impl LossSchedule {
-    /// Validate scripted losses against a scenario (ids exist, times inside the flight).
-    pub fn new(s: &Scenario, losses: &[ScriptedLoss]) -> Result<Self, LossError> {
+    /// Validate scripted losses against a scenario flown to its last tick or to tick
+    /// `max_ticks` (`--max-ticks`), whichever comes first: ids exist, times inside the flight
+    /// (a loss after the last flown tick would never happen).
+    pub fn new(
+        s: &Scenario,
+        losses: &[ScriptedLoss],
+        max_ticks: Option<u64>,
+    ) -> Result<Self, LossError> {
         let dt = s.dt_s();
-        let end_s = tick_time(s.last_tick(), dt);
+        let last_tick = max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
+        let end_s = tick_time(last_tick, dt);
         let mut seen = BTreeSet::new();
         let mut events: Vec<(u64, Vec<u32>)> = Vec::new();
         for l in losses {
@@ -89,6 +101,7 @@ impl LossSchedule {
                     id: l.id,
                     at_s: l.at_s,
                     end_s,
+                    last_tick,
                 });
             }
             if !seen.insert(l.id) {

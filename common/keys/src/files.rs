@@ -15,8 +15,22 @@ pub enum KeyDirError {
     },
     #[error("{}: already exists and is not empty (keys are never overwritten)", path.display())]
     Exists { path: PathBuf },
-    #[error("{}: mode {mode:04o} lets others read it; keys must be their owner's only (chmod 600)", path.display())]
-    Readable { path: PathBuf, mode: u32 },
+    #[error("{}: mode {mode:04o} lets others read it; keys must be their owner's only ({fix})", path.display())]
+    Readable {
+        path: PathBuf,
+        mode: u32,
+        fix: &'static str,
+    },
+    /// Others can replace the file (or, in the directory, its files) with their own authority's.
+    #[error("{}: mode {mode:04o} lets others write it; keys must be their owner's only ({fix})", path.display())]
+    Writable {
+        path: PathBuf,
+        mode: u32,
+        fix: &'static str,
+    },
+    /// Owned by another user, who can change its mode and contents at will.
+    #[error("{}: owned by user {owner}, not by user {me} who runs this; keys must be their owner's only", path.display())]
+    NotOwned { path: PathBuf, owner: u32, me: u32 },
     #[error("{}: {detail}", path.display())]
     Certificate { path: PathBuf, detail: String },
     #[error("cannot make {what}: {source}")]
@@ -82,15 +96,28 @@ pub(crate) fn read(path: &Path) -> Result<Vec<u8>, KeyDirError> {
     std::fs::read(path).map_err(io(path))
 }
 
-/// `path` is a file that only its owner can read or write.
+/// `path` (a file or a directory) is ours, and only we can read, write or enter it: a key
+/// directory another user can write lets them put their own authority's certificate and keys in
+/// it (then their daemon joins our team), and one they own they can open at will.
 pub(crate) fn check_private(path: &Path) -> Result<(), KeyDirError> {
     let m = std::fs::metadata(path).map_err(io(path))?;
-    let mode = m.mode() & 0o7777;
-    if mode & 0o077 != 0 {
-        return Err(KeyDirError::Readable {
+    // SAFETY: geteuid(2) cannot fail.
+    let me = unsafe { libc::geteuid() };
+    if m.uid() != me {
+        return Err(KeyDirError::NotOwned {
             path: path.to_owned(),
-            mode,
+            owner: m.uid(),
+            me,
         });
+    }
+    let mode = m.mode() & 0o7777;
+    let fix = if m.is_dir() { "chmod 700" } else { "chmod 600" };
+    let path = path.to_owned();
+    if mode & 0o022 != 0 {
+        return Err(KeyDirError::Writable { path, mode, fix });
+    }
+    if mode & 0o077 != 0 {
+        return Err(KeyDirError::Readable { path, mode, fix });
     }
     Ok(())
 }

@@ -73,8 +73,8 @@ impl std::fmt::Display for Holder {
 /// The common name of a team's authority.
 const AUTHORITY_CN: &str = "cdm team authority";
 
-/// One machine's key directory, checked: its three files exist, are its owner's only, and its
-/// certificate names a role.
+/// One machine's key directory, checked: the directory and its three files are ours and ours
+/// only (no other user can read, write or own them), and its certificate names a role.
 #[derive(Debug, Clone)]
 pub struct KeyDir {
     pub role: Holder,
@@ -94,7 +94,7 @@ impl KeyDir {
             dir.join("cert.pem"),
             dir.join("key.pem"),
         );
-        for p in [&ca, &cert, &key] {
+        for p in [dir, &ca, &cert, &key] {
             files::check_private(p)?;
         }
         let pem = read(&cert)?;

@@ -89,10 +89,33 @@ fn a_key_readable_by_others_is_refused_naming_the_file() {
 }
 
 #[test]
+fn a_directory_or_file_others_can_write_or_read_is_refused_saying_which() {
+    use std::os::unix::fs::PermissionsExt;
+    let t = Scratch::new("dirmode");
+    new_team(&t.0, 1).unwrap();
+    let d = t.0.join("host-1");
+    let chmod = |p: &Path, m: u32| std::fs::set_permissions(p, PermissionsExt::from_mode(m));
+    for (mode, says) in [(0o703, "write"), (0o730, "write"), (0o755, "read")] {
+        chmod(&d, mode).unwrap();
+        let e = KeyDir::open(&d).unwrap_err().to_string();
+        let want = format!("{}: mode {mode:04o} lets others {says} it", d.display());
+        assert!(e.contains(&want) && e.contains("chmod 700"), "{e}");
+    }
+    chmod(&d, 0o700).unwrap();
+    chmod(&d.join("ca.pem"), 0o646).unwrap();
+    let e = KeyDir::open(&d).unwrap_err().to_string();
+    assert!(e.contains("ca.pem: mode 0646 lets others write it"), "{e}");
+}
+
+#[test]
 fn a_missing_or_foreign_certificate_is_named() {
     let t = Scratch::new("missing");
     let e = KeyDir::open(&t.0).unwrap_err();
+    assert!(e.to_string().contains(&t.0.display().to_string()), "{e}");
+    files::make_dir(&t.0).unwrap();
+    let e = KeyDir::open(&t.0).unwrap_err();
     assert!(e.to_string().contains("ca.pem"), "{e}");
+    std::fs::remove_dir(&t.0).unwrap();
     new_team(&t.0, 1).unwrap();
     // The authority's own certificate names no role.
     let d = t.0.join("host-1");

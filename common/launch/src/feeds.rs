@@ -17,13 +17,17 @@ pub struct Ros2Args {
     /// member's pose, /tf, /cdm/formation and /cdm/audit. Output only: nothing is subscribed.
     #[arg(long, value_name = "MIDDLEWARE")]
     pub ros2: Option<Backend>,
-    /// With --ros2: ticks published per second of wall time, at most (default 30).
+    /// With --ros2: ticks published per second of wall time, at most (0.01 to 1000, default 30).
     #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
     pub ros2_hz: Option<f64>,
 }
 
 /// `--ros2-hz` when not given.
 pub const DEFAULT_ROS2_HZ: f64 = 30.0;
+
+/// `--ros2-hz`'s range: one tick every 100 s at the least (a slower feed is no live view),
+/// a thousand a second at the most.
+pub const ROS2_HZ_RANGE: std::ops::RangeInclusive<f64> = 0.01..=1000.0;
 
 impl Ros2Args {
     /// The options, or `None` without --ros2; a bad value is bad input naming its flag.
@@ -35,9 +39,11 @@ impl Ros2Args {
             return Ok(None);
         };
         let hz = self.ros2_hz.unwrap_or(DEFAULT_ROS2_HZ);
-        if !(hz.is_finite() && hz > 0.0 && hz <= 1000.0) {
+        if !ROS2_HZ_RANGE.contains(&hz) {
             return Err(Failure::bad_input(format!(
-                "--ros2-hz must be in (0, 1000], got {hz}"
+                "--ros2-hz must be in [{}, {}], got {hz:e}",
+                ROS2_HZ_RANGE.start(),
+                ROS2_HZ_RANGE.end()
             )));
         }
         Ok(Some(Ros2Options { backend, hz }))

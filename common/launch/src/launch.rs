@@ -98,8 +98,10 @@ struct Watchers<'a> {
 
 /// Run a launch to the end.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
-    let interrupted = cdm_process::signals::install();
+    // The stop signals are caught only from here on: until now nothing needs cleaning up, and a
+    // wait in the preflight (a ROS 2 participant or zenoh session opening) ends at once on one.
     let mut live = preflight(s, o)?;
+    let interrupted = cdm_process::signals::install();
     let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.quiet)?;
     let layout = team_layout(s, o, &hosts)?;
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;

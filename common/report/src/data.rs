@@ -406,7 +406,13 @@ pub fn read_telemetry(
         if f.len() != 13 {
             return Err(bad("expected 13 fields"));
         }
-        let num = |i: usize| f[i].parse::<Real>().map_err(|_| bad("not a number"));
+        // A NaN or an infinity would pass for a position and leave the member out of every
+        // distance the readers compute (the audit topic, the figures): refused like text.
+        let num = |i: usize| match f[i].parse::<Real>() {
+            Ok(x) if x.is_finite() => Ok(x),
+            Ok(_) => Err(bad("not a finite number")),
+            Err(_) => Err(bad("not a number")),
+        };
         let row = Row {
             tick: f[0].parse().map_err(|_| bad("bad tick"))?,
             t_s: num(1)?,

@@ -80,6 +80,10 @@ pub enum Ros2Error {
     #[cfg(feature = "zenoh")]
     #[error("--ros2 zenoh: {0}")]
     Zenoh(#[from] cdm_zenoh::rmw::RmwError),
+    /// `ZENOH_SESSION_CONFIG_URI` names no regular file, or one too large.
+    #[cfg(feature = "zenoh")]
+    #[error("--ros2 zenoh: ZENOH_SESSION_CONFIG_URI: {0}")]
+    ZenohConfig(#[from] cdm_files::FileError),
     /// The publishing thread could not be started.
     #[error("--ros2: cannot start the publishing thread: {0}")]
     Thread(#[source] std::io::Error),

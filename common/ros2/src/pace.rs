@@ -13,10 +13,13 @@ pub struct Pacer {
 }
 
 impl Pacer {
-    /// At most `hz` ticks a second (`hz` > 0).
+    /// At most `hz` ticks a second (the caller checks the range: `--ros2-hz`). A rate slower
+    /// than one a day (a tiny, zero or negative one, whose interval no `Duration` may even
+    /// hold) is one a day, rather than a panic.
     pub fn new(hz: f64) -> Self {
+        let day = Duration::from_secs(86_400);
         Pacer {
-            interval: Duration::from_secs_f64(1.0 / hz),
+            interval: Duration::try_from_secs_f64(1.0 / hz).map_or(day, |d| d.min(day)),
             next: None,
         }
     }
@@ -60,6 +63,11 @@ mod tests {
                 .filter(|&k| p.due(ms(k * step_ms), false))
                 .count();
             assert_eq!(sent, 30, "a tick every {step_ms} ms");
+        }
+        // Rates no `Duration` holds are one tick a day.
+        for hz in [1e-20, 5e-324, 0.0, -1.0] {
+            let mut p = Pacer::new(hz);
+            assert!(p.due(ms(0), false) && !p.due(ms(1000), false), "{hz}");
         }
         // After a pause the slots start again from the next tick: no burst.
         let mut p = Pacer::new(10.0);

@@ -9,8 +9,13 @@ use cdm_rosbag::msgs::MsgType;
 use cdm_rosbag::Topic;
 use cdm_zenoh::rmw::{Attachment, RmwPublisher, RmwSession};
 
+use cdm_files::read_input;
+
 use crate::rmw_zenoh::{gid, node_token, publisher_token, topic_key};
 use crate::{Env, Publish, Ros2Error};
+
+/// The largest session configuration read (rmw_zenoh's default file is about 30 KiB).
+const MAX_ZENOH_CONFIG_BYTES: u64 = 1 << 20;
 
 /// One topic: its publisher, its GID and its last sequence number.
 struct Out {
@@ -30,7 +35,11 @@ impl ZenohOut {
     /// Opens the session (`ZENOH_SESSION_CONFIG_URI` or rmw_zenoh's defaults), announces the
     /// node and a publisher per topic in domain `ROS_DOMAIN_ID`.
     pub fn open(env: &Env, topics: &[(Topic, String, MsgType)]) -> Result<Self, Ros2Error> {
-        let mut session = RmwSession::open(env.zenoh_config.as_deref())?;
+        let config = match env.zenoh_config.as_deref() {
+            Some(path) => Some((path, read_input(path, MAX_ZENOH_CONFIG_BYTES)?)),
+            None => None,
+        };
+        let mut session = RmwSession::open(config.as_ref().map(|(p, t)| (*p, t.as_str())))?;
         let zid = session.zid();
         session.declare_token(&node_token(env.domain, &zid))?;
         let mut outs = Vec::with_capacity(topics.len());

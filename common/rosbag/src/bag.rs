@@ -4,12 +4,13 @@
 //! memory. metadata.yaml is written last: a bag without it was not finished.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use crate::metadata::{BagInfo, TopicCount, OFFERED_QOS};
 use crate::msgs::MsgType;
+use crate::room::{Room, Spool};
 use crate::tick::{Message, Team};
 
 /// Why a bag could not be written, naming the file.
@@ -46,7 +47,9 @@ struct Channel {
 pub struct BagWriter {
     dir: PathBuf,
     file: String,
-    mcap: Option<mcap::Writer<BufWriter<File>>>,
+    mcap: Option<mcap::Writer<BufWriter<Spool>>>,
+    /// The room kept free to end the MCAP file on a full disk.
+    room: Arc<Room>,
     /// Pose channels in member order, then /tf, /cdm/formation, /cdm/audit.
     channels: Vec<Channel>,
     members: usize,
@@ -77,7 +80,9 @@ impl BagWriter {
         if meta.exists() {
             std::fs::remove_file(&meta).map_err(|source| BagError::Io { path: meta, source })?;
         }
-        let out = File::create(&path).map_err(|e| mcap_err(e.into()))?;
+        // Every topic of the team: a pose per member, /tf, /cdm/formation and /cdm/audit.
+        let (out, room) =
+            Spool::create(&path, team.ids().len() + 3).map_err(|e| mcap_err(e.into()))?;
         let mut w = mcap::WriteOptions::new()
             .profile("ros2")
             .compression(None)
@@ -111,6 +116,7 @@ impl BagWriter {
             dir: dir.to_path_buf(),
             file,
             mcap: Some(w),
+            room,
             channels,
             members: team.ids().len(),
             first_ns: None,
@@ -165,11 +171,14 @@ impl BagWriter {
             path: path.clone(),
             source,
         };
+        // The room kept for the end is the end's now (all of it on a full disk).
+        self.room.give_back();
         w.write_metadata(&record).map_err(mcap_err)?;
         w.finish().map_err(mcap_err)?;
         let out = w.into_inner();
         out.into_inner()
             .map_err(|e| mcap_err(e.into_error().into()))?
+            .file()
             .sync_all()
             .map_err(|e| mcap_err(e.into()))?;
         let meta = self.dir.join("metadata.yaml");
@@ -181,9 +190,16 @@ impl BagWriter {
     pub fn abandon(mut self) {
         // Dropping the MCAP writer writes its summary into the file removed next.
         drop(self.mcap.take());
+        self.room.give_back();
         let _ = std::fs::remove_file(self.path());
         let _ = std::fs::remove_file(self.dir.join("metadata.yaml"));
         let _ = std::fs::remove_dir(&self.dir);
+    }
+
+    /// The full disk the MCAP file met, naming it and the free space then: the bag ends at
+    /// the end of this tick, in the room kept for it.
+    pub fn full(&self) -> Option<String> {
+        self.room.full()
     }
 
     /// What metadata.yaml says of the bag so far.

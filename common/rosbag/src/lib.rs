@@ -21,6 +21,7 @@ pub mod bag;
 pub mod cdr;
 pub mod metadata;
 pub mod msgs;
+pub mod room;
 pub mod sink;
 pub mod tick;
 

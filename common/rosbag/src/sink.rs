@@ -88,7 +88,12 @@ impl TelemetrySink for BagSink {
         for m in &self.messages {
             self.bag.write(m).map_err(io::Error::other)?;
         }
-        Ok(())
+        // A full disk met during this tick: the tick is in the bag whole (the room kept for the
+        // end took the rest), and the run stops here.
+        match self.bag.full() {
+            Some(e) => Err(io::Error::new(io::ErrorKind::StorageFull, e)),
+            None => Ok(()),
+        }
     }
 
     /// Nothing to force: chunks go to the file as they fill (1 MiB), and an MCAP file is read

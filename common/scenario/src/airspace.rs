@@ -191,7 +191,7 @@ pub(super) fn check_tables(f: &ScenarioFile) -> Result<(), E> {
     for (k, o) in f.obstacles.iter().enumerate() {
         if o.name.trim().is_empty() {
             return Err(bad(
-                format!("obstacle[{k}]"),
+                format!("obstacle {}", k + 1),
                 "`name` must not be empty".into(),
             ));
         }
@@ -207,7 +207,12 @@ fn check_fence(g: &GeofenceSpec) -> Result<(), E> {
     let what = "geofence";
     for (k, v) in g.polygon.iter().enumerate() {
         for (c, x) in v.iter().enumerate() {
-            finite(what, format!("polygon[{k}][{c}]"), *x)?;
+            // Vertices counted from 1, as in every other message about the polygon.
+            finite(
+                what,
+                format!("polygon` vertex {} `{}", k + 1, ["x", "y"][c]),
+                *x,
+            )?;
         }
     }
     finite(what, "min_z_m".into(), g.min_z_m)?;
@@ -230,8 +235,9 @@ fn check_fence(g: &GeofenceSpec) -> Result<(), E> {
             return Err(bad(
                 what,
                 format!(
-                    "`polygon` vertices {k} and {} are the same point (edge {} has no length)",
-                    (k + 1) % n,
+                    "`polygon` vertices {} and {} are the same point (edge {} has no length; vertices and edges are counted from 1)",
+                    k + 1,
+                    (k + 1) % n + 1,
                     k + 1
                 ),
             ));
@@ -381,7 +387,7 @@ mod tests {
             ),
             (
                 FENCE.replace("500.0, 600.0", "nan, 600.0"),
-                "geofence: `polygon[2][0]` must be a finite number, got NaN",
+                "geofence: `polygon` vertex 3 `x` must be a finite number, got NaN",
             ),
             (
                 FENCE.replace("max_z_m = 1500.0", "max_z_m = 1000.0"),

@@ -10,7 +10,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::{ScenarioErrorKind as E, ScenarioFile};
-use crate::fields::{finite, positive, MIN_MOTION_TICKS};
+use crate::fields::{coordinate, finite, positive, MAX_TICKS, MIN_MOTION_TICKS};
 use cdm_math::{vec3, Real, Vec3};
 use cdm_model::formation::{Formation, Role};
 use cdm_model::frame::{leader_sine, MIN_LEADER_SINE};
@@ -60,7 +60,10 @@ pub(super) fn phases(
     let mut t = 0.0;
     if let Some(to) = &f.takeoff {
         let (t_s, hold) = timing(f, "takeoff", to.t_s, to.hold_s)?;
-        let ground = ground_of(&plan.start, finite("takeoff.ground_z_m", to.ground_z_m)?);
+        let ground = ground_of(
+            &plan.start,
+            coordinate("takeoff.ground_z_m", to.ground_z_m)?,
+        );
         check_ground(f, formation, "takeoff", to.ground_z_m, &plan.start)?;
         out.push(phase(PhaseKind::Takeoff, t, t_s, ground, plan.start));
         t += t_s + hold;
@@ -87,15 +90,17 @@ pub(super) fn phases(
     if let Some(la) = &f.landing {
         let (t_s, hold) = timing(f, "landing", la.t_s, la.hold_s)?;
         let from = out.last().map_or(plan.goal, |p| p.goal);
-        let ground = ground_of(&from, finite("landing.ground_z_m", la.ground_z_m)?);
+        let ground = ground_of(&from, coordinate("landing.ground_z_m", la.ground_z_m)?);
         check_ground(f, formation, "landing", la.ground_z_m, &from)?;
         out.push(phase(PhaseKind::Landing, t + hold, t_s, from, ground));
     }
     let ticks = out.last().map_or(0.0, Phase::t_end_s) * f.comm_hz;
-    if ticks > 1e8 {
+    if ticks > MAX_TICKS {
         return Err(E::Invalid {
             field: "segment".into(),
-            reason: format!("the mission's ticks ({ticks:.0}) exceed 1e8"),
+            reason: format!(
+                "the whole mission times comm_hz gives {ticks:.3e} ticks; at most {MAX_TICKS:e} are supported"
+            ),
         });
     }
     Ok(out)
@@ -130,6 +135,17 @@ fn timing(f: &ScenarioFile, name: &str, t_s: Real, hold: Option<Real>) -> Result
             reason: format!("must be >= 0, got {hold}"),
         });
     }
+    for (field, v) in [("t_s", t_s), ("hold_s", hold)] {
+        let ticks = v * f.comm_hz;
+        if ticks > MAX_TICKS {
+            return Err(E::Invalid {
+                field: format!("{name}.{field}"),
+                reason: format!(
+                    "= {v:.3e} s times comm_hz gives {ticks:.3e} ticks; at most {MAX_TICKS:e} are supported"
+                ),
+            });
+        }
+    }
     Ok((t_s, hold))
 }
 
@@ -161,7 +177,7 @@ fn goals_of(seg: &SegmentSpec, name: &str, order: &[usize; 3]) -> Result<[Vec3; 
     }
     for (k, g) in seg.goals.iter().enumerate() {
         for (c, v) in g.iter().enumerate() {
-            finite(format!("{name}.goals[{k}][{c}]"), *v)?;
+            coordinate(format!("{name}.goals[{k}][{c}]"), *v)?;
         }
     }
     Ok(std::array::from_fn(|k| vec3(seg.goals[order[k]])))

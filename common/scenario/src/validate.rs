@@ -10,7 +10,7 @@ use cdm_model::gains::stability_margin;
 use cdm_model::graph::{synthesize, DEFAULT_WEIGHT_FLOOR};
 use cdm_model::plan::TeamPlan;
 
-use crate::fields::{finite, positive, MIN_MOTION_TICKS};
+use crate::fields::{coordinate, finite, positive, MAX_COORD_M, MAX_TICKS, MIN_MOTION_TICKS};
 
 fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
     positive("t_total_s", f.t_total_s)?;
@@ -61,11 +61,11 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
         });
     }
     check_resolution(f)?;
-    if f.comm_hz * f.t_total_s > 1e8 {
+    if f.comm_hz * f.t_total_s > MAX_TICKS {
         return Err(E::Invalid {
             field: "t_total_s".into(),
             reason: format!(
-                "times comm_hz gives {} ticks; at most 1e8 are supported",
+                "times comm_hz gives {:.3e} ticks; at most {MAX_TICKS:e} are supported",
                 f.comm_hz * f.t_total_s
             ),
         });
@@ -230,14 +230,14 @@ fn check_agents(file: &ScenarioFile) -> Result<(), E> {
         // The field's name is formatted only for a bad value: every member of a team runs this
         // for every agent at start (3,000 names at N = 1000).
         for (c, v) in a.position.iter().enumerate() {
-            if !v.is_finite() {
-                finite(format!("agents[id={}].position[{c}]", a.id), *v)?;
+            if !v.is_finite() || v.abs() > MAX_COORD_M {
+                coordinate(format!("agents[id={}].position[{c}]", a.id), *v)?;
             }
         }
         if let Some(g) = a.goal {
             for (c, v) in g.iter().enumerate() {
-                if !v.is_finite() {
-                    finite(format!("agents[id={}].goal[{c}]", a.id), *v)?;
+                if !v.is_finite() || v.abs() > MAX_COORD_M {
+                    coordinate(format!("agents[id={}].goal[{c}]", a.id), *v)?;
                 }
             }
         }

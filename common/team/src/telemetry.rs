@@ -62,11 +62,14 @@ pub fn open(
     }
 }
 
-/// An earlier run's bag in a reused directory: its two files, and the directory once empty.
+/// An earlier run's bag in a reused directory: its files, and the directory once empty.
 fn remove_bag(bag: &Path) -> Result<(), RunDirError> {
+    // The reserve is the room the bag keeps free while written (cdm-rosbag `room.rs`), left
+    // behind by a run that was killed.
     let files = [
         bag.join("metadata.yaml"),
         bag.join(format!("{BAG_DIR}_0.mcap")),
+        bag.join(format!(".{BAG_DIR}_0.mcap.reserve")),
     ];
     for p in files {
         if p.exists() {
@@ -87,8 +90,14 @@ impl<A: TelemetrySink, B: TelemetrySink> TelemetrySink for Both<A, B> {
         self.0.keeps(tick)
     }
 
+    /// The table's tick reaches its file before the bag is given it: the bag never holds a
+    /// tick the table lost to a full disk, and a bag that meets a full disk ends on this tick,
+    /// which the table has whole.
     fn write_tick(&mut self, rows: &[cdm_records::telemetry::Row]) -> io::Result<()> {
         self.0.write_tick(rows)?;
+        if rows.first().is_some_and(|r| self.0.keeps(r.tick)) {
+            self.0.flush()?;
+        }
         self.1.write_tick(rows)
     }
 

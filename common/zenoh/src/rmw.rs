@@ -45,14 +45,16 @@ pub struct RmwSession {
 }
 
 impl RmwSession {
-    /// Opens the session with the configuration file `config` (rmw_zenoh's
-    /// `ZENOH_SESSION_CONFIG_URI`), or with rmw_zenoh's defaults. A peer whose router is not
-    /// up yet keeps trying in the background (zenoh's default for peers): opening never waits
-    /// for one.
-    pub fn open(config: Option<&Path>) -> Result<Self, RmwError> {
+    /// Opens the session with the configuration `config`: the JSON5 text of rmw_zenoh's
+    /// `ZENOH_SESSION_CONFIG_URI` and the file it was read from (the caller reads it, with a
+    /// size limit and regular files only: zenoh's own `Config::from_file` reads whatever it is
+    /// given, /dev/zero or a FIFO, for ever), or rmw_zenoh's defaults. A peer whose router is
+    /// not up yet keeps trying in the background (zenoh's default for peers): opening never
+    /// waits for one.
+    pub fn open(config: Option<(&Path, &str)>) -> Result<Self, RmwError> {
         let (cfg, what) = match config {
-            Some(path) => {
-                let cfg = zenoh::Config::from_file(path).map_err(|e| RmwError::Config {
+            Some((path, json5)) => {
+                let cfg = zenoh::Config::from_json5(json5).map_err(|e| RmwError::Config {
                     path: path.to_path_buf(),
                     detail: e.to_string(),
                 })?;
@@ -177,10 +179,11 @@ mod tests {
     }
 
     #[test]
-    fn a_missing_configuration_file_is_named() {
-        let Err(e) = RmwSession::open(Some(Path::new("/nonexistent/zenoh.json5"))) else {
-            panic!("a missing file opened a session");
+    fn a_configuration_that_is_not_json5_is_named() {
+        let file = Path::new("/etc/zenoh.json5");
+        let Err(e) = RmwSession::open(Some((file, "mode: peer\n"))) else {
+            panic!("a bad configuration opened a session");
         };
-        assert!(e.to_string().contains("/nonexistent/zenoh.json5"), "{e}");
+        assert!(e.to_string().contains("/etc/zenoh.json5"), "{e}");
     }
 }

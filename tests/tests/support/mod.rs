@@ -32,6 +32,7 @@ pub const PROGRESS_DEADLINE: Duration = integration_tests::deadline::SHORT;
 pub use integration_tests::{launch, launch_loud, simulate};
 
 pub mod netns;
+pub mod users;
 
 /// `leader` or `agent` (by `role`) joining `team` as `id` with `scenario`.
 pub fn member(binary: &str, scenario: &Path, team: &str, id: u32) -> Command {
