@@ -64,7 +64,8 @@ impl Room {
         }
     }
 
-    /// Records a full disk met writing `bag` and gives the reserve back.
+    /// Records a full disk (or another error of the reserve) met writing `bag` and gives the
+    /// reserve back.
     fn met_full(&self, bag: &Path, e: &io::Error) {
         let mut r = self.lock();
         if r.full.is_none() {
@@ -79,29 +80,32 @@ impl Room {
         self.lock().file.is_some()
     }
 
-    /// Grows the reserve to `want` bytes; a full disk gives it back (see [`Room::full`]).
-    fn grow(&self, bag: &Path, want: u64) -> io::Result<()> {
+    /// Grows the reserve to `want` bytes. A reserve that cannot grow (a full disk, or any other
+    /// error) is given back and the bag stops at the end of the tick (see [`Room::full`]): the
+    /// write that asked has already reached the file, so this never fails it.
+    fn grow(&self, bag: &Path, want: u64) {
         let zeros = [0u8; 64 << 10];
         loop {
             let mut r = self.lock();
             let Some((f, size)) = r.file.as_mut() else {
-                return Ok(());
+                return;
             };
             if *size >= want {
-                return Ok(());
+                return;
             }
             let n = (want - *size).min(zeros.len() as u64) as usize;
-            match f.write(&zeros[..n]) {
-                Ok(0) => return Err(io::ErrorKind::WriteZero.into()),
-                Ok(k) => *size += k as u64,
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) if is_disk_full(&e) => {
-                    drop(r);
-                    self.met_full(bag, &e);
-                    return Ok(());
+            let e = match f.write(&zeros[..n]) {
+                Ok(0) => io::ErrorKind::WriteZero.into(),
+                Ok(k) => {
+                    *size += k as u64;
+                    continue;
                 }
-                Err(e) => return Err(e),
-            }
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => e,
+            };
+            drop(r);
+            self.met_full(bag, &e);
+            return;
         }
     }
 }
@@ -134,7 +138,7 @@ impl Spool {
             full: None,
         })));
         let channels = channels as u64;
-        room.grow(path, reserve_for(channels, 0))?;
+        room.grow(path, reserve_for(channels, 0));
         if let Some(e) = room.full() {
             let _ = std::fs::remove_file(path);
             return Err(io::Error::new(io::ErrorKind::StorageFull, e));
@@ -162,7 +166,7 @@ impl Write for Spool {
                 Ok(n) => {
                     self.written += n as u64;
                     self.room
-                        .grow(&self.path, reserve_for(self.channels, self.written))?;
+                        .grow(&self.path, reserve_for(self.channels, self.written));
                     return Ok(n);
                 }
                 // The room kept for the end: given back, the write goes on into it.
