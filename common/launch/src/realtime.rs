@@ -199,12 +199,7 @@ pub fn run(
     };
     let cpu_at_start = team_cpu_s(m.children);
     let result = crate::fly::fly(&mut core, &mut m, &clock, interrupted);
-    let Monitor {
-        mut vehicles,
-        ports,
-        children,
-        ..
-    } = m;
+    let (mut vehicles, ports, children) = (m.vehicles, m.ports, m.children);
     let book = wall_clock(&mut core);
     let audits = book.audits();
     let cpu_s = team_cpu_s(children) - cpu_at_start;
@@ -220,14 +215,8 @@ pub fn run(
     let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
     collect_final_reports(book, ports, (children, elsewhere), &mut vehicles);
     vehicles.record(audit);
-    let figures = book.figures(RunFigures {
-        audits,
-        audit_hz: rt.audit_hz,
-        phase_seed: rt.phase_seed,
-        stale_after_s: rt.stale_after.as_secs_f64(),
-        wall_s: flight_s,
-        team_cpu_cores: (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s),
-    });
+    let cpu_cores = (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s);
+    let figures = book.figures(run_figures(rt, audits, flight_s, cpu_cores));
     if !o.quiet {
         print_figures(&figures, s.formation.members.len());
     }
@@ -242,6 +231,23 @@ pub fn run(
             let _ = tel.flush();
             Err(stop)
         }
+    }
+}
+
+/// The monitor's own figures of a flight of `wall_s` seconds with `audits` instants audited.
+fn run_figures(
+    rt: &RealtimeOptions,
+    audits: u64,
+    wall_s: f64,
+    team_cpu_cores: Option<f64>,
+) -> RunFigures {
+    RunFigures {
+        audits,
+        audit_hz: rt.audit_hz,
+        phase_seed: rt.phase_seed,
+        stale_after_s: rt.stale_after.as_secs_f64(),
+        wall_s,
+        team_cpu_cores,
     }
 }
 
