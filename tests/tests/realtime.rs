@@ -8,7 +8,8 @@
 //! - Under `--on-loss stop`, a member stopped with SIGSTOP is named (agent-silent) and the team
 //!   stopped, nothing left; a killed member is named (agent-exited) the same way.
 //! - Under `--on-loss repair` (the default) a member lost in flight (`--lose`) is repaired
-//!   around: its readers fly their new triangles, the team finishes SAFE, exit 0.
+//!   around: its readers fly their new triangles, the team finishes SAFE, exit 0; two lost at
+//!   the same instant are repaired as lockstep repairs them.
 //! - SIGINT to the orchestrator stops the team, nothing left.
 //! - A member started by hand in the other mode is refused with exit 2.
 //! - `--rt-priority P` puts the orchestrator and every member under SCHED_FIFO at P (read back
@@ -161,6 +162,25 @@ fn impaired_links_hold_real_deliveries_back_and_drop_some() {
     assert_stderr_has(&o, "launch", &["--link-delay-ms 500", "--stale-after"]);
 }
 
+/// A short real-time flight of `team` into `out` that loses `lose` (values of `--lose`) under
+/// the default `--on-loss repair`, the members logging their repairs: exit 0, SAFE and
+/// complete. Its output and audit.json.
+fn repaired_flight(team: &str, out: &Path, lose: &[&str]) -> (std::process::Output, Value) {
+    let mut extra = SHORT.to_vec();
+    for l in lose {
+        extra.extend(["--lose", l]);
+    }
+    let mut cmd = realtime_launch(team, out, &extra);
+    cmd.env("RUST_LOG", "warn,cdm_runtime::realtime::repair=info");
+    let o = run(&mut cmd, DEADLINE);
+    let what = format!("launch --realtime --lose {}", lose.join(" --lose "));
+    assert_exit(&o, 0, &what);
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    (o, audit)
+}
+
 /// `--lose 6@1` in real time (default `--on-loss repair`): the orchestrator kills secondary
 /// leader 6 once it has published its tick of 1 s, records the loss (`scripted`, its last tick,
 /// the repair tick a lead later) and announces it; its readers 7, 9 and 10 open their new
@@ -172,15 +192,7 @@ fn a_scripted_loss_in_real_time_is_repaired_and_the_team_finishes_safe() {
     let dir = TempDir::new();
     let team = unique_team("rt_lose");
     let out = dir.path().join("rt");
-    let mut extra = SHORT.to_vec();
-    extra.extend(["--lose", "6@1"]);
-    let mut cmd = realtime_launch(&team, &out, &extra);
-    cmd.env("RUST_LOG", "warn,cdm_runtime::realtime::repair=info");
-    let o = run(&mut cmd, DEADLINE);
-    assert_exit(&o, 0, "launch --realtime --lose 6@1");
-    let audit = read_json(&out.join("audit.json"));
-    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
-    assert_eq!(audit["complete"], true, "{audit:#}");
+    let (o, audit) = repaired_flight(&team, &out, &["6@1"]);
     let losses = audit["losses"].as_array().expect("losses");
     assert_eq!(losses.len(), 1, "{audit:#}");
     let l = &losses[0];
@@ -216,6 +228,40 @@ fn a_scripted_loss_in_real_time_is_repaired_and_the_team_finishes_safe() {
         assert_eq!(ids_at, &want, "tick {tick}");
     }
     assert!(!stderr.contains("not written"), "{stderr}");
+    assert_no_process_of(&team);
+}
+
+/// `--lose 1@1 --lose 2@1` in real time: two primaries lost at the same instant, each given a
+/// repair tick of its own. Follower 7 read both; the repair of 1 alone would have it read 2,
+/// which is dead, so it flies the repair of both (the next link) instead, the triangle lockstep
+/// and `simulate` fly: [3, 4, 9]. The short plan finishes SAFE and complete, exit 0, nothing
+/// left.
+#[test]
+fn two_primaries_lost_at_the_same_instant_are_repaired_as_in_lockstep() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_lose2");
+    let out = dir.path().join("rt");
+    let (o, audit) = repaired_flight(&team, &out, &["1@1", "2@1"]);
+    let losses = audit["losses"].as_array().expect("losses");
+    let lost: Vec<(Option<u64>, Option<&str>)> = losses
+        .iter()
+        .map(|l| (l["id"].as_u64(), l["cause"].as_str()))
+        .collect();
+    assert_eq!(
+        lost,
+        [(Some(1), Some("scripted")), (Some(2), Some("scripted"))],
+        "{audit:#}"
+    );
+    let last = &losses[1]["retriangulated"][0];
+    assert_eq!(last["id"], 7, "{audit:#}");
+    assert_eq!(last["new"], serde_json::json!([3, 4, 9]), "{audit:#}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let flew = stderr.lines().any(|s| {
+        s.contains("flying the repaired link")
+            && s.contains(" id=7 ")
+            && s.contains("in_neighbors=[3, 4, 9]")
+    });
+    assert!(flew, "agent 7 never flew [3, 4, 9]:\n{stderr}");
     assert_no_process_of(&team);
 }
 

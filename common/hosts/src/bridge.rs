@@ -7,10 +7,11 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use cdm_iox::{MemberPorts, OrchestratorPorts, TeamName, TeamProcess};
 use cdm_records::audit::FaultRecord;
-use cdm_runtime::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, LossNotice, StateMsg};
 use cdm_scenario::Scenario;
+use cdm_iox::{MemberPorts, OrchestratorPorts, TeamName, TeamProcess};
+use cdm_runtime::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, LossNotice, StateMsg};
+use cdm_runtime::process_exit::ProcessExit;
 use cdm_team::out;
 use cdm_team::Failure;
 use cdm_zenoh::{
@@ -240,7 +241,7 @@ impl OtherHosts for Bridge {
     }
 
     /// A remote member that exited since the last call (`--on-loss repair`), with how.
-    fn take_exited(&self) -> Option<(u32, String)> {
+    fn take_exited(&self) -> Option<(u32, ProcessExit)> {
         let mut l = self.links.lock().ok()?;
         (!l.exited.is_empty()).then(|| l.exited.remove(0))
     }
@@ -580,6 +581,7 @@ fn on_frame<L>(r: &mut Remote<L>, ctx: &Ctx, frame: Up) -> Result<(), LinkLost> 
             if r.killed.contains(&id) {
                 return Ok(());
             }
+            let how = ProcessExit::from(how);
             tracing::warn!(host = r.host, id, "agent {id} on host {} {how}", r.host);
             if ctx.flight.repair {
                 // Lost and repaired around, as a member of this host that exits.
@@ -796,7 +798,11 @@ fn lose<L>(r: &mut Remote<L>, ctx: &Ctx, why: LinkLost) {
         .collect();
     if let Ok(mut links) = ctx.links.lock() {
         if repaired {
-            let how = format!("was killed with host {} ({}): {why}", r.host, r.who);
+            let how = ProcessExit::WithHost {
+                host: r.host,
+                who: r.who.clone(),
+                why: why.to_string(),
+            };
             links
                 .exited
                 .extend(alive.iter().map(|&id| (id, how.clone())));
@@ -929,7 +935,7 @@ mod tests {
         let exited: Vec<u32> = links.exited.iter().map(|(id, _)| *id).collect();
         assert_eq!(exited, members);
         assert_eq!(
-            links.exited[0].1,
+            links.exited[0].1.to_string(),
             "was killed with host 1 (b (pid 7)): the daemon is gone, its zenoh session closed: \
              killed or exited"
         );

@@ -8,14 +8,16 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+use cdm_scenario::{Checks, Scenario};
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{ClockCommand, ClockMsg, StopReason};
-use cdm_scenario::{Checks, Scenario};
+use cdm_runtime::process_exit::ProcessExit;
 use cdm_team::out;
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
 use cdm_team::{Exit, Failure};
 use cdm_zenoh::{
-    down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, NetState, Up, PROTOCOL_VERSION,
+    down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, NetExit, NetState, Up,
+    PROTOCOL_VERSION,
 };
 
 use crate::bridge::HEARTBEAT;
@@ -520,7 +522,7 @@ impl<'a, L: HostLink<In = Down, Out = Up>> Link<'a, L> {
             }
             if let Ok(Some(status)) = c.child.try_wait() {
                 self.up(ports, now)?;
-                let how = cdm_team::team::describe_exit(status);
+                let how = NetExit::of(&ProcessExit::of(status));
                 self.reported.insert(c.id);
                 self.send(&Up::Exited { id: c.id, how }, now)?;
             }

@@ -102,7 +102,10 @@ pub enum DaemonStop {
     #[error("interrupted by {0}")]
     Interrupted(&'static str),
     #[error("agent {id} {how} before the team started")]
-    ExitedEarly { id: u32, how: String },
+    ExitedEarly {
+        id: u32,
+        how: cdm_runtime::process_exit::ProcessExit,
+    },
     #[error("agents {late:?} did not start within {deadline:?}")]
     NotStarted { late: Vec<u32>, deadline: Duration },
     #[error("the orchestrator stopped the team before it started")]

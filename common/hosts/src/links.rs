@@ -6,8 +6,9 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-use cdm_model::outcome::FaultKind;
 use cdm_records::audit::FaultRecord;
+use cdm_model::outcome::FaultKind;
+use cdm_runtime::process_exit::ProcessExit;
 
 /// How long a remote member's silence waits at least for the bridge's verdict on its host: a
 /// closed session is reported after zenoh's grace (150 ms); the rest is slack for a loaded
@@ -34,8 +35,8 @@ pub struct Links {
     /// Joined hosts: the daemon and when a frame last came from it.
     pub heard: BTreeMap<u32, (String, Instant)>,
     /// Remote members that exited (`--on-loss repair`: lost, not a fault), oldest first, with
-    /// `first_exited`'s wording of how.
-    pub exited: Vec<(u32, String)>,
+    /// how.
+    pub exited: Vec<(u32, ProcessExit)>,
     /// Remote members the team core asked to kill, not yet sent to their daemon.
     pub to_kill: Vec<u32>,
     /// Links (reader, writer) of repairs, whose reader runs on another host, that its daemon

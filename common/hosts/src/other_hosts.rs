@@ -3,9 +3,10 @@
 //! (`crate::Bridge`) when daemons on other machines run part of it. The launch asks the same
 //! questions of both, so no code path of its own depends on how many hosts there are.
 
-use cdm_iox::OrchestratorPorts;
 use cdm_records::audit::FaultRecord;
 use cdm_records::rundir::RunDir;
+use cdm_iox::OrchestratorPorts;
+use cdm_runtime::process_exit::ProcessExit;
 
 /// The other hosts of a team, as the launch asks about them.
 pub trait OtherHosts {
@@ -19,7 +20,7 @@ pub trait OtherHosts {
     /// The team core's kill of member `id` (another host's member is its daemon's to kill).
     fn kill(&self, id: u32);
     /// A remote member that exited since the last call (`--on-loss repair`), with how.
-    fn take_exited(&self) -> Option<(u32, String)>;
+    fn take_exited(&self) -> Option<(u32, ProcessExit)>;
     /// True when the link (reader, writer) a repair opened is connected.
     fn linked(&self, ports: &OrchestratorPorts, reader: u32, writer: u32) -> bool;
     /// After the team's stop: the other hosts stop their members; their record is written
@@ -42,7 +43,7 @@ impl OtherHosts for OneHost {
         None
     }
     fn kill(&self, _id: u32) {}
-    fn take_exited(&self) -> Option<(u32, String)> {
+    fn take_exited(&self) -> Option<(u32, ProcessExit)> {
         None
     }
     fn linked(&self, ports: &OrchestratorPorts, reader: u32, writer: u32) -> bool {

@@ -11,21 +11,21 @@ use cdm_team::out;
 use cdm_team::telemetry_thread::ThreadedSink;
 
 use crate::realtime::Elsewhere;
-use cdm_engine::loss::{LossSchedule, LossState};
-use cdm_hosts::OtherHosts;
-use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
-use cdm_math::vec3;
 use cdm_model::formation::Role;
+use cdm_engine::loss::{LossSchedule, LossState};
+use cdm_math::vec3;
 use cdm_model::outcome::FaultKind;
 use cdm_records::record::TickRecorder;
 use cdm_records::rundir::RunDir;
+use cdm_scenario::Scenario;
 use cdm_records::telemetry::TelemetrySink;
-use cdm_runtime::messages::{ClockMsg, StateMsg, StopReason};
+use cdm_hosts::OtherHosts;
+use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
+use cdm_runtime::messages::{ClockMsg, LossNotice, StateMsg, StopReason};
 use cdm_runtime::seams::{Clock, MonotonicClock};
-use cdm_runtime::team_core::{nap_before_wait, TeamAction, TeamConfig, TeamCore, TickStates};
+use cdm_runtime::team_core::{nap_before_wait, TeamConfig, TeamCore, TickStates};
 use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_runtime::team_loss::TeamLosses;
-use cdm_scenario::Scenario;
 use cdm_viewer::live::LiveView;
 
 use crate::feeds::Feeds;
@@ -412,8 +412,7 @@ pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: 
         }
     };
     let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
-    let _ =
-        cdm_records::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
+    let _ = cdm_records::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
 }
 
 /// A telemetry write or flush that failed (a full disk) at `tick`: a fault, the file keeps its
@@ -437,8 +436,8 @@ fn transport_stop<E: std::fmt::Display>(tick: u64) -> impl Fn(E) -> Stop {
     }
 }
 
-/// The team's protocol core (sans I/O) for this launch: its members, window and deadlines,
-/// and the scripted losses; repairs only where the orchestrator can kill (spawned members).
+/// The team's protocol core (sans I/O) for this launch: lockstep over its members, window
+/// and deadlines, and the scripted losses.
 fn team_core(s: &Scenario, o: &LaunchOptions, last: u64, now: Duration) -> TeamCore {
     let cfg = TeamConfig {
         ids: s.formation.members.iter().map(|m| m.id).collect(),
@@ -446,13 +445,19 @@ fn team_core(s: &Scenario, o: &LaunchOptions, last: u64, now: Duration) -> TeamC
         last_tick: last,
         agent_timeout: o.agent_timeout,
     };
-    let repairs = o.on_loss == cdm_engine::loss::OnLoss::Repair && o.spawn;
     let book = TeamLosses::new(s, &cdm_team::loss::scripted_kills(&o.losses));
-    TeamCore::new(cfg, now).with_losses(book, repairs)
+    TeamCore::lockstep(cfg, now).with_losses(book, repairs(o))
 }
 
-/// The tick loop: I/O only. The team core (`cdm_runtime::team_core`) decides what to grant, which
-/// tick is complete and when to stop; this loop receives, publishes, audits, writes and waits.
+/// Whether the team repairs its losses: `--on-loss repair` with members this launch spawned
+/// (it kills a silent one); in real time on one host only (a loss across hosts stays the host's
+/// fault there).
+pub fn repairs(o: &LaunchOptions) -> bool {
+    let one_host_if_realtime = o.realtime.is_none() || o.hosts.hosts <= 1;
+    o.on_loss == cdm_engine::loss::OnLoss::Repair && o.spawn && one_host_if_realtime
+}
+
+/// The lockstep flight: the team core paced by grants, in the one loop (`fly.rs`).
 fn fly_team(
     s: &Scenario,
     o: &LaunchOptions,
@@ -462,96 +467,131 @@ fn fly_team(
     watchers: Watchers<'_>,
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
-    let mut w = watchers;
-    let hash = s.content_hash();
     let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let clock = MonotonicClock::start();
     let mut core = team_core(s, o, last, clock.now());
-    let mut rec = Recorder::new(s, last, o.quiet);
-    let mut ticking = None;
-    let mut last_flush = Instant::now();
-    loop {
-        let now = clock.now();
-        if interrupted.load(Ordering::Relaxed) {
-            core.on_interrupt(cdm_process::signals::received());
+    let mut io = LockstepIo {
+        s,
+        o,
+        hash: s.content_hash(),
+        last,
+        ports,
+        children,
+        tel,
+        w: watchers,
+        rec: Recorder::new(s, last, o.quiet),
+        ticking: None,
+        granted: 0,
+    };
+    let all = crate::fly::fly(&mut core, &mut io, &clock, interrupted)?;
+    Ok((io.ticking.unwrap_or_else(Instant::now), all))
+}
+
+/// The lockstep loop's I/O: grants on the clock channel, complete ticks audited and written,
+/// waits woken by the members.
+struct LockstepIo<'a, 'w> {
+    s: &'a Scenario,
+    o: &'a LaunchOptions,
+    hash: u64,
+    last: u64,
+    ports: &'a mut OrchestratorPorts,
+    children: &'a mut [Spawned],
+    tel: &'a mut dyn TelemetrySink,
+    w: Watchers<'w>,
+    rec: Recorder,
+    /// When the first grant went out.
+    ticking: Option<Instant>,
+    /// The highest tick granted so far.
+    granted: u64,
+}
+
+impl crate::fly::TeamIo for LockstepIo<'_, '_> {
+    fn receive(&mut self, core: &mut TeamCore, now: Duration) -> Result<(), Stop> {
+        self.ports
+            .receive_notified_states(|msg| core.on_state(&msg, now))
+            .map(drop)
+            .map_err(transport_stop(core.position()))
+    }
+
+    fn grant(&mut self, core: &TeamCore, g: u64) -> Result<(), Stop> {
+        let notice = core.losses().and_then(|l| l.notice());
+        self.publish(ClockMsg::run(g, self.hash).with_loss(notice), core)?;
+        self.granted = g;
+        self.ticking.get_or_insert_with(Instant::now);
+        Ok(())
+    }
+
+    fn announce(&mut self, core: &TeamCore, n: LossNotice) -> Result<(), Stop> {
+        let msg = ClockMsg::run(self.granted, self.hash).with_loss(Some(n));
+        self.publish(msg, core)
+    }
+
+    fn complete(
+        &mut self,
+        core: &mut TeamCore,
+        tick: u64,
+        states: TickStates,
+    ) -> Result<Option<bool>, Stop> {
+        let stop = self.o.stop_on_violation;
+        let (s, w, tel) = (self.s, &mut self.w, &mut *self.tel);
+        let ends = self.rec.complete(s, (tick, states), core, w, tel, stop)?;
+        Ok(ends.then_some(tick >= self.last))
+    }
+
+    /// [`check_exited`] after a read of every member: one that died after sending states,
+    /// before it would have woken the orchestrator, is read here (reads otherwise go by
+    /// wake-ups).
+    fn check_exited(&mut self, core: &mut TeamCore, now: Duration) -> Result<(), Stop> {
+        self.ports
+            .receive_states(|msg| core.on_state(&msg, now))
+            .map_err(transport_stop(core.position()))?;
+        check_exited(core, self.children, self.w.hosts, now);
+        Ok(())
+    }
+
+    fn kill(&mut self, id: u32) {
+        cdm_team::loss::kill_and_reap(self.children, id);
+        self.w.hosts.kill(id);
+    }
+
+    /// On this host's shared memory, or (with `--hosts`) through the bridge, which knows where
+    /// each reader runs.
+    fn linked(&self, reader: u32, writer: u32) -> bool {
+        self.w.hosts.linked(self.ports, reader, writer)
+    }
+
+    fn flush(&mut self, at: u64) -> Result<(), Stop> {
+        self.tel.flush().map_err(io_stop(at))
+    }
+
+    /// Waits at most `d` for the members' wake-ups, after a nap when they are far from the
+    /// grant (`nap_before_wait`: their wake-ups then cost the orchestrator one).
+    fn wait(&mut self, core: &TeamCore, d: Duration) {
+        let window = u64::from(self.o.window);
+        let nap = nap_before_wait(self.granted, core.position(), window).min(d);
+        if !nap.is_zero() {
+            std::thread::sleep(nap);
         }
-        core.on_turn(now);
-        ports
-            .receive_notified_states(|msg| core.on_state(msg, now))
-            .map_err(transport_stop(core.next_tick()))?;
-        loop {
-            match core.next_action(clock.now()) {
-                TeamAction::Grant(g) => {
-                    publish_grant(ports, &core, g, hash)?;
-                    ticking.get_or_insert_with(Instant::now);
-                }
-                TeamAction::Complete { tick, states } => {
-                    let stop = o.stop_on_violation;
-                    if rec.complete(s, (tick, states), &mut core, &mut w, tel, stop)? {
-                        return Ok((ticking.unwrap_or_else(Instant::now), tick >= last));
-                    }
-                }
-                TeamAction::CheckExited => {
-                    read_all_then_check_exited(&mut core, ports, children, w.hosts, clock.now())?;
-                }
-                TeamAction::Kill(ids) => {
-                    for id in ids {
-                        cdm_team::loss::kill_and_reap(children, id);
-                        w.hosts.kill(id);
-                    }
-                    break;
-                }
-                TeamAction::CheckLinks => check_links(&mut core, ports, w.hosts, clock.now()),
-                TeamAction::Poll => {
-                    // Complete ticks reach the file at least every 100 ms (and at every stop).
-                    if last_flush.elapsed() > Duration::from_millis(100) {
-                        tel.flush().map_err(io_stop(core.next_tick()))?;
-                        last_flush = Instant::now();
-                    }
-                    break;
-                }
-                TeamAction::Wait(d) => {
-                    wait_for_members(ports, &core, o.window, d);
-                    break;
-                }
-                TeamAction::Finished => {
-                    rec.progress.finish();
-                    tel.finish().map_err(io_stop(core.next_tick()))?;
-                    return Ok((ticking.unwrap_or_else(Instant::now), true));
-                }
-                TeamAction::Stop(f, reason) => {
-                    let _ = tel.flush();
-                    return Err((f, reason));
-                }
-            }
+        let _ = self.ports.wait(d - nap);
+    }
+
+    fn end(&mut self, core: &TeamCore, finished: bool) -> Result<(), Stop> {
+        if !finished {
+            let _ = self.tel.flush();
+            return Ok(());
         }
+        self.rec.progress.finish();
+        self.tel.finish().map_err(io_stop(core.position()))
     }
 }
 
-/// Waits at most `d` for the members' wake-ups, after a nap when they are far from the grant
-/// (`nap_before_wait`: their wake-ups then cost the orchestrator one).
-fn wait_for_members(ports: &mut OrchestratorPorts, core: &TeamCore, window: u32, d: Duration) {
-    let nap = nap_before_wait(core.granted(), core.next_tick(), u64::from(window)).min(d);
-    if !nap.is_zero() {
-        std::thread::sleep(nap);
+impl LockstepIo<'_, '_> {
+    fn publish(&mut self, msg: ClockMsg, core: &TeamCore) -> Result<(), Stop> {
+        self.ports
+            .publish_clock(msg)
+            .map(drop)
+            .map_err(transport_stop(core.position()))
     }
-    let _ = ports.wait(d - nap);
-}
-
-/// [`check_exited`] after a read of every member: one that died after sending states, before
-/// it would have woken the orchestrator, is read here (reads otherwise go by wake-ups).
-fn read_all_then_check_exited(
-    core: &mut TeamCore,
-    ports: &mut OrchestratorPorts,
-    children: &mut [Spawned],
-    hosts: &dyn OtherHosts,
-    now: Duration,
-) -> Result<(), Stop> {
-    ports
-        .receive_states(|msg| core.on_state(msg, now))
-        .map_err(transport_stop(core.next_tick()))?;
-    check_exited(core, children, hosts, now);
-    Ok(())
 }
 
 /// Hands the team core the first member that exited and is not already lost: one of ours, or
@@ -571,31 +611,6 @@ fn check_exited(
     while let Some((id, how)) = hosts.take_exited() {
         core.on_exited(id, how, now);
     }
-}
-
-/// Tells the team core which of a repair's new links are connected: on this host's shared
-/// memory, or (with `--hosts`) through the bridge, which knows where each reader runs.
-fn check_links(
-    core: &mut TeamCore,
-    ports: &OrchestratorPorts,
-    hosts: &dyn OtherHosts,
-    now: Duration,
-) {
-    core.on_links(now, |r, wr| hosts.linked(ports, r, wr));
-}
-
-/// Grants ticks up to `g` on the clock channel, with the latest loss notice.
-fn publish_grant(
-    ports: &mut OrchestratorPorts,
-    core: &TeamCore,
-    g: u64,
-    hash: u64,
-) -> Result<(), Stop> {
-    let notice = core.losses().and_then(|l| l.notice());
-    ports
-        .publish_clock(ClockMsg::run(g, hash).with_loss(notice))
-        .map(drop)
-        .map_err(transport_stop(core.next_tick()))
 }
 
 /// What every complete tick gets: the shared audit and telemetry of `simulate`

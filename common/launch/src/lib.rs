@@ -4,6 +4,7 @@
 
 pub mod feeds;
 pub mod flight;
+mod fly;
 pub mod launch;
 pub mod realtime;
 pub mod team_arm;

@@ -5,30 +5,31 @@
 //! the plan, on a fault, a stale or exited member, or a signal. With `--on-loss repair` (the
 //! default, members spawned on one host) a dead, stale or vehicle-lost member, or `--lose`, is a
 //! loss instead: killed if need be, recorded, announced on the clock channel, and repaired
-//! around by its readers. Every decision is cdm-runtime's `RealtimeTeam` (no I/O, driven by the
-//! clock passed in); this file moves messages, reads the clock, sleeps, and writes files.
+//! around by its readers. Every decision is cdm-runtime's team core over its real-time pacing
+//! (no I/O, driven by the clock passed in), flown by the one loop of `fly.rs`; this file moves
+//! messages, sleeps, and writes files.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use crate::feeds::Feeds;
-use cdm_engine::loss::{LossAt, LossSchedule, LossState, OnLoss};
-use cdm_iox::OrchestratorPorts;
-use cdm_math::Vec3;
-use cdm_model::formation::Role;
-use cdm_model::outcome::FaultKind;
 use cdm_records::audit::{Auditor, LossRecord, RealtimeFigures};
+use cdm_model::formation::Role;
+use cdm_engine::loss::{LossAt, LossSchedule, LossState};
+use cdm_math::Vec3;
+use cdm_model::outcome::FaultKind;
 use cdm_records::record::{write_fault, TickRecorder};
 use cdm_records::rundir::RunDir;
+use cdm_scenario::Scenario;
 use cdm_records::telemetry::TelemetrySink;
-use cdm_runtime::messages::{ClockMsg, StopReason};
+use cdm_iox::OrchestratorPorts;
+use cdm_runtime::messages::{ClockMsg, LossNotice, StopReason};
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
+use cdm_runtime::seams::{Clock, MonotonicClock};
+use cdm_runtime::team_core::Pacing;
+use cdm_runtime::team_core::{LostMember, RealtimePlan, TeamCore, WallClock, MEMBER_STALE_FACTOR};
 use cdm_runtime::team_loss::TeamLosses;
-use cdm_runtime::team_realtime::{
-    LostMember, MonitorAction, RealtimePlan, RealtimeTeam, MEMBER_STALE_FACTOR,
-};
-use cdm_scenario::Scenario;
 
 use cdm_team::out;
 
@@ -123,19 +124,17 @@ impl RealtimeArgs {
     }
 }
 
-/// Whether a real-time launch repairs its losses: `--on-loss repair` with members it spawned
-/// (it kills a silent one) on one host (a loss across hosts stays the host's fault in real time).
-pub fn repairs(o: &LaunchOptions) -> bool {
-    o.on_loss == OnLoss::Repair && o.spawn && o.hosts.hosts <= 1
-}
-
 /// The member flags of a real-time launch (spawned members get them; hand-started ones are told).
 /// A team that repairs its losses gives its members [`MEMBER_STALE_FACTOR`] times the stale
 /// bound: the monitor finds a silent member first, and its readers switch before they give up.
 pub fn member_flags(o: &LaunchOptions) -> Vec<String> {
     match &o.realtime {
         Some(rt) => {
-            let factor = if repairs(o) { MEMBER_STALE_FACTOR } else { 1 };
+            let factor = if crate::launch::repairs(o) {
+                MEMBER_STALE_FACTOR
+            } else {
+                1
+            };
             let mut flags = vec![
                 "--realtime".into(),
                 "--stale-after".into(),
@@ -179,11 +178,12 @@ pub fn run(
     })?;
     let (mut core, clock, start, start_msg) = announce(s, o, rt, ports)?;
     let hash = s.content_hash();
+    let plan = *wall_clock(&mut core).plan();
+    let (last_audit, period_s) = (plan.last_audit, plan.period_s);
     let mut m = Monitor {
         s,
-        o,
-        clock,
-        core: &mut core,
+        ports,
+        children,
         audit,
         live,
         tel: tel.as_mut(),
@@ -194,11 +194,14 @@ pub fn run(
         lost: Vec::new(),
         out: vec![false; s.formation.members.len()],
         start_msg,
+        progress: cdm_team::progress::Progress::new("launch", last_audit, period_s, o.quiet),
+        quiet: o.quiet,
     };
-    let cpu_at_start = team_cpu_s(children);
-    let result = m.fly(ports, children, interrupted);
-    let Monitor { mut vehicles, .. } = m;
-    let audits = core.audits();
+    let cpu_at_start = team_cpu_s(m.children);
+    let result = crate::fly::fly(&mut core, &mut m, &clock, interrupted);
+    let (mut vehicles, ports, children) = (m.vehicles, m.ports, m.children);
+    let book = wall_clock(&mut core);
+    let audits = book.audits();
     let cpu_s = team_cpu_s(children) - cpu_at_start;
     let flight_s = Instant::now()
         .saturating_duration_since(start)
@@ -207,19 +210,13 @@ pub fn run(
     let reason = result
         .as_ref()
         .map_or_else(|(_, r)| *r, |_| StopReason::Finished);
-    let book = core.book_mut();
+    let book = book.book_mut();
     book.stopping();
     let _ = ports.publish_clock(ClockMsg::stop(s.last_tick(), hash, reason));
     collect_final_reports(book, ports, (children, elsewhere), &mut vehicles);
     vehicles.record(audit);
-    let figures = book.figures(RunFigures {
-        audits,
-        audit_hz: rt.audit_hz,
-        phase_seed: rt.phase_seed,
-        stale_after_s: rt.stale_after.as_secs_f64(),
-        wall_s: flight_s,
-        team_cpu_cores: (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s),
-    });
+    let cpu_cores = (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s);
+    let figures = book.figures(run_figures(rt, audits, flight_s, cpu_cores));
     if !o.quiet {
         print_figures(&figures, s.formation.members.len());
     }
@@ -237,14 +234,37 @@ pub fn run(
     }
 }
 
-/// The monitor of `s`'s team on a clock started now, the start instant it announced (tick 0's
-/// instant on this process's monotonic clock) and the clock message that announced it.
+/// The monitor's own figures of a flight of `wall_s` seconds with `audits` instants audited.
+fn run_figures(
+    rt: &RealtimeOptions,
+    audits: u64,
+    wall_s: f64,
+    team_cpu_cores: Option<f64>,
+) -> RunFigures {
+    RunFigures {
+        audits,
+        audit_hz: rt.audit_hz,
+        phase_seed: rt.phase_seed,
+        stale_after_s: rt.stale_after.as_secs_f64(),
+        wall_s,
+        team_cpu_cores,
+    }
+}
+
+/// The real-time pacing of a team core (always, for the core [`announce`] made).
+fn wall_clock(core: &mut TeamCore) -> &mut WallClock {
+    core.wall_clock_mut()
+        .expect("the real-time launch makes a real-time team core")
+}
+
+/// The team core of `s`'s flight on a clock started now, the start instant it announced (tick
+/// 0's instant on this process's monotonic clock) and the clock message that announced it.
 fn announce(
     s: &Scenario,
     o: &LaunchOptions,
     rt: &RealtimeOptions,
     ports: &mut OrchestratorPorts,
-) -> Result<(RealtimeTeam, Instant, Instant, ClockMsg), Stop> {
+) -> Result<(TeamCore, MonotonicClock, Instant, ClockMsg), Stop> {
     let members: Vec<_> = s
         .formation
         .members
@@ -256,7 +276,7 @@ fn announce(
     let book = MonitorCore::new(&members, hash, history, rt.phase_seed);
     let lead = start_lead(members.len());
     let start_ns = unix_now_ns() + lead.as_nanos() as u64;
-    let clock = Instant::now();
+    let (started, clock) = (Instant::now(), MonotonicClock::start());
     let last = o.max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
     let plan = RealtimePlan::new(lead, (last, s.dt_s()), rt.audit_hz, rt.stale_after);
     let start_msg = ClockMsg::realtime(start_ns, hash, rt.phase_seed);
@@ -264,9 +284,9 @@ fn announce(
         .publish_clock(start_msg)
         .map_err(|e| transport(e, 0))?;
     let scripted = cdm_team::loss::scripted_kills(&o.losses);
-    let core = RealtimeTeam::new(plan, book, clock.elapsed())
-        .with_losses(TeamLosses::new(s, &scripted), repairs(o));
-    Ok((core, clock, clock + lead, start_msg))
+    let core = TeamCore::realtime(plan, book, clock.now())
+        .with_losses(TeamLosses::new(s, &scripted), crate::launch::repairs(o));
+    Ok((core, clock, started + lead, start_msg))
 }
 
 /// The pacing line of the summary (and what the links dropped, when they are impaired).
@@ -355,13 +375,12 @@ fn transport(e: impl std::fmt::Display, tick: u64) -> Stop {
     (f, StopReason::AgentFault)
 }
 
-/// The monitor's loop state.
-struct Monitor<'a> {
+/// The real-time loop's I/O: states drained (vehicle reports kept aside), audit instants
+/// written, losses recorded, plain sleeps.
+struct Monitor<'a, 'p> {
     s: &'a Scenario,
-    o: &'a LaunchOptions,
-    /// The clock the monitor core is driven by (it started just before the announcement).
-    clock: Instant,
-    core: &'a mut RealtimeTeam,
+    ports: &'p mut OrchestratorPorts,
+    children: &'p mut [Spawned],
     audit: &'a mut Auditor,
     /// The live feeds (`--serve`, `--ros2`): every audited instant is offered to them (each
     /// sends at most its own rate).
@@ -382,102 +401,89 @@ struct Monitor<'a> {
     out: Vec<bool>,
     /// The start's clock message: loss notices ride on copies of it.
     start_msg: ClockMsg,
+    progress: cdm_team::progress::Progress,
+    quiet: bool,
 }
 
-impl Monitor<'_> {
-    /// Audits every instant up to the end of the plan (or `--max-ticks`); true when all were.
-    fn fly(
-        &mut self,
-        ports: &mut OrchestratorPorts,
-        children: &mut [Spawned],
-        interrupted: &AtomicBool,
-    ) -> Result<bool, Stop> {
-        let plan = *self.core.plan();
-        let mut progress = cdm_team::progress::Progress::new(
-            "launch",
-            plan.last_audit,
-            plan.period_s,
-            self.o.quiet,
-        );
-        loop {
-            if interrupted.load(Ordering::Relaxed) {
-                self.core.on_interrupt(cdm_process::signals::received());
-            }
-            self.core.on_turn();
-            self.drain(ports)?;
-            loop {
-                match self.core.next_action(self.clock.elapsed()) {
-                    MonitorAction::Audit { index, t_s } => {
-                        self.audit_once(index, t_s)?;
-                        progress.tick(index, self.audit.report());
-                    }
-                    MonitorAction::CheckExited => {
-                        let gone = |id| self.core.is_gone(id);
-                        if let Some((id, how)) = first_exited_but(children, gone) {
-                            self.core.on_exited(id, how);
-                        }
-                    }
-                    MonitorAction::Kill(ids) => {
-                        for id in ids {
-                            cdm_team::loss::kill_and_reap(children, id);
-                        }
-                        // Their last states are drained before they are lost.
-                        break;
-                    }
-                    MonitorAction::Lost(lost) => self.lost(lost),
-                    MonitorAction::Announce(notice) => {
-                        let msg = self.start_msg.with_loss(Some(notice));
-                        let tick = self.core.audits();
-                        ports.publish_clock(msg).map_err(|e| transport(e, tick))?;
-                    }
-                    MonitorAction::CheckLinks => {
-                        let now = self.clock.elapsed();
-                        let linked = |r, w| ports.linked(r, w).unwrap_or(false);
-                        self.core.on_links(now, linked);
-                    }
-                    MonitorAction::Flush => {
-                        let _ = self.tel.flush();
-                    }
-                    MonitorAction::Wait(d) => {
-                        // A plain sleep: the transport's timed wait is coarser, and members do
-                        // not wake the monitor in real time.
-                        std::thread::sleep(d);
-                        break;
-                    }
-                    MonitorAction::Finished => {
-                        progress.finish();
-                        self.record_losses(u64::MAX);
-                        return Ok(true);
-                    }
-                    MonitorAction::Stop(stop) => {
-                        self.record_losses(u64::MAX);
-                        return Err(stop);
-                    }
-                }
-            }
-        }
-    }
-
+impl crate::fly::TeamIo for Monitor<'_, '_> {
     /// Takes every state and report that arrived (the core keeps the fault that stops it).
-    fn drain(&mut self, ports: &mut OrchestratorPorts) -> Result<(), Stop> {
-        let core = &mut *self.core;
+    fn receive(&mut self, core: &mut TeamCore, now: Duration) -> Result<(), Stop> {
         let vehicles = &mut self.vehicles;
-        ports
+        let at = core.position();
+        self.ports
             .receive_states(|msg| {
                 if !vehicles.take(&msg) {
-                    core.on_state(&msg);
+                    core.on_state(&msg, now);
                 }
             })
             .map(drop)
-            .map_err(|e| transport(e, core.audits()))
+            .map_err(|e| transport(e, at))
     }
 
+    fn announce(&mut self, core: &TeamCore, n: LossNotice) -> Result<(), Stop> {
+        let msg = self.start_msg.with_loss(Some(n));
+        let at = core.position();
+        self.ports
+            .publish_clock(msg)
+            .map(drop)
+            .map_err(|e| transport(e, at))
+    }
+
+    fn audit(&mut self, core: &TeamCore, index: u64, t_s: f64) -> Result<(), Stop> {
+        let Pacing::Realtime(w) = core.pacing() else {
+            return Ok(());
+        };
+        self.audit_once(w.book(), index, t_s)?;
+        self.progress.tick(index, self.audit.report());
+        Ok(())
+    }
+
+    fn lost(&mut self, lost: LostMember) {
+        self.lose(lost);
+    }
+
+    fn check_exited(&mut self, core: &mut TeamCore, now: Duration) -> Result<(), Stop> {
+        let gone = |id| core.is_gone(id);
+        if let Some((id, how)) = first_exited_but(self.children, gone) {
+            core.on_exited(id, how, now);
+        }
+        Ok(())
+    }
+
+    fn kill(&mut self, id: u32) {
+        cdm_team::loss::kill_and_reap(self.children, id);
+    }
+
+    fn linked(&self, reader: u32, writer: u32) -> bool {
+        self.ports.linked(reader, writer).unwrap_or(false)
+    }
+
+    fn flush(&mut self, _at: u64) -> Result<(), Stop> {
+        let _ = self.tel.flush();
+        Ok(())
+    }
+
+    /// A plain sleep: the transport's timed wait is coarser, and members do not wake the
+    /// monitor in real time.
+    fn wait(&mut self, _core: &TeamCore, d: Duration) {
+        std::thread::sleep(d);
+    }
+
+    fn end(&mut self, _core: &TeamCore, finished: bool) -> Result<(), Stop> {
+        if finished {
+            self.progress.finish();
+        }
+        self.record_losses(u64::MAX);
+        Ok(())
+    }
+}
+
+impl Monitor<'_, '_> {
     /// Audits and writes the instant `t_s` (audit index `index`) with the recorder `simulate`
     /// and lockstep `launch` use: the same audit, the same columns. Lost members have no row.
-    fn audit_once(&mut self, index: u64, t_s: f64) -> Result<(), Stop> {
+    fn audit_once(&mut self, book: &MonitorCore, index: u64, t_s: f64) -> Result<(), Stop> {
         self.record_losses(index);
         let n = self.s.formation.members.len();
-        let book = self.core.book();
         self.at.clear();
         self.at.extend((0..n).map(|k| book.state_at(k, t_s)));
         let (at, out) = (&self.at, &self.out);
@@ -497,7 +503,7 @@ impl Monitor<'_> {
     /// A member lost: the repair is computed now, in the order the losses were found (each
     /// repairs the graph the one before left, as the members do), and said; the audit takes
     /// the record at the instant the body leaves ([`Self::record_losses`]).
-    fn lost(&mut self, l: LostMember) {
+    fn lose(&mut self, l: LostMember) {
         let at = LossAt {
             last_tick: l.last_tick.unwrap_or(0),
             tick: l.index,
@@ -505,7 +511,7 @@ impl Monitor<'_> {
             repair_tick: Some(l.tick),
         };
         let (r, records) = self.losses.repair(self.s, at, &[l.id], l.cause);
-        if !self.o.quiet {
+        if !self.quiet {
             let switched: Vec<u32> = r.retriangulated.iter().map(|x| x.id).collect();
             out!(
                 "agent {} lost ({}) after its tick {}: its readers {switched:?} fly the repaired graph from their tick {}",

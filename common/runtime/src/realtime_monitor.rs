@@ -135,6 +135,11 @@ impl MonitorCore {
         MonitorEvent::Nothing
     }
 
+    /// The members' ids in formation order.
+    pub fn ids(&self) -> Vec<u32> {
+        self.members.iter().map(|m| m.id).collect()
+    }
+
     /// Member `id`'s index in the formation.
     pub fn index_of(&self, id: u32) -> Option<usize> {
         self.index.get(id)

@@ -10,21 +10,22 @@ use cdm_model::outcome::FaultKind;
 use cdm_records::audit::FaultRecord;
 
 use crate::messages::{FaultCode, StopReason};
+use crate::process_exit::ProcessExit;
 
 /// Whose clock a member's tick is on: lockstep ticks are the team's (every member flies tick k
 /// at once); real-time ticks are each member's own (phase offsets, no barrier), so the text says
 /// "its tick".
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TickClock {
+pub enum WhoseTick {
     Team,
     Own,
 }
 
-impl TickClock {
+impl WhoseTick {
     fn at(self) -> &'static str {
         match self {
-            TickClock::Team => "at tick",
-            TickClock::Own => "at its tick",
+            WhoseTick::Team => "at tick",
+            WhoseTick::Own => "at its tick",
         }
     }
 }
@@ -53,13 +54,13 @@ pub enum TeamFault {
         tick: u64,
         code: FaultCode,
         peer: Option<u32>,
-        clock: TickClock,
+        clock: WhoseTick,
     },
     /// Member `id` published a non-finite state at `tick` and no reader reported it.
     NonFinite {
         id: u32,
         tick: u64,
-        clock: TickClock,
+        clock: WhoseTick,
     },
     /// Real time: member `peer`'s newest state was older than `bound_s` when `reporter` read it
     /// at its tick `tick` (the reporter holds position; the peer is the fault).
@@ -83,8 +84,12 @@ pub enum TeamFault {
         age_s: f64,
         index: u64,
     },
-    /// Member `id`'s process ended (`how`: "exited with code 1") before `tick`.
-    Exited { id: u32, how: String, tick: u64 },
+    /// Member `id`'s process ended (`how`) before `tick`.
+    Exited {
+        id: u32,
+        how: ProcessExit,
+        tick: u64,
+    },
     /// SIGINT, SIGTERM, SIGHUP or SIGQUIT (`signal` names it).
     Interrupted { signal: String, at: InterruptedAt },
     /// The repair after losing member `id` did not connect within `timeout`: the links
@@ -322,14 +327,14 @@ mod tests {
             clock,
         };
         assert_eq!(
-            reported(TickClock::Team).to_string(),
+            reported(WhoseTick::Team).to_string(),
             "agent 5 reported NeighborFault at tick 12 (peer 4)"
         );
         assert_eq!(
-            reported(TickClock::Own).to_string(),
+            reported(WhoseTick::Own).to_string(),
             "agent 5 reported NeighborFault at its tick 12 (peer 4)"
         );
-        let r = reported(TickClock::Team).record();
+        let r = reported(WhoseTick::Team).record();
         assert_eq!(
             (r.kind, r.agent, r.peer, r.tick),
             (FaultKind::AgentFault, Some(5), Some(4), 12)
@@ -337,7 +342,7 @@ mod tests {
         let nf = TeamFault::NonFinite {
             id: 3,
             tick: 9,
-            clock: TickClock::Own,
+            clock: WhoseTick::Own,
         };
         assert_eq!(
             nf.to_string(),
@@ -391,7 +396,7 @@ mod tests {
         assert_eq!(rt.stop().0.tick, 20);
         let ex = TeamFault::Exited {
             id: 1,
-            how: "exited with code 3".into(),
+            how: ProcessExit::Code(3),
             tick: 6,
         };
         assert_eq!(ex.to_string(), "agent 1 exited with code 3 at tick 6");

@@ -15,16 +15,6 @@ use cdm_scenario::Scenario;
 
 use crate::messages::{FaultCode, LossNotice};
 
-/// Why a member process that ended is lost: `killed` by a signal, else `exited`. `how` is
-/// `cdm_team::team::describe_exit`'s wording ("was killed by signal 9", "exited with code 3").
-pub fn exit_cause(how: &str) -> LossCause {
-    if how.starts_with("was killed") {
-        LossCause::Killed
-    } else {
-        LossCause::Exited
-    }
-}
-
 /// The loss a member's fault report announces, if it is one: its real vehicle lost, taken over
 /// or disarmed (the member stops flying it; the team repairs around it, real time).
 pub fn reported_loss(code: FaultCode) -> Option<LossCause> {

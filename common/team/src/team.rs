@@ -20,6 +20,7 @@ pub struct Spawned {
     pub child: Child,
 }
 
+pub use cdm_runtime::process_exit::ProcessExit;
 pub use cdm_runtime::team_core::{exited_fault, Stop};
 
 /// A fault record.
@@ -73,9 +74,8 @@ pub fn spawn_member(
         .spawn()
 }
 
-/// The first spawned member that has exited: its id and how (`exited with code 1`, `was killed
-/// by signal 9`).
-pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, String)> {
+/// The first spawned member that has exited: its id and how.
+pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, ProcessExit)> {
     first_exited_but(children, |_| false)
 }
 
@@ -83,27 +83,17 @@ pub fn first_exited(children: &mut [Spawned]) -> Option<(u32, String)> {
 pub fn first_exited_but(
     children: &mut [Spawned],
     known: impl Fn(u32) -> bool,
-) -> Option<(u32, String)> {
+) -> Option<(u32, ProcessExit)> {
     children.iter_mut().filter(|c| !known(c.id)).find_map(|c| {
         let status = c.child.try_wait().ok()??;
-        Some((c.id, describe_exit(status)))
+        Some((c.id, ProcessExit::of(status)))
     })
-}
-
-/// How a process ended: `exited with code 1`, `was killed by signal 9`.
-pub fn describe_exit(status: std::process::ExitStatus) -> String {
-    use std::os::unix::process::ExitStatusExt;
-    match (status.code(), status.signal()) {
-        (_, Some(sig)) => format!("was killed by signal {sig}"),
-        (Some(code), _) => format!("exited with code {code}"),
-        _ => "exited".into(),
-    }
 }
 
 /// A spawned member that exited before the end is a fault, named with its id and the tick.
 pub fn check_children(children: &mut [Spawned], tick: u64) -> Result<(), Stop> {
     match first_exited(children) {
-        Some((id, how)) => Err(exited_fault(id, &how, tick)),
+        Some((id, how)) => Err(exited_fault(id, how, tick)),
         None => Ok(()),
     }
 }

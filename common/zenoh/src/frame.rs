@@ -6,11 +6,12 @@
 use std::collections::BTreeMap;
 
 use cdm_runtime::messages::{ClockMsg, StateMsg};
+use cdm_runtime::process_exit::ProcessExit;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
-pub const PROTOCOL_VERSION: u32 = 5;
+pub const PROTOCOL_VERSION: u32 = 6;
 
 /// A [`StateMsg`], field for field (the shared-memory type stays free of serde).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -112,6 +113,36 @@ pub enum Down {
     Kill(u32),
 }
 
+/// How a member process ended, as a daemon saw it ([`ProcessExit`] on the wire).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NetExit {
+    Code(i32),
+    Signal(i32),
+    Ended,
+}
+
+impl NetExit {
+    /// `exit` as a daemon reports it: a host's loss is the orchestrator's own finding and
+    /// never travels, so it has no wire form ([`NetExit::Ended`]).
+    pub fn of(exit: &ProcessExit) -> Self {
+        match *exit {
+            ProcessExit::Code(c) => NetExit::Code(c),
+            ProcessExit::Signal(s) => NetExit::Signal(s),
+            ProcessExit::Ended | ProcessExit::WithHost { .. } => NetExit::Ended,
+        }
+    }
+}
+
+impl From<NetExit> for ProcessExit {
+    fn from(e: NetExit) -> Self {
+        match e {
+            NetExit::Code(c) => ProcessExit::Code(c),
+            NetExit::Signal(s) => ProcessExit::Signal(s),
+            NetExit::Ended => ProcessExit::Ended,
+        }
+    }
+}
+
 /// Daemon -> orchestrator.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Up {
@@ -123,7 +154,7 @@ pub enum Up {
     /// States (and fault reports) of this host's members, in the order they were published.
     States(Vec<NetState>),
     /// A member process exited before the stop.
-    Exited { id: u32, how: String },
+    Exited { id: u32, how: NetExit },
     /// Nothing new; proves the link alive.
     Heartbeat,
     /// The daemon stopped its members after the orchestrator's stop and leaves.

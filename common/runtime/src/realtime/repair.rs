@@ -76,11 +76,21 @@ impl Realtime {
                 self.links.delivered_by(j, tick, stamp, t_own)
             })
         };
-        let unheard = matches!(law, Law::Follower { .. })
-            && ids
-                .iter()
-                .any(|&j| !m.neighbor_ids.contains(&j) && !heard(j));
-        if l.waits_at(m.tick) || unheard {
+        let follower = matches!(law, Law::Follower { .. });
+        let unheard: Vec<u32> = (ids.iter().copied())
+            .filter(|&j| follower && !m.neighbor_ids.contains(&j) && !heard(j))
+            .collect();
+        // A new in-neighbour lost since is never heard: a real-time repair applies a lead after
+        // its loss was found, so a member lost just after (two lost at once) may be a new
+        // in-neighbour of the repair before its own. Its own repair, scheduled next, replaces
+        // this link, which is never flown.
+        let reads_lost = unheard.iter().any(|&j| l.is_lost(j));
+        let waits = l.waits_at(m.tick) || !unheard.is_empty();
+        if reads_lost && self.losses.as_mut().is_some_and(|l| l.skip_upcoming()) {
+            tracing::info!(id = m.id, tick = m.tick, at, lost = ?unheard, "a repaired link reads a member lost since: the next one replaces it");
+            return self.relink_if_due(m, t_own);
+        }
+        if waits {
             if self.waited_at != Some(at) {
                 self.waited_at = Some(at);
                 tracing::debug!(id = m.id, tick = m.tick, at, "the repaired link waits");

@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use super::*;
 use crate::messages::{AgentStatus, FaultCode, StateMsg, StopReason};
+use crate::process_exit::ProcessExit;
 use cdm_model::outcome::FaultKind;
 
 const HASH: u64 = 7;
@@ -20,7 +21,7 @@ fn core(ids: &[u32], window: u32, last_tick: u64) -> TeamCore {
         last_tick,
         agent_timeout: Duration::from_secs(10),
     };
-    TeamCore::new(cfg, ms(0))
+    TeamCore::lockstep(cfg, ms(0))
 }
 
 fn state(id: u32, tick: u64) -> StateMsg {
@@ -42,7 +43,7 @@ struct Turn {
 
 /// Runs the core at `now` until it waits, polls, finishes or stops, as the loop does (complete
 /// ticks are checked whole and recycled; an exit check finds `exited`).
-fn turn(c: &mut TeamCore, now: Duration, exited: Option<(u32, &str)>) -> Turn {
+fn turn(c: &mut TeamCore, now: Duration, exited: Option<(u32, ProcessExit)>) -> Turn {
     let mut t = Turn::default();
     c.on_turn(now);
     for _ in 0..10_000 {
@@ -53,10 +54,11 @@ fn turn(c: &mut TeamCore, now: Duration, exited: Option<(u32, &str)>) -> Turn {
                 t.complete.push(tick);
                 c.recycle(states);
             }
+            TeamAction::Flush => {}
             TeamAction::CheckExited => {
                 t.exit_checks += 1;
-                if let Some((id, how)) = exited {
-                    c.on_exited(id, how.into(), now);
+                if let Some((id, how)) = &exited {
+                    c.on_exited(*id, how.clone(), now);
                 }
             }
             end => {
@@ -78,7 +80,7 @@ fn stop_of(t: &Turn) -> (FaultRecord, StopReason) {
 fn send(c: &mut TeamCore, ids: &[u32], ticks: std::ops::RangeInclusive<u64>, now: Duration) {
     for tick in ticks {
         for &id in ids {
-            c.on_state(state(id, tick), now);
+            c.on_state(&state(id, tick), now);
         }
     }
 }
@@ -91,7 +93,7 @@ fn the_grant_window_opens_first_then_moves_in_half_windows() {
     assert_eq!(t.grants, [3], "the first grant is a whole window");
     assert_eq!(t.end, Some(TeamAction::Wait(WAIT_SLICE)));
     // A state beyond the grant is not counted (a member cannot have computed it).
-    c.on_state(state(1, 9), ms(1));
+    c.on_state(&state(1, 9), ms(1));
     send(&mut c, &ids, 0..=0, ms(1));
     let t = turn(&mut c, ms(1), None);
     assert_eq!(
@@ -129,8 +131,8 @@ fn the_root_cause_wins_over_an_earlier_echo() {
     send(&mut c, &ids, 0..=3, ms(1));
     // Member 3 stops because its neighbour did (an echo, one tick earlier in its own count);
     // member 2 names the cause.
-    c.on_state(report(3, 3, FaultCode::NeighborFault, Some(2)), ms(1));
-    c.on_state(report(2, 4, FaultCode::Control, None), ms(1));
+    c.on_state(&report(3, 3, FaultCode::NeighborFault, Some(2)), ms(1));
+    c.on_state(&report(2, 4, FaultCode::Control, None), ms(1));
     let t = turn(&mut c, ms(1), None);
     assert_eq!(t.complete, [0, 1, 2, 3]);
     let t = turn(&mut c, ms(1) + FAULT_GRACE, None);
@@ -150,7 +152,7 @@ fn a_lost_vehicle_is_recorded_as_vehicle_lost_naming_the_member() {
     let mut c = core(&ids, 16, 100);
     turn(&mut c, ms(0), None);
     send(&mut c, &ids, 0..=2, ms(1));
-    c.on_state(report(2, 2, FaultCode::VehicleLost, None), ms(1));
+    c.on_state(&report(2, 2, FaultCode::VehicleLost, None), ms(1));
     let t = turn(&mut c, ms(1), None);
     let (f, reason) = stop_of(&t);
     assert_eq!(
@@ -166,7 +168,7 @@ fn a_fault_at_tick_k_keeps_ticks_0_to_k_and_no_later_one() {
     let mut c = core(&ids, 16, 100);
     turn(&mut c, ms(0), None);
     send(&mut c, &ids, 0..=6, ms(1));
-    c.on_state(report(1, 3, FaultCode::Control, None), ms(1));
+    c.on_state(&report(1, 3, FaultCode::Control, None), ms(1));
     let t = turn(&mut c, ms(1), None);
     assert_eq!(
         t.complete,
@@ -223,7 +225,7 @@ fn an_exited_member_is_blamed_for_the_first_tick_it_never_sent() {
         [0, 1, 2, 3, 4],
         "its published states are audited first"
     );
-    let t = turn(&mut c, ms(200), Some((2, "was killed by signal 9")));
+    let t = turn(&mut c, ms(200), Some((2, ProcessExit::Signal(9))));
     assert_eq!(t.exit_checks, 1);
     assert_eq!(
         t.end,
@@ -246,10 +248,10 @@ fn a_non_finite_state_nobody_reads_is_named_by_the_orchestrator() {
     let mut c = core(&ids, 8, 100);
     turn(&mut c, ms(0), None);
     send(&mut c, &ids, 0..=1, ms(1));
-    c.on_state(state(1, 2), ms(1));
+    c.on_state(&state(1, 2), ms(1));
     let mut bad = state(2, 2);
     bad.state[4] = f64::NAN;
-    c.on_state(bad, ms(1));
+    c.on_state(&bad, ms(1));
     let t = turn(&mut c, ms(1), None);
     assert_eq!(t.complete, [0, 1], "the non-finite tick is never complete");
     assert_eq!(
@@ -265,8 +267,8 @@ fn a_non_finite_state_nobody_reads_is_named_by_the_orchestrator() {
     // A reader's report naming both members outranks the orchestrator's own finding.
     let mut c = core(&ids, 8, 100);
     turn(&mut c, ms(0), None);
-    c.on_state(bad, ms(1));
-    c.on_state(report(1, 2, FaultCode::NonFinite, Some(2)), ms(2));
+    c.on_state(&bad, ms(1));
+    c.on_state(&report(1, 2, FaultCode::NonFinite, Some(2)), ms(2));
     let (f, _) = stop_of(&turn(&mut c, ms(1000), None));
     assert_eq!(
         (f.kind, f.agent, f.peer),

@@ -1,28 +1,22 @@
-//! The orchestrator's side of a real-time flight as a plain type, with no I/O, the counterpart
-//! of [`crate::team_core::TeamCore`]: events in (a member's state or report, a member process
-//! seen exited, an interrupt, "now" from a clock the caller drives), actions out (audit and
-//! write an instant through `cdm_records::record::TickRecorder`, check the processes, flush, wait,
-//! finish, stop with a fault). The loop around it (`orchestrator/src/realtime.rs`) owns the
-//! ports, the processes and the files.
+//! Real-time pacing of the team core: members fly on the wall clock from the start instant
+//! with no grant and no barrier, and the orchestrator audits common instants from their newest
+//! states (`crate::realtime_monitor::MonitorCore`), writing telemetry through
+//! `cdm_records::record::TickRecorder` as lockstep does.
 //!
 //! What it decides: when an audit instant is due (it lags the clock by one member period, and
-//! waits until every member has been heard at or after it), which member is stale, which fault
-//! report names the root cause ([`FaultRank`], as in lockstep), and when to look for exited
-//! members and flush. With `--on-loss repair` a dead, stale or vehicle-lost member is lost
-//! instead, and its readers repaired around it (`team_realtime/losses.rs`).
+//! waits until every member has been heard at or after it), which member is stale, that a
+//! fault stops the flight at once (no tick waits for it), and the tick a loss is repaired from
+//! (`team_core/realtime_losses.rs`).
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
-use crate::messages::{FaultCode, LossNotice, StateMsg};
+use super::{Team, TeamAction};
+use crate::messages::{FaultCode, StateMsg};
 use crate::realtime_monitor::{MonitorCore, MonitorEvent};
-use crate::team_core::{Stop, EXIT_CHECK};
-use crate::team_fault::{FaultRank, InterruptedAt, TeamFault, TickClock};
+use crate::team_fault::{FaultRank, InterruptedAt, TeamFault, WhoseTick};
 
-mod losses;
-pub use losses::{LostMember, RealtimeLosses, MEMBER_STALE_FACTOR, REPAIR_LEAD_OF_STALE};
-
-/// How often telemetry is flushed while flying.
-pub const FLUSH_EVERY: Duration = Duration::from_millis(100);
+use super::realtime_losses::LostMember;
 
 /// The longest wait between two turns: fault reports are read at least this often.
 pub const MAX_WAIT: Duration = Duration::from_millis(10);
@@ -71,65 +65,24 @@ impl RealtimePlan {
     }
 }
 
-/// What the loop must do next.
-#[derive(Debug, Clone, PartialEq)]
-pub enum MonitorAction {
-    /// Audit and write instant `index` at `t_s` of the common time line, from the members'
-    /// states brought to it ([`MonitorCore::state_at`]).
-    Audit { index: u64, t_s: f64 },
-    /// Look for an exited member process and tell [`RealtimeTeam::on_exited`] (if one is).
-    CheckExited,
-    /// Flush the telemetry.
-    Flush,
-    /// Receive what arrived after sleeping this long (or less when woken).
-    Wait(Duration),
-    /// Every instant of the plan was audited.
-    Finished,
-    /// Stop the team: record the fault and send the reason.
-    Stop(Stop),
-    /// SIGKILL these members and reap them (a scripted loss, or stale past the bound), then
-    /// receive again: their last states are drained before they are lost.
-    Kill(Vec<u32>),
-    /// A member is lost: record it in the audit (its body leaves the audit and telemetry from
-    /// the next instant on).
-    Lost(LostMember),
-    /// Publish the clock message again with this loss notice (a new loss, or its links joined).
-    Announce(LossNotice),
-    /// Ask which awaited links of a repair are connected: answer with
-    /// [`RealtimeTeam::on_links`].
-    CheckLinks,
-}
-
-/// The real-time monitor's protocol state (see the module doc).
+/// The real-time pacing's state (see the module doc).
 #[derive(Debug, Clone)]
-pub struct RealtimeTeam {
-    plan: RealtimePlan,
-    book: MonitorCore,
+pub struct WallClock {
+    pub(super) plan: RealtimePlan,
+    pub(super) book: MonitorCore,
     /// Audit instants done.
-    audits: u64,
-    last_exit_check: Duration,
-    last_flush: Duration,
-    /// The best-ranked fault heard since the last turn.
-    fault: Option<(FaultRank, TeamFault)>,
-    interrupt: Option<String>,
-    exited: Option<(u32, String)>,
-    /// Losses (`with_losses`): `None` keeps every dead or stale member a fault.
-    losses: Option<RealtimeLosses>,
+    pub(super) audits: u64,
+    /// Losses applied, not yet handed to the audit.
+    pub(super) found: VecDeque<LostMember>,
 }
 
-impl RealtimeTeam {
-    /// A flight about to be monitored at `now`, with the members' state book.
-    pub fn new(plan: RealtimePlan, book: MonitorCore, now: Duration) -> Self {
-        RealtimeTeam {
+impl WallClock {
+    pub(super) fn new(plan: RealtimePlan, book: MonitorCore) -> Self {
+        WallClock {
             plan,
             book,
             audits: 0,
-            last_exit_check: now,
-            last_flush: now,
-            fault: None,
-            interrupt: None,
-            exited: None,
-            losses: None,
+            found: VecDeque::new(),
         }
     }
 
@@ -153,11 +106,21 @@ impl RealtimeTeam {
         self.audits
     }
 
+    /// Where an interrupt finds the flight: the next audit instant.
+    pub(super) fn interrupted_at(&self) -> InterruptedAt {
+        let index = self.audits;
+        InterruptedAt::Instant {
+            index,
+            t_s: self.instant_s(index),
+        }
+    }
+
     /// A message from a member's state service. A fault report or a non-finite state is kept
-    /// when it names the root cause better than the one kept so far.
-    pub fn on_state(&mut self, msg: &StateMsg) {
+    /// when it names the root cause better than the one kept so far; a lost member's are not,
+    /// nor (losses repaired) a member's report of its own vehicle's loss, which is a loss.
+    pub(super) fn on_state(&mut self, t: &mut Team, msg: &StateMsg, now: Duration) {
         let event = self.book.on_state(msg);
-        if self.is_gone(msg.id) || self.lost_on_report(&event) {
+        if t.is_gone(msg.id) {
             return;
         }
         let (rank, fault) = match event {
@@ -168,61 +131,55 @@ impl RealtimeTeam {
                 code,
                 peer,
             } => {
+                if t.lost_on_report(id, code) {
+                    return;
+                }
                 let member = self.book.index_of(id).unwrap_or(usize::MAX);
                 (
                     FaultRank::of_report(code, tick, member),
-                    self.reported(id, tick, code, peer),
+                    self.reported(t, id, tick, code, peer),
                 )
             }
             MonitorEvent::NonFinite { id, tick } => {
-                let clock = TickClock::Own;
+                let clock = WhoseTick::Own;
                 (
                     FaultRank::found(tick),
                     TeamFault::NonFinite { id, tick, clock },
                 )
             }
         };
-        if rank.outranks(self.fault.as_ref().map(|f| &f.0)) {
-            self.fault = Some((rank, fault));
-        }
+        t.keep_fault(rank, &fault, now);
     }
 
     /// A member's own report. A follower that found a neighbour stale names the neighbour: that
     /// one is the fault, the follower only saw it.
-    fn reported(&self, id: u32, tick: u64, code: FaultCode, peer: Option<u32>) -> TeamFault {
+    fn reported(
+        &self,
+        t: &Team,
+        id: u32,
+        tick: u64,
+        code: FaultCode,
+        peer: Option<u32>,
+    ) -> TeamFault {
         match (code, peer) {
             (FaultCode::NeighborSilent, Some(p)) => TeamFault::NeighborStale {
                 peer: p,
                 reporter: id,
                 tick,
-                bound_s: self.member_stale_after().as_secs_f64(),
+                bound_s: self.member_stale_after(t).as_secs_f64(),
             },
             _ => TeamFault::Reported {
                 id,
                 tick,
                 code,
                 peer,
-                clock: TickClock::Own,
+                clock: WhoseTick::Own,
             },
         }
     }
 
-    /// Member `id`'s process was seen exited (`how`: "exited with code 1"): lost when losses
-    /// are repaired, else the fault that stops the team.
-    pub fn on_exited(&mut self, id: u32, how: String) {
-        if self.is_gone(id) || self.lost_on_exit(id, &how) {
-            return;
-        }
-        self.exited.get_or_insert((id, how));
-    }
-
-    /// The run was interrupted by `signal`: the next action stops the team.
-    pub fn on_interrupt(&mut self, signal: &str) {
-        self.interrupt.get_or_insert_with(|| signal.to_owned());
-    }
-
     /// Seconds on the common time line at `now` (negative before the start instant).
-    fn time_s(&self, now: Duration) -> f64 {
+    pub(super) fn time_s(&self, now: Duration) -> f64 {
         match now.checked_sub(self.plan.start) {
             Some(d) => d.as_secs_f64(),
             None => -(self.plan.start - now).as_secs_f64(),
@@ -230,81 +187,78 @@ impl RealtimeTeam {
     }
 
     /// Audit instant `index`'s time.
-    fn instant_s(&self, index: u64) -> f64 {
+    pub(super) fn instant_s(&self, index: u64) -> f64 {
         index as f64 * self.plan.period_s
     }
 
-    /// The next action at `now`: a signal, a fault report, a stale member, an exited member
-    /// stop the team in that order; then the audit instants due; then a flush; then a wait.
-    pub fn next_action(&mut self, now: Duration) -> MonitorAction {
-        if let Some(signal) = self.interrupt.take() {
-            let (index, t_s) = (self.audits, self.instant_s(self.audits));
-            let at = InterruptedAt::Instant { index, t_s };
-            return MonitorAction::Stop(TeamFault::Interrupted { signal, at }.stop());
-        }
-        if let Some(a) = self.loss_action(now) {
+    /// The next action at `now`: the losses; a fault report, a stale member, an exited member
+    /// stop the flight in that order (a stale member is killed and lost instead when losses
+    /// are repaired); then the audit instants due; then a flush; then a wait.
+    pub(super) fn next_action(&mut self, t: &mut Team, now: Duration) -> TeamAction {
+        if let Some(a) = t.loss_action(self, now) {
             return a;
         }
-        if let Some(a) = self.stop_action(now) {
-            return MonitorAction::Stop(a.stop());
+        let (now_s, bound_s) = (self.time_s(now), self.plan.stale_after.as_secs_f64());
+        let stale = self.book.stale(now_s, bound_s);
+        if let Some((id, _, _)) = stale {
+            if let Some(kill) = t.kill_silent(&[id], now) {
+                return kill;
+            }
         }
-        if now.saturating_sub(self.last_exit_check) > EXIT_CHECK {
-            self.last_exit_check = now;
-            return MonitorAction::CheckExited;
+        if let Some(s) = t.stopping.take() {
+            return TeamAction::Stop(s.record, s.reason);
         }
-        let now_s = self.time_s(now);
-        let t = self.instant_s(self.audits);
+        let index = self.audits;
+        if let Some((id, newest, age_s)) = stale {
+            let fault = TeamFault::Stale {
+                id,
+                newest,
+                age_s,
+                index,
+            };
+            return t.explained(&fault, now);
+        }
+        if let Some(e) = t.exited.take() {
+            let fault = TeamFault::Exited {
+                id: e.id,
+                how: e.how,
+                tick: index,
+            };
+            return t.explained(&fault, now);
+        }
+        if t.exit_check_due(now) {
+            return TeamAction::CheckExited;
+        }
+        let instant = self.instant_s(index);
         // Audit instants lag the clock by one member period: the state a member stamped just
         // before an instant has then been published. An instant also waits until every member
         // has been heard at or after it, so a member that is late (starved, or behind a slow
         // link) is audited from the states around the instant instead of extrapolated from an
         // old one; the wait is bounded by the stale rule (--stale-after).
-        if self.audits <= self.plan.last_audit
-            && t + self.plan.lag_s <= now_s
-            && t <= self.book.heard_until()
+        if index <= self.plan.last_audit
+            && instant + self.plan.lag_s <= now_s
+            && instant <= self.book.heard_until()
         {
-            let index = self.audits;
             self.audits += 1;
-            return MonitorAction::Audit { index, t_s: t };
+            return TeamAction::Audit {
+                index,
+                t_s: instant,
+            };
         }
-        if self.audits > self.plan.last_audit {
-            return MonitorAction::Finished;
+        if index > self.plan.last_audit {
+            return TeamAction::Finished;
         }
-        if now.saturating_sub(self.last_flush) > FLUSH_EVERY {
-            self.last_flush = now;
-            return MonitorAction::Flush;
+        if t.flush_due(now) {
+            return TeamAction::Flush;
         }
         // A plain sleep to the next audit instant (at most MAX_WAIT, so fault reports are read
         // promptly; LATE_WAIT while a due instant waits for a late member): members do not wake
         // the monitor in real time.
-        let next = t + self.plan.lag_s - now_s;
-        MonitorAction::Wait(if next > 0.0 {
+        let next = instant + self.plan.lag_s - now_s;
+        TeamAction::Wait(if next > 0.0 {
             Duration::from_secs_f64(next).min(MAX_WAIT)
         } else {
             LATE_WAIT
-        })
-    }
-
-    /// The fault that stops the team now, if any (after a signal and the losses).
-    fn stop_action(&mut self, now: Duration) -> Option<TeamFault> {
-        let index = self.audits;
-        if let Some((_, f)) = self.fault.take() {
-            return Some(f);
-        }
-        let bound_s = self.plan.stale_after.as_secs_f64();
-        if let Some((id, newest, age_s)) = self.book.stale(self.time_s(now), bound_s) {
-            return Some(TeamFault::Stale {
-                id,
-                newest,
-                age_s,
-                index,
-            });
-        }
-        let (id, how) = self.exited.take()?;
-        Some(TeamFault::Exited {
-            id,
-            how,
-            tick: index,
         })
     }
 }
@@ -316,6 +270,9 @@ mod tests {
     use cdm_model::outcome::FaultKind;
 
     use crate::messages::{AgentStatus, StopReason};
+    use crate::process_exit::ProcessExit;
+    use crate::realtime_monitor::MonitorCore;
+    use crate::team_core::{Stop, TeamCore};
 
     const HASH: u64 = 7;
     const IDS: [u32; 3] = [1, 2, 3];
@@ -326,14 +283,14 @@ mod tests {
 
     /// Three members at 10 Hz, audited at 10 Hz up to tick 10 (instants 0..=10), starting at 1 s
     /// on the fake clock, stale after 0.5 s, aligned phases.
-    fn team() -> RealtimeTeam {
+    fn team() -> TeamCore {
         let members: Vec<(u32, Vec3, bool)> = IDS
             .iter()
             .map(|&id| (id, Vec3::new(id as f64, 0.0, 0.0), id == 3))
             .collect();
         let book = MonitorCore::new(&members, HASH, (0.1, 0.5), 0);
         let plan = RealtimePlan::new(ms(1000), (10, 0.1), 10.0, ms(500));
-        RealtimeTeam::new(plan, book, ms(0))
+        TeamCore::realtime(plan, book, ms(0))
     }
 
     fn state(id: u32, tick: u64) -> StateMsg {
@@ -345,10 +302,10 @@ mod tests {
     }
 
     /// Every member's states of ticks `0..=last`.
-    fn heard(c: &mut RealtimeTeam, ids: &[u32], last: u64) {
+    fn heard(c: &mut TeamCore, ids: &[u32], last: u64) {
         for tick in 0..=last {
             for &id in ids {
-                c.on_state(&state(id, tick));
+                c.on_state(&state(id, tick), ms(0));
             }
         }
     }
@@ -359,26 +316,26 @@ mod tests {
         audits: Vec<u64>,
         exit_checks: usize,
         flushes: usize,
-        end: Option<MonitorAction>,
+        end: Option<TeamAction>,
     }
 
     /// Runs the monitor at `now` until it waits, finishes or stops, as the loop does (an exit
     /// check finds `exited`).
-    fn turn(c: &mut RealtimeTeam, now: Duration, exited: Option<(u32, &str)>) -> Turn {
+    fn turn(c: &mut TeamCore, now: Duration, exited: Option<(u32, ProcessExit)>) -> Turn {
         let mut t = Turn::default();
         for _ in 0..10_000 {
             match c.next_action(now) {
-                MonitorAction::Audit { index, t_s } => {
+                TeamAction::Audit { index, t_s } => {
                     assert_eq!(t_s, index as f64 * 0.1);
                     t.audits.push(index);
                 }
-                MonitorAction::CheckExited => {
+                TeamAction::CheckExited => {
                     t.exit_checks += 1;
-                    if let Some((id, how)) = exited {
-                        c.on_exited(id, how.into());
+                    if let Some((id, how)) = &exited {
+                        c.on_exited(*id, how.clone(), now);
                     }
                 }
-                MonitorAction::Flush => t.flushes += 1,
+                TeamAction::Flush => t.flushes += 1,
                 end => {
                     t.end = Some(end);
                     return t;
@@ -388,9 +345,9 @@ mod tests {
         panic!("the monitor never waited");
     }
 
-    fn stopped(t: &Turn) -> &Stop {
+    fn stopped(t: &Turn) -> Stop {
         match &t.end {
-            Some(MonitorAction::Stop(stop)) => stop,
+            Some(TeamAction::Stop(f, r)) => (f.clone(), *r),
             other => panic!("no stop: {other:?}"),
         }
     }
@@ -401,19 +358,19 @@ mod tests {
         // Before the start instant: nothing is due; the wait is bounded.
         let t = turn(&mut c, ms(500), None);
         assert!(t.audits.is_empty());
-        assert_eq!(t.end, Some(MonitorAction::Wait(MAX_WAIT)));
+        assert_eq!(t.end, Some(TeamAction::Wait(MAX_WAIT)));
         heard(&mut c, &IDS, 2);
         // At t = 0.25 s: instants 0 and 1 are a period old, instant 2 is not yet.
         let t = turn(&mut c, ms(1250), None);
         assert_eq!(t.audits, [0, 1]);
-        assert_eq!(t.end, Some(MonitorAction::Wait(MAX_WAIT)));
+        assert_eq!(t.end, Some(TeamAction::Wait(MAX_WAIT)));
         // Instant 2 is due at 0.3 s, but member 3 was last heard at tick 2 (0.2 s): due, audited.
         heard(&mut c, &[1, 2], 4);
         let t = turn(&mut c, ms(1420), None);
         assert_eq!(t.audits, [2]);
         // Instant 3 waits for member 3 (heard until 0.2 s), polled often.
-        assert_eq!(t.end, Some(MonitorAction::Wait(LATE_WAIT)));
-        c.on_state(&state(3, 3));
+        assert_eq!(t.end, Some(TeamAction::Wait(LATE_WAIT)));
+        c.on_state(&state(3, 3), ms(0));
         assert_eq!(turn(&mut c, ms(1421), None).audits, [3]);
     }
 
@@ -426,8 +383,8 @@ mod tests {
         assert_eq!((t.flushes, t.exit_checks), (1, 1));
         let t = turn(&mut c, ms(2200), None);
         assert_eq!(t.audits, (5..=10).collect::<Vec<_>>());
-        assert_eq!(t.end, Some(MonitorAction::Finished));
-        assert_eq!(c.audits(), 11);
+        assert_eq!(t.end, Some(TeamAction::Finished));
+        assert_eq!(c.position(), 11);
     }
 
     #[test]
@@ -442,7 +399,7 @@ mod tests {
         assert!(t.audits.is_empty());
         let (f, reason) = stopped(&t);
         assert_eq!(
-            (f.kind, f.agent, f.tick, *reason),
+            (f.kind, f.agent, f.tick, reason),
             (FaultKind::AgentSilent, Some(3), 2, StopReason::AgentSilent)
         );
         assert_eq!(
@@ -454,13 +411,13 @@ mod tests {
     #[test]
     fn the_root_cause_outranks_its_echo_whatever_arrived_first() {
         let mut c = team();
-        c.on_state(&report(1, 3, FaultCode::NeighborFault, Some(2)));
-        c.on_state(&report(2, 4, FaultCode::Control, None));
-        c.on_state(&report(3, 4, FaultCode::NeighborFault, Some(2)));
+        c.on_state(&report(1, 3, FaultCode::NeighborFault, Some(2)), ms(0));
+        c.on_state(&report(2, 4, FaultCode::Control, None), ms(0));
+        c.on_state(&report(3, 4, FaultCode::NeighborFault, Some(2)), ms(0));
         let t = turn(&mut c, ms(100), None);
         let (f, reason) = stopped(&t);
         assert_eq!(
-            (f.kind, f.agent, f.tick, *reason),
+            (f.kind, f.agent, f.tick, reason),
             (FaultKind::Control, Some(2), 4, StopReason::AgentFault)
         );
         assert_eq!(f.message, "agent 2 reported Control at its tick 4");
@@ -469,11 +426,11 @@ mod tests {
     #[test]
     fn a_follower_that_found_a_neighbour_stale_names_the_neighbour() {
         let mut c = team();
-        c.on_state(&report(3, 9, FaultCode::NeighborSilent, Some(2)));
+        c.on_state(&report(3, 9, FaultCode::NeighborSilent, Some(2)), ms(0));
         let t = turn(&mut c, ms(100), None);
         let (f, reason) = stopped(&t);
         assert_eq!(
-            (f.kind, f.agent, f.peer, *reason),
+            (f.kind, f.agent, f.peer, reason),
             (
                 FaultKind::AgentSilent,
                 Some(2),
@@ -490,8 +447,8 @@ mod tests {
     #[test]
     fn a_non_finite_state_is_never_audited_and_stops_the_flight() {
         let mut c = team();
-        c.on_state(&StateMsg::ok(2, HASH, 1, [f64::NAN; 12]));
-        let (f, _) = stopped(&turn(&mut c, ms(100), None)).clone();
+        c.on_state(&StateMsg::ok(2, HASH, 1, [f64::NAN; 12]), ms(0));
+        let (f, _) = stopped(&turn(&mut c, ms(100), None));
         assert_eq!(
             (f.kind, f.agent, f.tick),
             (FaultKind::NonFiniteState, Some(1), 2)
@@ -506,14 +463,14 @@ mod tests {
     fn an_exited_member_is_looked_for_every_exit_check_and_stops_the_flight() {
         let mut c = team();
         heard(&mut c, &IDS, 3);
-        let t = turn(&mut c, ms(50), Some((2, "exited with code 1")));
+        let t = turn(&mut c, ms(50), Some((2, ProcessExit::Code(1))));
         assert_eq!(t.exit_checks, 0, "checked before EXIT_CHECK passed");
-        let t = turn(&mut c, ms(1300), Some((2, "exited with code 1")));
+        let t = turn(&mut c, ms(1300), Some((2, ProcessExit::Code(1))));
         assert_eq!(t.exit_checks, 1);
         // Checked before the instants: none audited, the fault names the next one.
         let (f, reason) = stopped(&t);
         assert_eq!(
-            (f.kind, f.agent, f.tick, *reason),
+            (f.kind, f.agent, f.tick, reason),
             (FaultKind::AgentExited, Some(2), 0, StopReason::AgentFault)
         );
         assert_eq!(f.message, "agent 2 exited with code 1 at tick 0");
@@ -525,7 +482,7 @@ mod tests {
         heard(&mut c, &IDS, 3);
         assert_eq!(turn(&mut c, ms(1250), None).audits, [0, 1]);
         c.on_interrupt("SIGTERM");
-        let (f, reason) = stopped(&turn(&mut c, ms(1260), None)).clone();
+        let (f, reason) = stopped(&turn(&mut c, ms(1260), None));
         assert_eq!(
             (f.kind, f.tick, reason),
             (FaultKind::Interrupted, 2, StopReason::Interrupted)
