@@ -4,7 +4,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use cdm_certificates::airspace_suggest::suggest;
-use cdm_certificates::certificate::{certify, deviation_at, Certificate};
+use cdm_certificates::certificate::{deviation_at, Certificate};
+use cdm_certificates::certify::certify;
 use cdm_certificates::delay::deviation_at_delay;
 use cdm_certificates::losscert::{certify_losses, LossCertificate};
 use cdm_engine::loss::LossSchedule;

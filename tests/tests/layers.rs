@@ -1,8 +1,9 @@
 //! The crate layering of ARCHITECTURE.md, held by the manifests and checked here from
 //! `cargo metadata`: only `cdm-iox` depends on iceoryx2, only `cdm-math` on nalgebra,
-//! only `cdm-zenoh` on zenoh, only `cdm-rosbag` on mcap, only `cdm-ros2` on ros2-client, and the
-//! core crate's whole dependency tree has no iceoryx2, zenoh, ros2-client, clap or
-//! tracing-subscriber (it is usable as a library on its own).
+//! only `cdm-zenoh` on zenoh, only `cdm-rosbag` on mcap, only `cdm-ros2` on ros2-client; the
+//! core crates' whole dependency trees have no iceoryx2, zenoh, ros2-client, arrow, clap or
+//! tracing-subscriber (they are usable as libraries on their own), the pure model's not even
+//! libc or sha2, and each core crate depends only on the core crates below it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::process::Command;
@@ -105,18 +106,55 @@ fn only_the_backends_name_their_libraries_and_the_core_stands_alone() {
             "workspace crates depending on {lib} directly"
         );
     }
-    let core = closure(&deps, "cdm-core");
-    for banned in [
-        "iceoryx2",
-        "zenoh",
-        "ros2-client",
-        "clap",
-        "tracing-subscriber",
-    ] {
-        assert!(!core.contains(banned), "cdm-core's tree has {banned}");
+    for core in CORE_LAYERS.iter().flat_map(|layer| layer.iter()) {
+        let tree = closure(&deps, core);
+        for banned in [
+            "iceoryx2",
+            "zenoh",
+            "ros2-client",
+            "arrow-array",
+            "parquet",
+            "clap",
+            "tracing-subscriber",
+        ] {
+            assert!(!tree.contains(banned), "{core}'s tree has {banned}");
+        }
+    }
+    let model = closure(&deps, "cdm-model");
+    for banned in ["libc", "sha2", "toml", "serde_json", "tracing"] {
+        assert!(!model.contains(banned), "cdm-model's tree has {banned}");
     }
     assert!(
-        core.contains("nalgebra"),
-        "the check sees the core's tree: {core:?}"
+        model.contains("nalgebra"),
+        "the check sees the model's tree: {model:?}"
     );
+}
+
+/// The core crates, bottom to top: a crate depends only on crates of the layers below its own.
+const CORE_LAYERS: &[&[&str]] = &[
+    &["cdm-math", "cdm-files"],
+    &["cdm-model"],
+    &["cdm-scenario"],
+    &["cdm-trajectory", "cdm-records"],
+    &["cdm-engine"],
+    &["cdm-certificates"],
+    &["cdm-simulate"],
+];
+
+#[test]
+fn each_core_crate_depends_only_on_core_crates_below_it() {
+    let (deps, members) = graph();
+    for (k, layer) in CORE_LAYERS.iter().enumerate() {
+        let below: BTreeSet<&str> = CORE_LAYERS[..k]
+            .iter()
+            .flat_map(|l| l.iter().copied())
+            .collect();
+        for core in *layer {
+            assert!(members.contains(*core), "{core} is a workspace member");
+            let ours: Vec<&String> = (deps[*core].iter())
+                .filter(|d| members.contains(*d) && !below.contains(d.as_str()))
+                .collect();
+            assert!(ours.is_empty(), "{core} depends on {ours:?}, not below it");
+        }
+    }
 }

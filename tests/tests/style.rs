@@ -1,7 +1,10 @@
 //! The style rules that a reviewer would otherwise count by hand, checked on the sources: no
 //! function outside tests is longer than 80 lines (STYLE.md: a long function is a sign to split),
-//! and no module is mounted with `#[path]` (a file's module is where its path says).
+//! no module is mounted with `#[path]` (a file's module is where its path says), no two modules
+//! of a crate import each other (directly or through others), and no public type, trait or enum
+//! name means two things in the workspace.
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The longest a function outside tests may be, in lines from `fn` to its closing brace.
@@ -191,4 +194,353 @@ fn no_module_is_mounted_with_a_path_attribute() {
         "#[path] mounts:\n{}",
         mounted.join("\n")
     );
+}
+
+/// Import circles that belong to crates being reworked elsewhere, each a crate and the modules
+/// of one circle: a circle in that crate among these modules only is tolerated. Empty this list
+/// as they are untangled; nothing may be added to it.
+const ALLOWED_CIRCLES: &[(&str, &[&str])] = &[
+    // The team protocol's launch loops (one team core over a pacing seam will replace them).
+    (
+        "common/launch",
+        &["flight", "launch", "realtime", "team_arm", "team_realtime"],
+    ),
+    // The runtime's wire messages and its seams.
+    ("common/runtime", &["messages", "seams"]),
+    // A member's errors and its vehicles.
+    ("common/member", &["member_error", "vehicles"]),
+];
+
+/// Public type names defined twice that belong to crates being reworked elsewhere (with the
+/// files that define them). Empty this list as they are renamed; nothing may be added to it.
+const ALLOWED_TWICE: &[(&str, &[&str])] = &[
+    // A trait (the tick's clock seam) and an enum (which clock a fault names), in one crate.
+    (
+        "TickClock",
+        &[
+            "common/runtime/src/seams.rs",
+            "common/runtime/src/team_fault.rs",
+        ],
+    ),
+    (
+        "BoxError",
+        &[
+            "common/hosts/src/host_link.rs",
+            "common/team/src/failure.rs",
+        ],
+    ),
+    (
+        "Kind",
+        &[
+            "common/member/src/member.rs",
+            "common/process/src/fault_inject.rs",
+        ],
+    ),
+];
+
+/// The text of `text` before its `#[cfg(test)] mod`, without comments and string contents.
+fn code_outside_tests(text: &str) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    let tests_from = lines
+        .windows(2)
+        .position(|w| w[0].starts_with("#[cfg(test)]") && w[1].starts_with("mod "))
+        .unwrap_or(lines.len());
+    let code: Vec<String> = lines[..tests_from].iter().map(|l| code_of(l)).collect();
+    code.join("\n")
+}
+
+/// The module path of `file` inside its package's `src/` (`lib.rs`, `main.rs`: the root;
+/// `a.rs` and `a/mod.rs`: `a`; `a/b.rs`: `a::b`); `None` for the binaries in `src/bin/`.
+fn module_of(src: &Path, file: &Path) -> Option<Vec<String>> {
+    let rel = file.strip_prefix(src).ok()?;
+    let mut parts: Vec<String> = rel
+        .iter()
+        .map(|s| s.to_string_lossy().trim_end_matches(".rs").to_owned())
+        .collect();
+    if parts.first().is_some_and(|p| p == "bin") {
+        return None;
+    }
+    if parts.len() == 1 && (parts[0] == "lib" || parts[0] == "main") || parts.last()? == "mod" {
+        parts.pop();
+    }
+    Some(parts)
+}
+
+/// The paths a `crate::` or `super::` reference names after its prefix: one for `a::b::X`,
+/// one per item of a group `{a::X, b::{Y, Z}}`, each as its segments.
+fn referenced_paths(after: &str) -> Vec<Vec<String>> {
+    let Some(group) = after.strip_prefix('{') else {
+        let path: String = (after.chars())
+            .take_while(|c| c.is_alphanumeric() || *c == '_' || *c == ':')
+            .collect();
+        let segs = path.split("::").filter(|s| !s.is_empty());
+        return vec![segs.map(str::to_owned).collect()];
+    };
+    let (mut depth, mut item, mut out) = (0, String::new(), Vec::new());
+    for c in group.chars() {
+        match c {
+            '{' => depth += 1,
+            '}' if depth == 0 => break,
+            '}' => depth -= 1,
+            ',' if depth == 0 => {
+                out.extend(referenced_paths(item.trim()));
+                item.clear();
+                continue;
+            }
+            _ => {}
+        }
+        item.push(c);
+    }
+    out.extend(referenced_paths(item.trim()));
+    out
+}
+
+/// The modules of one crate that each module references through `crate::` or `super::`
+/// (outside its tests), resolved to the longest known module; a module's own ancestors and
+/// descendants are not edges (a child uses its parent's items, a parent mounts its children).
+fn module_edges(modules: &[(Vec<String>, String)]) -> BTreeMap<String, BTreeSet<String>> {
+    let known: BTreeSet<&Vec<String>> = modules.iter().map(|(m, _)| m).collect();
+    let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (module, text) in modules {
+        let code = code_outside_tests(text);
+        for (at, _) in code
+            .match_indices("crate::")
+            .chain(code.match_indices("super::"))
+        {
+            let ident = |c: char| c.is_alphanumeric() || c == '_';
+            if code[..at].chars().next_back().is_some_and(ident) {
+                continue; // `pub(crate)`, `my_crate::`.
+            }
+            let (mut base, mut rest) = if code[at..].starts_with("crate::") {
+                (Vec::new(), &code[at + 7..])
+            } else {
+                (
+                    module[..module.len().saturating_sub(1)].to_vec(),
+                    &code[at + 7..],
+                )
+            };
+            while let Some(r) = rest.strip_prefix("super::") {
+                base.pop();
+                rest = r;
+            }
+            for path in referenced_paths(rest) {
+                let mut target = base.clone();
+                let mut found = base.clone();
+                for seg in path {
+                    target.push(seg);
+                    if known.contains(&target) {
+                        found = target.clone();
+                    }
+                }
+                let related = found.starts_with(module) || module.starts_with(&found);
+                if !related {
+                    let entry = edges.entry(module.join("::")).or_default();
+                    entry.insert(found.join("::"));
+                }
+            }
+        }
+    }
+    edges
+}
+
+/// The import circles among `modules` (module path, source): each circle's modules, sorted.
+fn import_circles(modules: &[(Vec<String>, String)]) -> Vec<Vec<String>> {
+    let edges = module_edges(modules);
+    let reach = |from: &String| {
+        let (mut seen, mut stack) = (BTreeSet::new(), vec![from.clone()]);
+        while let Some(m) = stack.pop() {
+            for n in edges.get(&m).into_iter().flatten() {
+                if seen.insert(n.clone()) {
+                    stack.push(n.clone());
+                }
+            }
+        }
+        seen
+    };
+    let reaches: BTreeMap<&String, BTreeSet<String>> =
+        edges.keys().map(|m| (m, reach(m))).collect();
+    let mut circles: BTreeSet<Vec<String>> = BTreeSet::new();
+    for (m, r) in &reaches {
+        if !r.contains(*m) {
+            continue;
+        }
+        // The circle through `m`: every module `m` reaches that reaches `m` back.
+        let mut circle: Vec<String> = (r.iter())
+            .filter(|n| reaches.get(n).is_some_and(|back| back.contains(*m)))
+            .cloned()
+            .collect();
+        circle.sort();
+        circles.insert(circle);
+    }
+    circles.into_iter().collect()
+}
+
+/// Every package directory with a `src/` (relative to the workspace root).
+fn packages() -> Vec<String> {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let mut out: Vec<String> = ["agent", "leader", "orchestrator", "tests"]
+        .map(str::to_owned)
+        .to_vec();
+    for e in std::fs::read_dir(root.join("common"))
+        .expect("common/ is readable")
+        .flatten()
+    {
+        if e.path().join("src").is_dir() {
+            out.push(format!("common/{}", e.file_name().to_string_lossy()));
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn no_module_imports_itself_through_others() {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let all = sources();
+    let mut found = Vec::new();
+    for package in packages() {
+        let src = root.join(&package).join("src");
+        let modules: Vec<(Vec<String>, String)> = (all.iter())
+            .filter(|p| p.starts_with(&src))
+            .filter_map(|p| Some((module_of(&src, p)?, std::fs::read_to_string(p).ok()?)))
+            .collect();
+        for circle in import_circles(&modules) {
+            let allowed = ALLOWED_CIRCLES
+                .iter()
+                .any(|(c, m)| *c == package && circle.iter().all(|x| m.contains(&x.as_str())));
+            if !allowed {
+                found.push(format!("{package}: {}", circle.join(" <-> ")));
+            }
+        }
+    }
+    assert!(found.is_empty(), "import circles:\n{}", found.join("\n"));
+}
+
+#[test]
+fn the_circle_finder_finds_direct_transitive_and_grouped_circles() {
+    let m = |path: &str, text: &str| {
+        let segs = path
+            .split("::")
+            .filter(|s| !s.is_empty())
+            .map(str::to_owned);
+        (segs.collect::<Vec<_>>(), text.to_owned())
+    };
+    let two = [m("a", "use crate::b::X;\n"), m("b", "use crate::a::Y;\n")];
+    assert_eq!(
+        import_circles(&two),
+        vec![vec!["a".to_owned(), "b".to_owned()]]
+    );
+    let three = [
+        m("a", "use crate::{b::X, d};\n"),
+        m("b", "fn f() { crate::c::g() }\n"),
+        m("c", "use super::a::Z;\n"),
+        m("d", ""),
+    ];
+    assert_eq!(
+        import_circles(&three),
+        vec![["a", "b", "c"].map(str::to_owned).to_vec()]
+    );
+    let line = [
+        m("a", "use crate::b::X;\n"),
+        m("b", "use crate::c::X;\n"),
+        m("c", ""),
+    ];
+    assert!(import_circles(&line).is_empty());
+    // Parents and children, comments, strings and test modules are not imports.
+    let not_imports = [
+        m("", "pub mod a;\nuse crate::a::X;\n"),
+        m(
+            "a",
+            "use super::Y; // crate::b::\nconst S: &str = \"crate::b::X\";\n",
+        ),
+        m(
+            "b",
+            "use crate::a::X;\n#[cfg(test)]\nmod tests {\n    use crate::a::tests::T;\n}\n",
+        ),
+        m("a::tests", "use crate::b::Z;\n"),
+    ];
+    assert!(
+        import_circles(&not_imports).is_empty(),
+        "{:?}",
+        module_edges(&not_imports)
+    );
+}
+
+/// Public types, traits, enums and aliases defined in more than one place (outside tests): each
+/// name with the files that define it.
+fn defined_twice(files: &[(String, String)]) -> BTreeMap<String, Vec<String>> {
+    let mut defs: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for (file, text) in files {
+        for line in code_outside_tests(text).lines() {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            let Some(k) =
+                (words.iter()).position(|w| ["struct", "enum", "trait", "type"].contains(w))
+            else {
+                continue;
+            };
+            if k == 0 || !words[..k].iter().any(|w| w.starts_with("pub")) {
+                continue;
+            }
+            let name: String = (words.get(k + 1).unwrap_or(&"").chars())
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            if name.starts_with(|c: char| c.is_ascii_uppercase()) {
+                defs.entry(name).or_default().push(file.clone());
+            }
+        }
+    }
+    defs.retain(|_, files| files.len() > 1);
+    defs
+}
+
+#[test]
+fn no_public_type_name_is_defined_twice() {
+    let root = std::fs::canonicalize(concat!(env!("CARGO_MANIFEST_DIR"), "/..")).unwrap();
+    let files: Vec<(String, String)> = (sources().iter())
+        .filter_map(|p| {
+            let rel = std::fs::canonicalize(p).ok()?;
+            let rel = rel.strip_prefix(&root).ok()?.to_string_lossy().into_owned();
+            Some((rel, std::fs::read_to_string(p).ok()?))
+        })
+        .collect();
+    let twice: Vec<String> = defined_twice(&files)
+        .into_iter()
+        .filter(|(name, at)| {
+            let allowed = ALLOWED_TWICE.iter().find(|(n, _)| n == name);
+            !allowed.is_some_and(|(_, files)| at.iter().all(|f| files.contains(&f.as_str())))
+        })
+        .map(|(name, at)| format!("{name}: {}", at.join(", ")))
+        .collect();
+    assert!(
+        twice.is_empty(),
+        "public names defined twice:\n{}",
+        twice.join("\n")
+    );
+}
+
+#[test]
+fn the_name_finder_finds_a_name_defined_twice() {
+    let f = |path: &str, text: &str| (path.to_owned(), text.to_owned());
+    let files = [
+        f(
+            "a/src/x.rs",
+            "pub struct Role;\npub(crate) enum Kind { A }\nstruct Private;\n",
+        ),
+        f(
+            "b/src/y.rs",
+            "pub enum Role { A }\n// pub struct Kind\nstruct Private;\n",
+        ),
+        f(
+            "c/src/z.rs",
+            "pub trait Kind {}\n#[cfg(test)]\nmod tests {\n    pub struct Role;\n}\n",
+        ),
+    ];
+    let twice = defined_twice(&files);
+    assert_eq!(
+        twice.keys().collect::<Vec<_>>(),
+        ["Kind", "Role"],
+        "{twice:?}"
+    );
+    assert_eq!(twice["Role"], ["a/src/x.rs", "b/src/y.rs"]);
+    assert_eq!(twice["Kind"], ["a/src/x.rs", "c/src/z.rs"]);
 }

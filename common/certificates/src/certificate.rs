@@ -1,11 +1,11 @@
-//! The pre-flight certificate of `orchestrator plan`, assembled once for the paper's manoeuvre
-//! and for a mission: the safety numbers (Sec. VI), T_threshold by simulation (eq. 34), the
-//! gains' stability (eq. 26), the link delay it tolerates, and the airspace's margins.
+//! The pre-flight certificate of `orchestrator plan` and how it is assembled, once for the
+//! paper's manoeuvre and for a mission: the safety numbers (Sec. VI), T_threshold by simulation
+//! (eq. 34), the gains' stability (eq. 26), the link delay it tolerates, and the airspace's
+//! margins. `certify` computes one.
 
 use serde::Serialize;
 
-use crate::delay::{bound_ms, max_link_delay, DelayBound};
-use crate::linear_certificate::LinearTeam;
+use crate::delay::{bound_ms, DelayBound};
 use crate::losscert::LossCertificate;
 use cdm_engine::engine::max_follower_deviation;
 use cdm_math::Real;
@@ -41,11 +41,35 @@ pub struct Certificate {
     /// A mission (issue 26): every phase's certificate in flight order; the verdict above is
     /// the worst of them.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub segments: Option<Vec<crate::mission_certificate::PhaseCertificate>>,
+    pub segments: Option<Vec<PhaseCertificate>>,
     /// `[geofence]` and `[[obstacle]]` (issue 27): each boundary's smallest margin; absent
     /// without them, so other certificates keep the JSON they had.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub airspace: Option<crate::airspace_certificate::AirspaceCertificate>,
+}
+
+/// One phase of a mission, certified.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PhaseCertificate {
+    /// `takeoff`, `segment N` or `landing`.
+    pub name: String,
+    pub t_start_s: Real,
+    pub t_end_s: Real,
+    /// Smallest lambda_1(U_D) over the phase and when (informative for take-off and landing).
+    pub lambda1_min: Real,
+    pub t_lambda1_min_s: Real,
+    pub d_b_m: Real,
+    pub d_s_m: Real,
+    pub delta_m: Real,
+    /// Smallest travel time of this phase whose E_max stays under delta.
+    pub t_threshold_s: Real,
+    /// E_max of this phase flown from rest at its own travel time (linear model).
+    pub max_follower_deviation_m: Real,
+    /// Take-off and landing: the closest two members' ground spots (metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_ground_separation_m: Option<Real>,
+    pub verdict: Verdict,
+    pub reasons: Vec<String>,
 }
 
 /// The reason a certificate fails when the gains' stability margin (eq. 26) is not positive.
@@ -135,72 +159,6 @@ pub fn t_threshold_from(
     hi
 }
 
-/// The certificate of a scenario validated with `Checks::Full`: the paper's (or the mission's)
-/// and, with a geofence or obstacles, the airspace's, whose breaches are reasons too.
-pub fn certify(s: &Scenario) -> Certificate {
-    let mut c = if s.plan.is_mission() {
-        crate::mission_certificate::certify_mission(s)
-    } else {
-        certify_one(s)
-    };
-    c.airspace = crate::airspace_certificate::certify_airspace(s, c.numbers.delta_m);
-    if let Some(a) = &c.airspace {
-        c.reasons.extend(a.reasons());
-        c.verdict = verdict_of(&c.reasons);
-    }
-    c
-}
-
-/// The certificate of the paper's one manoeuvre.
-fn certify_one(s: &Scenario) -> Certificate {
-    let n = SafetyNumbers::of(s);
-    // E(T) on the exactly linear error dynamics when the graph allows (linear_certificate.rs),
-    // otherwise by flying the nonlinear team at every trial T.
-    let linear = LinearTeam::new(s)
-        .inspect_err(|why| tracing::info!("the certificate flies the plan: {why}"))
-        .ok();
-    let deviation = |t| match &linear {
-        Some(team) => team.max_follower_deviation(t),
-        None => deviation_at(s, t),
-    };
-    let e = deviation(s.file.t_total_s);
-    let t_thr = t_threshold(s, n.delta_m, e, deviation);
-    let margin = s.gains_margin.unwrap_or(Real::NAN);
-    let mut reasons = Vec::new();
-    if n.delta_m.is_nan() || n.delta_m <= 0.0 {
-        reasons.push(format!(
-            "delta = {:.4} m <= 0: eps = {} m is too large for D_B = {:.4} m, D_S = {:.4} m and lambda_CD,min = {:.4} (eq. 38)",
-            n.delta_m, n.eps_m, n.d_b_m, n.d_s_m, n.lambda_cd_min
-        ));
-    }
-    if n.lambda1_min < n.lambda_cd_min - 1e-12 {
-        reasons.push(format!(
-            "lambda_1(U_D) falls to {:.4} at t = {:.2} s, below lambda_CD,min = {:.4} (eq. 37)",
-            n.lambda1_min, n.t_lambda1_min_s, n.lambda_cd_min
-        ));
-    }
-    if t_thr.is_nan() || s.file.t_total_s < t_thr {
-        reasons.push(format!(
-            "t_total_s = {} s is below T_threshold = {:.2} s: max follower deviation {:.4} m exceeds delta = {:.4} m (eq. 34)",
-            s.file.t_total_s, t_thr, e, n.delta_m
-        ));
-    }
-    reasons.extend(unstable_gains(margin));
-    Certificate::assemble(
-        s,
-        Findings {
-            reasons,
-            numbers: n,
-            t_threshold_s: t_thr,
-            t_total_s: s.file.t_total_s,
-            max_follower_deviation_m: e,
-            gains_stability_margin: margin,
-            max_link_delay: max_link_delay(s, n.delta_m, e, linear.as_ref()),
-            segments: None,
-        },
-    )
-}
-
 /// What a certificate found, before the verdict: the parts the paper's manoeuvre and a mission
 /// compute differently.
 pub struct Findings {
@@ -215,7 +173,7 @@ pub struct Findings {
     /// The largest link delay in ticks (`delay.rs`).
     pub max_link_delay: DelayBound,
     /// A mission's phases, in flight order.
-    pub segments: Option<Vec<crate::mission_certificate::PhaseCertificate>>,
+    pub segments: Option<Vec<PhaseCertificate>>,
 }
 
 impl Certificate {

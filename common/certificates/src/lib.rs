@@ -8,6 +8,7 @@
 pub mod airspace_certificate;
 pub mod airspace_suggest;
 pub mod certificate;
+pub mod certify;
 pub mod delay;
 pub mod linear_certificate;
 pub mod losscert;

@@ -12,41 +12,16 @@
 //!   the whole mission once with the nonlinear engine and checks its largest follower deviation
 //!   against delta too.
 
-use serde::Serialize;
-
-use crate::certificate::{t_threshold_from, unstable_gains, verdict_of, Certificate, Findings};
+use crate::certificate::{
+    t_threshold_from, unstable_gains, verdict_of, Certificate, Findings, PhaseCertificate,
+};
 use crate::delay::{delay_search, max_link_delay_linear, DelayBound};
 use crate::linear_certificate::LinearTeam;
 use cdm_engine::engine::max_follower_deviation;
 use cdm_math::{Real, Vec3};
-use cdm_model::outcome::Verdict;
 use cdm_model::plan::{Phase, PhaseKind};
 use cdm_records::audit::SafetyNumbers;
 use cdm_scenario::{closest_ground_pair, Scenario};
-
-/// One phase of a mission, certified.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct PhaseCertificate {
-    /// `takeoff`, `segment N` or `landing`.
-    pub name: String,
-    pub t_start_s: Real,
-    pub t_end_s: Real,
-    /// Smallest lambda_1(U_D) over the phase and when (informative for take-off and landing).
-    pub lambda1_min: Real,
-    pub t_lambda1_min_s: Real,
-    pub d_b_m: Real,
-    pub d_s_m: Real,
-    pub delta_m: Real,
-    /// Smallest travel time of this phase whose E_max stays under delta.
-    pub t_threshold_s: Real,
-    /// E_max of this phase flown from rest at its own travel time (linear model).
-    pub max_follower_deviation_m: Real,
-    /// Take-off and landing: the closest two members' ground spots (metres).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub min_ground_separation_m: Option<Real>,
-    pub verdict: Verdict,
-    pub reasons: Vec<String>,
-}
 
 /// The certificate of a scenario whose plan is a mission.
 pub fn certify_mission(s: &Scenario) -> Certificate {

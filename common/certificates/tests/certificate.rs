@@ -4,7 +4,8 @@
 
 use std::path::Path;
 
-use cdm_certificates::certificate::{certify, deviation_at, t_threshold, t_threshold_from};
+use cdm_certificates::certificate::{deviation_at, t_threshold, t_threshold_from};
+use cdm_certificates::certify::certify;
 use cdm_certificates::linear_certificate::{LinearTeam, NotLinear};
 use cdm_records::audit::SafetyNumbers;
 use cdm_scenario::{Checks, Scenario};

@@ -1,8 +1,7 @@
 //! The pre-flight certificate as `plan`, `simulate` and `export` print it.
 
 use cdm_certificates::airspace_certificate::{AirspaceCertificate, ClearanceKind};
-use cdm_certificates::certificate::Certificate;
-use cdm_certificates::mission_certificate::PhaseCertificate;
+use cdm_certificates::certificate::{Certificate, PhaseCertificate};
 use cdm_team::out;
 
 pub fn print_certificate(c: &Certificate) {

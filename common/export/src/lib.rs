@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use cdm_certificates::certificate::{certify, Certificate};
+use cdm_certificates::certificate::Certificate;
+use cdm_certificates::certify::certify;
 use cdm_math::{Real, Vec3};
 use cdm_model::formation::Role;
 use cdm_model::outcome::Verdict;

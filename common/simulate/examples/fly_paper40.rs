@@ -3,7 +3,7 @@
 //!
 //! How to run: `cargo run --release -p cdm-simulate --example fly_paper40`
 
-use cdm_certificates::certificate::certify;
+use cdm_certificates::certify::certify;
 use cdm_model::outcome::Verdict;
 use cdm_records::rundir::RunDir;
 use cdm_scenario::{Checks, Scenario};
