@@ -14,10 +14,11 @@
 // Protobuf messages are decoded with the schema the server advertised (a FileDescriptorSet), as
 // the Foxglove app does. Every wait has a deadline: the process exits by itself.
 import { createRequire } from "node:module";
-import { FoxgloveClient } from "@foxglove/ws-protocol";
-import WebSocket from "ws";
 
+// Both packages are CommonJS: loaded as Node loads them.
 const require = createRequire(import.meta.url);
+const { FoxgloveClient } = require("@foxglove/ws-protocol");
+const WebSocket = require("ws");
 const protobuf = require("protobufjs");
 require("protobufjs/ext/descriptor");
 
@@ -44,7 +45,8 @@ client.on("error", (e) => {
 });
 client.on("close", () => {
   print({ event: "closed" });
-  process.exit(0);
+  // A reading client that closes before its poses failed; a stalled one is done.
+  process.exit(mode === "check" ? 4 : 0);
 });
 client.on("serverInfo", (info) => {
   print({ event: "server", name: info.name, capabilities: info.capabilities });

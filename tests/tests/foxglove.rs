@@ -20,13 +20,13 @@ use integration_tests::{bin, describe, launch_loud, run, spawn, unique_team, Run
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 /// Seconds a client waits for its poses (its own deadline), well inside the plan.
 const CLIENT_WAIT_S: &str = "60";
-/// Poses each reading client waits for (the team's six members, a few ticks each).
+/// Poses each reading client waits for (the team's members, a few ticks each).
 const POSES: &str = "30";
 /// A small team in real time over a plan longer than any wait: interrupted once the clients
-/// have their poses. Member 6 is lost at 1 s: `/cdm/events` says so.
+/// have their poses. Member 9 (a follower) is lost at 1 s.
 const TEAM: [&str; 10] = [
     "--n",
-    "6",
+    "10",
     "--t-total",
     "120",
     "--realtime",
@@ -34,7 +34,7 @@ const TEAM: [&str; 10] = [
     "5",
     "--no-figures",
     "--lose",
-    "6@1",
+    "9@1",
 ];
 
 /// The Node client of tests/foxglove (its packages installed by scripts/test-deps.sh).
@@ -222,11 +222,12 @@ fn foxglove_on_an_address_in_use_exits_2_before_the_team() {
 fn view_foxglove_plays_a_finished_run_to_a_client_equal_to_its_telemetry() {
     let tmp = TempDir::new();
     let run_dir = tmp.path().join("run");
+    // A complete run, SAFE or not (this short plan breaks its tracking bound: exit 1).
     let o = run(
-        &mut integration_tests::simulate(&run_dir, &["--n", "6", "--t-total", "3"]),
+        &mut integration_tests::simulate(&run_dir, &["--n", "10", "--t-total", "5"]),
         DEADLINE,
     );
-    assert!(o.status.success(), "{}", describe(&o));
+    assert!(matches!(o.status.code(), Some(0 | 1)), "{}", describe(&o));
     let mut view = Command::new(bin("orchestrator"));
     view.arg("view")
         .arg(&run_dir)

@@ -142,6 +142,17 @@ impl Live {
     }
 }
 
+/// Without the server: `view --foxglove` is bad input (exit 2), naming the feature.
+#[cfg(not(feature = "live"))]
+pub fn replay(
+    _dir: &std::path::Path,
+    _o: &FoxgloveOptions,
+    _stop: &std::sync::atomic::AtomicBool,
+    _on_listening: impl FnOnce(SocketAddr),
+) -> Result<Summary, FoxgloveError> {
+    Err(FoxgloveError::NotBuilt)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -52,6 +52,8 @@ struct Snapshot {
 
 /// The topics of a team, in the order they are advertised.
 struct Topics {
+    /// The SDK's context: its channels close when it is dropped, so the topics keep it.
+    _ctx: Arc<Context>,
     poses: Vec<Channel<PoseInFrame>>,
     tf: Channel<FrameTransforms>,
     formation: Channel<SceneUpdate>,
@@ -77,6 +79,7 @@ impl Topics {
                 })
         };
         Ok(Topics {
+            _ctx: ctx.clone(),
             poses: (0..n)
                 .map(|k| ChannelBuilder::new(name(k)).context(ctx).build())
                 .collect(),
