@@ -441,7 +441,7 @@ fn view_foxglove(
     quiet: bool,
 ) -> Result<Exit, Failure> {
     let interrupted = cdm_process::signals::install();
-    let s = cdm_foxglove::replay(dir, o, &interrupted, |addr| {
+    let s = cdm_foxglove::replay(dir, o, interrupted, |addr| {
         // Only this line goes to stdout in quiet mode: tools read the address from it.
         out!("foxglove: ws://{addr} (plays once a client connects; Ctrl-C stops)");
     })
