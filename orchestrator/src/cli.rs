@@ -87,6 +87,10 @@ pub enum Command {
         /// Serve the page on ADDR (HOST:PORT or PORT; a bare --serve is 127.0.0.1:8080).
         #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_SERVE)]
         serve: Option<String>,
+        /// Play the run to Foxglove instead, at its own pace, once a client connects (ADDR:
+        /// HOST:PORT or PORT; a bare --foxglove is 127.0.0.1:8765).
+        #[command(flatten)]
+        foxglove: cdm_launch::feeds::FoxgloveArgs,
     },
     /// Redraw every figure of a finished run from its telemetry.csv, audit.json and
     /// scenario.toml (SVG and PNG, into the run directory).
@@ -197,6 +201,8 @@ pub struct LaunchArgs {
     pub realtime: cdm_launch::realtime::RealtimeArgs,
     #[command(flatten)]
     pub ros2: cdm_launch::feeds::Ros2Args,
+    #[command(flatten)]
+    pub foxglove: cdm_launch::feeds::FoxgloveArgs,
     #[command(flatten)]
     pub run: RunOptions,
 }

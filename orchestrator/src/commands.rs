@@ -60,7 +60,14 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
         Command::Simulate { source, out, run } => simulate_command(&source, &out, &run, cli.quiet),
         Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
         Command::Launch(args) => launch_command(*args, cli.quiet),
-        Command::View { dir, serve } => view(&dir, serve.as_deref(), cli.quiet),
+        Command::View {
+            dir,
+            serve,
+            foxglove,
+        } => match foxglove.options()? {
+            Some(o) => view_foxglove(&dir, &o, cli.quiet),
+            None => view(&dir, serve.as_deref(), cli.quiet),
+        },
         Command::Clean => clean(cli.quiet),
         Command::Host {
             connect,
@@ -254,6 +261,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             .transpose()
             .map_err(Failure::bad_input)?,
         ros2: a.ros2.options()?,
+        foxglove: a.foxglove.options()?,
         hosts: host_options(a)?,
         realtime,
         losses,
@@ -424,6 +432,29 @@ fn view(dir: &Path, serve: Option<&str>, quiet: bool) -> Result<Exit, Failure> {
     out!("serving http://{}/ (Ctrl-C stops)", server.addr);
     while !interrupted.load(std::sync::atomic::Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(100));
+    }
+    Ok(Exit::Safe)
+}
+
+/// `view RUN_DIR --foxglove [ADDR]`: the run played to Foxglove once a client connects, at
+/// simulation time's pace; the server stops at the end of the run or on Ctrl-C.
+fn view_foxglove(
+    dir: &Path,
+    o: &cdm_foxglove::FoxgloveOptions,
+    quiet: bool,
+) -> Result<Exit, Failure> {
+    let interrupted = cdm_process::signals::install();
+    let s = cdm_foxglove::replay(dir, o, interrupted, |addr| {
+        // Only this line goes to stdout in quiet mode: tools read the address from it.
+        out!("foxglove: ws://{addr} (plays once a client connects; Ctrl-C stops)");
+    })
+    .map_err(Failure::bad_input)?;
+    if !quiet {
+        out!(
+            "foxglove: {} ticks published, {} dropped",
+            s.ticks,
+            s.dropped
+        );
     }
     Ok(Exit::Safe)
 }

@@ -1,9 +1,11 @@
 //! What sees each audited tick besides the audit and telemetry, in lockstep and real time
-//! alike: the live view (`--serve`, cdm-viewer) and the live ROS 2 topics (`--ros2`, cdm-ros2).
-//! Both pace themselves by the wall clock and never make the loop wait.
+//! alike: the live view (`--serve`, cdm-viewer), the live ROS 2 topics (`--ros2`, cdm-ros2) and
+//! Foxglove (`--foxglove`, cdm-foxglove). Each paces itself by the wall clock and never makes
+//! the loop wait.
 
 use cdm_math::Vec3;
 use cdm_records::audit::{AuditReport, Auditor};
+use cdm_foxglove::FoxgloveOptions;
 use cdm_ros2::{Backend, Live, Ros2Options};
 use cdm_scenario::Scenario;
 use cdm_team::{out, Failure};
@@ -50,11 +52,40 @@ impl Ros2Args {
     }
 }
 
+/// `--foxglove` and `--foxglove-hz`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FoxgloveArgs {
+    /// Serve the run live to Foxglove (its WebSocket protocol) on ADDR (HOST:PORT or PORT; a
+    /// bare --foxglove is 127.0.0.1:8765): each member's pose, /tf, the formation as a 3-D
+    /// scene, the margins, the verdict and losses. Only loopback unless another address is given.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = cdm_foxglove::DEFAULT_ADDR)]
+    pub foxglove: Option<String>,
+    /// With --foxglove: ticks published per second of wall time, at most (default 30).
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
+    pub foxglove_hz: Option<f64>,
+}
+
+impl FoxgloveArgs {
+    /// The options, or `None` without --foxglove; a bad value is bad input naming its flag.
+    pub fn options(&self) -> Result<Option<FoxgloveOptions>, Failure> {
+        match &self.foxglove {
+            None if self.foxglove_hz.is_some() => {
+                Err(Failure::bad_input("--foxglove-hz needs --foxglove"))
+            }
+            None => Ok(None),
+            Some(addr) => FoxgloveOptions::parse(addr, self.foxglove_hz)
+                .map(Some)
+                .map_err(Failure::bad_input),
+        }
+    }
+}
+
 /// The live feeds of a launch.
 #[derive(Default)]
 pub struct Feeds {
     pub view: Option<LiveView>,
     pub ros2: Option<Live>,
+    pub foxglove: Option<cdm_foxglove::Live>,
 }
 
 impl Feeds {
@@ -64,6 +95,7 @@ impl Feeds {
         s: &Scenario,
         serve: Option<std::net::SocketAddr>,
         ros2: Option<&Ros2Options>,
+        foxglove: Option<&FoxgloveOptions>,
         quiet: bool,
     ) -> Result<Self, Failure> {
         let view = match serve {
@@ -82,7 +114,21 @@ impl Feeds {
             Some(o) => Some(Live::start(o, s).map_err(Failure::bad_input)?),
             None => None,
         };
-        Ok(Feeds { view, ros2 })
+        let foxglove = match foxglove {
+            Some(o) => {
+                let f = cdm_foxglove::Live::start(o, s).map_err(Failure::bad_input)?;
+                if !quiet {
+                    out!("foxglove: ws://{}", f.addr());
+                }
+                Some(f)
+            }
+            None => None,
+        };
+        Ok(Feeds {
+            view,
+            ros2,
+            foxglove,
+        })
     }
 
     /// One audited tick: offered to each feed (`flying(k)` false for a member lost by then).
@@ -100,11 +146,31 @@ impl Feeds {
         if let Some(r) = self.ros2.as_mut() {
             r.tick(tick, t_s, (pos, ht), &flying);
         }
+        if let Some(f) = self.foxglove.as_mut() {
+            f.tick(tick, t_s, (pos, ht), &flying, report.verdict);
+        }
     }
 
-    /// The run is over: the page gets its verdict, the ROS 2 topics their last messages (the
-    /// view keeps serving until the caller drops it).
+    /// The run is over: the page gets its verdict, the ROS 2 topics their last messages,
+    /// Foxglove the final verdict before its server closes (the view keeps serving until the
+    /// caller drops it).
     pub fn finish(&mut self, report: &AuditReport, quiet: bool) {
+        if let Some(f) = self.foxglove.take() {
+            let s = f.finish(report.verdict);
+            if !quiet {
+                let unfinished = if s.unfinished {
+                    "; still publishing when the launch ended"
+                } else {
+                    ""
+                };
+                out!(
+                    "  foxglove (ws://{}): {} ticks published, {} dropped (queue full){unfinished}",
+                    s.addr,
+                    s.ticks,
+                    s.dropped
+                );
+            }
+        }
         if let Some(v) = &self.view {
             v.finish(report);
         }

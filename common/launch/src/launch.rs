@@ -57,6 +57,8 @@ pub struct LaunchOptions {
     pub serve: Option<std::net::SocketAddr>,
     /// Publish the run live on ROS 2 (`--ros2`, `--ros2-hz`).
     pub ros2: Option<cdm_ros2::Ros2Options>,
+    /// Serve the run live to Foxglove (`--foxglove`, `--foxglove-hz`).
+    pub foxglove: Option<cdm_foxglove::FoxgloveOptions>,
     /// Across hosts (`--hosts`, `--listen`; issue 12).
     pub hosts: cdm_hosts::HostOptions,
     /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
@@ -181,7 +183,7 @@ fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Feeds, Failure> {
         member_binaries_present()?;
     }
     crate::realtime::schedule(o)?;
-    let live = Feeds::start(s, o.serve, o.ros2.as_ref(), o.quiet)?;
+    let live = Feeds::start(s, o.serve, o.ros2.as_ref(), o.foxglove.as_ref(), o.quiet)?;
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),

@@ -235,18 +235,29 @@ impl Team {
         });
     }
 
-    /// A sphere of the safety ball's size (2 eps) per member coloured by role (deleted once
-    /// lost), the leading polygon through the leaders' positions, closed, and the airspace.
+    /// The formation's markers of one tick, encoded.
     fn formation(&self, stamp: Stamp, t: &Tick<'_>) -> Vec<u8> {
-        let d = 2.0 * self.limits.eps_m;
-        let polygon: Vec<Vec3> = self
-            .scenario
+        let polygon = self.polygon(t);
+        msgs::marker_array(stamp, WORLD, &self.markers(t, &polygon))
+    }
+
+    /// The leading polygon through the leaders' positions, closed (the `points` of its marker).
+    pub fn polygon(&self, t: &Tick<'_>) -> Vec<Vec3> {
+        self.scenario
             .formation
             .polygon
             .iter()
             .chain(self.scenario.formation.polygon.first())
             .map(|&k| t.pos[k])
-            .collect();
+            .collect()
+    }
+
+    /// The formation as markers, whatever encodes them (the bag's MarkerArray, the live
+    /// Foxglove scene): a sphere of the safety ball's size (2 eps) per member coloured by role
+    /// (deleted once lost), the leading polygon (`polygon`, from [`Team::polygon`]) and the
+    /// airspace.
+    pub fn markers<'a>(&'a self, t: &Tick<'_>, polygon: &'a [Vec3]) -> Vec<Marker<'a>> {
+        let d = 2.0 * self.limits.eps_m;
         let mut markers: Vec<Marker<'_>> = (0..self.ids.len())
             .map(|k| Marker {
                 ns: "members",
@@ -267,7 +278,7 @@ impl Team {
             position: Vec3::zeros(),
             scale: Vec3::new(d / 4.0, 0.0, 0.0),
             color: Rgba([1.0, 1.0, 1.0, 1.0]),
-            points: &polygon,
+            points: polygon,
         });
         markers.extend(self.airspace.iter().map(|a| Marker {
             ns: a.ns,
@@ -279,7 +290,7 @@ impl Team {
             color: a.color,
             points: &a.points,
         }));
-        msgs::marker_array(stamp, WORLD, &markers)
+        markers
     }
 
     /// The tick's four margins, each with its value and its distance to the limit (positive:
