@@ -7,11 +7,11 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use cdm_records::audit::FaultRecord;
-use cdm_scenario::Scenario;
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamName, TeamProcess};
+use cdm_records::audit::FaultRecord;
 use cdm_runtime::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, LossNotice, StateMsg};
 use cdm_runtime::process_exit::ProcessExit;
+use cdm_scenario::Scenario;
 use cdm_team::out;
 use cdm_team::Failure;
 use cdm_zenoh::{

@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use cdm_scenario::{Checks, Scenario};
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{ClockCommand, ClockMsg, StopReason};
 use cdm_runtime::process_exit::ProcessExit;
+use cdm_scenario::{Checks, Scenario};
 use cdm_team::out;
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
 use cdm_team::{Exit, Failure};

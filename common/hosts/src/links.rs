@@ -6,8 +6,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-use cdm_records::audit::FaultRecord;
 use cdm_model::outcome::FaultKind;
+use cdm_records::audit::FaultRecord;
 use cdm_runtime::process_exit::ProcessExit;
 
 /// How long a remote member's silence waits at least for the bridge's verdict on its host: a

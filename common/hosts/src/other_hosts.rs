@@ -3,9 +3,9 @@
 //! (`crate::Bridge`) when daemons on other machines run part of it. The launch asks the same
 //! questions of both, so no code path of its own depends on how many hosts there are.
 
+use cdm_iox::OrchestratorPorts;
 use cdm_records::audit::FaultRecord;
 use cdm_records::rundir::RunDir;
-use cdm_iox::OrchestratorPorts;
 use cdm_runtime::process_exit::ProcessExit;
 
 /// The other hosts of a team, as the launch asks about them.

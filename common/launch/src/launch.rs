@@ -11,21 +11,21 @@ use cdm_team::out;
 use cdm_team::telemetry_thread::ThreadedSink;
 
 use crate::realtime::Elsewhere;
-use cdm_model::formation::Role;
 use cdm_engine::loss::{LossSchedule, LossState};
+use cdm_hosts::OtherHosts;
+use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_math::vec3;
+use cdm_model::formation::Role;
 use cdm_model::outcome::FaultKind;
 use cdm_records::record::TickRecorder;
 use cdm_records::rundir::RunDir;
-use cdm_scenario::Scenario;
 use cdm_records::telemetry::TelemetrySink;
-use cdm_hosts::OtherHosts;
-use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{ClockMsg, LossNotice, StateMsg, StopReason};
 use cdm_runtime::seams::{Clock, MonotonicClock};
 use cdm_runtime::team_core::{nap_before_wait, TeamConfig, TeamCore, TickStates};
 use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_runtime::team_loss::TeamLosses;
+use cdm_scenario::Scenario;
 use cdm_viewer::live::LiveView;
 
 use crate::feeds::Feeds;
@@ -414,7 +414,8 @@ pub(crate) fn write_subscriptions(s: &Scenario, ports: &OrchestratorPorts, dir: 
         }
     };
     let text = serde_json::to_string_pretty(&subs).unwrap_or_default();
-    let _ = cdm_records::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
+    let _ =
+        cdm_records::rundir::write_atomic(&dir.path().join("subscriptions.json"), text.as_bytes());
 }
 
 /// A telemetry write or flush that failed (a full disk) at `tick`: a fault, the file keeps its

@@ -13,16 +13,15 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use crate::feeds::Feeds;
-use cdm_records::audit::{Auditor, LossRecord, RealtimeFigures};
-use cdm_model::formation::Role;
 use cdm_engine::loss::{LossAt, LossSchedule, LossState};
+use cdm_iox::OrchestratorPorts;
 use cdm_math::Vec3;
+use cdm_model::formation::Role;
 use cdm_model::outcome::FaultKind;
+use cdm_records::audit::{Auditor, LossRecord, RealtimeFigures};
 use cdm_records::record::{write_fault, TickRecorder};
 use cdm_records::rundir::RunDir;
-use cdm_scenario::Scenario;
 use cdm_records::telemetry::TelemetrySink;
-use cdm_iox::OrchestratorPorts;
 use cdm_runtime::messages::{ClockMsg, LossNotice, StopReason};
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
@@ -30,6 +29,7 @@ use cdm_runtime::seams::{Clock, MonotonicClock};
 use cdm_runtime::team_core::Pacing;
 use cdm_runtime::team_core::{LostMember, RealtimePlan, TeamCore, WallClock, MEMBER_STALE_FACTOR};
 use cdm_runtime::team_loss::TeamLosses;
+use cdm_scenario::Scenario;
 
 use cdm_team::out;
 

@@ -25,8 +25,8 @@ use cdm_model::plan::TeamPlan;
 
 pub use airspace::{has_airspace, GeofenceSpec, ObstacleShapeError, ObstacleSpec};
 pub use builtin::{generated, paper40, TeamSizeError, MAX_AGENTS};
-pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
 pub use fields::{MAX_COORD_M, MAX_TICKS};
+pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
 
 /// Default tolerance for members off the primary leaders' plane (ERRATA 10): within it a member
 /// is projected onto the plane (and the tool says so); beyond it the scenario is refused.
