@@ -128,7 +128,8 @@ fn a_full_disk_keeps_a_readable_parquet_file_of_whole_row_groups() {
     let out = disk.dir.join("run");
     let n = N.to_string();
     let o = run(
-        simulate(&out, &["--n", &n, "--no-figures"]).args(["--telemetry", "parquet"]),
+        simulate(&out, &["--n", &n, "--no-figures", "--every", "1"])
+            .args(["--telemetry", "parquet"]),
         DEADLINE,
     );
     assert_exit(&o, 3, "simulate --telemetry parquet into a full disk");
