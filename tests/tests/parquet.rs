@@ -143,7 +143,7 @@ fn csv_ticks(csv: &Path) -> Vec<u64> {
 #[test]
 fn a_large_team_keeps_one_tick_in_n_over_40_by_default_and_says_so() {
     let dir = TempDir::new();
-    let source = ["--n", "100", "--max-ticks", "30", "--no-figures"];
+    let source = ["--n", "100", "--max-ticks", "30"];
     let (csv, pq, all) = (
         dir.path().join("csv"),
         dir.path().join("pq"),
@@ -152,7 +152,11 @@ fn a_large_team_keeps_one_tick_in_n_over_40_by_default_and_says_so() {
     // Not --quiet: the line is printed before the flight.
     let loud = |out: &Path| {
         let mut c = Command::new(bin("orchestrator"));
-        c.arg("simulate").args(source).arg("--out").arg(out);
+        c.arg("simulate")
+            .args(source)
+            .arg("--no-figures")
+            .arg("--out")
+            .arg(out);
         c
     };
     let o = run(&mut loud(&csv), DEADLINE);
