@@ -36,9 +36,19 @@
 # and their start-up (command to first tick, default `--on-loss repair`; CSV telemetry on both
 # sides). BEFORE_ONLY=1 runs only this section.
 #
+# Telemetry (TELEMETRY_ONLY=1 runs only this section; not part of a full run): at N = TELEMETRY_N
+# (default 1000), TELEMETRY_TICKS ticks (default: the full plan), a flight with almost no
+# telemetry (`--every 1000`) and the same flight writing every tick to telemetry.parquet
+# (`--every 1`), alternated ROUNDS times: medians and every run of both wall times, the writing
+# cost over the flight ((with - without) / without) and the file's bytes a row.
+#
+# Every flight above writes every tick (`--every 1`, as before the default --every grew with N),
+# so the figures compare with earlier runs of this script.
+#
 # Usage: [BIN=DIR] [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
 #        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [BENCH_N_FLAGS=...] [SCALE_ONLY=1]
-#        [BEFORE_BIN=DIR] [ROUNDS=3] [BEFORE_ONLY=1] scripts/bench.sh [N ...]
+#        [BEFORE_BIN=DIR] [ROUNDS=3] [BEFORE_ONLY=1]
+#        [TELEMETRY_ONLY=1] [TELEMETRY_N=1000] [TELEMETRY_TICKS=K] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
@@ -108,7 +118,7 @@ scale_section() {
   [ -z "${BENCH_N:-}" ] || sns+=("$BENCH_N")
   [ ${#sns[@]} -gt 0 ] || return 0
   echo
-  echo "Scale (\`launch --n N --telemetry parquet --no-figures\`, full plan; load average before: $(cut -d' ' -f1-3 /proc/loadavg)):"
+  echo "Scale (\`launch --n N --every 1 --telemetry parquet --no-figures\`, full plan; load average before: $(cut -d' ' -f1-3 /proc/loadavg)):"
   echo
   echo "| N | ticks flown | engine ticks/s | launch ticks/s | launch/engine | start-up s, --on-loss stop | start-up s, repair (default) | largest member MiB | all members MiB (sum of VmHWM) | orchestrator MiB | machine used MiB before / peak | load average after |"
   echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
@@ -124,7 +134,7 @@ scale_section() {
     su_stop=-; [ "$n" = "${BENCH_N:-}" ] || su_stop=$(startup --on-loss stop)
     before=$(used_kib)
     local extra=(); [ "$n" != "${BENCH_N:-}" ] || extra=(${BENCH_N_FLAGS:-})
-    "$bin/orchestrator" launch --n "$n" --telemetry parquet --no-figures --team "scale$n-$$" \
+    "$bin/orchestrator" launch --n "$n" --every 1 --telemetry parquet --no-figures --team "scale$n-$$" \
       --out "$out/sc$n" "${extra[@]}" >"$out/sc$n.log" 2>/dev/null &
     pid=$!
     while kill -0 "$pid" 2>/dev/null; do
@@ -169,7 +179,6 @@ before_after_section() {
   read -r bp bs < <(cert "$BEFORE_BIN"); read -r ap as < <(cert "$bin")
   b=$(awk -v p="$bp" -v s="$bs" 'BEGIN{printf "%.3f", p/s}'); a=$(awk -v p="$ap" -v s="$as" 'BEGIN{printf "%.3f", p/s}')
   echo "| \`plan --n $fn\` / \`simulate --n $fn --every 1000\` (wall s) | $b ($bp / $bs) | $a ($ap / $as) | $(awk -v a="$a" -v b="$b" 'BEGIN{printf "%.3f", a/b}') |"
-  median() { tr ' ' '\n' | grep -v '^$' | sort -g | awk '{v[NR]=$1} END{if (NR%2) print v[(NR+1)/2]; else printf "%.3f\n", (v[NR/2]+v[NR/2+1])/2}'; }
   for n in 40 1000; do
     local limit=() label="full plan" eng_ticks=5000
     [ "$n" = 40 ] || { limit=(--max-ticks 2999); label="3000 ticks"; eng_ticks=1000; }
@@ -178,7 +187,7 @@ before_after_section() {
       for side in "$BEFORE_BIN" "$bin"; do
         local e l r su
         e=$("$side/cdm-bench" engine --n "$n" --ticks "$eng_ticks" | rate)
-        l=$("$side/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --team "ba$n-$$" --out "$out/ba" 2>/dev/null | grep "ticking:")
+        l=$("$side/orchestrator" launch --n "$n" "${limit[@]}" --every 1 --no-figures --team "ba$n-$$" --out "$out/ba" 2>/dev/null | grep "ticking:")
         rm -rf "$out/ba"
         r=$(awk -v l="$(rate <<<"$l")" -v e="$e" 'BEGIN{printf "%.3f", l/e}')
         su=$(startup_s <<<"$l")
@@ -192,7 +201,30 @@ before_after_section() {
     echo "| start-up s, \`launch --n $n\` (command to first tick) | $mb (${sb[*]}) | $ma (${sa[*]}) | $(awk -v a="$ma" -v b="$mb" 'BEGIN{printf "%.2f", a/b}') |"
   done
 }
+# Telemetry (see the header): the writing cost of telemetry.parquet, interleaved medians.
+telemetry_section() {
+  local tn=${TELEMETRY_N:-1000} rounds=${ROUNDS:-3} limit=() i
+  [ -n "${TELEMETRY_TICKS:-}" ] && limit=(--max-ticks $((TELEMETRY_TICKS - 1)))
+  local bare=() full=() size rows
+  for i in $(seq "$rounds"); do
+    bare+=("$(secs "$bin/orchestrator" simulate --n "$tn" "${limit[@]}" --every 1000 --no-figures --quiet --out "$out/tb" | cut -d' ' -f1)")
+    rm -rf "$out/tb"
+    full+=("$(secs "$bin/orchestrator" simulate --n "$tn" "${limit[@]}" --every 1 --telemetry parquet --no-figures --quiet --out "$out/tp" | cut -d' ' -f1)")
+    size=$(stat -c %s "$out/tp/telemetry.parquet")
+    rows=$(( $(jq .ticks "$out/tp/audit.json") * tn ))
+    rm -rf "$out/tp"
+  done
+  local mb mf
+  mb=$(median <<<"${bare[*]}"); mf=$(median <<<"${full[*]}")
+  echo "Telemetry at N = $tn (${TELEMETRY_TICKS:-full plan}${TELEMETRY_TICKS:+ ticks}; $rounds rounds alternated; load average after: $(cut -d' ' -f1-3 /proc/loadavg)):"
+  echo
+  echo "| \`simulate --every 1000\` wall s: median (runs) | \`simulate --every 1 --telemetry parquet\` wall s: median (runs) | writing / flight (medians) | bytes a row |"
+  echo "|---|---|---|---|"
+  echo "| $mb (${bare[*]}) | $mf (${full[*]}) | $(awk -v a="$mf" -v b="$mb" 'BEGIN{printf "%.2f", (a-b)/b}') | $(awk -v s="$size" -v r="$rows" 'BEGIN{printf "%.2f (%d bytes, %d rows)", s/r, s, r}') |"
+}
+median() { tr ' ' '\n' | grep -v '^$' | sort -g | awk '{v[NR]=$1} END{if (NR%2) print v[(NR+1)/2]; else printf "%.3f\n", (v[NR/2]+v[NR/2+1])/2}'; }
 secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }
+if [ -n "${TELEMETRY_ONLY:-}" ]; then telemetry_section; exit 0; fi
 if [ -n "${BEFORE_ONLY:-}" ]; then before_after_section; exit 0; fi
 if [ -n "${SCALE_ONLY:-}" ]; then scale_section; exit 0; fi
 if [ -n "${REALTIME_ONLY:-}" ]; then realtime_section; exit 0; fi
@@ -206,13 +238,13 @@ for n in "${ns[@]}"; do
   esac
   eng_ticks=5000; [ "$n" -ge 1000 ] && eng_ticks=1000
   eng=$("$bin/cdm-bench" engine --n "$n" --ticks "$eng_ticks" | rate)
-  s=$("$bin/orchestrator" simulate --n "$n" "${limit[@]}" --no-figures --out "$out/s$n" 2>/dev/null | grep "^simulate:")
+  s=$("$bin/orchestrator" simulate --n "$n" "${limit[@]}" --every 1 --no-figures --out "$out/s$n" 2>/dev/null | grep "^simulate:")
   sim=$(rate <<<"$s")
   ticks=$(sed -E 's/.* ([0-9]+) ticks in .*/\1/' <<<"$s")
   # simulate's telemetry (about 9 GB at N = 1000) is still being written back to disk: without
   # this, launch's start-up below would time the kernel's writeback too.
   sync
-  l=$("$bin/orchestrator" launch --n "$n" "${limit[@]}" --no-figures --window "$window" \
+  l=$("$bin/orchestrator" launch --n "$n" "${limit[@]}" --every 1 --no-figures --window "$window" \
       --team "bench$n-$$" --out "$out/l$n" 2>/dev/null)
   lt=$(grep "ticking:" <<<"$l" | rate)
   su=$(grep "ticking:" <<<"$l" | startup_s)
@@ -242,9 +274,9 @@ mib() { awk -v k="$1" 'BEGIN{printf "%.1f", k/1024}'; }
 echo "| \`plan --n $fn\` | $plan_s | $(mib "$plan_kb") | | $(awk -v a="$plan_s" -v b="$base_s" 'BEGIN{printf "%.3f of the time", a/b}') |"
 echo "| \`simulate --n $fn --every 1000\` | $base_s | $(mib "$base_kb") | | 1 |"
 for fmt in csv parquet; do
-  read -r f_s f_kb < <(secs "$bin/orchestrator" simulate --n "$fn" --telemetry "$fmt" --no-figures --quiet --out "$out/$fmt")
+  read -r f_s f_kb < <(secs "$bin/orchestrator" simulate --n "$fn" --every 1 --telemetry "$fmt" --no-figures --quiet --out "$out/$fmt")
   size=$(stat -c %s "$out/$fmt/telemetry.$fmt")
-  echo "| \`simulate --n $fn --telemetry $fmt\` | $f_s | $(mib "$f_kb") | $(awk -v b="$size" 'BEGIN{printf "%.0f", b/1e6}') | $(awk -v a="$f_s" -v b="$base_s" 'BEGIN{printf "writing costs %.1f s (%.2f x the flight)", a-b, (a-b)/b}') |"
+  echo "| \`simulate --n $fn --every 1 --telemetry $fmt\` | $f_s | $(mib "$f_kb") | $(awk -v b="$size" 'BEGIN{printf "%.0f", b/1e6}') | $(awk -v a="$f_s" -v b="$base_s" 'BEGIN{printf "writing costs %.1f s (%.2f x the flight)", a-b, (a-b)/b}') |"
   rm -rf "$out/$fmt"
 done
 scale_section

@@ -163,9 +163,11 @@ pub struct LaunchArgs {
     /// The run directory (default: runs/<team>).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Write every K-th tick to the telemetry file.
-    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
-    pub every: u64,
+    /// Write every K-th tick to the telemetry file (default: every tick up to 40 members, then
+    /// every ceil(N / 40)-th: about 40 rows a tick whatever the team's size; printed at the
+    /// start).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: Option<u64>,
     /// Reuse a non-empty --out directory.
     #[arg(long)]
     pub force: bool,
@@ -229,12 +231,40 @@ pub struct OutDir {
     /// The run directory (created; refused when it exists and is not empty, unless --force).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
-    /// Write every K-th tick to the telemetry file.
-    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
-    pub every: u64,
+    /// Write every K-th tick to the telemetry file (default: every tick up to 40 members, then
+    /// every ceil(N / 40)-th: about 40 rows a tick whatever the team's size; printed at the
+    /// start).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: Option<u64>,
     /// Reuse a non-empty --out directory.
     #[arg(long)]
     pub force: bool,
+}
+
+/// Rows a tick the default `--every` keeps at most: a team of N members writes every
+/// ceil(N / 40)-th tick, so a default run's telemetry grows with its length, not its team
+/// (about 2 million rows for the longest built-in plans; docs/src/benchmarks/telemetry.md).
+pub const DEFAULT_ROWS_PER_TICK: u64 = 40;
+
+/// `--every`, or its default for a team of `members`.
+pub fn every_or_default(every: Option<u64>, members: usize) -> u64 {
+    every.unwrap_or_else(|| (members as u64).div_ceil(DEFAULT_ROWS_PER_TICK).max(1))
+}
+
+/// The line that says, before a run, which ticks its telemetry keeps.
+pub fn every_line(every: Option<u64>, members: usize) -> String {
+    let k = every_or_default(every, members);
+    let which = match k {
+        1 => "every tick".to_string(),
+        k => format!("one tick in {k}"),
+    };
+    match every {
+        Some(_) => format!("telemetry: {which} (--every)"),
+        None => format!(
+            "telemetry: {which} (the default for {members} members, about \
+             {DEFAULT_ROWS_PER_TICK} rows a tick; --every K to choose)"
+        ),
+    }
 }
 
 /// `orchestrator keys`.
@@ -330,5 +360,21 @@ impl From<OnLossArg> for OnLoss {
             OnLossArg::Repair => OnLoss::Repair,
             OnLossArg::Stop => OnLoss::Stop,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_every_keeps_about_40_rows_a_tick_and_an_explicit_one_wins() {
+        let default = |n| every_or_default(None, n);
+        assert_eq!([default(4), default(40), default(41)], [1, 1, 2]);
+        assert_eq!([default(100), default(250), default(1000)], [3, 7, 25]);
+        assert_eq!(every_or_default(Some(1), 1000), 1);
+        assert_eq!(every_or_default(Some(7), 10), 7);
+        assert!(every_line(None, 1000).starts_with("telemetry: one tick in 25 (the default"));
+        assert_eq!(every_line(Some(1), 1000), "telemetry: every tick (--every)");
     }
 }

@@ -103,16 +103,20 @@ fn simulate_command(
     let losses = LossSchedule::new(&s, &run.lose, run.max_ticks).map_err(Failure::bad_input)?;
     let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
     let started = Instant::now();
+    let every = crate::cli::every_or_default(out.every, s.file.agents.len());
+    if !quiet {
+        out!("{}", crate::cli::every_line(out.every, s.file.agents.len()));
+    }
     let opts = SimulateOptions {
-        every: out.every,
+        every,
         stop_on_violation: run.stop_on_violation,
         max_ticks: run.max_ticks,
         telemetry: run.telemetry,
         losses,
         on_loss: run.on_loss.into(),
     };
-    let mut tel = cdm_team::telemetry::open(&dir, run.telemetry, out.every, &s)
-        .map_err(Failure::bad_input)?;
+    let mut tel =
+        cdm_team::telemetry::open(&dir, run.telemetry, every, &s).map_err(Failure::bad_input)?;
     let last = run
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
@@ -178,6 +182,9 @@ fn scenario_export(
 /// `orchestrator launch`: the team as processes, then its summary, figures and replay.
 fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
     let (s, opts) = launch_options(&a, quiet)?;
+    if !quiet {
+        out!("{}", crate::cli::every_line(a.every, s.file.agents.len()));
+    }
     let started = Instant::now();
     let launched = launch(&s, &opts)?;
     print_launched(&launched, started, &opts.out, quiet);
@@ -239,7 +246,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             .unwrap_or_else(|| PathBuf::from("runs").join(team.as_str())),
         team,
         force: a.force,
-        every: a.every,
+        every: crate::cli::every_or_default(a.every, s.file.agents.len()),
         telemetry: a.run.telemetry,
         // Real time reads the newest states: a short buffer is enough.
         window: if realtime.is_some() {

@@ -4,8 +4,9 @@ Usage: parquet_equals_csv.py TELEMETRY.csv TELEMETRY.parquet [MORE.parquet ...]
 
 Reads each Parquet file with pyarrow (the reader pandas, polars and DuckDB users get) and the CSV
 with Python's csv module, then compares column names, types, row count and every value exactly
-(CSV prints shortest round-trip floats, so float(text) is the very same double). Prints one line
-per file; exits 1 naming the first difference.
+(CSV prints shortest round-trip floats, so float(text) is the very same double), and that each
+column chunk is stored as the writer chooses to (ENCODINGS, zstd). Prints one line per file; exits
+1 naming the first difference.
 """
 
 import csv
@@ -16,6 +17,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 TYPES = {"tick": pa.uint64(), "t": pa.float64(), "id": pa.uint32(), "role": pa.string()}
+# The data pages' encoding of each column (the f64 columns: BYTE_STREAM_SPLIT); every chunk is
+# compressed with zstd.
+ENCODINGS = {"tick": "DELTA_BINARY_PACKED", "id": "DELTA_BINARY_PACKED", "role": "RLE_DICTIONARY"}
 
 
 def read_csv(path):
@@ -58,6 +62,15 @@ def check(csv_path, header, cols, parquet_path):
             if not same(a, b):
                 sys.exit(f"{parquet_path}: row {i + 1} column {name}: {a!r}, CSV has {b!r}")
     meta = pq.ParquetFile(parquet_path).metadata
+    for g in range(meta.num_row_groups):
+        for c in range(meta.num_columns):
+            chunk = meta.row_group(g).column(c)
+            want = ENCODINGS.get(chunk.path_in_schema, "BYTE_STREAM_SPLIT")
+            if want not in chunk.encodings or chunk.compression != "ZSTD":
+                sys.exit(
+                    f"{parquet_path}: row group {g} column {chunk.path_in_schema}: "
+                    f"{chunk.encodings} {chunk.compression}, expected {want} and ZSTD"
+                )
     print(f"{parquet_path}: {rows} rows x {len(header)} columns equal, {meta.num_row_groups} row groups")
 
 

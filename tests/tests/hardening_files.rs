@@ -116,7 +116,8 @@ fn a_full_disk_keeps_whole_ticks_and_the_audit_and_says_where() {
 /// footer, and the footer comes last. The writer keeps one after every row group, so what the
 /// disk held is kept: pyarrow reads whole row groups of whole ticks; the message names the file,
 /// the free space and what was kept; audit.json says FAULT; exit 3. 200 members write about
-/// 5 MiB per row group (65,536 rows and up to a tick more), so a 12 MiB disk holds about two.
+/// 3.5 MiB per row group (65,536 rows and up to a tick more, about 55 bytes a row), so a 12 MiB
+/// disk holds about three.
 #[test]
 fn a_full_disk_keeps_a_readable_parquet_file_of_whole_row_groups() {
     const N: usize = 200;
@@ -128,7 +129,8 @@ fn a_full_disk_keeps_a_readable_parquet_file_of_whole_row_groups() {
     let out = disk.dir.join("run");
     let n = N.to_string();
     let o = run(
-        simulate(&out, &["--n", &n, "--no-figures"]).args(["--telemetry", "parquet"]),
+        simulate(&out, &["--n", &n, "--no-figures", "--every", "1"])
+            .args(["--telemetry", "parquet"]),
         DEADLINE,
     );
     assert_exit(&o, 3, "simulate --telemetry parquet into a full disk");

@@ -119,3 +119,70 @@ fn a_parquet_run_stopped_on_a_violation_is_complete_and_equal_to_csv() {
     );
     assert_parquet_equals_csv(&csv.join("telemetry.csv"), &[&pq.join("telemetry.parquet")]);
 }
+
+/// The ticks telemetry.csv holds, in file order.
+fn csv_ticks(csv: &Path) -> Vec<u64> {
+    let text = std::fs::read_to_string(csv).expect("telemetry.csv");
+    let mut ticks: Vec<u64> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            l.split(',')
+                .next()
+                .and_then(|t| t.parse().ok())
+                .expect("a tick")
+        })
+        .collect();
+    ticks.dedup();
+    ticks
+}
+
+/// Without `--every`, a team of more than 40 members writes one tick in ceil(N / 40) (about 40
+/// rows a tick), says so before flying, and both formats keep the same ticks; `--every 1` still
+/// keeps every tick.
+#[test]
+fn a_large_team_keeps_one_tick_in_n_over_40_by_default_and_says_so() {
+    let dir = TempDir::new();
+    let source = ["--n", "100", "--max-ticks", "30"];
+    let (csv, pq, all) = (
+        dir.path().join("csv"),
+        dir.path().join("pq"),
+        dir.path().join("all"),
+    );
+    // Not --quiet: the line is printed before the flight.
+    let loud = |out: &Path| {
+        let mut c = Command::new(bin("orchestrator"));
+        c.arg("simulate")
+            .args(source)
+            .arg("--no-figures")
+            .arg("--out")
+            .arg(out);
+        c
+    };
+    let o = run(&mut loud(&csv), DEADLINE);
+    ok(&o, 0, "simulate --n 100");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("telemetry: one tick in 3 (the default for 100 members"),
+        "{stdout}"
+    );
+    let want: Vec<u64> = (0..=30).step_by(3).collect();
+    assert_eq!(csv_ticks(&csv.join("telemetry.csv")), want);
+    ok(
+        &run(parquet(&mut simulate(&pq, &source)), DEADLINE),
+        0,
+        "simulate --n 100 --telemetry parquet",
+    );
+    assert_parquet_equals_csv(&csv.join("telemetry.csv"), &[&pq.join("telemetry.parquet")]);
+    let o = run(loud(&all).args(["--every", "1"]), DEADLINE);
+    ok(&o, 0, "simulate --n 100 --every 1");
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("telemetry: every tick (--every)"),
+        "{}",
+        describe(&o)
+    );
+    assert_eq!(
+        csv_ticks(&all.join("telemetry.csv")),
+        (0..=30).collect::<Vec<u64>>()
+    );
+}

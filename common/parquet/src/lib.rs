@@ -23,12 +23,12 @@ use cdm_records::telemetry::{Row, TelemetrySink};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::arrow_writer::ArrowWriterOptions;
 use parquet::arrow::{add_encoded_arrow_schema_to_metadata, ArrowSchemaConverter, ArrowWriter};
-use parquet::basic::Compression;
+use parquet::basic::{Compression, Encoding, ZstdLevel};
 use parquet::errors::ParquetError;
 use parquet::file::metadata::{
     FileMetaData, KeyValue, ParquetMetaData, ParquetMetaDataWriter, RowGroupMetaData,
 };
-use parquet::file::properties::WriterProperties;
+use parquet::file::properties::{WriterProperties, WriterPropertiesBuilder};
 use parquet::schema::types::{ColumnPath, SchemaDescPtr};
 
 /// Rows buffered before a row group is written (whole ticks: a row group holds up to one tick
@@ -75,6 +75,34 @@ pub fn schema() -> SchemaRef {
             .map(|name| Field::new(*name, DataType::Float64, false)),
     );
     Arc::new(Schema::new(fields))
+}
+
+/// How telemetry.parquet stores its columns (measured in docs/src/benchmarks/telemetry.md, bytes
+/// a row and writing time, against the other encodings and codecs of the `parquet` crate):
+/// - the f64 columns in BYTE_STREAM_SPLIT: byte k of every value together, so the bytes that
+///   barely change from one member to the next (sign, exponent, leading mantissa) form long
+///   runs the codec shrinks, where PLAIN interleaves them with the mantissa's noise;
+/// - `tick` and `id` in DELTA_BINARY_PACKED: one tick repeated N times and ids counting up by
+///   one are deltas of 0 and 1, a few bits a row before compression;
+/// - dictionary encoding only for `role` (three values): the f64 values barely repeat, and a
+///   dictionary of them cost a quarter of a whole run in the interner and its hash table;
+/// - zstd at level 1 on every page: on BYTE_STREAM_SPLIT columns it finds the repeats that
+///   snappy's short matches miss, at a writing cost close to snappy's on the same split bytes.
+///
+/// Lossless: every value reads back bit for bit (tested here and with pyarrow against
+/// telemetry.csv).
+pub fn writer_properties() -> WriterPropertiesBuilder {
+    let mut props = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::default()))
+        .set_dictionary_enabled(false)
+        .set_column_dictionary_enabled(ColumnPath::from("role"), true);
+    for name in ["tick", "id"] {
+        props = props.set_column_encoding(ColumnPath::from(name), Encoding::DELTA_BINARY_PACKED);
+    }
+    for name in std::iter::once("t").chain(VECTORS) {
+        props = props.set_column_encoding(ColumnPath::from(name), Encoding::BYTE_STREAM_SPLIT);
+    }
+    props
 }
 
 /// Streams telemetry rows into a Parquet file, every `every`-th tick.
@@ -130,19 +158,24 @@ impl FooterParts {
 }
 
 impl ParquetTelemetryWriter {
-    /// Create (truncate) the file at `path`; it is at once a readable file of no rows.
+    /// Create (truncate) the file at `path`; it is at once a readable file of no rows. The
+    /// columns are stored as [`writer_properties`] says.
     pub fn create(path: &Path, every: u64) -> Result<Self, TelemetryParquetError> {
+        Self::create_with(path, every, writer_properties())
+    }
+
+    /// [`create`](Self::create) with other encodings or compression (`props`; its row group
+    /// size is set here): for measuring what they cost (the `encodings` example).
+    pub fn create_with(
+        path: &Path,
+        every: u64,
+        props: WriterPropertiesBuilder,
+    ) -> Result<Self, TelemetryParquetError> {
         let file = File::create(path)?;
-        let mut props = WriterProperties::builder()
-            .set_compression(Compression::SNAPPY)
+        let mut props = props
             // One row group per batch of whole ticks (`write_buffered` ends each): a file cut
             // back to its last row group ends on a whole tick, as telemetry.csv does.
             .set_max_row_group_row_count(None)
-            // Dictionary encoding pays only where values repeat: `role` (three values). On the
-            // f64 columns, whose values barely repeat, it cost a quarter of a whole run in
-            // the interner and its hash table (BENCHMARKS.md).
-            .set_dictionary_enabled(false)
-            .set_column_dictionary_enabled(ColumnPath::from("role"), true)
             .build();
         // What ArrowWriter would derive itself, derived once here so that the footers written
         // between row groups say exactly what its own final footer says.
