@@ -1,4 +1,4 @@
-//! Live Foxglove: `launch --foxglove [ADDR]` serves the team, while it flies, over the Foxglove
+//! FoxgloveLive Foxglove: `launch --foxglove [ADDR]` serves the team, while it flies, over the Foxglove
 //! WebSocket protocol with Foxglove's own SDK (the `foxglove` crate), and `view RUN_DIR
 //! --foxglove` plays a finished run the same way. The topics carry what the run's ROS 2 bag
 //! carries (cdm-rosbag's per-tick content: the formation's markers, the margins), in Foxglove's
@@ -27,7 +27,7 @@ mod replay;
 pub mod scene;
 
 #[cfg(feature = "live")]
-pub use live::Live;
+pub use live::FoxgloveLive;
 #[cfg(feature = "live")]
 pub use replay::replay;
 
@@ -97,7 +97,7 @@ pub enum FoxgloveError {
 
 /// What the server did over a run.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Summary {
+pub struct FoxgloveSummary {
     /// Where it listened.
     pub addr: SocketAddr,
     /// Ticks whose messages went out.
@@ -110,14 +110,11 @@ pub struct Summary {
 
 /// Without the server: `--foxglove` is bad input (exit 2), naming the feature.
 #[cfg(not(feature = "live"))]
-pub struct Live;
+pub struct FoxgloveLive;
 
 #[cfg(not(feature = "live"))]
-impl Live {
-    pub fn start(
-        _o: &FoxgloveOptions,
-        _s: &cdm_scenario::Scenario,
-    ) -> Result<Self, FoxgloveError> {
+impl FoxgloveLive {
+    pub fn start(_o: &FoxgloveOptions, _s: &cdm_scenario::Scenario) -> Result<Self, FoxgloveError> {
         Err(FoxgloveError::NotBuilt)
     }
     pub fn addr(&self) -> SocketAddr {
@@ -132,8 +129,8 @@ impl Live {
         _verdict: cdm_model::outcome::Verdict,
     ) {
     }
-    pub fn finish(self, _verdict: cdm_model::outcome::Verdict) -> Summary {
-        Summary {
+    pub fn finish(self, _verdict: cdm_model::outcome::Verdict) -> FoxgloveSummary {
+        FoxgloveSummary {
             addr: self.addr(),
             ticks: 0,
             dropped: 0,
@@ -149,7 +146,7 @@ pub fn replay(
     _o: &FoxgloveOptions,
     _stop: &std::sync::atomic::AtomicBool,
     _on_listening: impl FnOnce(SocketAddr),
-) -> Result<Summary, FoxgloveError> {
+) -> Result<FoxgloveSummary, FoxgloveError> {
     Err(FoxgloveError::NotBuilt)
 }
 

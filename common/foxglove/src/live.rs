@@ -15,15 +15,15 @@ use foxglove::websocket::Capability;
 use foxglove::WebSocketServerHandle;
 use foxglove::{Channel, ChannelBuilder, Context, RawChannel, Schema, WebSocketServer};
 
-use cdm_records::audit::SafetyNumbers;
 use cdm_math::Vec3;
 use cdm_model::outcome::Verdict;
-use cdm_scenario::Scenario;
+use cdm_records::audit::SafetyNumbers;
 use cdm_ros2::pace::Pacer;
 use cdm_rosbag::{Limits, Team, Tick};
+use cdm_scenario::Scenario;
 
 use crate::scene::{frame, stamp};
-use crate::{FoxgloveError, FoxgloveOptions, Summary};
+use crate::{FoxgloveError, FoxgloveOptions, FoxgloveSummary};
 
 /// Ticks waiting for the publishing thread: a few, old ticks are worth nothing.
 const QUEUE: usize = 4;
@@ -99,7 +99,7 @@ const MARGINS_SCHEMA: &str = r#"{"type":"object","properties":{"tick":{"type":"i
 const VERDICT_SCHEMA: &str = r#"{"type":"object","properties":{"tick":{"type":"integer"},"t_s":{"type":"number"},"verdict":{"type":"string","enum":["SAFE","UNSAFE","FAULT"]},"final":{"type":"boolean"}}}"#;
 
 /// The Foxglove server of a launch or a replay.
-pub struct Live {
+pub struct FoxgloveLive {
     addr: SocketAddr,
     pacer: Pacer,
     last_tick: u64,
@@ -111,7 +111,7 @@ pub struct Live {
     offered: (u64, f64),
 }
 
-impl Live {
+impl FoxgloveLive {
     /// Binds the server and advertises the topics of `scenario`, before the team starts: an
     /// address in use stops nothing (exit 2), and a client may connect while the team gathers.
     pub fn start(o: &FoxgloveOptions, scenario: &Scenario) -> Result<Self, FoxgloveError> {
@@ -138,7 +138,7 @@ impl Live {
             .name("foxglove".into())
             .spawn(move || publish_all(&team, &topics, &clock, rx))
             .map_err(FoxgloveError::Thread)?;
-        Ok(Live {
+        Ok(FoxgloveLive {
             addr,
             pacer: Pacer::new(o.hz),
             last_tick: scenario.last_tick(),
@@ -198,7 +198,7 @@ impl Live {
 
     /// Publishes the final verdict, lets the thread publish what is queued and closes the
     /// server (waiting at most a few seconds), and says what was published.
-    pub fn finish(mut self, verdict: Verdict) -> Summary {
+    pub fn finish(mut self, verdict: Verdict) -> FoxgloveSummary {
         if let Some(tx) = self.tx.take() {
             let last = Snapshot {
                 tick: self.offered.0,
@@ -234,7 +234,7 @@ impl Live {
         if let Some(server) = self.server.take() {
             stop(server);
         }
-        Summary {
+        FoxgloveSummary {
             addr: self.addr,
             ticks,
             dropped: self.dropped,
@@ -243,7 +243,7 @@ impl Live {
     }
 }
 
-impl Drop for Live {
+impl Drop for FoxgloveLive {
     fn drop(&mut self) {
         drop(self.tx.take());
         if let Some(server) = self.server.take() {

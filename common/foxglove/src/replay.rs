@@ -7,10 +7,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use cdm_model::outcome::Verdict;
-use cdm_scenario::{Checks, Scenario};
 use cdm_report::data::{read_audit, stream_ticks};
+use cdm_scenario::{Checks, Scenario};
 
-use crate::{FoxgloveError, FoxgloveOptions, Live, Summary};
+use crate::{FoxgloveError, FoxgloveLive, FoxgloveOptions, FoxgloveSummary};
 
 /// Plays the run in `dir` once a client is connected, then returns (or as soon as `stop` is
 /// set). `on_listening` is told the server's address once it listens.
@@ -19,12 +19,12 @@ pub fn replay(
     o: &FoxgloveOptions,
     stop: &AtomicBool,
     on_listening: impl FnOnce(std::net::SocketAddr),
-) -> Result<Summary, FoxgloveError> {
+) -> Result<FoxgloveSummary, FoxgloveError> {
     let run = |e: String| FoxgloveError::Run(e);
     let scenario = Scenario::load(&dir.join("scenario.toml"), Checks::Member)
         .map_err(|e| run(e.to_string()))?;
     let audit = read_audit(&dir.join("audit.json")).map_err(|e| run(e.to_string()))?;
-    let mut live = Live::start(o, &scenario)?;
+    let mut live = FoxgloveLive::start(o, &scenario)?;
     on_listening(live.addr());
     while live.clients() == 0 && !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));

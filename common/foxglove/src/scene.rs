@@ -15,7 +15,7 @@ use cdm_rosbag::tick::{time_ns, WORLD};
 use cdm_rosbag::{Team, Tick};
 
 /// The messages of one tick.
-pub struct Frame {
+pub struct SceneFrame {
     /// Simulation time of the tick, ns (every message's log time).
     pub time_ns: u64,
     /// (member index, pose) of each member still flying, in member order.
@@ -55,7 +55,7 @@ fn pose(at: &Vec3) -> Pose {
 }
 
 /// Each living member's pose and frame, and the formation's scene, at `t`.
-pub fn frame(team: &Team, t: &Tick<'_>) -> Frame {
+pub fn frame(team: &Team, t: &Tick<'_>) -> SceneFrame {
     let time_ns = time_ns(t.t_s);
     let timestamp = Some(stamp(time_ns));
     let living: Vec<usize> = (0..team.ids().len()).filter(|&k| t.alive[k]).collect();
@@ -96,7 +96,7 @@ pub fn frame(team: &Team, t: &Tick<'_>) -> Frame {
             formation.entities.push(entity(id, timestamp, &m));
         }
     }
-    Frame {
+    SceneFrame {
         time_ns,
         poses,
         tf,
@@ -160,8 +160,8 @@ fn entity(id: String, timestamp: Option<Timestamp>, m: &Marker<'_>) -> SceneEnti
 #[cfg(test)]
 mod tests {
     use cdm_records::audit::SafetyNumbers;
-    use cdm_scenario::Scenario;
     use cdm_rosbag::Limits;
+    use cdm_scenario::Scenario;
 
     use super::*;
 

@@ -2,7 +2,7 @@
 //! communication edges cross hosts (pure; no I/O).
 //!
 //! The synthesised graph links each follower to a triangle of nearby members
-//! (`cdm-core/src/graph.rs`), so cutting the formation into slabs along one in-plane axis keeps
+//! (`common/model/src/graph.rs`), so cutting the formation into slabs along one in-plane axis keeps
 //! most edges inside a slab. Both in-plane axes are tried and the one with fewer crossing edges
 //! kept; slabs hold `n / K` members each (the first ones one more when K does not divide n).
 

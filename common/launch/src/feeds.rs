@@ -3,9 +3,9 @@
 //! Foxglove (`--foxglove`, cdm-foxglove). Each paces itself by the wall clock and never makes
 //! the loop wait.
 
+use cdm_foxglove::FoxgloveOptions;
 use cdm_math::Vec3;
 use cdm_records::audit::{AuditReport, Auditor};
-use cdm_foxglove::FoxgloveOptions;
 use cdm_ros2::{Backend, Live, Ros2Options};
 use cdm_scenario::Scenario;
 use cdm_team::{out, Failure};
@@ -85,7 +85,7 @@ impl FoxgloveArgs {
 pub struct Feeds {
     pub view: Option<LiveView>,
     pub ros2: Option<Live>,
-    pub foxglove: Option<cdm_foxglove::Live>,
+    pub foxglove: Option<cdm_foxglove::FoxgloveLive>,
 }
 
 impl Feeds {
@@ -116,7 +116,7 @@ impl Feeds {
         };
         let foxglove = match foxglove {
             Some(o) => {
-                let f = cdm_foxglove::Live::start(o, s).map_err(Failure::bad_input)?;
+                let f = cdm_foxglove::FoxgloveLive::start(o, s).map_err(Failure::bad_input)?;
                 if !quiet {
                     out!("foxglove: ws://{}", f.addr());
                 }

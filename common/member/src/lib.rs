@@ -2,8 +2,8 @@
 //! joining the runtime (`cdm-runtime`) to the iceoryx2 backend (`cdm-iox`) and to the vehicle
 //! (the model, or a MAVLink plant through `cdm-mavlink`).
 //!
-//! Crates, bottom to top: `cdm-math` (the only one that names nalgebra) -> `cdm-core` (math
-//! through the engine and the audit; no I/O crates) -> `cdm-runtime` (wire messages, signals,
+//! Crates, bottom to top: `cdm-math` (the only one that names nalgebra) -> `cdm-model`,
+//! `cdm-scenario` (the paper's math, the scenario; no transport) -> `cdm-runtime` (wire messages, signals,
 //! fault injection; no iceoryx2) -> `cdm-iox` (the only library crate that names iceoryx2).
 
 pub mod member;

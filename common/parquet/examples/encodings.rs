@@ -11,8 +11,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use cdm_core::telemetry::{Row, TelemetrySink};
 use cdm_parquet::{read_rows, writer_properties, ParquetTelemetryWriter};
+use cdm_records::telemetry::{Row, TelemetrySink};
 use parquet::basic::{Compression, Encoding, ZstdLevel};
 use parquet::file::properties::{WriterProperties, WriterPropertiesBuilder};
 use parquet::schema::types::ColumnPath;

@@ -14,7 +14,7 @@ pub const STATUS_OK: u32 = 0;
 /// `StateMsg::status`: the member has detected a fault and is no longer following the plan.
 pub const STATUS_FAULT: u32 = 1;
 /// `StateMsg::status`: not a state but a real-time member's pacing report, sent once when the
-/// team stops (`tick`: ticks flown; `state`: the figures, see `cdm_runtime::realtime::Pacing`).
+/// team stops (`tick`: ticks flown; `state`: the figures, see `cdm_runtime::realtime::MemberPacing`).
 /// [`StateMsg::status`] decodes it as a fault, so a reader that does not know it never audits it.
 pub const STATUS_PACING: u32 = 2;
 

@@ -65,7 +65,7 @@ pub fn stamp_s(tick: u64, phase_s: f64, dt_s: f64) -> f64 {
 /// A member's own pacing figures, published as a [`STATUS_PACING`] message every second of
 /// flight (so the monitor has them whatever stops the team) and when the stop arrives.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Pacing {
+pub struct MemberPacing {
     /// Ticks flown.
     pub ticks: u64,
     /// Ticks computed more than one period after their instant.
@@ -101,7 +101,7 @@ pub struct PacingFigures {
     pub link_states: (u64, u64),
 }
 
-impl Default for Pacing {
+impl Default for MemberPacing {
     fn default() -> Self {
         Self {
             ticks: 0,
@@ -114,7 +114,7 @@ impl Default for Pacing {
     }
 }
 
-impl Pacing {
+impl MemberPacing {
     fn tick(&mut self, late_s: f64, dt_s: f64) {
         self.ticks += 1;
         if late_s > dt_s {
@@ -225,7 +225,7 @@ pub struct Realtime {
     /// Received states the links still hold back.
     links: DelayLine,
     start: Option<Start>,
-    pacing: Pacing,
+    pacing: MemberPacing,
     created: Duration,
     /// Loss notices and repairs (`None`: a loss notice is a fault).
     losses: Option<Box<MemberLosses>>,
@@ -250,7 +250,7 @@ impl<V: Vehicle> MemberCore<V, Realtime> {
             heard: [None; 3],
             links: DelayLine::new(setup.links, member.id, in_neighbors(member)),
             start: None,
-            pacing: Pacing::default(),
+            pacing: MemberPacing::default(),
             created: now,
             losses: None,
             waited_at: None,
@@ -267,7 +267,7 @@ impl<V: Vehicle> MemberCore<V, Realtime> {
     }
 
     /// The pacing figures so far.
-    pub fn pacing(&self) -> &Pacing {
+    pub fn pacing(&self) -> &MemberPacing {
         &self.timing.pacing
     }
 }

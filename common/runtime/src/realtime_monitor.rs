@@ -11,7 +11,7 @@ use cdm_model::step::{extrapolate_flat, NeighborModel};
 use cdm_records::audit::{RealtimeFigures, SlowMember};
 
 use crate::messages::{AgentStatus, FaultCode, StateMsg};
-use crate::realtime::{phase_offset_s, stamp_s, Pacing, PacingFigures};
+use crate::realtime::{phase_offset_s, stamp_s, MemberPacing, PacingFigures};
 use crate::team_slots::IdIndex;
 
 /// States kept per member beyond the history the monitor is asked to cover: an audit instant
@@ -107,7 +107,7 @@ impl MonitorCore {
         }
         let stopped = self.stopped;
         let m = &mut self.members[k];
-        if let Some(p) = Pacing::from_msg(msg) {
+        if let Some(p) = MemberPacing::from_msg(msg) {
             m.pacing = Some(p);
             m.final_report |= stopped;
             return MonitorEvent::Nothing;

@@ -20,6 +20,8 @@ use std::time::Duration;
 
 use cdm_records::audit::FaultRecord;
 
+use cdm_model::outcome::LossCause;
+
 use crate::messages::{LossNotice, StateMsg, StopReason};
 use crate::process_exit::ProcessExit;
 use crate::stall::StallWatch;
@@ -37,7 +39,22 @@ pub use lockstep::{
 };
 use losses::LossEvents;
 pub use realtime::{RealtimePlan, WallClock, LATE_WAIT, MAX_WAIT};
-pub use realtime_losses::{LostMember, MEMBER_STALE_FACTOR, REPAIR_LEAD_OF_STALE};
+pub use realtime_losses::{MEMBER_STALE_FACTOR, REPAIR_LEAD_OF_STALE};
+
+/// A member lost, as the audit records it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LostMember {
+    pub id: u32,
+    pub cause: LossCause,
+    /// Its newest state heard (`None`: it published nothing).
+    pub last_tick: Option<u64>,
+    /// The first audit instant without it (from it on, it is out of the audit and telemetry),
+    /// and that instant's time: the first after its newest state, unless audited already.
+    pub index: u64,
+    pub t_s: f64,
+    /// The tick its readers fly the repair from.
+    pub tick: u64,
+}
 
 /// Why a run stops early: the fault to record and the reason sent to the members.
 pub type Stop = (FaultRecord, StopReason);
@@ -121,7 +138,7 @@ struct Exited {
 
 /// The team's state both pacings share.
 #[derive(Debug)]
-pub(crate) struct Team {
+pub(crate) struct TeamState {
     index: IdIndex,
     interrupt: Option<String>,
     /// A fault that stops the team at once (a repair whose links never joined).
@@ -138,7 +155,7 @@ pub(crate) struct Team {
 /// The orchestrator's protocol state (see the module doc).
 #[derive(Debug)]
 pub struct TeamCore {
-    t: Team,
+    t: TeamState,
     pacing: Pacing,
 }
 
@@ -160,7 +177,7 @@ impl TeamCore {
     }
 
     fn new(ids: &[u32], pacing: Pacing, now: Duration) -> Self {
-        let t = Team {
+        let t = TeamState {
             index: IdIndex::new(ids),
             interrupt: None,
             halt: None,
@@ -280,7 +297,7 @@ fn stop(fault: &TeamFault) -> TeamAction {
     TeamAction::Stop(record, reason)
 }
 
-impl Team {
+impl TeamState {
     /// Keeps `fault` (ranked `rank`, seen since `since`) when it names the root cause better
     /// than the one kept so far.
     fn keep_fault(&mut self, rank: FaultRank, fault: &TeamFault, since: Duration) {

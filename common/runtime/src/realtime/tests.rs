@@ -120,7 +120,7 @@ fn phase_offsets_are_seeded_spread_and_in_one_period() {
     assert_eq!(phase_offset_s(PHASES_ALIGNED, 5, DT), 0.0);
 }
 
-/// The offsets are SplitMix64's (cdm-core `link::splitmix64`), bit for bit the values of the
+/// The offsets are SplitMix64's (cdm-model `link::splitmix64`), bit for bit the values of the
 /// formula this file once wrote out by itself.
 #[test]
 fn phase_offsets_are_pinned_to_the_bit() {
@@ -201,7 +201,7 @@ fn neighbour_ages_are_own_time_minus_the_newest_stamp() {
     while c.tick() < 43 {
         let _ = c.poll(now);
     }
-    let p = Pacing::from_msg(&c.pacing().to_msg(ME, HASH)).expect("a pacing message");
+    let p = MemberPacing::from_msg(&c.pacing().to_msg(ME, HASH)).expect("a pacing message");
     assert_eq!(p.ticks, 43);
     assert!((p.age_max_ms - 20.0).abs() < 1e-6, "{p:?}");
 }
@@ -317,18 +317,18 @@ fn a_failed_tick_is_reported_with_its_fault() {
 
 #[test]
 fn pacing_quantiles_round_trip_through_the_message() {
-    let mut p = Pacing::default();
+    let mut p = MemberPacing::default();
     for k in 0..100 {
         p.age(f64::from(k) * 1e-4); // 0.0 .. 9.9 ms
     }
     p.tick(0.0, DT);
-    let f = Pacing::from_msg(&p.to_msg(4, HASH)).expect("pacing");
+    let f = MemberPacing::from_msg(&p.to_msg(4, HASH)).expect("pacing");
     assert_eq!((f.id, f.ticks, f.late_ticks, f.age_samples), (4, 1, 0, 100));
     // The 50th and 99th of the 100 ages, to a bin.
     assert!((f.age_p50_ms - 4.9).abs() <= AGE_BIN_MS, "{f:?}");
     assert!((f.age_p99_ms - 9.8).abs() <= AGE_BIN_MS, "{f:?}");
     assert!((f.age_max_ms - 9.9).abs() < 1e-9, "{f:?}");
-    assert_eq!(Pacing::from_msg(&state(4, 1)), None);
+    assert_eq!(MemberPacing::from_msg(&state(4, 1)), None);
 }
 
 fn monitor() -> MonitorCore {
@@ -426,8 +426,8 @@ fn the_monitor_names_the_stalest_member_and_passes_on_fault_reports() {
 #[test]
 fn the_monitor_sums_the_members_pacing_reports() {
     let mut m = monitor();
-    let mut leader = Pacing::default();
-    let mut follower = Pacing::default();
+    let mut leader = MemberPacing::default();
+    let mut follower = MemberPacing::default();
     for _ in 0..99 {
         leader.tick(0.0, DT);
         follower.tick(0.0, DT);

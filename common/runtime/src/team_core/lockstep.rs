@@ -7,7 +7,7 @@
 use std::time::Duration;
 
 use super::losses::LossPacing;
-use super::{Exited, Team, TeamAction, FAULT_GRACE};
+use super::{Exited, TeamAction, TeamState, FAULT_GRACE};
 use crate::messages::{AgentStatus, StateMsg};
 use crate::team_fault::{FaultRank, TeamFault, WhoseTick};
 use crate::team_loss::{LossCause, TeamLosses};
@@ -113,7 +113,7 @@ impl Grants {
 
     /// A received state or fault report. States outside the granted window are ignored (stale
     /// or foreign); a non-finite one is never used.
-    pub(super) fn on_state(&mut self, t: &mut Team, msg: &StateMsg, now: Duration) {
+    pub(super) fn on_state(&mut self, t: &mut TeamState, msg: &StateMsg, now: Duration) {
         let Some(k) = self.index.get(msg.id) else {
             return;
         };
@@ -163,7 +163,7 @@ impl Grants {
     /// The next action at `now`. Grants go out before complete ticks (members go on while the
     /// orchestrator audits and writes); a fault at tick k stops the team once ticks 0..=k are
     /// complete (as `simulate` keeps them) or its grace is over.
-    pub(super) fn next_action(&mut self, t: &mut Team, now: Duration) -> TeamAction {
+    pub(super) fn next_action(&mut self, t: &mut TeamState, now: Duration) -> TeamAction {
         if !self.started {
             self.started = true;
             return TeamAction::Grant(self.grant);
@@ -211,7 +211,7 @@ impl Grants {
     }
 
     /// The next complete tick, unless the team stops at an earlier fault.
-    fn take_complete(&mut self, t: &Team) -> Option<TeamAction> {
+    fn take_complete(&mut self, t: &TeamState) -> Option<TeamAction> {
         let tick = self.next_tick;
         let stops_before = t.stopping.as_ref().is_some_and(|s| tick > s.record.tick);
         if tick >= self.complete || stops_before {
@@ -228,7 +228,7 @@ impl Grants {
 
     /// A non-finite state nobody reported within the grace: the orchestrator names its sender
     /// (a member without out-neighbours has no reader to report it).
-    fn expire_non_finite(&mut self, t: &mut Team, now: Duration) {
+    fn expire_non_finite(&mut self, t: &mut TeamState, now: Duration) {
         let Some((id, tick, seen)) = self.non_finite else {
             return;
         };
@@ -242,7 +242,7 @@ impl Grants {
     }
 
     /// No tick completed this turn: look for exited members, then the deadlines, then wait.
-    fn when_stuck(&mut self, t: &mut Team, now: Duration) -> TeamAction {
+    fn when_stuck(&mut self, t: &mut TeamState, now: Duration) -> TeamAction {
         if t.stopping.is_some() {
             return TeamAction::Wait(WAIT_SLICE);
         }
@@ -279,7 +279,7 @@ impl Grants {
     }
 
     /// The members that sent no state for the next tick (lost ones aside), in formation order.
-    fn missing(&self, t: &Team) -> Vec<u32> {
+    fn missing(&self, t: &TeamState) -> Vec<u32> {
         let tick = self.next_tick;
         let have = self.pending.get(tick);
         let lost = |id: u32| t.losses.as_ref().is_some_and(|l| l.book.lost_at(id, tick));
@@ -292,7 +292,7 @@ impl Grants {
 }
 
 /// How many states complete `tick` (fewer once members are lost).
-fn expected(t: &Team, n: usize, tick: u64) -> usize {
+fn expected(t: &TeamState, n: usize, tick: u64) -> usize {
     t.losses.as_ref().map_or(n, |l| l.book.expected(tick))
 }
 

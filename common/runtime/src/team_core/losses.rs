@@ -11,7 +11,7 @@
 
 use std::time::Duration;
 
-use super::{FaultRank, LostMember, Pacing, Team, TeamAction, TeamCore, WAIT_SLICE};
+use super::{FaultRank, LostMember, Pacing, TeamAction, TeamCore, TeamState, WAIT_SLICE};
 use crate::messages::FaultCode;
 use crate::process_exit::ProcessExit;
 use crate::team_fault::TeamFault;
@@ -134,7 +134,7 @@ impl TeamCore {
     }
 }
 
-impl Team {
+impl TeamState {
     /// True once member `id` is lost, or being lost.
     pub(super) fn is_gone(&self, id: u32) -> bool {
         self.losses

@@ -11,12 +11,12 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use super::{Team, TeamAction};
+use super::{TeamAction, TeamState};
 use crate::messages::{FaultCode, StateMsg};
 use crate::realtime_monitor::{MonitorCore, MonitorEvent};
 use crate::team_fault::{FaultRank, InterruptedAt, TeamFault, WhoseTick};
 
-use super::realtime_losses::LostMember;
+use super::LostMember;
 
 /// The longest wait between two turns: fault reports are read at least this often.
 pub const MAX_WAIT: Duration = Duration::from_millis(10);
@@ -118,7 +118,7 @@ impl WallClock {
     /// A message from a member's state service. A fault report or a non-finite state is kept
     /// when it names the root cause better than the one kept so far; a lost member's are not,
     /// nor (losses repaired) a member's report of its own vehicle's loss, which is a loss.
-    pub(super) fn on_state(&mut self, t: &mut Team, msg: &StateMsg, now: Duration) {
+    pub(super) fn on_state(&mut self, t: &mut TeamState, msg: &StateMsg, now: Duration) {
         let event = self.book.on_state(msg);
         if t.is_gone(msg.id) {
             return;
@@ -155,7 +155,7 @@ impl WallClock {
     /// one is the fault, the follower only saw it.
     fn reported(
         &self,
-        t: &Team,
+        t: &TeamState,
         id: u32,
         tick: u64,
         code: FaultCode,
@@ -194,7 +194,7 @@ impl WallClock {
     /// The next action at `now`: the losses; a fault report, a stale member, an exited member
     /// stop the flight in that order (a stale member is killed and lost instead when losses
     /// are repaired); then the audit instants due; then a flush; then a wait.
-    pub(super) fn next_action(&mut self, t: &mut Team, now: Duration) -> TeamAction {
+    pub(super) fn next_action(&mut self, t: &mut TeamState, now: Duration) -> TeamAction {
         if let Some(a) = t.loss_action(self, now) {
             return a;
         }

@@ -27,7 +27,8 @@ use std::time::Duration;
 
 use super::losses::LossPacing;
 use super::realtime::WallClock;
-use super::Team;
+use super::LostMember;
+use super::TeamState;
 use crate::team_loss::{LossCause, TeamLosses};
 
 /// The lead of a repair's tick over the instant its loss was found, as a share of the stale
@@ -40,24 +41,9 @@ pub const REPAIR_LEAD_OF_STALE: f64 = 0.5;
 /// before the readers give up.
 pub const MEMBER_STALE_FACTOR: u32 = 2;
 
-/// A member lost, as the audit records it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LostMember {
-    pub id: u32,
-    pub cause: LossCause,
-    /// Its newest state heard (`None`: it published nothing).
-    pub last_tick: Option<u64>,
-    /// The first audit instant without it (from it on, it is out of the audit and telemetry),
-    /// and that instant's time: the first after its newest state, unless audited already.
-    pub index: u64,
-    pub t_s: f64,
-    /// The tick its readers fly the repair from.
-    pub tick: u64,
-}
-
 impl WallClock {
     /// The bound the members apply to a silent in-neighbour.
-    pub(super) fn member_stale_after(&self, t: &Team) -> Duration {
+    pub(super) fn member_stale_after(&self, t: &TeamState) -> Duration {
         if t.repairs() {
             self.plan.stale_after * MEMBER_STALE_FACTOR
         } else {
