@@ -182,7 +182,9 @@ fn scenario_export(
 /// `orchestrator launch`: the team as processes, then its summary, figures and replay.
 fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
     let (s, opts) = launch_options(&a, quiet)?;
-    if !quiet {
+    // Said only when the default thins the telemetry (over 40 members): before the launch, which
+    // may still refuse its input, so a small team's refusal keeps stdout empty.
+    if !quiet && a.every.is_none() && crate::cli::every_or_default(None, s.file.agents.len()) > 1 {
         out!("{}", crate::cli::every_line(a.every, s.file.agents.len()));
     }
     let started = Instant::now();
