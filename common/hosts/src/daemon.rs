@@ -5,24 +5,23 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use cdm_iox::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
-use cdm_runtime::messages::{ClockCommand, ClockMsg, StopReason};
+use cdm_runtime::messages::{StateMsg, StopReason};
 use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::{Checks, Scenario};
 use cdm_team::out;
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
 use cdm_team::{Exit, Failure};
 use cdm_zenoh::{
-    down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, NetExit, NetState, Up,
-    PROTOCOL_VERSION,
+    down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, Up, PROTOCOL_VERSION,
 };
 
-use crate::bridge::HEARTBEAT;
+use crate::daemon_core::{Action, DaemonCore, Event};
 use crate::daemon_repair::DaemonRepairs;
-use crate::error::DaemonStop;
+use crate::error::{DaemonError, DaemonStop};
 use crate::host_link::{HostLink, ZenohLink};
 use crate::idle::IdleBackoff;
 use crate::repairs::{partners, single_loss_links, CrossRepairs};
@@ -70,10 +69,8 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     };
     let (security, bound) = crate::security::daemon(&o.transport)?;
     let host = match (bound, o.host) {
-        (Some(k), Some(h)) if h != k => {
-            return Err(Failure::bad_input(format!(
-                "--host {h}: the certificate in --keys is host {k}'s (a daemon is the host its certificate names)"
-            )))
+        (Some(certified), Some(asked)) if asked != certified => {
+            return Err(DaemonError::NotCertified { asked, certified }.into())
         }
         (Some(k), _) => Some(k),
         (None, h) => h,
@@ -81,8 +78,7 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     if let Some(w) = o.transport.warning(&o.connect) {
         tracing::warn!("{w}");
     }
-    let net = Net::connect(&o.connect, &security)
-        .map_err(|e| Failure::bad_input(format!("--connect: {e}")))?;
+    let net = Net::connect(&o.connect, &security).map_err(DaemonError::Connect)?;
     let request = JoinRequest {
         version: PROTOCOL_VERSION,
         team: o.team.as_ref().map(|t| t.as_str().to_owned()),
@@ -93,19 +89,19 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     let a = match net.join(&request, o.join_timeout) {
         Ok(JoinReply::Accepted(a)) => *a,
         Ok(JoinReply::Refused(why)) => {
-            return Err(Failure::bad_input(format!(
-                "refused by the orchestrator at {}: {why}",
-                o.connect
-            )))
+            let at = o.connect.clone();
+            return Err(DaemonError::Refused { at, why }.into());
         }
-        Err(e) => return Err(Failure::fault(e)),
+        Err(e) => return Err(DaemonError::Join(e).into()),
     };
     let (j, chan) = joined(&net, a)?;
     if let Some(p) = j.a.realtime_priority {
         // `--rt-priority` of the team: this thread (the bridge loop) now, the members through
         // their flag. zenoh's threads started before the team's mode was known and keep theirs.
-        cdm_process::sched::fifo(p)
-            .map_err(|e| Failure::bad_input(format!("team {}: {e}", j.team)))?;
+        cdm_process::sched::fifo(p).map_err(|source| DaemonError::Priority {
+            team: j.team.to_string(),
+            source,
+        })?;
     }
     if !o.quiet {
         out!(
@@ -118,24 +114,22 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     let dir = super::workdir::create(j.team.as_str())?;
     let result = fly(&j, chan, &dir, interrupted);
     let _ = std::fs::remove_dir_all(&dir);
-    result
+    Ok(result?)
 }
 
 /// Checks the assignment and opens the host's link.
-fn joined(net: &Net, a: Assignment) -> Result<(Joined, OrchestratorLink), Failure> {
-    let team = TeamName::new(&a.team).map_err(Failure::fault)?;
+fn joined(net: &Net, a: Assignment) -> Result<(Joined, OrchestratorLink), DaemonError> {
+    let team = TeamName::new(&a.team)?;
     let s = Scenario::parse_json(
         &a.scenario_json,
         "the orchestrator's scenario",
         Checks::Member,
-    )
-    .map_err(Failure::fault)?;
+    )?;
     if s.content_hash() != a.scenario_hash {
-        return Err(Failure::fault(format!(
-            "the orchestrator's scenario has hash {:016x} here and {:016x} there",
-            s.content_hash(),
-            a.scenario_hash
-        )));
+        return Err(DaemonError::ScenarioHash {
+            here: s.content_hash(),
+            there: a.scenario_hash,
+        });
     }
     let mine = a
         .hosts_of
@@ -146,7 +140,7 @@ fn joined(net: &Net, a: Assignment) -> Result<(Joined, OrchestratorLink), Failur
     let chan = net
         .channel(&up_key(&a.team, a.host), &down_key(&a.team, a.host))
         .map(ZenohLink::new)
-        .map_err(Failure::fault)?;
+        .map_err(DaemonError::Channel)?;
     let link_timeout = Duration::from_millis(a.link_timeout_ms.max(1));
     let j = Joined {
         a,
@@ -168,7 +162,7 @@ fn who() -> String {
 /// read or wake appear too, each standing in through a relay (its in-neighbours here are the
 /// members of this host that it reads); edges between two other hosts are not here at all.
 /// Returns the layout and, per relayed member, its in- and out-neighbours on this host.
-fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Failure> {
+fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), DaemonError> {
     let mut ins = BTreeMap::new();
     let mut ghosts: BTreeMap<u32, Neighbours> = BTreeMap::new();
     for m in
@@ -204,9 +198,7 @@ fn host_layout(j: &Joined) -> Result<(TeamLayout, BTreeMap<u32, Neighbours>), Fa
         }
     }
     let ids: Vec<u32> = j.mine.iter().chain(ghosts.keys()).copied().collect();
-    let mut layout = TeamLayout::new(ids, ins, j.a.window)
-        .map_err(Failure::fault)?
-        .with_scenario_hash(j.a.scenario_hash);
+    let mut layout = TeamLayout::new(ids, ins, j.a.window)?.with_scenario_hash(j.a.scenario_hash);
     if j.a.repair {
         // The same room as on the orchestrator's host (`launch`'s layout).
         let room = cdm_team::loss::repair_room(&j.s, j.a.window);
@@ -249,22 +241,25 @@ fn fly(
     j: &Joined,
     chan: OrchestratorLink,
     dir: &Path,
-    interrupted: &std::sync::atomic::AtomicBool,
-) -> Result<Exit, Failure> {
+    interrupted: &AtomicBool,
+) -> Result<Exit, DaemonError> {
     let (layout, ghosts) = host_layout(j)?;
-    let mut ports = OrchestratorPorts::create(&j.team, &layout).map_err(Failure::bad_input)?;
+    let mut ports = OrchestratorPorts::create(&j.team, &layout).map_err(DaemonError::Services)?;
     let host_of: BTreeMap<u32, u32> = j.a.hosts_of.iter().copied().collect();
     let mut relays = BTreeMap::new();
     for (&g, nb) in &ghosts {
         let h = host_of.get(&g).copied().unwrap_or(0);
         let hash = j.a.scenario_hash;
-        let relay = MemberPorts::open_relay(&j.team, h, g, hash, &nb.ins, &nb.outs)
-            .map_err(Failure::fault)?;
+        let relay = MemberPorts::open_relay(&j.team, h, g, hash, &nb.ins, &nb.outs)?;
         relays.insert(g, relay);
     }
     let file = dir.join("scenario.json");
-    cdm_records::rundir::write_atomic(&file, j.a.scenario_json.as_bytes())
-        .map_err(|e| Failure::fault(format!("cannot write {}: {e}", file.display())))?;
+    cdm_records::rundir::write_atomic(&file, j.a.scenario_json.as_bytes()).map_err(|source| {
+        DaemonError::WriteScenario {
+            file: file.clone(),
+            source,
+        }
+    })?;
     let mut children = Vec::new();
     let flags = member_flags(&j.a);
     for m in
@@ -275,9 +270,9 @@ fn fly(
     {
         match spawn_member(&file, &j.team, m.id, m.role, &flags) {
             Ok(child) => children.push(Spawned { id: m.id, child }),
-            Err(e) => {
+            Err(source) => {
                 stop_team(&mut ports, &mut children, &j.s, StopReason::AgentFault);
-                return Err(Failure::fault(format!("cannot start agent {}: {e}", m.id)));
+                return Err(DaemonError::Spawn { id: m.id, source });
             }
         }
     }
@@ -289,23 +284,43 @@ fn fly(
         CrossRepairs::new(&j.s),
         now,
     );
-    let mut link = Link::new(j, chan, repairs, now);
-    let outcome = link
-        .wait_ready(&mut ports, &mut children, interrupted)
-        .and_then(|()| link.bridge(&mut ports, &mut relays, &mut children, interrupted));
+    let mut host = Host {
+        core: DaemonCore::new(j.mine.clone(), j.link_timeout, now),
+        chan,
+        ports,
+        relays,
+        children,
+        repairs,
+        interrupted,
+        realtime: j.a.realtime_stale_after_s.is_some(),
+    };
+    let outcome = host.wait_ready().and_then(|()| host.bridge());
     let reason = match &outcome {
         Ok(r) => *r,
         Err(_) => StopReason::AgentSilent,
     };
     if outcome.is_ok() {
-        link.up_while_stopping(&mut ports, &mut children);
+        host.up_while_stopping();
     }
+    let Host {
+        mut core,
+        mut chan,
+        mut ports,
+        relays,
+        mut children,
+        ..
+    } = host;
     stop_team(&mut ports, &mut children, &j.s, reason);
     if outcome.is_ok() {
         // What the members published as they stopped (real time: their pacing reports).
         let now = Instant::now();
-        let _ = link.up(&mut ports, now);
-        let _ = link.send(&Up::Stopped, now);
+        for event in [Event::States(drain(&mut ports)), Event::MembersStopped] {
+            for a in core.handle(event, now).unwrap_or_default() {
+                if let Action::Send(frame) = a {
+                    let _ = chan.send(&frame);
+                }
+            }
+        }
     }
     drop(relays);
     if let Err(e) = ports.shutdown() {
@@ -315,24 +330,35 @@ fn fly(
         StopReason::Finished => Ok(()),
         r => Err(DaemonStop::TeamStopped(r)),
     });
-    outcome.map(|()| Exit::Safe).map_err(|why| {
-        Failure::fault(format!(
-            "host {} of team {}: {why}; its members were stopped",
-            j.a.host, j.team
-        ))
-    })
+    outcome
+        .map(|()| Exit::Safe)
+        .map_err(|why| DaemonError::Stopped {
+            host: j.a.host,
+            team: j.team.to_string(),
+            why: Box::new(why),
+        })
 }
 
-/// The daemon's side of the link, with its deadlines, over link `L` (zenoh; a fake one in the
-/// unit tests). Every step is handed the instant of its turn: the loops read the clock.
-struct Link<'a, L = OrchestratorLink> {
-    j: &'a Joined,
+/// The states published on this host's shared memory since the last call, in order.
+fn drain(ports: &mut OrchestratorPorts) -> Vec<StateMsg> {
+    let mut states = vec![];
+    if let Err(e) = ports.receive_states(|m| states.push(m)) {
+        tracing::warn!("{e}");
+    }
+    states
+}
+
+/// The daemon's loops: the state machine, and the link, ports, relays and member processes it
+/// acts through. The only place that reads the clock: each turn hands the core its instant.
+struct Host<'a, L = OrchestratorLink> {
+    core: DaemonCore,
     chan: L,
-    last_heard: Instant,
-    last_sent: Instant,
-    /// Members whose exit was reported.
-    reported: BTreeSet<u32>,
+    ports: OrchestratorPorts,
+    relays: BTreeMap<u32, MemberPorts>,
+    children: Vec<Spawned>,
     repairs: DaemonRepairs,
+    interrupted: &'a AtomicBool,
+    realtime: bool,
 }
 
 /// Interrupted by a signal: the daemon says which.
@@ -340,231 +366,138 @@ fn interrupted_by() -> DaemonStop {
     DaemonStop::Interrupted(cdm_process::signals::received())
 }
 
-impl<'a, L: HostLink<In = Down, Out = Up>> Link<'a, L> {
-    fn new(j: &'a Joined, chan: L, repairs: DaemonRepairs, now: Instant) -> Self {
-        Link {
-            j,
-            chan,
-            last_heard: now,
-            last_sent: now,
-            reported: BTreeSet::new(),
-            repairs,
-        }
-    }
-
-    /// Heartbeat out when due at `now`; an error when the orchestrator has been silent too long.
-    fn keep_alive(&mut self, now: Instant) -> Result<(), DaemonStop> {
-        if now.saturating_duration_since(self.last_sent) >= HEARTBEAT {
-            self.send(&Up::Heartbeat, now)?;
-        }
-        if now.saturating_duration_since(self.last_heard) > self.j.link_timeout {
-            return Err(DaemonStop::Silent {
-                after: self.j.link_timeout,
-            });
-        }
-        Ok(())
-    }
-
-    /// Between two turns at `last` and `now`, this process did not run for longer than the link
-    /// timeout (SIGSTOP, a debugger): checked before the frames queued meanwhile are read, which
-    /// would make the link look alive.
-    fn check_ran(&self, last: Instant, now: Instant) -> Result<(), DaemonStop> {
-        let gap = now.saturating_duration_since(last);
-        let timeout = self.j.link_timeout;
-        if gap > timeout {
-            return Err(DaemonStop::Stalled { gap, timeout });
-        }
-        Ok(())
-    }
-
-    fn send(&mut self, frame: &Up, now: Instant) -> Result<(), DaemonStop> {
-        self.last_sent = now;
-        Ok(self.chan.send(frame)?)
-    }
-
-    /// Frames from the orchestrator before the team starts: a stop ends the wait.
-    fn before_start(&mut self, now: Instant) -> Result<(), DaemonStop> {
-        while let Some(f) = self.chan.try_recv()? {
-            self.last_heard = now;
-            if let Down::Clock(c) = f {
-                if matches!(ClockMsg::from(c).command(), ClockCommand::Stop(_)) {
-                    return Err(DaemonStop::StoppedBeforeStart);
-                }
-            }
-        }
-        self.keep_alive(now)
-    }
-
+impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
     /// Waits (bounded) until every member of this host has opened its ports, then says so.
-    fn wait_ready(
-        &mut self,
-        ports: &mut OrchestratorPorts,
-        children: &mut [Spawned],
-        interrupted: &std::sync::atomic::AtomicBool,
-    ) -> Result<(), DaemonStop> {
-        let n = self.j.mine.len() as u64;
-        let deadline = Duration::from_secs(30) + Duration::from_millis(60 * n);
-        let started = Instant::now();
-        while !ports.readiness().is_complete() {
+    fn wait_ready(&mut self) -> Result<(), DaemonStop> {
+        loop {
             let now = Instant::now();
-            if interrupted.load(Ordering::Relaxed) {
+            let readiness = self.ports.readiness();
+            if readiness.is_complete() {
+                let mine = self.core.mine().iter().copied();
+                let subscriptions = self.ports.subscriber_graph(mine).unwrap_or_default();
+                self.apply(Event::Ready(subscriptions), now)?;
+                return Ok(());
+            }
+            if self.interrupted.load(Ordering::Relaxed) {
                 return Err(interrupted_by());
             }
-            if let Some((id, how)) = first_exited(children) {
-                return Err(DaemonStop::ExitedEarly { id, how });
+            if let Some((id, how)) = first_exited(&mut self.children) {
+                self.apply(Event::Exited { id, how }, now)?;
             }
-            if now.saturating_duration_since(started) > deadline {
-                let late = ports.readiness().waiting_for();
-                return Err(DaemonStop::NotStarted { late, deadline });
+            self.apply(Event::Waiting(readiness.waiting_for()), now)?;
+            while let Some(f) = self.chan.try_recv()? {
+                self.apply(Event::Frame(f), now)?;
             }
-            self.before_start(now)?;
-            let _ = ports.wait(Duration::from_millis(20));
+            self.apply(Event::Deadlines, now)?;
+            let _ = self.ports.wait(Duration::from_millis(20));
         }
-        let subscriptions = ports
-            .subscriber_graph(self.j.mine.iter().copied())
-            .unwrap_or_default();
-        self.send(&Up::Ready { subscriptions }, Instant::now())
     }
 
     /// Carries frames both ways until the orchestrator's stop (its reason) or a lost link.
-    fn bridge(
-        &mut self,
-        ports: &mut OrchestratorPorts,
-        relays: &mut BTreeMap<u32, MemberPorts>,
-        children: &mut [Spawned],
-        interrupted: &std::sync::atomic::AtomicBool,
-    ) -> Result<StopReason, DaemonStop> {
-        let mut last_child_check = Instant::now();
-        let mut last_turn = last_child_check;
-        let realtime = self.j.a.realtime_stale_after_s.is_some();
-        let mut idle = IdleBackoff::for_team(realtime);
+    fn bridge(&mut self) -> Result<StopReason, DaemonStop> {
+        let mut idle = IdleBackoff::for_team(self.realtime);
         loop {
             let now = Instant::now();
-            if interrupted.load(Ordering::Relaxed) {
+            if self.interrupted.load(Ordering::Relaxed) {
                 return Err(interrupted_by());
             }
-            self.check_ran(last_turn, now)?;
-            last_turn = now;
             let mut busy = false;
+            self.apply(Event::Woke, now)?;
             while let Some(f) = self.chan.try_recv()? {
-                self.last_heard = now;
                 busy = true;
-                match &f {
-                    Down::Kill(id) => cdm_team::loss::kill_and_reap(children, *id),
-                    Down::Clock(c) => self.repairs.on_clock(&ClockMsg::from(*c), relays, now)?,
-                    _ => {}
-                }
-                if let Some(reason) = down(f, ports, relays)? {
+                if let Some(reason) = self.apply(Event::Frame(f), now)? {
                     return Ok(reason);
                 }
             }
-            busy |= self.up(ports, now)?;
-            self.repairs.hand_over_ready(relays, now);
-            let linked = self.repairs.connected(ports, now);
-            if !linked.is_empty() {
-                self.send(&Up::Linked(linked), now)?;
-            }
-            if now.saturating_duration_since(last_child_check) > Duration::from_millis(100) {
-                last_child_check = now;
-                self.report_exits(ports, children, now)?;
-            }
-            self.keep_alive(now)?;
+            let states = drain(&mut self.ports);
+            busy |= states.iter().any(|m| self.core.mine().contains(&m.id));
+            self.apply(Event::States(states), now)?;
+            self.repairs.hand_over_ready(&mut self.relays, now);
+            let linked = self.repairs.connected(&self.ports, now);
+            self.apply(Event::Linked(linked), now)?;
+            self.apply(Event::Deadlines, now)?;
             if let Some(sleep) = idle.after(busy) {
                 self.chan.wait(sleep);
             }
         }
     }
 
-    /// This host's members' states (and fault reports) up, in order; true when any.
-    fn up(&mut self, ports: &mut OrchestratorPorts, now: Instant) -> Result<bool, DaemonStop> {
-        let mine = &self.j.mine;
-        let mut batch: Vec<NetState> = vec![];
-        ports.receive_states(|m| {
-            if mine.contains(&m.id) {
-                batch.push(m.into());
-            }
-        })?;
-        if batch.is_empty() {
-            return Ok(false);
-        }
-        self.send(&Up::States(batch), now)?;
-        Ok(true)
-    }
-
     /// After the orchestrator's stop (the bridge published it here): the members' last states
     /// (real time: their final pacing reports) go up as they come, until every member exited
-    /// or the graceful stop's 3 s passed; the orchestrator waits for them a bounded while.
-    fn up_while_stopping(&mut self, ports: &mut OrchestratorPorts, children: &mut [Spawned]) {
-        let until = Instant::now() + Duration::from_secs(3);
+    /// or the core's wait is over; the orchestrator waits for them a bounded while.
+    fn up_while_stopping(&mut self) {
         loop {
             let now = Instant::now();
-            let _ = self.up(ports, now);
-            let running = children
+            let states = drain(&mut self.ports);
+            let _ = self.apply(Event::States(states), now);
+            let running = self
+                .children
                 .iter_mut()
                 .any(|c| matches!(c.child.try_wait(), Ok(None)));
-            if !running || now >= until {
+            if !running || matches!(self.apply(Event::Woke, now), Ok(Some(_)) | Err(_)) {
                 return;
             }
-            let _ = ports.wait(Duration::from_millis(5));
+            let _ = self.ports.wait(Duration::from_millis(5));
         }
     }
 
-    /// A member that exited: its last states first, then the exit.
-    fn report_exits(
-        &mut self,
-        ports: &mut OrchestratorPorts,
-        children: &mut [Spawned],
-        now: Instant,
-    ) -> Result<(), DaemonStop> {
-        for c in children.iter_mut() {
-            if self.reported.contains(&c.id) {
+    /// Hands `event` to the core and carries out its actions, in order; the stop's reason when
+    /// the orchestrator stopped the team (or, stopping, when the wait is over).
+    fn apply(&mut self, event: Event, now: Instant) -> Result<Option<StopReason>, DaemonStop> {
+        let mut stop = None;
+        for action in self.core.handle(event, now)? {
+            match action {
+                Action::Send(frame) => self.chan.send(&frame)?,
+                Action::Kill(id) => cdm_team::loss::kill_and_reap(&mut self.children, id),
+                Action::Clock(c) => {
+                    // A new loss: the relays wake their new readers before the members hear it.
+                    self.repairs.on_clock(&c, &mut self.relays, now)?;
+                    self.ports.publish_clock(c)?;
+                }
+                Action::Relay(states) => relay(&mut self.relays, states)?,
+                Action::CheckExits => self.report_exits(now)?,
+                Action::Finish(reason) => stop = Some(reason),
+                Action::Done => stop = Some(StopReason::Finished),
+            }
+        }
+        Ok(stop)
+    }
+
+    /// Members that exited: each one's last states first, then the exit.
+    fn report_exits(&mut self, now: Instant) -> Result<(), DaemonStop> {
+        for k in 0..self.children.len() {
+            let c = &mut self.children[k];
+            if self.core.reported(c.id) {
                 continue;
             }
             if let Ok(Some(status)) = c.child.try_wait() {
-                self.up(ports, now)?;
-                let how = NetExit::of(&ProcessExit::of(status));
-                self.reported.insert(c.id);
-                self.send(&Up::Exited { id: c.id, how }, now)?;
+                let (id, how) = (c.id, ProcessExit::of(status));
+                let states = drain(&mut self.ports);
+                self.apply(Event::States(states), now)?;
+                self.apply(Event::Exited { id, how }, now)?;
             }
         }
         Ok(())
     }
 }
 
-/// One frame from the orchestrator: the clock to every member (a stop ends the bridge), or
-/// other hosts' states re-published here for their readers.
-fn down(
-    f: Down,
-    ports: &mut OrchestratorPorts,
-    relays: &mut BTreeMap<u32, MemberPorts>,
-) -> Result<Option<StopReason>, DaemonStop> {
-    match f {
-        Down::Clock(c) => {
-            let c = ClockMsg::from(c);
-            ports.publish_clock(c)?;
-            if let ClockCommand::Stop(reason) = c.command() {
-                return Ok(Some(reason));
-            }
+/// Other hosts' states re-published here for their readers, in order; each relay wakes its
+/// readers once.
+fn relay(relays: &mut BTreeMap<u32, MemberPorts>, states: Vec<StateMsg>) -> Result<(), DaemonStop> {
+    let mut touched = vec![];
+    for st in states {
+        if let Some(relay) = relays.get_mut(&st.id) {
+            relay.publish_quietly(st)?;
+            touched.push(st.id);
         }
-        Down::States(states) => {
-            let mut touched = vec![];
-            for st in states {
-                if let Some(relay) = relays.get_mut(&st.id) {
-                    relay.publish_quietly(st.into())?;
-                    touched.push(st.id);
-                }
-            }
-            touched.dedup();
-            for id in touched {
-                if let Some(relay) = relays.get_mut(&id) {
-                    relay.notify_readers()?;
-                }
-            }
-        }
-        // Handled by the caller (it owns the children).
-        Down::Heartbeat | Down::Kill(_) => {}
     }
-    Ok(None)
+    touched.dedup();
+    for id in touched {
+        if let Some(relay) = relays.get_mut(&id) {
+            relay.notify_readers()?;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -584,99 +517,6 @@ mod tests {
             realtime_priority: priority,
             repair: false,
         }
-    }
-
-    /// Host 1 of paper40 over two hosts, as a daemon joins it.
-    fn joined() -> Joined {
-        let s = Scenario::builtin("paper40").unwrap();
-        let mut a = assignment(None, None);
-        a.hosts_of = s
-            .formation
-            .members
-            .iter()
-            .map(|m| (m.id, m.id % 2))
-            .collect();
-        let mine = a
-            .hosts_of
-            .iter()
-            .filter(|p| p.1 == 1)
-            .map(|p| p.0)
-            .collect();
-        Joined {
-            team: TeamName::new("unit").unwrap(),
-            s,
-            mine,
-            link_timeout: Duration::from_millis(a.link_timeout_ms),
-            a,
-        }
-    }
-
-    type Fake = crate::host_link::FakeLink<Down, Up>;
-
-    fn link(j: &Joined, t0: Instant) -> Link<'_, Fake> {
-        let host_of = j.a.hosts_of.iter().copied().collect();
-        let repairs = CrossRepairs::new(&j.s);
-        let repairs = DaemonRepairs::new(j.team.clone(), host_of, j.mine.clone(), repairs, t0);
-        Link::new(j, Fake::default(), repairs, t0)
-    }
-
-    fn ms(n: u64) -> Duration {
-        Duration::from_millis(n)
-    }
-
-    #[test]
-    fn the_daemon_keeps_its_link_alive_and_gives_up_on_a_silent_orchestrator() {
-        let (j, t0) = (joined(), Instant::now());
-        let mut l = link(&j, t0);
-        l.keep_alive(t0 + ms(199)).unwrap();
-        assert!(l.chan.sent.is_empty());
-        l.keep_alive(t0 + ms(200)).unwrap();
-        assert_eq!(l.chan.sent, [Up::Heartbeat]);
-        l.chan.incoming.push_back(Ok(Down::Heartbeat));
-        l.before_start(t0 + ms(2000)).unwrap();
-        l.keep_alive(t0 + ms(5000)).unwrap();
-        let e = l.keep_alive(t0 + ms(5001)).unwrap_err();
-        assert!(matches!(e, DaemonStop::Silent { .. }), "{e}");
-        assert_eq!(
-            e.to_string(),
-            "nothing heard from the orchestrator for 3.0 s (network partition or orchestrator gone)"
-        );
-    }
-
-    #[test]
-    fn a_daemon_that_did_not_run_for_the_link_timeout_says_so() {
-        let (j, t0) = (joined(), Instant::now());
-        let l = link(&j, t0);
-        l.check_ran(t0, t0 + ms(3000)).unwrap();
-        let e = l.check_ran(t0, t0 + ms(5200)).unwrap_err();
-        assert!(
-            e.to_string()
-                .starts_with("this daemon did not run for 5.2 s"),
-            "{e}"
-        );
-        let stopped = DaemonStop::TeamStopped(StopReason::AgentSilent);
-        assert_eq!(
-            stopped.to_string(),
-            "the orchestrator stopped the team (a silent member, see its audit.json)"
-        );
-    }
-
-    #[test]
-    fn a_stop_before_the_start_or_a_closed_session_ends_the_wait() {
-        let (j, t0) = (joined(), Instant::now());
-        let mut l = link(&j, t0);
-        let stop = ClockMsg::stop(0, 0, StopReason::AgentFault);
-        l.chan.incoming.push_back(Ok(Down::Clock(stop.into())));
-        let e = l.before_start(t0 + ms(10)).unwrap_err();
-        assert!(matches!(e, DaemonStop::StoppedBeforeStart), "{e}");
-
-        let gone = crate::host_link::LinkError::PeerGone("its zenoh session closed".into());
-        l.chan.incoming.push_back(Err(gone));
-        let e = l.before_start(t0 + ms(20)).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "the orchestrator is gone, its zenoh session closed: killed or exited"
-        );
     }
 
     #[test]

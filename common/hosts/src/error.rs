@@ -1,5 +1,6 @@
 //! Why a host's link ends, as typed values: the bridge's verdict on a daemon ([`LinkLost`]), a
-//! join request it refuses ([`Refusal`]), and what ends a daemon's bridging ([`DaemonStop`]).
+//! join request it refuses ([`Refusal`]), what ends a daemon's bridging ([`DaemonStop`]), and
+//! why a daemon fails as a whole ([`DaemonError`]).
 //! Their texts are written here and nowhere else; the multi-host tests and the operators read
 //! them in the log, audit.json's fault and hosts.json.
 
@@ -8,6 +9,15 @@ use std::time::Duration;
 use cdm_iox::TransportError;
 use cdm_runtime::messages::StopReason;
 use cdm_runtime::notices::NoticeGap;
+#[cfg(feature = "hosts")]
+use {
+    cdm_process::sched::SchedError,
+    cdm_records::rundir::RunDirError,
+    cdm_scenario::ScenarioError,
+    cdm_team::{Exit, Failure},
+    cdm_zenoh::NetError,
+    std::path::PathBuf,
+};
 
 use crate::host_link::LinkError;
 
@@ -159,6 +169,94 @@ impl From<LinkError> for DaemonStop {
             e @ LinkError::PeerGone(_) => DaemonStop::OrchestratorGone(e),
             e @ LinkError::Protocol(_) => DaemonStop::Protocol(e),
             e => DaemonStop::Link(e),
+        }
+    }
+}
+
+/// Why `orchestrator host` fails: bad input of its own (exit 2) or the team's fault (exit 3).
+#[cfg(feature = "hosts")]
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// `--host` names another host than the certificate in `--keys`.
+    #[error(
+        "--host {asked}: the certificate in --keys is host {certified}'s (a daemon is the host \
+         its certificate names)"
+    )]
+    NotCertified { asked: u32, certified: u32 },
+    /// The orchestrator's endpoint cannot be reached.
+    #[error("--connect: {0}")]
+    Connect(#[source] NetError),
+    /// The orchestrator answered no.
+    #[error("refused by the orchestrator at {at}: {why}")]
+    Refused { at: String, why: String },
+    /// Joining failed on the network (no answer within the join timeout).
+    #[error(transparent)]
+    Join(NetError),
+    /// The host's link cannot be opened.
+    #[error(transparent)]
+    Channel(NetError),
+    /// The team's `--rt-priority` cannot be had on this machine.
+    #[error("team {team}: {source}")]
+    Priority {
+        team: String,
+        #[source]
+        source: SchedError,
+    },
+    /// The assignment names a team or scenario this host cannot take.
+    #[error(transparent)]
+    Assignment(#[from] ScenarioError),
+    /// The scenario the orchestrator sent does not hash as it says.
+    #[error("the orchestrator's scenario has hash {here:016x} here and {there:016x} there")]
+    ScenarioHash { here: u64, there: u64 },
+    /// This host's shared memory refused the team's services.
+    #[error(transparent)]
+    Services(TransportError),
+    /// A port, a relay or the layout of the host's share could not be made.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    #[error("cannot write {}: {source}", file.display())]
+    WriteScenario {
+        file: PathBuf,
+        #[source]
+        source: RunDirError,
+    },
+    #[error("cannot start agent {id}: {source}")]
+    Spawn {
+        id: u32,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The bridging ended before the plan was flown.
+    #[error("host {host} of team {team}: {why}; its members were stopped")]
+    Stopped {
+        host: u32,
+        team: String,
+        #[source]
+        why: Box<DaemonStop>,
+    },
+}
+
+#[cfg(feature = "hosts")]
+impl DaemonError {
+    /// The process's exit: bad input is the operator's (2), the rest the team's fault (3).
+    pub fn exit(&self) -> Exit {
+        match self {
+            DaemonError::NotCertified { .. }
+            | DaemonError::Connect(_)
+            | DaemonError::Refused { .. }
+            | DaemonError::Priority { .. }
+            | DaemonError::Services(_) => Exit::BadInput,
+            _ => Exit::Fault,
+        }
+    }
+}
+
+#[cfg(feature = "hosts")]
+impl From<DaemonError> for Failure {
+    fn from(e: DaemonError) -> Self {
+        Failure {
+            exit: e.exit(),
+            error: Box::new(e),
         }
     }
 }

@@ -12,7 +12,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-use cdm_iox::MemberPorts;
+use crate::relay::Relay;
 
 /// The longest a relay's hand-over waits for its history to reach the repair's tick.
 pub const HAND_OVER_WAIT: Duration = Duration::from_secs(1);
@@ -27,7 +27,7 @@ pub struct PendingHandOver {
 
 impl PendingHandOver {
     /// Every relay in `relays` is to hand over the states from `needs_from` on.
-    pub fn new(needs_from: u64, relays: &BTreeMap<u32, MemberPorts>, now: Instant) -> Self {
+    pub fn new<R>(needs_from: u64, relays: &BTreeMap<u32, R>, now: Instant) -> Self {
         PendingHandOver {
             needs_from,
             since: now,
@@ -37,9 +37,9 @@ impl PendingHandOver {
 
     /// Hands over every relay whose history reaches the tick (all of them once `wait` passed
     /// at `now`); true when none is left. `failed` hears of a relay that could not.
-    pub fn poll(
+    pub fn poll<R: Relay>(
         &mut self,
-        relays: &mut BTreeMap<u32, MemberPorts>,
+        relays: &mut BTreeMap<u32, R>,
         wait: Duration,
         now: Instant,
         mut failed: impl FnMut(u32, String),
@@ -62,10 +62,10 @@ impl PendingHandOver {
 }
 
 /// Starts a hand-over (the one before, if any is still pending, goes at once) and moves it on.
-pub fn start(
+pub fn start<R: Relay>(
     pending: &mut Option<PendingHandOver>,
     needs_from: u64,
-    relays: &mut BTreeMap<u32, MemberPorts>,
+    relays: &mut BTreeMap<u32, R>,
     now: Instant,
     failed: impl FnMut(u32, String) + Copy,
 ) {
@@ -79,9 +79,9 @@ pub fn start(
 }
 
 /// Moves a pending hand-over on (`wait`: how long a relay may wait for its history).
-pub fn poll(
+pub fn poll<R: Relay>(
     pending: &mut Option<PendingHandOver>,
-    relays: &mut BTreeMap<u32, MemberPorts>,
+    relays: &mut BTreeMap<u32, R>,
     wait: Duration,
     now: Instant,
     failed: impl FnMut(u32, String),

@@ -5,6 +5,9 @@
 
 use std::time::Duration;
 
+/// How often a quiet link says it is alive (both ends).
+pub const HEARTBEAT: Duration = Duration::from_millis(200);
+
 /// A boxed error with its source chain.
 pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
 

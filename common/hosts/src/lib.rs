@@ -12,7 +12,11 @@
 #[cfg(feature = "hosts")]
 mod bridge;
 #[cfg(feature = "hosts")]
+mod bridge_core;
+#[cfg(feature = "hosts")]
 pub mod daemon;
+#[cfg(feature = "hosts")]
+mod daemon_core;
 #[cfg(feature = "hosts")]
 mod daemon_repair;
 pub mod error;
@@ -26,6 +30,8 @@ mod other_hosts;
 mod placed;
 mod plan;
 pub mod regions;
+#[cfg(feature = "hosts")]
+mod relay;
 #[cfg(feature = "hosts")]
 mod repairs;
 #[cfg(feature = "hosts")]

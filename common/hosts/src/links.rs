@@ -49,7 +49,45 @@ pub struct Links {
     pub link_timeout: Option<Duration>,
 }
 
+/// What the bridge learnt of a host's link, for the launch: the bridge thread applies its
+/// core's notes to the [`Links`] it shares ([`Links::note`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Note {
+    /// A frame came from host `host` (its daemon `who`) at `at`.
+    Heard { host: u32, who: String, at: Instant },
+    /// The host's link is lost, and its members with it.
+    Lost { host: u32, lost: LostHost },
+    /// The host's daemon stopped its members and said so.
+    Stopped(u32),
+    /// A remote member exited (`--on-loss repair`: lost, not a fault).
+    Exited(u32, ProcessExit),
+    /// Links (reader, writer) of repairs that a daemon reported connected.
+    Linked(Vec<(u32, u32)>),
+    /// An edge (source, reader) that a repair made cross hosts.
+    CrossingAdded(u32, u32),
+}
+
 impl Links {
+    /// Applies one of the bridge's notes.
+    pub fn note(&mut self, n: Note) {
+        match n {
+            Note::Heard { host, who, at } => {
+                self.heard.insert(host, (who, at));
+            }
+            Note::Lost { host, lost } => {
+                self.lost.insert(host, lost);
+            }
+            Note::Stopped(host) => {
+                self.stopped.insert(host);
+            }
+            Note::Exited(id, how) => self.exited.push((id, how)),
+            Note::Linked(pairs) => self.linked.extend(pairs),
+            Note::CrossingAdded(source, reader) => {
+                self.crossing_added.insert((source, reader));
+            }
+        }
+    }
+
     /// The host of member `id` when it is not this one.
     pub fn remote_host(&self, id: Option<u32>) -> Option<u32> {
         id.and_then(|id| self.host_of.get(&id).copied())

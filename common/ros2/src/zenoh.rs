@@ -74,6 +74,8 @@ impl Publish for ZenohOut {
             source_timestamp_ns: now_ns,
             gid: out.gid,
         };
-        out.publisher.put(cdr, &attachment)
+        out.publisher
+            .put(cdr, &attachment)
+            .map_err(|e| e.to_string())
     }
 }

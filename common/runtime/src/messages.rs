@@ -4,7 +4,9 @@
 //!
 //! Both are `#[repr(C)]` with plain fields only (`u32`, `u64`, `f64`, arrays), so iceoryx2 can
 //! place them in shared memory as they are. The backend (cdm-iox) gives them `ZeroCopySend` and
-//! their stable type names; this crate does not name iceoryx2. Codes travel as `u32` with the
+//! their stable type names; this crate does not name iceoryx2. The same types cross hosts: they
+//! derive serde, and cdm-zenoh's one `encode` (postcard) writes them field by field in
+//! declaration order (`ClockMsg::reserved` stays behind: it is padding, always zero). Codes travel as `u32` with the
 //! documented constants below; [`AgentStatus`] and [`ClockCommand`] are the Rust-side view of
 //! them. Decoding never fails: a code this build does not know is kept as `Unknown(code)` so a
 //! newer peer cannot crash an older one.
@@ -98,7 +100,7 @@ pub const REASON_AGENT_SILENT: u32 = 3;
 pub const REASON_INTERRUPTED: u32 = 4;
 
 /// One member's full state at one tick, published once per tick.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[repr(C)]
 pub struct StateMsg {
     /// The tick this state belongs to (simulation time is `tick * dt`). Consumers detect lost
@@ -120,7 +122,7 @@ pub struct StateMsg {
 }
 
 /// The orchestrator's grant: how far members may run, or that they must stop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[repr(C)]
 pub struct ClockMsg {
     /// The last tick members may compute (inclusive).
@@ -143,7 +145,8 @@ pub struct ClockMsg {
     /// How many of the announced losses have every new link of their repair connected: the
     /// new in-neighbours then hand their readers the states these missed (iceoryx2 history).
     pub loss_linked: u32,
-    /// Zero (keeps the layout free of implicit padding).
+    /// Zero (keeps the layout free of implicit padding); never on the network.
+    #[serde(skip)]
     pub reserved: u32,
 }
 

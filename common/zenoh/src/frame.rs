@@ -1,7 +1,8 @@
 //! What travels between hosts, named by direction of travel: [`Down`] from the orchestrator's
 //! bridge to a host's daemon, [`Up`] back, [`JoinRequest`] / [`JoinReply`] once when a daemon
 //! joins. Every frame goes through the one codec pair [`encode`] / [`decode`] (postcard), so the
-//! codec can be swapped in one place.
+//! codec can be swapped in one place. The clock and the states are the shared-memory messages
+//! themselves ([`ClockMsg`], [`StateMsg`]): one definition for iceoryx2 and for zenoh.
 
 use std::collections::BTreeMap;
 
@@ -13,99 +14,15 @@ use serde::{Deserialize, Serialize};
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
 pub const PROTOCOL_VERSION: u32 = 6;
 
-/// A [`StateMsg`], field for field (the shared-memory type stays free of serde).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct NetState {
-    pub tick: u64,
-    pub scenario_hash: u64,
-    pub id: u32,
-    pub status: u32,
-    pub fault_code: u32,
-    pub fault_peer: u32,
-    pub state: [f64; 12],
-}
-
-impl From<StateMsg> for NetState {
-    fn from(m: StateMsg) -> Self {
-        Self {
-            tick: m.tick,
-            scenario_hash: m.scenario_hash,
-            id: m.id,
-            status: m.status,
-            fault_code: m.fault_code,
-            fault_peer: m.fault_peer,
-            state: m.state,
-        }
-    }
-}
-
-impl From<NetState> for StateMsg {
-    fn from(m: NetState) -> Self {
-        Self {
-            tick: m.tick,
-            scenario_hash: m.scenario_hash,
-            id: m.id,
-            status: m.status,
-            fault_code: m.fault_code,
-            fault_peer: m.fault_peer,
-            state: m.state,
-        }
-    }
-}
-
-/// A [`ClockMsg`], field for field.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct NetClock {
-    pub grant_tick: u64,
-    pub scenario_hash: u64,
-    pub command: u32,
-    pub reason: u32,
-    pub loss_tick: u64,
-    pub loss_seq: u32,
-    pub loss_id: u32,
-    pub loss_linked: u32,
-}
-
-impl From<ClockMsg> for NetClock {
-    fn from(m: ClockMsg) -> Self {
-        Self {
-            grant_tick: m.grant_tick,
-            scenario_hash: m.scenario_hash,
-            command: m.command,
-            reason: m.reason,
-            loss_tick: m.loss_tick,
-            loss_seq: m.loss_seq,
-            loss_id: m.loss_id,
-            loss_linked: m.loss_linked,
-        }
-    }
-}
-
-impl From<NetClock> for ClockMsg {
-    fn from(m: NetClock) -> Self {
-        Self {
-            grant_tick: m.grant_tick,
-            scenario_hash: m.scenario_hash,
-            command: m.command,
-            reason: m.reason,
-            loss_tick: m.loss_tick,
-            loss_seq: m.loss_seq,
-            loss_id: m.loss_id,
-            loss_linked: m.loss_linked,
-            reserved: 0,
-        }
-    }
-}
-
 /// Orchestrator -> daemon.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Down {
     /// A grant or the stop. Every clock message whose loss notice changed is sent, in order
     /// (members must see each loss); of the others only the newest.
-    Clock(NetClock),
+    Clock(ClockMsg),
     /// States of other hosts' members that this host's members read (crossing edges), in the
     /// order they were published.
-    States(Vec<NetState>),
+    States(Vec<StateMsg>),
     /// Nothing new; proves the link alive.
     Heartbeat,
     /// Kill this member of the host with SIGKILL (a scripted loss, `launch --lose`, or a
@@ -152,7 +69,7 @@ pub enum Up {
         subscriptions: BTreeMap<u32, Vec<String>>,
     },
     /// States (and fault reports) of this host's members, in the order they were published.
-    States(Vec<NetState>),
+    States(Vec<StateMsg>),
     /// A member process exited before the stop.
     Exited { id: u32, how: NetExit },
     /// Nothing new; proves the link alive.
@@ -238,6 +155,7 @@ pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, DecodeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use cdm_runtime::messages::LossNotice;
 
     #[test]
     fn frames_round_trip_bit_for_bit() {
@@ -260,19 +178,48 @@ mod tests {
                 12.0,
             ],
         );
-        let f = Down::States(vec![s.into()]);
+        let f = Down::States(vec![s]);
         let back: Down = decode(&encode(&f)).unwrap();
         let Down::States(v) = back else {
             panic!("not states")
         };
-        let m: StateMsg = v[0].into();
+        let m = v[0];
         assert_eq!(m.tick, 7);
         for (a, b) in m.state.iter().zip(s.state.iter()) {
             assert_eq!(a.to_bits(), b.to_bits());
         }
         let c = ClockMsg::run(9, 1);
-        let back: Down = decode(&encode(&Down::Clock(c.into()))).unwrap();
-        assert_eq!(back, Down::Clock(c.into()));
+        let back: Down = decode(&encode(&Down::Clock(c))).unwrap();
+        assert_eq!(back, Down::Clock(c));
+    }
+
+    /// The bytes of protocol 6, as its field-by-field mirror of the clock message wrote them:
+    /// the message encodes its fields in declaration order, and its padding never travels.
+    #[test]
+    fn the_clock_message_keeps_the_bytes_of_its_protocol() {
+        let notice = LossNotice {
+            seq: 2,
+            id: 7,
+            tick: 300,
+            linked: 1,
+        };
+        let mut c = ClockMsg::run(9, 1).with_loss(Some(notice));
+        c.reserved = 5;
+        let bytes = encode(&Down::Clock(c));
+        // variant 0, grant 9, hash 1, command 0, reason 0, loss tick 300 (varint), seq, id, linked
+        assert_eq!(bytes, [0, 9, 1, 0, 0, 0xac, 0x02, 2, 7, 1]);
+        let back: Down = decode(&bytes).unwrap();
+        c.reserved = 0;
+        assert_eq!(back, Down::Clock(c));
+        let s = StateMsg::ok(1, 2, 3, [0.5; 12]);
+        let bytes = encode(&Up::States(vec![s]));
+        // variant 1, one state: tick, hash, id, status, code, peer (varints), 12 f64 of 8 bytes
+        // (the peer, none, is u32::MAX: a varint of 5 bytes)
+        assert_eq!(bytes.len(), 2 + 5 + 5 + 12 * 8);
+        assert_eq!(
+            bytes[..12],
+            [1, 1, 1, 2, 3, 0, 0, 0xff, 0xff, 0xff, 0xff, 0x0f]
+        );
     }
 
     #[test]

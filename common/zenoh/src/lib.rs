@@ -15,8 +15,8 @@ pub mod link;
 pub mod rmw;
 
 pub use frame::{
-    decode, encode, Assignment, DecodeError, Down, JoinReply, JoinRequest, NetClock, NetExit,
-    NetState, Up, PROTOCOL_VERSION,
+    decode, encode, Assignment, DecodeError, Down, JoinReply, JoinRequest, NetExit, Up,
+    PROTOCOL_VERSION,
 };
 pub use link::{
     down_key, host_key_exprs, join_key, orchestrator_key_exprs, up_key, Channel, JoinDesk, Net,

@@ -36,6 +36,9 @@ pub enum RmwError {
         key: String,
         detail: String,
     },
+    /// A message could not be published.
+    #[error("zenoh: cannot publish on {key}: {detail}")]
+    Put { key: String, detail: String },
 }
 
 /// A zenoh session for ROS 2 entities, and the tokens that announce them.
@@ -107,7 +110,8 @@ impl RmwSession {
             .congestion_control(CongestionControl::Drop)
             .wait()
             .map_err(|e| declare("a publisher", key, e))?;
-        Ok(RmwPublisher { publisher })
+        let key = key.to_owned();
+        Ok(RmwPublisher { publisher, key })
     }
 }
 
@@ -146,16 +150,20 @@ impl Attachment {
 /// One topic's publisher.
 pub struct RmwPublisher {
     publisher: zenoh::pubsub::Publisher<'static>,
+    key: String,
 }
 
 impl RmwPublisher {
     /// Publishes one serialized message (CDR with its header) with its attachment.
-    pub fn put(&self, payload: &[u8], attachment: &Attachment) -> Result<(), String> {
+    pub fn put(&self, payload: &[u8], attachment: &Attachment) -> Result<(), RmwError> {
         self.publisher
             .put(payload.to_vec())
             .attachment(attachment.zbytes())
             .wait()
-            .map_err(|e| e.to_string())
+            .map_err(|e| RmwError::Put {
+                key: self.key.clone(),
+                detail: e.to_string(),
+            })
     }
 }
 
