@@ -14,7 +14,7 @@ use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::Scenario;
 use cdm_team::out;
 use cdm_team::Failure;
-use cdm_zenoh::{down_key, up_key, JoinDesk, JoinReply, Net, PendingJoin};
+use cdm_zenoh::{down_key, up_key, JoinDesk, JoinReply, Net, NetError, PendingJoin};
 
 use crate::bridge_core::{BridgeCore, Ctx, HostReport};
 use crate::error::Refusal;
@@ -25,6 +25,22 @@ use crate::other_hosts::OtherHosts;
 use crate::placed::placed;
 use crate::regions::Regions;
 use crate::{HostOptions, TeamFlight};
+
+/// Why the bridge cannot start (the team's fault: exit 3).
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    /// The join desk cannot be declared on the session.
+    #[error("--listen: {0}")]
+    Listen(#[source] NetError),
+    #[error("cannot start the bridge thread: {0}")]
+    Thread(#[source] std::io::Error),
+}
+
+impl From<BridgeError> for Failure {
+    fn from(e: BridgeError) -> Self {
+        Failure::fault(e)
+    }
+}
 
 /// What the bridge thread knows of each host's link, read by the launch.
 type SharedLinks = Arc<Mutex<Links>>;
@@ -51,7 +67,7 @@ impl Bridge {
         let ctx = Ctx::new(s, team, regions, h, flight);
         let desk = net
             .join_desk(team.as_str(), ctx.tls.then(|| regions.hosts() - 1))
-            .map_err(|e| Failure::fault(format!("--listen: {e}")))?;
+            .map_err(BridgeError::Listen)?;
         let crossing = regions.crossing(&placed(s));
         let links = Arc::new(Mutex::new(Links {
             host_of: regions.pairs().into_iter().collect(),
@@ -64,7 +80,7 @@ impl Bridge {
         let thread = std::thread::Builder::new()
             .name("bridge".into())
             .spawn(move || run(net, desk, ctx, &shared, &flag, quiet))
-            .map_err(|e| Failure::fault(format!("cannot start the bridge thread: {e}")))?;
+            .map_err(BridgeError::Thread)?;
         Ok(Self {
             stop,
             thread: Some(thread),

@@ -9,10 +9,10 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
 use cdm_iox::{MemberPorts, TeamName};
-use cdm_runtime::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, LossNotice, StateMsg};
+use cdm_runtime::messages::{AgentStatus, ClockMsg, FaultCode, LossNotice, StateMsg};
 use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::Scenario;
-use cdm_zenoh::{Assignment, Down, JoinRequest, Up, PROTOCOL_VERSION};
+use cdm_zenoh::{Assignment, Down, JoinRequest, Up};
 use serde::Serialize;
 
 use crate::error::{LinkLost, Refusal};
@@ -22,8 +22,11 @@ use crate::links::{LostHost, Note};
 use crate::placed::placed;
 use crate::regions::Regions;
 use crate::relay::Relay;
-use crate::repairs::{CrossRepairs, RepairStep};
+use crate::repairs::CrossRepairs;
 use crate::{HostOptions, TeamFlight};
+
+mod forward;
+mod join;
 
 /// How long the bridge waits, after the team's stop, for every daemon to stop its members.
 const STOP_DEADLINE: Duration = Duration::from_secs(8);
@@ -157,13 +160,13 @@ impl<L: HostLink<In = Up, Out = Down>, R: Relay> BridgeCore<L, R> {
 
     /// The host a join request asking on the key of host `slot` may take, or why not.
     pub(crate) fn which_host(&self, slot: Option<u32>, q: &JoinRequest) -> Result<u32, Refusal> {
-        bound(&self.ctx, slot, q.host)?;
-        which_host(&self.ctx, &self.remotes, q)
+        join::bound(&self.ctx, slot, q.host)?;
+        join::which_host(&self.ctx, &self.remotes, q)
     }
 
     /// Host `host`'s share of the team, as its daemon needs it.
     pub(crate) fn assignment(&self, host: u32) -> Assignment {
-        assignment(&self.ctx, host)
+        join::assignment(&self.ctx, host)
     }
 
     /// The daemon `who` joined as host `host` at `now`, over `chan`; its members.
@@ -244,32 +247,6 @@ impl<L: HostLink<In = Up, Out = Down>, R: Relay> BridgeCore<L, R> {
     }
 }
 
-/// A request asks on its own host's key (`join/k` for `host: Some(k)`): with TLS, access control
-/// lets only host k's certificate ask there, so the host number is the certificate's.
-fn bound(ctx: &Ctx, slot: Option<u32>, host: Option<u32>) -> Result<(), Refusal> {
-    match (slot, host) {
-        (None, _) if ctx.tls => Err(Refusal::Unbound),
-        (s, h) if s != h => Err(Refusal::Slot { slot, host }),
-        _ => Ok(()),
-    }
-}
-
-/// Host `host`'s share of the team, as its daemon needs it.
-fn assignment(ctx: &Ctx, host: u32) -> Assignment {
-    Assignment {
-        team: ctx.team.as_str().to_owned(),
-        host,
-        hosts_of: ctx.regions.pairs(),
-        scenario_json: ctx.scenario_json.clone(),
-        scenario_hash: ctx.hash,
-        window: ctx.flight.window,
-        link_timeout_ms: ctx.link_timeout.as_millis() as u64,
-        realtime_stale_after_s: ctx.flight.realtime_stale_after.map(|d| d.as_secs_f64()),
-        realtime_priority: ctx.flight.realtime_priority,
-        repair: ctx.flight.repair,
-    }
-}
-
 impl<L, R> Remote<L, R> {
     /// A daemon that joined as host `host` at `now`, over `chan`.
     fn joined(ctx: &Ctx, host: u32, who: String, chan: L, now: Instant) -> Self {
@@ -296,59 +273,6 @@ impl<L, R> Remote<L, R> {
     }
 }
 
-/// The host a join request may take, or why it is refused (another protocol, team or
-/// scenario; a host number out of range or taken; no host left).
-fn which_host<L, R>(
-    ctx: &Ctx,
-    remotes: &BTreeMap<u32, Remote<L, R>>,
-    q: &JoinRequest,
-) -> Result<u32, Refusal> {
-    let team = || ctx.team.as_str().to_owned();
-    if q.version != PROTOCOL_VERSION {
-        return Err(Refusal::Protocol {
-            theirs: q.version,
-            ours: PROTOCOL_VERSION,
-        });
-    }
-    if let Some(t) = q.team.as_deref().filter(|t| *t != ctx.team.as_str()) {
-        let asked = t.to_owned();
-        return Err(Refusal::Team {
-            asked,
-            team: team(),
-        });
-    }
-    if let Some(h) = q.scenario_hash.filter(|&h| h != ctx.hash) {
-        let (theirs, ours) = (h, ctx.hash);
-        return Err(Refusal::Scenario {
-            theirs,
-            team: team(),
-            ours,
-        });
-    }
-    let hosts = ctx.regions.hosts();
-    match q.host {
-        Some(host) if host == 0 || host >= hosts => Err(Refusal::NoSuchHost {
-            host,
-            team: team(),
-            last: hosts - 1,
-        }),
-        Some(host) => match remotes.get(&host) {
-            Some(r) => Err(Refusal::Taken {
-                host,
-                team: team(),
-                by: r.who.clone(),
-            }),
-            None => Ok(host),
-        },
-        None => (1..hosts)
-            .find(|h| !remotes.contains_key(h))
-            .ok_or_else(|| Refusal::Full {
-                others: hosts - 1,
-                team: team(),
-            }),
-    }
-}
-
 /// One round for one daemon at `now`: its frames in, the clock and the crossing states out,
 /// the heartbeat, the silence deadline. True when anything moved.
 fn pump<L: HostLink<In = Up, Out = Down>, R: Relay>(
@@ -358,7 +282,7 @@ fn pump<L: HostLink<In = Up, Out = Down>, R: Relay>(
     now: Instant,
 ) -> bool {
     if matches!(r.phase, Phase::Lost(_)) && ctx.flight.repair {
-        follow_repairs(r, ctx, now);
+        forward::follow_repairs(r, ctx, now);
         return false;
     }
     if matches!(r.phase, Phase::Lost(_) | Phase::Stopped) {
@@ -389,7 +313,7 @@ fn pump<L: HostLink<In = Up, Out = Down>, R: Relay>(
     }
     if matches!(r.phase, Phase::Ready) {
         send_kills(r, kills, now);
-        match forward(r, ctx, now) {
+        match forward::forward(r, ctx, now) {
             Ok(sent) => busy |= sent,
             Err(why) => {
                 lose(r, ctx, why);
@@ -495,114 +419,6 @@ fn open_relays<L, R: Relay>(r: &mut Remote<L, R>, ctx: &Ctx) -> Result<(), LinkL
         r.relays.insert(g, ports);
     }
     Ok(())
-}
-
-/// The clock and the crossing states towards a ready host; true when anything went.
-fn forward<L: HostLink<In = Up, Out = Down>, R: Relay>(
-    r: &mut Remote<L, R>,
-    ctx: &Ctx,
-    now: Instant,
-) -> Result<bool, LinkLost> {
-    let mut clocks = vec![];
-    let mut batch = vec![];
-    for (k, (&g, relay)) in r.relays.iter_mut().enumerate() {
-        // Every relay subscribes to the clock: each drains its own, the first one's are kept.
-        relay.receive_clock(|c| {
-            if k == 0 {
-                clocks.push(c);
-            }
-        })?;
-        let forwarder = &r.forwarder;
-        relay.receive_neighbors(|m| {
-            if forwarder.get(&m.id) == Some(&g) {
-                batch.push(m);
-            }
-        })?;
-    }
-    let moved = !clocks.is_empty() || !batch.is_empty();
-    // States first: a grant must never reach members before the states it lets them use.
-    if !batch.is_empty() {
-        r.chan.send(&Down::States(batch))?;
-        r.last_sent = now;
-    }
-    for c in worth_sending(&clocks, &mut r.last_notice) {
-        // A new loss: the relays carry the repaired links before the daemon's members hear it.
-        let step = r.repairs.on_notice(c.loss())?;
-        carry_repair(r, ctx, &step, now);
-        r.stop_sent |= matches!(c.command(), ClockCommand::Stop(_));
-        r.chan.send(&Down::Clock(c))?;
-        r.last_sent = now;
-    }
-    Ok(moved)
-}
-
-/// A lost host's relays still stand in for its members' last states: repairs that make a
-/// member of this host read one of them are carried (linked, history handed over), as the
-/// killed member's own publisher would on one host.
-fn follow_repairs<L, R: Relay>(r: &mut Remote<L, R>, ctx: &Ctx, now: Instant) {
-    let mut clocks = vec![];
-    for (k, relay) in r.relays.values_mut().enumerate() {
-        let _ = relay.receive_clock(|c| {
-            if k == 0 {
-                clocks.push(c);
-            }
-        });
-        let _ = relay.receive_neighbors(|_| {});
-    }
-    for c in worth_sending(&clocks, &mut r.last_notice) {
-        match r.repairs.on_notice(c.loss()) {
-            Ok(step) => carry_repair(r, ctx, &step, now),
-            Err(e) => tracing::warn!("host {}: the repairs its relays carry: {e}", r.host),
-        }
-    }
-    // Nothing more will cross from a lost host: its relays hand over what they hold.
-    let wait = Duration::ZERO;
-    handover::poll(&mut r.handing, &mut r.relays, wait, now, warn_hand_over);
-}
-
-/// Of the clock messages drained, in order: each whose loss notice differs from the one sent
-/// before (members must see every loss, and every rise of the connected count), and the newest.
-fn worth_sending(clocks: &[ClockMsg], last: &mut Option<LossNotice>) -> Vec<ClockMsg> {
-    let mut out = vec![];
-    for (k, c) in clocks.iter().enumerate() {
-        if c.loss() != *last || k + 1 == clocks.len() {
-            *last = c.loss();
-            out.push(*c);
-        }
-    }
-    out
-}
-
-/// A repair's new links at this host's relays: a reader on that host gets its new
-/// in-neighbour's states forwarded (one relay subscribes to it here), a reader on this host is
-/// woken by the relay of its new in-neighbour there; history goes to new readers once every
-/// link is connected. A link that cannot be opened (no room left) is left for the team core's
-/// deadline, which names it.
-fn carry_repair<L, R: Relay>(r: &mut Remote<L, R>, ctx: &Ctx, step: &RepairStep, now: Instant) {
-    for &(reader, writer) in &step.new_links {
-        let (hr, hw) = (ctx.regions.host_of(reader), ctx.regions.host_of(writer));
-        let opened = if hr == r.host && hw != r.host && !r.forwarder.contains_key(&writer) {
-            r.forwarder.insert(writer, reader);
-            r.relays.get_mut(&reader).map(|p| p.connect(&[writer], &[]))
-        } else if hw == r.host && hr == 0 {
-            r.relays.get_mut(&writer).map(|p| p.connect(&[], &[reader]))
-        } else {
-            None
-        };
-        if let Some(Err(e)) = opened {
-            tracing::warn!(
-                host = r.host,
-                "cannot carry the repaired link {writer} -> {reader}: {e}"
-            );
-        }
-        if hr != hw && (hr == r.host || hw == r.host) {
-            r.notes.push(Note::CrossingAdded(writer, reader));
-        }
-    }
-    if step.hand_over {
-        let from = step.needs_from;
-        handover::start(&mut r.handing, from, &mut r.relays, now, warn_hand_over);
-    }
 }
 
 /// The team core's kills of this host's members, sent to its daemon.
@@ -721,7 +537,7 @@ mod tests {
     use crate::links::Links;
     use crate::relay::FakeRelay;
     use cdm_runtime::messages::StopReason;
-    use cdm_zenoh::NetExit;
+    use cdm_zenoh::{NetExit, PROTOCOL_VERSION};
 
     type Fake = FakeLink<Up, Down>;
     type Core = BridgeCore<Fake, FakeRelay>;
@@ -1035,10 +851,10 @@ mod tests {
             who: "c (pid 9)".into(),
         };
         let mut remotes: BTreeMap<u32, Remote<Fake, FakeRelay>> = BTreeMap::new();
-        assert_eq!(which_host(&ctx, &remotes, &q(None)), Ok(1));
-        assert_eq!(which_host(&ctx, &remotes, &q(Some(1))), Ok(1));
+        assert_eq!(join::which_host(&ctx, &remotes, &q(None)), Ok(1));
+        assert_eq!(join::which_host(&ctx, &remotes, &q(Some(1))), Ok(1));
         let refused = |q: JoinRequest, remotes: &BTreeMap<u32, Remote<Fake, FakeRelay>>| {
-            which_host(&ctx, remotes, &q).unwrap_err().to_string()
+            join::which_host(&ctx, remotes, &q).unwrap_err().to_string()
         };
         let old = JoinRequest {
             version: PROTOCOL_VERSION - 1,
@@ -1094,14 +910,14 @@ mod tests {
             c(15, Some(n(1, 1))),
         ];
         let mut last = None;
-        let sent: Vec<u64> = worth_sending(&clocks, &mut last)
+        let sent: Vec<u64> = forward::worth_sending(&clocks, &mut last)
             .iter()
             .map(|c| c.grant_tick)
             .collect();
         assert_eq!(sent, [11, 13, 15]);
         assert_eq!(last, Some(n(1, 1)));
-        assert_eq!(worth_sending(&[], &mut last), vec![]);
-        let again = worth_sending(&clocks[4..], &mut last);
+        assert_eq!(forward::worth_sending(&[], &mut last), vec![]);
+        let again = forward::worth_sending(&clocks[4..], &mut last);
         assert_eq!(again.len(), 1, "only the newest of unchanged notices");
     }
 }

@@ -253,29 +253,7 @@ fn fly(
         let relay = MemberPorts::open_relay(&j.team, h, g, hash, &nb.ins, &nb.outs)?;
         relays.insert(g, relay);
     }
-    let file = dir.join("scenario.json");
-    cdm_records::rundir::write_atomic(&file, j.a.scenario_json.as_bytes()).map_err(|source| {
-        DaemonError::WriteScenario {
-            file: file.clone(),
-            source,
-        }
-    })?;
-    let mut children = Vec::new();
-    let flags = member_flags(&j.a);
-    for m in
-        j.s.formation
-            .members
-            .iter()
-            .filter(|m| j.mine.contains(&m.id))
-    {
-        match spawn_member(&file, &j.team, m.id, m.role, &flags) {
-            Ok(child) => children.push(Spawned { id: m.id, child }),
-            Err(source) => {
-                stop_team(&mut ports, &mut children, &j.s, StopReason::AgentFault);
-                return Err(DaemonError::Spawn { id: m.id, source });
-            }
-        }
-    }
+    let children = spawn_members(j, dir, &mut ports)?;
     let now = Instant::now();
     let repairs = DaemonRepairs::new(
         j.team.clone(),
@@ -295,37 +273,7 @@ fn fly(
         realtime: j.a.realtime_stale_after_s.is_some(),
     };
     let outcome = host.wait_ready().and_then(|()| host.bridge());
-    let reason = match &outcome {
-        Ok(r) => *r,
-        Err(_) => StopReason::AgentSilent,
-    };
-    if outcome.is_ok() {
-        host.up_while_stopping();
-    }
-    let Host {
-        mut core,
-        mut chan,
-        mut ports,
-        relays,
-        mut children,
-        ..
-    } = host;
-    stop_team(&mut ports, &mut children, &j.s, reason);
-    if outcome.is_ok() {
-        // What the members published as they stopped (real time: their pacing reports).
-        let now = Instant::now();
-        for event in [Event::States(drain(&mut ports)), Event::MembersStopped] {
-            for a in core.handle(event, now).unwrap_or_default() {
-                if let Action::Send(frame) = a {
-                    let _ = chan.send(&frame);
-                }
-            }
-        }
-    }
-    drop(relays);
-    if let Err(e) = ports.shutdown() {
-        tracing::warn!("{e}");
-    }
+    host.land(&j.s, &outcome);
     let outcome = outcome.and_then(|reason| match reason {
         StopReason::Finished => Ok(()),
         r => Err(DaemonStop::TeamStopped(r)),
@@ -337,6 +285,39 @@ fn fly(
             team: j.team.to_string(),
             why: Box::new(why),
         })
+}
+
+/// Writes the team's scenario where the members read it and spawns this host's members; on a
+/// failure the ones started are stopped.
+fn spawn_members(
+    j: &Joined,
+    dir: &Path,
+    ports: &mut OrchestratorPorts,
+) -> Result<Vec<Spawned>, DaemonError> {
+    let file = dir.join("scenario.json");
+    cdm_records::rundir::write_atomic(&file, j.a.scenario_json.as_bytes()).map_err(|source| {
+        DaemonError::WriteScenario {
+            file: file.clone(),
+            source,
+        }
+    })?;
+    let mut children = Vec::new();
+    let flags = member_flags(&j.a);
+    for m in
+        j.s.formation
+            .members
+            .iter()
+            .filter(|m| j.mine.contains(&m.id))
+    {
+        match spawn_member(&file, &j.team, m.id, m.role, &flags) {
+            Ok(child) => children.push(Spawned { id: m.id, child }),
+            Err(source) => {
+                stop_team(ports, &mut children, &j.s, StopReason::AgentFault);
+                return Err(DaemonError::Spawn { id: m.id, source });
+            }
+        }
+    }
+    Ok(children)
 }
 
 /// The states published on this host's shared memory since the last call, in order.
@@ -438,6 +419,31 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
                 return;
             }
             let _ = self.ports.wait(Duration::from_millis(5));
+        }
+    }
+
+    /// After the bridging: the members' last states go up while they stop (a flight that ended
+    /// on the orchestrator's stop), the members are stopped, the daemon says it leaves, and the
+    /// host's services go.
+    fn land(mut self, s: &Scenario, outcome: &Result<StopReason, DaemonStop>) {
+        let reason = match outcome {
+            Ok(r) => *r,
+            Err(_) => StopReason::AgentSilent,
+        };
+        if outcome.is_ok() {
+            self.up_while_stopping();
+        }
+        stop_team(&mut self.ports, &mut self.children, s, reason);
+        if outcome.is_ok() {
+            // What the members published as they stopped (real time: their pacing reports).
+            let now = Instant::now();
+            let states = drain(&mut self.ports);
+            let _ = self.apply(Event::States(states), now);
+            let _ = self.apply(Event::MembersStopped, now);
+        }
+        drop(self.relays);
+        if let Err(e) = self.ports.shutdown() {
+            tracing::warn!("{e}");
         }
     }
 

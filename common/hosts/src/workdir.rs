@@ -58,15 +58,29 @@ pub fn sweep_dead() -> usize {
     sweep(&std::env::temp_dir(), is_dead)
 }
 
+/// The daemon's work directory cannot be made (the team's fault on this host: exit 3).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot create {}: {source}", dir.display())]
+pub struct WorkDirError {
+    dir: PathBuf,
+    #[source]
+    source: std::io::Error,
+}
+
+impl From<WorkDirError> for Failure {
+    fn from(e: WorkDirError) -> Self {
+        Failure::fault(e)
+    }
+}
+
 /// Creates this daemon's work directory (readable by this user only).
-pub fn create(team: &str) -> Result<PathBuf, Failure> {
+pub fn create(team: &str) -> Result<PathBuf, WorkDirError> {
     let tmp = std::env::temp_dir();
     let dir = tmp.join(format!("{PREFIX}{team}-{}", std::process::id()));
-    std::fs::DirBuilder::new()
-        .mode(0o700)
-        .create(&dir)
-        .map_err(|e| Failure::fault(format!("cannot create {}: {e}", dir.display())))?;
-    Ok(dir)
+    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+        Ok(()) => Ok(dir),
+        Err(source) => Err(WorkDirError { dir, source }),
+    }
 }
 
 #[cfg(test)]

@@ -16,7 +16,7 @@ use cdm_rosbag::msgs::MsgType;
 use cdm_rosbag::Topic;
 
 use crate::rmw_zenoh::NODE_NAME;
-use crate::{Env, Publish, Ros2Error};
+use crate::{Env, Publish, PublishError, Ros2Error};
 
 /// A serialized message handed to ros2-client as is: its CDR body as a sequence of octets
 /// written one after another (a tuple: no length, no padding), after the header ros2-client's
@@ -107,12 +107,13 @@ impl DdsOut {
 }
 
 impl Publish for DdsOut {
-    fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), String> {
+    fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), PublishError> {
         debug_assert_eq!(cdr.get(..4), Some(&CDR_LE[..]));
         let Some(p) = self.publishers.get(index) else {
-            return Err(format!("no topic {index}"));
+            return Err(PublishError::NoTopic(index));
         };
-        p.publish(RawCdr(cdr.to_vec())).map_err(|e| e.to_string())
+        let sent = p.publish(RawCdr(cdr.to_vec()));
+        sent.map_err(|e| PublishError::Dds(e.to_string()))
     }
 }
 

@@ -134,7 +134,22 @@ impl Env {
 /// (`Topic::index`). Implementations never wait on a subscriber.
 pub trait Publish {
     /// Publishes one serialized message (CDR with its 4-byte header) on topic `index`.
-    fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), String>;
+    fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), PublishError>;
+}
+
+/// Why a message was not published.
+#[derive(Debug, thiserror::Error)]
+pub enum PublishError {
+    /// No publisher has this topic index.
+    #[error("no topic {0}")]
+    NoTopic(usize),
+    /// rmw_zenoh's publisher refused it.
+    #[cfg(feature = "zenoh")]
+    #[error(transparent)]
+    Zenoh(#[from] cdm_zenoh::rmw::RmwError),
+    /// The DDS writer refused it (ros2-client's error, as its text).
+    #[error("DDS: {0}")]
+    Dds(String),
 }
 
 /// `geometry_msgs/msg/PoseStamped` -> (`geometry_msgs`, `PoseStamped`).

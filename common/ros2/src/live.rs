@@ -188,7 +188,7 @@ fn publish_all(team: &Team, mut out: Box<dyn Publish + Send>, rx: Receiver<Snaps
                 done.failed += 1;
                 if done.first_error.is_none() {
                     tracing::warn!(tick = s.tick, "ROS 2: {e}");
-                    done.first_error = Some(e);
+                    done.first_error = Some(e.to_string());
                 }
             }
         }
@@ -216,7 +216,7 @@ mod tests {
     }
 
     impl Publish for Recorder {
-        fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), String> {
+        fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), crate::PublishError> {
             if let Some(gate) = &self.gate {
                 // Bounded: a test that never opens the gate fails instead of hanging.
                 let _ = gate.recv_timeout(Duration::from_secs(10));

@@ -12,7 +12,7 @@ use cdm_zenoh::rmw::{Attachment, RmwPublisher, RmwSession};
 use cdm_files::read_input;
 
 use crate::rmw_zenoh::{gid, node_token, publisher_token, topic_key};
-use crate::{Env, Publish, Ros2Error};
+use crate::{Env, Publish, PublishError, Ros2Error};
 
 /// The largest session configuration read (rmw_zenoh's default file is about 30 KiB).
 const MAX_ZENOH_CONFIG_BYTES: u64 = 1 << 20;
@@ -61,9 +61,9 @@ impl ZenohOut {
 }
 
 impl Publish for ZenohOut {
-    fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), String> {
+    fn publish(&mut self, index: usize, cdr: &[u8]) -> Result<(), PublishError> {
         let Some(out) = self.topics.get_mut(index) else {
-            return Err(format!("no topic {index}"));
+            return Err(PublishError::NoTopic(index));
         };
         out.sequence += 1;
         let now_ns = SystemTime::now()
@@ -74,8 +74,6 @@ impl Publish for ZenohOut {
             source_timestamp_ns: now_ns,
             gid: out.gid,
         };
-        out.publisher
-            .put(cdr, &attachment)
-            .map_err(|e| e.to_string())
+        Ok(out.publisher.put(cdr, &attachment)?)
     }
 }
