@@ -19,7 +19,7 @@ use cdm_zenoh::{
     down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, Up, PROTOCOL_VERSION,
 };
 
-use crate::daemon_core::{Action, DaemonCore, Event};
+use crate::daemon_core::{DaemonAction, DaemonCore, DaemonEvent};
 use crate::daemon_repair::DaemonRepairs;
 use crate::error::{DaemonError, DaemonStop};
 use crate::host_link::{HostLink, ZenohLink};
@@ -356,20 +356,20 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
             if readiness.is_complete() {
                 let mine = self.core.mine().iter().copied();
                 let subscriptions = self.ports.subscriber_graph(mine).unwrap_or_default();
-                self.apply(Event::Ready(subscriptions), now)?;
+                self.apply(DaemonEvent::Ready(subscriptions), now)?;
                 return Ok(());
             }
             if self.interrupted.load(Ordering::Relaxed) {
                 return Err(interrupted_by());
             }
             if let Some((id, how)) = first_exited(&mut self.children) {
-                self.apply(Event::Exited { id, how }, now)?;
+                self.apply(DaemonEvent::Exited { id, how }, now)?;
             }
-            self.apply(Event::Waiting(readiness.waiting_for()), now)?;
+            self.apply(DaemonEvent::Waiting(readiness.waiting_for()), now)?;
             while let Some(f) = self.chan.try_recv()? {
-                self.apply(Event::Frame(f), now)?;
+                self.apply(DaemonEvent::Frame(f), now)?;
             }
-            self.apply(Event::Deadlines, now)?;
+            self.apply(DaemonEvent::Deadlines, now)?;
             let _ = self.ports.wait(Duration::from_millis(20));
         }
     }
@@ -383,20 +383,20 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
                 return Err(interrupted_by());
             }
             let mut busy = false;
-            self.apply(Event::Woke, now)?;
+            self.apply(DaemonEvent::Woke, now)?;
             while let Some(f) = self.chan.try_recv()? {
                 busy = true;
-                if let Some(reason) = self.apply(Event::Frame(f), now)? {
+                if let Some(reason) = self.apply(DaemonEvent::Frame(f), now)? {
                     return Ok(reason);
                 }
             }
             let states = drain(&mut self.ports);
             busy |= states.iter().any(|m| self.core.mine().contains(&m.id));
-            self.apply(Event::States(states), now)?;
+            self.apply(DaemonEvent::States(states), now)?;
             self.repairs.hand_over_ready(&mut self.relays, now);
             let linked = self.repairs.connected(&self.ports, now);
-            self.apply(Event::Linked(linked), now)?;
-            self.apply(Event::Deadlines, now)?;
+            self.apply(DaemonEvent::Linked(linked), now)?;
+            self.apply(DaemonEvent::Deadlines, now)?;
             if let Some(sleep) = idle.after(busy) {
                 self.chan.wait(sleep);
             }
@@ -410,12 +410,12 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
         loop {
             let now = Instant::now();
             let states = drain(&mut self.ports);
-            let _ = self.apply(Event::States(states), now);
+            let _ = self.apply(DaemonEvent::States(states), now);
             let running = self
                 .children
                 .iter_mut()
                 .any(|c| matches!(c.child.try_wait(), Ok(None)));
-            if !running || matches!(self.apply(Event::Woke, now), Ok(Some(_)) | Err(_)) {
+            if !running || matches!(self.apply(DaemonEvent::Woke, now), Ok(Some(_)) | Err(_)) {
                 return;
             }
             let _ = self.ports.wait(Duration::from_millis(5));
@@ -438,8 +438,8 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
             // What the members published as they stopped (real time: their pacing reports).
             let now = Instant::now();
             let states = drain(&mut self.ports);
-            let _ = self.apply(Event::States(states), now);
-            let _ = self.apply(Event::MembersStopped, now);
+            let _ = self.apply(DaemonEvent::States(states), now);
+            let _ = self.apply(DaemonEvent::MembersStopped, now);
         }
         drop(self.relays);
         if let Err(e) = self.ports.shutdown() {
@@ -449,21 +449,25 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
 
     /// Hands `event` to the core and carries out its actions, in order; the stop's reason when
     /// the orchestrator stopped the team (or, stopping, when the wait is over).
-    fn apply(&mut self, event: Event, now: Instant) -> Result<Option<StopReason>, DaemonStop> {
+    fn apply(
+        &mut self,
+        event: DaemonEvent,
+        now: Instant,
+    ) -> Result<Option<StopReason>, DaemonStop> {
         let mut stop = None;
         for action in self.core.handle(event, now)? {
             match action {
-                Action::Send(frame) => self.chan.send(&frame)?,
-                Action::Kill(id) => cdm_team::loss::kill_and_reap(&mut self.children, id),
-                Action::Clock(c) => {
+                DaemonAction::Send(frame) => self.chan.send(&frame)?,
+                DaemonAction::Kill(id) => cdm_team::loss::kill_and_reap(&mut self.children, id),
+                DaemonAction::Clock(c) => {
                     // A new loss: the relays wake their new readers before the members hear it.
                     self.repairs.on_clock(&c, &mut self.relays, now)?;
                     self.ports.publish_clock(c)?;
                 }
-                Action::Relay(states) => relay(&mut self.relays, states)?,
-                Action::CheckExits => self.report_exits(now)?,
-                Action::Finish(reason) => stop = Some(reason),
-                Action::Done => stop = Some(StopReason::Finished),
+                DaemonAction::Relay(states) => relay(&mut self.relays, states)?,
+                DaemonAction::CheckExits => self.report_exits(now)?,
+                DaemonAction::Finish(reason) => stop = Some(reason),
+                DaemonAction::Done => stop = Some(StopReason::Finished),
             }
         }
         Ok(stop)
@@ -479,8 +483,8 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
             if let Ok(Some(status)) = c.child.try_wait() {
                 let (id, how) = (c.id, ProcessExit::of(status));
                 let states = drain(&mut self.ports);
-                self.apply(Event::States(states), now)?;
-                self.apply(Event::Exited { id, how }, now)?;
+                self.apply(DaemonEvent::States(states), now)?;
+                self.apply(DaemonEvent::Exited { id, how }, now)?;
             }
         }
         Ok(())

@@ -25,7 +25,7 @@ const STOPPING_WAIT: Duration = Duration::from_secs(3);
 
 /// What happened, as the loop saw it.
 #[derive(Debug)]
-pub enum Event {
+pub enum DaemonEvent {
     /// A turn of the loop begins (before the frames queued meanwhile are read).
     Woke,
     /// A turn of the loop ends: heartbeat and silence deadlines.
@@ -48,7 +48,7 @@ pub enum Event {
 
 /// What the loop is to do, in order.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Action {
+pub enum DaemonAction {
     /// Send this frame to the orchestrator.
     Send(Up),
     /// Kill this member (SIGKILL) and reap it.
@@ -57,7 +57,7 @@ pub enum Action {
     Clock(ClockMsg),
     /// Re-publish these states of other hosts' members through their relays here.
     Relay(Vec<StateMsg>),
-    /// Look whether member processes ended (each answer is an [`Event::Exited`], after the
+    /// Look whether member processes ended (each answer is a [`DaemonEvent::Exited`], after the
     /// states published before it).
     CheckExits,
     /// The orchestrator stopped the team for this reason: the members are to stop.
@@ -124,36 +124,40 @@ impl DaemonCore {
     }
 
     /// One event at `now`: the actions it calls for, or why the daemon stops bridging.
-    pub fn handle(&mut self, event: Event, now: Instant) -> Result<Vec<Action>, DaemonStop> {
+    pub fn handle(
+        &mut self,
+        event: DaemonEvent,
+        now: Instant,
+    ) -> Result<Vec<DaemonAction>, DaemonStop> {
         let mut out = Vec::new();
         match event {
-            Event::Woke => self.woke(now, &mut out)?,
-            Event::Deadlines => self.deadlines(now, &mut out)?,
-            Event::Waiting(late) => {
+            DaemonEvent::Woke => self.woke(now, &mut out)?,
+            DaemonEvent::Deadlines => self.deadlines(now, &mut out)?,
+            DaemonEvent::Waiting(late) => {
                 if let Phase::Starting { since, deadline } = self.phase {
                     if now.saturating_duration_since(since) > deadline {
                         return Err(DaemonStop::NotStarted { late, deadline });
                     }
                 }
             }
-            Event::Ready(subscriptions) => {
+            DaemonEvent::Ready(subscriptions) => {
                 self.phase = Phase::Flying {
                     last_turn: now,
                     last_child_check: now,
                 };
                 self.send(Up::Ready { subscriptions }, now, &mut out);
             }
-            Event::Frame(f) => {
+            DaemonEvent::Frame(f) => {
                 self.last_heard = now;
                 self.on_frame(f, now, &mut out)?;
             }
-            Event::States(mut states) => {
+            DaemonEvent::States(mut states) => {
                 states.retain(|m| self.mine.contains(&m.id));
                 if !states.is_empty() {
                     self.send(Up::States(states), now, &mut out);
                 }
             }
-            Event::Exited { id, how } => match self.phase {
+            DaemonEvent::Exited { id, how } => match self.phase {
                 Phase::Starting { .. } => return Err(DaemonStop::ExitedEarly { id, how }),
                 Phase::Flying { .. } if self.reported.insert(id) => {
                     let how = NetExit::of(&how);
@@ -161,26 +165,26 @@ impl DaemonCore {
                 }
                 _ => {}
             },
-            Event::Linked(pairs) => {
+            DaemonEvent::Linked(pairs) => {
                 if !pairs.is_empty() {
                     self.send(Up::Linked(pairs), now, &mut out);
                 }
             }
-            Event::MembersStopped => self.send(Up::Stopped, now, &mut out),
+            DaemonEvent::MembersStopped => self.send(Up::Stopped, now, &mut out),
         }
         Ok(out)
     }
 
-    fn send(&mut self, frame: Up, now: Instant, out: &mut Vec<Action>) {
+    fn send(&mut self, frame: Up, now: Instant, out: &mut Vec<DaemonAction>) {
         self.last_sent = now;
-        out.push(Action::Send(frame));
+        out.push(DaemonAction::Send(frame));
     }
 
     /// The start of a turn. Flying: between two turns this process did not run for longer than
     /// the link timeout (SIGSTOP, a debugger) is checked before the frames queued meanwhile
     /// are read, which would make the link look alive; the member processes are due a look.
     /// Stopping: done once the wait is over.
-    fn woke(&mut self, now: Instant, out: &mut Vec<Action>) -> Result<(), DaemonStop> {
+    fn woke(&mut self, now: Instant, out: &mut Vec<DaemonAction>) -> Result<(), DaemonStop> {
         match &mut self.phase {
             Phase::Flying {
                 last_turn,
@@ -194,17 +198,17 @@ impl DaemonCore {
                 *last_turn = now;
                 if now.saturating_duration_since(*last_child_check) > CHILD_CHECK {
                     *last_child_check = now;
-                    out.push(Action::CheckExits);
+                    out.push(DaemonAction::CheckExits);
                 }
             }
-            Phase::Stopping { until } if now >= *until => out.push(Action::Done),
+            Phase::Stopping { until } if now >= *until => out.push(DaemonAction::Done),
             _ => {}
         }
         Ok(())
     }
 
     /// Heartbeat out when due at `now`; an error when the orchestrator has been silent too long.
-    fn deadlines(&mut self, now: Instant, out: &mut Vec<Action>) -> Result<(), DaemonStop> {
+    fn deadlines(&mut self, now: Instant, out: &mut Vec<DaemonAction>) -> Result<(), DaemonStop> {
         if matches!(self.phase, Phase::Stopping { .. }) {
             return Ok(());
         }
@@ -221,7 +225,12 @@ impl DaemonCore {
     /// One frame from the orchestrator. Before the start only a stop matters (it ends the wait);
     /// then: a kill, the clock to every member (a stop ends the flight), other hosts' states
     /// for their readers here.
-    fn on_frame(&mut self, f: Down, now: Instant, out: &mut Vec<Action>) -> Result<(), DaemonStop> {
+    fn on_frame(
+        &mut self,
+        f: Down,
+        now: Instant,
+        out: &mut Vec<DaemonAction>,
+    ) -> Result<(), DaemonStop> {
         let stop = match &f {
             Down::Clock(c) => match c.command() {
                 ClockCommand::Stop(reason) => Some(reason),
@@ -236,16 +245,16 @@ impl DaemonCore {
             };
         }
         match f {
-            Down::Kill(id) => out.push(Action::Kill(id)),
-            Down::Clock(c) => out.push(Action::Clock(c)),
-            Down::States(states) => out.push(Action::Relay(states)),
+            Down::Kill(id) => out.push(DaemonAction::Kill(id)),
+            Down::Clock(c) => out.push(DaemonAction::Clock(c)),
+            Down::States(states) => out.push(DaemonAction::Relay(states)),
             Down::Heartbeat => {}
         }
         if let Some(reason) = stop {
             self.phase = Phase::Stopping {
                 until: now + STOPPING_WAIT,
             };
-            out.push(Action::Finish(reason));
+            out.push(DaemonAction::Finish(reason));
         }
         Ok(())
     }
@@ -263,10 +272,10 @@ mod tests {
     /// A daemon of members 2 and 4, its link timing out after 3 s, flying from `t0`.
     fn flying(t0: Instant) -> DaemonCore {
         let mut d = DaemonCore::new([2, 4].into(), ms(3000), t0);
-        let ready = d.handle(Event::Ready(BTreeMap::new()), t0).unwrap();
+        let ready = d.handle(DaemonEvent::Ready(BTreeMap::new()), t0).unwrap();
         assert_eq!(
             ready,
-            [Action::Send(Up::Ready {
+            [DaemonAction::Send(Up::Ready {
                 subscriptions: BTreeMap::new()
             })]
         );
@@ -281,15 +290,15 @@ mod tests {
     fn the_daemon_keeps_its_link_alive_and_gives_up_on_a_silent_orchestrator() {
         let t0 = Instant::now();
         let mut d = flying(t0);
-        assert_eq!(d.handle(Event::Deadlines, t0 + ms(199)).unwrap(), []);
-        let beat = d.handle(Event::Deadlines, t0 + ms(200)).unwrap();
-        assert_eq!(beat, [Action::Send(Up::Heartbeat)]);
-        d.handle(Event::Frame(Down::Heartbeat), t0 + ms(2000))
+        assert_eq!(d.handle(DaemonEvent::Deadlines, t0 + ms(199)).unwrap(), []);
+        let beat = d.handle(DaemonEvent::Deadlines, t0 + ms(200)).unwrap();
+        assert_eq!(beat, [DaemonAction::Send(Up::Heartbeat)]);
+        d.handle(DaemonEvent::Frame(Down::Heartbeat), t0 + ms(2000))
             .unwrap();
-        d.handle(Event::Woke, t0 + ms(2000)).unwrap();
-        d.handle(Event::Deadlines, t0 + ms(5000)).unwrap();
-        d.handle(Event::Woke, t0 + ms(5000)).unwrap();
-        let e = d.handle(Event::Deadlines, t0 + ms(5001)).unwrap_err();
+        d.handle(DaemonEvent::Woke, t0 + ms(2000)).unwrap();
+        d.handle(DaemonEvent::Deadlines, t0 + ms(5000)).unwrap();
+        d.handle(DaemonEvent::Woke, t0 + ms(5000)).unwrap();
+        let e = d.handle(DaemonEvent::Deadlines, t0 + ms(5001)).unwrap_err();
         assert!(matches!(e, DaemonStop::Silent { .. }), "{e}");
         assert_eq!(
             e.to_string(),
@@ -301,9 +310,9 @@ mod tests {
     fn a_late_frame_after_a_stall_does_not_keep_the_link() {
         let t0 = Instant::now();
         let mut d = flying(t0);
-        d.handle(Event::Woke, t0 + ms(3000)).unwrap();
+        d.handle(DaemonEvent::Woke, t0 + ms(3000)).unwrap();
         // The process did not run for 5.2 s; a frame queued meanwhile is read after the check.
-        let e = d.handle(Event::Woke, t0 + ms(8200)).unwrap_err();
+        let e = d.handle(DaemonEvent::Woke, t0 + ms(8200)).unwrap_err();
         assert!(
             e.to_string()
                 .starts_with("this daemon did not run for 5.2 s"),
@@ -321,7 +330,7 @@ mod tests {
         let t0 = Instant::now();
         let mut d = DaemonCore::new([2, 4].into(), ms(3000), t0);
         let run = ClockMsg::run(3, 0);
-        let actions = d.handle(Event::Frame(Down::Clock(run)), t0).unwrap();
+        let actions = d.handle(DaemonEvent::Frame(Down::Clock(run)), t0).unwrap();
         assert_eq!(
             actions,
             [],
@@ -329,19 +338,22 @@ mod tests {
         );
         let stop = ClockMsg::stop(0, 0, StopReason::AgentFault);
         let e = d
-            .handle(Event::Frame(Down::Clock(stop)), t0 + ms(10))
+            .handle(DaemonEvent::Frame(Down::Clock(stop)), t0 + ms(10))
             .unwrap_err();
         assert!(matches!(e, DaemonStop::StoppedBeforeStart), "{e}");
 
         let mut d = DaemonCore::new([2, 4].into(), ms(3000), t0);
         let deadline = ms(30_120);
-        d.handle(Event::Waiting(vec![4]), t0 + deadline).unwrap();
+        d.handle(DaemonEvent::Waiting(vec![4]), t0 + deadline)
+            .unwrap();
         let e = d
-            .handle(Event::Waiting(vec![4]), t0 + deadline + ms(1))
+            .handle(DaemonEvent::Waiting(vec![4]), t0 + deadline + ms(1))
             .unwrap_err();
         assert_eq!(e.to_string(), "agents [4] did not start within 30.12s");
         let how = ProcessExit::Code(3);
-        let e = d.handle(Event::Exited { id: 2, how }, t0).unwrap_err();
+        let e = d
+            .handle(DaemonEvent::Exited { id: 2, how }, t0)
+            .unwrap_err();
         assert_eq!(
             e.to_string(),
             "agent 2 exited with code 3 before the team started"
@@ -356,32 +368,40 @@ mod tests {
         let crossing = vec![state(7, 4)];
         let t = t0 + ms(10);
         assert_eq!(
-            d.handle(Event::Frame(Down::Kill(4)), t).unwrap(),
-            [Action::Kill(4)]
+            d.handle(DaemonEvent::Frame(Down::Kill(4)), t).unwrap(),
+            [DaemonAction::Kill(4)]
         );
         assert_eq!(
-            d.handle(Event::Frame(Down::States(crossing.clone())), t)
+            d.handle(DaemonEvent::Frame(Down::States(crossing.clone())), t)
                 .unwrap(),
-            [Action::Relay(crossing)]
+            [DaemonAction::Relay(crossing)]
         );
         assert_eq!(
-            d.handle(Event::Frame(Down::Clock(grant)), t).unwrap(),
-            [Action::Clock(grant)]
+            d.handle(DaemonEvent::Frame(Down::Clock(grant)), t).unwrap(),
+            [DaemonAction::Clock(grant)]
         );
         let stop = ClockMsg::stop(9, 1, StopReason::Finished);
         assert_eq!(
-            d.handle(Event::Frame(Down::Clock(stop)), t).unwrap(),
-            [Action::Clock(stop), Action::Finish(StopReason::Finished)]
+            d.handle(DaemonEvent::Frame(Down::Clock(stop)), t).unwrap(),
+            [
+                DaemonAction::Clock(stop),
+                DaemonAction::Finish(StopReason::Finished)
+            ]
         );
         // Stopping: the last states still go up, for 3 s at most; the link is not judged.
         let last = vec![state(2, 9)];
-        let up = d.handle(Event::States(last.clone()), t + ms(5)).unwrap();
-        assert_eq!(up, [Action::Send(Up::States(last))]);
-        assert_eq!(d.handle(Event::Deadlines, t + ms(2999)).unwrap(), []);
-        assert_eq!(d.handle(Event::Woke, t + ms(2999)).unwrap(), []);
-        assert_eq!(d.handle(Event::Woke, t + ms(3000)).unwrap(), [Action::Done]);
-        let bye = d.handle(Event::MembersStopped, t + ms(3000)).unwrap();
-        assert_eq!(bye, [Action::Send(Up::Stopped)]);
+        let up = d
+            .handle(DaemonEvent::States(last.clone()), t + ms(5))
+            .unwrap();
+        assert_eq!(up, [DaemonAction::Send(Up::States(last))]);
+        assert_eq!(d.handle(DaemonEvent::Deadlines, t + ms(2999)).unwrap(), []);
+        assert_eq!(d.handle(DaemonEvent::Woke, t + ms(2999)).unwrap(), []);
+        assert_eq!(
+            d.handle(DaemonEvent::Woke, t + ms(3000)).unwrap(),
+            [DaemonAction::Done]
+        );
+        let bye = d.handle(DaemonEvent::MembersStopped, t + ms(3000)).unwrap();
+        assert_eq!(bye, [DaemonAction::Send(Up::Stopped)]);
     }
 
     #[test]
@@ -393,19 +413,23 @@ mod tests {
             peer: None,
         });
         let published = vec![state(2, 8), state(7, 8), fault];
-        let up = d.handle(Event::States(published), t0).unwrap();
+        let up = d.handle(DaemonEvent::States(published), t0).unwrap();
         assert_eq!(
             up,
-            [Action::Send(Up::States(vec![state(2, 8), fault]))],
+            [DaemonAction::Send(Up::States(vec![state(2, 8), fault]))],
             "a relay's state is not this host's to send"
         );
-        assert_eq!(d.handle(Event::States(vec![state(7, 9)]), t0).unwrap(), []);
-        assert_eq!(d.handle(Event::Woke, t0 + ms(100)).unwrap(), []);
-        let due = d.handle(Event::Woke, t0 + ms(101)).unwrap();
-        assert_eq!(due, [Action::CheckExits]);
+        assert_eq!(
+            d.handle(DaemonEvent::States(vec![state(7, 9)]), t0)
+                .unwrap(),
+            []
+        );
+        assert_eq!(d.handle(DaemonEvent::Woke, t0 + ms(100)).unwrap(), []);
+        let due = d.handle(DaemonEvent::Woke, t0 + ms(101)).unwrap();
+        assert_eq!(due, [DaemonAction::CheckExits]);
         let how = ProcessExit::Signal(9);
         let exit = d.handle(
-            Event::Exited {
+            DaemonEvent::Exited {
                 id: 4,
                 how: how.clone(),
             },
@@ -413,16 +437,16 @@ mod tests {
         );
         assert_eq!(
             exit.unwrap(),
-            [Action::Send(Up::Exited {
+            [DaemonAction::Send(Up::Exited {
                 id: 4,
                 how: NetExit::Signal(9)
             })]
         );
         assert!(d.reported(4));
-        let again = d.handle(Event::Exited { id: 4, how }, t0 + ms(300));
+        let again = d.handle(DaemonEvent::Exited { id: 4, how }, t0 + ms(300));
         assert_eq!(again.unwrap(), []);
-        let linked = d.handle(Event::Linked(vec![(2, 7)]), t0).unwrap();
-        assert_eq!(linked, [Action::Send(Up::Linked(vec![(2, 7)]))]);
-        assert_eq!(d.handle(Event::Linked(vec![]), t0).unwrap(), []);
+        let linked = d.handle(DaemonEvent::Linked(vec![(2, 7)]), t0).unwrap();
+        assert_eq!(linked, [DaemonAction::Send(Up::Linked(vec![(2, 7)]))]);
+        assert_eq!(d.handle(DaemonEvent::Linked(vec![]), t0).unwrap(), []);
     }
 }
