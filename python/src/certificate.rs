@@ -10,12 +10,12 @@ use cdm_team::Failure;
 use pyo3::prelude::*;
 
 use crate::errors::to_py;
-use crate::scenario::Scenario;
+use crate::scenario::PyScenario;
 
 /// One phase of a mission, certified (`take-off`, `segment N`, `landing`).
-#[pyclass(module = "cdm", frozen, get_all)]
+#[pyclass(module = "cdm", name = "Phase", frozen, get_all)]
 #[derive(Clone)]
-pub struct Phase {
+pub struct PyPhase {
     pub name: String,
     pub t_start_s: f64,
     pub t_end_s: f64,
@@ -35,9 +35,9 @@ pub struct Phase {
 }
 
 /// The smallest margin to one boundary of the airspace.
-#[pyclass(module = "cdm", frozen, get_all)]
+#[pyclass(module = "cdm", name = "Clearance", frozen, get_all)]
 #[derive(Clone)]
-pub struct Clearance {
+pub struct PyClearance {
     /// `fence` or `obstacle`.
     pub kind: String,
     /// The fence's side (`floor`, `ceiling`, `edge K`) or the obstacle's name.
@@ -51,17 +51,17 @@ pub struct Clearance {
 }
 
 /// The airspace's margins: every fence side, then every obstacle.
-#[pyclass(module = "cdm", frozen, get_all)]
+#[pyclass(module = "cdm", name = "Airspace", frozen, get_all)]
 #[derive(Clone)]
-pub struct Airspace {
+pub struct PyAirspace {
     /// The ball around each member's desired path: eps + delta (eq. 38).
     pub radius_m: f64,
-    pub clearances: Vec<Clearance>,
+    pub clearances: Vec<PyClearance>,
 }
 
 /// The pre-flight certificate (`orchestrator plan`).
-#[pyclass(module = "cdm", frozen, get_all)]
-pub struct Certificate {
+#[pyclass(module = "cdm", name = "Certificate", frozen, get_all)]
+pub struct PyCertificate {
     /// `"SAFE"` or `"UNSAFE"`.
     pub verdict: String,
     /// Why it is UNSAFE (empty when SAFE).
@@ -90,15 +90,15 @@ pub struct Certificate {
     pub max_link_delay_at_least: bool,
     pub notes: Vec<String>,
     /// A mission's phases in flight order (empty otherwise).
-    pub phases: Vec<Phase>,
+    pub phases: Vec<PyPhase>,
     /// The airspace's margins; `None` without a fence or obstacles.
-    pub airspace: Option<Airspace>,
+    pub airspace: Option<PyAirspace>,
     /// `plan --json`'s text, byte for byte (losses and suggestions included when asked for).
     pub json: String,
 }
 
 #[pymethods]
-impl Certificate {
+impl PyCertificate {
     fn __repr__(&self) -> String {
         format!(
             "Certificate({}: {} members, lambda_1 = {}, delta_m = {}, t_threshold_s = {}, {} reason(s))",
@@ -112,9 +112,9 @@ impl Certificate {
     }
 }
 
-impl Phase {
+impl PyPhase {
     fn of(p: &PhaseCertificate) -> Self {
-        Phase {
+        PyPhase {
             name: p.name.clone(),
             t_start_s: p.t_start_s,
             t_end_s: p.t_end_s,
@@ -132,10 +132,10 @@ impl Phase {
     }
 }
 
-impl Airspace {
+impl PyAirspace {
     fn of(a: &AirspaceCertificate) -> Self {
         let clearances = (a.clearances.iter())
-            .map(|c| Clearance {
+            .map(|c| PyClearance {
                 kind: match c.kind {
                     ClearanceKind::Fence => "fence",
                     ClearanceKind::Obstacle => "obstacle",
@@ -148,17 +148,17 @@ impl Airspace {
                 phase: c.phase.clone(),
             })
             .collect();
-        Airspace {
+        PyAirspace {
             radius_m: a.radius_m,
             clearances,
         }
     }
 }
 
-impl Certificate {
+impl PyCertificate {
     fn of(c: &certificate::Certificate) -> Result<Self, Failure> {
         let n = &c.numbers;
-        Ok(Certificate {
+        Ok(PyCertificate {
             verdict: c.verdict.to_string(),
             reasons: c.reasons.clone(),
             scenario: c.scenario.clone(),
@@ -178,8 +178,8 @@ impl Certificate {
             max_link_delay_ms: c.max_link_delay_ms,
             max_link_delay_at_least: c.max_link_delay_at_least,
             notes: c.notes.clone(),
-            phases: c.segments.iter().flatten().map(Phase::of).collect(),
-            airspace: c.airspace.as_ref().map(Airspace::of),
+            phases: c.segments.iter().flatten().map(PyPhase::of).collect(),
+            airspace: c.airspace.as_ref().map(PyAirspace::of),
             json: serde_json::to_string_pretty(c).map_err(Failure::fault)?,
         })
     }
@@ -192,11 +192,11 @@ impl Certificate {
 #[pyo3(signature = (scenario, losses=false, suggest_offsets=false, threads=None))]
 pub fn plan(
     py: Python<'_>,
-    scenario: &Scenario,
+    scenario: &PyScenario,
     losses: bool,
     suggest_offsets: bool,
     threads: Option<usize>,
-) -> PyResult<Certificate> {
+) -> PyResult<PyCertificate> {
     let s = &scenario.loaded;
     let c = py.detach(|| {
         let mut c = certify(s);
@@ -211,12 +211,12 @@ pub fn plan(
         }
         c
     });
-    Certificate::of(&c).map_err(to_py)
+    PyCertificate::of(&c).map_err(to_py)
 }
 
 /// The max follower deviation (2-norm, metres) of the plan flown with travel time
 /// `t_total_s` (what `plan --sweep` draws; infinite when the flight faults).
 #[pyfunction]
-pub fn deviation_at(py: Python<'_>, scenario: &Scenario, t_total_s: f64) -> f64 {
+pub fn deviation_at(py: Python<'_>, scenario: &PyScenario, t_total_s: f64) -> f64 {
     py.detach(|| certificate::deviation_at(&scenario.loaded, t_total_s))
 }

@@ -8,7 +8,7 @@ use cdm_team::Exit;
 use pyo3::prelude::*;
 
 use crate::errors::{bad_input, to_py};
-use crate::scenario::Scenario;
+use crate::scenario::PyScenario;
 
 /// Export `scenario` to `target` (`crazyswarm2`: a directory; `skybrush`: a .skyc file) at
 /// `out`, mapped p -> scale p + origin ("X,Y,Z"), for vehicles of radius `eps`. Returns the
@@ -19,7 +19,7 @@ use crate::scenario::Scenario;
 #[allow(clippy::too_many_arguments)]
 pub fn export(
     py: Python<'_>,
-    scenario: &Scenario,
+    scenario: &PyScenario,
     target: &str,
     out: PathBuf,
     scale: f64,

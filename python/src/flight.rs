@@ -14,7 +14,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
 use crate::errors::{bad_input, to_py};
-use crate::scenario::Scenario;
+use crate::scenario::PyScenario;
 
 /// Fly `scenario` into the run directory `out` (refused when it exists and is not empty,
 /// unless `force`): telemetry.csv every `every` ticks (the CLI's default when `None`),
@@ -24,7 +24,7 @@ use crate::scenario::Scenario;
 #[pyo3(signature = (scenario, out, force=false, every=None, max_ticks=None, stop_on_violation=false))]
 pub fn simulate(
     py: Python<'_>,
-    scenario: &Scenario,
+    scenario: &PyScenario,
     out: PathBuf,
     force: bool,
     every: Option<u64>,

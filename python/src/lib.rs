@@ -15,11 +15,11 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _cdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
-    m.add_class::<scenario::Scenario>()?;
-    m.add_class::<certificate::Certificate>()?;
-    m.add_class::<certificate::Phase>()?;
-    m.add_class::<certificate::Clearance>()?;
-    m.add_class::<certificate::Airspace>()?;
+    m.add_class::<scenario::PyScenario>()?;
+    m.add_class::<certificate::PyCertificate>()?;
+    m.add_class::<certificate::PyPhase>()?;
+    m.add_class::<certificate::PyClearance>()?;
+    m.add_class::<certificate::PyAirspace>()?;
     m.add_function(wrap_pyfunction!(scenario::load, m)?)?;
     m.add_function(wrap_pyfunction!(scenario::parse, m)?)?;
     m.add_function(wrap_pyfunction!(certificate::plan, m)?)?;

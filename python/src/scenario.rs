@@ -11,15 +11,15 @@ use pyo3::prelude::*;
 use crate::errors::to_py;
 
 /// A validated scenario (`cdm.load`, `cdm.parse`).
-#[pyclass(module = "cdm", frozen)]
-pub struct Scenario {
+#[pyclass(module = "cdm", name = "Scenario", frozen)]
+pub struct PyScenario {
     pub loaded: Loaded,
     /// How the CLI would name it; `None` for a scenario parsed from text.
     pub source: Option<Source>,
 }
 
 #[pymethods]
-impl Scenario {
+impl PyScenario {
     /// The scenario's `name`.
     #[getter]
     fn name(&self) -> &str {
@@ -100,7 +100,7 @@ pub fn load(
     builtin: Option<String>,
     n: Option<usize>,
     t_total_s: Option<f64>,
-) -> PyResult<Scenario> {
+) -> PyResult<PyScenario> {
     let source = Source {
         scenario: path,
         n,
@@ -110,7 +110,7 @@ pub fn load(
     let loaded = py
         .detach(|| cdm_export::cli::load(&source))
         .map_err(to_py)?;
-    Ok(Scenario {
+    Ok(PyScenario {
         loaded,
         source: Some(source),
     })
@@ -120,11 +120,11 @@ pub fn load(
 /// in messages.
 #[pyfunction]
 #[pyo3(signature = (text, origin="<text>"))]
-pub fn parse(py: Python<'_>, text: &str, origin: &str) -> PyResult<Scenario> {
+pub fn parse(py: Python<'_>, text: &str, origin: &str) -> PyResult<PyScenario> {
     let loaded = py
         .detach(|| Loaded::parse(text, origin, Checks::Full))
         .map_err(|e| to_py(Failure::bad_input(e)))?;
-    Ok(Scenario {
+    Ok(PyScenario {
         loaded,
         source: None,
     })

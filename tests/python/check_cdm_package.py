@@ -12,6 +12,9 @@ Usage:
   check_cdm_package.py refuse CALL ARG...
       Runs one call that must fail and prints `<exception class>: <message>`:
       `load PATH_OR_NAME`, `plan PATH_OR_NAME`, `simulate PATH_OR_NAME OUT`, `generated N`.
+  check_cdm_package.py export SCENARIO TARGET OUT SCALE
+      `cdm.export(SCENARIO, TARGET, OUT, scale=SCALE)`; prints `export <verdict> <written>` last
+      (the files are compared with the CLI's by the Rust test).
 """
 
 import json
@@ -153,9 +156,18 @@ def refuse(call, args):
     fail(f"{call} {args} did not raise")
 
 
+def export(source, target, out, scale):
+    e = cdm.export(source, target, out, scale=float(scale))
+    if e.certificate["certificate"]["verdict"] != e.verdict:
+        fail(f"verdict {e.verdict}, certificate.json's {e.certificate['certificate']['verdict']}")
+    print(f"export {e.verdict} {e.written}")
+
+
 def main():
     if sys.argv[1] == "same":
         same(*sys.argv[2:5])
+    elif sys.argv[1] == "export":
+        export(*sys.argv[2:6])
     else:
         refuse(sys.argv[2], sys.argv[3:])
 

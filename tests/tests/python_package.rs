@@ -7,6 +7,8 @@
 //!   every typed field equal to it), audit.json as a dict, and telemetry.csv as NumPy columns,
 //!   value for value, for paper40, its mission and a fenced paper40
 //!   (tests/python/check_cdm_package.py);
+//! - `cdm.export` writes the very files of `orchestrator export crazyswarm2` and `export
+//!   skybrush`;
 //! - bad input raises `cdm.BadInput` with the very message the CLI prints after `error: `;
 //! - python/examples/design_sweep.py designs a formation, certifies it and sweeps its travel
 //!   time: its deviations and T_threshold are the CLI's `plan --sweep` and `plan --json`
@@ -176,6 +178,66 @@ fn plan_and_simulate_equal_the_cli_with_a_geofence_and_obstacles() {
     write_scenario(tmp.path(), "fenced.toml", &fenced_paper40());
     let line = same_as_cli("fenced.toml", &tmp);
     assert!(line.contains("certificate SAFE"), "{line}");
+}
+
+#[test]
+fn export_writes_the_files_of_the_cli() {
+    let tmp = TempDir::new();
+    let dir = tmp.path();
+    let check = python_script("check_cdm_package.py");
+    let check = check.to_str().unwrap_or_default();
+    for (target, cli_out, py_out) in [
+        ("crazyswarm2", "cli-cf", "py-cf"),
+        ("skybrush", "cli/show.skyc", "py/show.skyc"),
+    ] {
+        let cli = orchestrator(
+            dir,
+            &[
+                "--quiet",
+                "export",
+                target,
+                "--builtin",
+                "paper40",
+                "--scale",
+                "0.01",
+                "--out",
+                cli_out,
+            ],
+        );
+        assert_eq!(cli.status.code(), Some(0), "{}", describe(&cli));
+        let py = run(
+            &mut python(dir, &[check, "export", "paper40", target, py_out, "0.01"]),
+            RUN_DEADLINE,
+        );
+        assert_eq!(py.status.code(), Some(0), "{}", describe(&py));
+        let text = String::from_utf8_lossy(&py.stdout);
+        assert_eq!(text.lines().last(), Some("export SAFE True"), "{text}");
+    }
+    // Crazyswarm2: every file the CLI wrote, byte for byte.
+    let names = |d: &str| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir.join(d))
+            .expect("export directory")
+            .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+            .collect();
+        v.sort();
+        v
+    };
+    let files = names("cli-cf");
+    assert_eq!(files, names("py-cf"));
+    assert!(files.len() > 40, "{files:?}");
+    for f in &files {
+        let a = std::fs::read(dir.join("cli-cf").join(f)).expect("read");
+        let b = std::fs::read(dir.join("py-cf").join(f)).expect("read");
+        assert!(
+            a == b,
+            "{f} differs between the CLI's export and cdm.export"
+        );
+    }
+    // Skybrush: the show and the certificate beside it.
+    for f in ["show.skyc", "show.certificate.json", "show.scenario.toml"] {
+        let read = |d: &str| std::fs::read(dir.join(d).join(f)).expect("read");
+        assert!(read("cli") == read("py"), "{f} differs");
+    }
 }
 
 /// The CLI's refusal (exit 2, `error: MESSAGE`) and the package's (`BadInput: MESSAGE`).
