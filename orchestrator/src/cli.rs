@@ -241,15 +241,9 @@ pub struct OutDir {
     pub force: bool,
 }
 
-/// Rows a tick the default `--every` keeps at most: a team of N members writes every
-/// ceil(N / 40)-th tick, so a default run's telemetry grows with its length, not its team
-/// (about 2 million rows for the longest built-in plans; docs/src/benchmarks/telemetry.md).
-pub const DEFAULT_ROWS_PER_TICK: u64 = 40;
-
-/// `--every`, or its default for a team of `members`.
-pub fn every_or_default(every: Option<u64>, members: usize) -> u64 {
-    every.unwrap_or_else(|| (members as u64).div_ceil(DEFAULT_ROWS_PER_TICK).max(1))
-}
+// The default `--every` lives beside the telemetry writers, where the Python package's
+// `simulate` finds it too.
+pub use cdm_team::telemetry::{every_or_default, DEFAULT_ROWS_PER_TICK};
 
 /// The line that says, before a run, which ticks its telemetry keeps.
 pub fn every_line(every: Option<u64>, members: usize) -> String {

@@ -15,7 +15,7 @@ const MAX_FN_LINES: usize = 80;
 fn sources() -> Vec<PathBuf> {
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let mut out = Vec::new();
-    let mut dirs: Vec<PathBuf> = ["agent", "leader", "orchestrator", "tests"]
+    let mut dirs: Vec<PathBuf> = ["agent", "leader", "orchestrator", "python", "tests"]
         .iter()
         .map(|p| root.join(p).join("src"))
         .collect();
@@ -371,7 +371,7 @@ fn import_circles(modules: &[(Vec<String>, String)]) -> Vec<Vec<String>> {
 /// Every package directory with a `src/` (relative to the workspace root).
 fn packages() -> Vec<String> {
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    let mut out: Vec<String> = ["agent", "leader", "orchestrator", "tests"]
+    let mut out: Vec<String> = ["agent", "leader", "orchestrator", "python", "tests"]
         .map(str::to_owned)
         .to_vec();
     for e in std::fs::read_dir(root.join("common"))

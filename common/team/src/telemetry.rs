@@ -12,6 +12,16 @@ use cdm_scenario::Scenario;
 
 use crate::Failure;
 
+/// Rows a tick the default `--every` keeps at most: a team of N members writes every
+/// ceil(N / 40)-th tick, so a default run's telemetry grows with its length, not its team
+/// (about 2 million rows for the longest built-in plans; docs/src/benchmarks/telemetry.md).
+pub const DEFAULT_ROWS_PER_TICK: u64 = 40;
+
+/// `--every`, or its default for a team of `members`.
+pub fn every_or_default(every: Option<u64>, members: usize) -> u64 {
+    every.unwrap_or_else(|| (members as u64).div_ceil(DEFAULT_ROWS_PER_TICK).max(1))
+}
+
 /// Refuse a format this build cannot write, before anything is created.
 pub fn check_available(format: TelemetryFormat) -> Result<(), Failure> {
     let (name, built) = match format {
