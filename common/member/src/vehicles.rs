@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use cdm_mavlink::{
     member_addr, FeedForward, LinkTimeouts, MavlinkPlant, PlantConfig, PlantError, SigningKey,
-    VehicleConfig, VehicleOrigin, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
+    VehicleConfig, VehicleFrame, VehicleOrigin, DEFAULT_HEARTBEAT_TIMEOUT,
+    DEFAULT_POSITION_TIMEOUT,
 };
 
 use crate::member_error::MemberError;
@@ -308,6 +309,10 @@ impl Vehicles {
         let Vehicles::Mavlink(o) = self else {
             return Ok(());
         };
+        let local_origin = o.origins.is_some() || o.origin != Vec3::zeros();
+        if s.file.geo_origin.is_some() && local_origin {
+            return Err(CheckError::LocalOriginOutdoors);
+        }
         if let Some(file) = &o.origins {
             VehicleOrigins::load(file, &member_ids(s))?;
         }
@@ -331,6 +336,10 @@ pub enum CheckError {
     /// `--disarm-at-end` on a scenario that does not end on the ground.
     #[error("--disarm-at-end: the scenario has no [landing] (the vehicles would be disarmed in the air)")]
     DisarmWithoutLanding,
+    /// `--vehicle-origin(s)` on a scenario with an `[origin]`, whose vehicles fly in global
+    /// coordinates and have no use for a local origin.
+    #[error("--vehicle-origin and --vehicle-origins are for local NED; the scenario has an [origin], so its vehicles fly latitude and longitude (leave them out)")]
+    LocalOriginOutdoors,
 }
 
 fn member_ids(s: &Scenario) -> Vec<u32> {
@@ -369,7 +378,11 @@ pub fn connect<'a>(
     connect: Duration,
     interrupted: &AtomicBool,
 ) -> Result<MavlinkPlant<'a>, MemberError> {
-    let origin = origin_of(s, me, o)?;
+    // With an [origin] the vehicles fly latitude and longitude; otherwise local NED.
+    let frame = match s.file.geo_origin {
+        Some(g) => VehicleFrame::Global(g),
+        None => VehicleFrame::Local(VehicleOrigin(origin_of(s, me, o)?)),
+    };
     let index = s
         .formation
         .members
@@ -380,7 +393,7 @@ pub fn connect<'a>(
     let config = PlantConfig {
         vehicle: VehicleConfig {
             agent: me.id,
-            origin: VehicleOrigin(origin),
+            frame,
             arm: o.arm,
             connect_deadline: connect,
             timeouts: o.timeouts,
