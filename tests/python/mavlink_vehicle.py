@@ -93,6 +93,18 @@ its local position's reference where the estimator first has a GPS fix):
   - alt (relative frames: - alt); acceleration feed-forward only when the type_mask uses it.
   A global target without --home (no GPS) is refused: counted, not flown.
 
+Its geofence, as PX4 keeps one (PX4 user guide, "GeoFence": polygons and circles, inclusion or
+exclusion, uploaded as a fence plan) through the mission protocol's fence side (mavlink.io,
+"Mission Protocol", mission_type MAV_MISSION_TYPE_FENCE):
+- Upload: MISSION_COUNT, then it asks for each item in turn with MISSION_REQUEST_INT and closes
+  with MISSION_ACK: MAV_MISSION_ACCEPTED once every item arrived and the polygons are whole
+  (every vertex of a polygon carries its vertex count as param1, as the geofence items define),
+  MAV_MISSION_INVALID otherwise, and MAV_MISSION_DENIED to every upload with --refuse-fence. A
+  new fence replaces the old one only once accepted.
+- Download: MISSION_REQUEST_LIST answered with MISSION_COUNT, each MISSION_REQUEST_INT with that
+  MISSION_ITEM_INT; the ground side's MISSION_ACK ends it.
+The fence is kept and reported (summary `fence`), not enforced in flight.
+
 What it does not reproduce:
 - PX4's own stream rates on an onboard link (LOCAL_POSITION_NED 30 Hz, ATTITUDE 100 Hz in
   mavlink_main.cpp's onboard mode): the defaults here are 50 Hz for both; pass --position-hz 30
@@ -243,6 +255,8 @@ def parse_args():
                    help="answer every MAV_CMD_NAV_TAKEOFF with FAILED")
     p.add_argument("--stall-climb", action="store_true",
                    help="an accepted take-off climbs only halfway and stays there")
+    p.add_argument("--refuse-fence", action="store_true",
+                   help="answer every fence upload with MISSION_ACK MAV_MISSION_DENIED")
     p.add_argument("--home", type=vec3, default=None,
                    help="LAT,LON,ALT of its local NED origin (degrees, m AMSL): it has GPS, "
                         "streams GLOBAL_POSITION_INT and flies SET_POSITION_TARGET_GLOBAL_INT")
@@ -345,6 +359,11 @@ class Vehicle:
         self.home_projection = (None if args.home is None
                                 else MapProjection(args.home[0], args.home[1]))
         self.global_refused = 0
+        # The geofence it holds (MISSION_ITEM_INT messages), the one being uploaded, and counts.
+        self.fence = []
+        self.fence_incoming = None
+        self.fence_expected = 0
+        self.fence_acks = {}
 
     def ardupilot(self):
         return self.args.autopilot == "ardupilot"
@@ -427,6 +446,46 @@ class Vehicle:
             self.on_setpoint_value(self.setpoint, now)
         elif kind == "COMMAND_LONG":
             self.on_command(conn, msg, now)
+        elif (kind.startswith("MISSION_")
+              and getattr(msg, "mission_type", None) == mavlink.MAV_MISSION_TYPE_FENCE):
+            self.on_fence(conn, msg)
+
+    def on_fence(self, conn, msg):
+        """The fence side of the mission protocol (upload, download)."""
+        kind = msg.get_type()
+        fence = mavlink.MAV_MISSION_TYPE_FENCE
+        me = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "MISSION_COUNT":
+            if self.args.refuse_fence:
+                conn.mav.mission_ack_send(*me, mavlink.MAV_MISSION_DENIED, fence)
+                return
+            self.fence_incoming, self.fence_expected = [], msg.count
+            if msg.count == 0:
+                self.fence, self.fence_incoming = [], None
+                conn.mav.mission_ack_send(*me, mavlink.MAV_MISSION_ACCEPTED, fence)
+                return
+            conn.mav.mission_request_int_send(*me, 0, fence)
+        elif kind == "MISSION_ITEM_INT" and self.fence_incoming is not None:
+            if msg.seq != len(self.fence_incoming):
+                return
+            self.fence_incoming.append(msg)
+            if len(self.fence_incoming) < self.fence_expected:
+                conn.mav.mission_request_int_send(*me, len(self.fence_incoming), fence)
+                return
+            result = (mavlink.MAV_MISSION_ACCEPTED if polygons_whole(self.fence_incoming)
+                      else mavlink.MAV_MISSION_INVALID)
+            if result == mavlink.MAV_MISSION_ACCEPTED:
+                self.fence = self.fence_incoming
+            self.fence_incoming = None
+            conn.mav.mission_ack_send(*me, result, fence)
+        elif kind == "MISSION_REQUEST_LIST":
+            conn.mav.mission_count_send(*me, len(self.fence), fence)
+        elif kind == "MISSION_REQUEST_INT" and msg.seq < len(self.fence):
+            i = self.fence[msg.seq]
+            conn.mav.mission_item_int_send(*me, i.seq, i.frame, i.command, 0, 0, i.param1,
+                                           i.param2, i.param3, i.param4, i.x, i.y, i.z, fence)
+        elif kind == "MISSION_ACK":
+            self.fence_acks[msg.type] = self.fence_acks.get(msg.type, 0) + 1
 
     def target_ned(self, msg):
         """A target's position in the local NED frame; None for a global one it cannot fly (no
@@ -687,6 +746,8 @@ class Vehicle:
             "final_position_global": (None if self.home_projection is None
                                       else list(self.global_position())),
             "global_targets_refused": self.global_refused,
+            "fence": [[i.command, i.param1, i.x, i.y] for i in self.fence],
+            "fence_acks_received": self.fence_acks,
             "last_setpoint_ned": self.setpoint[0] if self.setpoint else None,
             "ready_unix": self.ready_unix,
             "sent": self.streams.sent,
@@ -790,6 +851,25 @@ class Streams:
 
     def next_at(self):
         return self.queue[0][0] if self.queue else math.inf
+
+
+def polygons_whole(items):
+    """Every polygon vertex item carries its polygon's vertex count, and each polygon has that
+    many vertices in a row (the geofence items' definition)."""
+    polygon = (mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+               mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
+    k = 0
+    while k < len(items):
+        i = items[k]
+        if i.command not in polygon:
+            k += 1
+            continue
+        n = int(i.param1)
+        run = items[k:k + n]
+        if n < 3 or len(run) < n or any(j.command != i.command or int(j.param1) != n for j in run):
+            return False
+        k += n
+    return True
 
 
 def drain(conn, vehicle, now):

@@ -7,13 +7,15 @@
 //! `[origin]`), `health` (loss detection), `takeover` (a vehicle leaving
 //! OFFBOARD/GUIDED, named by `flight_mode`), `arming` (`--arm` sequence), `takeoff` and
 //! `landing` (ArduCopter's take-off, `--disarm-at-end`; `flight_ends` holds both) and
-//! `messages` (what is sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
+//! `fence` (`--upload-fence`: the mission protocol's fence side) and `messages` (what is
+//! sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
 //! without I/O, driven by the caller's clock; `udp` is the socket. `setpoint` (pure) and `plant`
 //! put them behind the member's `Vehicle` seam (cdm-runtime): [`MavlinkPlant`]. The encoding is
 //! the `mavlink` crate's (MAVLink 2, common dialect).
 
 pub mod arming;
 pub mod battery;
+pub mod fence;
 pub mod flight_ends;
 pub mod flight_mode;
 pub mod global;

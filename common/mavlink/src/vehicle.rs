@@ -9,6 +9,7 @@ use mavlink::MavHeader;
 
 use crate::arming::{ArmAction, ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
 use crate::battery::{BatteryFigures, BatteryWatch};
+use crate::fence::{FenceError, FenceItem, FenceUpload};
 use crate::flight_ends::{EndsError, FlightEnds};
 use crate::global::{self, VehicleFrame};
 use crate::health::{LinkFault, LinkHealth, LinkTimeouts};
@@ -117,6 +118,9 @@ pub enum VehicleError {
     /// A take-off or a landing failed.
     #[error(transparent)]
     Ends(#[from] EndsError),
+    /// `--upload-fence`: the vehicle refused the fence, or holds another, or stayed silent.
+    #[error(transparent)]
+    Fence(#[from] FenceError),
 }
 
 /// One member's MAVLink vehicle, as pure logic.
@@ -139,6 +143,8 @@ pub struct MavlinkVehicle {
     ends: FlightEnds,
     /// A take-off or landing failure seen in a COMMAND_ACK, reported at the next tick.
     ends_fault: Option<EndsError>,
+    /// `--upload-fence`: the fence to put on the vehicle before it reports ready.
+    fence: Option<FenceUpload>,
 }
 
 impl MavlinkVehicle {
@@ -159,7 +165,14 @@ impl MavlinkVehicle {
             counters: LinkCounters::default(),
             ends: FlightEnds::new(config.agent, config.takeoff, config.disarm_at_end),
             ends_fault: None,
+            fence: None,
         }
+    }
+
+    /// `--upload-fence`: upload `items` as the vehicle's geofence and read them back before it
+    /// reports ready (so before anything arms).
+    pub fn upload_fence(&mut self, items: Vec<FenceItem>) {
+        self.fence = Some(FenceUpload::new(self.config.agent, items));
     }
 
     /// A message arrived at `now`. Returns whether it came from the vehicle this link follows
@@ -185,6 +198,11 @@ impl MavlinkVehicle {
         if u32::from(t.system) != header.system_id || t.component != header.component_id {
             self.counters.foreign_packets += 1;
             return false;
+        }
+        if let Some(f) = &mut self.fence {
+            if f.on_message(t, msg) {
+                return true;
+            }
         }
         match msg {
             MavMessage::HEARTBEAT(hb) if hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID => {
@@ -292,6 +310,9 @@ impl MavlinkVehicle {
             self.counters.heartbeats_sent += 1;
             out.push(messages::heartbeat());
         }
+        if let Some(f) = &mut self.fence {
+            out.extend(f.on_tick(now, target)?);
+        }
         if let Some(sp) = setpoint {
             let started = *self.stream_started.get_or_insert(now);
             // time_boot_ms is the member's milliseconds since the link started (wraps after 49 days).
@@ -357,7 +378,7 @@ impl MavlinkVehicle {
 
     /// Whether the vehicle has been heard (HEARTBEAT and position): it reports ready.
     pub fn ready(&self) -> bool {
-        self.health.connected()
+        self.health.connected() && self.fence.as_ref().is_none_or(FenceUpload::done)
     }
 
     /// The last measured state, if any.
@@ -827,6 +848,7 @@ mod tests {
                 let ack = COMMAND_ACK_DATA {
                     command: cmd.command,
                     result,
+                    ..COMMAND_ACK_DATA::default()
                 };
                 acks.push(MavMessage::COMMAND_ACK(ack));
             }

@@ -142,6 +142,12 @@ pub struct VehicleArgs {
     /// --arm and a scenario with [landing].
     #[arg(long)]
     pub disarm_at_end: bool,
+    /// MAVLink: before arming, each member uploads the scenario's [geofence] polygon and
+    /// [[obstacle]]s to its vehicle's own geofence (the mission protocol, mission_type FENCE),
+    /// reads it back and compares; its vehicle reports ready only then, so nothing arms until
+    /// every fence is in place, and a vehicle that refuses is named. Needs an [origin].
+    #[arg(long)]
+    pub upload_fence: bool,
 }
 
 impl Default for VehicleArgs {
@@ -159,6 +165,7 @@ impl Default for VehicleArgs {
             min_battery: None,
             vehicle_feed_forward: FeedForwardArg::Commanded,
             disarm_at_end: false,
+            upload_fence: false,
         }
     }
 }
@@ -184,6 +191,8 @@ pub struct MavlinkOptions {
     pub feed_forward: FeedForward,
     /// `--disarm-at-end`.
     pub disarm_at_end: bool,
+    /// `--upload-fence`.
+    pub upload_fence: bool,
 }
 
 /// What each member flies, validated.
@@ -207,7 +216,7 @@ impl VehicleArgs {
         match self.vehicles {
             VehicleKind::Model => {
                 if *self != (VehicleArgs::default()) {
-                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key, --min-battery, --vehicle-feed-forward and --disarm-at-end need --vehicles mavlink".into());
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key, --min-battery, --vehicle-feed-forward, --disarm-at-end and --upload-fence need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
             }
@@ -249,6 +258,7 @@ impl VehicleArgs {
                 },
                 feed_forward: self.vehicle_feed_forward.into(),
                 disarm_at_end: self.disarm_at_end,
+                upload_fence: self.upload_fence,
             })),
         }
     }
@@ -297,6 +307,9 @@ impl Vehicles {
         if o.disarm_at_end {
             a.push("--disarm-at-end".into());
         }
+        if o.upload_fence {
+            a.push("--upload-fence".into());
+        }
         a
     }
 }
@@ -324,6 +337,12 @@ impl Vehicles {
         if o.disarm_at_end && !lands {
             return Err(CheckError::DisarmWithoutLanding);
         }
+        if o.upload_fence && s.file.geo_origin.is_none() {
+            return Err(CheckError::FenceWithoutOrigin);
+        }
+        if o.upload_fence && s.file.geofence.is_none() && s.file.obstacles.is_empty() {
+            return Err(CheckError::NoFence);
+        }
         Ok(())
     }
 }
@@ -340,6 +359,14 @@ pub enum CheckError {
     /// coordinates and have no use for a local origin.
     #[error("--vehicle-origin and --vehicle-origins are for local NED; the scenario has an [origin], so its vehicles fly latitude and longitude (leave them out)")]
     LocalOriginOutdoors,
+    /// `--upload-fence` without an `[origin]`: fence items are latitudes and longitudes.
+    #[error("--upload-fence: the scenario has no [origin] (a vehicle's fence is in latitude and longitude)")]
+    FenceWithoutOrigin,
+    /// `--upload-fence` with nothing to upload.
+    #[error(
+        "--upload-fence: the scenario has no [geofence] and no [[obstacle]] (nothing to upload)"
+    )]
+    NoFence,
 }
 
 fn member_ids(s: &Scenario) -> Vec<u32> {
@@ -405,6 +432,14 @@ pub fn connect<'a>(
         signing: o.signing_key.as_ref().map(|(_, key)| *key),
         period: Duration::from_secs_f64(s.dt_s()),
         feed_forward: o.feed_forward,
+        fence: match (o.upload_fence, &s.file.geo_origin) {
+            (true, Some(origin)) => Some(cdm_mavlink::fence::fence_items(
+                origin,
+                s.file.geofence.as_ref(),
+                &s.file.obstacles,
+            )),
+            _ => None,
+        },
     };
     Ok(MavlinkPlant::connect(
         config,
