@@ -199,25 +199,12 @@ impl MavlinkVehicle {
             self.counters.foreign_packets += 1;
             return false;
         }
-        if let Some(f) = &mut self.fence {
-            if f.on_message(t, msg) {
-                return true;
-            }
+        if self.fence.as_mut().is_some_and(|f| f.on_message(t, msg)) {
+            return true;
         }
         match msg {
             MavMessage::HEARTBEAT(hb) if hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID => {
-                self.counters.heartbeats_received += 1;
-                self.health.on_heartbeat(now);
-                self.battery.on_system_status(hb.system_status);
-                let mode = VehicleMode {
-                    autopilot: autopilot_of(hb.autopilot),
-                    custom_mode: hb.custom_mode,
-                    armed: hb
-                        .base_mode
-                        .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
-                };
-                self.mode = Some(mode);
-                self.takeover.on_heartbeat(mode);
+                self.on_heartbeat(now, hb);
             }
             MavMessage::LOCAL_POSITION_NED(p) if self.local().is_some() => {
                 let origin = self.local().unwrap_or_default();
@@ -259,6 +246,22 @@ impl MavlinkVehicle {
             }
         }
         true
+    }
+
+    /// The autopilot's HEARTBEAT: alive, its state, its mode.
+    fn on_heartbeat(&mut self, now: Duration, hb: &mavlink::dialects::common::HEARTBEAT_DATA) {
+        self.counters.heartbeats_received += 1;
+        self.health.on_heartbeat(now);
+        self.battery.on_system_status(hb.system_status);
+        let mode = VehicleMode {
+            autopilot: autopilot_of(hb.autopilot),
+            custom_mode: hb.custom_mode,
+            armed: hb
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
+        };
+        self.mode = Some(mode);
+        self.takeover.on_heartbeat(mode);
     }
 
     /// The vehicle's local NED origin, when it flies local NED.
