@@ -629,6 +629,7 @@ fn plan(
     write_sweeps(&s, &c, &sweeps, quiet)?;
     if !quiet {
         print_certificate(&c);
+        cdm_export::geographic::print_origin(&s);
         if let Some(l) = &c.losses {
             print_loss_certificate(l);
         }

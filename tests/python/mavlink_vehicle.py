@@ -77,6 +77,34 @@ With --autopilot ardupilot it is an ArduCopter (4.x) instead, in what the member
 - --refuse-takeoff answers every NAV_TAKEOFF with FAILED; --stall-climb stops the climb halfway
   (a take-off that never completes).
 
+Outdoors, with --home LAT,LON,ALT (the geographic position of its local NED origin, as PX4 sets
+its local position's reference where the estimator first has a GPS fix):
+- GLOBAL_POSITION_INT at the position rate besides LOCAL_POSITION_NED, as PX4 and ArduPilot
+  stream both (MAVLink common: lat and lon in 1e-7 degree, alt in mm above mean sea level,
+  relative_alt in mm above home, vx, vy, vz in cm/s north, east, down). The local position is
+  turned into latitude and longitude by PX4's map projection (px4_geo.py: PX4's
+  MapProjection::reproject; altitude = home altitude - local down).
+- SET_POSITION_TARGET_GLOBAL_INT flown like the local target, as PX4's offboard guide (Offboard
+  Mode, "SET_POSITION_TARGET_GLOBAL_INT": position, velocity, or position with velocity
+  feed-forward; coordinate_frame MAV_FRAME_GLOBAL) and ArduPilot's guided-mode guide ("Copter
+  Commands in Guided Mode": MAV_FRAME_GLOBAL(_INT) altitude AMSL, MAV_FRAME_GLOBAL_RELATIVE_ALT
+  (_INT) above home) describe it: the target's latitude and longitude projected into the local
+  frame with PX4's MapProjection::project about home, its altitude as local down = home altitude
+  - alt (relative frames: - alt); acceleration feed-forward only when the type_mask uses it.
+  A global target without --home (no GPS) is refused: counted, not flown.
+
+Its geofence, as PX4 keeps one (PX4 user guide, "GeoFence": polygons and circles, inclusion or
+exclusion, uploaded as a fence plan) through the mission protocol's fence side (mavlink.io,
+"Mission Protocol", mission_type MAV_MISSION_TYPE_FENCE):
+- Upload: MISSION_COUNT, then it asks for each item in turn with MISSION_REQUEST_INT and closes
+  with MISSION_ACK: MAV_MISSION_ACCEPTED once every item arrived and the polygons are whole
+  (every vertex of a polygon carries its vertex count as param1, as the geofence items define),
+  MAV_MISSION_INVALID otherwise, and MAV_MISSION_DENIED to every upload with --refuse-fence. A
+  new fence replaces the old one only once accepted.
+- Download: MISSION_REQUEST_LIST answered with MISSION_COUNT, each MISSION_REQUEST_INT with that
+  MISSION_ITEM_INT; the ground side's MISSION_ACK ends it.
+The fence is kept and reported (summary `fence`), not enforced in flight.
+
 What it does not reproduce:
 - PX4's own stream rates on an onboard link (LOCAL_POSITION_NED 30 Hz, ATTITUDE 100 Hz in
   mavlink_main.cpp's onboard mode): the defaults here are 50 Hz for both; pass --position-hz 30
@@ -109,6 +137,8 @@ import os
 import random
 import sys
 import time
+
+from px4_geo import MapProjection
 
 # MAVLink 2 and the common dialect (what PX4 speaks) must be chosen before pymavlink loads one.
 os.environ["MAVLINK20"] = "1"
@@ -144,6 +174,12 @@ ARDUCOPTER_LAND_SPEED = 0.5
 PX4_DISARM_LAND_S = 2.0
 # COMPONENT_ARM_DISARM param2 that forces a disarm in the air.
 FORCE_DISARM = 21196
+# Global frames by their altitude: above mean sea level, or above home.
+AMSL_FRAMES = {mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT}
+RELATIVE_FRAMES = {mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT}
+# type_mask bits that drop the acceleration feed-forward.
+ACCEL_IGNORED = (mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_AY_IGNORE
+                 | mavlink.POSITION_TARGET_TYPEMASK_AZ_IGNORE)
 
 
 def vec3(text):
@@ -219,6 +255,11 @@ def parse_args():
                    help="answer every MAV_CMD_NAV_TAKEOFF with FAILED")
     p.add_argument("--stall-climb", action="store_true",
                    help="an accepted take-off climbs only halfway and stays there")
+    p.add_argument("--refuse-fence", action="store_true",
+                   help="answer every fence upload with MISSION_ACK MAV_MISSION_DENIED")
+    p.add_argument("--home", type=vec3, default=None,
+                   help="LAT,LON,ALT of its local NED origin (degrees, m AMSL): it has GPS, "
+                        "streams GLOBAL_POSITION_INT and flies SET_POSITION_TARGET_GLOBAL_INT")
     return p.parse_args()
 
 
@@ -314,6 +355,15 @@ class Vehicle:
         self.on_ground_since = None
         self.disarmed_on_ground_unix = None
         self.disarmed_by = None
+        # GPS: PX4's map projection about home, and the global targets it could not fly.
+        self.home_projection = (None if args.home is None
+                                else MapProjection(args.home[0], args.home[1]))
+        self.global_refused = 0
+        # The geofence it holds (MISSION_ITEM_INT messages), the one being uploaded, and counts.
+        self.fence = []
+        self.fence_incoming = None
+        self.fence_expected = 0
+        self.fence_acks = {}
 
     def ardupilot(self):
         return self.args.autopilot == "ardupilot"
@@ -370,9 +420,13 @@ class Vehicle:
         if msg.get_msgbuf()[0] != 0xFD:
             self.not_mavlink2 += 1
         self.member_sysids.add(msg.get_srcSystem())
-        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+        if kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
             if msg.target_system != self.args.sysid:
                 self.wrong_target += 1
+                return
+            target = self.target_ned(msg)
+            if target is None:
+                self.global_refused += 1
                 return
             self.setpoint_times.append(now)
             if self.armed and self.ground_handling():
@@ -386,11 +440,73 @@ class Vehicle:
                 self.setpoints_after_shown += 1
             self.type_masks.add(msg.type_mask)
             self.frames.add(msg.coordinate_frame)
-            self.setpoint = ([msg.x, msg.y, msg.z], [msg.vx, msg.vy, msg.vz],
-                             [msg.afx, msg.afy, msg.afz])
+            acc = ([0.0, 0.0, 0.0] if kind == "SET_POSITION_TARGET_GLOBAL_INT"
+                   and msg.type_mask & ACCEL_IGNORED == ACCEL_IGNORED else [msg.afx, msg.afy, msg.afz])
+            self.setpoint = (target, [msg.vx, msg.vy, msg.vz], acc)
             self.on_setpoint_value(self.setpoint, now)
         elif kind == "COMMAND_LONG":
             self.on_command(conn, msg, now)
+        elif (kind.startswith("MISSION_")
+              and getattr(msg, "mission_type", None) == mavlink.MAV_MISSION_TYPE_FENCE):
+            self.on_fence(conn, msg)
+
+    def on_fence(self, conn, msg):
+        """The fence side of the mission protocol (upload, download)."""
+        kind = msg.get_type()
+        fence = mavlink.MAV_MISSION_TYPE_FENCE
+        me = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "MISSION_COUNT":
+            if self.args.refuse_fence:
+                conn.mav.mission_ack_send(*me, mavlink.MAV_MISSION_DENIED, fence)
+                return
+            self.fence_incoming, self.fence_expected = [], msg.count
+            if msg.count == 0:
+                self.fence, self.fence_incoming = [], None
+                conn.mav.mission_ack_send(*me, mavlink.MAV_MISSION_ACCEPTED, fence)
+                return
+            conn.mav.mission_request_int_send(*me, 0, fence)
+        elif kind == "MISSION_ITEM_INT" and self.fence_incoming is not None:
+            if msg.seq != len(self.fence_incoming):
+                return
+            self.fence_incoming.append(msg)
+            if len(self.fence_incoming) < self.fence_expected:
+                conn.mav.mission_request_int_send(*me, len(self.fence_incoming), fence)
+                return
+            result = (mavlink.MAV_MISSION_ACCEPTED if polygons_whole(self.fence_incoming)
+                      else mavlink.MAV_MISSION_INVALID)
+            if result == mavlink.MAV_MISSION_ACCEPTED:
+                self.fence = self.fence_incoming
+            self.fence_incoming = None
+            conn.mav.mission_ack_send(*me, result, fence)
+        elif kind == "MISSION_REQUEST_LIST":
+            conn.mav.mission_count_send(*me, len(self.fence), fence)
+        elif kind == "MISSION_REQUEST_INT" and msg.seq < len(self.fence):
+            i = self.fence[msg.seq]
+            conn.mav.mission_item_int_send(*me, i.seq, i.frame, i.command, 0, 0, i.param1,
+                                           i.param2, i.param3, i.param4, i.x, i.y, i.z, fence)
+        elif kind == "MISSION_ACK":
+            self.fence_acks[msg.type] = self.fence_acks.get(msg.type, 0) + 1
+
+    def target_ned(self, msg):
+        """A target's position in the local NED frame; None for a global one it cannot fly (no
+        GPS, or a frame it does not know)."""
+        if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+            return [msg.x, msg.y, msg.z]
+        if self.home_projection is None:
+            return None
+        if msg.coordinate_frame in AMSL_FRAMES:
+            down = self.args.home[2] - msg.alt
+        elif msg.coordinate_frame in RELATIVE_FRAMES:
+            down = -msg.alt
+        else:
+            return None
+        north, east = self.home_projection.project(msg.lat_int / 1e7, msg.lon_int / 1e7)
+        return [north, east, down]
+
+    def global_position(self):
+        """(lat, lon, alt AMSL) of where it is (PX4's reprojection of its local position)."""
+        lat, lon = self.home_projection.reproject(self.pos[0], self.pos[1])
+        return lat, lon, self.args.home[2] - self.pos[2]
 
     def on_command(self, conn, msg, now):
         streaming = bool(self.setpoint_times) and now - self.setpoint_times[-1] < OFFBOARD_LOSS_S
@@ -560,8 +676,9 @@ class Vehicle:
         if self.ready_unix is None:
             self.ready_unix = time.time()
         mute = self.args.mute
-        if silent and (mute == "all" or kind == {"heartbeat": "HEARTBEAT",
-                                                 "position": "LOCAL_POSITION_NED"}[mute]):
+        muted = {"heartbeat": ("HEARTBEAT",),
+                 "position": ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT")}
+        if silent and (mute == "all" or kind in muted[mute]):
             return None
         if kind == "HEARTBEAT":
             autopilot = (mavlink.MAV_AUTOPILOT_PX4 if self.args.autopilot == "px4"
@@ -587,6 +704,13 @@ class Vehicle:
                                                       self.landed_state())
         if kind == "LOCAL_POSITION_NED":
             return conn.mav.local_position_ned_encode(boot_ms, *self.pos, *self.vel)
+        if kind == "GLOBAL_POSITION_INT":
+            lat, lon, alt = self.global_position()
+            cm_s = [int(round(v * 100.0)) for v in self.vel]
+            # hdg UINT16_MAX: unknown (the point mass has no heading).
+            return conn.mav.global_position_int_encode(
+                boot_ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
+                int(round(-self.pos[2] * 1000.0)), *cm_s, 65535)
         # Small-angle attitude that would produce the commanded horizontal acceleration.
         roll = math.atan2(self.acc[1], GRAVITY)
         pitch = -math.atan2(self.acc[0], GRAVITY)
@@ -619,6 +743,11 @@ class Vehicle:
             "armed": self.armed,
             "custom_mode": self.custom_mode,
             "final_position_ned": self.pos,
+            "final_position_global": (None if self.home_projection is None
+                                      else list(self.global_position())),
+            "global_targets_refused": self.global_refused,
+            "fence": [[i.command, i.param1, i.x, i.y] for i in self.fence],
+            "fence_acks_received": self.fence_acks,
             "last_setpoint_ned": self.setpoint[0] if self.setpoint else None,
             "ready_unix": self.ready_unix,
             "sent": self.streams.sent,
@@ -663,6 +792,8 @@ class Streams:
                         "EXTENDED_SYS_STATE": 1.0 / args.ext_state_hz,
                         "LOCAL_POSITION_NED": 1.0 / (args.position_hz or args.rate_hz),
                         "ATTITUDE": 1.0 / (args.attitude_hz or args.rate_hz)}
+        if args.home is not None:
+            self.periods["GLOBAL_POSITION_INT"] = self.periods["LOCAL_POSITION_NED"]
         # The index of the last period each stream was sent for (-1: none yet).
         self.last = {kind: -1 for kind in self.periods}
         self.queue = []  # heap of (send_at, order, msg, duplicate)
@@ -720,6 +851,25 @@ class Streams:
 
     def next_at(self):
         return self.queue[0][0] if self.queue else math.inf
+
+
+def polygons_whole(items):
+    """Every polygon vertex item carries its polygon's vertex count, and each polygon has that
+    many vertices in a row (the geofence items' definition)."""
+    polygon = (mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+               mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
+    k = 0
+    while k < len(items):
+        i = items[k]
+        if i.command not in polygon:
+            k += 1
+            continue
+        n = int(i.param1)
+        run = items[k:k + n]
+        if n < 3 or len(run) < n or any(j.command != i.command or int(j.param1) != n for j in run):
+            return False
+        k += n
+    return True
 
 
 def drain(conn, vehicle, now):

@@ -10,6 +10,7 @@
 pub mod certificate;
 pub mod cli;
 mod crazyswarm2;
+pub mod geographic;
 mod rosbag2;
 mod skybrush;
 

@@ -17,8 +17,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context};
 use cdm_math::{Real, Vec3};
 use cdm_mavlink::{
-    member_addr, LinkTimeouts, MavlinkVehicle, Setpoint, UdpLink, VehicleConfig, VehicleOrigin,
-    DEFAULT_BASE_PORT, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
+    member_addr, LinkTimeouts, MavlinkVehicle, Setpoint, UdpLink, VehicleConfig, VehicleFrame,
+    VehicleOrigin, DEFAULT_BASE_PORT, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
 };
 use cdm_model::plan::{Quintic, Segment};
 use clap::Parser;
@@ -114,7 +114,10 @@ fn validate(a: &Args) -> anyhow::Result<Run> {
     let connect_deadline = positive_s("connect-timeout-s", a.connect_timeout_s)?;
     let config = VehicleConfig {
         agent: a.agent,
-        origin: VehicleOrigin(parse_vec3("vehicle-origin", &a.vehicle_origin)?),
+        frame: VehicleFrame::Local(VehicleOrigin(parse_vec3(
+            "vehicle-origin",
+            &a.vehicle_origin,
+        )?)),
         arm: a.arm,
         connect_deadline,
         timeouts: LinkTimeouts {

@@ -3,18 +3,22 @@
 //! it setpoints (SET_POSITION_TARGET_LOCAL_NED with velocity and acceleration feed-forward) and a
 //! HEARTBEAT once a second.
 //!
-//! Layers: `ned` (frame conversion), `health` (loss detection), `takeover` (a vehicle leaving
+//! Layers: `ned` and `global` (frame conversion: local NED, or latitude and longitude with an
+//! `[origin]`), `health` (loss detection), `takeover` (a vehicle leaving
 //! OFFBOARD/GUIDED, named by `flight_mode`), `arming` (`--arm` sequence), `takeoff` and
 //! `landing` (ArduCopter's take-off, `--disarm-at-end`; `flight_ends` holds both) and
-//! `messages` (what is sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
+//! `fence` (`--upload-fence`: the mission protocol's fence side) and `messages` (what is
+//! sent) are pure; `vehicle` combines them into [`MavlinkVehicle`], still
 //! without I/O, driven by the caller's clock; `udp` is the socket. `setpoint` (pure) and `plant`
 //! put them behind the member's `Vehicle` seam (cdm-runtime): [`MavlinkPlant`]. The encoding is
 //! the `mavlink` crate's (MAVLink 2, common dialect).
 
 pub mod arming;
 pub mod battery;
+pub mod fence;
 pub mod flight_ends;
 pub mod flight_mode;
+pub mod global;
 pub mod health;
 pub mod landing;
 pub mod messages;
@@ -32,6 +36,7 @@ pub mod vehicle;
 pub use arming::{ArmAction, ArmError, ArmStage, Autopilot};
 pub use battery::BatteryFigures;
 pub use flight_mode::FlightMode;
+pub use global::VehicleFrame;
 pub use health::{LinkFault, LinkTimeouts, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT};
 pub use messages::Setpoint;
 pub use ned::VehicleOrigin;

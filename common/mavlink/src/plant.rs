@@ -31,7 +31,7 @@ use crate::udp::{UdpError, UdpLink};
 use crate::vehicle::{AttitudeFigures, LinkCounters, MavlinkVehicle, VehicleConfig, VehicleError};
 
 /// How one member's plant is set up.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PlantConfig {
     /// The link: member id, `--vehicle-origin`, `--arm`, the connect deadline.
     pub vehicle: VehicleConfig,
@@ -43,6 +43,8 @@ pub struct PlantConfig {
     pub signing: Option<SigningKey>,
     /// `--vehicle-feed-forward`: the acceleration and jerk published with the measured state.
     pub feed_forward: FeedForward,
+    /// `--upload-fence`: the geofence items the vehicle must hold before it reports ready.
+    pub fence: Option<Vec<crate::fence::FenceItem>>,
 }
 
 /// Why the plant could not start (or stopped).
@@ -140,8 +142,12 @@ impl<'a> MavlinkPlant<'a> {
         let link = UdpLink::bind(agent, config.bind, signing)?;
         tracing::info!(agent, listen = %link.local_addr(), "waiting for the vehicle");
         let clock = Instant::now();
+        let mut vehicle = MavlinkVehicle::new(config.vehicle);
+        if let Some(items) = config.fence {
+            vehicle.upload_fence(items);
+        }
         let shared = Arc::new(Mutex::new(Shared {
-            vehicle: MavlinkVehicle::new(config.vehicle),
+            vehicle,
             setpoint: hold_at(member.start),
             fault: None,
             stop: false,

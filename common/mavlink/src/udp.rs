@@ -281,7 +281,6 @@ impl UdpLink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ned::VehicleOrigin;
     use crate::vehicle::VehicleConfig;
     use mavlink::dialects::common::{MavAutopilot, MavModeFlag, MavState, MavType, HEARTBEAT_DATA};
     use std::net::Ipv4Addr;
@@ -326,7 +325,7 @@ mod tests {
         let mut link = UdpLink::bind(1, SocketAddr::new(localhost, 0), None).unwrap();
         let mut vehicle = MavlinkVehicle::new(VehicleConfig {
             agent: 1,
-            origin: VehicleOrigin::default(),
+            frame: crate::VehicleFrame::default(),
             arm: false,
             connect_deadline: Duration::from_secs(5),
             timeouts: crate::health::LinkTimeouts::default(),

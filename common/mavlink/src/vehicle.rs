@@ -9,10 +9,12 @@ use mavlink::MavHeader;
 
 use crate::arming::{ArmAction, ArmError, ArmSequence, ArmStage, Autopilot, VehicleMode};
 use crate::battery::{BatteryFigures, BatteryWatch};
+use crate::fence::{FenceError, FenceItem, FenceUpload};
 use crate::flight_ends::{EndsError, FlightEnds};
+use crate::global::{self, VehicleFrame};
 use crate::health::{LinkFault, LinkHealth, LinkTimeouts};
 use crate::messages::{self, Setpoint, Target};
-use crate::ned::{from_f32, ned_to_enu_vector, VehicleOrigin};
+use crate::ned::{from_f32, ned_to_enu_vector};
 use crate::takeoff::Takeoff;
 use crate::takeover::TakeoverWatch;
 use cdm_math::{Real, Vec3};
@@ -25,8 +27,9 @@ pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
 pub struct VehicleConfig {
     /// The member's id (named in every fault).
     pub agent: u32,
-    /// `--vehicle-origin`: where the vehicle's NED origin is in the scenario.
-    pub origin: VehicleOrigin,
+    /// Local NED about `--vehicle-origin`, or latitude and longitude through the scenario's
+    /// `[origin]` (`global.rs`).
+    pub frame: VehicleFrame,
     /// `--arm`: switch mode and arm once the team is ready; otherwise stream only.
     pub arm: bool,
     /// How long to wait for the vehicle's first HEARTBEAT and position.
@@ -115,6 +118,9 @@ pub enum VehicleError {
     /// A take-off or a landing failed.
     #[error(transparent)]
     Ends(#[from] EndsError),
+    /// `--upload-fence`: the vehicle refused the fence, or holds another, or stayed silent.
+    #[error(transparent)]
+    Fence(#[from] FenceError),
 }
 
 /// One member's MAVLink vehicle, as pure logic.
@@ -137,6 +143,8 @@ pub struct MavlinkVehicle {
     ends: FlightEnds,
     /// A take-off or landing failure seen in a COMMAND_ACK, reported at the next tick.
     ends_fault: Option<EndsError>,
+    /// `--upload-fence`: the fence to put on the vehicle before it reports ready.
+    fence: Option<FenceUpload>,
 }
 
 impl MavlinkVehicle {
@@ -157,7 +165,14 @@ impl MavlinkVehicle {
             counters: LinkCounters::default(),
             ends: FlightEnds::new(config.agent, config.takeoff, config.disarm_at_end),
             ends_fault: None,
+            fence: None,
         }
+    }
+
+    /// `--upload-fence`: upload `items` as the vehicle's geofence and read them back before it
+    /// reports ready (so before anything arms).
+    pub fn upload_fence(&mut self, items: Vec<FenceItem>) {
+        self.fence = Some(FenceUpload::new(self.config.agent, items));
     }
 
     /// A message arrived at `now`. Returns whether it came from the vehicle this link follows
@@ -184,30 +199,27 @@ impl MavlinkVehicle {
             self.counters.foreign_packets += 1;
             return false;
         }
+        if self.fence.as_mut().is_some_and(|f| f.on_message(t, msg)) {
+            return true;
+        }
         match msg {
             MavMessage::HEARTBEAT(hb) if hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID => {
-                self.counters.heartbeats_received += 1;
-                self.health.on_heartbeat(now);
-                self.battery.on_system_status(hb.system_status);
-                let mode = VehicleMode {
-                    autopilot: autopilot_of(hb.autopilot),
-                    custom_mode: hb.custom_mode,
-                    armed: hb
-                        .base_mode
-                        .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
-                };
-                self.mode = Some(mode);
-                self.takeover.on_heartbeat(mode);
+                self.on_heartbeat(now, hb);
             }
-            MavMessage::LOCAL_POSITION_NED(p) => {
-                self.counters.positions_received += 1;
-                self.health.on_position(now);
-                self.state = Some(MeasuredState {
-                    position: self.config.origin.ned_to_enu(&from_f32(p.x, p.y, p.z)),
-                    velocity: ned_to_enu_vector(&from_f32(p.vx, p.vy, p.vz)),
-                    time_boot_ms: p.time_boot_ms,
-                    received_at: now,
-                });
+            MavMessage::LOCAL_POSITION_NED(p) if self.local().is_some() => {
+                let origin = self.local().unwrap_or_default();
+                let position = origin.ned_to_enu(&from_f32(p.x, p.y, p.z));
+                let velocity = ned_to_enu_vector(&from_f32(p.vx, p.vy, p.vz));
+                self.on_position(now, position, velocity, p.time_boot_ms);
+            }
+            // Outdoors the GPS fix is the position (PX4 and ArduPilot stream both).
+            MavMessage::GLOBAL_POSITION_INT(p) => {
+                let VehicleFrame::Global(origin) = self.config.frame else {
+                    self.counters.ignored += 1;
+                    return false;
+                };
+                let (position, velocity) = global::measured(&origin, p);
+                self.on_position(now, position, velocity, p.time_boot_ms);
             }
             MavMessage::SYS_STATUS(st) => {
                 self.battery
@@ -234,6 +246,42 @@ impl MavlinkVehicle {
             }
         }
         true
+    }
+
+    /// The autopilot's HEARTBEAT: alive, its state, its mode.
+    fn on_heartbeat(&mut self, now: Duration, hb: &mavlink::dialects::common::HEARTBEAT_DATA) {
+        self.counters.heartbeats_received += 1;
+        self.health.on_heartbeat(now);
+        self.battery.on_system_status(hb.system_status);
+        let mode = VehicleMode {
+            autopilot: autopilot_of(hb.autopilot),
+            custom_mode: hb.custom_mode,
+            armed: hb
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
+        };
+        self.mode = Some(mode);
+        self.takeover.on_heartbeat(mode);
+    }
+
+    /// The vehicle's local NED origin, when it flies local NED.
+    fn local(&self) -> Option<crate::ned::VehicleOrigin> {
+        match self.config.frame {
+            VehicleFrame::Local(o) => Some(o),
+            VehicleFrame::Global(_) => None,
+        }
+    }
+
+    /// A measured position (in the frame this link flies) arrived at `now`.
+    fn on_position(&mut self, now: Duration, position: Vec3, velocity: Vec3, time_boot_ms: u32) {
+        self.counters.positions_received += 1;
+        self.health.on_position(now);
+        self.state = Some(MeasuredState {
+            position,
+            velocity,
+            time_boot_ms,
+            received_at: now,
+        });
     }
 
     /// One tick at `now`: check the link, then return what to send once the vehicle is known
@@ -265,17 +313,18 @@ impl MavlinkVehicle {
             self.counters.heartbeats_sent += 1;
             out.push(messages::heartbeat());
         }
+        if let Some(f) = &mut self.fence {
+            out.extend(f.on_tick(now, target)?);
+        }
         if let Some(sp) = setpoint {
             let started = *self.stream_started.get_or_insert(now);
             // time_boot_ms is the member's milliseconds since the link started (wraps after 49 days).
             let ms = u32::try_from(now.as_millis() % (1 << 32)).unwrap_or(0);
             let sp = self.ends.floored(sp, self.mode.as_ref());
-            out.push(messages::position_target(
-                target,
-                ms,
-                &self.config.origin,
-                &sp,
-            ));
+            out.push(match &self.config.frame {
+                VehicleFrame::Local(origin) => messages::position_target(target, ms, origin, &sp),
+                VehicleFrame::Global(origin) => global::position_target(target, ms, origin, &sp),
+            });
             self.counters.setpoints_sent += 1;
             let streamed = now.saturating_sub(started);
             for (action, sent) in self.commands(now, streamed, team_ready)? {
@@ -332,7 +381,7 @@ impl MavlinkVehicle {
 
     /// Whether the vehicle has been heard (HEARTBEAT and position): it reports ready.
     pub fn ready(&self) -> bool {
-        self.health.connected()
+        self.health.connected() && self.fence.as_ref().is_none_or(FenceUpload::done)
     }
 
     /// The last measured state, if any.
@@ -427,7 +476,7 @@ mod tests {
     fn config(arm: bool) -> VehicleConfig {
         VehicleConfig {
             agent: 12,
-            origin: VehicleOrigin(Vec3::new(10.0, 20.0, 0.0)),
+            frame: VehicleFrame::Local(crate::ned::VehicleOrigin(Vec3::new(10.0, 20.0, 0.0))),
             arm,
             connect_deadline: ms(5000),
             timeouts: LinkTimeouts::default(),
@@ -802,6 +851,7 @@ mod tests {
                 let ack = COMMAND_ACK_DATA {
                     command: cmd.command,
                     result,
+                    ..COMMAND_ACK_DATA::default()
                 };
                 acks.push(MavMessage::COMMAND_ACK(ack));
             }

@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use cdm_mavlink::{
     member_addr, FeedForward, LinkTimeouts, MavlinkPlant, PlantConfig, PlantError, SigningKey,
-    VehicleConfig, VehicleOrigin, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
+    VehicleConfig, VehicleFrame, VehicleOrigin, DEFAULT_HEARTBEAT_TIMEOUT,
+    DEFAULT_POSITION_TIMEOUT,
 };
 
 use crate::member_error::MemberError;
@@ -141,6 +142,12 @@ pub struct VehicleArgs {
     /// --arm and a scenario with [landing].
     #[arg(long)]
     pub disarm_at_end: bool,
+    /// MAVLink: before arming, each member uploads the scenario's [geofence] polygon and
+    /// [[obstacle]]s to its vehicle's own geofence (the mission protocol, mission_type FENCE),
+    /// reads it back and compares; its vehicle reports ready only then, so nothing arms until
+    /// every fence is in place, and a vehicle that refuses is named. Needs an [origin].
+    #[arg(long)]
+    pub upload_fence: bool,
 }
 
 impl Default for VehicleArgs {
@@ -158,6 +165,7 @@ impl Default for VehicleArgs {
             min_battery: None,
             vehicle_feed_forward: FeedForwardArg::Commanded,
             disarm_at_end: false,
+            upload_fence: false,
         }
     }
 }
@@ -183,6 +191,8 @@ pub struct MavlinkOptions {
     pub feed_forward: FeedForward,
     /// `--disarm-at-end`.
     pub disarm_at_end: bool,
+    /// `--upload-fence`.
+    pub upload_fence: bool,
 }
 
 /// What each member flies, validated.
@@ -206,7 +216,7 @@ impl VehicleArgs {
         match self.vehicles {
             VehicleKind::Model => {
                 if *self != (VehicleArgs::default()) {
-                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key, --min-battery, --vehicle-feed-forward and --disarm-at-end need --vehicles mavlink".into());
+                    return Err("--mavlink-base-port, --mavlink-host, --vehicle-origin, --arm, --heartbeat-timeout, --position-timeout, --mavlink-signing-key, --min-battery, --vehicle-feed-forward, --disarm-at-end and --upload-fence need --vehicles mavlink".into());
                 }
                 Ok(Vehicles::Model)
             }
@@ -248,6 +258,7 @@ impl VehicleArgs {
                 },
                 feed_forward: self.vehicle_feed_forward.into(),
                 disarm_at_end: self.disarm_at_end,
+                upload_fence: self.upload_fence,
             })),
         }
     }
@@ -296,6 +307,9 @@ impl Vehicles {
         if o.disarm_at_end {
             a.push("--disarm-at-end".into());
         }
+        if o.upload_fence {
+            a.push("--upload-fence".into());
+        }
         a
     }
 }
@@ -308,6 +322,10 @@ impl Vehicles {
         let Vehicles::Mavlink(o) = self else {
             return Ok(());
         };
+        let local_origin = o.origins.is_some() || o.origin != Vec3::zeros();
+        if s.file.geo_origin.is_some() && local_origin {
+            return Err(CheckError::LocalOriginOutdoors);
+        }
         if let Some(file) = &o.origins {
             VehicleOrigins::load(file, &member_ids(s))?;
         }
@@ -318,6 +336,12 @@ impl Vehicles {
             .is_some_and(|p| p.kind == PhaseKind::Landing);
         if o.disarm_at_end && !lands {
             return Err(CheckError::DisarmWithoutLanding);
+        }
+        if o.upload_fence && s.file.geo_origin.is_none() {
+            return Err(CheckError::FenceWithoutOrigin);
+        }
+        if o.upload_fence && s.file.geofence.is_none() && s.file.obstacles.is_empty() {
+            return Err(CheckError::NoFence);
         }
         Ok(())
     }
@@ -331,6 +355,18 @@ pub enum CheckError {
     /// `--disarm-at-end` on a scenario that does not end on the ground.
     #[error("--disarm-at-end: the scenario has no [landing] (the vehicles would be disarmed in the air)")]
     DisarmWithoutLanding,
+    /// `--vehicle-origin(s)` on a scenario with an `[origin]`, whose vehicles fly in global
+    /// coordinates and have no use for a local origin.
+    #[error("--vehicle-origin and --vehicle-origins are for local NED; the scenario has an [origin], so its vehicles fly latitude and longitude (leave them out)")]
+    LocalOriginOutdoors,
+    /// `--upload-fence` without an `[origin]`: fence items are latitudes and longitudes.
+    #[error("--upload-fence: the scenario has no [origin] (a vehicle's fence is in latitude and longitude)")]
+    FenceWithoutOrigin,
+    /// `--upload-fence` with nothing to upload.
+    #[error(
+        "--upload-fence: the scenario has no [geofence] and no [[obstacle]] (nothing to upload)"
+    )]
+    NoFence,
 }
 
 fn member_ids(s: &Scenario) -> Vec<u32> {
@@ -369,7 +405,11 @@ pub fn connect<'a>(
     connect: Duration,
     interrupted: &AtomicBool,
 ) -> Result<MavlinkPlant<'a>, MemberError> {
-    let origin = origin_of(s, me, o)?;
+    // With an [origin] the vehicles fly latitude and longitude; otherwise local NED.
+    let frame = match s.file.geo_origin {
+        Some(g) => VehicleFrame::Global(g),
+        None => VehicleFrame::Local(VehicleOrigin(origin_of(s, me, o)?)),
+    };
     let index = s
         .formation
         .members
@@ -380,7 +420,7 @@ pub fn connect<'a>(
     let config = PlantConfig {
         vehicle: VehicleConfig {
             agent: me.id,
-            origin: VehicleOrigin(origin),
+            frame,
             arm: o.arm,
             connect_deadline: connect,
             timeouts: o.timeouts,
@@ -392,6 +432,14 @@ pub fn connect<'a>(
         signing: o.signing_key.as_ref().map(|(_, key)| *key),
         period: Duration::from_secs_f64(s.dt_s()),
         feed_forward: o.feed_forward,
+        fence: match (o.upload_fence, &s.file.geo_origin) {
+            (true, Some(origin)) => Some(cdm_mavlink::fence::fence_items(
+                origin,
+                s.file.geofence.as_ref(),
+                &s.file.obstacles,
+            )),
+            _ => None,
+        },
     };
     Ok(MavlinkPlant::connect(
         config,

@@ -158,6 +158,7 @@ fn generated_unchecked(n: usize) -> ScenarioFile {
         weight_floor: None,
         plane_tolerance_m: None,
         link: None,
+        geo_origin: None,
         takeoff: None,
         segments: Vec::new(),
         landing: None,

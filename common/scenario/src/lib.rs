@@ -10,6 +10,7 @@ mod fields;
 mod flight;
 mod locate;
 mod mission;
+mod origin;
 mod validate;
 
 use std::path::Path;
@@ -27,6 +28,7 @@ pub use airspace::{has_airspace, GeofenceSpec, ObstacleShapeError, ObstacleSpec}
 pub use builtin::{generated, paper40, TeamSizeError, MAX_AGENTS};
 pub use fields::{MAX_COORD_M, MAX_TICKS};
 pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
+pub use origin::{GeoOrigin, GeoPoint};
 
 /// Default tolerance for members off the primary leaders' plane (ERRATA 10): within it a member
 /// is projected onto the plane (and the tool says so); beyond it the scenario is refused.
@@ -67,6 +69,10 @@ pub struct ScenarioFile {
     /// content hash covers it and a member with other links is refused.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link: Option<LinkSpec>,
+    /// `[origin]`: the scenario's frame on the Earth (WGS-84; `origin.rs`). Without it the
+    /// scenario is only local metres.
+    #[serde(default, rename = "origin", skip_serializing_if = "Option::is_none")]
+    pub geo_origin: Option<GeoOrigin>,
     /// `[takeoff]`: start on the ground below the start formation (issue 26).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub takeoff: Option<GroundSpec>,

@@ -51,6 +51,7 @@ fn check_numbers(f: &ScenarioFile) -> Result<(), E> {
     }
     check_optional(f)?;
     super::airspace::check_tables(f)?;
+    super::origin::check_table(f)?;
     if f.name.len() > MAX_NAME_BYTES {
         return Err(E::Invalid {
             field: "name".into(),

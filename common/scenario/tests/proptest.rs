@@ -328,6 +328,7 @@ proptest! {
                 weight_floor: floor,
                 plane_tolerance_m: tolerance,
                 link: None,
+                geo_origin: None,
                 takeoff: None,
                 segments: Vec::new(),
                 landing: None,
