@@ -11,6 +11,7 @@ mod flight;
 mod locate;
 mod mission;
 mod validate;
+mod vehicle;
 
 use std::path::Path;
 
@@ -27,6 +28,7 @@ pub use airspace::{has_airspace, GeofenceSpec, ObstacleShapeError, ObstacleSpec}
 pub use builtin::{generated, paper40, TeamSizeError, MAX_AGENTS};
 pub use fields::{MAX_COORD_M, MAX_TICKS};
 pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
+pub use vehicle::VehicleSpec;
 
 /// Default tolerance for members off the primary leaders' plane (ERRATA 10): within it a member
 /// is projected onto the plane (and the tool says so); beyond it the scenario is refused.
@@ -83,6 +85,9 @@ pub struct ScenarioFile {
     /// `[[obstacle]]`: solids the team must not touch, each named.
     #[serde(default, rename = "obstacle", skip_serializing_if = "Vec::is_empty")]
     pub obstacles: Vec<ObstacleSpec>,
+    /// `[vehicle]`: the quadcopters' speed and acceleration limits and their downwash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<VehicleSpec>,
     pub agents: Vec<AgentSpec>,
 }
 
@@ -336,6 +341,12 @@ impl Scenario {
     /// RK4 substeps per tick.
     pub fn substeps(&self) -> u32 {
         self.file.substeps.unwrap_or(DEFAULT_SUBSTEPS)
+    }
+
+    /// The downwash ellipsoid's vertical semi-axis over its horizontal one (`[vehicle]`
+    /// `downwash_ratio`), when the file sets it; without it separation is the paper's spheres.
+    pub fn downwash_ratio(&self) -> Option<Real> {
+        self.file.vehicle.and_then(|v| v.downwash_ratio)
     }
 
     /// The role of a member id, if present.
