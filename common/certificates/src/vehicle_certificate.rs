@@ -321,4 +321,45 @@ mod tests {
         assert!(at(t).is_empty(), "{:?}", at(t));
         assert!(!at(t * 0.99).is_empty());
     }
+
+    /// The followers' overshoot of their commanded peaks, flown by the nonlinear engine on
+    /// paper40 at its T_threshold (36 s) and at 60 and 120 s, stays under the live audit's
+    /// tolerances: the numbers the book quotes (`--nocapture` prints them).
+    #[test]
+    fn the_followers_overshoot_stays_under_the_audits_tolerance() {
+        use cdm_model::formation::Role;
+        use cdm_records::limit_audit::tolerance;
+        for t_total_s in [36.0, 60.0, 120.0] {
+            let mut f = paper40();
+            f.t_total_s = t_total_s;
+            let s = Scenario::from_file(f, "test", Checks::Member).unwrap();
+            let segs = segments(&s, &s.plan.phases()[0]);
+            let mut e = cdm_engine::engine::quad_engine(&s);
+            let n = s.formation.members.len();
+            let mut flown = vec![[0.0; 5]; n];
+            while e.tick() < s.last_tick() {
+                e.advance().unwrap();
+                for (k, x) in e.states().iter().enumerate() {
+                    let fl = x.flat();
+                    for (j, l) in Limit::ALL.into_iter().enumerate() {
+                        let v = l.measure(if l.is_accel() { &fl.a } else { &fl.v });
+                        flown[k][j] = Real::max(flown[k][j], v);
+                    }
+                }
+            }
+            let mut worst = [0.0; 5];
+            for (k, m) in s.formation.members.iter().enumerate() {
+                for (j, l) in Limit::ALL.into_iter().enumerate() {
+                    let commanded = l.peak(&segs[k].1, t_total_s);
+                    if m.role == Role::Follower && commanded > 1e-3 {
+                        worst[j] = Real::max(worst[j], flown[k][j] / commanded - 1.0);
+                    }
+                }
+            }
+            println!("paper40 at {t_total_s} s: followers' overshoot {worst:.4?} (xy, up, down speed; xy, z acceleration)");
+            for (w, l) in worst.iter().zip(Limit::ALL) {
+                assert!(*w < tolerance(l), "{l:?} {w}");
+            }
+        }
+    }
 }

@@ -18,7 +18,8 @@ use cdm_scenario::Scenario;
 
 /// How far above a speed limit (relative) the flown speed may go before it is a violation: the
 /// followers' overshoot of their commanded peak speed, 4.1 % on paper40 flown at its
-/// T_threshold (36 s; 0.4 % at 120 s), with room to spare.
+/// T_threshold (36 s; 0.4 % at 120 s), with room to spare (cdm-certificates'
+/// `the_followers_overshoot_stays_under_the_audits_tolerance`).
 pub const SPEED_TOLERANCE: Real = 0.1;
 
 /// The same for an acceleration limit: 12.8 % on paper40 at 36 s (0.9 % at 120 s).
