@@ -219,7 +219,7 @@ fn time_key(kind: PhaseKind) -> String {
     match kind {
         PhaseKind::Takeoff => "takeoff.t_s".into(),
         PhaseKind::Segment(1) => "t_total_s".into(),
-        PhaseKind::Segment(n) => format!("t_s of [[segment]] {} (segment {n})", n - 1),
+        PhaseKind::Segment(n) => format!("t_s of [[segment]] {}", n - 1),
         PhaseKind::Landing => "landing.t_s".into(),
     }
 }
