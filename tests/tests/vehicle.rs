@@ -40,9 +40,13 @@ fn plan(dir: &Path, scenario: &Path) -> (Output, serde_json::Value) {
     (out, cert)
 }
 
-/// `simulate` into DIR/run and its audit.json.
-fn simulate(dir: &Path, scenario: &Path) -> (Output, serde_json::Value, std::path::PathBuf) {
-    let run_dir = dir.join("run");
+/// `simulate` into DIR/NAME and its audit.json.
+fn simulate(
+    dir: &Path,
+    scenario: &Path,
+    name: &str,
+) -> (Output, serde_json::Value, std::path::PathBuf) {
+    let run_dir = dir.join(name);
     let (s, o) = (scenario.to_str().unwrap(), run_dir.to_str().unwrap());
     let out = orchestrator(&["simulate", "--scenario", s, "--out", o, "--quiet"]);
     let audit = read_json(&run_dir.join("audit.json"));
@@ -78,7 +82,7 @@ fn limits_are_certified_suggested_and_audited() {
             "{l}"
         );
     }
-    let (out, audit, _) = simulate(dir.path(), &safe);
+    let (out, audit, _) = simulate(dir.path(), &safe, "slow");
     assert_exit(&out, 0, "simulate within the limits");
     let flown = audit["vehicle_limits"].as_array().expect("flown limits");
     assert_eq!(flown.len(), 5, "{audit:#}");
@@ -107,7 +111,7 @@ fn limits_are_certified_suggested_and_audited() {
     assert_eq!(row["key"], "t_total_s", "{cert:#}");
     let shortest = row["shortest_t_s"].as_f64().expect("a suggested time");
     assert!(shortest > 20.0 && shortest < 60.0, "{row}");
-    let (out, audit, _) = simulate(dir.path(), &fast);
+    let (out, audit, _) = simulate(dir.path(), &fast, "fast");
     assert_exit(&out, 1, "simulate too fast for the limits");
     let kinds: Vec<&str> = (audit["violations"].as_array().unwrap().iter())
         .filter(|v| v["kind"] == "limit")
@@ -219,7 +223,7 @@ fn a_stack_inside_the_downwash_is_unsafe_and_the_same_spacing_side_by_side_is_sa
         "{cert:#}"
     );
     // Flown, the stack's ellipsoids overlap (1.5 m < 2 eps): a collision in the downwash metric.
-    let (out, audit, run_dir) = simulate(dir.path(), &stacked);
+    let (out, audit, run_dir) = simulate(dir.path(), &stacked, "stacked");
     assert_exit(&out, 1, "simulate of the stack");
     let first = &audit["violations"][0];
     assert_eq!(first["kind"], "collision", "{audit:#}");
@@ -241,8 +245,7 @@ fn a_stack_inside_the_downwash_is_unsafe_and_the_same_spacing_side_by_side_is_sa
     let (out, cert) = plan(dir.path(), &side);
     assert_exit(&out, 0, "plan side by side");
     assert!((cert["vehicle"]["downwash"]["min_m"].as_f64().unwrap() - 4.5).abs() < 1e-9);
-    let dir2 = TempDir::new();
-    let (out, audit, run_dir) = simulate(dir2.path(), &side);
+    let (out, audit, run_dir) = simulate(dir.path(), &side, "side");
     assert_exit(&out, 0, "simulate side by side");
     let (_, smallest) = check_bound_on_flight(&run_dir, 3.0);
     assert!(smallest >= 3.0, "{smallest} {audit:#}");
