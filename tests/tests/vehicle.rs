@@ -156,12 +156,15 @@ fn pair(up: [f64; 3], ratio: Option<f64>) -> ScenarioFile {
     f
 }
 
+/// One member at one tick: its flown position r and its desired position r_HT.
+type Flown = ([f64; 3], [f64; 3]);
+
 /// Per tick, every pair: the flown downwash distance is at least the desired one less both
 /// members' Euclidean tracking errors (the bound of the certificate). Returns the number of
 /// pairs checked and the smallest flown distance.
 fn check_bound_on_flight(run_dir: &Path, ratio: f64) -> (usize, f64) {
     let text = std::fs::read_to_string(run_dir.join("telemetry.csv")).expect("telemetry");
-    let mut ticks: BTreeMap<u64, Vec<([f64; 3], [f64; 3])>> = BTreeMap::new();
+    let mut ticks: BTreeMap<u64, Vec<Flown>> = BTreeMap::new();
     for line in text.lines().skip(1) {
         let c: Vec<&str> = line.split(',').collect();
         let n = |k: usize| c[k].parse::<f64>().expect("a number");

@@ -42,7 +42,7 @@ pub struct LimitPeak {
 impl LimitPeak {
     /// True when the plan commands more than the vehicle can fly.
     pub fn exceeded(&self) -> bool {
-        !(self.value <= self.max)
+        self.value > self.max || self.value.is_nan()
     }
 }
 
@@ -102,7 +102,7 @@ impl VehicleCertificate {
         if let Some(d) = self
             .downwash
             .as_ref()
-            .filter(|d| !(d.min_m >= d.required_m))
+            .filter(|d| d.min_m < d.required_m || d.min_m.is_nan())
         {
             out.push(format!(
                 "downwash: members {} and {} in {} come {:.4} m apart in the downwash metric (ratio {}) at t = {:.2} s, below 2 (eps + delta) = {:.4} m",

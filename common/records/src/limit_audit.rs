@@ -124,7 +124,7 @@ impl LimitAudit {
                     f.flown = value;
                     f.agent = Some(ids[k]);
                 }
-                let bad = !(value <= f.allowed);
+                let bad = value > f.allowed || value.is_nan();
                 let slot = k * width + j;
                 if bad && !self.failing[slot] {
                     breach(LimitBreach {
