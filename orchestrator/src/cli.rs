@@ -60,7 +60,8 @@ pub enum Command {
         losses: bool,
         /// With `[geofence]` or `[[obstacle]]`: also report the smallest altitude offset (up and
         /// down) that clears each breached boundary and the whole airspace, and why no uniform
-        /// time scaling can.
+        /// time scaling can. With `[vehicle]` limits: the shortest travel time of each phase
+        /// whose commanded speeds and accelerations meet them.
         #[arg(long)]
         suggest: bool,
     },

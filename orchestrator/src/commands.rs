@@ -8,6 +8,7 @@ use cdm_certificates::certificate::{deviation_at, Certificate};
 use cdm_certificates::certify::certify;
 use cdm_certificates::delay::deviation_at_delay;
 use cdm_certificates::losscert::{certify_losses, LossCertificate};
+use cdm_certificates::vehicle_certificate::{suggest_times, VehicleCertificate};
 use cdm_engine::loss::LossSchedule;
 use cdm_model::link::MAX_DELAY_MS;
 use cdm_model::outcome::Verdict;
@@ -579,7 +580,8 @@ fn write_sweeps(
 struct PlanAlso {
     /// `--losses`: the loss of every single member.
     losses: bool,
-    /// `--suggest`: the offsets that clear the airspace's breaches.
+    /// `--suggest`: the offsets that clear the airspace's breaches, the travel times that meet
+    /// the vehicles' limits.
     suggest: bool,
 }
 
@@ -603,11 +605,14 @@ fn plan(
     let mut c = certify(&s);
     spinner.finish();
     if also.suggest {
+        if let Some(v) = &mut c.vehicle {
+            v.suggestion = Some(suggest_times(&s));
+        }
         match &mut c.airspace {
             Some(a) => a.suggestion = Some(suggest(&s, a.radius_m)),
-            None if !quiet => {
-                out!("suggest: the scenario has no [geofence] or [[obstacle]]: nothing to clear")
-            }
+            None if !quiet && c.vehicle.is_none() => out!(
+                "suggest: the scenario has no [geofence], [[obstacle]] or [vehicle]: nothing to clear"
+            ),
             None => {}
         }
     }
@@ -630,6 +635,9 @@ fn plan(
     if !quiet {
         print_certificate(&c);
         cdm_export::geographic::print_origin(&s);
+        if let Some(v) = &c.vehicle {
+            print_vehicle(v);
+        }
         if let Some(l) = &c.losses {
             print_loss_certificate(l);
         }
@@ -649,6 +657,45 @@ fn plan(
     } else {
         Exit::Unsafe
     })
+}
+
+/// The `[vehicle]` part: each limit's largest commanded value, the downwash clearance, and
+/// with `--suggest` the shortest travel time per phase.
+fn print_vehicle(v: &VehicleCertificate) {
+    if !v.limits.is_empty() {
+        out!("vehicle limits: the largest commanded value over every phase (exact)");
+    }
+    for p in &v.limits {
+        let ok = if p.exceeded() { "EXCEEDED" } else { "ok" };
+        out!(
+            "  {:<20} {:>10.4} of {:<8} member {:<4} {} at t = {:.2} s  {ok}",
+            p.limit,
+            p.value,
+            p.max,
+            p.agent,
+            p.phase,
+            p.t_s
+        );
+    }
+    if let Some(d) = &v.downwash {
+        out!(
+            "  downwash (ratio {}): closest desired positions {:.4} m apart (members {} and {}, {} at t = {:.2} s), need 2 (eps + delta) = {:.4} m",
+            d.downwash_ratio, d.min_m, d.agents[0], d.agents[1], d.phase, d.t_s, d.required_m
+        );
+    }
+    for t in v.suggestion.iter().flatten() {
+        let why = match (t.limit, t.agent) {
+            (Some(l), Some(a)) => format!("{l}, member {a}"),
+            _ => "no member loads a limit".into(),
+        };
+        out!(
+            "  suggest: {} ({}) now {} s, shortest meeting the limits {} s ({why})",
+            t.phase,
+            t.key,
+            t.t_s,
+            t.shortest_t_s
+        );
+    }
 }
 
 fn print_loss_certificate(l: &LossCertificate) {

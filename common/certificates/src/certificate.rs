@@ -46,6 +46,10 @@ pub struct Certificate {
     /// without them, so other certificates keep the JSON they had.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub airspace: Option<crate::airspace_certificate::AirspaceCertificate>,
+    /// `[vehicle]`: the commanded peaks against the limits and the downwash clearance; absent
+    /// without the table.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<crate::vehicle_certificate::VehicleCertificate>,
 }
 
 /// One phase of a mission, certified.
@@ -197,6 +201,7 @@ impl Certificate {
             losses: None,
             segments: f.segments,
             airspace: None,
+            vehicle: None,
         }
     }
 }

@@ -8,12 +8,14 @@ use crate::certificate::{
 use crate::delay::max_link_delay;
 use crate::linear_certificate::LinearTeam;
 use crate::mission_certificate::certify_mission;
+use crate::vehicle_certificate::certify_vehicle;
 use cdm_math::Real;
 use cdm_records::audit::SafetyNumbers;
 use cdm_scenario::Scenario;
 
 /// The certificate of a scenario validated with `Checks::Full`: the paper's (or the mission's)
-/// and, with a geofence or obstacles, the airspace's, whose breaches are reasons too.
+/// and, with a geofence or obstacles, the airspace's, and with `[vehicle]`, the limits' and the
+/// downwash's, whose breaches are reasons too.
 pub fn certify(s: &Scenario) -> Certificate {
     let mut c = if s.plan.is_mission() {
         certify_mission(s)
@@ -23,6 +25,11 @@ pub fn certify(s: &Scenario) -> Certificate {
     c.airspace = certify_airspace(s, c.numbers.delta_m);
     if let Some(a) = &c.airspace {
         c.reasons.extend(a.reasons());
+        c.verdict = verdict_of(&c.reasons);
+    }
+    c.vehicle = certify_vehicle(s, c.numbers.delta_m);
+    if let Some(v) = &c.vehicle {
+        c.reasons.extend(v.reasons());
         c.verdict = verdict_of(&c.reasons);
     }
     c

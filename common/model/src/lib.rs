@@ -5,7 +5,7 @@
 //! Layers of the shared crates, bottom to top (a crate only depends on crates below it):
 //! 1. `cdm-math` (the numeric facade) and `cdm-files` (bounded reads, safe writes);
 //! 2. `cdm-model` (this crate): `frame`, `plan`, `geometry`, `airspace`, `formation`, `graph`,
-//!    `repair`, `gains`, `safety`, `dynamics`, `guard`, `control` -> `step` (one member's
+//!    `repair`, `gains`, `safety`, `dynamics`, `guard`, `limits`, `control` -> `step` (one member's
 //!    tick), `link` (imperfect links), `outcome` (typed verdicts and causes);
 //! 3. `cdm-scenario` (files, validation, built-ins);
 //! 4. `cdm-trajectory` (the plan's exact pieces for fleets) and `cdm-records` (run directory,
@@ -23,6 +23,7 @@ pub mod gains;
 pub mod geometry;
 pub mod graph;
 pub mod guard;
+pub mod limits;
 pub mod link;
 pub mod outcome;
 pub mod plan;

@@ -145,6 +145,8 @@ pub enum ViolationKind {
     Geofence,
     /// A member's ball of radius eps inside an obstacle (issue 27).
     Obstacle,
+    /// A member flew faster or accelerated harder than its `[vehicle]` limit (named by key).
+    Limit,
 }
 
 impl ViolationKind {
@@ -157,6 +159,7 @@ impl ViolationKind {
             ViolationKind::Deformation => "deformation",
             ViolationKind::Geofence => "geofence",
             ViolationKind::Obstacle => "obstacle",
+            ViolationKind::Limit => "limit",
         }
     }
 }
@@ -224,6 +227,7 @@ mod tests {
             ViolationKind::Deformation,
             ViolationKind::Geofence,
             ViolationKind::Obstacle,
+            ViolationKind::Limit,
         ] {
             assert_eq!(
                 serde_json::to_string(&v).unwrap(),

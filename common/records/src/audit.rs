@@ -8,9 +8,11 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::airspace_audit::AirspaceAudit;
+use crate::limit_audit::{FlownLimit, LimitAudit};
 use cdm_math::{Real, Vec3};
 use cdm_model::formation::Role;
 use cdm_model::frame::deformation_eigenvalues;
+use cdm_model::limits::scaled;
 use cdm_model::outcome::{FaultKind, LossCause, Verdict, ViolationKind};
 use cdm_model::repair::Retriangulation;
 use cdm_model::safety::{self, Prism};
@@ -77,10 +79,12 @@ impl SafetyNumbers {
 /// One safety violation (the tick at which a condition starts to fail for these members).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Violation {
-    /// `collision`, `containment`, `tracking`, `deformation`, `geofence` or `obstacle`.
+    /// `collision`, `containment`, `tracking`, `deformation`, `geofence`, `obstacle` or
+    /// `limit`.
     pub kind: ViolationKind,
-    /// `geofence`: the side (`floor`, `ceiling`, `edge K`); `obstacle`: its name (absent for
-    /// the other kinds, whose records are as they were).
+    /// `geofence`: the side (`floor`, `ceiling`, `edge K`); `obstacle`: its name; `limit`: the
+    /// `[vehicle]` key; `collision` with a downwash ratio: `downwash` (absent for the other
+    /// kinds, whose records are as they were).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub name: Option<String>,
     pub tick: u64,
@@ -201,6 +205,13 @@ pub struct AuditReport {
     /// With `[[obstacle]]`: the smallest distance of a member's ball to an obstacle.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub min_obstacle_margin_m: Option<Real>,
+    /// With `[vehicle]` `downwash_ratio`: the smallest distance between two members in the
+    /// downwash metric sqrt(dx^2 + dy^2 + (dz / ratio)^2), where collisions are then judged.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_downwash_separation_m: Option<Real>,
+    /// With `[vehicle]` limits: each limit's largest flown value (`limit_audit.rs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vehicle_limits: Option<Vec<FlownLimit>>,
     pub violations: Vec<Violation>,
     pub violations_dropped: u64,
     /// The run was ended at its first violation (`--stop-on-violation`).
@@ -335,6 +346,10 @@ pub struct Auditor {
     sweep: Sweep,
     /// The geofence and the obstacles, when the scenario has them.
     airspace: Option<AirspaceAudit>,
+    /// The `[vehicle]` limits, when the scenario sets them.
+    limits: Option<LimitAudit>,
+    /// The downwash ratio, when the scenario sets one: collisions in its metric.
+    downwash_ratio: Option<Real>,
 }
 
 /// The collision sweep's buffers: the bodies' order along x (last tick's order sorts in about
@@ -345,6 +360,8 @@ struct Sweep {
     close: Vec<(usize, usize, Real)>,
     pairs: Vec<((u32, u32), Real)>,
     seen: Vec<(u32, u32)>,
+    /// The bodies in the downwash metric's Euclidean image (z / ratio).
+    scaled: Vec<Vec3>,
 }
 
 impl Auditor {
@@ -383,6 +400,8 @@ impl Auditor {
                 min_boundary_distance_m: Real::INFINITY,
                 min_fence_margin_m: None,
                 min_obstacle_margin_m: None,
+                min_downwash_separation_m: None,
+                vehicle_limits: None,
                 violations: Vec::new(),
                 violations_dropped: 0,
                 stopped_on_violation: false,
@@ -393,7 +412,35 @@ impl Auditor {
             },
             sweep: Sweep::default(),
             airspace: AirspaceAudit::new(scenario, numbers.delta_m),
+            limits: LimitAudit::new(scenario),
+            downwash_ratio: scenario.downwash_ratio(),
         }
+    }
+
+    /// Whether the audit needs the members' velocities ([`Self::observe_velocities`]).
+    pub fn wants_velocities(&self) -> bool {
+        self.limits.is_some()
+    }
+
+    /// Audit the `[vehicle]` limits on one instant's flown velocities (member order); nothing
+    /// without limits.
+    pub fn observe_velocities(&mut self, tick: u64, t: Real, vel: &[Vec3]) {
+        let Some(mut a) = self.limits.take() else {
+            return;
+        };
+        let mut breaches = Vec::new();
+        a.observe(t, vel, &self.alive, &self.ids, |b| breaches.push(b));
+        for b in breaches {
+            let m = Measured {
+                value: b.value,
+                limit: b.allowed,
+            };
+            let id = self.ids[b.member];
+            let name = Some(b.limit.key().to_string());
+            self.record_named(ViolationKind::Limit, name, &[id], (tick, t), m);
+        }
+        self.report.vehicle_limits = Some(a.flown.clone());
+        self.limits = Some(a);
     }
 
     /// The safety numbers used.
@@ -608,6 +655,21 @@ impl Auditor {
         safety::sort_by_x(bodies, &mut sw.by_x);
         let (sep, _, _) = safety::min_separation_sorted(bodies, &sw.by_x);
         self.report.min_separation_m = self.report.min_separation_m.min(sep);
+        // With a downwash ratio, collisions are judged in its metric: the Euclidean distance of
+        // the bodies with heights divided by the ratio. x is unchanged, so the order holds.
+        let bodies = match self.downwash_ratio {
+            Some(ratio) => {
+                sw.scaled.clear();
+                sw.scaled.extend(bodies.iter().map(|p| scaled(p, ratio)));
+                let (d, _, _) = safety::min_separation_sorted(&sw.scaled, &sw.by_x);
+                let r = &mut self.report;
+                r.min_downwash_separation_m =
+                    Some(r.min_downwash_separation_m.map_or(d, |m| m.min(d)));
+                &sw.scaled
+            }
+            None => bodies,
+        };
+        let name = self.downwash_ratio.map(|_| "downwash".to_string());
         close_pairs_sorted(bodies, &sw.by_x, 2.0 * n.eps_m, &mut sw.close);
         sw.pairs.clear();
         sw.pairs.extend(sw.close.iter().map(|&(i, j, d)| {
@@ -622,7 +684,7 @@ impl Auditor {
                     value: d,
                     limit: 2.0 * n.eps_m,
                 };
-                self.record(ViolationKind::Collision, &[a, b], at, m);
+                self.record_named(ViolationKind::Collision, name.clone(), &[a, b], at, m);
             }
         }
         std::mem::swap(&mut self.failing.collisions, &mut sw.seen);

@@ -16,6 +16,8 @@ pub struct TickRecorder {
     order: Vec<usize>,
     ht: Vec<Vec3>,
     pos: Vec<Vec3>,
+    /// Velocities, kept only when the audit checks `[vehicle]` limits.
+    vel: Vec<Vec3>,
     rows: Vec<Row>,
 }
 
@@ -27,6 +29,7 @@ impl TickRecorder {
             order: s.id_order(),
             ht: Vec::with_capacity(n),
             pos: vec![Vec3::zeros(); n],
+            vel: vec![Vec3::zeros(); n],
             rows: Vec::with_capacity(n),
         }
     }
@@ -64,6 +67,14 @@ impl TickRecorder {
             }
         }
         audit.observe(tick, t, &self.pos, &self.ht);
+        if audit.wants_velocities() {
+            for (k, v) in self.vel.iter_mut().enumerate() {
+                if let Some((_, flown)) = member(k) {
+                    *v = flown;
+                }
+            }
+            audit.observe_velocities(tick, t, &self.vel);
+        }
         if !tel.keeps(tick) {
             return Ok(());
         }

@@ -164,6 +164,7 @@ fn generated_unchecked(n: usize) -> ScenarioFile {
         landing: None,
         geofence: None,
         obstacles: Vec::new(),
+        vehicle: None,
         agents,
     }
 }

@@ -12,6 +12,7 @@ mod locate;
 mod mission;
 mod origin;
 mod validate;
+mod vehicle;
 
 use std::path::Path;
 
@@ -29,6 +30,7 @@ pub use builtin::{generated, paper40, TeamSizeError, MAX_AGENTS};
 pub use fields::{MAX_COORD_M, MAX_TICKS};
 pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
 pub use origin::{GeoOrigin, GeoPoint};
+pub use vehicle::VehicleSpec;
 
 /// Default tolerance for members off the primary leaders' plane (ERRATA 10): within it a member
 /// is projected onto the plane (and the tool says so); beyond it the scenario is refused.
@@ -89,6 +91,9 @@ pub struct ScenarioFile {
     /// `[[obstacle]]`: solids the team must not touch, each named.
     #[serde(default, rename = "obstacle", skip_serializing_if = "Vec::is_empty")]
     pub obstacles: Vec<ObstacleSpec>,
+    /// `[vehicle]`: the quadcopters' speed and acceleration limits and their downwash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<VehicleSpec>,
     pub agents: Vec<AgentSpec>,
 }
 
@@ -342,6 +347,12 @@ impl Scenario {
     /// RK4 substeps per tick.
     pub fn substeps(&self) -> u32 {
         self.file.substeps.unwrap_or(DEFAULT_SUBSTEPS)
+    }
+
+    /// The downwash ellipsoid's vertical semi-axis over its horizontal one (`[vehicle]`
+    /// `downwash_ratio`), when the file sets it; without it separation is the paper's spheres.
+    pub fn downwash_ratio(&self) -> Option<Real> {
+        self.file.vehicle.and_then(|v| v.downwash_ratio)
     }
 
     /// The role of a member id, if present.

@@ -334,6 +334,7 @@ proptest! {
                 landing: None,
                 geofence: None,
                 obstacles: Vec::new(),
+                vehicle: None,
                 agents: own,
             }
         };
