@@ -29,3 +29,5 @@ pub mod plan;
 pub mod repair;
 pub mod safety;
 pub mod step;
+pub mod steer;
+pub mod stop;
