@@ -109,12 +109,16 @@ pub struct Steering {
     route: Option<(TeamPlan, Real)>,
     /// The flight the team was launched for ends no earlier than this.
     launched_end_s: Real,
+    /// The largest peak acceleration of a leader on the launched plan (m/s^2).
+    launched_peak_acc: Real,
     settings: SteerSettings,
 }
 
 /// Where the leaders come to rest from a switch: the phases up to there, when and where.
 struct Rest {
     phases: Vec<Phase>,
+    /// The first of `phases` that is not the plan's (the stop).
+    first_new: usize,
     t_s: Real,
     at: [Vec3; 3],
     kind: PhaseKind,
@@ -125,8 +129,14 @@ struct Rest {
 impl Steering {
     /// The steering of a team launched with `plan`.
     pub fn new(plan: TeamPlan, settings: SteerSettings) -> Self {
+        let launched_peak_acc = (plan.phases().iter())
+            .map(|p| {
+                max_distance(&p.start, &p.goal) * quintic_peak_acceleration(p.quintic.t_total_s)
+            })
+            .fold(0.0, Real::max);
         Steering {
             launched_end_s: plan.flight_end_s(),
+            launched_peak_acc,
             plan,
             route: None,
             settings,
@@ -149,10 +159,11 @@ impl Steering {
             });
         }
         let rest = self.to_rest(t_switch_s);
-        let route = self.route.clone().or_else(|| {
-            (*command != Command::Resume).then(|| (self.plan.clone(), t_switch_s))
-        });
-        let first_new = rest.phases.len();
+        let route = self
+            .route
+            .clone()
+            .or_else(|| (*command != Command::Resume).then(|| (self.plan.clone(), t_switch_s)));
+        let first_new = rest.first_new;
         let mut phases = rest.phases.clone();
         let mut route_after = route.clone();
         match command {
@@ -179,7 +190,9 @@ impl Steering {
                 if rest.kind == PhaseKind::Landing {
                     return Err(NotApplicable::Landing);
                 }
-                let ground = rest.at.map(|p| Vec3::new(p.x, p.y, self.settings.ground_z_m));
+                let ground = rest
+                    .at
+                    .map(|p| Vec3::new(p.x, p.y, self.settings.ground_z_m));
                 let z_m = rest.at.iter().map(|p| p.z).fold(Real::INFINITY, Real::min);
                 if z_m - self.settings.ground_z_m < 1e-9 {
                     return Err(NotApplicable::OnGround { z_m });
@@ -264,6 +277,7 @@ impl Steering {
         let p = all[k];
         let whole = |t_s: Real| Rest {
             phases: all[..=k].to_vec(),
+            first_new: k + 1,
             t_s,
             at: p.goal,
             kind: p.kind,
@@ -287,6 +301,7 @@ impl Steering {
             // At rest on it (its start): nothing to stop.
             return Rest {
                 phases,
+                first_new: k + 1,
                 t_s: t,
                 at: p.primaries_at_s(s0),
                 kind: p.kind,
@@ -309,6 +324,7 @@ impl Steering {
                 });
                 Rest {
                     phases,
+                    first_new: k + 1,
                     t_s: t + stop.t_s,
                     at,
                     kind: p.kind,
@@ -321,14 +337,9 @@ impl Steering {
     }
 
     /// The default travel time from `from` to `to`: the fastest leader's peak acceleration at
-    /// most the largest any rest-to-rest phase of the launched plan reaches.
+    /// most the largest any phase of the launched plan reaches.
     fn travel_time(&self, from: &[Vec3; 3], to: &[Vec3; 3]) -> Real {
-        let peak = (self.plan.phases().iter())
-            .filter(|p| p.scaling == Scaling::RestToRest)
-            .map(|p| {
-                max_distance(&p.start, &p.goal) * quintic_peak_acceleration(p.quintic.t_total_s)
-            })
-            .fold(0.0, Real::max);
+        let peak = self.launched_peak_acc;
         let d = max_distance(from, to);
         let t = if peak > 0.0 {
             (d * quintic_peak_acceleration(1.0) / peak).sqrt()

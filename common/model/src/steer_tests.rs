@@ -115,8 +115,8 @@ fn goto_after_a_hold_ends_at_the_goals_and_resume_returns_to_the_route() {
     assert_eq!(last.goal, plan.goal);
     assert_eq!(last.t_start_s, t_r);
     let d = at(&r.plan, r.plan.end_s());
-    for i in 0..3 {
-        assert!((d[i][0] - plan.goal[i]).norm() < 1e-9);
+    for (d, goal) in d.iter().zip(plan.goal) {
+        assert!((d[0] - goal).norm() < 1e-9);
     }
     steer.accept(r);
     assert_eq!(
@@ -143,13 +143,19 @@ fn a_resumed_mission_keeps_its_later_phases_and_lands() {
     let r = steer.propose(&Command::Resume, h.t_rest_s + 10.0).unwrap();
     let kinds: Vec<PhaseKind> = r.plan.phases().iter().map(|p| p.kind).collect();
     use PhaseKind::*;
-    assert_eq!(kinds, [Takeoff, Segment(1), Segment(1), Segment(1), Landing]);
+    assert_eq!(
+        kinds,
+        [Takeoff, Segment(1), Segment(1), Segment(1), Landing]
+    );
     let back = r.plan.phases()[3];
     let landing = r.plan.phases()[4];
     // The 5 s hover before the landing is kept.
     assert!((landing.t_start_s - back.t_end_s() - 5.0).abs() < 1e-9);
     assert_eq!(landing.goal, plan.phases()[2].goal);
-    assert_eq!(r.plan.flight_end_s(), landing.t_end_s() + crate::plan::LANDING_SETTLE_S);
+    assert_eq!(
+        r.plan.flight_end_s(),
+        landing.t_end_s() + crate::plan::LANDING_SETTLE_S
+    );
     // Land from the air: straight down from where the team holds.
     let l = steer.propose(&Command::Land, 100.0).unwrap();
     let last = *l.plan.phases().last().unwrap();

@@ -94,7 +94,11 @@ impl Stop {
         let u = (tau / t).clamp(0.0, 1.0);
         let (u2, u3, u4) = (u * u, u * u * u, u * u * u * u);
         // P = integral of (1-w)^2 (1+2w), Q = integral of w (1-w)^2, from 0 to u.
-        let p = [u - u3 + u4 / 2.0, 1.0 - 3.0 * u2 + 2.0 * u3, 6.0 * u2 - 6.0 * u];
+        let p = [
+            u - u3 + u4 / 2.0,
+            1.0 - 3.0 * u2 + 2.0 * u3,
+            6.0 * u2 - 6.0 * u,
+        ];
         let q = [
             u2 / 2.0 - 2.0 * u3 / 3.0 + u4 / 4.0,
             u - 2.0 * u2 + u3,

@@ -144,7 +144,7 @@ fn timing(f: &ScenarioFile, name: &str, t_s: Real, hold: Option<Real>) -> Result
 }
 
 /// The primary leaders' ids in the plan's order (file order; validation found exactly three).
-fn primary_ids(f: &ScenarioFile) -> [u32; 3] {
+pub(crate) fn primary_ids(f: &ScenarioFile) -> [u32; 3] {
     let mut ids = (f.agents.iter())
         .filter(|a| a.role == Role::Primary)
         .map(|a| a.id);
@@ -153,7 +153,7 @@ fn primary_ids(f: &ScenarioFile) -> [u32; 3] {
 
 /// For each primary leader in the plan's order, its rank in ascending id order (the order of a
 /// segment's `goals`).
-fn primary_order(ids: &[u32; 3]) -> [usize; 3] {
+pub(crate) fn primary_order(ids: &[u32; 3]) -> [usize; 3] {
     let mut sorted = *ids;
     sorted.sort_unstable();
     std::array::from_fn(|k| sorted.iter().position(|&id| id == ids[k]).unwrap_or(k))
