@@ -24,8 +24,9 @@ use cdm_math::Real;
 use cdm_model::outcome::Verdict;
 use cdm_model::plan::{Phase, PhaseKind};
 use cdm_model::steer::{Command, NotApplicable, Proposal, Steering};
-use cdm_records::audit::SafetyNumbers;
-use cdm_scenario::Scenario;
+use cdm_model::step::tick_time;
+use cdm_records::audit::{CommandSummary, SafetyNumbers};
+use cdm_scenario::{CommandSpec, Scenario, TimedCommand};
 
 /// What a command's motion was certified to, and the verdict.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -152,6 +153,73 @@ pub fn steer(
             }
         }
     }
+}
+
+/// One command of a file and what became of it: an entry of a run's `commands.json` (the
+/// command's own fields first, so the file reads back as a command file).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CommandRecord {
+    #[serde(flatten)]
+    pub spec: CommandSpec,
+    /// When it arrived (simulation time): a file's command arrives at its `at_s`.
+    pub arrived_s: Real,
+    pub switch_tick: u64,
+    /// The certificate's verdict; `None` when the command did not apply at all.
+    pub verdict: Option<Verdict>,
+    pub accepted: bool,
+    /// Why it was refused: the certificate's reasons, or why it did not apply.
+    pub why: Option<String>,
+    pub certificate: Option<CommandCertificate>,
+}
+
+impl CommandRecord {
+    /// What audit.json lists of it.
+    pub fn summary(&self) -> CommandSummary {
+        CommandSummary {
+            command: self.spec.command.clone(),
+            arrived_s: self.arrived_s,
+            switch_tick: self.switch_tick,
+            verdict: self.verdict,
+            accepted: self.accepted,
+            why: self.why.clone(),
+        }
+    }
+}
+
+/// A file's commands applied in order to the team of `s`, each certified at its switch tick
+/// against the plan as commanded before it: the scenario to fly (its plan the commanded one,
+/// the same before every switch, so flying it is flying the switches) and what became of each.
+pub fn apply_commands(s: &Scenario, commands: &[TimedCommand]) -> (Scenario, Vec<CommandRecord>) {
+    let n = SafetyNumbers::of(s);
+    let mut steering = s.steering();
+    let records = (commands.iter())
+        .map(|c| {
+            let t_switch_s = tick_time(c.switch_tick, s.dt_s());
+            let outcome = steer(&mut steering, s, &n, &c.command, t_switch_s);
+            let (verdict, accepted, why, certificate) = match outcome {
+                CommandOutcome::Accepted(cert) => (Some(cert.verdict), true, None, Some(cert)),
+                CommandOutcome::Refused(cert) => (
+                    Some(cert.verdict),
+                    false,
+                    Some(cert.reasons.join("; ")),
+                    Some(cert),
+                ),
+                CommandOutcome::NotApplicable(why) => (None, false, Some(why.to_string()), None),
+            };
+            CommandRecord {
+                spec: c.spec.clone(),
+                arrived_s: c.spec.at_s,
+                switch_tick: c.switch_tick,
+                verdict,
+                accepted,
+                why,
+                certificate,
+            }
+        })
+        .collect();
+    let mut flown = s.clone();
+    flown.plan = steering.plan().clone();
+    (flown, records)
 }
 
 #[cfg(test)]
