@@ -92,7 +92,12 @@ fn held_refused_sent_elsewhere_and_landed_then_replayed_byte_for_byte() {
         0,
         "simulate --commands RUN/commands.json",
     );
-    for f in ["telemetry.csv", "audit.json", "commands.json", "scenario.toml"] {
+    for f in [
+        "telemetry.csv",
+        "audit.json",
+        "commands.json",
+        "scenario.toml",
+    ] {
         assert_same_file(&first.join(f), &again.join(f));
     }
 }
@@ -101,7 +106,10 @@ fn held_refused_sent_elsewhere_and_landed_then_replayed_byte_for_byte() {
 fn bad_command_files_are_refused_naming_the_field() {
     let tmp = TempDir::new();
     for (k, (text, needles)) in [
-        (r#"[{"at_s": 1, "command": "hover"}]"#, &["commands[0].command", "hover"][..]),
+        (
+            r#"[{"at_s": 1, "command": "hover"}]"#,
+            &["commands[0].command", "hover"][..],
+        ),
         (
             r#"[{"at_s": 1, "command": "goto", "goals": [[0, 0, 1]]}]"#,
             &["commands[0].goals", "got 1"][..],

@@ -23,7 +23,7 @@ use cdm_engine::engine::max_follower_deviation_within;
 use cdm_math::Real;
 use cdm_model::outcome::Verdict;
 use cdm_model::plan::{Phase, PhaseKind};
-use cdm_model::steer::{Command, NotApplicable, Proposal, Steering};
+use cdm_model::steer::{NotApplicable, Proposal, Steering, TeamCommand};
 use cdm_model::step::tick_time;
 use cdm_records::audit::{CommandSummary, SafetyNumbers};
 use cdm_scenario::{CommandSpec, Scenario, TimedCommand};
@@ -138,7 +138,7 @@ pub fn steer(
     steering: &mut Steering,
     s: &Scenario,
     n: &SafetyNumbers,
-    command: &Command,
+    command: &TeamCommand,
     t_switch_s: Real,
 ) -> CommandOutcome {
     match steering.propose(command, t_switch_s) {

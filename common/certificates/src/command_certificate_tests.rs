@@ -21,7 +21,7 @@ fn accepted(o: &CommandOutcome) -> &CommandCertificate {
 fn held_refused_sent_and_landed() {
     let (s, n, mut steering) = team();
     let t_end = s.plan.flight_end_s();
-    let hold = steer(&mut steering, &s, &n, &Command::Hold, 0.3 * t_end);
+    let hold = steer(&mut steering, &s, &n, &TeamCommand::Hold, 0.3 * t_end);
     let c = accepted(&hold);
     assert_eq!(c.phases.len(), 1, "{c:?}");
     assert!(c.phases[0].name.ends_with("(hold)"));
@@ -40,7 +40,7 @@ fn held_refused_sent_and_landed() {
         mid + (here[2] - mid) * 0.05,
     ];
     let t1 = held.end_s() + 1.0;
-    let unsafe_goto = Command::Goto {
+    let unsafe_goto = TeamCommand::Goto {
         goals: sliver,
         travel_s: Some(100.0),
     };
@@ -54,7 +54,7 @@ fn held_refused_sent_and_landed() {
     assert_eq!(steering.plan(), &held);
     // Too quick: the followers cannot keep up (T_threshold, eq. 34).
     let shift = here.map(|p| p + Vec3::new(200.0, 0.0, 0.0));
-    let rushed = Command::Goto {
+    let rushed = TeamCommand::Goto {
         goals: shift,
         travel_s: Some(1.0),
     };
@@ -63,7 +63,7 @@ fn held_refused_sent_and_landed() {
         other => panic!("{other:?}"),
     }
     assert_eq!(steering.plan(), &held);
-    let safe_goto = Command::Goto {
+    let safe_goto = TeamCommand::Goto {
         goals: shift,
         travel_s: None,
     };
@@ -73,7 +73,7 @@ fn held_refused_sent_and_landed() {
         assert!((there[i] - shift[i]).norm() < 1e-9);
     }
     let t2 = steering.plan().end_s();
-    let land = steer(&mut steering, &s, &n, &Command::Land, t2);
+    let land = steer(&mut steering, &s, &n, &TeamCommand::Land, t2);
     let c = accepted(&land);
     assert!(c.phases.iter().any(|p| p.name == "landing"), "{c:?}");
     let down = at(steering.plan());
@@ -91,7 +91,7 @@ fn a_command_file_is_checked_and_read_back() {
     let cs = cdm_scenario::parse_commands(ok, &s).unwrap();
     let hz = s.file.comm_hz;
     assert_eq!(cs[0].switch_tick, (10.004 * hz - 1e-9).ceil() as u64);
-    assert!(matches!(cs[1].command, Command::Goto { travel_s: Some(t), .. } if t == 50.0));
+    assert!(matches!(cs[1].command, TeamCommand::Goto { travel_s: Some(t), .. } if t == 50.0));
     for (text, field) in [
         (
             r#"[{"at_s": 1, "command": "hover"}]"#,

@@ -3,7 +3,7 @@
 //! (eqs. 13-14, 23).
 
 use crate::frame::{deformation_eigenvalues, CollinearLeaders, Homogeneous};
-use crate::stop::Stop;
+use crate::stop::StopProfile;
 use cdm_math::{Mat3, Real, Vec3};
 
 /// Which polynomial piece an integration interval lies on. The 3rd and 4th derivatives of s(t)
@@ -120,7 +120,7 @@ pub enum Scaling {
     Cut { until_s: Real },
     /// The leaders brought to rest from moving (`stop.rs`), in units of the segment it stops;
     /// this phase's `start`..`goal` is the part flown, s = (S - s0) / `stop.distance()`.
-    Stop(Stop),
+    Stop(StopProfile),
 }
 
 /// One phase: the primary leaders move from `start` to `goal` on the quintic of eq. 15, rest to

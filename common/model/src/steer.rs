@@ -20,12 +20,12 @@
 //! quintic over a distance d and a time T peaks at 10 d / (sqrt(3) T^2)).
 
 use crate::plan::{Phase, PhaseKind, Quintic, Scaling, Segment, TeamPlan};
-use crate::stop::{quintic_peak_acceleration, Stop};
+use crate::stop::{quintic_peak_acceleration, StopProfile};
 use cdm_math::{Real, Vec3};
 
 /// A command to a team in flight.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Command {
+pub enum TeamCommand {
     /// Come to rest along the current segment and hover.
     Hold,
     /// Fly on along the route left by the first departing command.
@@ -40,14 +40,14 @@ pub enum Command {
     },
 }
 
-impl Command {
+impl TeamCommand {
     /// `hold`, `resume`, `land`, `goto`: how the files and the command line name it.
     pub fn name(&self) -> &'static str {
         match self {
-            Command::Hold => "hold",
-            Command::Resume => "resume",
-            Command::Land => "land",
-            Command::Goto { .. } => "goto",
+            TeamCommand::Hold => "hold",
+            TeamCommand::Resume => "resume",
+            TeamCommand::Land => "land",
+            TeamCommand::Goto { .. } => "goto",
         }
     }
 }
@@ -150,7 +150,11 @@ impl Steering {
 
     /// The motion `command` asks for from `t_switch_s` on (a tick's instant), or why it does
     /// not apply. Nothing changes until [`Steering::accept`].
-    pub fn propose(&self, command: &Command, t_switch_s: Real) -> Result<Proposal, NotApplicable> {
+    pub fn propose(
+        &self,
+        command: &TeamCommand,
+        t_switch_s: Real,
+    ) -> Result<Proposal, NotApplicable> {
         let end_s = self.plan.flight_end_s();
         if t_switch_s > end_s {
             return Err(NotApplicable::Ended {
@@ -162,52 +166,18 @@ impl Steering {
         let route = self
             .route
             .clone()
-            .or_else(|| (*command != Command::Resume).then(|| (self.plan.clone(), t_switch_s)));
+            .or_else(|| (*command != TeamCommand::Resume).then(|| (self.plan.clone(), t_switch_s)));
         let first_new = rest.first_new;
         let mut phases = rest.phases.clone();
         let mut route_after = route.clone();
         match command {
-            Command::Hold => {}
-            Command::Goto { goals, travel_s } => {
-                if rest.kind == PhaseKind::Landing
-                    || (rest.kind == PhaseKind::Takeoff && !rest.complete)
-                {
-                    return Err(NotApplicable::NotAirborne {
-                        phase: rest.kind.name(),
-                    });
-                }
-                let t_s = travel_s.unwrap_or_else(|| self.travel_time(&rest.at, goals));
+            TeamCommand::Hold => {}
+            TeamCommand::Goto { goals, travel_s } => {
                 let n = next_segment_number(&phases);
-                phases.push(Phase::rest_to_rest(
-                    PhaseKind::Segment(n),
-                    rest.t_s,
-                    t_s,
-                    rest.at,
-                    *goals,
-                ));
+                phases.push(self.goto(&rest, goals, *travel_s, n)?);
             }
-            Command::Land => {
-                if rest.kind == PhaseKind::Landing {
-                    return Err(NotApplicable::Landing);
-                }
-                let ground = rest
-                    .at
-                    .map(|p| Vec3::new(p.x, p.y, self.settings.ground_z_m));
-                let z_m = rest.at.iter().map(|p| p.z).fold(Real::INFINITY, Real::min);
-                if z_m - self.settings.ground_z_m < 1e-9 {
-                    return Err(NotApplicable::OnGround { z_m });
-                }
-                let t_s = (self.settings.landing_t_s)
-                    .unwrap_or_else(|| self.travel_time(&rest.at, &ground));
-                phases.push(Phase::rest_to_rest(
-                    PhaseKind::Landing,
-                    rest.t_s,
-                    t_s,
-                    rest.at,
-                    ground,
-                ));
-            }
-            Command::Resume => {
+            TeamCommand::Land => phases.push(self.landing(&rest)?),
+            TeamCommand::Resume => {
                 let (route_plan, left_s) = route.ok_or(NotApplicable::NotHeld)?;
                 if rest.kind == PhaseKind::Landing {
                     return Err(NotApplicable::Landing);
@@ -230,6 +200,52 @@ impl Steering {
             held_at: rest.at,
             route: route_after,
         })
+    }
+
+    /// A goto's segment (numbered `n`) from where the team rests.
+    fn goto(
+        &self,
+        rest: &Rest,
+        goals: &[Vec3; 3],
+        travel_s: Option<Real>,
+        n: u32,
+    ) -> Result<Phase, NotApplicable> {
+        if rest.kind == PhaseKind::Landing || (rest.kind == PhaseKind::Takeoff && !rest.complete) {
+            return Err(NotApplicable::NotAirborne {
+                phase: rest.kind.name(),
+            });
+        }
+        let t_s = travel_s.unwrap_or_else(|| self.travel_time(&rest.at, goals));
+        Ok(Phase::rest_to_rest(
+            PhaseKind::Segment(n),
+            rest.t_s,
+            t_s,
+            rest.at,
+            *goals,
+        ))
+    }
+
+    /// The landing from where the team rests.
+    fn landing(&self, rest: &Rest) -> Result<Phase, NotApplicable> {
+        if rest.kind == PhaseKind::Landing {
+            return Err(NotApplicable::Landing);
+        }
+        let ground = rest
+            .at
+            .map(|p| Vec3::new(p.x, p.y, self.settings.ground_z_m));
+        let z_m = rest.at.iter().map(|p| p.z).fold(Real::INFINITY, Real::min);
+        if z_m - self.settings.ground_z_m < 1e-9 {
+            return Err(NotApplicable::OnGround { z_m });
+        }
+        let t_s =
+            (self.settings.landing_t_s).unwrap_or_else(|| self.travel_time(&rest.at, &ground));
+        Ok(Phase::rest_to_rest(
+            PhaseKind::Landing,
+            rest.t_s,
+            t_s,
+            rest.at,
+            ground,
+        ))
     }
 
     /// The proposal becomes the team's plan (its motion was certified).
@@ -309,7 +325,7 @@ impl Steering {
             };
         }
         let peak = quintic_peak_acceleration(p.quintic.t_total_s);
-        match Stop::quickest(s0, v0, a0, peak, self.settings.dt_s) {
+        match StopProfile::quickest(s0, v0, a0, peak, self.settings.dt_s) {
             Some(stop) if t + stop.t_s < p.t_end_s() => {
                 let at = p.primaries_at_s(s0 + stop.distance());
                 phases.push(Phase {

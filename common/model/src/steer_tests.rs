@@ -57,7 +57,7 @@ fn a_hold_stops_along_the_segment_no_faster_than_the_plan() {
     let plan = paper_plan(100.0);
     let steer = Steering::new(plan.clone(), settings());
     let t_sw = 30.0;
-    let p = steer.propose(&Command::Hold, t_sw).unwrap();
+    let p = steer.propose(&TeamCommand::Hold, t_sw).unwrap();
     assert_switches_smoothly(&plan, &p.plan, t_sw);
     assert!(p.t_rest_s > t_sw && p.t_rest_s < 100.0, "{}", p.t_rest_s);
     // The run goes on hovering as long as the launched flight would have.
@@ -79,7 +79,7 @@ fn a_hold_stops_along_the_segment_no_faster_than_the_plan() {
         }
     }
     // Late in the segment the quintic brakes sooner than any stop: the hold keeps it.
-    let late = steer.propose(&Command::Hold, 70.0).unwrap();
+    let late = steer.propose(&TeamCommand::Hold, 70.0).unwrap();
     assert_eq!(late.t_rest_s, 100.0);
     assert_eq!(late.plan.phases(), plan.phases());
 }
@@ -88,12 +88,12 @@ fn a_hold_stops_along_the_segment_no_faster_than_the_plan() {
 fn goto_after_a_hold_ends_at_the_goals_and_resume_returns_to_the_route() {
     let plan = paper_plan(100.0);
     let mut steer = Steering::new(plan.clone(), settings());
-    let hold = steer.propose(&Command::Hold, 20.0).unwrap();
+    let hold = steer.propose(&TeamCommand::Hold, 20.0).unwrap();
     steer.accept(hold.clone());
     let goals = hold.held_at.map(|p| p + Vec3::new(30.0, 0.0, 0.0));
     // While moving, a goto holds first: the same stop.
     let t_sw = 25.0;
-    let goto = Command::Goto {
+    let goto = TeamCommand::Goto {
         goals,
         travel_s: Some(40.0),
     };
@@ -110,7 +110,7 @@ fn goto_after_a_hold_ends_at_the_goals_and_resume_returns_to_the_route() {
     steer.accept(g);
     // Resume: back to the goal of the interrupted segment, then hover until the flight's end.
     let t_r = end + 5.0;
-    let r = steer.propose(&Command::Resume, t_r).unwrap();
+    let r = steer.propose(&TeamCommand::Resume, t_r).unwrap();
     let last = *r.plan.phases().last().unwrap();
     assert_eq!(last.goal, plan.goal);
     assert_eq!(last.t_start_s, t_r);
@@ -120,11 +120,11 @@ fn goto_after_a_hold_ends_at_the_goals_and_resume_returns_to_the_route() {
     }
     steer.accept(r);
     assert_eq!(
-        steer.propose(&Command::Resume, steer.plan().end_s()),
+        steer.propose(&TeamCommand::Resume, steer.plan().end_s()),
         Err(NotApplicable::NotHeld)
     );
     // A default travel time: the fastest leader's peak acceleration is the plan's own.
-    let back = Command::Goto {
+    let back = TeamCommand::Goto {
         goals: plan.start,
         travel_s: None,
     };
@@ -138,9 +138,11 @@ fn goto_after_a_hold_ends_at_the_goals_and_resume_returns_to_the_route() {
 fn a_resumed_mission_keeps_its_later_phases_and_lands() {
     let plan = mission();
     let mut steer = Steering::new(plan.clone(), settings());
-    let h = steer.propose(&Command::Hold, 80.0).unwrap();
+    let h = steer.propose(&TeamCommand::Hold, 80.0).unwrap();
     steer.accept(h.clone());
-    let r = steer.propose(&Command::Resume, h.t_rest_s + 10.0).unwrap();
+    let r = steer
+        .propose(&TeamCommand::Resume, h.t_rest_s + 10.0)
+        .unwrap();
     let kinds: Vec<PhaseKind> = r.plan.phases().iter().map(|p| p.kind).collect();
     use PhaseKind::*;
     assert_eq!(
@@ -157,7 +159,7 @@ fn a_resumed_mission_keeps_its_later_phases_and_lands() {
         landing.t_end_s() + crate::plan::LANDING_SETTLE_S
     );
     // Land from the air: straight down from where the team holds.
-    let l = steer.propose(&Command::Land, 100.0).unwrap();
+    let l = steer.propose(&TeamCommand::Land, 100.0).unwrap();
     let last = *l.plan.phases().last().unwrap();
     assert_eq!(last.kind, Landing);
     for i in 0..3 {
@@ -170,7 +172,7 @@ fn commands_that_do_not_apply_say_why() {
     let plan = mission();
     let steer = Steering::new(plan.clone(), settings());
     let goals = plan.goal;
-    let goto = Command::Goto {
+    let goto = TeamCommand::Goto {
         goals,
         travel_s: None,
     };
@@ -184,19 +186,19 @@ fn commands_that_do_not_apply_say_why() {
     ));
     assert!(steer.propose(&goto, 52.0).is_ok());
     assert_eq!(
-        steer.propose(&Command::Resume, 60.0),
+        steer.propose(&TeamCommand::Resume, 60.0),
         Err(NotApplicable::NotHeld)
     );
     assert_eq!(
-        steer.propose(&Command::Land, 170.0),
+        steer.propose(&TeamCommand::Land, 170.0),
         Err(NotApplicable::Landing)
     );
     assert!(matches!(
-        steer.propose(&Command::Land, 0.0),
+        steer.propose(&TeamCommand::Land, 0.0),
         Err(NotApplicable::OnGround { .. })
     ));
     assert!(matches!(
-        steer.propose(&Command::Hold, 500.0),
+        steer.propose(&TeamCommand::Hold, 500.0),
         Err(NotApplicable::Ended { .. })
     ));
 }

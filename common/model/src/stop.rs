@@ -27,7 +27,7 @@ pub fn quintic_peak_acceleration(t_total_s: Real) -> Real {
 /// A stop of a segment's time scaling, in that segment's own units of s (0 at its start, 1 at
 /// its end), from the switch (tau = 0) to rest (tau = `t_s`).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Stop {
+pub struct StopProfile {
     /// Duration T_h, seconds (a whole number of ticks).
     pub t_s: Real,
     /// s' at the switch (1/s).
@@ -36,19 +36,25 @@ pub struct Stop {
     pub a0: Real,
 }
 
-impl Stop {
+impl StopProfile {
     /// The quickest stop, on whole ticks of `dt_s`, whose |s''| never exceeds `peak_acc` (the
     /// segment's own quintic's peak: no leader accelerates harder than the plan made it) and
     /// that ends at s <= 1 - s0 further on (short of the segment's end). `None` when none exists
     /// (near the segment's end the quintic itself is the quickest such stop: keep it).
-    pub fn quickest(s0: Real, v0: Real, a0: Real, peak_acc: Real, dt_s: Real) -> Option<Stop> {
+    pub fn quickest(
+        s0: Real,
+        v0: Real,
+        a0: Real,
+        peak_acc: Real,
+        dt_s: Real,
+    ) -> Option<StopProfile> {
         if !(s0.is_finite() && v0.is_finite() && a0.is_finite() && v0 >= 0.0 && dt_s > 0.0) {
             return None;
         }
         // The quintic's own rest-to-rest time at that peak bounds how long a stop may need.
         const MAX_STEPS: u64 = 10_000_000;
         for k in 1..=MAX_STEPS {
-            let stop = Stop {
+            let stop = StopProfile {
                 t_s: k as Real * dt_s,
                 v0,
                 a0,
@@ -127,7 +133,7 @@ mod tests {
         let peak = quintic_peak_acceleration(100.0);
         for t_sw in [5.0, 20.0, 35.0, 50.0, 62.0] {
             let [s0, v0, a0, _, _] = q.derivatives(t_sw, Segment::Motion);
-            let stop = Stop::quickest(s0, v0, a0, peak, 0.01).expect("a stop exists");
+            let stop = StopProfile::quickest(s0, v0, a0, peak, 0.01).expect("a stop exists");
             let d0 = stop.derivatives(0.0);
             assert!(d0[0].abs() < 1e-15 && (d0[1] - v0).abs() < 1e-15);
             assert!((d0[2] - a0).abs() < 1e-12, "{t_sw}: {d0:?} vs {a0}");
@@ -137,7 +143,7 @@ mod tests {
             assert!(s0 + stop.distance() <= 1.0);
             assert!(stop.peak_acceleration() <= peak * (1.0 + 1e-9));
             // One tick shorter would be too fast or overshoot: it is the quickest.
-            let shorter = Stop {
+            let shorter = StopProfile {
                 t_s: stop.t_s - 0.01,
                 ..stop
             };
@@ -170,8 +176,8 @@ mod tests {
         let q = Quintic { t_total_s: 100.0 };
         let peak = quintic_peak_acceleration(100.0);
         let [s0, v0, a0, _, _] = q.derivatives(70.0, Segment::Motion);
-        assert_eq!(Stop::quickest(s0, v0, a0, peak, 0.01), None);
-        assert_eq!(Stop::quickest(0.5, -1.0, 0.0, peak, 0.01), None);
-        assert_eq!(Stop::quickest(0.5, Real::NAN, 0.0, peak, 0.01), None);
+        assert_eq!(StopProfile::quickest(s0, v0, a0, peak, 0.01), None);
+        assert_eq!(StopProfile::quickest(0.5, -1.0, 0.0, peak, 0.01), None);
+        assert_eq!(StopProfile::quickest(0.5, Real::NAN, 0.0, peak, 0.01), None);
     }
 }

@@ -11,7 +11,7 @@ use super::{Scenario, ScenarioErrorKind as E};
 use crate::fields::{coordinate, finite, positive, MIN_MOTION_TICKS};
 use crate::mission::{primary_ids, primary_order};
 use cdm_math::{vec3, Real};
-use cdm_model::steer::{Command, SteerSettings, Steering};
+use cdm_model::steer::{SteerSettings, Steering, TeamCommand};
 
 /// The fields a run's `commands.json` adds to each command (ignored when read back).
 const RECORD_FIELDS: [&str; 6] = [
@@ -44,7 +44,7 @@ pub struct CommandSpec {
 pub struct TimedCommand {
     pub spec: CommandSpec,
     pub switch_tick: u64,
-    pub command: Command,
+    pub command: TeamCommand,
 }
 
 /// A command file that cannot be used; names the file, the command's index and its field.
@@ -105,9 +105,9 @@ pub fn check_command(spec: CommandSpec, s: &Scenario, name: &str) -> Result<Time
     }
     let has_goals = spec.goals.is_some() || spec.travel_s.is_some();
     let command = match spec.command.as_str() {
-        "hold" => Command::Hold,
-        "resume" => Command::Resume,
-        "land" => Command::Land,
+        "hold" => TeamCommand::Hold,
+        "resume" => TeamCommand::Resume,
+        "land" => TeamCommand::Land,
         "goto" => goto(&spec, s, name)?,
         other => {
             return Err(E::Invalid {
@@ -116,7 +116,7 @@ pub fn check_command(spec: CommandSpec, s: &Scenario, name: &str) -> Result<Time
             })
         }
     };
-    if has_goals && !matches!(command, Command::Goto { .. }) {
+    if has_goals && !matches!(command, TeamCommand::Goto { .. }) {
         return Err(E::Invalid {
             field: format!("{name}.goals"),
             reason: format!("only goto takes goals and travel_s, not {}", spec.command),
@@ -130,7 +130,7 @@ pub fn check_command(spec: CommandSpec, s: &Scenario, name: &str) -> Result<Time
     })
 }
 
-fn goto(spec: &CommandSpec, s: &Scenario, name: &str) -> Result<Command, E> {
+fn goto(spec: &CommandSpec, s: &Scenario, name: &str) -> Result<TeamCommand, E> {
     let field = format!("{name}.goals");
     let goals = spec.goals.as_ref().ok_or_else(|| E::Invalid {
         field: field.clone(),
@@ -166,7 +166,7 @@ fn goto(spec: &CommandSpec, s: &Scenario, name: &str) -> Result<Command, E> {
         }
     };
     let order = primary_order(&primary_ids(&s.file));
-    Ok(Command::Goto {
+    Ok(TeamCommand::Goto {
         goals: std::array::from_fn(|k| vec3(goals[order[k]])),
         travel_s,
     })
