@@ -223,5 +223,4 @@ pub fn apply_commands(s: &Scenario, commands: &[TimedCommand]) -> (Scenario, Vec
 }
 
 #[cfg(test)]
-#[path = "command_certificate_tests.rs"]
 mod tests;

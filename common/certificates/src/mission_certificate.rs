@@ -108,11 +108,7 @@ pub(crate) fn certify_phase(
     // A hold's stop (`command_certificate.rs`) starts moving, not from rest: the linear team
     // from rest does not model it, and its E_max is measured by flying the commanded flight.
     let stop = matches!(p.scaling, Scaling::Stop(_));
-    let name = if stop {
-        format!("{} (hold)", p.kind.name())
-    } else {
-        p.kind.name()
-    };
+    let name = format!("{}{}", p.kind.name(), if stop { " (hold)" } else { "" });
     let mut reasons = Vec::new();
     let l = s.plan.lambda1_min_of(p).ok();
     let (lambda1, t_l) = l.map_or((0.0, p.t_start_s), |l| (l.lambda1, l.t_s));

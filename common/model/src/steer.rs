@@ -397,5 +397,4 @@ fn next_segment_number(phases: &[Phase]) -> u32 {
 }
 
 #[cfg(test)]
-#[path = "steer_tests.rs"]
 mod tests;
