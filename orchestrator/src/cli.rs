@@ -74,6 +74,12 @@ pub enum Command {
         out: OutDir,
         #[command(flatten)]
         run: RunOptions,
+        /// Steer the team in flight: a JSON list of {at_s, command (hold, resume, land, goto),
+        /// goals (goto: the 3 primary leaders' [x, y, z], ascending id), travel_s}; each is
+        /// certified at its switch tick and applied only when SAFE. The run directory gets
+        /// commands.json (what became of each; readable as such a file again).
+        #[arg(long, value_name = "FILE")]
+        commands: Option<PathBuf>,
     },
     /// Fly the team as processes: one per quadcopter over iceoryx2 shared memory, a shared
     /// lockstep clock, a live safety audit. Exit 0 safe and complete, 1 violation, 2 bad input,

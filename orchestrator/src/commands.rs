@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use cdm_certificates::airspace_suggest::suggest;
 use cdm_certificates::certificate::{deviation_at, Certificate};
 use cdm_certificates::certify::certify;
+use cdm_certificates::command_certificate::{apply_commands, CommandRecord};
 use cdm_certificates::delay::deviation_at_delay;
 use cdm_certificates::losscert::{certify_losses, LossCertificate};
 use cdm_certificates::vehicle_certificate::{suggest_times, VehicleCertificate};
@@ -58,7 +59,12 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
                 cli.quiet,
             )
         }
-        Command::Simulate { source, out, run } => simulate_command(&source, &out, &run, cli.quiet),
+        Command::Simulate {
+            source,
+            out,
+            run,
+            commands,
+        } => simulate_command(&source, &out, &run, commands.as_deref(), cli.quiet),
         Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
         Command::Launch(args) => launch_command(*args, cli.quiet),
         Command::View {
@@ -90,11 +96,19 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
     }
 }
 
+/// The run's commands.json: every command and what became of it.
+fn write_commands(dir: &RunDir, records: &[CommandRecord]) -> Result<(), Failure> {
+    let text = serde_json::to_string_pretty(records).map_err(Failure::fault)?;
+    cdm_records::rundir::write_atomic(&dir.path().join("commands.json"), text.as_bytes())
+        .map_err(Failure::from)
+}
+
 /// `orchestrator simulate`: the whole team in one process, audited and recorded.
 fn simulate_command(
     source: &Source,
     out: &OutDir,
     run: &RunOptions,
+    commands: Option<&Path>,
     quiet: bool,
 ) -> Result<Exit, Failure> {
     cdm_team::telemetry::check_available(run.telemetry)?;
@@ -102,7 +116,21 @@ fn simulate_command(
     check_follow(&s, run.follow)?;
     // Checked before the run directory exists: a refused loss writes nothing.
     let losses = LossSchedule::new(&s, &run.lose, run.max_ticks).map_err(Failure::bad_input)?;
+    let steered = match commands {
+        Some(path) => {
+            let list = cdm_scenario::load_commands(path, &s).map_err(Failure::bad_input)?;
+            Some(apply_commands(&s, &list))
+        }
+        None => None,
+    };
     let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
+    let (s, records) = match steered {
+        Some((flown, records)) => {
+            write_commands(&dir, &records)?;
+            (flown, records)
+        }
+        None => (s, Vec::new()),
+    };
     let started = Instant::now();
     let every = crate::cli::every_or_default(out.every, s.file.agents.len());
     if !quiet {
@@ -115,6 +143,7 @@ fn simulate_command(
         telemetry: run.telemetry,
         losses,
         on_loss: run.on_loss.into(),
+        commands: records.iter().map(CommandRecord::summary).collect(),
     };
     let mut tel =
         cdm_team::telemetry::open(&dir, run.telemetry, every, &s).map_err(Failure::bad_input)?;

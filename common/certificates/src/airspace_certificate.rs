@@ -321,9 +321,9 @@ fn time_of(p: &cdm_model::plan::Phase, s: Real) -> Real {
     if s <= 0.0 {
         0.0
     } else if s >= 1.0 {
-        p.quintic.t_total_s
+        p.duration_s()
     } else {
-        p.quintic.time_of(s)
+        p.time_of(s)
     }
 }
 

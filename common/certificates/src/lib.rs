@@ -10,6 +10,7 @@ pub mod airspace_certificate;
 pub mod airspace_suggest;
 pub mod certificate;
 pub mod certify;
+pub mod command_certificate;
 pub mod delay;
 pub mod linear_certificate;
 pub mod losscert;

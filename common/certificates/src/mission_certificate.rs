@@ -19,7 +19,7 @@ use crate::delay::{delay_search, max_link_delay_linear, DelayBound};
 use crate::linear_certificate::LinearTeam;
 use cdm_engine::engine::max_follower_deviation;
 use cdm_math::{Real, Vec3};
-use cdm_model::plan::{Phase, PhaseKind};
+use cdm_model::plan::{Phase, PhaseKind, Scaling};
 use cdm_records::audit::SafetyNumbers;
 use cdm_scenario::{closest_ground_pair, Scenario};
 
@@ -83,7 +83,7 @@ pub fn certify_mission(s: &Scenario) -> Certificate {
 }
 
 /// The tighter of two delay bounds (the mission tolerates the smallest of its phases').
-fn tighter(a: DelayBound, b: DelayBound) -> DelayBound {
+pub(crate) fn tighter(a: DelayBound, b: DelayBound) -> DelayBound {
     use DelayBound::*;
     match (a, b) {
         (None, _) | (_, None) => None,
@@ -100,14 +100,22 @@ fn tighter(a: DelayBound, b: DelayBound) -> DelayBound {
 }
 
 /// One phase's row and the largest link delay it tolerates.
-fn certify_phase(s: &Scenario, n: &SafetyNumbers, p: &Phase) -> (PhaseCertificate, DelayBound) {
-    let name = p.kind.name();
+pub(crate) fn certify_phase(
+    s: &Scenario,
+    n: &SafetyNumbers,
+    p: &Phase,
+) -> (PhaseCertificate, DelayBound) {
+    // A hold's stop (`command_certificate.rs`) starts moving, not from rest: the linear team
+    // from rest does not model it, and its E_max is measured by flying the commanded flight.
+    let stop = matches!(p.scaling, Scaling::Stop(_));
+    let name = format!("{}{}", p.kind.name(), if stop { " (hold)" } else { "" });
     let mut reasons = Vec::new();
     let l = s.plan.lambda1_min_of(p).ok();
     let (lambda1, t_l) = l.map_or((0.0, p.t_start_s), |l| (l.lambda1, l.t_s));
     let t_s = p.quintic.t_total_s;
     let linear = LinearTeam::of_motion(s, &p.start, &p.goal);
     let (e, t_thr, delay) = match &linear {
+        _ if stop => (Real::NAN, Real::NAN, DelayBound::AtLeast(u64::MAX)),
         Ok(team) => {
             let e = team.max_follower_deviation(t_s);
             let t_thr = t_threshold_from(t_s, s.file.comm_hz, n.delta_m, e, |t| {
@@ -125,7 +133,7 @@ fn certify_phase(s: &Scenario, n: &SafetyNumbers, p: &Phase) -> (PhaseCertificat
     };
     if n.delta_m.is_nan() || n.delta_m <= 0.0 {
         reasons.push("delta <= 0 (eq. 38)".into());
-    } else if t_thr.is_nan() || t_s < t_thr {
+    } else if !stop && (t_thr.is_nan() || t_s < t_thr) {
         reasons.push(format!(
             "t_s = {t_s} s is below its T_threshold = {t_thr:.2} s: max follower deviation {e:.4} m exceeds delta = {:.4} m (eq. 34)",
             n.delta_m

@@ -29,4 +29,6 @@ pub mod outcome;
 pub mod plan;
 pub mod repair;
 pub mod safety;
+pub mod steer;
 pub mod step;
+pub mod stop;

@@ -3,6 +3,7 @@
 //! (eqs. 13-14, 23).
 
 use crate::frame::{deformation_eigenvalues, CollinearLeaders, Homogeneous};
+use crate::stop::StopProfile;
 use cdm_math::{Mat3, Real, Vec3};
 
 /// Which polynomial piece an integration interval lies on. The 3rd and 4th derivatives of s(t)
@@ -106,8 +107,25 @@ impl PhaseKind {
     }
 }
 
+/// How a phase's path parameter s runs from 0 to 1 (eq. 15 holds with any s(t): the leaders
+/// stay on the straight segment from `start` to `goal`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Scaling {
+    /// Eq. 16's quintic over `quintic.t_total_s`, rest to rest.
+    #[default]
+    RestToRest,
+    /// Eq. 16's quintic, but the phase ends `until_s` into it: a command switched the team to
+    /// another motion there (the next phase carries on from the same position, velocity and
+    /// acceleration).
+    Cut { until_s: Real },
+    /// The leaders brought to rest from moving (`stop.rs`), in units of the segment it stops;
+    /// this phase's `start`..`goal` is the part flown, s = (S - s0) / `stop.distance()`.
+    Stop(StopProfile),
+}
+
 /// One phase: the primary leaders move from `start` to `goal` on the quintic of eq. 15, rest to
-/// rest, from `t_start_s`; before it (after the previous phase) they hover.
+/// rest, from `t_start_s` (or as `scaling` says); before it (after the previous phase) they
+/// hover.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Phase {
     pub kind: PhaseKind,
@@ -115,12 +133,79 @@ pub struct Phase {
     pub quintic: Quintic,
     pub start: [Vec3; 3],
     pub goal: [Vec3; 3],
+    pub scaling: Scaling,
 }
 
 impl Phase {
-    /// The instant the phase's motion ends (its leaders at rest at `goal`).
+    /// A phase on eq. 16's quintic, rest to rest.
+    pub fn rest_to_rest(
+        kind: PhaseKind,
+        t_start_s: Real,
+        t_s: Real,
+        start: [Vec3; 3],
+        goal: [Vec3; 3],
+    ) -> Phase {
+        Phase {
+            kind,
+            t_start_s,
+            quintic: Quintic { t_total_s: t_s },
+            start,
+            goal,
+            scaling: Scaling::RestToRest,
+        }
+    }
+
+    /// How long the phase's motion lasts.
+    pub fn duration_s(&self) -> Real {
+        match self.scaling {
+            Scaling::RestToRest => self.quintic.t_total_s,
+            Scaling::Cut { until_s } => until_s,
+            Scaling::Stop(stop) => stop.t_s,
+        }
+    }
+
+    /// The instant the phase's motion ends (its leaders at rest at `goal`, unless cut).
     pub fn t_end_s(&self) -> Real {
-        self.t_start_s + self.quintic.t_total_s
+        self.t_start_s + self.duration_s()
+    }
+
+    /// The derivatives 0..4 of s, `tau` seconds into the phase on `segment`.
+    pub fn s_derivatives(&self, tau: Real, segment: Segment) -> [Real; 5] {
+        match self.scaling {
+            Scaling::RestToRest => self.quintic.derivatives(tau, segment),
+            Scaling::Cut { until_s } => match segment {
+                Segment::Motion => self.quintic.derivatives(tau.min(until_s), segment),
+                // Never flown: a cut phase is always followed by the motion it was cut for.
+                Segment::Hold => {
+                    let s = self.quintic.derivatives(until_s, Segment::Motion)[0];
+                    [s, 0.0, 0.0, 0.0, 0.0]
+                }
+            },
+            Scaling::Stop(stop) => {
+                if segment == Segment::Hold {
+                    return [1.0, 0.0, 0.0, 0.0, 0.0];
+                }
+                let span = stop.distance();
+                stop.derivatives(tau).map(|d| d / span)
+            }
+        }
+    }
+
+    /// The time into the phase at which s reaches `s_target` in [0, 1] (s is monotone).
+    pub fn time_of(&self, s_target: Real) -> Real {
+        if let Scaling::RestToRest = self.scaling {
+            return self.quintic.time_of(s_target);
+        }
+        let (mut lo, mut hi) = (0.0, self.duration_s());
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if self.s_derivatives(mid, Segment::Motion)[0] < s_target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
     }
 
     /// Primary leaders' positions at this phase's path parameter s.
@@ -132,7 +217,7 @@ impl Phase {
     fn primary_derivs(&self, t: Real, segment: Segment) -> [Derivs; 3] {
         // `t - 0.0` is `t` exactly: a one-phase plan evaluates the very same numbers as before
         // missions existed (the golden telemetry pins it).
-        let s = self.quintic.derivatives(t - self.t_start_s, segment);
+        let s = self.s_derivatives(t - self.t_start_s, segment);
         std::array::from_fn(|i| {
             let delta = self.goal[i] - self.start[i];
             [
@@ -165,6 +250,9 @@ pub struct TeamPlan {
     homogeneous: Homogeneous,
     /// Every phase in flight order, starting at t = 0 (one phase without mission tables).
     phases: Vec<Phase>,
+    /// A commanded team that ends hovering flies on at least until then (the flight it was
+    /// launched for).
+    end_not_before_s: Real,
 }
 
 /// Result of scanning a plan for its smallest deformation eigenvalue.
@@ -188,13 +276,14 @@ impl TeamPlan {
             start,
             goal,
             homogeneous: Homogeneous::new(&start)?,
-            phases: vec![Phase {
-                kind: PhaseKind::Segment(1),
-                t_start_s: 0.0,
-                quintic,
+            phases: vec![Phase::rest_to_rest(
+                PhaseKind::Segment(1),
+                0.0,
+                t_total_s,
                 start,
                 goal,
-            }],
+            )],
+            end_not_before_s: 0.0,
         })
     }
 
@@ -202,6 +291,12 @@ impl TeamPlan {
     /// `scenario/mission.rs` builds and checks them).
     pub fn with_phases(mut self, phases: Vec<Phase>) -> Self {
         self.phases = phases;
+        self
+    }
+
+    /// The same plan, hovering after its last phase until at least `t_s` unless it lands.
+    pub fn hovering_until(mut self, t_s: Real) -> Self {
+        self.end_not_before_s = t_s;
         self
     }
 
@@ -226,7 +321,7 @@ impl TeamPlan {
     pub fn flight_end_s(&self) -> Real {
         match self.phases.last() {
             Some(p) if p.kind == PhaseKind::Landing => p.t_end_s() + LANDING_SETTLE_S,
-            _ => self.end_s(),
+            _ => self.end_s().max(self.end_not_before_s),
         }
     }
 
@@ -360,7 +455,7 @@ impl TeamPlan {
         Ok(Lambda1Min {
             lambda1,
             s,
-            t_s: phase.t_start_s + phase.quintic.time_of(s),
+            t_s: phase.t_start_s + phase.time_of(s),
         })
     }
 }
@@ -463,13 +558,7 @@ pub(crate) mod tests {
     fn a_chain_of_phases_is_smooth_and_split_at_every_start_and_end() {
         let one = paper_plan(100.0);
         let (a, b) = (one.start, one.goal);
-        let back = Phase {
-            kind: PhaseKind::Segment(2),
-            t_start_s: 105.0,
-            quintic: Quintic { t_total_s: 50.0 },
-            start: b,
-            goal: a,
-        };
+        let back = Phase::rest_to_rest(PhaseKind::Segment(2), 105.0, 50.0, b, a);
         let plan = one.clone().with_phases(vec![one.phases()[0], back]);
         assert!(plan.is_mission() && !one.is_mission());
         assert_eq!(plan.end_s(), 155.0);

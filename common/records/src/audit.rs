@@ -229,6 +229,28 @@ pub struct AuditReport {
     /// (absent otherwise, so other runs keep the audit.json they always had).
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub vehicles: BTreeMap<u32, VehicleFigures>,
+    /// Commands to the team in flight, in order, and what became of each (absent when none,
+    /// so other runs keep the audit.json they always had; the certificates are in
+    /// commands.json).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub commands: Vec<CommandSummary>,
+}
+
+/// One command to the team in flight, as the audit lists it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CommandSummary {
+    /// `hold`, `resume`, `land` or `goto`.
+    pub command: String,
+    /// When it arrived (simulation time, seconds).
+    pub arrived_s: Real,
+    /// The tick its motion starts at (accepted or not).
+    pub switch_tick: u64,
+    /// The certificate's verdict; absent when the command did not apply at all.
+    pub verdict: Option<Verdict>,
+    pub accepted: bool,
+    /// Why it was refused.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub why: Option<String>,
 }
 
 /// One member's real vehicle, from its newest vehicle report (cdm-mavlink `report`): the
@@ -409,6 +431,7 @@ impl Auditor {
                 losses: Vec::new(),
                 realtime: None,
                 vehicles: BTreeMap::new(),
+                commands: Vec::new(),
             },
             sweep: Sweep::default(),
             airspace: AirspaceAudit::new(scenario, numbers.delta_m),

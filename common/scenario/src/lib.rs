@@ -6,6 +6,7 @@
 
 mod airspace;
 mod builtin;
+mod commands;
 mod fields;
 mod flight;
 mod locate;
@@ -27,6 +28,9 @@ use cdm_model::plan::TeamPlan;
 
 pub use airspace::{has_airspace, GeofenceSpec, ObstacleShapeError, ObstacleSpec};
 pub use builtin::{generated, paper40, TeamSizeError, MAX_AGENTS};
+pub use commands::{
+    check_command, load_commands, parse_commands, CommandSpec, CommandsError, TimedCommand,
+};
 pub use fields::{MAX_COORD_M, MAX_TICKS};
 pub use mission::{closest_ground_pair, GroundSpec, SegmentSpec};
 pub use origin::{GeoOrigin, GeoPoint};

@@ -14,7 +14,7 @@ use crate::fields::{coordinate, finite, positive, MAX_TICKS, MIN_MOTION_TICKS};
 use cdm_math::{vec3, Real, Vec3};
 use cdm_model::formation::{Formation, Role};
 use cdm_model::frame::{leader_sine, MIN_LEADER_SINE};
-use cdm_model::plan::{Phase, PhaseKind, Quintic, TeamPlan};
+use cdm_model::plan::{Phase, PhaseKind, TeamPlan};
 
 /// `[takeoff]` or `[landing]`: every member rises from, or lands on, the ground below it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -107,13 +107,7 @@ pub(super) fn phases(
 }
 
 fn phase(kind: PhaseKind, t_start_s: Real, t_s: Real, start: [Vec3; 3], goal: [Vec3; 3]) -> Phase {
-    Phase {
-        kind,
-        t_start_s,
-        quintic: Quintic { t_total_s: t_s },
-        start,
-        goal,
-    }
+    Phase::rest_to_rest(kind, t_start_s, t_s, start, goal)
 }
 
 /// A phase's travel time and hold, checked (field names `NAME.t_s`, `NAME.hold_s`).
@@ -150,7 +144,7 @@ fn timing(f: &ScenarioFile, name: &str, t_s: Real, hold: Option<Real>) -> Result
 }
 
 /// The primary leaders' ids in the plan's order (file order; validation found exactly three).
-fn primary_ids(f: &ScenarioFile) -> [u32; 3] {
+pub(crate) fn primary_ids(f: &ScenarioFile) -> [u32; 3] {
     let mut ids = (f.agents.iter())
         .filter(|a| a.role == Role::Primary)
         .map(|a| a.id);
@@ -159,7 +153,7 @@ fn primary_ids(f: &ScenarioFile) -> [u32; 3] {
 
 /// For each primary leader in the plan's order, its rank in ascending id order (the order of a
 /// segment's `goals`).
-fn primary_order(ids: &[u32; 3]) -> [usize; 3] {
+pub(crate) fn primary_order(ids: &[u32; 3]) -> [usize; 3] {
     let mut sorted = *ids;
     sorted.sort_unstable();
     std::array::from_fn(|k| sorted.iter().position(|&id| id == ids[k]).unwrap_or(k))

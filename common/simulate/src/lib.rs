@@ -8,7 +8,7 @@
 use cdm_engine::engine::{quad_engine, AgentFault};
 use cdm_engine::loss::{LossSchedule, LossState, OnLoss};
 use cdm_model::outcome::FaultKind;
-use cdm_records::audit::{AuditReport, Auditor, FaultRecord};
+use cdm_records::audit::{AuditReport, Auditor, CommandSummary, FaultRecord};
 use cdm_records::record::{write_fault, TickRecorder};
 use cdm_records::rundir::{RunDir, RunDirError};
 use cdm_records::telemetry::{TelemetryFormat, TelemetrySink};
@@ -29,6 +29,9 @@ pub struct SimulateOptions {
     pub losses: LossSchedule,
     /// What a loss does (`--on-loss`).
     pub on_loss: OnLoss,
+    /// Commands to the team in flight (`--commands`), already applied to the plan flown:
+    /// audit.json lists them.
+    pub commands: Vec<CommandSummary>,
 }
 
 /// Fly `s` in-process, streaming telemetry (every `every` ticks) and auditing every tick.
@@ -90,7 +93,8 @@ pub fn simulate(
             false
         }
     };
-    let report = audit.finish(complete);
+    let mut report = audit.finish(complete);
+    report.commands = opts.commands;
     dir.write_audit(&report)?;
     Ok(report)
 }

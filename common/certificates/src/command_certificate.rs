@@ -1,0 +1,226 @@
+//! The certificate of a command to a team in flight (`cdm_model::steer`): the phases it adds,
+//! certified as a mission's are, against the safety numbers the flight was launched with.
+//!
+//! Why the guarantee carries over: every leader path stays a straight segment and every other
+//! member the same affine combination of the leaders (eq. 13), so
+//! - a new rest-to-rest segment (goto, resume, landing) is a mission phase: lambda_1(U_D) over
+//!   it against lambda_CD,min (eq. 37), E_max on the linear team from rest at its travel time
+//!   (eq. 34), the link delay it tolerates, and for a landing the ground spots 2 (eps + delta)
+//!   apart;
+//! - a hold's stop flies part of a segment already flown, so lambda_1 over it is the
+//!   deformation's along that part; its new time profile starts from the team's tracking error
+//!   at the switch, so its E_max is measured by flying the whole commanded flight once with the
+//!   nonlinear engine (deterministic: the flight it certifies is the one flown in lockstep);
+//! - the geofence and obstacles are certified over every path of the commanded plan.
+
+use serde::Serialize;
+
+use crate::airspace_certificate::{certify_airspace, AirspaceCertificate};
+use crate::certificate::{verdict_of, PhaseCertificate};
+use crate::delay::{bound_ms, DelayBound};
+use crate::mission_certificate::{certify_phase, tighter};
+use cdm_engine::engine::max_follower_deviation_within;
+use cdm_math::Real;
+use cdm_model::outcome::Verdict;
+use cdm_model::plan::{Phase, PhaseKind};
+use cdm_model::steer::{NotApplicable, Proposal, Steering, TeamCommand};
+use cdm_model::step::tick_time;
+use cdm_records::audit::{CommandSummary, SafetyNumbers};
+use cdm_scenario::{CommandSpec, Scenario, TimedCommand};
+
+/// What a command's motion was certified to, and the verdict.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CommandCertificate {
+    /// SAFE or UNSAFE.
+    pub verdict: Verdict,
+    /// Every UNSAFE reason, each naming its phase (and member, where one is at fault).
+    pub reasons: Vec<String>,
+    /// The flight's lambda_CD,min and delta (eqs. 37-38), unchanged by commands.
+    pub lambda_cd_min: Real,
+    pub delta_m: Real,
+    /// The commanded flight flown once from t = 0: its max follower deviation (eq. 34), or
+    /// the first value found above delta.
+    pub max_follower_deviation_m: Real,
+    /// The largest link delay the new segments tolerate (ms); `None` when one fails without.
+    pub max_link_delay_ms: Option<Real>,
+    pub max_link_delay_at_least: bool,
+    /// The phases the command adds, in flight order.
+    pub phases: Vec<PhaseCertificate>,
+    /// `[geofence]` and `[[obstacle]]`: every path of the commanded plan.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub airspace: Option<AirspaceCertificate>,
+}
+
+/// The certificate of `proposal` for the team of `s` launched with the safety numbers `n`.
+pub fn certify_command(s: &Scenario, n: &SafetyNumbers, proposal: &Proposal) -> CommandCertificate {
+    let mut commanded = s.clone();
+    commanded.plan = proposal.plan.clone();
+    let s = &commanded;
+    let mut reasons = Vec::new();
+    let mut rows = Vec::new();
+    let mut delay = DelayBound::AtLeast(u64::MAX);
+    for p in &s.plan.phases()[proposal.first_new..] {
+        let (mut row, d) = certify_phase(s, n, p);
+        delay = tighter(delay, d);
+        if p.kind == PhaseKind::Landing {
+            if let Some(why) = below_ground(s, p) {
+                row.reasons.push(why);
+                row.verdict = Verdict::Unsafe;
+            }
+        }
+        reasons.extend(row.reasons.iter().map(|r| format!("{}: {r}", row.name)));
+        rows.push(row);
+    }
+    let flown = max_follower_deviation_within(s, n.delta_m).unwrap_or(Real::INFINITY);
+    if flown.is_nan() || flown > n.delta_m {
+        reasons.push(format!(
+            "the commanded flight flown: max follower deviation {flown:.4} m exceeds delta = {:.4} m (eq. 34)",
+            n.delta_m
+        ));
+    }
+    let link_ticks = s.link_model().max_ticks();
+    match delay {
+        DelayBound::Ticks(d) if link_ticks > d => reasons.push(format!(
+            "the links' delay of {link_ticks} ticks exceeds the {d} ticks the new segments tolerate"
+        )),
+        _ => {}
+    }
+    let airspace = certify_airspace(s, n.delta_m);
+    if let Some(a) = &airspace {
+        reasons.extend(a.reasons());
+    }
+    let (max_link_delay_ms, max_link_delay_at_least) = bound_ms(delay, s.dt_s());
+    CommandCertificate {
+        verdict: verdict_of(&reasons),
+        reasons,
+        lambda_cd_min: n.lambda_cd_min,
+        delta_m: n.delta_m,
+        max_follower_deviation_m: flown,
+        max_link_delay_ms,
+        max_link_delay_at_least,
+        phases: rows,
+        airspace,
+    }
+}
+
+/// A landing whose ground is not below every member at its top.
+fn below_ground(s: &Scenario, p: &Phase) -> Option<String> {
+    let ground = p.goal[0].z;
+    (s.formation.members.iter())
+        .map(|m| {
+            let a = m.alpha;
+            (
+                m.id,
+                (p.start[0] * a[0] + p.start[1] * a[1] + p.start[2] * a[2]).z,
+            )
+        })
+        .find(|&(_, z)| z <= ground)
+        .map(|(id, z)| {
+            format!(
+                "the ground z = {ground} m is not below agent {id} (z = {z:.3} m where it holds)"
+            )
+        })
+}
+
+/// What became of a command.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CommandOutcome {
+    /// Certified SAFE: the team's plan is the commanded one from the switch on.
+    Accepted(CommandCertificate),
+    /// Certified UNSAFE: nothing changed.
+    Refused(CommandCertificate),
+    /// It does not apply at its switch instant: nothing changed.
+    NotApplicable(NotApplicable),
+}
+
+/// Propose `command` at `t_switch_s`, certify its motion and accept it only when SAFE.
+pub fn steer(
+    steering: &mut Steering,
+    s: &Scenario,
+    n: &SafetyNumbers,
+    command: &TeamCommand,
+    t_switch_s: Real,
+) -> CommandOutcome {
+    match steering.propose(command, t_switch_s) {
+        Err(why) => CommandOutcome::NotApplicable(why),
+        Ok(p) => {
+            let c = certify_command(s, n, &p);
+            if c.verdict == Verdict::Safe {
+                steering.accept(p);
+                CommandOutcome::Accepted(c)
+            } else {
+                CommandOutcome::Refused(c)
+            }
+        }
+    }
+}
+
+/// One command of a file and what became of it: an entry of a run's `commands.json` (the
+/// command's own fields first, so the file reads back as a command file).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CommandRecord {
+    #[serde(flatten)]
+    pub spec: CommandSpec,
+    /// When it arrived (simulation time): a file's command arrives at its `at_s`.
+    pub arrived_s: Real,
+    pub switch_tick: u64,
+    /// The certificate's verdict; `None` when the command did not apply at all.
+    pub verdict: Option<Verdict>,
+    pub accepted: bool,
+    /// Why it was refused: the certificate's reasons, or why it did not apply.
+    pub why: Option<String>,
+    pub certificate: Option<CommandCertificate>,
+}
+
+impl CommandRecord {
+    /// What audit.json lists of it.
+    pub fn summary(&self) -> CommandSummary {
+        CommandSummary {
+            command: self.spec.command.clone(),
+            arrived_s: self.arrived_s,
+            switch_tick: self.switch_tick,
+            verdict: self.verdict,
+            accepted: self.accepted,
+            why: self.why.clone(),
+        }
+    }
+}
+
+/// A file's commands applied in order to the team of `s`, each certified at its switch tick
+/// against the plan as commanded before it: the scenario to fly (its plan the commanded one,
+/// the same before every switch, so flying it is flying the switches) and what became of each.
+pub fn apply_commands(s: &Scenario, commands: &[TimedCommand]) -> (Scenario, Vec<CommandRecord>) {
+    let n = SafetyNumbers::of(s);
+    let mut steering = s.steering();
+    let records = (commands.iter())
+        .map(|c| {
+            let t_switch_s = tick_time(c.switch_tick, s.dt_s());
+            let outcome = steer(&mut steering, s, &n, &c.command, t_switch_s);
+            let (verdict, accepted, why, certificate) = match outcome {
+                CommandOutcome::Accepted(cert) => (Some(cert.verdict), true, None, Some(cert)),
+                CommandOutcome::Refused(cert) => (
+                    Some(cert.verdict),
+                    false,
+                    Some(cert.reasons.join("; ")),
+                    Some(cert),
+                ),
+                CommandOutcome::NotApplicable(why) => (None, false, Some(why.to_string()), None),
+            };
+            CommandRecord {
+                spec: c.spec.clone(),
+                arrived_s: c.spec.at_s,
+                switch_tick: c.switch_tick,
+                verdict,
+                accepted,
+                why,
+                certificate,
+            }
+        })
+        .collect();
+    let mut flown = s.clone();
+    flown.plan = steering.plan().clone();
+    (flown, records)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,127 @@
+use super::*;
+use cdm_math::Vec3;
+use cdm_scenario::{paper40, Checks};
+
+fn team() -> (Scenario, SafetyNumbers, Steering) {
+    let s = Scenario::from_file(paper40(), "paper40", Checks::Full).unwrap();
+    let n = SafetyNumbers::of(&s);
+    let steering = s.steering();
+    (s, n, steering)
+}
+
+fn accepted(o: &CommandOutcome) -> &CommandCertificate {
+    match o {
+        CommandOutcome::Accepted(c) => c,
+        other => panic!("not accepted: {other:?}"),
+    }
+}
+
+/// Held, refused an UNSAFE goto (nothing changes), sent to a SAFE goto, landed.
+#[test]
+fn held_refused_sent_and_landed() {
+    let (s, n, mut steering) = team();
+    let t_end = s.plan.flight_end_s();
+    let hold = steer(&mut steering, &s, &n, &TeamCommand::Hold, 0.3 * t_end);
+    let c = accepted(&hold);
+    assert_eq!(c.phases.len(), 1, "{c:?}");
+    assert!(c.phases[0].name.ends_with("(hold)"));
+    assert!(c.max_follower_deviation_m <= n.delta_m);
+    let held = steering.plan().clone();
+    let at = |p: &cdm_model::plan::TeamPlan| {
+        let t = p.end_s();
+        p.primary_derivs(t, p.piece_at(t)).map(|d| d[0])
+    };
+    let here = at(&held);
+    // Squeeze the triangle to a sliver: lambda_1 falls below lambda_CD,min.
+    let mid = (here[1] + here[2]) * 0.5;
+    let sliver = [
+        here[0],
+        mid + (here[1] - mid) * 0.05,
+        mid + (here[2] - mid) * 0.05,
+    ];
+    let t1 = held.end_s() + 1.0;
+    let unsafe_goto = TeamCommand::Goto {
+        goals: sliver,
+        travel_s: Some(100.0),
+    };
+    match steer(&mut steering, &s, &n, &unsafe_goto, t1) {
+        CommandOutcome::Refused(c) => {
+            assert_eq!(c.verdict, Verdict::Unsafe);
+            assert!(c.reasons.iter().any(|r| r.contains("eq. 37")), "{c:?}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(steering.plan(), &held);
+    // Too quick: the followers cannot keep up (T_threshold, eq. 34).
+    let shift = here.map(|p| p + Vec3::new(200.0, 0.0, 0.0));
+    let rushed = TeamCommand::Goto {
+        goals: shift,
+        travel_s: Some(1.0),
+    };
+    match steer(&mut steering, &s, &n, &rushed, t1) {
+        CommandOutcome::Refused(c) => assert!(c.reasons.iter().any(|r| r.contains("eq. 34"))),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(steering.plan(), &held);
+    let safe_goto = TeamCommand::Goto {
+        goals: shift,
+        travel_s: None,
+    };
+    accepted(&steer(&mut steering, &s, &n, &safe_goto, t1));
+    let there = at(steering.plan());
+    for i in 0..3 {
+        assert!((there[i] - shift[i]).norm() < 1e-9);
+    }
+    let t2 = steering.plan().end_s();
+    let land = steer(&mut steering, &s, &n, &TeamCommand::Land, t2);
+    let c = accepted(&land);
+    assert!(c.phases.iter().any(|p| p.name == "landing"), "{c:?}");
+    let down = at(steering.plan());
+    assert!(down.iter().all(|p| p.z == 0.0));
+}
+
+/// A command file: checked fields, switch ticks, goals in ascending id order, and a run's
+/// `commands.json` (with the fields a run adds) read back as it is.
+#[test]
+fn a_command_file_is_checked_and_read_back() {
+    let (s, _, _) = team();
+    let ok = r#"[{"at_s": 10.004, "command": "hold"},
+                 {"at_s": 20, "command": "goto", "goals": [[0,0,500],[10,0,500],[0,10,500]],
+                  "travel_s": 50, "switch_tick": 2000, "verdict": "SAFE", "accepted": true}]"#;
+    let cs = cdm_scenario::parse_commands(ok, &s).unwrap();
+    let hz = s.file.comm_hz;
+    assert_eq!(cs[0].switch_tick, (10.004 * hz - 1e-9).ceil() as u64);
+    assert!(matches!(cs[1].command, TeamCommand::Goto { travel_s: Some(t), .. } if t == 50.0));
+    for (text, field) in [
+        (
+            r#"[{"at_s": 1, "command": "hover"}]"#,
+            "commands[0].command",
+        ),
+        (r#"[{"at_s": -1, "command": "hold"}]"#, "commands[0].at_s"),
+        (
+            r#"[{"at_s": 1, "command": "goto", "goals": [[0,0,1]]}]"#,
+            "commands[0].goals",
+        ),
+        (
+            r#"[{"at_s": 1, "command": "hold", "goals": [[0,0,1]]}]"#,
+            "commands[0].goals",
+        ),
+        (
+            r#"[{"at_s": 1, "command": "hold"}, {"at_s": 1, "command": "land"}]"#,
+            "commands[1].at_s",
+        ),
+        (
+            r#"[{"at_s": 1, "command": "goto", "goals": [[0,0,1],[1,0,1],[0,1,1]], "travel_s": 0}]"#,
+            "commands[0].travel_s",
+        ),
+    ] {
+        let e = cdm_scenario::parse_commands(text, &s)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(field), "{text}: {e}");
+    }
+    let e = cdm_scenario::parse_commands(r#"[{"at_s": 1, "command": "hold", "when": 2}]"#, &s)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("when"), "{e}");
+}
