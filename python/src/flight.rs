@@ -48,6 +48,7 @@ pub fn simulate(
             telemetry: TelemetryFormat::Csv,
             losses,
             on_loss: OnLoss::Repair,
+            commands: Vec::new(),
         };
         let mut tel = cdm_team::telemetry::open(&dir, TelemetryFormat::Csv, every, s)
             .map_err(Failure::bad_input)?;
