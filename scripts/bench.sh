@@ -10,7 +10,7 @@
 # full-telemetry `simulate` in each format (file size, wall time, peak memory); writing cost =
 # that run's time minus the --every 1000 run's.
 #
-# Last, real time (issue 11): `launch --realtime` at comm_hz = 100 for REALTIME_NS (default
+# Last, real time: `launch --realtime` at comm_hz = 100 for REALTIME_NS (default
 # "10 40 100 250"; REALTIME_NS=0 skips it), REALTIME_S seconds of flight each (default 10): late
 # ticks, neighbour age p50/p99/max and the CPU of the whole team over the flight (orchestrator and
 # members, from /proc at the start instant and the last audit), all from audit.json's `realtime`;
@@ -19,7 +19,7 @@
 # SCHED_FIFO, needs root or `ulimit -r`; RT_PRIORITY=0 skips these rows).
 # REALTIME_ONLY=1 runs only this section.
 #
-# Scale (issue 17), after the main table: for N in SCALE_NS (default 1000; SCALE_NS=0 skips it)
+# Scale, after the main table: for N in SCALE_NS (default 1000; SCALE_NS=0 skips it)
 # and, opt-in, BENCH_N (e.g. BENCH_N=2000: 2000 processes, a full plan of about 66,000 ticks,
 # tens of minutes on 2 cores): the engine alone, start-up (command to first tick) with
 # `--on-loss stop` (10 ticks flown; not for BENCH_N), then the full plan with `--telemetry

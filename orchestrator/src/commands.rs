@@ -837,7 +837,7 @@ pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet:
     out!("  run directory: {}", dir.display());
 }
 
-/// The airspace's smallest margins and its breaches by name (issue 27): the first breach of
+/// The airspace's smallest margins and its breaches by name: the first breach of
 /// each fence side and obstacle; nothing without a fence or obstacles.
 fn airspace_summary(r: &AuditReport) {
     let margins: Vec<String> = [

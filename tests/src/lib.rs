@@ -683,7 +683,7 @@ pub fn paper40() -> ScenarioFile {
 }
 
 /// paper40 inside a geofence, with a box ("tower") and a vertical cylinder ("mast") well aside
-/// of its path (issue 27): SAFE, and every airspace table has something in it.
+/// of its path: SAFE, and every airspace table has something in it.
 pub fn fenced_paper40() -> ScenarioFile {
     use cdm_model::airspace::Shape;
     use cdm_scenario::{GeofenceSpec, ObstacleSpec};

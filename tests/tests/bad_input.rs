@@ -874,7 +874,7 @@ fn long_names_are_refused_without_printing_them() {
     }
 }
 
-// ---- the airspace (issue 27) -----------------------------------------------------------------
+// ---- the airspace -----------------------------------------------------------------
 
 /// `[geofence]` and `[[obstacle]]` tables that cannot be flown: each refused naming the fence or
 /// the obstacle (paper40 starts at z 900-1197 m around x -198..360, y -72..117).

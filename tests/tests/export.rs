@@ -138,7 +138,7 @@ fn skybrush_show_is_the_plan_as_bezier_curves() {
     assert!(String::from_utf8_lossy(&check.stdout).contains("skyc ok: 40 drones, 4 segments"));
 }
 
-/// A mission (issue 26) is exported whole for both targets: take-off, both segments, the hovers
+/// A mission is exported whole for both targets: take-off, both segments, the hovers
 /// and the landing, read back by cflib and numpy (Crazyswarm2) and the skyc reader against
 /// `simulate`'s r_HT of the scaled mission, on the ground (z = 0 scaled stays 0) at the first
 /// and the last point, lasting the mission's 200 + 5 + 200 + 5 + 150 + 5 + 150 = 715 s.

@@ -150,7 +150,7 @@ fn two_hosts_fly_lockstep_exactly_as_simulate() {
 }
 
 /// A mission (take-off, three segments, landing: `support::mission`) over two hosts flies the
-/// telemetry of `simulate`, byte for byte (issue 26).
+/// telemetry of `simulate`, byte for byte.
 #[test]
 fn a_mission_over_two_hosts_flies_as_simulate() {
     let Some(h) = Hosts::create("lm") else { return };

@@ -659,7 +659,7 @@ fn a_signed_team_drops_unsigned_wrongly_signed_and_replayed_frames() {
     assert_no_team_resources(&team_name);
 }
 
-/// Issue 24 item 6, the measurement behind README "Fly real vehicles" and BENCHMARKS.md (not a
+/// The measurement behind README "Fly real vehicles" and BENCHMARKS.md (not a
 /// check: a benchmark on a shared machine): ten members arm ten exact point-mass vehicles and
 /// fly the 1.9 m translation in `T_TOTAL_S`, `RUNS` times with the acceleration and jerk the
 /// members commanded published as their measured states' feed-forward, and as many times with
@@ -946,7 +946,7 @@ fn lab_vehicles(
     vehicles
 }
 
-/// Issue 24 item 5, issue 26's `--vehicles mavlink`: a mission with take-off and landing flown
+/// `--vehicles mavlink`: a mission with take-off and landing flown
 /// by a team of two PX4-like and two ArduCopter-like vehicles resting on their ground spots,
 /// launched with `--arm --disarm-at-end`. The PX4s climb under OFFBOARD setpoints (no take-off
 /// command); each ArduCopter, armed in GUIDED on the team's order, is sent MAV_CMD_NAV_TAKEOFF,
@@ -1023,7 +1023,7 @@ fn a_mission_takes_off_and_lands_px4_and_ardupilot_vehicles_ending_disarmed_on_t
     assert_no_team_resources(&team_name);
 }
 
-/// The take-off refused (issue 24 item 5): one ArduCopter-like vehicle of [`support::lab_mission`]
+/// The take-off refused: one ArduCopter-like vehicle of [`support::lab_mission`]
 /// answers MAV_CMD_NAV_TAKEOFF with FAILED (`--refuse-takeoff`). Its member names the refusal
 /// and the result, the team never starts (no vehicle saw the flight start), `vehicle-lost`
 /// naming that member, exit 3.

@@ -124,7 +124,7 @@ fn fly_by_hand(scenario: &Path, out: &Path) {
     assert_no_process_of(&team);
 }
 
-/// Issue 26 item 4, real time: a tiny mission (the lab mission's take-off and its one segment,
+/// Real time: a tiny mission (the lab mission's take-off and its one segment,
 /// 6.5 s) launched with `--realtime` is SAFE and complete, exit 0, and its telemetry covers the
 /// whole mission: every member at every audit instant from t = 0, on the ground, to the
 /// mission's end. Nothing about how fast it ran.

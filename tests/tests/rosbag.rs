@@ -69,7 +69,7 @@ fn export_of_a_csv_run_is_read_by_rosbags_and_mcap() {
     check("check", &bag, &run_dir);
 }
 
-/// paper40 in its airspace (issue 27): the fence and the obstacles are markers too.
+/// paper40 in its airspace: the fence and the obstacles are markers too.
 #[test]
 fn export_of_a_parquet_run_with_every_is_read_by_rosbags_and_mcap() {
     let tmp = TempDir::new();

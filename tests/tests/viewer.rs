@@ -200,7 +200,7 @@ fn file_url(path: &Path) -> String {
     format!("file://{}", abs.display())
 }
 
-/// paper40 inside its fence, beside a tower and a mast (issue 27): all three are drawn.
+/// paper40 inside its fence, beside a tower and a mast: all three are drawn.
 #[test]
 fn replay_html_works_from_file_with_the_network_disabled() {
     let tmp = TempDir::new();

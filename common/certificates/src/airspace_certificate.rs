@@ -1,4 +1,4 @@
-//! The airspace certificate (issue 27): every member's ball of radius eps + delta stays inside
+//! The airspace certificate: every member's ball of radius eps + delta stays inside
 //! the geofence and outside every obstacle for all t, proved per phase with no time sampling.
 //!
 //! The argument (ARCHITECTURE.md, "Geofence and obstacles"): in a phase the primary leaders

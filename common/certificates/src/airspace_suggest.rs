@@ -1,4 +1,4 @@
-//! `plan --suggest` (issue 27): what would clear the airspace certificate's breaches.
+//! `plan --suggest`: what would clear the airspace certificate's breaches.
 //!
 //! - An altitude offset: every height above the ground raised (or lowered) by dz, a take-off's
 //!   and a landing's ground spots kept. Every point of every path moves by at most |dz|, and

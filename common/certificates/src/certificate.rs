@@ -38,11 +38,11 @@ pub struct Certificate {
     /// `plan --losses`: the loss of every single member, certified (`losscert`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub losses: Option<LossCertificate>,
-    /// A mission (issue 26): every phase's certificate in flight order; the verdict above is
+    /// A mission: every phase's certificate in flight order; the verdict above is
     /// the worst of them.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub segments: Option<Vec<PhaseCertificate>>,
-    /// `[geofence]` and `[[obstacle]]` (issue 27): each boundary's smallest margin; absent
+    /// `[geofence]` and `[[obstacle]]`: each boundary's smallest margin; absent
     /// without them, so other certificates keep the JSON they had.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub airspace: Option<crate::airspace_certificate::AirspaceCertificate>,

@@ -1,4 +1,4 @@
-//! The certificate of a mission (issue 26): each phase certified on its own, the mission's
+//! The certificate of a mission: each phase certified on its own, the mission's
 //! verdict the worst of them, and the whole mission flown once for what carries over.
 //!
 //! - A deformation segment is the paper's manoeuvre between two waypoints: lambda_1(U_D) over

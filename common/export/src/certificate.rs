@@ -55,7 +55,7 @@ pub fn print_certificate(c: &Certificate) {
     }
 }
 
-/// A mission's phases, one line each (issue 26).
+/// A mission's phases, one line each.
 fn print_phases(rows: &[PhaseCertificate]) {
     out!("  mission phases:");
     out!(
@@ -79,7 +79,7 @@ fn print_phases(rows: &[PhaseCertificate]) {
     }
 }
 
-/// The airspace's smallest margins (issue 27): the fence's worst side, then every obstacle.
+/// The airspace's smallest margins: the fence's worst side, then every obstacle.
 fn print_airspace(a: &AirspaceCertificate) {
     out!(
         "  airspace: smallest margins of the balls of eps + delta = {:.4} m (negative: breached)",

@@ -68,7 +68,7 @@ pub fn write(dir: &Path, sc: &Scaled, split: &CrazyflieSplit) -> Result<(), Fail
     put(dir, "README.txt", &readme(sc, split))
 }
 
-/// Where the scenario's fence and obstacles go (issue 27): Crazyswarm2 has no airspace file of
+/// Where the scenario's fence and obstacles go: Crazyswarm2 has no airspace file of
 /// its own, so this one is ours, explained in README.txt and the project README.
 const AIRSPACE_FILE: &str = "airspace.yaml";
 

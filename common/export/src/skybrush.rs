@@ -27,7 +27,7 @@ struct Show {
     version: u32,
     settings: ShowSettings,
     swarm: Swarm,
-    /// The scenario's `[geofence]` (issue 27), absent without one.
+    /// The scenario's `[geofence]`, absent without one.
     #[serde(skip_serializing_if = "Option::is_none")]
     geofence: Option<Geofence>,
     meta: Meta,

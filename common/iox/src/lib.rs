@@ -323,7 +323,7 @@ fn wait_on(
         // that is a spurious wake-up, not an error. Callers check their stop flag every loop.
         Err(ListenerWaitError::InterruptSignal) => Ok(true),
         // The service's name only for an error: formatting it for every wait was 7 % of a
-        // member's CPU at N = 1000 (perf, issue 28).
+        // member's CPU at N = 1000 (perf).
         Err(e) => Err(service_error(team, who, &service(), "wait", e)),
     }
 }

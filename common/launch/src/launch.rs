@@ -59,7 +59,7 @@ pub struct LaunchOptions {
     pub ros2: Option<cdm_ros2::Ros2Options>,
     /// Serve the run live to Foxglove (`--foxglove`, `--foxglove-hz`).
     pub foxglove: Option<cdm_foxglove::FoxgloveOptions>,
-    /// Across hosts (`--hosts`, `--listen`; issue 12).
+    /// Across hosts (`--hosts`, `--listen`).
     pub hosts: cdm_hosts::HostOptions,
     /// `--realtime`: fly on the wall clock, the orchestrator monitors (`realtime.rs`).
     pub realtime: Option<crate::realtime::RealtimeOptions>,

@@ -1,4 +1,4 @@
-//! The airspace around the team (issue 27), as pure geometry: the geofence (a vertical prism
+//! The airspace around the team, as pure geometry: the geofence (a vertical prism
 //! over a simple polygon, between a floor and a ceiling) and the obstacles (axis-aligned boxes
 //! and vertical cylinders), with signed distances (negative inside a shape) and the smallest
 //! distance from a straight segment to each. The certificate (`airspace_certificate.rs`) and

@@ -53,7 +53,7 @@ pub struct Member {
     /// Initial position r_i0 (on the leaders' plane): the reference formation of eqs. 11-18.
     pub position: Vec3,
     /// Where the member is at t = 0: `position`, or the ground below it when the mission takes
-    /// off (issue 26).
+    /// off.
     pub start: Vec3,
     /// In-plane coordinates (gamma_i, beta_i) at t0 (eq. 12).
     pub planar: Vec2,

@@ -141,9 +141,9 @@ pub enum ViolationKind {
     Tracking,
     /// lambda_1(U_D) < lambda_CD,min (eq. 37).
     Deformation,
-    /// A member's ball of radius eps beyond the geofence (issue 27).
+    /// A member's ball of radius eps beyond the geofence.
     Geofence,
-    /// A member's ball of radius eps inside an obstacle (issue 27).
+    /// A member's ball of radius eps inside an obstacle.
     Obstacle,
     /// A member flew faster or accelerated harder than its `[vehicle]` limit (named by key).
     Limit,

@@ -77,7 +77,7 @@ pub const LANDING_SETTLE_S: Real = 10.0;
 /// Position and its first four time derivatives.
 pub type Derivs = [Vec3; 5];
 
-/// What a phase of a mission is (issue 26). A scenario without mission tables has one phase,
+/// What a phase of a mission is. A scenario without mission tables has one phase,
 /// `Segment(1)`: the paper's single manoeuvre.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PhaseKind {

@@ -150,7 +150,7 @@ fn degrade(f: &mut Formation, id: u32) {
 /// Who reads whom, by member index (the rows of `Formation::out_neighbors` without a map).
 /// `launch` repairs every single loss to size its services before it spawns anyone, and each
 /// repair walks the graph several times: building `out_neighbors` for each walk was a sixth of
-/// the orchestrator's start-up CPU at N = 1000 (BENCHMARKS.md, issue 17 start-up).
+/// the orchestrator's start-up CPU at N = 1000 (BENCHMARKS.md, start-up).
 struct ReaderTable {
     rows: Vec<Vec<usize>>,
 }

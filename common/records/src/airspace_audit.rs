@@ -1,4 +1,4 @@
-//! The live audit of the airspace (issue 27): every tick, each member's measured position
+//! The live audit of the airspace: every tick, each member's measured position
 //! against the geofence and the obstacles, in every mode (`simulate`, `launch`, real time,
 //! vehicles: the audit is one, `audit.rs`). A breach is the member's ball of radius eps
 //! reaching beyond the fence or into an obstacle; it is a violation of its own kind

@@ -65,7 +65,7 @@ fn first_violation(d: &RunData, scale: Real) -> Option<Rule> {
     })
 }
 
-/// A mission's phase boundaries (issue 26): a vertical line where each phase after the first
+/// A mission's phase boundaries: a vertical line where each phase after the first
 /// starts, named; none for the paper's one manoeuvre.
 fn phase_marks(d: &RunData, scale: Real) -> Vec<Rule> {
     let plan = &d.scenario.plan;

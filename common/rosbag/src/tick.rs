@@ -87,7 +87,7 @@ pub struct Team {
     airspace: Vec<Solid>,
 }
 
-/// A static marker of the airspace (issue 27): the geofence's edges or one obstacle.
+/// A static marker of the airspace: the geofence's edges or one obstacle.
 struct Solid {
     ns: &'static str,
     id: i32,

@@ -56,7 +56,7 @@ impl Watch {
     /// question waits [`ALIVE_CHECK`] from here. A dead orchestrator is still found within
     /// [`ALIVE_CHECK`] of its last message. Asking costs a read of every node attached to the
     /// member's state service (iceoryx2 parses each node's details file): at N = 1000, asking
-    /// every half second while grants kept arriving was 13 % of the members' CPU (issue 28).
+    /// every half second while grants kept arriving was 13 % of the members' CPU.
     pub(crate) fn heard_from_orchestrator(&mut self, now: Duration) {
         self.last_alive_check = self.last_alive_check.max(now);
     }

@@ -1,4 +1,4 @@
-//! `[geofence]` and `[[obstacle]]` (issue 27): the airspace the team may use and what stands in
+//! `[geofence]` and `[[obstacle]]`: the airspace the team may use and what stands in
 //! it, as the file gives them, and their checks. The geometry is `cdm_model::airspace`.
 
 use std::collections::BTreeSet;

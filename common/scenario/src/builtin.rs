@@ -44,7 +44,7 @@ pub fn paper40() -> ScenarioFile {
     f
 }
 
-/// paper40 as a whole flight (issue 26): take off from the ground (z = 0) below the paper's start
+/// paper40 as a whole flight: take off from the ground (z = 0) below the paper's start
 /// formation, fly the paper's descent (segment 1), hover, turn the team by 30 degrees about the
 /// vertical through its centre while moving 60 m west, 120 m south and 60 m down (segment 2, a
 /// rigid motion of segment 1's goals, so it deforms no more than the paper's descent), hover,

@@ -79,7 +79,7 @@ pub struct ScenarioFile {
     /// scenario is only local metres.
     #[serde(default, rename = "origin", skip_serializing_if = "Option::is_none")]
     pub geo_origin: Option<GeoOrigin>,
-    /// `[takeoff]`: start on the ground below the start formation (issue 26).
+    /// `[takeoff]`: start on the ground below the start formation.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub takeoff: Option<GroundSpec>,
     /// `[[segment]]`: further deformations after the agents' own goals, in flight order
@@ -89,7 +89,7 @@ pub struct ScenarioFile {
     /// `[landing]`: land below the final formation.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub landing: Option<GroundSpec>,
-    /// `[geofence]`: the airspace the team may use (issue 27).
+    /// `[geofence]`: the airspace the team may use.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub geofence: Option<GeofenceSpec>,
     /// `[[obstacle]]`: solids the team must not touch, each named.
@@ -303,7 +303,7 @@ impl Scenario {
     /// Content hash of the scenario as flown (canonical JSON, SHA-256, first 8 bytes): two
     /// processes fly the same team only if their hashes agree. JSON rather than TOML because
     /// every member computes it at start: serde_json writes the 1000-member file in a fifth of
-    /// the instructions the TOML writer needs (BENCHMARKS.md, issue 17 start-up). Both forms are
+    /// the instructions the TOML writer needs (BENCHMARKS.md, start-up). Both forms are
     /// canonical (fields in declaration order, shortest round-trip floats), and the keys are
     /// written, so two optional fields cannot be mistaken for each other.
     pub fn content_hash(&self) -> u64 {

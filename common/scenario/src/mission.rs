@@ -1,4 +1,4 @@
-//! Missions (issue 26): take-off, further deformation segments and landing around the paper's
+//! Missions: take-off, further deformation segments and landing around the paper's
 //! one manoeuvre, checked and turned into the plan's phases.
 //!
 //! Every phase is a homogeneous transformation of the reference formation (the agents'

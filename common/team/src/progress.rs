@@ -39,7 +39,7 @@ pub fn margins(r: &AuditReport) -> String {
     let v = r.violations.len() as u64 + r.violations_dropped;
     let mut text =
         format!("margin sep {sep:+.2} m, track {track:+.2} m, side {side:+.2} m, λ1 {lambda:+.3}");
-    // The airspace (issue 27), only when the scenario has one.
+    // The airspace, only when the scenario has one.
     if let Some(m) = r.min_fence_margin_m {
         text.push_str(&format!(", fence {m:+.2} m"));
     }

@@ -93,7 +93,7 @@ impl TargetFrame {
         for ground in [&mut f.takeoff, &mut f.landing].into_iter().flatten() {
             ground.ground_z_m = self.map_z(ground.ground_z_m);
         }
-        // The airspace (issue 27) is of the same frame: the fence and the obstacles scale with
+        // The airspace is of the same frame: the fence and the obstacles scale with
         // the plan, so the certificate at the target scale checks them again.
         if let Some(fence) = &mut f.geofence {
             for v in &mut fence.polygon {

@@ -44,10 +44,10 @@ pub struct Scene {
     /// The graph after each loss's repair, from the tick it applies (replay of a run with losses).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub graphs: Vec<GraphChange>,
-    /// A mission's phases (issue 26), marked on the replay's timeline; none for one manoeuvre.
+    /// A mission's phases, marked on the replay's timeline; none for one manoeuvre.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub phases: Vec<PhaseMark>,
-    /// The scenario's `[geofence]` (issue 27), drawn as a wire prism.
+    /// The scenario's `[geofence]`, drawn as a wire prism.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub geofence: Option<GeofenceSpec>,
     /// The scenario's `[[obstacle]]`s, drawn as translucent solids with their names.
@@ -283,7 +283,7 @@ mod tests {
         assert!(scene.phases.is_empty());
     }
 
-    /// A mission's phases reach the replay's timeline (issue 26), in flight order.
+    /// A mission's phases reach the replay's timeline, in flight order.
     #[test]
     fn a_mission_scene_names_its_phases() {
         let s = Scenario::builtin("paper40-mission").expect("paper40-mission");

@@ -530,7 +530,7 @@ impl Drop for Stopped {
     }
 }
 
-/// The ground of `mission()` (issue 26).
+/// The ground of `mission()`.
 pub const GROUND_Z: f64 = 500.0;
 /// The paper's goals (segment 1) turned by 30 degrees about their centre and moved, then the
 /// paper's goals moved 40 m along each axis (rigid motions: no more deformation than the
@@ -571,7 +571,7 @@ pub fn mission() -> ScenarioFile {
     f
 }
 
-/// A lab-sized mission (issue 24 item 5; issue 26's real-time and MAVLink flights): four members 3 m apart take off from z = 0 to 1.5 m
+/// A lab-sized mission (for the real-time and MAVLink flights): four members 3 m apart take off from z = 0 to 1.5 m
 /// (4 s), translate by (0.3, 0.2, 0.2) m (2.5 s), land (4 s after 0.5 s), then the plan's 10 s
 /// on the ground: 21 s. Certified SAFE (delta 0.70 m: `orchestrator plan`).
 pub const LAB_MISSION: &str = r#"

@@ -62,7 +62,7 @@ const track = new THREE.Line(new THREE.BufferGeometry(), new THREE.LineBasicMate
 track.frustumCulled = false;
 world.add(track);
 
-// --- airspace (issue 27): the geofence as a wire prism, obstacles as translucent solids --------
+// --- airspace: the geofence as a wire prism, obstacles as translucent solids --------
 const FENCE_COLOUR = 0x5fd3f3, OBSTACLE_COLOUR = 0xc77dff;
 const drawn = { fence: 0, obstacles: [] }; // data-airspace, for tests: what was added
 function wire(points, colour) {
