@@ -546,3 +546,72 @@ fn the_name_finder_finds_a_name_defined_twice() {
     assert_eq!(twice["Role"], ["a/src/x.rs", "b/src/y.rs"]);
     assert_eq!(twice["Kind"], ["a/src/x.rs", "c/src/z.rs"]);
 }
+
+/// A comment that names a ticket ("issue 27") says which request a line came from, not why it
+/// is there; the ticket means nothing to a reader of the code. Returns the offending lines.
+fn ticket_references(text: &str) -> Vec<(usize, String)> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let lower = line.to_ascii_lowercase();
+        let mut rest = lower.as_str();
+        while let Some(at) = rest.find("issue") {
+            let after = rest[at + "issue".len()..].trim_start_matches('s');
+            let after = after.strip_prefix(' ').unwrap_or(after);
+            let after = after.strip_prefix('#').unwrap_or(after);
+            if after.starts_with(|c: char| c.is_ascii_digit()) {
+                out.push((i + 1, line.trim().to_string()));
+                break;
+            }
+            rest = &rest[at + "issue".len()..];
+        }
+    }
+    out
+}
+
+#[test]
+fn no_comment_names_an_issue_number() {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let mut files = sources();
+    for dir in [
+        "tests/tests",
+        "tests/tests/support",
+        "scripts",
+        "tests/python",
+        "python",
+    ] {
+        for e in std::fs::read_dir(root.join(dir))
+            .into_iter()
+            .flatten()
+            .flatten()
+        {
+            files.push(e.path());
+        }
+    }
+    let tomls = ["Cargo.toml", "tests/Cargo.toml", "python/Cargo.toml"];
+    files.extend(tomls.iter().map(|t| root.join(t)));
+    let mut found = Vec::new();
+    for f in files.iter().filter(|f| f.is_file()) {
+        let Ok(text) = std::fs::read_to_string(f) else {
+            continue;
+        };
+        // This file names the pattern it looks for.
+        if f.ends_with("tests/tests/style.rs") {
+            continue;
+        }
+        for (line, text) in ticket_references(&text) {
+            found.push(format!("{}:{line}: {text}", f.display()));
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "comments that name an issue number:\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn the_ticket_finder_finds_an_issue_number_and_nothing_else() {
+    let text = "// the airspace (issue 27)\n// Issues #12 and 13\n// an issue with links\n";
+    let found: Vec<usize> = ticket_references(text).iter().map(|(l, _)| *l).collect();
+    assert_eq!(found, vec![1, 2]);
+}
