@@ -39,7 +39,7 @@ pub type ClockWire = Wire<ClockMsg>;
 /// slots have one size), so the state services' shared memory, and the memory a process touches
 /// reading them, grows with it. Measured at N = 40 (CPU per tick) and N = 250 (peak memory)
 /// against one state per sample: 4 saves 28-30 % of the team's CPU per tick, 8 saved only 17 %
-/// (issue17a: larger chunks stay out of the cache). Since the state services keep no history
+/// (larger chunks stay out of the cache). Since the state services keep no history
 /// (`resend.rs`), 4 costs the largest member at N = 250 about 0.2 MiB, which the 8 MiB budget
 /// just allows. BENCHMARKS.md, "Several ticks per sample, session 7".
 pub const STATES_PER_SAMPLE: usize = 4;
