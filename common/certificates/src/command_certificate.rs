@@ -19,6 +19,7 @@ use crate::airspace_certificate::{certify_airspace, AirspaceCertificate};
 use crate::certificate::{verdict_of, PhaseCertificate};
 use crate::delay::{bound_ms, DelayBound};
 use crate::mission_certificate::{certify_phase, tighter};
+use crate::vehicle_certificate::{certify_vehicle, VehicleCertificate};
 use cdm_engine::engine::max_follower_deviation_within;
 use cdm_math::Real;
 use cdm_model::outcome::Verdict;
@@ -49,6 +50,9 @@ pub struct CommandCertificate {
     /// `[geofence]` and `[[obstacle]]`: every path of the commanded plan.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub airspace: Option<AirspaceCertificate>,
+    /// `[vehicle]`: the limits and downwash over every phase of the commanded plan.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<VehicleCertificate>,
 }
 
 /// The certificate of `proposal` for the team of `s` launched with the safety numbers `n`.
@@ -89,6 +93,12 @@ pub fn certify_command(s: &Scenario, n: &SafetyNumbers, proposal: &Proposal) -> 
     if let Some(a) = &airspace {
         reasons.extend(a.reasons());
     }
+    // The vehicles' limits and downwash over every phase of the commanded plan: a hold's stop
+    // by its own cubic's extremes, a cut phase by its whole quintic's (it flies part of it).
+    let vehicle = certify_vehicle(s, n.delta_m);
+    if let Some(v) = &vehicle {
+        reasons.extend(v.reasons());
+    }
     let (max_link_delay_ms, max_link_delay_at_least) = bound_ms(delay, s.dt_s());
     CommandCertificate {
         verdict: verdict_of(&reasons),
@@ -100,6 +110,7 @@ pub fn certify_command(s: &Scenario, n: &SafetyNumbers, proposal: &Proposal) -> 
         max_link_delay_at_least,
         phases: rows,
         airspace,
+        vehicle,
     }
 }
 

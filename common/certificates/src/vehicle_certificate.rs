@@ -21,7 +21,7 @@ use serde::Serialize;
 
 use cdm_math::{Real, Vec3};
 use cdm_model::limits::{segment_min_downwash, Limit};
-use cdm_model::plan::{Phase, PhaseKind};
+use cdm_model::plan::{PeakRates, Phase, PhaseKind, Scaling};
 use cdm_scenario::Scenario;
 
 /// One limit's largest commanded value over the plan: who, where, when.
@@ -120,6 +120,26 @@ fn unit_of(key: &str) -> &'static str {
         .map_or("", Limit::unit)
 }
 
+/// The largest value of `limit`'s measure over phase `p` for a member moving by `d`: the
+/// quintic's closed form for a rest-to-rest phase, the phase's own peak rates for one a command
+/// cut or stopped (a hold's stop: its cubic's extremes; a cut: its whole quintic's).
+fn peak_in(p: &Phase, limit: Limit, d: &Vec3, rates: &PeakRates) -> Real {
+    match p.scaling {
+        Scaling::RestToRest => limit.peak(d, p.quintic.t_total_s),
+        _ if limit.is_accel() => limit.measure(d) * rates.accel,
+        _ => limit.measure(d) * rates.speed,
+    }
+}
+
+/// About when into phase `p` the peak of `limit` is.
+fn peak_at(p: &Phase, limit: Limit, t: Real, rates: &PeakRates) -> Real {
+    match p.scaling {
+        Scaling::RestToRest => limit.tau_of_peak() * t,
+        _ if limit.is_accel() => rates.accel_at_s,
+        _ => rates.speed_at_s,
+    }
+}
+
 /// Each member's desired segment over a phase: (a_i, D_i), in formation order.
 fn segments(s: &Scenario, p: &Phase) -> Vec<(Vec3, Vec3)> {
     let d: [Vec3; 3] = std::array::from_fn(|j| p.goal[j] - p.start[j]);
@@ -148,8 +168,9 @@ pub fn certify_vehicle(s: &Scenario, delta_m: Real) -> Option<VehicleCertificate
             let mut best: Option<LimitPeak> = None;
             for (p, segs) in phases.iter().zip(&per_phase) {
                 let t = p.quintic.t_total_s;
+                let rates = p.peak_rates();
                 for (k, (_, d)) in segs.iter().enumerate() {
-                    let value = limit.peak(d, t);
+                    let value = peak_in(p, limit, d, &rates);
                     if best.as_ref().is_none_or(|b| value > b.value) {
                         best = Some(LimitPeak {
                             limit: limit.key(),
@@ -157,7 +178,7 @@ pub fn certify_vehicle(s: &Scenario, delta_m: Real) -> Option<VehicleCertificate
                             value,
                             agent: ids[k],
                             phase: p.kind.name(),
-                            t_s: p.t_start_s + limit.tau_of_peak() * t,
+                            t_s: p.t_start_s + peak_at(p, limit, t, &rates),
                         });
                     }
                 }

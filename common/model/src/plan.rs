@@ -123,6 +123,16 @@ pub enum Scaling {
     Stop(StopProfile),
 }
 
+/// The largest s' (1/s) and |s''| (1/s^2) over a phase's motion, and about when (seconds into
+/// the phase; 0 for a stop, whose extremes are usually at the switch).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PeakRates {
+    pub speed: Real,
+    pub speed_at_s: Real,
+    pub accel: Real,
+    pub accel_at_s: Real,
+}
+
 /// One phase: the primary leaders move from `start` to `goal` on the quintic of eq. 15, rest to
 /// rest, from `t_start_s` (or as `scaling` says); before it (after the previous phase) they
 /// hover.
@@ -167,6 +177,31 @@ impl Phase {
     /// The instant the phase's motion ends (its leaders at rest at `goal`, unless cut).
     pub fn t_end_s(&self) -> Real {
         self.t_start_s + self.duration_s()
+    }
+
+    /// The largest s' and |s''| over the phase's motion, with the time into the phase of each
+    /// (the vehicle limits of `limits.rs` are |measure(D_i)| times these). Exact for a
+    /// rest-to-rest phase (the quintic's closed forms) and for a stop (its cubic's extremes);
+    /// a cut phase flies part of its quintic, so the whole quintic's peaks bound it.
+    pub fn peak_rates(&self) -> PeakRates {
+        let t = self.quintic.t_total_s;
+        match self.scaling {
+            Scaling::RestToRest | Scaling::Cut { .. } => PeakRates {
+                speed: crate::limits::PEAK_SPEED_TIMES_T / t,
+                speed_at_s: 0.5 * t,
+                accel: crate::limits::PEAK_ACCEL_TIMES_T2 / (t * t),
+                accel_at_s: crate::limits::TAU_PEAK_ACCEL * t,
+            },
+            Scaling::Stop(stop) => {
+                let span = stop.distance();
+                PeakRates {
+                    speed: stop.peak_speed() / span,
+                    speed_at_s: 0.0,
+                    accel: stop.peak_acceleration() / span,
+                    accel_at_s: 0.0,
+                }
+            }
+        }
     }
 
     /// The derivatives 0..4 of s, `tau` seconds into the phase on `segment`.

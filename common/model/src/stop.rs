@@ -94,6 +94,29 @@ impl StopProfile {
         m
     }
 
+    /// max s' over the stop: s' is a cubic in u, so its ends and the roots of s'' (the
+    /// quadratic of [`StopProfile::peak_acceleration`]) inside (0, 1).
+    pub fn peak_speed(&self) -> Real {
+        let (v0, a0, t) = (self.v0, self.a0, self.t_s);
+        let (c2, c1, c0) = (6.0 * v0 / t + 3.0 * a0, -6.0 * v0 / t - 4.0 * a0, a0);
+        let speed = |u: Real| self.derivatives(u * t)[1];
+        let mut roots = Vec::with_capacity(2);
+        if c2 == 0.0 {
+            if c1 != 0.0 {
+                roots.push(-c0 / c1);
+            }
+        } else {
+            let disc = c1 * c1 - 4.0 * c2 * c0;
+            if disc >= 0.0 {
+                let r = disc.sqrt();
+                roots.extend([(-c1 - r) / (2.0 * c2), (-c1 + r) / (2.0 * c2)]);
+            }
+        }
+        (roots.into_iter().filter(|u| *u > 0.0 && *u < 1.0))
+            .map(speed)
+            .fold(speed(0.0).max(speed(1.0)), Real::max)
+    }
+
     /// [s - s0, s', s'', s''', s''''] at `tau` seconds into the stop (clamped to it).
     pub fn derivatives(&self, tau: Real) -> [Real; 5] {
         let (v0, a0, t) = (self.v0, self.a0, self.t_s);
@@ -166,6 +189,32 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The stop's peak speed is its cubic's largest value: no sample of a dense scan exceeds it,
+    /// and the best sample comes within the scan's resolution of it.
+    #[test]
+    fn the_peak_speed_bounds_a_dense_scan_of_the_stop() {
+        let q = Quintic { t_total_s: 100.0 };
+        let peak = quintic_peak_acceleration(100.0);
+        for t_sw in [5.0, 20.0, 35.0, 50.0] {
+            let [s0, v0, a0, _, _] = q.derivatives(t_sw, Segment::Motion);
+            let stop = StopProfile::quickest(s0, v0, a0, peak, 0.01).expect("a stop exists");
+            let exact = stop.peak_speed();
+            let n = 20_000;
+            let scanned = (0..=n)
+                .map(|k| stop.derivatives(stop.t_s * k as Real / n as Real)[1])
+                .fold(Real::MIN, Real::max);
+            assert!(
+                scanned <= exact * (1.0 + 1e-12),
+                "{t_sw}: {scanned} > {exact}"
+            );
+            assert!(
+                exact - scanned <= 1e-6 * exact,
+                "{t_sw}: {scanned} vs {exact}"
+            );
+            assert!(exact >= v0);
         }
     }
 

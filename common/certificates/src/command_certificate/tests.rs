@@ -125,3 +125,46 @@ fn a_command_file_is_checked_and_read_back() {
         .to_string();
     assert!(e.contains("when"), "{e}");
 }
+
+/// The vehicles' limits hold over a command's motion too: with a horizontal speed limit the
+/// team's own plan meets, a goto that would need more is refused naming the limit, and the plan
+/// is unchanged; given time enough it is accepted.
+#[test]
+fn a_goto_faster_than_the_vehicles_can_fly_is_refused() {
+    let mut file = paper40();
+    file.vehicle = Some(cdm_scenario::VehicleSpec {
+        max_speed_xy_m_s: Some(20.0),
+        ..Default::default()
+    });
+    let s = Scenario::from_file(file, "paper40", Checks::Full).unwrap();
+    let n = SafetyNumbers::of(&s);
+    let mut steering = s.steering();
+    let t_end = s.plan.flight_end_s();
+    accepted(&steer(
+        &mut steering,
+        &s,
+        &n,
+        &TeamCommand::Hold,
+        0.3 * t_end,
+    ));
+    let held = steering.plan().clone();
+    let t = held.end_s();
+    let here = held.primary_derivs(t, held.piece_at(t)).map(|d| d[0]);
+    // Every leader shifted by the same 300 m: each member's D_i, a combination of the leaders'
+    // with weights summing to 1 (eq. 13), is that shift, so in 20 s each peaks at
+    // 1.875 * 300 / 20 = 28.1 m/s horizontally.
+    let shift = here.map(|p| p + Vec3::new(300.0, 0.0, 0.0));
+    let rushed = TeamCommand::Goto {
+        goals: shift,
+        travel_s: Some(20.0),
+    };
+    match steer(&mut steering, &s, &n, &rushed, t + 1.0) {
+        CommandOutcome::Refused(c) => {
+            let why = c.reasons.join("; ");
+            assert!(why.contains("vehicle limit max_speed_xy_m_s"), "{why}");
+            assert!(c.vehicle.is_some());
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(steering.plan(), &held);
+}
