@@ -396,10 +396,12 @@ fn a_control_fault_ends_a_launch_exactly_like_simulate() {
     let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
     let s = run(&mut simulate(&sim, &source), SMALL_DEADLINE);
     assert_exit(&s, 3, "simulate of a 10 s paper40");
-    let l = run(
-        &mut launch(&unique_team("ctlfault"), &out, &source),
-        SMALL_DEADLINE,
-    );
+    // Follower 20 (no ancestor of agent 39, whose in-neighbours are the primaries) publishes
+    // its tick 0 late, as a process slow to start on a loaded machine does: agent 39 runs
+    // ahead to its fault meanwhile, and the team must still record every tick before it.
+    let mut l = launch(&unique_team("ctlfault"), &out, &source);
+    l.env(cdm_process::fault_inject::ENV, "20:pause@0");
+    let l = run(&mut l, SMALL_DEADLINE);
     assert_exit(&l, 3, "launch of a 10 s paper40");
     let (fs, fl) = (
         read_json(&sim.join("audit.json")),

@@ -11,12 +11,17 @@
 //! | `tick` | its state labelled tick `<tick> + 1` (a state from the wrong step) |
 //! | `kill` | nothing: it kills itself with SIGKILL instead (a crash at a chosen tick) |
 //! | `stop` | nothing: it stops itself with SIGSTOP instead (a hang at a chosen tick) |
+//! | `pause` | its true state, [`PAUSE`] late (a process slow to start, or starved by a loaded machine) |
 //!
 //! Nothing else changes: the member's own integration goes on with its true state. Never set
 //! this variable outside tests; a member that acts on it says so with a warning.
 
 /// The environment variable read by members.
 pub const ENV: &str = "CDM_FAULT_INJECT";
+
+/// How long `pause` holds the state back: longer than any grace the orchestrator could wait
+/// by the wall clock, far shorter than the silence deadline.
+pub const PAUSE: std::time::Duration = std::time::Duration::from_millis(1500);
 
 /// What to corrupt.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,6 +34,8 @@ pub enum Kind {
     Kill,
     /// Hang (SIGSTOP) instead of publishing.
     Stop,
+    /// Publish the true state, [`PAUSE`] late.
+    Pause,
 }
 
 /// One injected fault for this process.
@@ -52,6 +59,7 @@ pub fn parse(spec: &str, my_id: u32) -> Option<Injection> {
         "tick" => Kind::WrongTick,
         "kill" => Kind::Kill,
         "stop" => Kind::Stop,
+        "pause" => Kind::Pause,
         _ => return None,
     };
     Some(Injection {
@@ -96,6 +104,7 @@ impl Injection {
                     libc::raise(libc::SIGSTOP);
                 }
             }
+            Kind::Pause => std::thread::sleep(PAUSE),
         }
     }
 }
@@ -116,6 +125,7 @@ mod tests {
         assert_eq!(parse("7:tick@3", 7).map(|i| i.kind), Some(Kind::WrongTick));
         assert_eq!(parse("1:kill@9", 1).map(|i| i.kind), Some(Kind::Kill));
         assert_eq!(parse("1:stop@9", 1).map(|i| i.kind), Some(Kind::Stop));
+        assert_eq!(parse("2:pause@0", 2).map(|i| i.kind), Some(Kind::Pause));
         for bad in ["7:nan@50", "7:nan", "x:nan@1", "7:inf@1", "7:nan@-1", ""] {
             assert_eq!(parse(bad, 8), None, "{bad}");
         }

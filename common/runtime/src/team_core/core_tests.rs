@@ -135,7 +135,13 @@ fn the_root_cause_wins_over_an_earlier_echo() {
     c.on_state(&report(2, 4, FaultCode::Control, None), ms(1));
     let t = turn(&mut c, ms(1), None);
     assert_eq!(t.complete, [0, 1, 2, 3]);
-    let t = turn(&mut c, ms(1) + FAULT_GRACE, None);
+    assert!(
+        !matches!(t.end, Some(TeamAction::Stop(..))),
+        "member 1 may still send tick 4"
+    );
+    // Members 2 and 3 send no more: once member 1's tick 4 is in, nothing else is owed.
+    send(&mut c, &[1], 4..=4, ms(2));
+    let t = turn(&mut c, ms(2), None);
     let (f, reason) = stop_of(&t);
     assert_eq!((f.kind, f.agent, f.tick), (FaultKind::Control, Some(2), 4));
     assert_eq!(reason, StopReason::AgentFault);
@@ -144,6 +150,47 @@ fn the_root_cause_wins_over_an_earlier_echo() {
         "{}",
         f.message
     );
+}
+
+#[test]
+fn a_fault_waits_for_every_tick_before_it_however_late_a_live_member_sends_it() {
+    let ids = [1, 2, 3];
+    let mut c = core(&ids, 16, 100);
+    turn(&mut c, ms(0), None);
+    // Member 3 starts slowly (a loaded machine): members 1 and 2 run ahead and 2 faults.
+    send(&mut c, &[1, 2], 0..=5, ms(1));
+    c.on_state(&report(2, 5, FaultCode::Control, None), ms(1));
+    let mut now = ms(1);
+    while now < ms(3000) {
+        let t = turn(&mut c, now, None);
+        assert!(
+            t.complete.is_empty(),
+            "nothing is complete without member 3"
+        );
+        assert_eq!(t.end, Some(TeamAction::Wait(WAIT_SLICE)), "at {now:?}");
+        now += ms(20);
+    }
+    send(&mut c, &[3], 0..=6, ms(3001));
+    let t = turn(&mut c, ms(3001), None);
+    assert_eq!(t.complete, [0, 1, 2, 3, 4, 5], "the ticks simulate keeps");
+    let (f, _) = stop_of(&t);
+    assert_eq!((f.kind, f.agent, f.tick), (FaultKind::Control, Some(2), 5));
+    // A member that never sends is waited for no longer than the silence deadline.
+    let mut c = core(&ids, 16, 100);
+    turn(&mut c, ms(0), None);
+    send(&mut c, &[1, 2], 0..=5, ms(1));
+    c.on_state(&report(2, 5, FaultCode::Control, None), ms(1));
+    // The loop turns every 20 ms (a longer gap would be an orchestrator stall).
+    let mut now = ms(1);
+    while now + ms(20) < Duration::from_secs(10) {
+        now += ms(20);
+        assert_eq!(
+            turn(&mut c, now, None).end,
+            Some(TeamAction::Wait(WAIT_SLICE))
+        );
+    }
+    let (f, _) = stop_of(&turn(&mut c, now + ms(20), None));
+    assert_eq!((f.kind, f.agent, f.tick), (FaultKind::Control, Some(2), 5));
 }
 
 #[test]

@@ -1,8 +1,9 @@
 //! Lockstep pacing of the team core: the orchestrator grants ticks and members run up to
 //! `window` ticks ahead of the last tick completely received. What it decides: the grants,
-//! which ticks are complete (one slot per tick and member), how long a non-finite state or a
-//! reported fault waits for the ticks before it ([`super::FAULT_GRACE`]), the tick an exited
-//! member is blamed for, and the silence deadline.
+//! which ticks are complete (one slot per tick and member), how long a reported fault waits for
+//! the ticks before it (as long as a member that owes one of them may still send it: never by a
+//! wall-clock grace, so a slow start under load records what `simulate` records), the tick an
+//! exited member is blamed for, and the silence deadline.
 
 use std::time::Duration;
 
@@ -61,6 +62,10 @@ pub struct Grants {
     last_progress: Duration,
     /// A non-finite state: who sent it, its tick, when it was seen. It is never audited.
     non_finite: Option<(u32, u64, Duration)>,
+    /// Per member (formation order): it sent its last usable state (it reported a fault, or
+    /// sent a non-finite state). Its states before that came first on its one queue, so a tick
+    /// it has not filled yet will never be filled by it.
+    sends_no_more: Vec<bool>,
 }
 
 impl Grants {
@@ -69,6 +74,7 @@ impl Grants {
         let index = IdIndex::new(&cfg.ids);
         let window = u64::from(cfg.window.max(1));
         let grant = first_grant(window, cfg.last_tick);
+        let sends_no_more = vec![false; cfg.ids.len()];
         Grants {
             cfg,
             index,
@@ -82,6 +88,7 @@ impl Grants {
             progressed: false,
             last_progress: now,
             non_finite: None,
+            sends_no_more,
         }
     }
 
@@ -118,6 +125,7 @@ impl Grants {
             return;
         };
         if let AgentStatus::Fault { code, peer } = msg.status() {
+            self.sends_no_more[k] = true;
             let rank = FaultRank::of_report(code, msg.tick, k);
             let fault = TeamFault::Reported {
                 id: msg.id,
@@ -137,6 +145,7 @@ impl Grants {
             return;
         }
         if msg.state.iter().any(|v| !v.is_finite()) {
+            self.sends_no_more[k] = true;
             self.non_finite.get_or_insert((msg.id, msg.tick, now));
             return;
         }
@@ -162,7 +171,8 @@ impl Grants {
 
     /// The next action at `now`. Grants go out before complete ticks (members go on while the
     /// orchestrator audits and writes); a fault at tick k stops the team once ticks 0..=k are
-    /// complete (as `simulate` keeps them) or its grace is over.
+    /// complete (as `simulate` keeps them), or once no member that owes one of them can still
+    /// send it.
     pub(super) fn next_action(&mut self, t: &mut TeamState, now: Duration) -> TeamAction {
         if !self.started {
             self.started = true;
@@ -191,7 +201,7 @@ impl Grants {
             return done;
         }
         if let Some(s) = t.stopping.take() {
-            if self.next_tick > s.record.tick || now.saturating_sub(s.since) >= FAULT_GRACE {
+            if self.next_tick > s.record.tick || self.owed_never_come(t, now) {
                 return TeamAction::Stop(s.record, s.reason);
             }
             t.stopping = Some(s);
@@ -223,6 +233,26 @@ impl Grants {
         Some(TeamAction::Complete {
             tick,
             states: slot.states,
+        })
+    }
+
+    /// True when the next tick, incomplete, can no longer be completed: every member it lacks
+    /// is lost, killed or sends no more, it was never granted, or nothing completed within the silence
+    /// deadline (a member
+    /// that owes it hangs). Waiting on members still alive, rather than for a fixed grace, keeps
+    /// every tick before a fault however slowly the members start or run.
+    fn owed_never_come(&self, t: &TeamState, now: Duration) -> bool {
+        if now.saturating_sub(self.last_progress) > self.cfg.agent_timeout {
+            return true;
+        }
+        let tick = self.next_tick;
+        if tick > self.grant {
+            // Never granted (a scripted loss caps the grants): nobody flies it.
+            return true;
+        }
+        let have = self.pending.get(tick);
+        !(self.cfg.ids.iter().enumerate()).any(|(k, &id)| {
+            have.is_none_or(|s| s.states[k].is_none()) && !self.sends_no_more[k] && !t.is_gone(id)
         })
     }
 

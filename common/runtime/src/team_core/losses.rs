@@ -369,8 +369,15 @@ mod tests {
         send(&mut c, &ids, 4..=5);
         let a = turn(&mut c, ms(3), false);
         assert_eq!(a.last(), Some(&TeamAction::Kill(vec![20])));
-        turn(&mut c, ms(4), false);
-        let a = turn(&mut c, ms(600), false);
+        let a = turn(&mut c, ms(4), false);
+        assert!(
+            !a.iter().any(|x| matches!(x, TeamAction::Stop(..))),
+            "the others may still send tick 6: {a:?}"
+        );
+        // The others fly tick 6; member 20 never will: the team stops at once, no grace.
+        let others: Vec<u32> = ids.iter().copied().filter(|&i| i != 20).collect();
+        send(&mut c, &others, 6..=6);
+        let a = turn(&mut c, ms(5), false);
         match a.last() {
             Some(TeamAction::Stop(f, StopReason::AgentFault)) => {
                 assert_eq!((f.kind, f.agent, f.tick), (FaultKind::Lost, Some(20), 6));
