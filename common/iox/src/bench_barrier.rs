@@ -3,7 +3,7 @@
 //! neighbours' samples, publishes one 128-byte sample and acknowledges; the coordinator waits for
 //! all N samples. This is what a naive one-process-per-member runtime pays per tick. It lives in
 //! this crate, not in the `cdm-bench` binary, so that only the transport backend names iceoryx2.
-//! Prints `barrier: N agents, K ticks in S s (R ticks/s)`. Every wait has a deadline.
+//! Returns what it measured ([`BarrierRun`]; the binary prints it). Every wait has a deadline.
 
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -19,16 +19,62 @@ use crate::wire::{StateWire, Wire};
 /// No wait of the barrier lasts longer than this without progress.
 const DEADLINE: Duration = Duration::from_secs(10);
 
-fn service(run: &str, what: &str) -> Result<ServiceName, String> {
-    ServiceName::new(&format!("cdm-bench/{run}/{what}")).map_err(|e| format!("{e:?}"))
+/// Why the barrier benchmark did not run to its end.
+#[derive(Debug, thiserror::Error)]
+pub enum BarrierError {
+    /// Fewer than four members (each reads three others).
+    #[error("barrier needs --n 4 or more, not {0}")]
+    TooFew(usize),
+    /// An iceoryx2 call failed: what it was for, and iceoryx2's error.
+    #[error("{what}: {detail}")]
+    Ipc { what: String, detail: String },
+    /// A member process could not start, or the process could not prepare.
+    #[error("{what}: {source}")]
+    Os {
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A wait ran past its deadline.
+    #[error("{0}")]
+    Deadline(String),
+    /// The open-file limit could not be raised.
+    #[error(transparent)]
+    Transport(#[from] crate::TransportError),
 }
 
-fn node() -> Result<Node<ipc::Service>, String> {
+/// What one barrier run measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BarrierRun {
+    /// Member processes.
+    pub n: usize,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Seconds for the ticks.
+    pub secs: f64,
+    /// Seconds from the first spawn until every member joined.
+    pub startup_s: f64,
+}
+
+/// An iceoryx2 error, kept as its debug text, for `what`.
+fn ipc<E: std::fmt::Debug>(what: impl Into<String>) -> impl FnOnce(E) -> BarrierError {
+    let what = what.into();
+    move |e| BarrierError::Ipc {
+        what,
+        detail: format!("{e:?}"),
+    }
+}
+
+fn service(run: &str, what: &str) -> Result<ServiceName, BarrierError> {
+    ServiceName::new(&format!("cdm-bench/{run}/{what}")).map_err(ipc(format!("service {what}")))
+}
+
+fn node() -> Result<Node<ipc::Service>, BarrierError> {
     NodeBuilder::new()
         .config(&crate::iceoryx2_config())
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| format!("node: {e:?}"))
+        .map_err(ipc("node"))
 }
 
 /// The three members that member `id` reads (no math, so any three others will do).
@@ -52,7 +98,7 @@ type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Ser
 
 impl Coordinator {
     /// Creates the services of `n` members of `run`.
-    fn create(run: &str, n: usize) -> Result<Self, String> {
+    fn create(run: &str, n: usize) -> Result<Self, BarrierError> {
         let node = node()?;
         let mut states = Vec::with_capacity(n);
         let mut wakes = Vec::with_capacity(n);
@@ -67,12 +113,12 @@ impl Coordinator {
                 .history_size(0)
                 .enable_safe_overflow(true)
                 .create()
-                .map_err(|e| format!("state/{id}: {e:?}"))?;
+                .map_err(ipc(format!("state/{id}")))?;
             let sub = st
                 .subscriber_builder()
                 .buffer_size(2)
                 .create()
-                .map_err(|e| format!("subscriber {id}: {e:?}"))?;
+                .map_err(ipc(format!("subscriber {id}")))?;
             states.push((st, sub));
             let w = node
                 .service_builder(&service(run, &format!("wake/{id}"))?)
@@ -81,11 +127,11 @@ impl Coordinator {
                 .max_notifiers(1)
                 .max_nodes(3)
                 .create()
-                .map_err(|e| format!("wake/{id}: {e:?}"))?;
+                .map_err(ipc(format!("wake/{id}")))?;
             let notifier = w
                 .notifier_builder()
                 .create()
-                .map_err(|e| format!("notifier {id}: {e:?}"))?;
+                .map_err(ipc(format!("notifier {id}")))?;
             wakes.push((w, notifier));
         }
         let ack = node
@@ -95,11 +141,11 @@ impl Coordinator {
             .max_notifiers(n)
             .max_nodes(n + 2)
             .create()
-            .map_err(|e| format!("ack: {e:?}"))?;
+            .map_err(ipc("ack"))?;
         let listener = ack
             .listener_builder()
             .create()
-            .map_err(|e| format!("ack listener: {e:?}"))?;
+            .map_err(ipc("ack listener"))?;
         Ok(Self {
             states,
             wakes,
@@ -126,11 +172,11 @@ impl Coordinator {
     }
 
     /// Ticks 1..=ticks: wake every member, wait for all their samples of the tick.
-    fn run_ticks(&self, ticks: u64) -> Result<(), String> {
+    fn run_ticks(&self, ticks: u64) -> Result<(), BarrierError> {
         let n = self.states.len();
         for tick in 1..=ticks {
             for (_, notifier) in &self.wakes {
-                notifier.notify().map_err(|e| format!("notify: {e:?}"))?;
+                notifier.notify().map_err(ipc("notify"))?;
             }
             let mut got = 0;
             let mut last = Instant::now();
@@ -147,9 +193,9 @@ impl Coordinator {
                     break;
                 }
                 if last.elapsed() > DEADLINE {
-                    return Err(format!(
+                    return Err(BarrierError::Deadline(format!(
                         "tick {tick}: {got} of {n} samples within {DEADLINE:?}"
-                    ));
+                    )));
                 }
                 let _ = self.listener.timed_wait(|_| {}, Duration::from_millis(20));
             }
@@ -174,8 +220,11 @@ fn stop_all(children: &mut [Child]) {
 }
 
 /// Starts the `n` member processes of `run` (all stopped again if one cannot start).
-fn spawn_members(run: &str, n: usize) -> Result<Vec<Child>, String> {
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+fn spawn_members(run: &str, n: usize) -> Result<Vec<Child>, BarrierError> {
+    let exe = std::env::current_exe().map_err(|source| BarrierError::Os {
+        what: "the benchmark's own executable".into(),
+        source,
+    })?;
     let mut children: Vec<Child> = Vec::with_capacity(n);
     for id in 0..n {
         let child = Command::new(&exe)
@@ -185,32 +234,36 @@ fn spawn_members(run: &str, n: usize) -> Result<Vec<Child>, String> {
             .spawn();
         match child {
             Ok(c) => children.push(c),
-            Err(e) => {
+            Err(source) => {
                 stop_all(&mut children);
-                return Err(format!("spawn member {id}: {e}"));
+                return Err(BarrierError::Os {
+                    what: format!("spawn member {id}"),
+                    source,
+                });
             }
         }
     }
     Ok(children)
 }
 
-pub fn barrier(n: usize, ticks: u64) -> Result<(), String> {
+/// Runs the barrier with `n` member processes for `ticks` ticks.
+pub fn barrier(n: usize, ticks: u64) -> Result<BarrierRun, BarrierError> {
     if n < 4 {
-        return Err("barrier needs --n 4 or more".into());
+        return Err(BarrierError::TooFew(n));
     }
     let run = format!("b{}", std::process::id());
     // The coordinator holds a subscriber and a notifier per member (~11 descriptors each).
-    crate::raise_fd_limit().map_err(|e| e.to_string())?;
+    crate::raise_fd_limit()?;
     let coordinator = Coordinator::create(&run, n)?;
     let mut children = spawn_members(&run, n)?;
     let started = Instant::now();
     while !coordinator.joined() {
         if started.elapsed() > DEADLINE + Duration::from_millis(50 * n as u64) {
             stop_all(&mut children);
-            return Err(format!(
+            return Err(BarrierError::Deadline(format!(
                 "members did not join within {:?}",
                 started.elapsed()
-            ));
+            )));
         }
         std::thread::sleep(Duration::from_millis(5));
     }
@@ -228,27 +281,28 @@ pub fn barrier(n: usize, ticks: u64) -> Result<(), String> {
     }
     stop_all(&mut children);
     result?;
-    println!(
-        "barrier: {n} agents, {ticks} ticks in {secs:.3} s ({:.0} ticks/s), start-up {:.2} s",
-        ticks as f64 / secs,
-        startup.as_secs_f64()
-    );
-    Ok(())
+    Ok(BarrierRun {
+        n,
+        ticks,
+        secs,
+        startup_s: startup.as_secs_f64(),
+    })
 }
 
-pub fn barrier_member(run: &str, n: usize, id: usize) -> Result<(), String> {
+/// One member process of [`barrier`]: `id` of `n` in run `run`.
+pub fn barrier_member(run: &str, n: usize, id: usize) -> Result<(), BarrierError> {
     let node = node()?;
     let open_state = |k: usize| {
         node.service_builder(&service(run, &format!("state/{k}"))?)
             .publish_subscribe::<StateWire>()
             .open()
-            .map_err(|e| format!("member {id}: state/{k}: {e:?}"))
+            .map_err(ipc(format!("member {id}: state/{k}")))
     };
     let mine = open_state(id)?;
     let publisher = mine
         .publisher_builder()
         .create()
-        .map_err(|e| format!("member {id}: publisher: {e:?}"))?;
+        .map_err(ipc(format!("member {id}: publisher")))?;
     let mut subs = Vec::new();
     for k in neighbours(n, id) {
         let s = open_state(k)?;
@@ -256,29 +310,29 @@ pub fn barrier_member(run: &str, n: usize, id: usize) -> Result<(), String> {
             .subscriber_builder()
             .buffer_size(2)
             .create()
-            .map_err(|e| format!("member {id}: subscriber {k}: {e:?}"))?;
+            .map_err(ipc(format!("member {id}: subscriber {k}")))?;
         subs.push((s, sub));
     }
     let wake = node
         .service_builder(&service(run, &format!("wake/{id}"))?)
         .event()
         .open()
-        .map_err(|e| format!("member {id}: wake: {e:?}"))?;
+        .map_err(ipc(format!("member {id}: wake")))?;
     let listener = wake
         .listener_builder()
         .create()
-        .map_err(|e| format!("member {id}: listener: {e:?}"))?;
+        .map_err(ipc(format!("member {id}: listener")))?;
     let ack = node
         .service_builder(&service(run, "ack")?)
         .event()
         .open()
-        .map_err(|e| format!("member {id}: ack: {e:?}"))?;
+        .map_err(ipc(format!("member {id}: ack")))?;
     let acker = ack
         .notifier_builder()
         .create()
-        .map_err(|e| format!("member {id}: ack notifier: {e:?}"))?;
+        .map_err(ipc(format!("member {id}: ack notifier")))?;
 
-    let me = u32::try_from(id).map_err(|e| e.to_string())?;
+    let me = u32::try_from(id).map_err(ipc(format!("member id {id}")))?;
     let mut tick: u64 = 0;
     let mut sum = 0.0;
     let mut idle = Instant::now();
@@ -310,9 +364,7 @@ pub fn barrier_member(run: &str, n: usize, id: usize) -> Result<(), String> {
         msg.state[0] = sum * 0.0 + tick as f64;
         publisher
             .send_copy(Wire(msg))
-            .map_err(|e| format!("member {id}: send: {e:?}"))?;
-        acker
-            .notify()
-            .map_err(|e| format!("member {id}: ack: {e:?}"))?;
+            .map_err(ipc(format!("member {id}: send")))?;
+        acker.notify().map_err(ipc(format!("member {id}: ack")))?;
     }
 }

@@ -54,10 +54,21 @@ enum Cmd {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let r = match cli.command {
+    let r: Result<(), String> = match cli.command {
         Cmd::Engine { n, ticks } => engine(n, ticks),
-        Cmd::Barrier { n, ticks } => barrier(n, ticks),
-        Cmd::BarrierMember { run, n, id } => barrier_member(&run, n, id),
+        Cmd::Barrier { n, ticks } => barrier(n, ticks)
+            .map(|b| {
+                println!(
+                    "barrier: {} agents, {} ticks in {:.3} s ({:.0} ticks/s), start-up {:.2} s",
+                    b.n,
+                    b.ticks,
+                    b.secs,
+                    b.ticks as f64 / b.secs,
+                    b.startup_s
+                );
+            })
+            .map_err(|e| e.to_string()),
+        Cmd::BarrierMember { run, n, id } => barrier_member(&run, n, id).map_err(|e| e.to_string()),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
