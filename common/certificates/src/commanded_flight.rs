@@ -113,8 +113,7 @@ pub fn max_follower_deviation_from(
         } else {
             Real::INFINITY
         },
-        agent: (team.members.get(i))
-            .map_or(0, |&k| s.formation.members[k].id),
+        agent: (team.members.get(i)).map_or(0, |&k| s.formation.members[k].id),
         tick: tick as u64,
     })
 }
@@ -126,6 +125,9 @@ struct FlightChains {
     /// Per coarse interval (from `from` on) and level and primary j: a bound on the norm of
     /// the 3-vector of that primary's three axes' g_l''.
     acc_bound: Vec<Real>,
+    /// The same layout: the largest norm of that 3-vector's positions over the interval and
+    /// every later one (the tail bound of [`max_norm`]).
+    tail: Vec<Real>,
     levels: usize,
     from: usize,
     last: usize,
@@ -136,7 +138,12 @@ fn desired(plan: &TeamPlan, origin: &[Vec3; 3], t: Real, piece: Piece) -> Signal
     let p = plan.primary_derivs(t, piece);
     std::array::from_fn(|i| {
         let (j, a) = (i / 3, i % 3);
-        Vec4::new(p[j][0][a] - origin[j][a], p[j][1][a], p[j][2][a], p[j][3][a])
+        Vec4::new(
+            p[j][0][a] - origin[j][a],
+            p[j][1][a],
+            p[j][2][a],
+            p[j][3][a],
+        )
     })
 }
 
@@ -160,6 +167,7 @@ fn run_chains(
     let intervals = (last - from).div_ceil(COARSE_TICKS).max(1);
     let mut pos = Vec::with_capacity((last - from + 1) * levels * SIGNALS);
     let mut acc_bound = vec![0.0; intervals * levels * 3];
+    let mut tail = vec![0.0; intervals * levels * 3];
     let zero = [Vec4::zeros(); SIGNALS];
     // At rest at the start, with whatever derivatives the plan starts with.
     let mut d_k = at(0);
@@ -179,7 +187,14 @@ fn run_chains(
         past[slot + 1] = lam;
         past[slot + 2..slot + width].copy_from_slice(&y);
         if k >= from {
-            record(k - from, &y, dt, intervals, &mut pos, &mut acc_bound);
+            record(
+                k - from,
+                &y,
+                dt,
+                intervals,
+                &mut pos,
+                (&mut acc_bound, &mut tail),
+            );
         }
         if k == last {
             break;
@@ -210,9 +225,17 @@ fn run_chains(
         lam = leader_step(plan, team, origin, k, &lam, &d_k, &d_next);
         d_k = d_next;
     }
+    // Each interval's largest position norm, then the largest over it and every later one.
+    let row = levels * 3;
+    for m in (0..intervals.saturating_sub(1)).rev() {
+        for q in 0..row {
+            tail[m * row + q] = tail[m * row + q].max(tail[(m + 1) * row + q]);
+        }
+    }
     FlightChains {
         pos,
         acc_bound,
+        tail,
         levels,
         from,
         last,
@@ -258,15 +281,15 @@ fn leader_step(
     std::array::from_fn(|i| e[i] + prev[i] - d_next[i])
 }
 
-/// Records tick `from + r` of every level (its positions) and raises the curvature bounds of
-/// the coarse intervals holding it.
+/// Records tick `from + r` of every level (its positions) and raises the curvature bounds and
+/// the position norms of the coarse intervals holding it.
 fn record(
     r: usize,
     y: &[Signals],
     dt: Real,
     intervals: usize,
     pos: &mut Vec<Real>,
-    acc_bound: &mut [Real],
+    (acc_bound, sup): (&mut [Real], &mut [Real]),
 ) {
     let levels = y.len();
     for (l, g) in y.iter().enumerate() {
@@ -281,6 +304,10 @@ fn record(
                 })
                 .sum::<Real>()
                 .sqrt();
+            let norm = (0..3)
+                .map(|a| g[3 * j + a][0] * g[3 * j + a][0])
+                .sum::<Real>()
+                .sqrt();
             let m = r / COARSE_TICKS;
             for m in [
                 Some(m),
@@ -290,8 +317,9 @@ fn record(
             .flatten()
             .filter(|&m| m < intervals)
             {
-                let slot = &mut acc_bound[(m * levels + l) * 3 + j];
-                *slot = slot.max(b);
+                let q = (m * levels + l) * 3 + j;
+                acc_bound[q] = acc_bound[q].max(b);
+                sup[q] = sup[q].max(norm);
             }
         }
     }
@@ -299,7 +327,10 @@ fn record(
 
 /// (max(floor, max over ticks of ||sum_l sum_j c_lj G_lj||), the tick) for one follower with
 /// coefficients `c` (one [j = 0, 1, 2] row per level): `linear_certificate::max_norm`'s
-/// coarse pass and refinement, with nine signals in place of one.
+/// coarse pass and refinement, with nine signals in place of one, ended at the first interval
+/// from which no later tick can exceed the best so far: there sum_lj |c_lj| max ||G_lj|| over
+/// the rest of the flight (the triangle inequality; the hovers after the last motion, where
+/// the errors only decay, are most of a commanded flight) is at most the best.
 fn max_norm(ch: &FlightChains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> (Real, usize) {
     let at = |r: usize| -> Real {
         let g = &ch.pos[r * ch.levels * SIGNALS..][..c.len() * SIGNALS];
@@ -313,10 +344,18 @@ fn max_norm(ch: &FlightChains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> (Rea
         }
         (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
     };
+    // sum over levels and primaries of |c_lj| times `per`'s (l, j) entries of interval m.
+    let weigh = |per: &[Real], m: usize| -> Real {
+        let row = &per[m * ch.levels * 3..][..c.len() * 3];
+        (row.chunks_exact(3).zip(c))
+            .map(|(b, cl)| (0..3).map(|j| b[j] * cl[j].abs()).sum::<Real>())
+            .sum()
+    };
     let span = ch.last - ch.from;
     let intervals = span.div_ceil(COARSE_TICKS).max(1);
     let mut best = (floor, ch.from);
     let mut ends = Vec::with_capacity(intervals + 1);
+    let mut cut = intervals;
     for m in 0..=intervals {
         let r = (m * COARSE_TICKS).min(span);
         let e = at(r);
@@ -328,14 +367,15 @@ fn max_norm(ch: &FlightChains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> (Rea
             best = (e, ch.from + r);
         }
         ends.push(e);
+        if m < intervals && weigh(&ch.tail, m) <= best.0 {
+            cut = m;
+            break;
+        }
     }
-    for m in 0..intervals {
+    for m in 0..cut {
         let (a, b) = (m * COARSE_TICKS, ((m + 1) * COARSE_TICKS).min(span));
         let h = (b - a) as Real * dt_s;
-        let curv: Real = (0..c.len())
-            .flat_map(|l| (0..3).map(move |j| (l, j)))
-            .map(|(l, j)| ch.acc_bound[(m * ch.levels + l) * 3 + j] * c[l][j].abs())
-            .sum();
+        let curv = weigh(&ch.acc_bound, m);
         if ends[m].max(ends[m + 1]) + h * h / 8.0 * curv * 1.01 > best.0 {
             for r in a + 1..b {
                 let e = at(r);

@@ -54,8 +54,14 @@ fn the_commanded_deviation_is_the_engines() {
         let linear = max_follower_deviation_from(&commanded, from, 0).unwrap();
         let (flown, agent, tick) = flown_from(&commanded, from);
         let rel = (linear.max_m - flown).abs() / flown;
-        eprintln!("from {t} s: linear {} m, flown {flown} m, relative {rel:.1e}", linear.max_m);
-        assert!(rel < 1e-9, "from {t} s: {linear:?} vs {flown} (agent {agent}, tick {tick})");
+        eprintln!(
+            "from {t} s: linear {} m, flown {flown} m, relative {rel:.1e}",
+            linear.max_m
+        );
+        assert!(
+            rel < 1e-9,
+            "from {t} s: {linear:?} vs {flown} (agent {agent}, tick {tick})"
+        );
         assert_eq!((linear.agent, linear.tick), (agent, tick), "from {t} s");
     }
 }
@@ -74,6 +80,9 @@ fn the_commanded_deviation_with_a_delay_is_the_engines() {
     let linear = max_follower_deviation_from(&commanded, from, 15).unwrap();
     let (flown, _, _) = flown_from(&commanded, from);
     let rel = (linear.max_m - flown).abs() / flown;
-    eprintln!("150 ms late from {t_hold} s: linear {} m, flown {flown} m, relative {rel:.1e}", linear.max_m);
+    eprintln!(
+        "150 ms late from {t_hold} s: linear {} m, flown {flown} m, relative {rel:.1e}",
+        linear.max_m
+    );
     assert!(rel < 1e-6, "{linear:?} vs {flown}");
 }
