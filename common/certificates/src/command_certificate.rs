@@ -9,14 +9,16 @@
 //!   apart;
 //! - a hold's stop flies part of a segment already flown, so lambda_1 over it is the
 //!   deformation's along that part; its new time profile starts from the team's tracking error
-//!   at the switch, so its E_max is measured by flying the whole commanded flight once with the
-//!   nonlinear engine (deterministic: the flight it certifies is the one flown in lockstep);
+//!   at the switch, so the tracking bound is the commanded flight's largest follower deviation
+//!   from the switch on, computed exactly on the linear team (`commanded_flight.rs`: the error
+//!   at the switch carried by the chains, every tick counted) and held against delta;
 //! - the geofence and obstacles are certified over every path of the commanded plan.
 
 use serde::Serialize;
 
 use crate::airspace_certificate::{certify_airspace, AirspaceCertificate};
 use crate::certificate::{verdict_of, PhaseCertificate};
+use crate::commanded_flight::{max_follower_deviation_from, Deviation};
 use crate::delay::{bound_ms, DelayBound};
 use crate::mission_certificate::{certify_phase, tighter};
 use crate::vehicle_certificate::{certify_vehicle, VehicleCertificate};
@@ -39,8 +41,8 @@ pub struct CommandCertificate {
     /// The flight's lambda_CD,min and delta (eqs. 37-38), unchanged by commands.
     pub lambda_cd_min: Real,
     pub delta_m: Real,
-    /// The commanded flight flown once from t = 0: its max follower deviation (eq. 34), or
-    /// the first value found above delta.
+    /// The commanded flight's max follower deviation from the switch tick on (eq. 34), the
+    /// error the flight so far left included.
     pub max_follower_deviation_m: Real,
     /// The largest link delay the new segments tolerate (ms); `None` when one fails without.
     pub max_link_delay_ms: Option<Real>,
@@ -75,13 +77,17 @@ pub fn certify_command(s: &Scenario, n: &SafetyNumbers, proposal: &Proposal) -> 
         reasons.extend(row.reasons.iter().map(|r| format!("{}: {r}", row.name)));
         rows.push(row);
     }
-    let flown = max_follower_deviation_within(s, n.delta_m).unwrap_or(Real::INFINITY);
-    if flown.is_nan() || flown > n.delta_m {
+    let flown = deviation_from_switch(s, n.delta_m, proposal.t_switch_s);
+    if flown.max_m.is_nan() || flown.max_m > n.delta_m {
         reasons.push(format!(
-            "the commanded flight flown: max follower deviation {flown:.4} m exceeds delta = {:.4} m (eq. 34)",
+            "the commanded flight from the switch on: agent {} deviates {:.4} m at t = {:.2} s, more than delta = {:.4} m (eq. 34)",
+            flown.agent,
+            flown.max_m,
+            tick_time(flown.tick, s.dt_s()),
             n.delta_m
         ));
     }
+    let flown = flown.max_m;
     let link_ticks = s.link_model().max_ticks();
     match delay {
         DelayBound::Ticks(d) if link_ticks > d => reasons.push(format!(
@@ -111,6 +117,28 @@ pub fn certify_command(s: &Scenario, n: &SafetyNumbers, proposal: &Proposal) -> 
         phases: rows,
         airspace,
         vehicle,
+    }
+}
+
+/// The commanded flight's largest follower deviation from the switch tick on (eq. 34), with the
+/// error the flight so far leaves at the switch: on the linear team (`commanded_flight.rs`)
+/// when the links are perfect or only delay, else (jitter, loss, or a graph the linear model
+/// does not cover) by flying the nonlinear engine from t = 0, ending once it exceeds delta.
+fn deviation_from_switch(s: &Scenario, delta_m: Real, t_switch_s: Real) -> Deviation {
+    let from_tick = (t_switch_s / s.dt_s()).round() as u64;
+    let link = s.link_model();
+    let spec = link.spec();
+    if spec.jitter_ms == 0.0 && spec.loss == 0.0 {
+        match max_follower_deviation_from(s, from_tick, link.max_ticks()) {
+            Ok(d) => return d,
+            Err(why) => tracing::info!(%why, "the command certificate flies the commanded flight"),
+        }
+    }
+    let max_m = max_follower_deviation_within(s, delta_m).unwrap_or(Real::INFINITY);
+    Deviation {
+        max_m,
+        agent: 0,
+        tick: 0,
     }
 }
 

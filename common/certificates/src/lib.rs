@@ -11,6 +11,7 @@ pub mod airspace_suggest;
 pub mod certificate;
 pub mod certify;
 pub mod command_certificate;
+pub mod commanded_flight;
 pub mod delay;
 pub mod linear_certificate;
 pub mod losscert;

@@ -53,7 +53,7 @@ pub enum NotLinear {
 }
 
 /// Ticks between the points of the coarse pass of [`max_norm`] (0.25 s at 100 Hz).
-const COARSE_TICKS: usize = 25;
+pub(crate) const COARSE_TICKS: usize = 25;
 
 /// The per-tick maps of one axis of one member (exact discretisation).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -101,14 +101,16 @@ impl TickMaps {
 /// A team reduced to its scalar chains and per-follower coefficients (independent of T).
 #[derive(Debug, Clone)]
 pub struct LinearTeam {
-    maps: TickMaps,
-    dt_s: Real,
+    pub(crate) maps: TickMaps,
+    pub(crate) dt_s: Real,
     comm_hz: Real,
     /// Coefficients c_l of every follower, l = 0..=depth_i, as [x, y, z] rows; `start[i]..start[i+1]`.
-    coef: Vec<[Real; 3]>,
-    start: Vec<usize>,
+    pub(crate) coef: Vec<[Real; 3]>,
+    pub(crate) start: Vec<usize>,
+    /// The member index of every follower, in the order of `start`.
+    pub(crate) members: Vec<usize>,
     /// Depth of the follower graph (longest chain of followers), so D + 1 coefficient levels.
-    depth: usize,
+    pub(crate) depth: usize,
 }
 
 /// The scalar chains of one travel time: positions of g_0..g_D at every tick (tick-major) and,
@@ -192,6 +194,7 @@ impl LinearTeam {
             comm_hz: s.file.comm_hz,
             coef,
             start,
+            members: order.iter().map(|&(k, _)| k).collect(),
             depth,
         })
     }
@@ -373,7 +376,7 @@ fn record_tick(
 
 /// The cubic Taylor shift by `tau` seconds of a (position, velocity, acceleration, jerk) state:
 /// `Heard::at_tick` as a matrix.
-fn taylor_shift(tau: Real) -> Mat4 {
+pub(crate) fn taylor_shift(tau: Real) -> Mat4 {
     let (t2, t3) = (tau * tau / 2.0, tau * tau * tau / 6.0);
     Mat4::new(
         1.0, tau, t2, t3, //

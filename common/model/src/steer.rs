@@ -94,6 +94,8 @@ pub struct Proposal {
     pub plan: TeamPlan,
     /// The index of the first phase the command added (earlier ones are flown or cut).
     pub first_new: usize,
+    /// The switch instant (a tick's): the plan is the team's own before it.
+    pub t_switch_s: Real,
     /// When the leaders are at rest after the hold every command starts with.
     pub t_rest_s: Real,
     /// Where the primary leaders hold (plan order).
@@ -196,6 +198,7 @@ impl Steering {
         Ok(Proposal {
             plan,
             first_new,
+            t_switch_s,
             t_rest_s: rest.t_s,
             held_at: rest.at,
             route: route_after,

@@ -7,7 +7,12 @@
 //!   publishes one 128-byte sample and acknowledges; the coordinator waits for all N samples.
 //!   This is what a naive one-process-per-member runtime pays per tick.
 //!
-//! Both print one line `<what>: N agents, K ticks in S s (R ticks/s)`. Every wait has a deadline.
+//! - `cdm-bench command --n N`: the certificate of one `hold` (at 30 % of the flight, moving)
+//!   and of one `goto` (every leader 20 m along x from where it holds, default travel time) on
+//!   the generated team of N members: what a command costs between its request and its switch.
+//!
+//! The first two print one line `<what>: N agents, K ticks in S s (R ticks/s)`, `command` one
+//! line per command. Every wait has a deadline.
 
 use std::process::ExitCode;
 use std::time::Instant;
@@ -40,6 +45,11 @@ enum Cmd {
         #[arg(long, default_value_t = 5000)]
         ticks: u64,
     },
+    /// Certification time of one hold and one goto on the generated team of N members.
+    Command {
+        #[arg(long)]
+        n: usize,
+    },
     /// One member of `barrier` (started by it).
     #[command(hide = true)]
     BarrierMember {
@@ -68,6 +78,7 @@ fn main() -> ExitCode {
                 );
             })
             .map_err(|e| e.to_string()),
+        Cmd::Command { n } => command(n),
         Cmd::BarrierMember { run, n, id } => barrier_member(&run, n, id).map_err(|e| e.to_string()),
     };
     match r {
@@ -93,4 +104,48 @@ fn engine(n: usize, ticks: u64) -> Result<(), String> {
         ticks as f64 / secs
     );
     Ok(())
+}
+
+fn command(n: usize) -> Result<(), String> {
+    use cdm_certificates::command_certificate::{steer, CommandOutcome};
+    use cdm_model::steer::TeamCommand;
+    use cdm_records::audit::SafetyNumbers;
+    let s = Scenario::generated(n).map_err(|e| format!("generated --n {n}: {e}"))?;
+    let numbers = SafetyNumbers::of(&s);
+    let mut steering = s.steering();
+    let dt = s.dt_s();
+    let t_hold = (0.3 * s.plan.flight_end_s() / dt).round() * dt;
+    let one = |steering: &mut cdm_model::steer::Steering,
+               name: &str,
+               c: &TeamCommand,
+               t: f64|
+     -> Result<(), String> {
+        let start = Instant::now();
+        let outcome = steer(steering, &s, &numbers, c, t);
+        let secs = start.elapsed().as_secs_f64();
+        let (verdict, e) = match &outcome {
+            CommandOutcome::Accepted(c) => ("accepted", c.max_follower_deviation_m),
+            CommandOutcome::Refused(c) => ("refused", c.max_follower_deviation_m),
+            CommandOutcome::NotApplicable(why) => return Err(format!("{name}: {why}")),
+        };
+        println!(
+            "command {name}: {n} agents, certified in {secs:.3} s ({verdict}, max follower deviation {e:.4} m)"
+        );
+        Ok(())
+    };
+    one(&mut steering, "hold", &TeamCommand::Hold, t_hold)?;
+    let plan = steering.plan().clone();
+    let t = plan.end_s();
+    let here = plan.primary_derivs(t, plan.piece_at(t)).map(|d| d[0]);
+    let goals = here.map(|p| p + cdm_math::Vec3::new(20.0, 0.0, 0.0));
+    let t_goto = ((t + 1.0) / dt).ceil() * dt;
+    one(
+        &mut steering,
+        "goto",
+        &TeamCommand::Goto {
+            goals,
+            travel_s: None,
+        },
+        t_goto,
+    )
 }
