@@ -16,6 +16,7 @@ use mavlink::dialects::common::{
     SET_POSITION_TARGET_GLOBAL_INT_DATA,
 };
 
+use crate::health::PositionStream;
 use crate::messages::{Setpoint, Target, SETPOINT_TYPE_MASK};
 use crate::ned::{enu_to_ned_vector, ned_to_enu_vector, to_f32, VehicleOrigin};
 use cdm_math::{Real, Vec3};
@@ -42,6 +43,16 @@ pub enum VehicleFrame {
     Local(VehicleOrigin),
     /// Latitude, longitude and altitude AMSL through the scenario's `[origin]`.
     Global(GeoOrigin),
+}
+
+impl VehicleFrame {
+    /// The position message a vehicle in this frame flies on.
+    pub fn position_stream(&self) -> PositionStream {
+        match self {
+            VehicleFrame::Local(_) => PositionStream::LocalNed,
+            VehicleFrame::Global(_) => PositionStream::GlobalInt,
+        }
+    }
 }
 
 impl Default for VehicleFrame {

@@ -1,6 +1,7 @@
 //! Losing a vehicle, as pure logic over a clock the caller drives: no HEARTBEAT for
-//! [`LinkTimeouts::heartbeat`] or no LOCAL_POSITION_NED for [`LinkTimeouts::position`] is a
-//! fault naming the member. Times are durations since the link started, read from the caller's
+//! [`LinkTimeouts::heartbeat`] or no position ([`PositionStream`]: LOCAL_POSITION_NED indoors,
+//! GLOBAL_POSITION_INT with an `[origin]`) for [`LinkTimeouts::position`] is a fault naming the
+//! member and the message it waited for. Times are durations since the link started, read from the caller's
 //! clock.
 //!
 //! Why these defaults. A HEARTBEAT comes once a second from PX4 and ArduPilot, so a limit of one
@@ -24,12 +25,31 @@ pub const DEFAULT_HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(3);
 /// `--position-timeout`'s default: 15 periods of PX4's 30 Hz LOCAL_POSITION_NED stream.
 pub const DEFAULT_POSITION_TIMEOUT: Duration = Duration::from_millis(500);
 
+/// The message a member flies on: what it waits for, and what a fault names.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum PositionStream {
+    /// LOCAL_POSITION_NED: local NED about the vehicle's origin.
+    #[default]
+    LocalNed,
+    /// GLOBAL_POSITION_INT: latitude, longitude and altitude through the scenario's `[origin]`.
+    GlobalInt,
+}
+
+impl std::fmt::Display for PositionStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            PositionStream::LocalNed => "LOCAL_POSITION_NED",
+            PositionStream::GlobalInt => "GLOBAL_POSITION_INT",
+        })
+    }
+}
+
 /// How long each of the vehicle's streams may be silent before the vehicle is lost.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LinkTimeouts {
     /// No HEARTBEAT for longer than this: lost (a multiple of the vehicle's 1 Hz beat).
     pub heartbeat: Duration,
-    /// No LOCAL_POSITION_NED for longer than this: lost (a multiple of its stream period).
+    /// No position for longer than this: lost (a multiple of its stream period).
     pub position: Duration,
 }
 
@@ -46,8 +66,12 @@ impl Default for LinkTimeouts {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum LinkFault {
     /// Nothing usable (a HEARTBEAT and a position) arrived before the connect deadline.
-    #[error("agent {agent}: no vehicle heard within {:.1} s (needs a HEARTBEAT and a LOCAL_POSITION_NED)", waited.as_secs_f64())]
-    NeverHeard { agent: u32, waited: Duration },
+    #[error("agent {agent}: no vehicle heard within {:.1} s (needs a HEARTBEAT and a {stream})", waited.as_secs_f64())]
+    NeverHeard {
+        agent: u32,
+        waited: Duration,
+        stream: PositionStream,
+    },
     /// The vehicle's HEARTBEAT stopped for longer than `limit` (`--heartbeat-timeout`).
     #[error("agent {agent}: vehicle lost: no HEARTBEAT for {:.3} s (limit {} s, --heartbeat-timeout)", silent.as_secs_f64(), limit.as_secs_f64())]
     HeartbeatLost {
@@ -55,12 +79,13 @@ pub enum LinkFault {
         silent: Duration,
         limit: Duration,
     },
-    /// The vehicle's LOCAL_POSITION_NED stopped for longer than `limit` (`--position-timeout`).
-    #[error("agent {agent}: vehicle lost: no LOCAL_POSITION_NED for {:.3} s (limit {} s, --position-timeout)", silent.as_secs_f64(), limit.as_secs_f64())]
+    /// The vehicle's position stream stopped for longer than `limit` (`--position-timeout`).
+    #[error("agent {agent}: vehicle lost: no {stream} for {:.3} s (limit {} s, --position-timeout)", silent.as_secs_f64(), limit.as_secs_f64())]
     PositionLost {
         agent: u32,
         silent: Duration,
         limit: Duration,
+        stream: PositionStream,
     },
     /// The vehicle's SYS_STATUS fell below `--min-battery` (`battery.rs`).
     #[error("agent {agent}: vehicle lost: battery at {pct} % (below --min-battery {min} %)")]
@@ -89,19 +114,26 @@ pub struct LinkHealth {
     agent: u32,
     connect_deadline: Duration,
     timeouts: LinkTimeouts,
+    stream: PositionStream,
     last_heartbeat: Option<Duration>,
     last_position: Option<Duration>,
 }
 
 impl LinkHealth {
-    /// A link of member `agent` that must hear its vehicle (both a HEARTBEAT and a position)
-    /// within `connect_deadline` of the clock's zero, and then keeps hearing it within
-    /// `timeouts`.
-    pub fn new(agent: u32, connect_deadline: Duration, timeouts: LinkTimeouts) -> Self {
+    /// A link of member `agent` that must hear its vehicle (both a HEARTBEAT and a position
+    /// from `stream`) within `connect_deadline` of the clock's zero, and then keeps hearing it
+    /// within `timeouts`.
+    pub fn new(
+        agent: u32,
+        connect_deadline: Duration,
+        timeouts: LinkTimeouts,
+        stream: PositionStream,
+    ) -> Self {
         LinkHealth {
             agent,
             connect_deadline,
             timeouts,
+            stream,
             last_heartbeat: None,
             last_position: None,
         }
@@ -112,7 +144,7 @@ impl LinkHealth {
         self.last_heartbeat = Some(now);
     }
 
-    /// A LOCAL_POSITION_NED arrived at `now`.
+    /// A position (of the link's stream) arrived at `now`.
     pub fn on_position(&mut self, now: Duration) {
         self.last_position = Some(now);
     }
@@ -132,6 +164,7 @@ impl LinkHealth {
                 Err(LinkFault::NeverHeard {
                     agent,
                     waited: self.connect_deadline,
+                    stream: self.stream,
                 })
             } else {
                 Ok(())
@@ -152,6 +185,7 @@ impl LinkHealth {
                 agent,
                 silent: pos_silent,
                 limit: limits.position,
+                stream: self.stream,
             });
         }
         Ok(())
@@ -167,7 +201,12 @@ mod tests {
     }
 
     fn link() -> LinkHealth {
-        LinkHealth::new(7, ms(3000), LinkTimeouts::default())
+        LinkHealth::new(
+            7,
+            ms(3000),
+            LinkTimeouts::default(),
+            PositionStream::LocalNed,
+        )
     }
 
     fn heard_at(t: Duration) -> LinkHealth {
@@ -244,14 +283,20 @@ mod tests {
             h.check(ms(3001)),
             Err(LinkFault::NeverHeard {
                 agent: 7,
-                waited: ms(3000)
+                waited: ms(3000),
+                stream: PositionStream::LocalNed
             })
         );
     }
 
     #[test]
     fn a_heartbeat_alone_is_not_a_connection() {
-        let mut h = LinkHealth::new(7, ms(100), LinkTimeouts::default());
+        let mut h = LinkHealth::new(
+            7,
+            ms(100),
+            LinkTimeouts::default(),
+            PositionStream::LocalNed,
+        );
         h.on_heartbeat(ms(50));
         assert!(!h.connected());
         assert!(matches!(
@@ -275,7 +320,7 @@ mod tests {
             ..LinkTimeouts::default()
         };
         let lost = replay(
-            LinkHealth::new(7, ms(3000), strict),
+            LinkHealth::new(7, ms(3000), strict, PositionStream::LocalNed),
             &beats,
             &positions,
             120_000,
@@ -325,7 +370,8 @@ mod tests {
             LinkFault::PositionLost {
                 agent: 7,
                 silent: ms(at - last),
-                limit: DEFAULT_POSITION_TIMEOUT
+                limit: DEFAULT_POSITION_TIMEOUT,
+                stream: PositionStream::LocalNed
             }
         );
         assert!(
@@ -342,14 +388,18 @@ mod tests {
             heartbeat: ms(5000),
             position: ms(250),
         };
-        let mut h = LinkHealth::new(7, ms(3000), timeouts);
+        let mut h = LinkHealth::new(7, ms(3000), timeouts, PositionStream::GlobalInt);
         h.on_heartbeat(ms(1000));
         h.on_position(ms(1000));
         assert_eq!(h.check(ms(1250)), Ok(()));
+        let lost = h.check(ms(1251));
         assert!(matches!(
-            h.check(ms(1251)),
+            lost,
             Err(LinkFault::PositionLost { limit, .. }) if limit == ms(250)
         ));
+        // A vehicle flown in global coordinates is lost for want of the message it sends.
+        let said = lost.map_err(|e| e.to_string()).unwrap_err();
+        assert!(said.contains("no GLOBAL_POSITION_INT for"), "{said}");
         for t in (1000..=6000).step_by(20) {
             h.on_position(ms(t));
         }

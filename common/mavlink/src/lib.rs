@@ -37,7 +37,9 @@ pub use arming::{ArmAction, ArmError, ArmStage, Autopilot};
 pub use battery::BatteryFigures;
 pub use flight_mode::FlightMode;
 pub use global::VehicleFrame;
-pub use health::{LinkFault, LinkTimeouts, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT};
+pub use health::{
+    LinkFault, LinkTimeouts, PositionStream, DEFAULT_HEARTBEAT_TIMEOUT, DEFAULT_POSITION_TIMEOUT,
+};
 pub use messages::Setpoint;
 pub use ned::VehicleOrigin;
 pub use plant::{

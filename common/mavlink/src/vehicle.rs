@@ -152,7 +152,12 @@ impl MavlinkVehicle {
     pub fn new(config: VehicleConfig) -> Self {
         MavlinkVehicle {
             config,
-            health: LinkHealth::new(config.agent, config.connect_deadline, config.timeouts),
+            health: LinkHealth::new(
+                config.agent,
+                config.connect_deadline,
+                config.timeouts,
+                config.frame.position_stream(),
+            ),
             arm: ArmSequence::new(config.agent, config.arm),
             target: None,
             mode: None,
@@ -633,6 +638,26 @@ mod tests {
             VehicleError::Link(LinkFault::PositionLost { agent: 12, .. })
         ));
         assert!(err.to_string().contains("agent 12"));
+    }
+
+    #[test]
+    fn a_vehicle_in_global_coordinates_is_awaited_by_global_position_int() {
+        let mut cfg = config(false);
+        cfg.frame = VehicleFrame::Global(cdm_scenario::GeoOrigin {
+            lat_deg: 47.0,
+            lon_deg: 8.0,
+            alt_m: 400.0,
+            heading_deg: 90.0,
+        });
+        let mut v = MavlinkVehicle::new(cfg);
+        // A LOCAL_POSITION_NED is no position for it: only the HEARTBEAT counts.
+        heard(&mut v, ms(100));
+        let err = v.on_tick(ms(5001), None, true).unwrap_err();
+        let said = err.to_string();
+        assert!(
+            said.contains("agent 12") && said.contains("a HEARTBEAT and a GLOBAL_POSITION_INT"),
+            "{said}"
+        );
     }
 
     #[test]
