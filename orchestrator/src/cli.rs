@@ -85,6 +85,12 @@ pub enum Command {
     /// lockstep clock, a live safety audit. Exit 0 safe and complete, 1 violation, 2 bad input,
     /// 3 runtime fault.
     Launch(Box<LaunchArgs>),
+    /// Fly a finished lockstep run (simulate or launch) again from its directory alone: its
+    /// scenario, options, commands and losses. Its telemetry and audit.json's safety figures
+    /// equal the run's byte for byte (checked: exit 3 when not). With --gains, --t-total or
+    /// --link-* the same history is flown with that change ("what if"). Exit 0 safe, 1
+    /// violation, 2 bad input (a tampered or foreign file: named, with its first bad record).
+    Replay(Box<crate::replay::ReplayArgs>),
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained
     /// page that works from file://; with --serve, also serves it until interrupted.
     View {

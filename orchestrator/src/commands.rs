@@ -14,6 +14,7 @@ use cdm_engine::loss::LossSchedule;
 use cdm_model::link::MAX_DELAY_MS;
 use cdm_model::outcome::Verdict;
 use cdm_records::audit::AuditReport;
+use cdm_records::run_record::{RunMode, RunRecord};
 use cdm_records::rundir::RunDir;
 use cdm_scenario::{Checks, Scenario};
 use cdm_simulate::{simulate, SimulateOptions};
@@ -65,6 +66,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             run,
             commands,
         } => simulate_command(&source, &out, &run, commands.as_deref(), cli.quiet),
+        Command::Replay(args) => crate::replay::replay_command(*args, cli.quiet),
         Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
         Command::Launch(args) => launch_command(*args, cli.quiet),
         Command::View {
@@ -125,43 +127,110 @@ fn simulate_command(
     };
     let dir = RunDir::create(&out.out, out.force).map_err(Failure::from)?;
     let (s, records) = match steered {
-        Some((flown, records)) => {
-            write_commands(&dir, &records)?;
-            (flown, records)
-        }
-        None => (s, Vec::new()),
+        Some((flown, records)) => (flown, Some(records)),
+        None => (s, None),
     };
-    let started = Instant::now();
-    let every = crate::cli::every_or_default(out.every, s.file.agents.len());
-    if !quiet {
-        out!("{}", crate::cli::every_line(out.every, s.file.agents.len()));
+    let flight = InProcess {
+        what: "simulate",
+        mode: RunMode::Simulate,
+        records: records.as_deref(),
+        losses,
+        every: out.every,
+        run,
+        quiet,
+    };
+    let report = fly_in_process(&s, &dir, flight)?;
+    after_run(dir.path(), &report, run, quiet);
+    Ok(exit_of(&report))
+}
+
+/// A flight with the in-process engine: `simulate`, and `replay` with the run's options.
+pub(crate) struct InProcess<'a> {
+    /// The command's name, in the progress and summary lines.
+    pub what: &'static str,
+    /// What run.json says flew the run.
+    pub mode: RunMode,
+    /// The commands applied to the plan flown, when the run has a command file.
+    pub records: Option<&'a [CommandRecord]>,
+    pub losses: LossSchedule,
+    /// `--every` as given.
+    pub every: Option<u64>,
+    pub run: &'a RunOptions,
+    pub quiet: bool,
+}
+
+/// Fly `s` (its plan the commanded one) into `dir`: commands.json, run.json, telemetry and the
+/// audit, with progress and the summary.
+pub(crate) fn fly_in_process(
+    s: &Scenario,
+    dir: &RunDir,
+    f: InProcess,
+) -> Result<AuditReport, Failure> {
+    let run = f.run;
+    if let Some(records) = f.records {
+        write_commands(dir, records)?;
     }
+    let started = Instant::now();
+    let every = crate::cli::every_or_default(f.every, s.file.agents.len());
+    if !f.quiet {
+        out!("{}", crate::cli::every_line(f.every, s.file.agents.len()));
+    }
+    run_record(s, f.mode, every, run, &f.losses)
+        .write(dir.path())
+        .map_err(Failure::from)?;
     let opts = SimulateOptions {
         every,
         stop_on_violation: run.stop_on_violation,
         max_ticks: run.max_ticks,
         telemetry: run.telemetry,
-        losses,
+        losses: f.losses,
         on_loss: run.on_loss.into(),
-        commands: records.iter().map(CommandRecord::summary).collect(),
+        commands: (f.records.unwrap_or_default().iter())
+            .map(CommandRecord::summary)
+            .collect(),
     };
     let mut tel =
-        cdm_team::telemetry::open(&dir, run.telemetry, every, &s).map_err(Failure::bad_input)?;
+        cdm_team::telemetry::open(dir, run.telemetry, every, s).map_err(Failure::bad_input)?;
     let last = run
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
-    let mut progress = Progress::new("simulate", last, s.dt_s(), quiet);
-    let report = simulate(&s, &dir, opts, tel.as_mut(), |tick, audit| {
+    let mut progress = Progress::new(f.what, last, s.dt_s(), f.quiet);
+    let report = simulate(s, dir, opts, tel.as_mut(), |tick, audit| {
         progress.tick(tick, audit.report())
     })
     .map_err(Failure::fault)?;
     progress.finish();
-    summary("simulate", &report, started, dir.path(), quiet);
-    figures_after_run(dir.path(), run, quiet);
-    if report.ticks > 0 {
-        replay_after_run(dir.path(), quiet);
+    summary(f.what, &report, started, dir.path(), f.quiet);
+    Ok(report)
+}
+
+/// run.json: what the run's other files do not say of how it was flown.
+pub(crate) fn run_record(
+    s: &Scenario,
+    mode: RunMode,
+    every: u64,
+    run: &RunOptions,
+    losses: &LossSchedule,
+) -> RunRecord {
+    RunRecord {
+        format: cdm_records::run_record::RUN_RECORD_FORMAT.into(),
+        mode,
+        scenario_hash: RunRecord::hash_text(s.content_hash()),
+        every,
+        max_ticks: run.max_ticks,
+        stop_on_violation: run.stop_on_violation,
+        stop_on_loss: run.on_loss == crate::cli::OnLossArg::Stop,
+        telemetry: RunRecord::telemetry_name(run.telemetry).into(),
+        losses: losses.events.clone(),
     }
-    Ok(exit_of(&report))
+}
+
+/// The figures and replay.html of a finished in-process run.
+pub(crate) fn after_run(dir: &Path, report: &AuditReport, run: &RunOptions, quiet: bool) {
+    figures_after_run(dir, run, quiet);
+    if report.ticks > 0 {
+        replay_after_run(dir, quiet);
+    }
 }
 
 /// `orchestrator report RUN_DIR`: the figures of a finished run.
@@ -219,6 +288,14 @@ fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
     }
     let started = Instant::now();
     let launched = launch(&s, &opts)?;
+    let mode = match opts.realtime {
+        Some(_) => RunMode::Realtime,
+        None => RunMode::Lockstep,
+    };
+    let record = run_record(&s, mode, opts.every, &a.run, &opts.losses);
+    if let Err(e) = record.write(&opts.out) {
+        tracing::error!("run.json not written: {e}");
+    }
     print_launched(&launched, started, &opts.out, quiet);
     if launched.report.ticks > 0 {
         figures_after_run(&opts.out, &a.run, quiet);

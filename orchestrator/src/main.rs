@@ -3,6 +3,7 @@
 
 mod cli;
 mod commands;
+mod replay;
 
 use cdm_team::Exit;
 use clap::Parser;

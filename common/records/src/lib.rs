@@ -12,5 +12,6 @@ pub mod limit_audit;
 pub mod loss_log;
 pub mod margins;
 pub mod record;
+pub mod run_record;
 pub mod rundir;
 pub mod telemetry;

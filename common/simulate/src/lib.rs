@@ -5,6 +5,8 @@
 //! engine, the records and the scenario together. The pre-flight certificate of `plan` is
 //! `cdm_certificates::certificate`.
 
+pub mod replay;
+
 use cdm_engine::engine::{quad_engine, AgentFault};
 use cdm_engine::loss::{LossSchedule, LossState, OnLoss};
 use cdm_model::outcome::FaultKind;
