@@ -279,6 +279,14 @@ for fmt in csv parquet; do
   echo "| \`simulate --n $fn --every 1 --telemetry $fmt\` | $f_s | $(mib "$f_kb") | $(awk -v b="$size" 'BEGIN{printf "%.0f", b/1e6}') | $(awk -v a="$f_s" -v b="$base_s" 'BEGIN{printf "writing costs %.1f s (%.2f x the flight)", a-b, (a-b)/b}') |"
   rm -rf "$out/$fmt"
 done
+echo
+# A command's certificate (one hold while moving, one goto from where the team holds), which
+# must stay well under a second at N = 1000: it runs between the request and the switch.
+echo "Command certification (\`cdm-bench command --n N\`; load average before: $(cut -d' ' -f1-3 /proc/loadavg)):"
+echo
+for cn in 40 250 1000; do
+  "$bin/cdm-bench" command --n "$cn" | sed 's/^/    /'
+done
 scale_section
 before_after_section
 realtime_section

@@ -191,6 +191,32 @@ def check_tf_markers_audit(msgs, rows, by_id, run_dir):
     print(f"/tf, /cdm/formation (MarkerArray, {len(arr.markers)} markers), /cdm/audit: one per tick")
 
 
+def check_commands(msgs, info, run_dir):
+    """/cdm/commands: one std_msgs/String per command of the run's commands.json, in order, each
+    stamped at or after its switch tick; no such topic in a run without commands."""
+    path = os.path.join(run_dir, "commands.json")
+    if not os.path.exists(path):
+        if "/cdm/commands" in info["types"]:
+            fail("/cdm/commands in a run without commands.json")
+        return
+    with open(path) as f:
+        want = json.load(f)
+    if info["types"].get("/cdm/commands") != TYPES["string"]:
+        fail(f"/cdm/commands: missing or not String ({info['types'].get('/cdm/commands')})")
+    got = [(stamp, json.loads(m.data)) for stamp, _, _, m in msgs["/cdm/commands"]]
+    if len(got) != len(want):
+        fail(f"/cdm/commands: {len(got)} messages, commands.json has {len(want)}")
+    for (stamp, g), w in zip(got, want):
+        if (g["tick"], g["command"], g["accepted"]) != (w["switch_tick"], w["command"], w["accepted"]):
+            fail(f"/cdm/commands: {g} differs from {w}")
+        if g["verdict"] != w["verdict"] or g["why"] != w.get("why"):
+            fail(f"/cdm/commands: verdict or why {g} differs from {w}")
+        if stamp < round(g["t_s"] * 1e9):
+            fail(f"/cdm/commands: {g} stamped {stamp}, before its switch")
+    print(f"/cdm/commands: {len(got)} commands as in commands.json "
+          f"({sum(g['accepted'] for _, g in got)} accepted)")
+
+
 def check_mcap(bag, info):
     files = [f for f in os.listdir(bag) if f.endswith(".mcap")]
     if len(files) != 1:
@@ -243,6 +269,7 @@ def main():
     rows = telemetry(run_dir)
     by_id = check_poses(msgs, info, rows)
     check_tf_markers_audit(msgs, rows, by_id, run_dir)
+    check_commands(msgs, info, run_dir)
     if info["count"] != sum(len(v) for v in msgs.values()):
         fail("metadata.yaml message_count differs from the messages read")
     check_mcap(bag, info)

@@ -105,6 +105,44 @@ fn simulate_telemetry_mcap_equals_the_export_of_the_run() {
     assert!(!live.exists(), "{} left by the earlier run", live.display());
 }
 
+/// paper40 commanded (`simulate --commands`: held, refused a 1 s goto, landed): the bag written
+/// during the run carries one `/cdm/commands` String per command of its commands.json (the
+/// checker compares them), and `export rosbag2` of the run the very same messages.
+#[test]
+fn a_commanded_runs_bag_carries_its_commands() {
+    let tmp = TempDir::new();
+    let (run_dir, bag) = (tmp.path().join("run"), tmp.path().join("exported"));
+    let file = tmp.path().join("commands.json");
+    std::fs::write(
+        &file,
+        r#"[{"at_s": 30, "command": "hold"},
+            {"at_s": 40, "command": "goto", "travel_s": 1,
+             "goals": [[300, 500, 600], [300, 300, 600], [400, 300, 600]]},
+            {"at_s": 50, "command": "land"}]"#,
+    )
+    .unwrap();
+    let commands = ["--commands", file.to_str().unwrap()];
+    let flags = [
+        "--builtin",
+        "paper40",
+        "--no-figures",
+        "--telemetry",
+        "mcap",
+        "--every",
+        "7",
+    ];
+    let o = run(
+        &mut simulate(&run_dir, &[&flags[..], &commands[..]].concat()),
+        DEADLINE,
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
+    let live = run_dir.join("rosbag2");
+    check("check", &live, &run_dir);
+    let out = export(&run_dir, &bag, &["--quiet"]);
+    assert_eq!(out.status.code(), Some(0), "{}", describe(&out));
+    check("equal", &live, &bag);
+}
+
 #[test]
 fn launch_telemetry_mcap_equals_the_export_of_the_run() {
     let tmp = TempDir::new();

@@ -111,6 +111,7 @@ fn status(url: &str, dir: &Path, offline: bool) -> Status {
             .then(|| num("data-first-tick")),
         verdict: attr("data-verdict"),
         lost: num("data-lost"),
+        commands: (num("data-commands-accepted"), num("data-commands-refused")),
         airspace: attr("data-airspace").replace("&quot;", "\""),
     }
 }
@@ -123,6 +124,8 @@ struct Status {
     verdict: String,
     /// Members lost by the shown tick.
     lost: i64,
+    /// Commands switched by the shown tick: (accepted, refused).
+    commands: (i64, i64),
     /// What the page drew of the airspace: the fence's sides and the obstacles' names (JSON).
     airspace: String,
 }
@@ -218,11 +221,31 @@ fn replay_html_works_from_file_with_the_network_disabled() {
     assert_eq!(s.tick, 2000, "{s:?}");
     assert_eq!(s.verdict, audit["verdict"].as_str().unwrap_or("?"), "{s:?}");
     assert_eq!(s.lost, 0, "{s:?}");
+    assert_eq!(s.commands, (0, 0), "{s:?}");
     assert_eq!(
         s.airspace, r#"{"fence":4,"obstacles":["tower","mast"]}"#,
         "{s:?}"
     );
     screenshot(&file_url(&replay), tmp.path(), true);
+}
+
+/// A commanded run (`simulate --commands`): held at 5 s, refused a 1 s goto at 10 s (eq. 34).
+/// Its replay, on its last tick, counts one accepted and one refused command; a run without
+/// commands counts none (`replay_html_works_from_file_with_the_network_disabled`).
+#[test]
+fn replay_html_counts_the_accepted_and_refused_commands() {
+    let tmp = TempDir::new();
+    let file = tmp.path().join("commands.json");
+    std::fs::write(
+        &file,
+        r#"[{"at_s": 5, "command": "hold"},
+            {"at_s": 10, "command": "goto", "travel_s": 1,
+             "goals": [[300, 500, 600], [300, 300, 600], [400, 300, 600]]}]"#,
+    )
+    .unwrap();
+    let (out, _) = paper40_run(&tmp, &["--commands", file.to_str().unwrap()]);
+    let s = status(&file_url(&out.join("replay.html")), tmp.path(), true);
+    assert_eq!((s.tick, s.commands), (2000, (1, 1)), "{s:?}");
 }
 
 /// The served run lost follower 20 at t = 5 s: the page shows it lost, with the repaired graph

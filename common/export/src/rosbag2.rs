@@ -19,7 +19,9 @@ pub fn export(run: &Path, out: &Path, quiet: bool) -> Result<Exit, Failure> {
         delta_m: audit.delta_m,
         lambda_cd_min: audit.lambda_cd_min,
     };
-    let team = Team::new(&scenario, limits);
+    let commands = cdm_records::commands::read_commands(run).map_err(Failure::bad_input)?;
+    let team = Team::new(&scenario, limits).with_commands(commands);
+    let mut shown = None;
     let mut bag = BagWriter::create(out, &team).map_err(Failure::bad_input)?;
     let mut messages = Vec::new();
     let mut failed: Option<BagError> = None;
@@ -36,6 +38,8 @@ pub fn export(run: &Path, out: &Path, quiet: bool) -> Result<Exit, Failure> {
         };
         messages.clear();
         team.messages(&tick, &mut messages);
+        team.command_messages(shown, &tick, &mut messages);
+        shown = Some(tp.tick);
         failed = messages.iter().find_map(|m| bag.write(m).err());
     });
     if let Err(e) = read {

@@ -236,8 +236,9 @@ pub struct AuditReport {
     pub commands: Vec<CommandSummary>,
 }
 
-/// One command to the team in flight, as the audit lists it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// One command to the team in flight, as the audit lists it (and as `commands.rs` reads a run's
+/// `commands.json` back: its other fields are ignored).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct CommandSummary {
     /// `hold`, `resume`, `land` or `goto`.
     pub command: String,

@@ -8,6 +8,7 @@
 
 pub mod airspace_audit;
 pub mod audit;
+pub mod commands;
 pub mod limit_audit;
 pub mod loss_log;
 pub mod margins;

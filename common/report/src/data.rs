@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use cdm_math::{vec3, Real, Vec3};
 use cdm_model::formation::Role;
+use cdm_records::audit::CommandSummary;
 use cdm_records::margins::{boundary_distance, lambdas_at, living_separation};
 use cdm_records::telemetry::{Row, TelemetryFormat, HEADER};
 use cdm_scenario::{Checks, Scenario};
@@ -148,6 +149,8 @@ pub struct RunData {
     /// The deviation |r - r_HT| (eq. 13) over time of every follower a loss repaired or left
     /// flying its plan, decimated like the primary paths: the repair transients.
     pub transients: Vec<Transient>,
+    /// The run's commands (`commands.json`; none for a run without).
+    pub commands: Vec<CommandSummary>,
 }
 
 /// One repaired follower's deviation from its desired position, (t, |r - r_HT|) pairs.
@@ -254,6 +257,12 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let scenario =
         Scenario::load(&sc_path, Checks::Member).map_err(|e| invalid(&sc_path, e.to_string()))?;
     let audit = read_audit(&dir.join("audit.json"))?;
+    let commands = cdm_records::commands::read_commands(dir).map_err(|e| {
+        invalid(
+            &dir.join(cdm_records::commands::COMMANDS_FILE),
+            e.to_string(),
+        )
+    })?;
     let members = &scenario.formation.members;
     let index: BTreeMap<u32, usize> = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
     let follow = match follow {
@@ -281,6 +290,7 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
         last: Vec::new(),
         primary_paths: [Vec::new(), Vec::new(), Vec::new()],
         transients: Vec::new(),
+        commands,
     };
     let repaired = repaired_members(&data.audit.repairs, &index);
     data.transients = repaired

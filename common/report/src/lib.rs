@@ -19,6 +19,9 @@ use cdm_records::rundir::write_atomic;
 pub use data::{read_run, ReadError, RunData};
 pub use plot::FigureError;
 use plot::{thin, thin_min, write_figure, Line, Panel, Rule, Stack, GREY, LIMIT, PALETTE};
+
+/// An accepted command's line (a refused one is drawn in [`LIMIT`]'s red).
+const ACCEPTED: plotters::style::RGBColor = plotters::style::RGBColor(0, 150, 60);
 pub use top_view::{top_view, TopPath};
 
 /// Points per plotted line (decimation keeps files small and drawing fast).
@@ -82,6 +85,25 @@ fn phase_marks(d: &RunData, scale: Real) -> Vec<Rule> {
         .collect()
 }
 
+/// The switch of every command the run was given (`commands.json`): a green line for an
+/// accepted one, a red one for a refused one (its motion never flown: the team went on as
+/// before), named with the command and the time.
+fn command_marks(d: &RunData, scale: Real) -> Vec<Rule> {
+    let dt = d.scenario.dt_s();
+    (d.commands.iter())
+        .map(|c| {
+            let t = cdm_model::step::tick_time(c.switch_tick, dt);
+            let what = if c.accepted { "accepted" } else { "refused" };
+            Rule {
+                label: format!("{} {what}, t = {t:.2} s", c.command),
+                at: t / scale,
+                vertical: true,
+                color: if c.accepted { ACCEPTED } else { LIMIT },
+            }
+        })
+        .collect()
+}
+
 fn csv(dir: &Path, name: &str, text: &str) -> Result<PathBuf, FigureError> {
     let p = dir.join(name);
     write_atomic(&p, text.as_bytes())?;
@@ -139,6 +161,7 @@ fn eigenvalues(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
             })
             .chain(first_violation(d, t_total))
             .chain(phase_marks(d, t_total))
+            .chain(command_marks(d, t_total))
             .collect(),
             log_y: false,
             legend: SeriesLabelPosition::MiddleLeft,
@@ -180,7 +203,10 @@ fn agent(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
                         dashed: true,
                     },
                 ],
-                rules: phase_marks(d, 1.0),
+                rules: phase_marks(d, 1.0)
+                    .into_iter()
+                    .chain(command_marks(d, 1.0))
+                    .collect(),
                 log_y: false,
                 legend: if rising {
                     SeriesLabelPosition::LowerRight
@@ -258,6 +284,7 @@ fn separation(dir: &Path, d: &RunData) -> Result<Vec<PathBuf>, FigureError> {
             .into_iter()
             .chain(first_violation(d, 1.0))
             .chain(phase_marks(d, 1.0))
+            .chain(command_marks(d, 1.0))
             .collect(),
             log_y: false,
             legend: SeriesLabelPosition::UpperRight,

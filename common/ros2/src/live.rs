@@ -8,7 +8,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use cdm_math::Vec3;
-use cdm_records::audit::SafetyNumbers;
+use cdm_records::audit::{CommandSummary, SafetyNumbers};
 use cdm_rosbag::{Limits, Team, Tick};
 use cdm_scenario::Scenario;
 
@@ -70,8 +70,19 @@ impl Live {
     /// declares a publisher per topic of `scenario`'s bag, before the team starts: a bad
     /// environment stops nothing, and subscribers may discover us while the team gathers.
     pub fn start(o: &Ros2Options, scenario: &Scenario) -> Result<Self, Ros2Error> {
+        Self::start_commanded(o, scenario, Vec::new())
+    }
+
+    /// [`Live::start`] for a commanded run: each command also goes out on `/cdm/commands`
+    /// with the first published tick at or after its switch (as the bag carries it).
+    pub fn start_commanded(
+        o: &Ros2Options,
+        scenario: &Scenario,
+        commands: Vec<CommandSummary>,
+    ) -> Result<Self, Ros2Error> {
         let env = Env::of_process()?;
-        let team = Team::new(scenario, Limits::from(&SafetyNumbers::of(scenario)));
+        let team =
+            Team::new(scenario, Limits::from(&SafetyNumbers::of(scenario))).with_commands(commands);
         let out = open(o.backend, &env, &team)?;
         tracing::info!(backend = %o.backend, domain = env.domain, hz = o.hz, "live ROS 2 topics");
         Live::over(out, o, scenario, team)
@@ -173,6 +184,7 @@ fn publish_all(team: &Team, mut out: Box<dyn Publish + Send>, rx: Receiver<Snaps
     let members = team.ids().len();
     let mut done = Published::default();
     let mut messages = Vec::new();
+    let mut shown = None;
     for s in rx {
         messages.clear();
         let tick = Tick {
@@ -183,6 +195,8 @@ fn publish_all(team: &Team, mut out: Box<dyn Publish + Send>, rx: Receiver<Snaps
             alive: &s.alive,
         };
         team.messages(&tick, &mut messages);
+        team.command_messages(shown, &tick, &mut messages);
+        shown = Some(s.tick);
         for m in &messages {
             if let Err(e) = out.publish(m.topic.index(members), &m.data) {
                 done.failed += 1;
@@ -265,6 +279,53 @@ mod tests {
             .map(|m| (m.topic.index(n), m.data))
             .collect();
         assert_eq!(*seen.lock().unwrap(), want);
+    }
+
+    /// A command goes out once on `/cdm/commands`, with the first published tick at or after
+    /// its switch, even when the rate let its own tick pass unpublished.
+    #[test]
+    fn a_command_goes_out_once_with_the_first_tick_after_its_switch() {
+        let s = Scenario::generated(6).unwrap();
+        let goto = CommandSummary {
+            command: "goto".into(),
+            arrived_s: 0.05,
+            switch_tick: 5,
+            verdict: None,
+            accepted: false,
+            why: Some("too quick".into()),
+        };
+        let team = Team::new(&s, Limits::from(&SafetyNumbers::of(&s))).with_commands(vec![goto]);
+        let commands = team.topics().len() - 1;
+        assert_eq!(team.topics()[commands].1, "/cdm/commands");
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let out = Box::new(Recorder {
+            seen: seen.clone(),
+            gate: None,
+        });
+        let o = Ros2Options {
+            backend: Backend::Dds,
+            hz: 30.0,
+        };
+        let mut live = Live::over(out, &o, &s, team).unwrap();
+        let n = s.formation.members.len();
+        let pos = vec![Vec3::zeros(); n];
+        // At 30 Hz of wall time the first tick goes out, the next two (the switch's among them)
+        // are dropped by the rate, and the plan's last is always let through.
+        for k in [0, 3, 5, s.last_tick()] {
+            live.tick(k, k as f64 * 0.01, (&pos, &pos), |_| true);
+        }
+        assert!(live.finish().ticks >= 2);
+        let seen = seen.lock().unwrap();
+        let on_commands: Vec<&Vec<u8>> = (seen.iter())
+            .filter(|(i, _)| *i == commands)
+            .map(|(_, b)| b)
+            .collect();
+        assert_eq!(on_commands.len(), 1);
+        let text = String::from_utf8_lossy(on_commands[0]);
+        assert!(
+            text.contains(r#""tick":5"#) && text.contains("too quick"),
+            "{text}"
+        );
     }
 
     #[test]

@@ -80,9 +80,10 @@ impl BagWriter {
         if meta.exists() {
             std::fs::remove_file(&meta).map_err(|source| BagError::Io { path: meta, source })?;
         }
-        // Every topic of the team: a pose per member, /tf, /cdm/formation and /cdm/audit.
+        // Every topic of the team: a pose per member, /tf, /cdm/formation and /cdm/audit (and
+        // /cdm/commands in a commanded run).
         let (out, room) =
-            Spool::create(&path, team.ids().len() + 3).map_err(|e| mcap_err(e.into()))?;
+            Spool::create(&path, team.topics().len()).map_err(|e| mcap_err(e.into()))?;
         let mut w = mcap::WriteOptions::new()
             .profile("ros2")
             .compression(None)

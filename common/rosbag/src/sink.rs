@@ -6,7 +6,7 @@ use std::io;
 use std::path::Path;
 
 use cdm_math::Vec3;
-use cdm_records::audit::SafetyNumbers;
+use cdm_records::audit::{CommandSummary, SafetyNumbers};
 use cdm_records::telemetry::{Row, TelemetrySink};
 use cdm_scenario::Scenario;
 
@@ -25,13 +25,26 @@ pub struct BagSink {
     ht: Vec<Vec3>,
     alive: Vec<bool>,
     messages: Vec<Message>,
+    /// The last tick written (the commands since go out with the next).
+    shown: Option<u64>,
 }
 
 impl BagSink {
     /// Start the bag in `dir` for a run of `scenario` keeping every `every`-th tick; the margins'
     /// limits are the audit's (`SafetyNumbers`, as audit.json records them).
     pub fn create(dir: &Path, scenario: &Scenario, every: u64) -> Result<Self, BagError> {
-        let team = Team::new(scenario, Limits::from(&SafetyNumbers::of(scenario)));
+        Self::with_commands(dir, scenario, every, Vec::new())
+    }
+
+    /// [`BagSink::create`] for a commanded run: its commands on `/cdm/commands`.
+    pub fn with_commands(
+        dir: &Path,
+        scenario: &Scenario,
+        every: u64,
+        commands: Vec<CommandSummary>,
+    ) -> Result<Self, BagError> {
+        let team =
+            Team::new(scenario, Limits::from(&SafetyNumbers::of(scenario))).with_commands(commands);
         let bag = BagWriter::create(dir, &team)?;
         let n = team.ids().len();
         Ok(BagSink {
@@ -48,6 +61,7 @@ impl BagSink {
             ht: vec![Vec3::zeros(); n],
             alive: vec![false; n],
             messages: Vec::new(),
+            shown: None,
         })
     }
 }
@@ -85,6 +99,9 @@ impl TelemetrySink for BagSink {
         };
         self.messages.clear();
         self.team.messages(&tick, &mut self.messages);
+        self.team
+            .command_messages(self.shown, &tick, &mut self.messages);
+        self.shown = Some(first.tick);
         for m in &self.messages {
             self.bag.write(m).map_err(io::Error::other)?;
         }

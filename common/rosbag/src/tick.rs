@@ -7,7 +7,8 @@ use serde_json::json;
 use cdm_math::{Real, Vec3};
 use cdm_model::airspace::Shape;
 use cdm_model::formation::Role;
-use cdm_records::audit::SafetyNumbers;
+use cdm_model::step::tick_time;
+use cdm_records::audit::{CommandSummary, SafetyNumbers};
 use cdm_records::margins::{boundary_distance, lambdas_at, living_separation, max_deviation};
 use cdm_scenario::Scenario;
 
@@ -16,13 +17,15 @@ use crate::msgs::{self, Marker, MsgType, Rgba, Stamp};
 /// The frame every position is in.
 pub const WORLD: &str = "world";
 
-/// A topic of the bag: a member's pose (member index), `/tf`, `/cdm/formation`, `/cdm/audit`.
+/// A topic of the bag: a member's pose (member index), `/tf`, `/cdm/formation`, `/cdm/audit`,
+/// and `/cdm/commands` in a commanded run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Topic {
     Pose(usize),
     Tf,
     Formation,
     Audit,
+    Commands,
 }
 
 impl Topic {
@@ -34,6 +37,7 @@ impl Topic {
             Topic::Tf => members,
             Topic::Formation => members + 1,
             Topic::Audit => members + 2,
+            Topic::Commands => members + 3,
         }
     }
 }
@@ -85,6 +89,8 @@ pub struct Team {
     followers: Vec<usize>,
     limits: Limits,
     airspace: Vec<Solid>,
+    /// The run's commands (`commands.json`), in switch tick order; none for a run without.
+    commands: Vec<CommandSummary>,
 }
 
 /// A static marker of the airspace: the geofence's edges or one obstacle.
@@ -172,6 +178,47 @@ impl Team {
                 .collect(),
             airspace: airspace(scenario, 0.5 * limits.eps_m),
             limits,
+            commands: Vec::new(),
+        }
+    }
+
+    /// The same team with the run's commands: a `/cdm/commands` topic carries each, as the
+    /// margins are carried on `/cdm/audit` (a run without commands has no such topic, and its
+    /// bag the bytes it always had).
+    pub fn with_commands(mut self, mut commands: Vec<CommandSummary>) -> Self {
+        commands.sort_by_key(|c| c.switch_tick);
+        self.commands = commands;
+        self
+    }
+
+    /// The messages on `/cdm/commands` for the shown tick `t` when the tick shown before it was
+    /// `shown_before` (none: `t` is the first): every command whose switch tick lies in between,
+    /// as JSON, stamped with `t` (a bag that keeps every k-th tick still carries each command,
+    /// once, in time order).
+    pub fn command_messages(
+        &self,
+        shown_before: Option<u64>,
+        t: &Tick<'_>,
+        out: &mut Vec<Message>,
+    ) {
+        let time_ns = time_ns(t.t_s);
+        let due = |c: &&CommandSummary| {
+            c.switch_tick <= t.tick && shown_before.is_none_or(|b| c.switch_tick > b)
+        };
+        for c in self.commands.iter().filter(due) {
+            let text = json!({
+                "tick": c.switch_tick,
+                "t_s": tick_time(c.switch_tick, self.scenario.dt_s()),
+                "command": c.command,
+                "accepted": c.accepted,
+                "verdict": c.verdict.map(|v| v.as_str()),
+                "why": c.why,
+            });
+            out.push(Message {
+                topic: Topic::Commands,
+                time_ns,
+                data: msgs::string(&text.to_string()),
+            });
         }
     }
 
@@ -199,6 +246,10 @@ impl Team {
                 ),
                 (Topic::Audit, "/cdm/audit".to_owned(), MsgType::String),
             ])
+            .chain(
+                (!self.commands.is_empty())
+                    .then(|| (Topic::Commands, "/cdm/commands".to_owned(), MsgType::String)),
+            )
             .collect()
     }
 

@@ -131,9 +131,17 @@ fn open_bag(
 ) -> Result<Box<dyn TelemetrySink + Send>, RunDirError> {
     let table = dir.telemetry(every)?;
     let path = dir.path().join(BAG_DIR);
-    let bag = cdm_rosbag::BagSink::create(&path, s, every).map_err(|e| RunDirError::Io {
-        path,
-        source: io::Error::other(e),
+    // A commanded run's commands.json is written before its telemetry opens.
+    let commands =
+        cdm_records::commands::read_commands(dir.path()).map_err(|e| RunDirError::Io {
+            path: dir.path().join(cdm_records::commands::COMMANDS_FILE),
+            source: io::Error::other(e),
+        })?;
+    let bag = cdm_rosbag::BagSink::with_commands(&path, s, every, commands).map_err(|e| {
+        RunDirError::Io {
+            path,
+            source: io::Error::other(e),
+        }
     })?;
     Ok(Box::new(Both(table, bag)))
 }

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use cdm_scenario::{Checks, Scenario};
 
 use cdm_report::data::{read_audit, read_timeline, stream_ticks, ReadError};
-use scene::{frame_stride, Scene, ShownTickMaker};
+use scene::{frame_stride, CommandMark, Scene, ShownTickMaker};
 
 pub use serve::serve_page;
 
@@ -56,6 +56,14 @@ pub fn replay_scene(dir: &Path) -> Result<Scene, ViewerError> {
     )
     .with_repairs(&scenario, &numbers.repairs);
     scene.verdict = timeline.verdict;
+    scene.commands = cdm_records::commands::read_commands(dir)
+        .map_err(|e| ReadError::Invalid {
+            path: dir.join(cdm_records::commands::COMMANDS_FILE),
+            message: e.to_string(),
+        })?
+        .iter()
+        .map(CommandMark::from)
+        .collect();
     scene.violations = timeline.violations;
     let n = scenario.formation.members.len();
     scene.stride = frame_stride(timeline.ticks.max(1), n, REPLAY_BUDGET_BYTES);

@@ -6,10 +6,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use cdm_math::Vec3;
-use cdm_records::audit::{AuditReport, SafetyNumbers};
+use cdm_records::audit::{AuditReport, CommandSummary, SafetyNumbers};
 use cdm_scenario::Scenario;
 
-use super::scene::{Scene, ShownTickMaker};
+use super::scene::{CommandMark, Scene, ShownTickMaker};
 use super::serve::{serve_page, Hub, ServeError, Server};
 use cdm_report::data::TickPositions;
 
@@ -24,6 +24,9 @@ pub struct LiveView {
     maker: ShownTickMaker,
     interval: Duration,
     last_sent: Option<(Instant, u64)>,
+    /// The commands known so far (from a command file, or told as they are decided): each
+    /// frame carries those switched by its tick.
+    commands: Vec<CommandMark>,
 }
 
 impl LiveView {
@@ -40,7 +43,14 @@ impl LiveView {
             maker: ShownTickMaker::new(scenario, n.delta_m + n.eps_m),
             interval: Duration::from_secs(1) / FRAMES_PER_S,
             last_sent: None,
+            commands: Vec::new(),
         })
+    }
+
+    /// A command decided (accepted or refused): the page marks it from its switch tick on, as
+    /// it shows a loss from the loss's tick.
+    pub fn command(&mut self, c: &CommandSummary) {
+        self.commands.push(CommandMark::from(c));
     }
 
     /// The address the page is served on.
@@ -79,10 +89,18 @@ impl LiveView {
             frame.rate = Some(tick.saturating_sub(k) as f64 / wall.max(1e-9));
         }
         self.last_sent = Some((now, tick));
-        let full = serde_json::json!({ "frame": &frame, "verdict": report.verdict });
+        let switched: Vec<&CommandMark> = self.commands.iter().filter(|c| c.tick <= tick).collect();
+        let message = |frame: &super::scene::ShownTick| {
+            let mut m = serde_json::json!({ "frame": frame, "verdict": report.verdict });
+            if !switched.is_empty() {
+                m["commands"] = serde_json::json!(switched);
+            }
+            m.to_string()
+        };
+        let full = message(&frame);
         frame.p.clear();
-        let light = serde_json::json!({ "frame": &frame, "verdict": report.verdict });
-        self.hub.frame(full.to_string(), light.to_string());
+        let light = message(&frame);
+        self.hub.frame(full, light);
     }
 
     /// The run is over: its verdict and violations go to the page, which closes its stream.

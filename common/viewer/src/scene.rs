@@ -8,6 +8,7 @@ use cdm_math::Real;
 use cdm_model::formation::Role;
 use cdm_scenario::{GeofenceSpec, ObstacleSpec, Scenario};
 
+use cdm_records::audit::CommandSummary;
 use cdm_records::margins::{boundary_distance, lambdas_at, living_separation};
 use cdm_report::data::{RepairRecord, TickPositions, ViolationMark};
 
@@ -53,6 +54,34 @@ pub struct Scene {
     /// The scenario's `[[obstacle]]`s, drawn as translucent solids with their names.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub obstacles: Vec<ObstacleSpec>,
+    /// The run's commands (`commands.json`), marked on the timeline at their switch ticks and
+    /// counted in the status by the shown tick; none for a run without.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub commands: Vec<CommandMark>,
+}
+
+/// One command to the team in flight as the viewer marks it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CommandMark {
+    /// `hold`, `resume`, `land` or `goto`.
+    pub command: String,
+    /// Its switch tick (a refused command's motion was never flown).
+    pub tick: u64,
+    pub accepted: bool,
+    /// Why it was refused.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub why: Option<String>,
+}
+
+impl From<&CommandSummary> for CommandMark {
+    fn from(c: &CommandSummary) -> Self {
+        CommandMark {
+            command: c.command.clone(),
+            tick: c.switch_tick,
+            accepted: c.accepted,
+            why: c.why.clone(),
+        }
+    }
 }
 
 /// One phase of a mission: its name and when its motion starts and ends (simulation seconds).
@@ -148,6 +177,7 @@ impl Scene {
             phases: phase_marks(s),
             geofence: s.file.geofence.clone(),
             obstacles: s.file.obstacles.clone(),
+            commands: Vec::new(),
         }
     }
 

@@ -2,7 +2,8 @@
 // curves of Figs. 8 and 11, and either a replay timeline or a live Server-Sent Events stream.
 // DOM contract for tests: #cdm-status carries data-agents, data-tick, data-verdict and data-lost
 // (members lost by the shown tick: hidden, and the graph drawn is the repaired one), and
-// data-airspace (the fence's sides drawn, then the obstacles drawn, by name).
+// data-airspace (the fence's sides drawn, then the obstacles drawn, by name), and
+// data-commands-accepted / data-commands-refused (commands switched by the shown tick).
 import * as THREE from 'three';
 import { OrbitControls } from 'orbit';
 
@@ -222,10 +223,19 @@ function status(f) {
   s.dataset.verdict = verdict;
   const lost = (f.lost ?? []).length;
   s.dataset.lost = String(lost);
+  const switched = (scene.commands ?? []).filter((c) => c.tick <= f.tick);
+  const accepted = switched.filter((c) => c.accepted).length;
+  const refused = switched.length - accepted;
+  s.dataset.commandsAccepted = String(accepted);
+  s.dataset.commandsRefused = String(refused);
+  const last = switched[switched.length - 1];
+  const command_text = last === undefined ? '' :
+    `\ncommands ${accepted} accepted, ${refused} refused; last: ${last.command} ` +
+    (last.accepted ? 'accepted' : 'refused') + ` at tick ${last.tick}`;
   const rate_text = rate === null ? '' : `   ${Math.round(rate)} ticks/s`;
   s.textContent = `${scene.scenario}: ${n} agents, ${live ? 'live' : 'replay'}\n` +
     `tick ${f.tick} / ${scene.last_tick}   t = ${f.t.toFixed(2)} s${rate_text}\nverdict ${verdict}` +
-    (lost > 0 ? `   lost ${lost}` : '');
+    (lost > 0 ? `   lost ${lost}` : '') + command_text;
 }
 
 // --- selection: click an agent for its track and numbers --------------------------------------
@@ -294,6 +304,16 @@ function replay() {
     mark.style.left = `${(100 * Math.max(i, 0)) / Math.max(frames.length - 1, 1)}%`;
     $('timeline').appendChild(mark);
   }
+  // Commands: a line at each switch tick, green when accepted, red when refused (with why).
+  for (const c of scene.commands || []) {
+    const i = frames.findIndex((f) => f.tick >= c.tick);
+    const mark = document.createElement('div');
+    mark.className = c.accepted ? 'command' : 'command refused';
+    mark.textContent = c.command;
+    mark.title = `${c.command} ${c.accepted ? 'accepted' : 'refused'} at tick ${c.tick}` + (c.why ? `: ${c.why}` : '');
+    mark.style.left = `${(100 * Math.max(i, 0)) / Math.max(frames.length - 1, 1)}%`;
+    $('timeline').appendChild(mark);
+  }
   scrub.addEventListener('input', () => { shown = Number(scrub.value); playing = false; $('play').textContent = 'play'; draw(); });
   $('play').addEventListener('click', () => {
     playing = !playing;
@@ -332,6 +352,7 @@ function follow() {
   events.addEventListener('frame', (e) => {
     const msg = JSON.parse(e.data);
     if (msg.frame.rate !== undefined) rate = msg.frame.rate;
+    if (msg.commands !== undefined) scene.commands = msg.commands;
     verdict = msg.verdict === 'SAFE' ? 'RUNNING' : msg.verdict;
     // Positions are kept for the newest frame only (the curves need the margins alone).
     if (shown >= 0 && frames[shown].p && frames[shown].p.length && msg.frame.p && msg.frame.p.length) frames[shown].p = [];
