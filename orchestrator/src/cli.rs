@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
+use crate::export_args::{ExportTarget, SourceArgs};
 use cdm_engine::loss::{OnLoss, ScriptedLoss};
-use cdm_export::cli::{ExportTarget, Source};
 use cdm_records::telemetry::TelemetryFormat;
 use clap::{Args, Parser, Subcommand};
 
@@ -38,7 +38,7 @@ pub enum Command {
     /// 1 UNSAFE, 2 bad input, 3 a file cannot be written.
     Plan {
         #[command(flatten)]
-        source: Source,
+        source: SourceArgs,
         /// Also write the certificate as JSON.
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
@@ -69,7 +69,7 @@ pub enum Command {
     /// and complete, 1 violation, 2 bad input, 3 runtime fault (a control fault, a full disk).
     Simulate {
         #[command(flatten)]
-        source: Source,
+        source: SourceArgs,
         #[command(flatten)]
         out: OutDir,
         #[command(flatten)]
@@ -156,7 +156,8 @@ pub enum Command {
     },
     /// Export the plan to the stacks that fly real fleets (Crazyswarm2, Skybrush), scaled into
     /// the target volume and certified again there: exit 0 SAFE, 1 UNSAFE (files written only
-    /// with --force), 2 bad input or a plan the target cannot hold.
+    /// with --force), 2 bad input or a plan the target cannot hold. Also a run as a ROS 2 bag,
+    /// and the scenario on a map (GeoJSON, QGroundControl's .plan).
     Export {
         #[command(subcommand)]
         target: ExportTarget,
@@ -172,7 +173,7 @@ pub enum Command {
 #[derive(Debug, Args)]
 pub struct LaunchArgs {
     #[command(flatten)]
-    pub source: Source,
+    pub source: SourceArgs,
     /// The run directory (default: runs/<team>).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,

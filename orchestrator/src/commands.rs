@@ -24,8 +24,8 @@ use cdm_iox::TeamName;
 use cdm_member::options::timeout;
 
 use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand};
-use cdm_export::certificate::print_certificate;
-use cdm_export::cli::{load, Source};
+use crate::export_args::{load, SourceArgs};
+use crate::print_certificate::print_certificate;
 use cdm_launch::launch::{launch, LaunchOptions};
 use cdm_report::{report, ReportError};
 use cdm_team::errors::CommandError;
@@ -91,7 +91,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             host_daemon(connect, t, team, host, scenario, join_timeout, cli.quiet)
         }
         Command::Keys { action } => keys_command(action, cli.quiet),
-        Command::Export { target } => cdm_export::run(target, cli.quiet),
+        Command::Export { target } => crate::export_cmd::run(target, cli.quiet),
         Command::Scenario {
             command: ScenarioCommand::Export { name, n, out },
         } => scenario_export(name, n, out.as_deref()),
@@ -107,7 +107,7 @@ fn write_commands(dir: &RunDir, records: &[CommandRecord]) -> Result<(), Failure
 
 /// `orchestrator simulate`: the whole team in one process, audited and recorded.
 fn simulate_command(
-    source: &Source,
+    source: &SourceArgs,
     out: &OutDir,
     run: &RunOptions,
     commands: Option<&Path>,
@@ -260,7 +260,7 @@ fn scenario_export(
     n: Option<usize>,
     out: Option<&Path>,
 ) -> Result<Exit, Failure> {
-    let source = Source {
+    let source = SourceArgs {
         scenario: None,
         n,
         builtin: name,
@@ -692,7 +692,7 @@ struct PlanAlso {
 }
 
 fn plan(
-    source: &Source,
+    source: &SourceArgs,
     json: Option<&Path>,
     sweeps: Sweeps,
     also: PlanAlso,
@@ -740,7 +740,7 @@ fn plan(
     write_sweeps(&s, &c, &sweeps, quiet)?;
     if !quiet {
         print_certificate(&c);
-        cdm_export::geographic::print_origin(&s);
+        crate::print_origin::print_origin(&s);
         if let Some(v) = &c.vehicle {
             print_vehicle(v);
         }

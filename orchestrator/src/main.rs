@@ -3,6 +3,10 @@
 
 mod cli;
 mod commands;
+mod export_args;
+mod export_cmd;
+mod print_certificate;
+mod print_origin;
 mod replay;
 
 use cdm_team::Exit;

@@ -238,8 +238,8 @@ def export(
     p -> scale p + origin (`"X,Y,Z"` metres) for vehicles of radius `eps`, certified again at
     that scale. `crazyswarm2` writes a directory, `skybrush` a .skyc file (with
     <stem>.certificate.json beside it). An UNSAFE certificate writes only the certificate
-    unless `force` (`Export.written`). A scenario from `parse` is exported from its TOML. The
-    CLI's code prints the verdict on standard output, as `orchestrator --quiet export` does.
+    unless `force` (`Export.written`). A scenario from `parse` is exported from its TOML.
+    Nothing is printed: the verdict and the certificate are in the returned `Export`.
     """
     s = _scenario(scenario)
     out = Path(out)

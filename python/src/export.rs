@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
-use cdm_export::cli::{ExportFrame, ExportTarget};
-use cdm_team::Exit;
+use cdm_export::{export_plan, ExportFrame, PlanTarget};
+use cdm_team::Failure;
 use pyo3::prelude::*;
 
 use crate::errors::{bad_input, to_py};
@@ -35,21 +35,31 @@ pub fn export(
     let frame = ExportFrame {
         scale,
         origin,
-        eps,
+        eps_m: eps,
         force,
     };
     let target = match target {
-        "crazyswarm2" => ExportTarget::Crazyswarm2 { source, out, frame },
-        "skybrush" => ExportTarget::Skybrush { source, out, frame },
+        "crazyswarm2" => PlanTarget::Crazyswarm2,
+        "skybrush" => PlanTarget::Skybrush,
         other => {
             return Err(bad_input(format!(
                 "export: unknown target {other:?} (crazyswarm2 or skybrush)"
             )))
         }
     };
-    let exit = py.detach(|| cdm_export::run(target, true)).map_err(to_py)?;
-    Ok(match exit {
-        Exit::Safe => ("SAFE".to_string(), true),
-        _ => ("UNSAFE".to_string(), force),
-    })
+    let done = py
+        .detach(|| export_plan(target, &source, &out, &frame))
+        .map_err(|e| {
+            to_py(if e.is_bad_input() {
+                Failure::bad_input(e)
+            } else {
+                Failure::fault(e)
+            })
+        })?;
+    let verdict = if done.certificate.verdict == cdm_model::outcome::Verdict::Safe {
+        "SAFE"
+    } else {
+        "UNSAFE"
+    };
+    Ok((verdict.to_string(), done.written))
 }

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use cdm_export::cli::Source;
+use cdm_export::ScenarioSource;
 use cdm_scenario::{Checks, Scenario as Loaded};
 use cdm_team::Failure;
 use pyo3::prelude::*;
@@ -15,7 +15,7 @@ use crate::errors::to_py;
 pub struct PyScenario {
     pub loaded: Loaded,
     /// How the CLI would name it; `None` for a scenario parsed from text.
-    pub source: Option<Source>,
+    pub source: Option<ScenarioSource>,
 }
 
 #[pymethods]
@@ -101,15 +101,15 @@ pub fn load(
     n: Option<usize>,
     t_total_s: Option<f64>,
 ) -> PyResult<PyScenario> {
-    let source = Source {
+    let source = ScenarioSource {
         scenario: path,
         n,
         builtin,
-        t_total: t_total_s,
+        t_total_s,
     };
     let loaded = py
-        .detach(|| cdm_export::cli::load(&source))
-        .map_err(to_py)?;
+        .detach(|| cdm_export::load(&source))
+        .map_err(|e| to_py(Failure::bad_input(e)))?;
     Ok(PyScenario {
         loaded,
         source: Some(source),

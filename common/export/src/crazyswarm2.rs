@@ -15,7 +15,7 @@ use cdm_scenario::{has_airspace, ScenarioFile};
 use cdm_trajectory::{pieces, CrazyflieSplit, PolyPiece};
 
 use super::Scaled;
-use cdm_team::Failure;
+use crate::ExportError;
 
 /// Coefficients per axis in the file (Crazyflie pieces are degree-7 polynomials).
 const COEFFS: usize = 8;
@@ -45,11 +45,11 @@ fn row(p: &PolyPiece) -> String {
     r
 }
 
-fn put(dir: &Path, name: &str, text: &str) -> Result<(), Failure> {
-    write_atomic(&dir.join(name), text.as_bytes()).map_err(Failure::bad_input)
+fn put(dir: &Path, name: &str, text: &str) -> Result<(), ExportError> {
+    Ok(write_atomic(&dir.join(name), text.as_bytes())?)
 }
 
-pub fn write(dir: &Path, sc: &Scaled, split: &CrazyflieSplit) -> Result<(), Failure> {
+pub fn write(dir: &Path, sc: &Scaled, split: &CrazyflieSplit) -> Result<(), ExportError> {
     let head = header();
     for t in &sc.trajs {
         let mut text = head.clone();

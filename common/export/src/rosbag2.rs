@@ -2,27 +2,37 @@
 //! cdm-rosbag). The run is read back by cdm-report's reader (scenario.toml, audit.json, and
 //! telemetry.csv or telemetry.parquet, one tick in memory at a time), each tick becomes the
 //! bag's messages, and the limits of the margins are audit.json's. A run directory that cannot
-//! be read is bad input (exit 2, naming the file); the partial bag is removed.
+//! be read is bad input (naming the file); the partial bag is removed.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use cdm_report::data::{read_audit, stream_ticks, AuditNumbers};
 use cdm_rosbag::{BagError, BagWriter, Limits, Team, Tick};
 use cdm_scenario::{Checks, Scenario};
-use cdm_team::{out, Exit, Failure};
 
-/// Write the bag of the run in `run` into `out` (already checked: absent, empty or --force).
-pub fn export(run: &Path, out: &Path, quiet: bool) -> Result<Exit, Failure> {
+use crate::{refuse_existing, ExportError};
+
+/// What [`export_bag`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BagExport {
+    pub out: PathBuf,
+    /// Messages per topic, in the bag's topic order.
+    pub counts: Vec<(String, u64)>,
+}
+
+/// Write the bag of the run in `run` into `out` (absent, empty, or replaced with `force`).
+pub fn export_bag(run: &Path, out: &Path, force: bool) -> Result<BagExport, ExportError> {
+    refuse_existing(out, force)?;
     let (scenario, audit) = read_head(run)?;
     let limits = Limits {
         eps_m: audit.eps_m,
         delta_m: audit.delta_m,
         lambda_cd_min: audit.lambda_cd_min,
     };
-    let commands = cdm_records::commands::read_commands(run).map_err(Failure::bad_input)?;
+    let commands = cdm_records::commands::read_commands(run)?;
     let team = Team::new(&scenario, limits).with_commands(commands);
     let mut shown = None;
-    let mut bag = BagWriter::create(out, &team).map_err(Failure::bad_input)?;
+    let mut bag = BagWriter::create(out, &team).map_err(ExportError::BagCreate)?;
     let mut messages = Vec::new();
     let mut failed: Option<BagError> = None;
     let read = stream_ticks(run, &scenario, &audit.losses, |tp| {
@@ -44,43 +54,31 @@ pub fn export(run: &Path, out: &Path, quiet: bool) -> Result<Exit, Failure> {
     });
     if let Err(e) = read {
         bag.abandon();
-        return Err(Failure::bad_input(e));
+        return Err(e.into());
     }
     if let Some(e) = failed {
         bag.abandon();
-        return Err(Failure::fault(e));
+        return Err(ExportError::Bag(e));
     }
-    bag.finish().map_err(Failure::fault)?;
-    if !quiet {
-        summary(&bag, out);
-    }
-    Ok(Exit::Safe)
+    bag.finish().map_err(ExportError::Bag)?;
+    Ok(BagExport {
+        out: out.to_path_buf(),
+        counts: bag
+            .counts()
+            .into_iter()
+            .map(|(name, n)| (name.to_string(), n))
+            .collect(),
+    })
 }
 
 /// scenario.toml and audit.json of a run directory, each error naming its file.
-fn read_head(run: &Path) -> Result<(Scenario, AuditNumbers), Failure> {
+fn read_head(run: &Path) -> Result<(Scenario, AuditNumbers), ExportError> {
     if !run.is_dir() {
-        return Err(Failure::bad_input(format!(
-            "{}: not a run directory (expected the --out of `simulate` or `launch`)",
-            run.display()
-        )));
+        return Err(ExportError::NotARun {
+            path: run.to_path_buf(),
+        });
     }
-    // Its errors name the file.
-    let scenario =
-        Scenario::load(&run.join("scenario.toml"), Checks::Member).map_err(Failure::bad_input)?;
-    let audit = read_audit(&run.join("audit.json")).map_err(Failure::bad_input)?;
+    let scenario = Scenario::load(&run.join("scenario.toml"), Checks::Member)?;
+    let audit = read_audit(&run.join("audit.json"))?;
     Ok((scenario, audit))
-}
-
-fn summary(bag: &BagWriter, out: &Path) {
-    let counts = bag.counts();
-    let total: u64 = counts.iter().map(|c| c.1).sum();
-    out!(
-        "export rosbag2: {total} messages on {} topics -> {}",
-        counts.len(),
-        out.display()
-    );
-    for (name, n) in counts.iter().rev().take(3).rev() {
-        out!("  {name}: {n}");
-    }
 }

@@ -5,6 +5,21 @@
 //! mission is one show from its first phase to its last (on the ground at both ends with
 //! `[takeoff]` and `[landing]`), each hover a constant segment, the limits over every phase. A
 //! scenario's `[geofence]` becomes the show's `geofence`.
+//!
+//! A scenario's `[origin]` and `[vehicle]` (absent: the show's bytes are as without them) go
+//! where Skybrush reads them (skybrush-io/skybrush.js, packages/show-format/src/types.ts:
+//! `ShowSpecification.environment`, `Location`, `ValidationSettings`):
+//! - `environment = {type: "outdoor", location: {origin, orientation}}`: `origin` is
+//!   [latitude 1e-7 degree, longitude 1e-7 degree, altitude AMSL in mm], integers, as Skybrush
+//!   Studio writes it (skybrush-io/studio-blender, src/modules/sbstudio/model/location.py,
+//!   `ShowLocation.json`) and Skybrush Live reads it (skybrush-io/live, src/utils/geography.ts,
+//!   `toLonLatFromScaledJSON`); `orientation` is the bearing of the show's +x axis in degrees
+//!   from north towards east, which is `[origin] heading_deg`.
+//! - `settings.validation`: `maxVelocityXY`, `maxVelocityZ` (down, once `maxVelocityZUp` is
+//!   given), `maxVelocityZUp`, `maxAccelerationXY`, `maxAccelerationZ`, as Studio's safety
+//!   check writes them (studio-blender, src/modules/sbstudio/model/safety_check.py,
+//!   `SafetyCheckParams.as_dict`), from the `[vehicle]` limits; a limit the table leaves out
+//!   stays the plan's own peak as before.
 
 use std::io::Write as _;
 use std::path::Path;
@@ -16,15 +31,18 @@ use zip::write::SimpleFileOptions;
 use cdm_certificates::certificate::Certificate;
 use cdm_math::{Real, Vec3};
 use cdm_records::rundir::write_atomic;
-use cdm_scenario::GeofenceSpec;
+use cdm_scenario::{GeoOrigin, GeofenceSpec};
 use cdm_trajectory::{pieces, Cut};
 
 use super::Scaled;
-use cdm_team::Failure;
+use crate::ExportError;
 
 #[derive(Serialize)]
 struct Show {
     version: u32,
+    /// With an `[origin]` only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    environment: Option<Environment>,
     settings: ShowSettings,
     swarm: Swarm,
     /// The scenario's `[geofence]`, absent without one.
@@ -73,22 +91,96 @@ impl Geofence {
 }
 
 #[derive(Serialize)]
+struct Environment {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    location: Location,
+}
+
+#[derive(Serialize)]
+struct Location {
+    /// [lat 1e-7 deg, lon 1e-7 deg, AMSL mm].
+    origin: [i64; 3],
+    /// Degrees from north towards east.
+    orientation: Real,
+}
+
+impl Location {
+    fn of(o: &GeoOrigin) -> Self {
+        Location {
+            origin: [
+                (o.lat_deg * 1e7).round() as i64,
+                (o.lon_deg * 1e7).round() as i64,
+                (o.alt_m * 1e3).round() as i64,
+            ],
+            orientation: o.heading_deg,
+        }
+    }
+}
+
+#[derive(Serialize)]
 struct ShowSettings {
     validation: Validation,
 }
 
 /// Limits Skybrush checks the show against.
-#[derive(Serialize)]
-struct Validation {
+#[derive(Serialize, Debug, Clone, PartialEq)]
+pub struct Validation {
     /// 2 eps: the certificate keeps the balls of radius eps apart (Sec. VI).
     #[serde(rename = "minDistance")]
-    min_distance: Real,
+    pub min_distance: Real,
     #[serde(rename = "maxVelocityXY")]
-    max_velocity_xy: Real,
+    pub max_velocity_xy: Real,
     #[serde(rename = "maxVelocityZ")]
-    max_velocity_z: Real,
+    pub max_velocity_z: Real,
     #[serde(rename = "maxAltitude")]
-    max_altitude: Real,
+    pub max_altitude: Real,
+    #[serde(rename = "maxVelocityZUp", skip_serializing_if = "Option::is_none")]
+    pub max_velocity_z_up: Option<Real>,
+    #[serde(rename = "maxAccelerationXY", skip_serializing_if = "Option::is_none")]
+    pub max_acceleration_xy: Option<Real>,
+    #[serde(rename = "maxAccelerationZ", skip_serializing_if = "Option::is_none")]
+    pub max_acceleration_z: Option<Real>,
+}
+
+/// Where a show sits on the Earth and what Skybrush validates it against.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShowFrame {
+    /// The scenario's `[origin]`: the show's (0, 0, 0) and the bearing of its +x axis.
+    pub location: Option<GeoOrigin>,
+    pub validation: Validation,
+}
+
+/// The show's frame and limits as [`write`] puts them in show.json.
+pub fn frame(sc: &Scaled, cert: &Certificate) -> ShowFrame {
+    ShowFrame {
+        location: sc.scenario.file.geo_origin,
+        validation: validation(sc, cert),
+    }
+}
+
+/// The plan's own peaks, replaced by the `[vehicle]` limits the file sets.
+fn validation(sc: &Scaled, cert: &Certificate) -> Validation {
+    let (mut vxy, mut vz, mut zmax) = (0.0, 0.0, Real::NEG_INFINITY);
+    for t in &sc.trajs {
+        let (a, b) = t.max_speeds();
+        vxy = Real::max(vxy, a);
+        vz = Real::max(vz, b);
+        zmax = zmax.max(t.z_range().1);
+    }
+    let v = sc.scenario.file.vehicle.unwrap_or_default();
+    // maxVelocityZ limits both ways until maxVelocityZUp is given: a table with only a descent
+    // limit keeps the climb at the plan's peak.
+    let up = v.max_speed_up_m_s.or(v.max_speed_down_m_s.map(|_| vz));
+    Validation {
+        min_distance: 2.0 * cert.numbers.eps_m,
+        max_velocity_xy: v.max_speed_xy_m_s.unwrap_or(vxy),
+        max_velocity_z: v.max_speed_down_m_s.unwrap_or(vz),
+        max_altitude: zmax,
+        max_velocity_z_up: up,
+        max_acceleration_xy: v.max_accel_xy_m_s2,
+        max_acceleration_z: v.max_accel_z_m_s2,
+    }
 }
 
 #[derive(Serialize)]
@@ -191,22 +283,14 @@ fn show(sc: &Scaled, cut: Cut, cert: &Certificate) -> Show {
             }
         })
         .collect();
-    let (mut vxy, mut vz, mut zmax) = (0.0, 0.0, Real::NEG_INFINITY);
-    for t in &sc.trajs {
-        let (a, b) = t.max_speeds();
-        vxy = Real::max(vxy, a);
-        vz = Real::max(vz, b);
-        zmax = zmax.max(t.z_range().1);
-    }
     Show {
         version: 1,
+        environment: sc.scenario.file.geo_origin.as_ref().map(|o| Environment {
+            kind: "outdoor",
+            location: Location::of(o),
+        }),
         settings: ShowSettings {
-            validation: Validation {
-                min_distance: 2.0 * cert.numbers.eps_m,
-                max_velocity_xy: vxy,
-                max_velocity_z: vz,
-                max_altitude: zmax,
-            },
+            validation: validation(sc, cert),
         },
         swarm: Swarm { drones },
         geofence: sc.scenario.file.geofence.as_ref().map(Geofence::of),
@@ -219,23 +303,24 @@ fn show(sc: &Scaled, cut: Cut, cert: &Certificate) -> Show {
     }
 }
 
-pub fn write(out: &Path, sc: &Scaled, cut: Cut, cert: &Certificate) -> Result<(), Failure> {
-    let json = serde_json::to_vec(&show(sc, cut, cert)).map_err(Failure::fault)?;
+pub fn write(out: &Path, sc: &Scaled, cut: Cut, cert: &Certificate) -> Result<(), ExportError> {
+    let json = serde_json::to_vec(&show(sc, cut, cert)).map_err(|source| ExportError::Json {
+        what: "show.json",
+        source,
+    })?;
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
     let opts = SimpleFileOptions::default()
         .compression_method(zip::CompressionMethod::Stored)
         .unix_permissions(0o644);
-    let fail = |source: zip::result::ZipError| {
-        Failure::fault(cdm_team::errors::CommandError::Zip {
-            file: out.to_path_buf(),
-            source,
-        })
+    let fail = |source: zip::result::ZipError| ExportError::Zip {
+        file: out.to_path_buf(),
+        source,
     };
     zip.start_file("show.json", opts).map_err(fail)?;
     zip.write_all(&json)
         .map_err(|e| fail(zip::result::ZipError::Io(e)))?;
     let bytes = zip.finish().map_err(fail)?.into_inner();
-    write_atomic(out, &bytes).map_err(Failure::bad_input)
+    Ok(write_atomic(out, &bytes)?)
 }
 
 #[cfg(test)]

@@ -1,9 +1,11 @@
 //! The command-line arguments of `orchestrator export`, and the scenario source every command
-//! shares (clap types: the orchestrator's CLI flattens them).
+//! shares (clap types: the orchestrator's CLI flattens them), each turned into cdm-export's
+//! plain values.
 
 use std::path::PathBuf;
 
-use cdm_scenario::{Checks, Scenario};
+use cdm_export::{ExportError, ExportFrame, ScenarioSource};
+use cdm_scenario::Scenario;
 use cdm_team::Failure;
 use clap::{Args, Subcommand};
 
@@ -13,23 +15,50 @@ pub enum ExportTarget {
     /// crazyflies.yaml, README.txt, certificate.json, scenario.toml and a top view into --out.
     Crazyswarm2 {
         #[command(flatten)]
-        source: Source,
+        source: SourceArgs,
         /// The output directory (created; our files in it are replaced).
         #[arg(long, value_name = "DIR")]
         out: PathBuf,
         #[command(flatten)]
-        frame: ExportFrame,
+        frame: FrameArgs,
     },
     /// A Skybrush show (.skyc: a ZIP holding show.json with Bézier trajectories), with
-    /// <stem>.certificate.json and <stem>.scenario.toml beside it.
+    /// <stem>.certificate.json and <stem>.scenario.toml beside it. With [origin], the show's
+    /// location and orientation; with [vehicle], its validation limits.
     Skybrush {
         #[command(flatten)]
-        source: Source,
+        source: SourceArgs,
         /// The show file to write (e.g. show.skyc).
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         #[command(flatten)]
-        frame: ExportFrame,
+        frame: FrameArgs,
+    },
+    /// The scenario on a map (needs [origin]): a GeoJSON FeatureCollection (RFC 7946) of the
+    /// geofence, the obstacles, the leaders' planned paths and the ground spots.
+    Geojson {
+        /// A scenario file, or a run directory (its scenario.toml).
+        #[arg(value_name = "RUN_OR_SCENARIO")]
+        source: PathBuf,
+        /// The .geojson file to write.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Overwrite --out if it exists.
+        #[arg(long)]
+        force: bool,
+    },
+    /// QGroundControl's .plan file (needs [origin]): the geofence as the inclusion polygon,
+    /// the obstacles as exclusion polygons and circles, the landing spots as rally points.
+    QgcPlan {
+        /// A scenario file, or a run directory (its scenario.toml).
+        #[arg(value_name = "RUN_OR_SCENARIO")]
+        source: PathBuf,
+        /// The .plan file to write.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Overwrite --out if it exists.
+        #[arg(long)]
+        force: bool,
     },
     /// A finished run (the RUN_DIR of `simulate` or `launch`) as a ROS 2 bag for Foxglove and
     /// `ros2 bag play`: a rosbag2 directory (metadata.yaml and one .mcap) with each member's
@@ -49,7 +78,7 @@ pub enum ExportTarget {
 
 /// Where an exported plan flies: p -> scale p + origin, and the target vehicles' radius.
 #[derive(Debug, Args, Clone)]
-pub struct ExportFrame {
+pub struct FrameArgs {
     /// Multiply every position and goal by S (the paper's team is 300 m wide; a lab is 5 m);
     /// a mission's segment goals and ground heights too.
     #[arg(
@@ -76,9 +105,20 @@ pub struct ExportFrame {
     pub force: bool,
 }
 
+impl FrameArgs {
+    pub fn plain(&self) -> ExportFrame {
+        ExportFrame {
+            scale: self.scale,
+            origin: self.origin.clone(),
+            eps_m: self.eps,
+            force: self.force,
+        }
+    }
+}
+
 /// Which scenario to fly: a file, a built-in, or a generated team (default: built-in paper40).
 #[derive(Debug, Args, Clone)]
-pub struct Source {
+pub struct SourceArgs {
     /// A scenario file (TOML).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["n", "builtin"])]
     pub scenario: Option<PathBuf>,
@@ -93,23 +133,27 @@ pub struct Source {
     pub t_total: Option<f64>,
 }
 
+impl SourceArgs {
+    pub fn plain(&self) -> ScenarioSource {
+        ScenarioSource {
+            scenario: self.scenario.clone(),
+            n: self.n,
+            builtin: self.builtin.clone(),
+            t_total_s: self.t_total,
+        }
+    }
+}
+
 /// Load and fully validate the scenario a command names.
-pub fn load(source: &Source) -> Result<Scenario, Failure> {
-    let mut s = match (&source.scenario, source.n, &source.builtin) {
-        (Some(p), _, _) => Scenario::load(p, Checks::Full),
-        (None, Some(n), _) => Scenario::generated(n),
-        (None, None, Some(b)) => Scenario::builtin(b),
-        (None, None, None) => Scenario::builtin("paper40"),
+pub fn load(source: &SourceArgs) -> Result<Scenario, Failure> {
+    cdm_export::load(&source.plain()).map_err(Failure::bad_input)
+}
+
+/// An export's error with its exit code: bad input 2, a fault 3.
+pub fn failure(e: ExportError) -> Failure {
+    if e.is_bad_input() {
+        Failure::bad_input(e)
+    } else {
+        Failure::fault(e)
     }
-    .map_err(Failure::bad_input)?;
-    if let Some(t) = source.t_total {
-        let mut f = s.file.clone();
-        f.t_total_s = t;
-        let origin = format!("{} with --t-total {t}", s.origin);
-        s = Scenario::from_file(f, &origin, Checks::Full).map_err(Failure::bad_input)?;
-    }
-    for note in &s.notes {
-        tracing::info!("{note}");
-    }
-    Ok(s)
 }
