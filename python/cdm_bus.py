@@ -123,7 +123,7 @@ class StateBatch(ctypes.Structure):
 
 
 class ClockMsg(ctypes.Structure):
-    """The orchestrator's grant (`common::messages::ClockMsg`, 48 bytes)."""
+    """The orchestrator's grant (`common::messages::ClockMsg`, 144 bytes)."""
 
     _fields_ = [
         ("grant_tick", ctypes.c_uint64),
@@ -135,6 +135,11 @@ class ClockMsg(ctypes.Structure):
         ("loss_id", ctypes.c_uint32),
         ("loss_linked", ctypes.c_uint32),
         ("reserved", ctypes.c_uint32),
+        ("steer_tick", ctypes.c_uint64),
+        ("steer_seq", ctypes.c_uint32),
+        ("steer_command", ctypes.c_uint32),
+        ("steer_goals", ctypes.c_double * 9),
+        ("steer_travel_s", ctypes.c_double),
     ]
 
     @staticmethod

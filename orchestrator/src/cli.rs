@@ -221,6 +221,10 @@ pub struct LaunchArgs {
     pub foxglove: cdm_launch::feeds::FoxgloveArgs,
     #[command(flatten)]
     pub run: RunOptions,
+    /// Steer the team in flight from a file, as `simulate --commands` does (lockstep: the same
+    /// run byte for byte); commands.json says what became of each.
+    #[arg(long, value_name = "FILE")]
+    pub commands: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]

@@ -27,6 +27,7 @@ use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand};
 use crate::export_args::{load, SourceArgs};
 use crate::print_certificate::print_certificate;
 use cdm_launch::launch::{launch, LaunchOptions};
+use cdm_launch::steer::{write_commands, FileCommands};
 use cdm_report::{report, ReportError};
 use cdm_team::errors::CommandError;
 use cdm_team::progress::{Progress, Spinner};
@@ -98,13 +99,6 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
     }
 }
 
-/// The run's commands.json: every command and what became of it.
-fn write_commands(dir: &RunDir, records: &[CommandRecord]) -> Result<(), Failure> {
-    let text = serde_json::to_string_pretty(records).map_err(Failure::fault)?;
-    cdm_records::rundir::write_atomic(&dir.path().join("commands.json"), text.as_bytes())
-        .map_err(Failure::from)
-}
-
 /// `orchestrator simulate`: the whole team in one process, audited and recorded.
 fn simulate_command(
     source: &SourceArgs,
@@ -168,7 +162,7 @@ pub(crate) fn fly_in_process(
 ) -> Result<AuditReport, Failure> {
     let run = f.run;
     if let Some(records) = f.records {
-        write_commands(dir, records)?;
+        write_commands(dir, records).map_err(Failure::fault)?;
     }
     let started = Instant::now();
     let every = crate::cli::every_or_default(f.every, s.file.agents.len());
@@ -341,6 +335,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             "--lose needs members spawned by launch (not --no-spawn)",
         ));
     }
+    let (s, commands) = file_commands(a, s)?;
     let team_name = a
         .team
         .clone()
@@ -382,8 +377,41 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         realtime,
         losses,
         on_loss: a.run.on_loss.into(),
+        commands,
     };
     Ok((s, opts))
+}
+
+/// `--commands FILE` decided for the team of `s`: the commanded scenario to launch and the
+/// commands (`s` itself without the option).
+fn file_commands(a: &LaunchArgs, s: Scenario) -> Result<(Scenario, Option<FileCommands>), Failure> {
+    let Some(path) = &a.commands else {
+        return Ok((s, None));
+    };
+    check_commanded_launch(a)?;
+    let list = cdm_scenario::load_commands(path, &s).map_err(Failure::bad_input)?;
+    let (flown, c) = FileCommands::decide(&s, &list);
+    Ok((flown, Some(c)))
+}
+
+/// `launch --commands` flies a lockstep team of model vehicles on one host: refused, not
+/// ignored, elsewhere.
+fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
+    let why = if a.realtime.realtime {
+        Some("--realtime (steer a real-time team live with `orchestrator command`)")
+    } else if a.hosts.hosts > 1 {
+        Some("--hosts above 1")
+    } else if a.vehicle.vehicles != cdm_member::vehicles::VehicleKind::Model {
+        Some("--vehicles mavlink")
+    } else {
+        None
+    };
+    match why {
+        Some(w) => Err(Failure::bad_input(format!(
+            "--commands flies a lockstep team of model vehicles on one host, not with {w}"
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// `--hosts`, `--listen` and its security: a `tls/` endpoint needs `--keys`, a `tcp/` one

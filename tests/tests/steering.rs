@@ -21,13 +21,7 @@ use support::{assert_exit, assert_same_file, assert_stderr_has, read_json};
 
 const DEADLINE: std::time::Duration = integration_tests::deadline::FLIGHT;
 
-const COMMANDS: &str = r#"[
-  {"at_s": 60, "command": "hold"},
-  {"at_s": 120, "command": "goto", "goals": [[224, 434, 600], [220, 224, 600], [228, 224, 600]],
-   "travel_s": 100},
-  {"at_s": 121, "command": "goto", "goals": [[224, 434, 600], [126, 224, 600], [322, 224, 600]]},
-  {"at_s": 200, "command": "land"}
-]"#;
+const COMMANDS: &str = support::STEERING_COMMANDS;
 
 fn simulate(out: &Path, commands: &Path) -> Output {
     run(

@@ -132,7 +132,7 @@ impl StateBatch {
 // The sizes other languages mirror; a field added to a message must fail here first.
 const _: () = assert!(core::mem::size_of::<StateMsg>() == 128);
 const _: () = assert!(core::mem::size_of::<StateBatch>() == 8 + 128 * STATES_PER_SAMPLE);
-const _: () = assert!(core::mem::size_of::<ClockMsg>() == 48);
+const _: () = assert!(core::mem::size_of::<ClockMsg>() == 144);
 
 // SAFETY: `StateMsg` is `#[repr(C)]` with only `u64`, `u32` and `[f64; 12]` fields (no pointers,
 // no references, no heap), so its bytes mean the same in every process that maps them; `Wire` is
@@ -151,7 +151,7 @@ unsafe impl ZeroCopySend for Wire<StateBatch> {
     }
 }
 
-// SAFETY: `ClockMsg` is `#[repr(C)]` with only `u64` and `u32` fields; as above.
+// SAFETY: `ClockMsg` is `#[repr(C)]` with only `u64`, `u32`, `f64` and `[f64; 9]` fields; as above.
 unsafe impl ZeroCopySend for Wire<ClockMsg> {
     unsafe fn type_name() -> &'static str {
         CLOCK_TYPE_NAME

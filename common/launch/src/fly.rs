@@ -6,7 +6,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use cdm_runtime::messages::LossNotice;
+use cdm_runtime::messages::{LossNotice, SteerNotice};
 use cdm_runtime::seams::{Clock, MonotonicClock};
 use cdm_runtime::team_core::{LostMember, TeamAction, TeamCore, TickStates};
 use cdm_team::team::Stop;
@@ -25,6 +25,12 @@ pub(crate) trait TeamIo {
 
     /// Publishes the clock message again with the loss notice `n`.
     fn announce(&mut self, core: &TeamCore, n: LossNotice) -> Result<(), Stop>;
+
+    /// Publishes the clock message again with the command notice `n`.
+    fn steer(&mut self, core: &TeamCore, n: SteerNotice) -> Result<(), Stop> {
+        let _ = (core, n);
+        Ok(())
+    }
 
     /// Lockstep: records complete tick `tick` and hands its states back to the core. `Some`
     /// ends the run here (its first violation, `--stop-on-violation`): whether the whole plan
@@ -89,6 +95,7 @@ pub(crate) fn fly(
             match core.next_action(clock.now()) {
                 TeamAction::Grant(g) => io.grant(core, g)?,
                 TeamAction::Announce(n) => io.announce(core, n)?,
+                TeamAction::Steer(n) => io.steer(core, n)?,
                 TeamAction::Complete { tick, states } => {
                     if let Some(all) = io.complete(core, tick, states)? {
                         return Ok(all);

@@ -20,7 +20,7 @@ use cdm_model::outcome::FaultKind;
 use cdm_records::record::TickRecorder;
 use cdm_records::rundir::RunDir;
 use cdm_records::telemetry::TelemetrySink;
-use cdm_runtime::messages::{ClockMsg, LossNotice, StateMsg, StopReason};
+use cdm_runtime::messages::{ClockMsg, LossNotice, StateMsg, SteerNotice, StopReason};
 use cdm_runtime::seams::{Clock, MonotonicClock};
 use cdm_runtime::team_core::{nap_before_wait, TeamConfig, TeamCore, TickStates};
 use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
@@ -69,6 +69,9 @@ pub struct LaunchOptions {
     pub losses: cdm_engine::loss::LossSchedule,
     /// What a lost member does to the run (`--on-loss`).
     pub on_loss: cdm_engine::loss::OnLoss,
+    /// `--commands FILE`, decided before the flight (the scenario launched is the commanded
+    /// one: its plan the same before every switch).
+    pub commands: Option<crate::steer::FileCommands>,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -111,10 +114,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
     let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
-    dir.write_scenario(s).map_err(Failure::fault)?;
+    let member_file = write_inputs(&dir, s, o)?;
     // Humans start members with scenario.toml; spawned members read the JSON copy (same hash).
     let scenario_file = dir.path().join("scenario.toml");
-    let member_file = dir.write_member_scenario(s).map_err(Failure::fault)?;
     if ports.stale_nodes_removed() > 0 {
         tracing::info!(
             removed = ports.stale_nodes_removed(),
@@ -160,6 +162,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         tracing::warn!("{e}");
     }
     let mut report = audit.finish(complete);
+    if let Some(c) = &o.commands {
+        report.commands = c.summaries();
+    }
     for l in &mut report.losses {
         l.host = others.host_of(l.id);
     }
@@ -173,6 +178,16 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         member_peak_rss,
         live: live.view,
     })
+}
+
+/// The run's inputs: commands.json (`--commands`), scenario.toml, and the members' JSON copy
+/// (its path returned).
+fn write_inputs(dir: &RunDir, s: &Scenario, o: &LaunchOptions) -> Result<PathBuf, Failure> {
+    if let Some(c) = &o.commands {
+        crate::steer::write_commands(dir, &c.records).map_err(Failure::fault)?;
+    }
+    dir.write_scenario(s).map_err(Failure::fault)?;
+    dir.write_member_scenario(s).map_err(Failure::fault)
 }
 
 /// Before anything is created: the member binaries are there, the real-time scheduling asked
@@ -449,7 +464,10 @@ fn team_core(s: &Scenario, o: &LaunchOptions, last: u64, now: Duration) -> TeamC
         agent_timeout: o.agent_timeout,
     };
     let book = TeamLosses::new(s, &cdm_team::loss::scripted_kills(&o.losses));
-    TeamCore::lockstep(cfg, now).with_losses(book, repairs(o))
+    let notices = o.commands.as_ref().map(|c| c.notices.clone());
+    TeamCore::lockstep(cfg, now)
+        .with_losses(book, repairs(o))
+        .with_commands(notices.unwrap_or_default())
 }
 
 /// Whether the team repairs its losses: `--on-loss repair` with members this launch spawned
@@ -517,15 +535,19 @@ impl crate::fly::TeamIo for LockstepIo<'_, '_> {
     }
 
     fn grant(&mut self, core: &TeamCore, g: u64) -> Result<(), Stop> {
-        let notice = core.losses().and_then(|l| l.notice());
-        self.publish(ClockMsg::run(g, self.hash).with_loss(notice), core)?;
+        self.publish(notices(ClockMsg::run(g, self.hash), core), core)?;
         self.granted = g;
         self.ticking.get_or_insert_with(Instant::now);
         Ok(())
     }
 
     fn announce(&mut self, core: &TeamCore, n: LossNotice) -> Result<(), Stop> {
-        let msg = ClockMsg::run(self.granted, self.hash).with_loss(Some(n));
+        let msg = notices(ClockMsg::run(self.granted, self.hash), core).with_loss(Some(n));
+        self.publish(msg, core)
+    }
+
+    fn steer(&mut self, core: &TeamCore, n: SteerNotice) -> Result<(), Stop> {
+        let msg = notices(ClockMsg::run(self.granted, self.hash), core).with_steer(Some(n));
         self.publish(msg, core)
     }
 
@@ -595,6 +617,12 @@ impl LockstepIo<'_, '_> {
             .map(drop)
             .map_err(transport_stop(core.position()))
     }
+}
+
+/// `msg` with the latest loss and command notices (every clock message repeats them).
+fn notices(msg: ClockMsg, core: &TeamCore) -> ClockMsg {
+    msg.with_loss(core.losses().and_then(|l| l.notice()))
+        .with_steer(core.steer_notice())
 }
 
 /// Hands the team core the first member that exited and is not already lost: one of ours, or

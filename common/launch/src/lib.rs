@@ -7,5 +7,6 @@ pub mod flight;
 mod fly;
 pub mod launch;
 pub mod realtime;
+pub mod steer;
 pub mod team_arm;
 pub mod vehicle_reports;

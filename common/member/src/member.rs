@@ -10,6 +10,7 @@ use cdm_runtime::member_core::{in_neighbors, subscriptions};
 use cdm_runtime::member_lockstep::LockstepCore;
 use cdm_runtime::member_loop::{fly, BeforePublish};
 use cdm_runtime::member_loss::MemberLosses;
+use cdm_runtime::member_steer::MemberSteering;
 use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 
@@ -177,7 +178,8 @@ impl Joined<'_> {
             let at_rest = neighbor_positions(s, me);
             let losses = MemberLosses::new(me, LossLog::new(s), &ins, &outs);
             let mut core = RealtimeCore::realtime(me, at_rest, setup, vehicle, clock.now())
-                .with_losses(losses);
+                .with_losses(losses)
+                .with_steering(MemberSteering::new(s.steering(), s.file.comm_hz));
             let done = crate::member_vehicle::fly(
                 &mut core,
                 &mut ports,
@@ -199,7 +201,8 @@ impl Joined<'_> {
             .map(|n| QuadState::hover(s.formation.member(n).map_or(me.start, |m| m.start)).flat());
         let mut core = LockstepCore::new(me, hash, s.last_tick(), parts, deadlines, clock.now())
             .with_links(s.link_model(), &s.step_config(), starts)
-            .with_losses(MemberLosses::new(me, LossLog::new(s), &ins, &outs));
+            .with_losses(MemberLosses::new(me, LossLog::new(s), &ins, &outs))
+            .with_steering(MemberSteering::new(s.steering(), s.file.comm_hz));
         let inject = cdm_process::fault_inject::from_env(id);
         let hook = inject.map(|i| move |m: &mut cdm_runtime::messages::StateMsg| i.apply(m));
         let hook = hook.as_ref().map(|h| h as BeforePublish);

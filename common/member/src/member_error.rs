@@ -79,6 +79,11 @@ pub enum MemberError {
     },
     #[error("agent {id} at tick {tick}: cannot follow the loss notices: {what}")]
     Loss { id: u32, tick: u64, what: String },
+    #[error("agent {id}: cannot follow the commands to the team: {fault}")]
+    Steer {
+        id: u32,
+        fault: cdm_runtime::member_steer::SteerFault,
+    },
     #[error("agent {id}: interrupted at tick {tick}")]
     Interrupted { id: u32, tick: u64 },
     #[error("agent {id}: team {team} flies {team_mode} and this member {mode}: start it {fix}")]
@@ -175,6 +180,7 @@ impl MemberError {
                 tick,
                 what: "this vehicle or transport cannot switch links in flight".into(),
             },
+            MemberFault::Steer(fault) => MemberError::Steer { id, fault },
             MemberFault::TickGap { tick, peer, later } => MemberError::Neighbor {
                 id,
                 tick,

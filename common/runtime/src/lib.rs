@@ -11,6 +11,7 @@ pub mod member_lockstep;
 pub mod member_loop;
 pub mod member_loss;
 mod member_protocol;
+pub mod member_steer;
 mod member_watch;
 pub mod messages;
 pub mod notices;

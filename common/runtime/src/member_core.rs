@@ -17,8 +17,11 @@ use std::time::Duration;
 use cdm_model::formation::Member;
 use cdm_model::step::{law_for, Law, StepFault};
 
+use crate::member_steer::{MemberSteering, SteerFault};
 use crate::member_watch::{report_fault, Watch};
-use crate::messages::{AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, NO_PEER};
+use crate::messages::{
+    AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, SteerNotice, NO_PEER,
+};
 use crate::seams::{Vehicle, VehicleFault};
 
 pub use crate::member_protocol::{
@@ -91,9 +94,35 @@ pub struct Shared<V> {
     /// Readers not yet woken since something was published or passed on.
     pub(crate) unnotified: bool,
     pub(crate) watch: Watch,
+    /// Commands to the team in flight (`None`: a command notice is a fault).
+    pub(crate) steering: Option<Box<MemberSteering>>,
 }
 
 impl<V: Vehicle> Shared<V> {
+    /// A command notice: the vehicle flies the commanded plan from now on (the same as the old
+    /// one before the switch), and the flight ends at its last tick.
+    fn steer(&mut self, n: SteerNotice) -> Result<(), MemberFault> {
+        let seq = n.seq;
+        let Some(st) = self.steering.as_mut() else {
+            return Err(MemberFault::Steer(SteerFault::Unsupported { seq }));
+        };
+        let Some(replan) = st.on_notice(n, self.tick).map_err(MemberFault::Steer)? else {
+            return Ok(());
+        };
+        if self.vehicle.replan(&replan.plan).is_err() {
+            return Err(MemberFault::Steer(SteerFault::Unsupported { seq }));
+        }
+        tracing::info!(
+            id = self.id,
+            seq,
+            switch_tick = n.tick,
+            last_tick = replan.last_tick,
+            "flying the commanded plan"
+        );
+        self.last = replan.last_tick;
+        Ok(())
+    }
+
     /// Publishes this tick's state (once).
     pub(crate) fn publish_tick(&mut self) -> Action {
         let tick = self.tick;
@@ -184,8 +213,16 @@ impl<V, T> MemberCore<V, T> {
             published: None,
             unnotified: false,
             watch: Watch::new(now),
+            steering: None,
         };
         Self { m, timing }
+    }
+
+    /// The same core, following the orchestrator's command notices with `steering`; without
+    /// it a notice is a fault.
+    pub fn with_steering(mut self, steering: MemberSteering) -> Self {
+        self.m.steering = Some(Box::new(steering));
+        self
     }
 
     /// This member's id.
@@ -227,6 +264,9 @@ impl<V: Vehicle, T: Timing<V>> MemberCore<V, T> {
             });
         }
         self.timing.on_clock(&mut self.m, c, (now, unix_now_ns))?;
+        if let Some(n) = c.steer() {
+            self.m.steer(n)?;
+        }
         match c.command() {
             ClockCommand::Stop(_) => Ok(Some(Finished {
                 tick: self.m.tick,

@@ -106,6 +106,9 @@ pub enum MemberFault {
     Loss(LossFault),
     /// The vehicle or the transport cannot switch to a repaired link.
     RepairUnsupported { tick: u64 },
+    /// A command notice this member cannot follow (missed, too late, unknown, or a vehicle
+    /// that cannot change its plan).
+    Steer(crate::member_steer::SteerFault),
 }
 
 /// What the loop must do next.

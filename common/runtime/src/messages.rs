@@ -99,6 +99,9 @@ pub const REASON_AGENT_SILENT: u32 = 3;
 /// `ClockMsg::reason`: the operator interrupted the run (signal).
 pub const REASON_INTERRUPTED: u32 = 4;
 
+use cdm_math::Vec3;
+use cdm_model::steer::TeamCommand;
+
 /// One member's full state at one tick, published once per tick.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[repr(C)]
@@ -122,7 +125,7 @@ pub struct StateMsg {
 }
 
 /// The orchestrator's grant: how far members may run, or that they must stop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[repr(C)]
 pub struct ClockMsg {
     /// The last tick members may compute (inclusive).
@@ -148,6 +151,41 @@ pub struct ClockMsg {
     /// Zero (keeps the layout free of implicit padding); never on the network.
     #[serde(skip)]
     pub reserved: u32,
+    /// The latest command to the team in flight announced: the tick its new motion starts
+    /// from. Meaningless while `steer_seq` is 0.
+    pub steer_tick: u64,
+    /// How many commands were announced so far (0: none); repeated by every later clock
+    /// message, as the loss notice is.
+    pub steer_seq: u32,
+    /// One of the `STEER_*` codes.
+    pub steer_command: u32,
+    /// A goto's three primary leaders' goals in the plan's order, x y z each.
+    pub steer_goals: [f64; 9],
+    /// A goto's travel time in seconds; 0 for the default (`cdm_model::steer`).
+    pub steer_travel_s: f64,
+}
+
+/// `ClockMsg::steer_command`: hold.
+pub const STEER_HOLD: u32 = 1;
+/// `ClockMsg::steer_command`: resume.
+pub const STEER_RESUME: u32 = 2;
+/// `ClockMsg::steer_command`: land.
+pub const STEER_LAND: u32 = 3;
+/// `ClockMsg::steer_command`: goto (`steer_goals`, `steer_travel_s`).
+pub const STEER_GOTO: u32 = 4;
+
+/// The latest accepted command a clock message announces (the Rust view of the `steer_*`
+/// fields): every member applies it to its plan from tick `tick` on, as the orchestrator did
+/// (`cdm_model::steer::Steering`, the same code, so the same plan).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteerNotice {
+    /// Commands announced so far; this is number `seq` (1-based).
+    pub seq: u32,
+    /// The switch tick.
+    pub tick: u64,
+    /// The command; `None` for a code this build does not know (a member then stops: it
+    /// cannot fly the team's plan).
+    pub command: Option<TeamCommand>,
 }
 
 /// The latest loss a clock message announces (the Rust view of the `loss_*` fields).
@@ -410,7 +448,56 @@ impl ClockMsg {
             loss_id: 0,
             loss_linked: 0,
             reserved: 0,
+            steer_tick: 0,
+            steer_seq: 0,
+            steer_command: 0,
+            steer_goals: [0.0; 9],
+            steer_travel_s: 0.0,
         }
+    }
+
+    /// The same message carrying `notice` (the latest command announced, repeated by every
+    /// later clock message).
+    pub fn with_steer(mut self, notice: Option<SteerNotice>) -> Self {
+        let Some(n) = notice else { return self };
+        self.steer_seq = n.seq;
+        self.steer_tick = n.tick;
+        self.steer_command = match n.command {
+            Some(TeamCommand::Hold) | None => STEER_HOLD,
+            Some(TeamCommand::Resume) => STEER_RESUME,
+            Some(TeamCommand::Land) => STEER_LAND,
+            Some(TeamCommand::Goto { goals, travel_s }) => {
+                for (k, g) in goals.iter().enumerate() {
+                    self.steer_goals[3 * k..3 * k + 3].copy_from_slice(&[g.x, g.y, g.z]);
+                }
+                self.steer_travel_s = travel_s.unwrap_or(0.0);
+                STEER_GOTO
+            }
+        };
+        self
+    }
+
+    /// The latest command announced, if any.
+    pub fn steer(&self) -> Option<SteerNotice> {
+        if self.steer_seq == 0 {
+            return None;
+        }
+        let g = &self.steer_goals;
+        let command = match self.steer_command {
+            STEER_HOLD => Some(TeamCommand::Hold),
+            STEER_RESUME => Some(TeamCommand::Resume),
+            STEER_LAND => Some(TeamCommand::Land),
+            STEER_GOTO => Some(TeamCommand::Goto {
+                goals: std::array::from_fn(|k| Vec3::new(g[3 * k], g[3 * k + 1], g[3 * k + 2])),
+                travel_s: (self.steer_travel_s > 0.0).then_some(self.steer_travel_s),
+            }),
+            _ => None,
+        };
+        Some(SteerNotice {
+            seq: self.steer_seq,
+            tick: self.steer_tick,
+            command,
+        })
     }
 
     /// The same message carrying `notice` (the latest loss announced, repeated by every later
@@ -490,7 +577,10 @@ mod tests {
     fn wire_sizes_are_stable() {
         // Every process of a team must agree on the layout; pin it.
         assert_eq!(core::mem::size_of::<StateMsg>(), 8 + 8 + 4 * 4 + 12 * 8);
-        assert_eq!(core::mem::size_of::<ClockMsg>(), 8 + 8 + 4 + 4 + 8 + 4 * 4);
+        assert_eq!(
+            core::mem::size_of::<ClockMsg>(),
+            8 + 8 + 4 + 4 + 8 + 4 * 4 + 8 + 4 + 4 + 9 * 8 + 8
+        );
     }
 
     #[test]
@@ -551,6 +641,37 @@ mod tests {
         assert_eq!(ClockMsg::run(5, 1).with_loss(Some(n)).loss(), Some(n));
         assert_eq!(odd.command(), ClockCommand::Stop(StopReason::AgentFault));
         assert_eq!(ClockMsg::arm(1).command(), ClockCommand::Arm);
+        assert_eq!(ClockMsg::run(5, 1).steer(), None);
+        for command in [
+            TeamCommand::Hold,
+            TeamCommand::Resume,
+            TeamCommand::Land,
+            TeamCommand::Goto {
+                goals: [
+                    Vec3::new(1.0, 2.0, 3.0),
+                    Vec3::new(4.0, 5.0, 6.0),
+                    Vec3::new(7.0, 8.0, 9.5),
+                ],
+                travel_s: Some(12.5),
+            },
+            TeamCommand::Goto {
+                goals: [Vec3::new(1.0, 2.0, 3.0); 3],
+                travel_s: None,
+            },
+        ] {
+            let n = SteerNotice {
+                seq: 3,
+                tick: 77,
+                command: Some(command),
+            };
+            assert_eq!(ClockMsg::run(5, 1).with_steer(Some(n)).steer(), Some(n));
+        }
+        let unknown = ClockMsg {
+            steer_seq: 1,
+            steer_command: 99,
+            ..ClockMsg::run(5, 1)
+        };
+        assert_eq!(unknown.steer().map(|n| n.command), Some(None));
         let r = StateMsg::arm_report(0, 1, 4, true);
         assert_eq!(r.armed(), Some(true));
         assert!(matches!(r.status(), AgentStatus::Fault { .. }));

@@ -2,6 +2,7 @@
 //! (the wall clock) and a second plant (a real vehicle) plug in under the same protocol core.
 //! Every method is generic (no `dyn`) and the hot path allocates nothing.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::time::{Duration, Instant};
 
@@ -181,6 +182,13 @@ pub trait Vehicle {
         let _ = member;
         Err(RelinkUnsupported)
     }
+    /// Flies `plan` from now on (a command to the team in flight: the same plan before its
+    /// switch). The default refuses: a vehicle that keeps its own plan must say how it
+    /// switches.
+    fn replan(&mut self, plan: &TeamPlan) -> Result<(), RelinkUnsupported> {
+        let _ = plan;
+        Err(RelinkUnsupported)
+    }
 }
 
 /// A vehicle that cannot switch links in flight.
@@ -191,7 +199,8 @@ pub struct RelinkUnsupported;
 #[derive(Debug, Clone)]
 pub struct ModelVehicle<'a> {
     cfg: StepConfig,
-    plan: &'a TeamPlan,
+    /// The launched plan, or the commanded one once a command arrived.
+    plan: Cow<'a, TeamPlan>,
     law: Law,
     neighbor_ids: [u32; 3],
     x: QuadState,
@@ -203,7 +212,7 @@ impl<'a> ModelVehicle<'a> {
         let (law, neighbor_ids) = law_for(member);
         Self {
             cfg,
-            plan,
+            plan: Cow::Borrowed(plan),
             law,
             neighbor_ids,
             x: QuadState::hover(member.start),
@@ -228,7 +237,7 @@ impl Vehicle for ModelVehicle<'_> {
     fn fly_tick_at(&mut self, at: TickAt, neighbors: &[Flat; 3]) -> Result<(), VehicleFault> {
         let next = step_at(
             &self.cfg,
-            self.plan,
+            &self.plan,
             &self.law,
             at,
             &self.x,
@@ -241,6 +250,11 @@ impl Vehicle for ModelVehicle<'_> {
 
     fn relink(&mut self, member: &Member) -> Result<(), RelinkUnsupported> {
         (self.law, self.neighbor_ids) = law_for(member);
+        Ok(())
+    }
+
+    fn replan(&mut self, plan: &TeamPlan) -> Result<(), RelinkUnsupported> {
+        self.plan = Cow::Owned(plan.clone());
         Ok(())
     }
 }

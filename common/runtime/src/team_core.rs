@@ -22,7 +22,7 @@ use cdm_records::audit::FaultRecord;
 
 use cdm_model::outcome::LossCause;
 
-use crate::messages::{LossNotice, StateMsg, StopReason};
+use crate::messages::{LossNotice, StateMsg, SteerNotice, StopReason};
 use crate::process_exit::ProcessExit;
 use crate::stall::StallWatch;
 pub use crate::team_fault::FaultRank;
@@ -33,6 +33,7 @@ mod lockstep;
 mod losses;
 mod realtime;
 mod realtime_losses;
+mod steer;
 
 pub use lockstep::{
     first_grant, nap_before_wait, next_grant, Grants, TeamConfig, TickStates, NAP, WAIT_SLICE,
@@ -88,6 +89,9 @@ pub enum TeamAction {
     Lost(LostMember),
     /// Publish the clock message again with this loss notice (a new loss, or its links joined).
     Announce(LossNotice),
+    /// Publish the clock message again with this command notice (an accepted command, before
+    /// any member may step into its switch tick).
+    Steer(SteerNotice),
     /// Look for an exited member process and tell [`TeamCore::on_exited`] (if one is found).
     CheckExited,
     /// Ask the transport which of the awaited links of a repair are connected: answer with
@@ -150,6 +154,8 @@ pub(crate) struct TeamState {
     stall: StallWatch,
     /// Losses (`with_losses`): `None` keeps every dead member a fault.
     losses: Option<LossEvents>,
+    /// Commands to announce (`with_commands`, `command`).
+    steer: steer::SteerEvents,
 }
 
 /// The orchestrator's protocol state (see the module doc).
@@ -187,6 +193,7 @@ impl TeamCore {
             last_flush: now,
             stall: StallWatch::new(now),
             losses: None,
+            steer: steer::SteerEvents::default(),
         };
         TeamCore { t, pacing }
     }

@@ -34,6 +34,17 @@ pub use integration_tests::{launch, launch_loud, simulate};
 pub mod netns;
 pub mod users;
 
+/// Commands to paper40 in flight (`steering.rs`, `steering_launch.rs`): a hold, an UNSAFE goto
+/// (the leaders' triangle squeezed to a sliver: lambda_1 below lambda_CD,min, eq. 37), a SAFE
+/// goto given while the team still brakes, a land given while it still moves.
+pub const STEERING_COMMANDS: &str = r#"[
+  {"at_s": 60, "command": "hold"},
+  {"at_s": 120, "command": "goto", "goals": [[224, 434, 600], [220, 224, 600], [228, 224, 600]],
+   "travel_s": 100},
+  {"at_s": 121, "command": "goto", "goals": [[224, 434, 600], [126, 224, 600], [322, 224, 600]]},
+  {"at_s": 200, "command": "land"}
+]"#;
+
 /// `leader` or `agent` (by `role`) joining `team` as `id` with `scenario`.
 pub fn member(binary: &str, scenario: &Path, team: &str, id: u32) -> Command {
     let mut c = Command::new(bin(binary));

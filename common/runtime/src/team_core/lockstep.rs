@@ -113,6 +113,16 @@ impl Grants {
         self.grant = first_grant(self.window, book.cap(self.cfg.last_tick));
     }
 
+    /// Commands cap the first grant: no member steps into a switch before its notice.
+    pub(super) fn cap_first_grant_at(&mut self, cap: u64) {
+        self.grant = self.grant.min(cap);
+    }
+
+    /// A command changed the flight's end.
+    pub(super) fn set_last_tick(&mut self, last: u64) {
+        self.cfg.last_tick = last;
+    }
+
     /// The orchestrator stalled: its members get a fresh silence timeout.
     pub(super) fn restart_silence(&mut self, now: Duration) {
         self.last_progress = now;
@@ -182,6 +192,9 @@ impl Grants {
         if let Some(a) = t.loss_action(self, now) {
             return a;
         }
+        if let Some(a) = t.steer_action(self.grant) {
+            return a;
+        }
         while self
             .pending
             .get(self.complete)
@@ -193,6 +206,7 @@ impl Grants {
             .losses
             .as_ref()
             .map_or(self.cfg.last_tick, |l| l.book.cap(self.cfg.last_tick));
+        let cap = t.steer.cap(cap);
         if let Some(want) = next_grant(self.complete, self.grant, self.window, cap) {
             self.grant = want;
             return TeamAction::Grant(want);
