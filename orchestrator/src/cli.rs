@@ -115,6 +115,10 @@ pub enum Command {
         /// in the graph).
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
+        /// Draw only fig_compare instead: this run against OTHER_DIR (a run and its `replay`
+        /// with a change) side by side: deviation, separation and containment margin over time.
+        #[arg(long, value_name = "OTHER_DIR", conflicts_with = "follow")]
+        against: Option<PathBuf>,
     },
     /// Remove what teams of yours left behind when all their processes died (SIGKILL, a
     /// crash): their iceoryx2 files in /dev/shm, and the monitor files of dead iceoryx2 nodes

@@ -67,7 +67,11 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             commands,
         } => simulate_command(&source, &out, &run, commands.as_deref(), cli.quiet),
         Command::Replay(args) => crate::replay::replay_command(*args, cli.quiet),
-        Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
+        Command::Report {
+            dir,
+            follow,
+            against,
+        } => report_command(&dir, follow, against.as_deref(), cli.quiet),
         Command::Launch(args) => launch_command(*args, cli.quiet),
         Command::View {
             dir,
@@ -234,9 +238,18 @@ pub(crate) fn after_run(dir: &Path, report: &AuditReport, run: &RunOptions, quie
 }
 
 /// `orchestrator report RUN_DIR`: the figures of a finished run.
-fn report_command(dir: &Path, follow: Option<u32>, quiet: bool) -> Result<Exit, Failure> {
+fn report_command(
+    dir: &Path,
+    follow: Option<u32>,
+    against: Option<&Path>,
+    quiet: bool,
+) -> Result<Exit, Failure> {
     let started = Instant::now();
-    let files = report(dir, follow).map_err(|e| match e {
+    let files = match against {
+        Some(other) => cdm_report::compare(dir, other),
+        None => report(dir, follow),
+    }
+    .map_err(|e| match e {
         ReportError::Read(_) => Failure::bad_input(e),
         ReportError::Draw(_) => Failure::fault(e),
     })?;

@@ -128,6 +128,8 @@ pub struct TickSample {
     pub min_separation_m: Real,
     /// Smallest signed distance of a follower to the containment prism's sides, D_S(t) (Fig. 11).
     pub min_boundary_m: Real,
+    /// Largest ||r_i - r_i,HT||_2 over the living members (against delta, eq. 38).
+    pub max_deviation_m: Real,
     /// The followed member: actual and desired position (Fig. 9).
     pub follow_r: Vec3,
     pub follow_ht: Vec3,
@@ -321,6 +323,10 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
             lambdas: lambdas_at(&scenario, t),
             min_separation_m: sep,
             min_boundary_m: boundary,
+            max_deviation_m: (0..pos.len())
+                .filter(|&k| tp.alive[k])
+                .map(|k| (pos[k] - ht[k]).norm())
+                .fold(0.0, Real::max),
             follow_r: pos[follow_k],
             follow_ht: ht[follow_k],
         });
