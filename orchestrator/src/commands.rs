@@ -66,7 +66,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             run,
             commands,
         } => simulate_command(&source, &out, &run, commands.as_deref(), cli.quiet),
-        Command::Replay(args) => crate::replay::replay_command(*args, cli.quiet),
+        Command::Replay(args) => replay_command(&args, cli.quiet),
         Command::Report {
             dir,
             follow,
@@ -148,8 +148,28 @@ fn simulate_command(
     Ok(exit_of(&report))
 }
 
+/// `orchestrator replay`: the run directory checked and flown again (changed or not), then
+/// compared with the run.
+fn replay_command(a: &crate::cli::ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
+    let p = crate::replay::prepare(a)?;
+    let flight = InProcess {
+        what: "replay",
+        mode: RunMode::Replay,
+        records: p.records.as_deref(),
+        losses: p.losses,
+        every: Some(p.every),
+        run: &p.run,
+        quiet,
+    };
+    let report = fly_in_process(&p.flown, &p.dir, flight)?;
+    let differs = crate::replay::compare(&a.run, p.dir.path(), p.format, quiet)?;
+    after_run(p.dir.path(), &report, &p.run, quiet);
+    crate::replay::outcome(a, p.what_if, differs)?;
+    Ok(exit_of(&report))
+}
+
 /// A flight with the in-process engine: `simulate`, and `replay` with the run's options.
-pub(crate) struct InProcess<'a> {
+struct InProcess<'a> {
     /// The command's name, in the progress and summary lines.
     pub what: &'static str,
     /// What run.json says flew the run.
@@ -165,11 +185,7 @@ pub(crate) struct InProcess<'a> {
 
 /// Fly `s` (its plan the commanded one) into `dir`: commands.json, run.json, telemetry and the
 /// audit, with progress and the summary.
-pub(crate) fn fly_in_process(
-    s: &Scenario,
-    dir: &RunDir,
-    f: InProcess,
-) -> Result<AuditReport, Failure> {
+fn fly_in_process(s: &Scenario, dir: &RunDir, f: InProcess) -> Result<AuditReport, Failure> {
     let run = f.run;
     if let Some(records) = f.records {
         write_commands(dir, records)?;
@@ -209,7 +225,7 @@ pub(crate) fn fly_in_process(
 }
 
 /// run.json: what the run's other files do not say of how it was flown.
-pub(crate) fn run_record(
+fn run_record(
     s: &Scenario,
     mode: RunMode,
     every: u64,
@@ -230,7 +246,7 @@ pub(crate) fn run_record(
 }
 
 /// The figures and replay.html of a finished in-process run.
-pub(crate) fn after_run(dir: &Path, report: &AuditReport, run: &RunOptions, quiet: bool) {
+fn after_run(dir: &Path, report: &AuditReport, run: &RunOptions, quiet: bool) {
     figures_after_run(dir, run, quiet);
     if report.ticks > 0 {
         replay_after_run(dir, quiet);

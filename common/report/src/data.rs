@@ -323,15 +323,20 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
             lambdas: lambdas_at(&scenario, t),
             min_separation_m: sep,
             min_boundary_m: boundary,
-            max_deviation_m: (0..pos.len())
-                .filter(|&k| tp.alive[k])
-                .map(|k| (pos[k] - ht[k]).norm())
-                .fold(0.0, Real::max),
+            max_deviation_m: max_deviation(pos, ht, tp.alive),
             follow_r: pos[follow_k],
             follow_ht: ht[follow_k],
         });
     })?;
     Ok(data)
+}
+
+/// Largest ||r_i - r_i,HT||_2 over the living members.
+fn max_deviation(pos: &[Vec3], ht: &[Vec3], alive: &[bool]) -> Real {
+    (0..pos.len())
+        .filter(|&k| alive[k])
+        .map(|k| (pos[k] - ht[k]).norm())
+        .fold(0.0, Real::max)
 }
 
 /// The followers any loss re-triangulated or left flying its plan, as (member index, id, first
