@@ -143,12 +143,17 @@ pub fn compare(
     quiet: bool,
 ) -> Result<Option<String>, Failure> {
     let name = format.file_name();
-    let read = |dir: &Path| {
+    let open = |dir: &Path| {
         let p = dir.join(name);
-        std::fs::read(&p).map_err(|e| Failure::bad_input(format!("{}: {e}", p.display())))
+        let f = std::fs::File::open(&p)
+            .map_err(|e| Failure::bad_input(format!("{}: {e}", p.display())))?;
+        let bytes = f.metadata().map_or(0, |m| m.len());
+        Ok::<_, Failure>((std::io::BufReader::new(f), bytes))
     };
-    let (a, b) = (read(run)?, read(replay)?);
-    let telemetry = match (format, first_line_difference(&a, &b)) {
+    let ((a, a_bytes), (b, b_bytes)) = (open(run)?, open(replay)?);
+    let first = first_line_difference(a, b)
+        .map_err(|e| Failure::bad_input(format!("{}: {e}", run.join(name).display())))?;
+    let telemetry = match (format, first) {
         (_, None) => None,
         (TelemetryFormat::Parquet, Some(_)) => Some(format!("{name} differs")),
         (_, Some(line)) => Some(format!("{name} differs from line {line}")),
@@ -159,8 +164,8 @@ pub fn compare(
     );
     if !quiet {
         match &telemetry {
-            None => out!("  {name}: identical to the run's ({} bytes)", b.len()),
-            Some(why) => out!("  {why} ({} bytes, the run's {})", b.len(), a.len()),
+            None => out!("  {name}: identical to the run's ({b_bytes} bytes)"),
+            Some(why) => out!("  {why} ({b_bytes} bytes, the run's {a_bytes})"),
         }
         match &audit {
             None => out!("  audit.json: safety figures identical to the run's"),
