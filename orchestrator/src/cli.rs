@@ -90,7 +90,7 @@ pub enum Command {
     /// equal the run's byte for byte (checked: exit 3 when not). With --gains, --t-total or
     /// --link-* the same history is flown with that change ("what if"). Exit 0 safe, 1
     /// violation, 2 bad input (a tampered or foreign file: named, with its first bad record).
-    Replay(Box<crate::replay::ReplayArgs>),
+    Replay(Box<ReplayArgs>),
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained
     /// page that works from file://; with --serve, also serves it until interrupted.
     View {
@@ -115,6 +115,10 @@ pub enum Command {
         /// in the graph).
         #[arg(long, value_name = "ID")]
         follow: Option<u32>,
+        /// Draw only fig_compare instead: this run against OTHER_DIR (a run and its `replay`
+        /// with a change) side by side: deviation, separation and containment margin over time.
+        #[arg(long, value_name = "OTHER_DIR", conflicts_with = "follow")]
+        against: Option<PathBuf>,
     },
     /// Remove what teams of yours left behind when all their processes died (SIGKILL, a
     /// crash): their iceoryx2 files in /dev/shm, and the monitor files of dead iceoryx2 nodes
@@ -225,6 +229,47 @@ pub struct LaunchArgs {
     /// run byte for byte); commands.json says what became of each.
     #[arg(long, value_name = "FILE")]
     pub commands: Option<PathBuf>,
+}
+
+/// The options of `orchestrator replay`.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The run directory to fly again (of `simulate`, a lockstep `launch` or a `replay`).
+    #[arg(value_name = "RUN_DIR")]
+    pub run: PathBuf,
+    /// The replay's run directory (created; refused when it exists and is not empty, unless
+    /// --force).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Reuse a non-empty --out directory.
+    #[arg(long)]
+    pub force: bool,
+    /// What if: fly with these gains k1,k2,k3,k4 (eq. 18) instead of the scenario's.
+    #[arg(long, value_name = "K1,K2,K3,K4", allow_hyphen_values = true)]
+    pub gains: Option<String>,
+    /// What if: fly with this travel time instead of the scenario's (the losses and commands
+    /// keep their ticks and times).
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub t_total: Option<f64>,
+    /// What if: other links (each flag overrides that key of the run's `[link]`).
+    #[command(flatten)]
+    pub link: cdm_member::options::LinkArgs,
+    /// Do not draw the figures at the end of the replay.
+    #[arg(long)]
+    pub no_figures: bool,
+}
+
+impl ReplayArgs {
+    /// Whether anything is changed: then the replay is expected to differ from the run.
+    pub fn what_if(&self) -> bool {
+        let l = &self.link;
+        self.gains.is_some()
+            || self.t_total.is_some()
+            || l.link_delay_ms.is_some()
+            || l.link_jitter_ms.is_some()
+            || l.link_loss.is_some()
+            || l.seed.is_some()
+    }
 }
 
 #[derive(Debug, Subcommand)]

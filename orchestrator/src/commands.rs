@@ -67,8 +67,12 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             run,
             commands,
         } => simulate_command(&source, &out, &run, commands.as_deref(), cli.quiet),
-        Command::Replay(args) => crate::replay::replay_command(*args, cli.quiet),
-        Command::Report { dir, follow } => report_command(&dir, follow, cli.quiet),
+        Command::Replay(args) => replay_command(&args, cli.quiet),
+        Command::Report {
+            dir,
+            follow,
+            against,
+        } => report_command(&dir, follow, against.as_deref(), cli.quiet),
         Command::Launch(args) => launch_command(*args, cli.quiet),
         Command::View {
             dir,
@@ -138,8 +142,28 @@ fn simulate_command(
     Ok(exit_of(&report))
 }
 
+/// `orchestrator replay`: the run directory checked and flown again (changed or not), then
+/// compared with the run.
+fn replay_command(a: &crate::cli::ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
+    let p = crate::replay::prepare(a)?;
+    let flight = InProcess {
+        what: "replay",
+        mode: RunMode::Replay,
+        records: p.records.as_deref(),
+        losses: p.losses,
+        every: Some(p.every),
+        run: &p.run,
+        quiet,
+    };
+    let report = fly_in_process(&p.flown, &p.dir, flight)?;
+    let differs = crate::replay::compare(&a.run, p.dir.path(), p.format, quiet)?;
+    after_run(p.dir.path(), &report, &p.run, quiet);
+    crate::replay::outcome(a, p.what_if, differs)?;
+    Ok(exit_of(&report))
+}
+
 /// A flight with the in-process engine: `simulate`, and `replay` with the run's options.
-pub(crate) struct InProcess<'a> {
+struct InProcess<'a> {
     /// The command's name, in the progress and summary lines.
     pub what: &'static str,
     /// What run.json says flew the run.
@@ -155,11 +179,7 @@ pub(crate) struct InProcess<'a> {
 
 /// Fly `s` (its plan the commanded one) into `dir`: commands.json, run.json, telemetry and the
 /// audit, with progress and the summary.
-pub(crate) fn fly_in_process(
-    s: &Scenario,
-    dir: &RunDir,
-    f: InProcess,
-) -> Result<AuditReport, Failure> {
+fn fly_in_process(s: &Scenario, dir: &RunDir, f: InProcess) -> Result<AuditReport, Failure> {
     let run = f.run;
     if let Some(records) = f.records {
         write_commands(dir, records).map_err(Failure::fault)?;
@@ -199,7 +219,7 @@ pub(crate) fn fly_in_process(
 }
 
 /// run.json: what the run's other files do not say of how it was flown.
-pub(crate) fn run_record(
+fn run_record(
     s: &Scenario,
     mode: RunMode,
     every: u64,
@@ -220,7 +240,7 @@ pub(crate) fn run_record(
 }
 
 /// The figures and replay.html of a finished in-process run.
-pub(crate) fn after_run(dir: &Path, report: &AuditReport, run: &RunOptions, quiet: bool) {
+fn after_run(dir: &Path, report: &AuditReport, run: &RunOptions, quiet: bool) {
     figures_after_run(dir, run, quiet);
     if report.ticks > 0 {
         replay_after_run(dir, quiet);
@@ -228,9 +248,18 @@ pub(crate) fn after_run(dir: &Path, report: &AuditReport, run: &RunOptions, quie
 }
 
 /// `orchestrator report RUN_DIR`: the figures of a finished run.
-fn report_command(dir: &Path, follow: Option<u32>, quiet: bool) -> Result<Exit, Failure> {
+fn report_command(
+    dir: &Path,
+    follow: Option<u32>,
+    against: Option<&Path>,
+    quiet: bool,
+) -> Result<Exit, Failure> {
     let started = Instant::now();
-    let files = report(dir, follow).map_err(|e| match e {
+    let files = match against {
+        Some(other) => cdm_report::compare(dir, other),
+        None => report(dir, follow),
+    }
+    .map_err(|e| match e {
         ReportError::Read(_) => Failure::bad_input(e),
         ReportError::Draw(_) => Failure::fault(e),
     })?;

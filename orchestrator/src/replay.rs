@@ -2,69 +2,42 @@
 //! its directory alone, and compared with it; with a change ("what if") the same history
 //! (commands, losses) flown with other gains, another travel time or other links.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use cdm_records::run_record::RunMode;
+use cdm_certificates::command_certificate::CommandRecord;
+use cdm_engine::loss::LossSchedule;
 use cdm_records::rundir::RunDir;
 use cdm_records::telemetry::TelemetryFormat;
 use cdm_scenario::{Checks, Scenario};
 use cdm_simulate::replay::{first_audit_difference, first_line_difference, read_audit, RunInputs};
-use cdm_team::{out, Exit, Failure};
-use clap::Args;
+use cdm_team::{out, Failure};
 
-use crate::cli::{OnLossArg, RunOptions};
-use crate::commands::{after_run, exit_of, fly_in_process, InProcess};
+use crate::cli::{OnLossArg, ReplayArgs, RunOptions};
 
-/// The options of `orchestrator replay`.
-#[derive(Debug, Args)]
-pub struct ReplayArgs {
-    /// The run directory to fly again (of `simulate`, a lockstep `launch` or a `replay`).
-    #[arg(value_name = "RUN_DIR")]
-    pub run: PathBuf,
-    /// The replay's run directory (created; refused when it exists and is not empty, unless
-    /// --force).
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
-    /// Reuse a non-empty --out directory.
-    #[arg(long)]
-    pub force: bool,
-    /// What if: fly with these gains k1,k2,k3,k4 (eq. 18) instead of the scenario's.
-    #[arg(long, value_name = "K1,K2,K3,K4", allow_hyphen_values = true)]
-    pub gains: Option<String>,
-    /// What if: fly with this travel time instead of the scenario's (the losses and commands
-    /// keep their ticks and times).
-    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
-    pub t_total: Option<f64>,
-    /// What if: other links (each flag overrides that key of the run's `[link]`).
-    #[command(flatten)]
-    pub link: cdm_member::options::LinkArgs,
-    /// Do not draw the figures at the end of the replay.
-    #[arg(long)]
-    pub no_figures: bool,
+/// A replay ready to fly: the run's inputs checked, the what-if applied, --out created.
+pub struct Prepared {
+    /// The scenario to fly, its plan the commanded one.
+    pub flown: Scenario,
+    /// The commands as applied, when the run had a command file.
+    pub records: Option<Vec<CommandRecord>>,
+    pub losses: LossSchedule,
+    /// The run's options (run.json), as `simulate` takes them.
+    pub run: RunOptions,
+    pub every: u64,
+    pub dir: RunDir,
+    pub format: TelemetryFormat,
+    pub what_if: bool,
 }
 
-impl ReplayArgs {
-    /// Whether anything is changed: then the replay is expected to differ from the run.
-    fn what_if(&self) -> bool {
-        let l = &self.link;
-        self.gains.is_some()
-            || self.t_total.is_some()
-            || l.link_delay_ms.is_some()
-            || l.link_jitter_ms.is_some()
-            || l.link_loss.is_some()
-            || l.seed.is_some()
-    }
-}
-
-/// `replay`: read and check the run directory, fly it (changed or not) into --out, compare.
-pub fn replay_command(a: ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
+/// Read and check the run directory, apply the change, create --out.
+pub fn prepare(a: &ReplayArgs) -> Result<Prepared, Failure> {
     let inputs = RunInputs::read(&a.run).map_err(Failure::bad_input)?;
     let r = &inputs.record;
     // Checked by RunRecord::read.
     let format = r.telemetry_format().unwrap_or_default();
     cdm_team::telemetry::check_available(format)?;
     let what_if = a.what_if();
-    let s = changed(&inputs.scenario, &a)?;
+    let s = changed(&inputs.scenario, a)?;
     let run = RunOptions {
         link: Default::default(),
         stop_on_violation: r.stop_on_violation,
@@ -96,24 +69,27 @@ pub fn replay_command(a: ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
         Some((flown, records)) => (flown, Some(records)),
         None => (s, None),
     };
-    let flight = InProcess {
-        what: "replay",
-        mode: RunMode::Replay,
-        records: records.as_deref(),
+    Ok(Prepared {
+        flown,
+        records,
         losses,
-        every: Some(r.every),
-        run: &run,
-        quiet,
-    };
-    let report = fly_in_process(&flown, &dir, flight)?;
-    let differs = compare(&a.run, dir.path(), format, quiet)?;
-    after_run(dir.path(), &report, &run, quiet);
+        run,
+        every: r.every,
+        dir,
+        format,
+        what_if,
+    })
+}
+
+/// A replay without a change that does not give the run's bytes is a fault of the replay (the
+/// lockstep contract broken), named by its first difference.
+pub fn outcome(a: &ReplayArgs, what_if: bool, differs: Option<String>) -> Result<(), Failure> {
     match differs {
         Some(why) if !what_if => Err(Failure::fault(format!(
             "replay of {} differs from the run: {why}",
             a.run.display()
         ))),
-        _ => Ok(exit_of(&report)),
+        _ => Ok(()),
     }
 }
 
@@ -160,19 +136,24 @@ fn same_dir(a: &Path, b: &Path) -> bool {
 
 /// Compare the replay's telemetry and audit with the run's and say so; the first difference,
 /// if any.
-fn compare(
+pub fn compare(
     run: &Path,
     replay: &Path,
     format: TelemetryFormat,
     quiet: bool,
 ) -> Result<Option<String>, Failure> {
     let name = format.file_name();
-    let read = |dir: &Path| {
+    let open = |dir: &Path| {
         let p = dir.join(name);
-        std::fs::read(&p).map_err(|e| Failure::bad_input(format!("{}: {e}", p.display())))
+        let f = std::fs::File::open(&p)
+            .map_err(|e| Failure::bad_input(format!("{}: {e}", p.display())))?;
+        let bytes = f.metadata().map_or(0, |m| m.len());
+        Ok::<_, Failure>((std::io::BufReader::new(f), bytes))
     };
-    let (a, b) = (read(run)?, read(replay)?);
-    let telemetry = match (format, first_line_difference(&a, &b)) {
+    let ((a, a_bytes), (b, b_bytes)) = (open(run)?, open(replay)?);
+    let first = first_line_difference(a, b)
+        .map_err(|e| Failure::bad_input(format!("{}: {e}", run.join(name).display())))?;
+    let telemetry = match (format, first) {
         (_, None) => None,
         (TelemetryFormat::Parquet, Some(_)) => Some(format!("{name} differs")),
         (_, Some(line)) => Some(format!("{name} differs from line {line}")),
@@ -183,8 +164,8 @@ fn compare(
     );
     if !quiet {
         match &telemetry {
-            None => out!("  {name}: identical to the run's ({} bytes)", b.len()),
-            Some(why) => out!("  {why} ({} bytes, the run's {})", b.len(), a.len()),
+            None => out!("  {name}: identical to the run's ({b_bytes} bytes)"),
+            Some(why) => out!("  {why} ({b_bytes} bytes, the run's {a_bytes})"),
         }
         match &audit {
             None => out!("  audit.json: safety figures identical to the run's"),

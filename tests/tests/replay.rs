@@ -5,6 +5,7 @@
 //!   byte for byte and audit.json's safety figures are the run's; run.json records the options.
 //! - What if: `--gains` re-flies the same history differently, and two such replays are
 //!   identical.
+//! - `report --against` draws a run and its what-if side by side.
 //! - A tampered or foreign file (audit.json's losses, commands.json, another scenario.toml, a
 //!   missing run.json) is exit 2 naming the file and its first bad record; nothing panics.
 //!
@@ -16,11 +17,11 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use integration_tests::{bin, run, unique_team, TempDir};
+use integration_tests::{bin, run, unique_team, write_text, TempDir};
 use serde_json::Value;
 use support::{
     assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file, launch,
-    read_json, simulate, write_text,
+    read_json, simulate,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
@@ -119,6 +120,22 @@ fn a_simulate_run_with_commands_and_a_loss_replays_byte_for_byte_and_what_if_is_
     // The same losses and commands were flown.
     assert_eq!(read_json(&a.join("audit.json"))["losses"][0]["tick"], 801);
     assert!(a.join("commands.json").exists());
+
+    // The two side by side.
+    let mut c = Command::new(bin("orchestrator"));
+    c.args(["report", "--quiet"])
+        .arg(&a)
+        .arg("--against")
+        .arg(&run_dir);
+    assert_exit(&run(&mut c, DEADLINE), 0, "report --against");
+    let table = std::fs::read_to_string(a.join("fig_compare.csv")).unwrap();
+    let rows = |k: &str| table.lines().filter(|l| l.starts_with(k)).count();
+    assert_eq!(
+        (rows("0,"), rows("1,")),
+        (1001, 1001),
+        "every third tick of 0..=3000"
+    );
+    assert!(a.join("fig_compare.svg").exists() && a.join("fig_compare.png").exists());
 }
 
 #[test]

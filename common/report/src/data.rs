@@ -129,6 +129,8 @@ pub struct TickSample {
     pub min_separation_m: Real,
     /// Smallest signed distance of a follower to the containment prism's sides, D_S(t) (Fig. 11).
     pub min_boundary_m: Real,
+    /// Largest ||r_i - r_i,HT||_2 over the living members (against delta, eq. 38).
+    pub max_deviation_m: Real,
     /// The followed member: actual and desired position (Fig. 9).
     pub follow_r: Vec3,
     pub follow_ht: Vec3,
@@ -331,11 +333,20 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
             lambdas: lambdas_at(&scenario, t),
             min_separation_m: sep,
             min_boundary_m: boundary,
+            max_deviation_m: max_deviation(pos, ht, tp.alive),
             follow_r: pos[follow_k],
             follow_ht: ht[follow_k],
         });
     })?;
     Ok(data)
+}
+
+/// Largest ||r_i - r_i,HT||_2 over the living members.
+fn max_deviation(pos: &[Vec3], ht: &[Vec3], alive: &[bool]) -> Real {
+    (0..pos.len())
+        .filter(|&k| alive[k])
+        .map(|k| (pos[k] - ht[k]).norm())
+        .fold(0.0, Real::max)
 }
 
 /// The followers any loss re-triangulated or left flying its plan, as (member index, id, first

@@ -2,6 +2,7 @@
 //! directory alone (telemetry.csv, audit.json, scenario.toml), as SVG and PNG, with the data of
 //! the safety figures beside them as CSV.
 
+mod compare;
 pub mod data;
 mod formation;
 mod plot;
@@ -16,6 +17,7 @@ use plotters::prelude::SeriesLabelPosition;
 use cdm_math::Real;
 use cdm_records::rundir::write_atomic;
 
+pub use compare::compare;
 pub use data::{read_run, ReadError, RunData};
 pub use plot::FigureError;
 use plot::{thin, thin_min, write_figure, Line, Panel, Rule, Stack, GREY, LIMIT, PALETTE};
@@ -25,7 +27,7 @@ const ACCEPTED: plotters::style::RGBColor = plotters::style::RGBColor(0, 150, 60
 pub use top_view::{top_view, TopPath};
 
 /// Points per plotted line (decimation keeps files small and drawing fast).
-const MAX_POINTS: usize = 1500;
+pub(crate) const MAX_POINTS: usize = 1500;
 
 /// Why a report could not be drawn.
 #[derive(Debug, thiserror::Error)]
@@ -104,7 +106,7 @@ fn command_marks(d: &RunData, scale: Real) -> Vec<Rule> {
         .collect()
 }
 
-fn csv(dir: &Path, name: &str, text: &str) -> Result<PathBuf, FigureError> {
+pub(crate) fn csv(dir: &Path, name: &str, text: &str) -> Result<PathBuf, FigureError> {
     let p = dir.join(name);
     write_atomic(&p, text.as_bytes())?;
     Ok(p)

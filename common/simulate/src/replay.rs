@@ -312,17 +312,28 @@ pub fn first_audit_difference(run: &Value, replay: &Value) -> Option<String> {
     first
 }
 
-/// The first line at which two telemetry texts differ (1-based), `None` when they are equal.
-pub fn first_line_difference(run: &[u8], replay: &[u8]) -> Option<usize> {
-    let mut a = run.split(|&c| c == b'\n');
-    let mut b = replay.split(|&c| c == b'\n');
+/// The first line at which two telemetry texts differ (1-based), `None` when they are equal;
+/// read as streams, a line at a time (a run's telemetry can be larger than memory).
+pub fn first_line_difference(
+    mut run: impl std::io::BufRead,
+    mut replay: impl std::io::BufRead,
+) -> std::io::Result<Option<usize>> {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
     let mut line = 1;
     loop {
-        match (a.next(), b.next()) {
-            (None, None) => return None,
-            (x, y) if x != y => return Some(line),
-            _ => line += 1,
+        a.clear();
+        b.clear();
+        let (n, m) = (
+            run.read_until(b'\n', &mut a)?,
+            replay.read_until(b'\n', &mut b)?,
+        );
+        if a != b {
+            return Ok(Some(line));
         }
+        if n == 0 && m == 0 {
+            return Ok(None);
+        }
+        line += 1;
     }
 }
 
@@ -337,9 +348,11 @@ mod tests {
 
     #[test]
     fn the_first_difference_is_named() {
-        assert_eq!(first_line_difference(b"a\nb\n", b"a\nb\n"), None);
-        assert_eq!(first_line_difference(b"a\nb\nc", b"a\nx\nc"), Some(2));
-        assert_eq!(first_line_difference(b"a\nb\n", b"a\nb\nc\n"), Some(3));
+        let first = |a: &[u8], b: &[u8]| first_line_difference(a, b).unwrap();
+        assert_eq!(first(b"a\nb\n", b"a\nb\n"), None);
+        assert_eq!(first(b"a\nb\nc", b"a\nx\nc"), Some(2));
+        assert_eq!(first(b"a\nb\n", b"a\nb\nc\n"), Some(3));
+        assert_eq!(first(b"a\nb", b"a\nb\n"), Some(2));
         let run: Value = serde_json::json!({"verdict": "SAFE", "max_deviation_m": 0.25,
             "losses": [{"id": 3, "cause": "killed", "tick": 5}]});
         let mut replay = run.clone();
