@@ -69,6 +69,15 @@ fn read_head(run: &Path) -> Result<(Scenario, AuditNumbers), Failure> {
     let scenario =
         Scenario::load(&run.join("scenario.toml"), Checks::Member).map_err(Failure::bad_input)?;
     let audit = read_audit(&run.join("audit.json")).map_err(Failure::bad_input)?;
+    // A commanded run flew its commanded plan: its commands.json, read as the command file it
+    // is, gives that plan again (deterministic), so the margins (lambda_1 of the plan) are the
+    // ones the run's own bag carries.
+    let commands = run.join(cdm_records::commands::COMMANDS_FILE);
+    if commands.is_file() {
+        let list = cdm_scenario::load_commands(&commands, &scenario).map_err(Failure::bad_input)?;
+        let (flown, _) = cdm_certificates::command_certificate::apply_commands(&scenario, &list);
+        return Ok((flown, audit));
+    }
     Ok((scenario, audit))
 }
 
