@@ -8,7 +8,6 @@
 //!
 //! How to run: `cargo test --release -p integration-tests --test commands_seen`.
 
-use std::path::Path;
 use std::process::Command;
 
 use integration_tests::{bin, describe, run, simulate, TempDir};

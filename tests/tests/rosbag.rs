@@ -129,7 +129,7 @@ fn a_commanded_runs_bag_carries_its_commands() {
         "--telemetry",
         "mcap",
         "--every",
-        "7",
+        "50",
     ];
     let o = run(
         &mut simulate(&run_dir, &[&flags[..], &commands[..]].concat()),

@@ -21,7 +21,7 @@
 //! split at every break (`step::step_at`).
 
 use crate::linear_certificate::{taylor_shift, LinearTeam, NotLinear, TickMaps, COARSE_TICKS};
-use cdm_math::{Real, Vec3, Vec4};
+use cdm_math::{Mat4, Real, Vec3, Vec4};
 use cdm_model::plan::{Piece, TeamPlan};
 use cdm_model::step::tick_time;
 use cdm_scenario::Scenario;
@@ -165,9 +165,14 @@ fn run_chains(
     };
     let levels = team.depth + 1;
     let intervals = (last - from).div_ceil(COARSE_TICKS).max(1);
-    let mut pos = Vec::with_capacity((last - from + 1) * levels * SIGNALS);
-    let mut acc_bound = vec![0.0; intervals * levels * 3];
-    let mut tail = vec![0.0; intervals * levels * 3];
+    let mut ch = FlightChains {
+        pos: Vec::with_capacity((last - from + 1) * levels * SIGNALS),
+        acc_bound: vec![0.0; intervals * levels * 3],
+        tail: vec![0.0; intervals * levels * 3],
+        levels,
+        from,
+        last,
+    };
     let zero = [Vec4::zeros(); SIGNALS];
     // At rest at the start, with whatever derivatives the plan starts with.
     let mut d_k = at(0);
@@ -187,14 +192,7 @@ fn run_chains(
         past[slot + 1] = lam;
         past[slot + 2..slot + width].copy_from_slice(&y);
         if k >= from {
-            record(
-                k - from,
-                &y,
-                dt,
-                intervals,
-                &mut pos,
-                (&mut acc_bound, &mut tail),
-            );
+            ch.record(k - from, &y, dt, intervals);
         }
         if k == last {
             break;
@@ -206,22 +204,15 @@ fn run_chains(
             psi * taylor_shift((k - h) as Real * dt)
         };
         let at_h = &past[(h % (delay + 1)) * width..][..width];
-        let (d_h, lam_h, y_h) = (at_h[0], at_h[1], &at_h[2..]);
-        for l in (1..levels).rev() {
-            for i in 0..SIGNALS {
-                let input = if l == 1 {
-                    y_h[0][i] - lam_h[i]
-                } else {
-                    y_h[l - 1][i]
-                };
-                y[l][i] = phi * y[l][i] + psi_h * input;
-            }
-        }
         let d_next = at(k + 1);
-        for i in 0..SIGNALS {
-            chi[i] = phi * chi[i] + psi_h * lam_h[i];
-            phi_x[i] = phi * phi_x[i] + phi * d_k[i] + psi_h * d_h[i] - d_next[i];
-        }
+        follower_step(
+            (phi, psi_h),
+            at_h,
+            (&d_k, &d_next),
+            &mut y,
+            &mut chi,
+            &mut phi_x,
+        );
         lam = leader_step(plan, team, origin, k, &lam, &d_k, &d_next);
         d_k = d_next;
     }
@@ -229,16 +220,37 @@ fn run_chains(
     let row = levels * 3;
     for m in (0..intervals.saturating_sub(1)).rev() {
         for q in 0..row {
-            tail[m * row + q] = tail[m * row + q].max(tail[(m + 1) * row + q]);
+            ch.tail[m * row + q] = ch.tail[m * row + q].max(ch.tail[(m + 1) * row + q]);
         }
     }
-    FlightChains {
-        pos,
-        acc_bound,
-        tail,
-        levels,
-        from,
-        last,
+    ch
+}
+
+/// The followers' chains from tick k to k + 1 (`linear_certificate::LinearTeam::chains`):
+/// g_l <- phi g_l + psi_h (input of level l), H Lam and g_0's own forcing, with `heard` what
+/// H reads at tick k (the tick-h desired state, Lam, g_0 .. g_D) and `(d_k, d_next)` the
+/// desired states at k and k + 1.
+fn follower_step(
+    (phi, psi_h): (Mat4, Mat4),
+    heard: &[Signals],
+    (d_k, d_next): (&Signals, &Signals),
+    y: &mut [Signals],
+    chi: &mut Signals,
+    phi_x: &mut Signals,
+) {
+    for l in (1..y.len()).rev() {
+        for i in 0..SIGNALS {
+            let input = if l == 1 {
+                heard[2][i] - heard[1][i]
+            } else {
+                heard[l + 1][i]
+            };
+            y[l][i] = phi * y[l][i] + psi_h * input;
+        }
+    }
+    for i in 0..SIGNALS {
+        chi[i] = phi * chi[i] + psi_h * heard[1][i];
+        phi_x[i] = phi * phi_x[i] + phi * d_k[i] + psi_h * heard[0][i] - d_next[i];
     }
 }
 
@@ -281,45 +293,41 @@ fn leader_step(
     std::array::from_fn(|i| e[i] + prev[i] - d_next[i])
 }
 
-/// Records tick `from + r` of every level (its positions) and raises the curvature bounds and
-/// the position norms of the coarse intervals holding it.
-fn record(
-    r: usize,
-    y: &[Signals],
-    dt: Real,
-    intervals: usize,
-    pos: &mut Vec<Real>,
-    (acc_bound, sup): (&mut [Real], &mut [Real]),
-) {
-    let levels = y.len();
-    for (l, g) in y.iter().enumerate() {
-        pos.extend(g.iter().map(|v| v[0]));
-        for j in 0..3 {
-            // |g''| between ticks is at most |g''(t_k)| + dt |g'''| (+ O(dt^2)), per axis.
-            let b = (0..3)
-                .map(|a| {
-                    let v = g[3 * j + a];
-                    let b = v[2].abs() + dt * v[3].abs();
-                    b * b
-                })
-                .sum::<Real>()
-                .sqrt();
-            let norm = (0..3)
-                .map(|a| g[3 * j + a][0] * g[3 * j + a][0])
-                .sum::<Real>()
-                .sqrt();
-            let m = r / COARSE_TICKS;
-            for m in [
-                Some(m),
-                (r > 0 && r.is_multiple_of(COARSE_TICKS)).then(|| m - 1),
-            ]
-            .into_iter()
-            .flatten()
-            .filter(|&m| m < intervals)
-            {
-                let q = (m * levels + l) * 3 + j;
-                acc_bound[q] = acc_bound[q].max(b);
-                sup[q] = sup[q].max(norm);
+impl FlightChains {
+    /// Records tick `from + r` of every level (its positions) and raises the curvature bounds
+    /// and the position norms of the coarse intervals holding it.
+    fn record(&mut self, r: usize, y: &[Signals], dt: Real, intervals: usize) {
+        let (pos, acc_bound, sup) = (&mut self.pos, &mut self.acc_bound, &mut self.tail);
+        let levels = y.len();
+        for (l, g) in y.iter().enumerate() {
+            pos.extend(g.iter().map(|v| v[0]));
+            for j in 0..3 {
+                // |g''| between ticks is at most |g''(t_k)| + dt |g'''| (+ O(dt^2)), per axis.
+                let b = (0..3)
+                    .map(|a| {
+                        let v = g[3 * j + a];
+                        let b = v[2].abs() + dt * v[3].abs();
+                        b * b
+                    })
+                    .sum::<Real>()
+                    .sqrt();
+                let norm = (0..3)
+                    .map(|a| g[3 * j + a][0] * g[3 * j + a][0])
+                    .sum::<Real>()
+                    .sqrt();
+                let m = r / COARSE_TICKS;
+                for m in [
+                    Some(m),
+                    (r > 0 && r.is_multiple_of(COARSE_TICKS)).then(|| m - 1),
+                ]
+                .into_iter()
+                .flatten()
+                .filter(|&m| m < intervals)
+                {
+                    let q = (m * levels + l) * 3 + j;
+                    acc_bound[q] = acc_bound[q].max(b);
+                    sup[q] = sup[q].max(norm);
+                }
             }
         }
     }

@@ -66,7 +66,10 @@ pub enum ExportError {
     BagCreate(BagError),
     /// The run's commands.json cannot be read.
     #[error(transparent)]
-    Commands(#[from] cdm_records::commands::CommandsError),
+    Commands(#[from] cdm_records::commands::RunCommandsError),
+    /// The run's commands.json is not a command file of its scenario.
+    #[error(transparent)]
+    CommandFile(#[from] cdm_scenario::CommandsError),
     /// The bag could not be written once created.
     #[error(transparent)]
     Bag(BagError),

@@ -80,5 +80,14 @@ fn read_head(run: &Path) -> Result<(Scenario, AuditNumbers), ExportError> {
     }
     let scenario = Scenario::load(&run.join("scenario.toml"), Checks::Member)?;
     let audit = read_audit(&run.join("audit.json"))?;
+    // A commanded run flew its commanded plan: its commands.json, read as the command file it
+    // is, gives that plan again (deterministic), so the margins (lambda_1 of the plan) are the
+    // ones the run's own bag carries.
+    let commands = run.join(cdm_records::commands::COMMANDS_FILE);
+    if commands.is_file() {
+        let list = cdm_scenario::load_commands(&commands, &scenario)?;
+        let (flown, _) = cdm_certificates::command_certificate::apply_commands(&scenario, &list);
+        return Ok((flown, audit));
+    }
     Ok((scenario, audit))
 }

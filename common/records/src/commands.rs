@@ -10,7 +10,7 @@ pub const COMMANDS_FILE: &str = "commands.json";
 
 /// Why a run's `commands.json` cannot be read.
 #[derive(Debug, thiserror::Error)]
-pub enum CommandsError {
+pub enum RunCommandsError {
     /// The file exists but cannot be read.
     #[error("{}: {source}", path.display())]
     Io {
@@ -27,14 +27,14 @@ pub enum CommandsError {
 
 /// Every command of the run in `dir`, in file order (switch tick order); none when the run was
 /// not commanded (no file).
-pub fn read_commands(dir: &Path) -> Result<Vec<CommandSummary>, CommandsError> {
+pub fn read_commands(dir: &Path) -> Result<Vec<CommandSummary>, RunCommandsError> {
     let path = dir.join(COMMANDS_FILE);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(source) => return Err(CommandsError::Io { path, source }),
+        Err(source) => return Err(RunCommandsError::Io { path, source }),
     };
-    serde_json::from_str(&text).map_err(|source| CommandsError::Json { path, source })
+    serde_json::from_str(&text).map_err(|source| RunCommandsError::Json { path, source })
 }
 
 /// A command as one line: `goto accepted at tick 2000` or `goto refused at tick 2000: why`.

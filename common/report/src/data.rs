@@ -253,18 +253,19 @@ pub fn deepest_follower(s: &Scenario) -> Option<u32> {
         .map(|(_, id)| id)
 }
 
+/// The run's commands.json (none for a run without), its errors naming the file.
+fn read_run_commands(dir: &Path) -> Result<Vec<CommandSummary>, ReadError> {
+    use cdm_records::commands::{read_commands, COMMANDS_FILE};
+    read_commands(dir).map_err(|e| invalid(&dir.join(COMMANDS_FILE), e.to_string()))
+}
+
 /// Read a run directory. `follow` overrides the followed member (it must be in the scenario).
 pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let sc_path = dir.join("scenario.toml");
     let scenario =
         Scenario::load(&sc_path, Checks::Member).map_err(|e| invalid(&sc_path, e.to_string()))?;
     let audit = read_audit(&dir.join("audit.json"))?;
-    let commands = cdm_records::commands::read_commands(dir).map_err(|e| {
-        invalid(
-            &dir.join(cdm_records::commands::COMMANDS_FILE),
-            e.to_string(),
-        )
-    })?;
+    let commands = read_run_commands(dir)?;
     let members = &scenario.formation.members;
     let index: BTreeMap<u32, usize> = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
     let follow = match follow {
