@@ -1,6 +1,8 @@
 //! `orchestrator export ...`: calls cdm-export and prints what it wrote. Exit 0 SAFE (or a
 //! written bag or map), 1 UNSAFE at the target scale, 2 bad input, 3 a fault.
 
+use std::path::Path;
+
 use cdm_export::{
     export_bag, export_geojson, export_plan, export_qgc_plan, MapSource, PlanExport, PlanTarget,
     ShowFrame,
@@ -9,15 +11,17 @@ use cdm_model::outcome::Verdict;
 use cdm_team::progress::Spinner;
 use cdm_team::{out, Exit, Failure};
 
-use crate::export_args::{failure, ExportTarget};
+use crate::export_args::{failure, ExportTarget, FrameArgs, SourceArgs};
 use crate::print_certificate::print_certificate;
 
 pub fn run(target: ExportTarget, quiet: bool) -> Result<Exit, Failure> {
-    let (plan, source, out, frame) = match target {
+    match target {
         ExportTarget::Crazyswarm2 { source, out, frame } => {
-            (PlanTarget::Crazyswarm2, source, out, frame)
+            plan(PlanTarget::Crazyswarm2, &source, &out, &frame, quiet)
         }
-        ExportTarget::Skybrush { source, out, frame } => (PlanTarget::Skybrush, source, out, frame),
+        ExportTarget::Skybrush { source, out, frame } => {
+            plan(PlanTarget::Skybrush, &source, &out, &frame, quiet)
+        }
         ExportTarget::Rosbag2 { run, out, force } => {
             let bag = export_bag(&run, &out, force).map_err(failure)?;
             if !quiet {
@@ -31,7 +35,7 @@ pub fn run(target: ExportTarget, quiet: bool) -> Result<Exit, Failure> {
                     out!("  {name}: {n}");
                 }
             }
-            return Ok(Exit::Safe);
+            Ok(Exit::Safe)
         }
         ExportTarget::Geojson { source, out, force } => {
             let g = export_geojson(&MapSource { path: source }, &out, force).map_err(failure)?;
@@ -47,7 +51,7 @@ pub fn run(target: ExportTarget, quiet: bool) -> Result<Exit, Failure> {
                     g.ground_spots
                 );
             }
-            return Ok(Exit::Safe);
+            Ok(Exit::Safe)
         }
         ExportTarget::QgcPlan { source, out, force } => {
             let p = export_qgc_plan(&MapSource { path: source }, &out, force).map_err(failure)?;
@@ -62,14 +66,24 @@ pub fn run(target: ExportTarget, quiet: bool) -> Result<Exit, Failure> {
                     p.rally_points
                 );
             }
-            return Ok(Exit::Safe);
+            Ok(Exit::Safe)
         }
-    };
+    }
+}
+
+/// `export crazyswarm2|skybrush`: exit 0 SAFE, 1 UNSAFE (the files written only with --force).
+fn plan(
+    target: PlanTarget,
+    source: &SourceArgs,
+    out: &Path,
+    frame: &FrameArgs,
+    quiet: bool,
+) -> Result<Exit, Failure> {
     let spinner = Spinner::new(
         "certifying at the target scale: flying the plan at several travel times",
         quiet,
     );
-    let done = export_plan(plan, &source.plain(), &out, &frame.plain());
+    let done = export_plan(target, &source.plain(), out, &frame.plain());
     spinner.finish();
     let done = done.map_err(failure)?;
     report(&done, quiet);
