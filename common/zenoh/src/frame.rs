@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
-pub const PROTOCOL_VERSION: u32 = 6;
+pub const PROTOCOL_VERSION: u32 = 7;
 
 /// Orchestrator -> daemon.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -193,8 +193,8 @@ mod tests {
         assert_eq!(back, Down::Clock(c));
     }
 
-    /// The bytes of protocol 6, as its field-by-field mirror of the clock message wrote them:
-    /// the message encodes its fields in declaration order, and its padding never travels.
+    /// The bytes of protocol 7: the message encodes its fields in declaration order, and its
+    /// padding never travels.
     #[test]
     fn the_clock_message_keeps_the_bytes_of_its_protocol() {
         let notice = LossNotice {
@@ -206,8 +206,10 @@ mod tests {
         let mut c = ClockMsg::run(9, 1).with_loss(Some(notice));
         c.reserved = 5;
         let bytes = encode(&Down::Clock(c));
-        // variant 0, grant 9, hash 1, command 0, reason 0, loss tick 300 (varint), seq, id, linked
-        assert_eq!(bytes, [0, 9, 1, 0, 0, 0xac, 0x02, 2, 7, 1]);
+        // variant 0, grant 9, hash 1, command 0, reason 0, loss tick 300 (varint), seq, id,
+        // linked; then no command: its tick, seq and kind (varints), 10 f64 of 8 bytes
+        assert_eq!(bytes[..13], [0, 9, 1, 0, 0, 0xac, 0x02, 2, 7, 1, 0, 0, 0]);
+        assert_eq!(bytes.len(), 13 + 10 * 8);
         let back: Down = decode(&bytes).unwrap();
         c.reserved = 0;
         assert_eq!(back, Down::Clock(c));
