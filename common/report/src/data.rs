@@ -259,6 +259,24 @@ fn read_run_commands(dir: &Path) -> Result<Vec<CommandSummary>, ReadError> {
     read_commands(dir).map_err(|e| invalid(&dir.join(COMMANDS_FILE), e.to_string()))
 }
 
+/// The member the figures follow: `follow` when it is in the scenario (`index`: id to
+/// formation position), else the deepest follower; an unknown id is an error naming `path`.
+fn followed(
+    scenario: &Scenario,
+    index: &BTreeMap<u32, usize>,
+    follow: Option<u32>,
+    path: &Path,
+) -> Result<u32, ReadError> {
+    match follow {
+        Some(id) if index.contains_key(&id) => Ok(id),
+        Some(id) => Err(invalid(
+            path,
+            format!("--follow {id}: no agent with this id"),
+        )),
+        None => Ok(deepest_follower(scenario).unwrap_or(scenario.formation.members[0].id)),
+    }
+}
+
 /// Read a run directory. `follow` overrides the followed member (it must be in the scenario).
 pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let sc_path = dir.join("scenario.toml");
@@ -268,16 +286,7 @@ pub fn read_run(dir: &Path, follow: Option<u32>) -> Result<RunData, ReadError> {
     let commands = read_run_commands(dir)?;
     let members = &scenario.formation.members;
     let index: BTreeMap<u32, usize> = members.iter().enumerate().map(|(k, m)| (m.id, k)).collect();
-    let follow = match follow {
-        Some(id) if index.contains_key(&id) => id,
-        Some(id) => {
-            return Err(invalid(
-                &sc_path,
-                format!("--follow {id}: no agent with this id"),
-            ))
-        }
-        None => deepest_follower(&scenario).unwrap_or(members[0].id),
-    };
+    let follow = followed(&scenario, &index, follow, &sc_path)?;
     let follow_k = index[&follow];
     let followers: Vec<usize> = (0..members.len())
         .filter(|&k| members[k].role == Role::Follower)
