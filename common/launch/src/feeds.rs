@@ -5,7 +5,7 @@
 
 use cdm_foxglove::FoxgloveOptions;
 use cdm_math::Vec3;
-use cdm_records::audit::{AuditReport, Auditor};
+use cdm_records::audit::{AuditReport, Auditor, CommandSummary};
 use cdm_ros2::{Backend, Live, Ros2Options};
 use cdm_scenario::Scenario;
 use cdm_team::{out, Failure};
@@ -90,19 +90,25 @@ pub struct Feeds {
 
 impl Feeds {
     /// Starts what `--serve` and `--ros2` ask for, before the team: a bad address or a bad
-    /// ROS 2 environment stops nothing (exit 2).
+    /// ROS 2 environment stops nothing (exit 2). `commands`: the run's commands, decided before
+    /// the flight (`--commands`): the live view marks each from its switch tick on, the live
+    /// ROS 2 topics send each with the first tick at or after its switch.
     pub fn start(
         s: &Scenario,
         serve: Option<std::net::SocketAddr>,
         ros2: Option<&Ros2Options>,
         foxglove: Option<&FoxgloveOptions>,
+        commands: &[CommandSummary],
         quiet: bool,
     ) -> Result<Self, Failure> {
         let view = match serve {
             Some(addr) => {
                 let auditor = Auditor::new(s);
-                let view = LiveView::start(&addr.to_string(), s, auditor.numbers())
+                let mut view = LiveView::start(&addr.to_string(), s, auditor.numbers())
                     .map_err(Failure::bad_input)?;
+                for c in commands {
+                    view.command(c);
+                }
                 if !quiet {
                     out!("live view: http://{}/", view.addr());
                 }
@@ -111,7 +117,10 @@ impl Feeds {
             None => None,
         };
         let ros2 = match ros2 {
-            Some(o) => Some(Live::start(o, s).map_err(Failure::bad_input)?),
+            Some(o) => {
+                let live = Live::start_commanded(o, s, commands.to_vec());
+                Some(live.map_err(Failure::bad_input)?)
+            }
             None => None,
         };
         let foxglove = match foxglove {

@@ -198,7 +198,13 @@ fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Feeds, Failure> {
         member_binaries_present()?;
     }
     crate::realtime::schedule(o)?;
-    let live = Feeds::start(s, o.serve, o.ros2.as_ref(), o.foxglove.as_ref(), o.quiet)?;
+    let commands = o
+        .commands
+        .as_ref()
+        .map(|c| c.summaries())
+        .unwrap_or_default();
+    let (ros2, foxglove) = (o.ros2.as_ref(), o.foxglove.as_ref());
+    let live = Feeds::start(s, o.serve, ros2, foxglove, &commands, o.quiet)?;
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
