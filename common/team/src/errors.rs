@@ -2,10 +2,7 @@
 //! (`main` prints the chain). Their text is what the messages said before they were typed, so
 //! scripts and tests that match it still do.
 
-use std::path::PathBuf;
-
 use cdm_iox::TransportError;
-use cdm_trajectory::SplitError;
 
 /// A failure of a command that no library error describes alone.
 #[derive(Debug, thiserror::Error)]
@@ -20,27 +17,6 @@ pub enum CommandError {
     /// The running executable could not be found (the member binaries sit beside it).
     #[error("cannot locate the orchestrator binary: {0}")]
     LocateBinary(#[source] std::io::Error),
-    /// An output directory (`--out`) could not be created.
-    #[error("--out {}: cannot create: {source}", dir.display())]
-    CreateDir {
-        dir: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// An export's `--out` already holds something (a file, or a directory that is not empty):
-    /// it is not overwritten unless `--force`.
-    #[error("--out {}: exists{} (use --force to overwrite)", out.display(), if *dir { " and is not empty" } else { "" })]
-    OutExists { out: PathBuf, dir: bool },
-    /// The plan cannot be cut into pieces the target (a Crazyflie) holds.
-    #[error("export crazyswarm2: {0}")]
-    Split(#[source] SplitError),
-    /// The .skyc archive could not be assembled in memory.
-    #[error("{}: {source}", file.display())]
-    Zip {
-        file: PathBuf,
-        #[source]
-        source: zip::result::ZipError,
-    },
 }
 
 impl CommandError {
