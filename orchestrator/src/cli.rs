@@ -197,9 +197,11 @@ pub struct LaunchArgs {
     #[arg(long)]
     pub no_spawn: bool,
     /// How many ticks a member may run ahead of the slowest (1 = strict lockstep). Larger
-    /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory.
-    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
-    pub window: u32,
+    /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory. Default:
+    /// 1024 up to 250 members, 512 up to 500, 256 above, halved while the team would take more
+    /// than half of the free /dev/shm.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub window: Option<u32>,
     /// Seconds without any member progress before the team is stopped as faulty (at most
     /// 86400).
     #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]

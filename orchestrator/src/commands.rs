@@ -330,6 +330,25 @@ fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
     Ok(exit)
 }
 
+/// `--window`, or the default for the team's size and the free shared memory
+/// ([`cdm_iox::lockstep_window`]); said when short shared memory narrowed it.
+fn lockstep_window(a: &LaunchArgs, s: &Scenario, quiet: bool) -> u32 {
+    if let Some(w) = a.window {
+        return w;
+    }
+    let agents = s.formation.members.len();
+    let delay = u32::try_from(s.link_model().max_ticks()).unwrap_or(u32::MAX);
+    let free = cdm_iox::shm_free_bytes();
+    let window = cdm_iox::lockstep_window(agents, delay, free);
+    if !quiet && window < cdm_iox::lockstep_window(agents, delay, None) {
+        out!(
+            "window: {window} ticks (/dev/shm has {} KiB free; --window W to choose)",
+            free.unwrap_or(0) / 1024
+        );
+    }
+    window
+}
+
 /// The scenario and the launch options from the command line, every value checked.
 fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOptions), Failure> {
     cdm_team::telemetry::check_available(a.run.telemetry)?;
@@ -385,7 +404,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         window: if realtime.is_some() {
             cdm_launch::realtime::REALTIME_WINDOW
         } else {
-            a.window
+            lockstep_window(a, &s, quiet)
         },
         spawn: !a.no_spawn,
         agent_timeout: secs(a.agent_timeout, "--agent-timeout")?,
