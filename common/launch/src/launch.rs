@@ -49,6 +49,8 @@ pub struct LaunchOptions {
     pub agent_timeout: Duration,
     pub join_timeout: Duration,
     pub quiet: bool,
+    /// Where the launch's notices go (the binary prints them, or drops them under `--quiet`).
+    pub notices: std::sync::Arc<dyn cdm_team::notices::Notices>,
     /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
     pub stop_on_violation: bool,
     /// Fly only ticks 0..=K of the plan.
@@ -107,7 +109,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     // wait in the preflight (a ROS 2 participant or zenoh session opening) ends at once on one.
     let mut live = preflight(s, o)?;
     let interrupted = cdm_process::signals::install();
-    let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.quiet)?;
+    let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.notices.clone())
+        .map_err(Failure::bad_input)?;
     let layout = team_layout(s, o, &hosts)?;
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     let others = hosts.start_bridge(s, &o.team, crate::flight::flight_of(o))?;
@@ -168,7 +171,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     for l in &mut report.losses {
         l.host = others.host_of(l.id);
     }
-    others.finish(&dir, report.ticks, o.quiet);
+    others.finish(&dir, report.ticks);
     dir.write_audit(&report).map_err(Failure::fault)?;
     live.finish(&report, o.quiet);
     Ok(Launched {
@@ -506,7 +509,7 @@ fn fly_team(
         children,
         tel,
         w: watchers,
-        rec: Recorder::new(s, last, o.quiet),
+        rec: Recorder::new(s, last, &*o.notices),
         ticking: None,
         granted: 0,
     };
@@ -654,16 +657,16 @@ fn check_exited(
 /// (`TickRecorder`), then the live view and the progress line.
 struct Recorder {
     tick: TickRecorder,
-    progress: cdm_team::progress::Progress,
+    progress: Box<dyn cdm_team::notices::TickProgress>,
     /// The losses' audit records (as `simulate` writes them).
     losses: LossState,
 }
 
 impl Recorder {
-    fn new(s: &Scenario, last: u64, quiet: bool) -> Self {
+    fn new(s: &Scenario, last: u64, notices: &dyn cdm_team::notices::Notices) -> Self {
         Recorder {
             tick: TickRecorder::new(s),
-            progress: cdm_team::progress::Progress::new("launch", last, s.dt_s(), quiet),
+            progress: notices.progress("launch", last, s.dt_s()),
             losses: LossState::new(s, LossSchedule::default()),
         }
     }

@@ -194,7 +194,7 @@ pub fn run(
         lost: Vec::new(),
         out: vec![false; s.formation.members.len()],
         start_msg,
-        progress: cdm_team::progress::Progress::new("launch", last_audit, period_s, o.quiet),
+        progress: o.notices.progress("launch", last_audit, period_s),
         quiet: o.quiet,
     };
     let cpu_at_start = team_cpu_s(m.children);
@@ -401,7 +401,7 @@ struct Monitor<'a, 'p> {
     out: Vec<bool>,
     /// The start's clock message: loss notices ride on copies of it.
     start_msg: ClockMsg,
-    progress: cdm_team::progress::Progress,
+    progress: Box<dyn cdm_team::notices::TickProgress>,
     quiet: bool,
 }
 
