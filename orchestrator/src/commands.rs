@@ -391,7 +391,6 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         spawn: !a.no_spawn,
         agent_timeout: secs(a.agent_timeout, "--agent-timeout")?,
         join_timeout: secs(a.join_timeout, "--join-timeout")?,
-        quiet,
         notices: crate::notices::sink(quiet),
         stop_on_violation: a.run.stop_on_violation,
         max_ticks: a.run.max_ticks,

@@ -5,6 +5,7 @@ mod cli;
 mod commands;
 mod export_args;
 mod export_cmd;
+mod launch_args;
 mod notices;
 mod print_certificate;
 mod print_origin;

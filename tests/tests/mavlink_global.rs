@@ -21,9 +21,7 @@ use std::time::Duration;
 
 use cdm_math::Vec3;
 use cdm_model::airspace::Shape;
-use cdm_scenario::{
-    Checks, GeoOrigin, GeoPoint, ObstacleSpec, Scenario, ScenarioFile,
-};
+use cdm_scenario::{Checks, GeoOrigin, GeoPoint, ObstacleSpec, Scenario, ScenarioFile};
 use integration_tests::{
     describe, free_udp_ports, python_script, run, spawn, unique_team, venv_python, write_scenario,
     Running, TempDir,

@@ -7,7 +7,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use cdm_records::audit::{AuditReport, Auditor};
-use cdm_team::out;
 use cdm_team::telemetry_thread::ThreadedSink;
 
 use crate::realtime::Elsewhere;
@@ -48,7 +47,6 @@ pub struct LaunchOptions {
     pub spawn: bool,
     pub agent_timeout: Duration,
     pub join_timeout: Duration,
-    pub quiet: bool,
     /// Where the launch's notices go (the binary prints them, or drops them under `--quiet`).
     pub notices: std::sync::Arc<dyn cdm_team::notices::Notices>,
     /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
@@ -173,7 +171,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     }
     others.finish(&dir, report.ticks);
     dir.write_audit(&report).map_err(Failure::fault)?;
-    live.finish(&report, o.quiet);
+    live.finish(&report, &*o.notices);
     Ok(Launched {
         report,
         ticking: first_tick.map_or(Duration::ZERO, |t| ended - t),
@@ -207,7 +205,7 @@ fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Feeds, Failure> {
         .map(|c| c.summaries())
         .unwrap_or_default();
     let (ros2, foxglove) = (o.ros2.as_ref(), o.foxglove.as_ref());
-    let live = Feeds::start(s, o.serve, ros2, foxglove, &commands, o.quiet)?;
+    let live = Feeds::start(s, o.serve, ros2, foxglove, &commands, &*o.notices)?;
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
@@ -301,8 +299,8 @@ fn start_members(
                 }
             }
         }
-    } else if !o.quiet {
-        out!(
+    } else {
+        o.notices.notice(&format_args!(
             "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
             o.team,
             ids.len(),
@@ -314,7 +312,7 @@ fn start_members(
             o.team,
             crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
-        );
+        ));
     }
     Ok(children)
 }
