@@ -622,6 +622,11 @@ fn the_ticket_finder_finds_an_issue_number_and_nothing_else() {
 const ALLOWED_PRINTING: &[(&str, &str)] = &[
     // The watchdog of the tests aborts a hung test: its last word goes to the test's stderr.
     ("common/test-support/src/lib.rs", "a test's watchdog"),
+    // Defines `out!`, the macro the binaries print with (a full stdout must not stop them).
+    ("common/team/src/lib.rs", "the binaries' macro"),
+    // The member processes' `main` (argument parsing, logging, the error line and exit code),
+    // shared by the agent and leader binaries; it belongs beside them.
+    ("common/member/src/member_cli.rs", "not yet moved"),
 ];
 
 /// Library crates under common/ that still depend on clap: their option structs derive the
@@ -630,9 +635,17 @@ const ALLOWED_PRINTING: &[(&str, &str)] = &[
 const ALLOWED_CLAP: &[&str] = &["common/member"];
 
 /// The lines of `text` (outside its tests) that print: `println!`, `eprintln!`, `print!`,
-/// `eprint!` or the orchestrator's `out!`.
+/// `eprint!`, the orchestrator's `out!`, or a write to `io::stdout()` or `io::stderr()`.
 fn printing_lines(text: &str) -> Vec<usize> {
-    let printing = ["println!(", "eprintln!(", "print!(", "eprint!(", "out!("];
+    let printing = [
+        "println!(",
+        "eprintln!(",
+        "print!(",
+        "eprint!(",
+        "out!(",
+        "io::stdout()",
+        "io::stderr()",
+    ];
     code_outside_tests(text)
         .lines()
         .enumerate()
@@ -696,8 +709,8 @@ fn no_library_under_common_prints_or_parses_arguments() {
 #[test]
 fn the_printing_finder_finds_prints_and_clap_and_nothing_else() {
     let text = "fn a() {\n    out!(\"x\");\n    let s = \"println!(\";\n    layout!(1);\n}\n\
-                fn b() { eprintln!(\"y\"); }\n#[cfg(test)]\nmod tests {\n    fn c() { println!(); }\n}\n";
-    assert_eq!(printing_lines(text), vec![2, 6]);
+                fn b() { eprintln!(\"y\"); }\nfn c() { let _ = std::io::stderr().write_all(b); }\n#[cfg(test)]\nmod tests {\n    fn c() { println!(); }\n}\n";
+    assert_eq!(printing_lines(text), vec![2, 6, 7]);
     assert!(depends_on_clap("[dependencies]\nclap.workspace = true\n"));
     assert!(depends_on_clap(
         "[dependencies]\nserde = \"1\"\nclap = { version = \"4\" }\n"
