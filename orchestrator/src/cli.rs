@@ -103,7 +103,7 @@ pub enum Command {
         /// Play the run to Foxglove instead, at its own pace, once a client connects (ADDR:
         /// HOST:PORT or PORT; a bare --foxglove is 127.0.0.1:8765).
         #[command(flatten)]
-        foxglove: cdm_launch::feeds::FoxgloveArgs,
+        foxglove: crate::launch_args::FoxgloveArgs,
     },
     /// Redraw every figure of a finished run from its telemetry.csv, audit.json and
     /// scenario.toml (SVG and PNG, into the run directory).
@@ -220,11 +220,11 @@ pub struct LaunchArgs {
     #[command(flatten)]
     pub hosts: HostArgs,
     #[command(flatten)]
-    pub realtime: cdm_launch::realtime::RealtimeArgs,
+    pub realtime: crate::launch_args::RealtimeArgs,
     #[command(flatten)]
-    pub ros2: cdm_launch::feeds::Ros2Args,
+    pub ros2: crate::launch_args::Ros2Args,
     #[command(flatten)]
-    pub foxglove: cdm_launch::feeds::FoxgloveArgs,
+    pub foxglove: crate::launch_args::FoxgloveArgs,
     #[command(flatten)]
     pub run: RunOptions,
     /// Steer the team in flight from a file, as `simulate --commands` does (lockstep: the same
