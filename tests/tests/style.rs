@@ -631,8 +631,9 @@ const ALLOWED_PRINTING: &[(&str, &str)] = &[
 
 /// Library crates under common/ that still depend on clap: their option structs derive the
 /// parser the member binaries and the orchestrator flatten into theirs (cdm-mavlink's clap is
-/// its example's, a dev-dependency).
-const ALLOWED_CLAP: &[&str] = &["common/member"];
+/// its example's, a dev-dependency). cdm-unified-features has no code: it lists every feature
+/// the workspace builds its third-party crates with, clap's among them, for the Python module.
+const ALLOWED_CLAP: &[&str] = &["common/member", "common/unified-features"];
 
 /// The lines of `text` (outside its tests) that print: `println!`, `eprintln!`, `print!`,
 /// `eprint!`, the orchestrator's `out!`, or a write to `io::stdout()` or `io::stderr()`.
