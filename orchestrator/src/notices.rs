@@ -3,13 +3,13 @@
 use std::fmt::Display;
 use std::sync::Arc;
 
-use cdm_team::notices::{Notices, Silent, TickProgress};
+use cdm_team::notices::{NoticeSink, Silent, TickProgress};
 use cdm_team::out;
 
 /// Prints each notice as it comes (a full or closed stdout drops it, as every line here).
 struct Stdout;
 
-impl Notices for Stdout {
+impl NoticeSink for Stdout {
     fn notice(&self, notice: &dyn Display) {
         out!("{notice}");
     }
@@ -20,7 +20,7 @@ impl Notices for Stdout {
 }
 
 /// The sink for a command: stdout, or nothing with `--quiet`.
-pub fn sink(quiet: bool) -> Arc<dyn Notices> {
+pub fn sink(quiet: bool) -> Arc<dyn NoticeSink> {
     if quiet {
         Arc::new(Silent)
     } else {

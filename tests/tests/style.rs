@@ -618,7 +618,7 @@ fn the_ticket_finder_finds_an_issue_number_and_nothing_else() {
 }
 
 /// Library files under common/ that still print, and why; a binary (src/main.rs, src/bin/)
-/// prints, a library hands its notices to the binary's sink (`cdm_team::notices::Notices`).
+/// prints, a library hands its notices to the binary's sink (`cdm_team::notices::NoticeSink`).
 const ALLOWED_PRINTING: &[(&str, &str)] = &[
     // The watchdog of the tests aborts a hung test: its last word goes to the test's stderr.
     ("common/test-support/src/lib.rs", "a test's watchdog"),

@@ -12,7 +12,7 @@ use cdm_iox::{OrchestratorPorts, TeamName, TeamProcess};
 use cdm_records::audit::FaultRecord;
 use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::Scenario;
-use cdm_team::notices::Notices;
+use cdm_team::notices::NoticeSink;
 use cdm_zenoh::{down_key, up_key, JoinDesk, JoinReply, Net, PendingJoin};
 
 use crate::bridge_core::{BridgeCore, Ctx, HostReport};
@@ -35,7 +35,7 @@ pub struct Bridge {
     thread: Option<JoinHandle<Vec<HostReport>>>,
     crossing: Vec<(u32, u32)>,
     links: SharedLinks,
-    notices: Arc<dyn Notices>,
+    notices: Arc<dyn NoticeSink>,
 }
 
 impl Bridge {
@@ -47,7 +47,7 @@ impl Bridge {
         regions: &Regions,
         h: &HostOptions,
         flight: TeamFlight,
-        notices: Arc<dyn Notices>,
+        notices: Arc<dyn NoticeSink>,
     ) -> Result<Self, BridgeError> {
         let ctx = Ctx::new(s, team, regions, h, flight);
         let desk = net
@@ -207,7 +207,7 @@ fn run(
     ctx: Ctx,
     shared: &Mutex<Links>,
     stop: &AtomicBool,
-    notices: &dyn Notices,
+    notices: &dyn NoticeSink,
 ) -> Vec<HostReport> {
     let mut idle = IdleBackoff::for_team(ctx.flight.realtime_stale_after.is_some());
     let mut core = BridgeCore::new(ctx);
@@ -240,7 +240,7 @@ fn run(
 }
 
 /// Answers one join request: refused with the reason, or accepted with the host's share.
-fn admit(net: &Net, core: &mut BridgeCore, p: PendingJoin, now: Instant, notices: &dyn Notices) {
+fn admit(net: &Net, core: &mut BridgeCore, p: PendingJoin, now: Instant, notices: &dyn NoticeSink) {
     let q = p.request.clone();
     let refuse = |p: PendingJoin, why: Refusal| {
         tracing::warn!(daemon = %q.who, "refused a daemon: {why}");

@@ -12,7 +12,7 @@ use cdm_iox::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{StateMsg, StopReason};
 use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::{Checks, Scenario};
-use cdm_team::notices::Notices;
+use cdm_team::notices::NoticeSink;
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
 use cdm_team::Exit;
 use cdm_zenoh::{
@@ -56,7 +56,7 @@ struct Joined {
 
 /// Runs the daemon to the end of the team (exit 0), a lost link (3) or a refusal (2,
 /// [`DaemonError::exit`]); says which members it runs to `notices`.
-pub fn run(o: &DaemonOptions, notices: &dyn Notices) -> Result<Exit, DaemonError> {
+pub fn run(o: &DaemonOptions, notices: &dyn NoticeSink) -> Result<Exit, DaemonError> {
     let interrupted = cdm_process::signals::install();
     cdm_team::team::member_binaries_present()?;
     super::workdir::sweep_dead();

@@ -1,5 +1,5 @@
 //! What the host side tells the operator, as values handed to the binary's
-//! [`Notices`](cdm_team::notices::Notices) sink; their texts are written here and nowhere else.
+//! [`NoticeSink`](cdm_team::notices::NoticeSink) sink; their texts are written here and nowhere else.
 
 use std::fmt;
 

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use cdm_iox::{TeamLayout, TeamName};
 use cdm_scenario::Scenario;
-use cdm_team::notices::Notices;
+use cdm_team::notices::NoticeSink;
 
 use crate::error::{BridgeError, PlanError};
 use crate::notice::HostNotice;
@@ -21,7 +21,7 @@ pub struct HostPlan {
     options: HostOptions,
     /// Where the split and, later, the bridge's notices go.
     #[cfg_attr(not(feature = "hosts"), allow(dead_code))]
-    notices: Arc<dyn Notices>,
+    notices: Arc<dyn NoticeSink>,
 }
 
 impl HostPlan {
@@ -30,7 +30,7 @@ impl HostPlan {
         s: &Scenario,
         h: &HostOptions,
         team: &TeamName,
-        notices: Arc<dyn Notices>,
+        notices: Arc<dyn NoticeSink>,
     ) -> Result<Self, PlanError> {
         let members = s.formation.members.len();
         if h.hosts as usize > members {

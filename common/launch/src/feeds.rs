@@ -8,7 +8,7 @@ use cdm_math::Vec3;
 use cdm_records::audit::{AuditReport, Auditor, CommandSummary};
 use cdm_ros2::{Live, Ros2Options};
 use cdm_scenario::Scenario;
-use cdm_team::notices::Notices;
+use cdm_team::notices::NoticeSink;
 use cdm_team::Failure;
 use cdm_viewer::live::LiveView;
 
@@ -31,7 +31,7 @@ impl Feeds {
         ros2: Option<&Ros2Options>,
         foxglove: Option<&FoxgloveOptions>,
         commands: &[CommandSummary],
-        notices: &dyn Notices,
+        notices: &dyn NoticeSink,
     ) -> Result<Self, Failure> {
         let view = match serve {
             Some(addr) => {
@@ -91,7 +91,7 @@ impl Feeds {
     /// The run is over: the page gets its verdict, the ROS 2 topics their last messages,
     /// Foxglove the final verdict before its server closes (the view keeps serving until the
     /// caller drops it).
-    pub fn finish(&mut self, report: &AuditReport, notices: &dyn Notices) {
+    pub fn finish(&mut self, report: &AuditReport, notices: &dyn NoticeSink) {
         if let Some(f) = self.foxglove.take() {
             let s = f.finish(report.verdict);
             let unfinished = unfinished(s.unfinished);

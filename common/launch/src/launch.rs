@@ -48,7 +48,7 @@ pub struct LaunchOptions {
     pub agent_timeout: Duration,
     pub join_timeout: Duration,
     /// Where the launch's notices go (the binary prints them, or drops them under `--quiet`).
-    pub notices: std::sync::Arc<dyn cdm_team::notices::Notices>,
+    pub notices: std::sync::Arc<dyn cdm_team::notices::NoticeSink>,
     /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
     pub stop_on_violation: bool,
     /// Fly only ticks 0..=K of the plan.
@@ -661,7 +661,7 @@ struct Recorder {
 }
 
 impl Recorder {
-    fn new(s: &Scenario, last: u64, notices: &dyn cdm_team::notices::Notices) -> Self {
+    fn new(s: &Scenario, last: u64, notices: &dyn cdm_team::notices::NoticeSink) -> Self {
         Recorder {
             tick: TickRecorder::new(s),
             progress: notices.progress("launch", last, s.dt_s()),

@@ -347,7 +347,7 @@ struct Monitor<'a, 'p> {
     /// The start's clock message: loss notices ride on copies of it.
     start_msg: ClockMsg,
     progress: Box<dyn cdm_team::notices::TickProgress>,
-    notices: std::sync::Arc<dyn cdm_team::notices::Notices>,
+    notices: std::sync::Arc<dyn cdm_team::notices::NoticeSink>,
 }
 
 impl crate::fly::TeamIo for Monitor<'_, '_> {

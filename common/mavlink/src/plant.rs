@@ -66,7 +66,7 @@ pub enum PlantError {
 
 /// Why `--disarm-at-end` did not see the vehicle landed and disarmed after the flight.
 #[derive(Debug, thiserror::Error)]
-pub enum LandingError {
+pub enum DisarmError {
     /// The link failed (its text names the member); shown as the member said it, no more.
     #[error("{0}")]
     Link(PlantError),
@@ -402,14 +402,14 @@ impl LinkFigures {
     /// once when no landing was ordered (no `--disarm-at-end`, or a team stopped before its
     /// landing ended). The landing's own deadline (`landing::LANDING_DEADLINE`, counted from
     /// its order) ends the wait with the link's fault; this wait is bounded by it too.
-    pub fn wait_landed(&self, interrupted: &AtomicBool) -> Result<(), LandingError> {
+    pub fn wait_landed(&self, interrupted: &AtomicBool) -> Result<(), DisarmError> {
         let until = Instant::now() + crate::landing::LANDING_DEADLINE + LANDED_MARGIN;
         loop {
             {
                 // The member ends with this wait: the fault is its to report, taken from here.
                 let mut g = lock(&self.0);
                 if let Some(f) = g.fault.take() {
-                    return Err(LandingError::Link(f));
+                    return Err(DisarmError::Link(f));
                 }
                 if g.vehicle.landing_done() {
                     return Ok(());
@@ -417,7 +417,7 @@ impl LinkFigures {
             }
             if interrupted.load(Ordering::Relaxed) || Instant::now() >= until {
                 let agent = lock(&self.0).vehicle.agent();
-                return Err(LandingError::NotDisarmed { agent });
+                return Err(DisarmError::NotDisarmed { agent });
             }
             std::thread::sleep(Duration::from_millis(10));
         }

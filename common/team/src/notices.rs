@@ -6,7 +6,7 @@ use std::fmt::Display;
 use cdm_records::audit::AuditReport;
 
 /// Where a library's notices go. A notice's text is its `Display` (one or more lines of stdout).
-pub trait Notices: Send + Sync {
+pub trait NoticeSink: Send + Sync {
     fn notice(&self, notice: &dyn Display);
 
     /// The progress of a run of ticks 0..=`last_tick`, `dt_s` apart: not shown unless the
@@ -29,7 +29,7 @@ pub trait TickProgress: Send {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Silent;
 
-impl Notices for Silent {
+impl NoticeSink for Silent {
     fn notice(&self, _notice: &dyn Display) {}
 }
 
