@@ -22,7 +22,7 @@ echo "|---|---|---|---|---|"
 for n in $ns; do
   team="bench_cmd_${n}_$$"
   RUST_LOG=info "$bin/orchestrator" launch --n "$n" --team "$team" --out "$out/run$n" \
-    --no-figures --t-total 5000 --agent-timeout 120 >"$out/launch$n.out" 2>"$out/launch$n.log" &
+    --no-figures --t-total 600 --agent-timeout 120 >"$out/launch$n.out" 2>"$out/launch$n.log" &
   pid=$!
   until [ -S "$root/$team.command" ] && [ -s "$out/run$n/telemetry.csv" ]; do sleep 0.2; done
   sleep 1
@@ -42,6 +42,7 @@ for n in $ns; do
   grep "^$n " "$out/rows" | while read -r nn c wall decided; do
     k=$((k + 1))
     sw=$(sed -n "${k}p" "$out/switch$n")
+    [ -n "$sw" ] && sw=$(printf '%.1f' "$sw")
     printf '| %s | %s | %s | %s | %s |\n' "$nn" "$c" "$wall" "$decided" "${sw:-n/a}"
   done
 done

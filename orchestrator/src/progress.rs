@@ -157,6 +157,12 @@ impl TickProgress for Progress {
     fn finish(&mut self) {
         Progress::finish(self);
     }
+    fn set_last_tick(&mut self, last_tick: u64) {
+        Progress::set_last_tick(self, last_tick);
+    }
+    fn set_commands(&mut self, accepted: usize, refused: usize) {
+        Progress::set_commands(self, accepted, refused);
+    }
 }
 
 impl Drop for Progress {
