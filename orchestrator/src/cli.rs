@@ -85,6 +85,13 @@ pub enum Command {
     /// lockstep clock, a live safety audit. Exit 0 safe and complete, 1 violation, 2 bad input,
     /// 3 runtime fault.
     Launch(Box<LaunchArgs>),
+    /// Steer a running team (`launch`, lockstep, one host): hold, resume, land, or goto
+    /// X,Y,Z X,Y,Z X,Y,Z. The team certifies the new motion and flies it from a switch tick it
+    /// announces to every member first. Exit 0 accepted (the switch tick and the certificate's
+    /// summary), 1 refused UNSAFE (why), 2 bad input or a command that does not apply now,
+    /// 3 no such team, no answer in time, or no tick left.
+    #[command(name = "command")]
+    Steer(Box<crate::steer_cmd::SteerArgs>),
     /// Fly a finished lockstep run (simulate or launch) again from its directory alone: its
     /// scenario, options, commands and losses. Its telemetry and audit.json's safety figures
     /// equal the run's byte for byte (checked: exit 3 when not). With --gains, --t-total or

@@ -74,6 +74,7 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             against,
         } => report_command(&dir, follow, against.as_deref(), cli.quiet),
         Command::Launch(args) => launch_command(*args, cli.quiet),
+        Command::Steer(args) => crate::steer_cmd::run(&args),
         Command::View {
             dir,
             serve,
@@ -528,7 +529,11 @@ fn clean(quiet: bool) -> Result<Exit, Failure> {
             removed.unknown_nodes
         );
     }
-    if removed.teams.is_empty() && removed.unknown_nodes == 0 {
+    let channels = cdm_launch::channel::remove_dead_channels();
+    for team in &channels {
+        text += &format!("removed team {team}'s command channel: its orchestrator is gone\n");
+    }
+    if removed.teams.is_empty() && removed.unknown_nodes == 0 && channels.is_empty() {
         text += &format!(
             "nothing to remove: no team under {} has all its processes dead, and no dead node of an unknown team is left\n",
             cdm_iox::iox2_root()

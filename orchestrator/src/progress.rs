@@ -27,6 +27,8 @@ pub struct Progress {
     dt_s: f64,
     started: Instant,
     shown: Instant,
+    /// Commands given in flight so far: (accepted, refused).
+    commands: (usize, usize),
 }
 
 /// The safety margins so far, as one short text: separation above 2 eps, tracking under delta,
@@ -80,6 +82,28 @@ impl Progress {
             dt_s,
             started: now,
             shown: now,
+            commands: (0, 0),
+        }
+    }
+
+    /// The run's last tick changed (a command given in flight).
+    pub fn set_last_tick(&mut self, last_tick: u64) {
+        self.last_tick = last_tick;
+        if let Mode::Bar(bar) = &self.mode {
+            bar.set_length(last_tick + 1);
+        }
+    }
+
+    /// The commands given in flight so far, shown from now on.
+    pub fn set_commands(&mut self, accepted: usize, refused: usize) {
+        self.commands = (accepted, refused);
+    }
+
+    /// The commands, when there are some: ", commands A accepted, R refused".
+    fn commands_text(&self) -> String {
+        match self.commands {
+            (0, 0) => String::new(),
+            (a, r) => format!(", commands {a} accepted, {r} refused"),
         }
     }
 
@@ -99,9 +123,10 @@ impl Progress {
             Mode::Bar(bar) => {
                 bar.set_position(tick + 1);
                 bar.set_message(format!(
-                    "tick {tick}/{}, t {t:.2} s, {rate:.0}/s, {}",
+                    "tick {tick}/{}, t {t:.2} s, {rate:.0}/s, {}{}",
                     self.last_tick,
-                    margins(r)
+                    margins(r),
+                    self.commands_text()
                 ));
             }
             Mode::Log => tracing::info!(
@@ -109,9 +134,10 @@ impl Progress {
                 last = self.last_tick,
                 t_s = t,
                 ticks_per_s = rate.round(),
-                "{} progress, {}",
+                "{} progress, {}{}",
                 self.what,
-                margins(r)
+                margins(r),
+                self.commands_text()
             ),
         }
     }
@@ -130,6 +156,12 @@ impl TickProgress for Progress {
     }
     fn finish(&mut self) {
         Progress::finish(self);
+    }
+    fn set_last_tick(&mut self, last_tick: u64) {
+        Progress::set_last_tick(self, last_tick);
+    }
+    fn set_commands(&mut self, accepted: usize, refused: usize) {
+        Progress::set_commands(self, accepted, refused);
     }
 }
 

@@ -232,33 +232,42 @@ pub fn apply_commands(s: &Scenario, commands: &[TimedCommand]) -> (Scenario, Vec
     let n = SafetyNumbers::of(s);
     let mut steering = s.steering();
     let records = (commands.iter())
-        .map(|c| {
-            let t_switch_s = tick_time(c.switch_tick, s.dt_s());
-            let outcome = steer(&mut steering, s, &n, &c.command, t_switch_s);
-            let (verdict, accepted, why, certificate) = match outcome {
-                CommandOutcome::Accepted(cert) => (Some(cert.verdict), true, None, Some(cert)),
-                CommandOutcome::Refused(cert) => (
-                    Some(cert.verdict),
-                    false,
-                    Some(cert.reasons.join("; ")),
-                    Some(cert),
-                ),
-                CommandOutcome::NotApplicable(why) => (None, false, Some(why.to_string()), None),
-            };
-            CommandRecord {
-                spec: c.spec.clone(),
-                arrived_s: c.spec.at_s,
-                switch_tick: c.switch_tick,
-                verdict,
-                accepted,
-                why,
-                certificate,
-            }
-        })
+        .map(|c| decide(&mut steering, s, &n, c))
         .collect();
     let mut flown = s.clone();
     flown.plan = steering.plan().clone();
     (flown, records)
+}
+
+/// Command `c` certified at its switch tick against `steering`'s plan (the team of `s`
+/// launched with the safety numbers `n`), applied to it when SAFE: what became of it.
+pub fn decide(
+    steering: &mut Steering,
+    s: &Scenario,
+    n: &SafetyNumbers,
+    c: &TimedCommand,
+) -> CommandRecord {
+    let t_switch_s = tick_time(c.switch_tick, s.dt_s());
+    let outcome = steer(steering, s, n, &c.command, t_switch_s);
+    let (verdict, accepted, why, certificate) = match outcome {
+        CommandOutcome::Accepted(cert) => (Some(cert.verdict), true, None, Some(cert)),
+        CommandOutcome::Refused(cert) => (
+            Some(cert.verdict),
+            false,
+            Some(cert.reasons.join("; ")),
+            Some(cert),
+        ),
+        CommandOutcome::NotApplicable(why) => (None, false, Some(why.to_string()), None),
+    };
+    CommandRecord {
+        spec: c.spec.clone(),
+        arrived_s: c.arrived_s.unwrap_or(c.spec.at_s),
+        switch_tick: c.switch_tick,
+        verdict,
+        accepted,
+        why,
+        certificate,
+    }
 }
 
 #[cfg(test)]

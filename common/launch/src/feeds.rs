@@ -68,6 +68,14 @@ impl Feeds {
         })
     }
 
+    /// A command given to the team in flight (`orchestrator command`): the live view marks it
+    /// (the live ROS 2 topics carry only the commands known at their start).
+    pub fn command(&mut self, c: &CommandSummary) {
+        if let Some(v) = self.view.as_mut() {
+            v.command(c);
+        }
+    }
+
     /// One audited tick: offered to each feed (`flying(k)` false for a member lost by then).
     pub fn tick(
         &mut self,

@@ -27,7 +27,9 @@ use cdm_runtime::team_loss::TeamLosses;
 use cdm_scenario::Scenario;
 use cdm_viewer::live::LiveView;
 
+use crate::channel::{Answered, CommandAnswer, CommandChannel};
 use crate::feeds::Feeds;
+use crate::steer::{FlightAt, LiveSteer};
 
 use cdm_team::team::{
     check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
@@ -99,6 +101,16 @@ struct Watchers<'a> {
     live: &'a mut Feeds,
     /// The other hosts' members, through the bridge (`--hosts`): their exits, kills and links.
     hosts: &'a dyn OtherHosts,
+    /// The commands the team takes in flight, and where they come from.
+    steer: Steer<'a>,
+}
+
+/// A lockstep team's commands: the channel (`orchestrator command`), what became of each so
+/// far, and the run directory their commands.json is written to.
+struct Steer<'a> {
+    channel: Option<&'a CommandChannel>,
+    live: &'a mut LiveSteer,
+    dir: &'a RunDir,
 }
 
 /// Run a launch to the end.
@@ -118,16 +130,12 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let member_file = write_inputs(&dir, s, o)?;
     // Humans start members with scenario.toml; spawned members read the JSON copy (same hash).
     let scenario_file = dir.path().join("scenario.toml");
-    if ports.stale_nodes_removed() > 0 {
-        tracing::info!(
-            removed = ports.stale_nodes_removed(),
-            "removed stale resources of a previous team {}",
-            o.team
-        );
-    }
+    log_stale(&ports, &o.team);
     let here = |id: u32| hosts.runs_here(id);
     let mut children = start_members(s, o, &dir, &mut ports, (&member_file, &scenario_file), here)?;
     let mut audit = Auditor::new(s);
+    let mut steered = LiveSteer::new(s, o.commands.as_ref());
+    let channel = command_channel(o)?;
     let result = if let Some(rt) = &o.realtime {
         let elsewhere = |id: u32| others.reporting(id);
         let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
@@ -144,10 +152,17 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
                 audit: &mut audit,
                 live: &mut live,
                 hosts: others.as_ref(),
+                steer: Steer {
+                    channel: channel.as_ref(),
+                    live: &mut steered,
+                    dir: &dir,
+                },
             },
             interrupted,
         )
     };
+    // No command is taken once the flight is over.
+    drop(channel);
     let ended = Instant::now();
     let (complete, reason, first_tick) = match result {
         Ok((t, complete)) => (complete, StopReason::Finished, Some(t)),
@@ -158,14 +173,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     };
     let member_peak_rss = cdm_team::team::members_peak_rss(&children);
     stop_team(&mut ports, &mut children, s, reason);
-    let shut = ports.shutdown();
-    if let Err(e) = shut {
+    if let Err(e) = ports.shutdown() {
         tracing::warn!("{e}");
     }
     let mut report = audit.finish(complete);
-    if let Some(c) = &o.commands {
-        report.commands = c.summaries();
-    }
+    report.commands = steered.records().iter().map(|r| r.summary()).collect();
     for l in &mut report.losses {
         l.host = others.host_of(l.id);
     }
@@ -179,6 +191,30 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         member_peak_rss,
         live: live.view,
     })
+}
+
+/// The channel `orchestrator command` reaches the team by, when it takes commands in flight:
+/// in lockstep, on one host, with model vehicles (as `--commands`).
+fn command_channel(o: &LaunchOptions) -> Result<Option<CommandChannel>, Failure> {
+    let takes = o.realtime.is_none()
+        && o.hosts.hosts <= 1
+        && o.vehicles == cdm_member::vehicles::Vehicles::Model;
+    match takes {
+        true => CommandChannel::open(&o.team)
+            .map(Some)
+            .map_err(Failure::fault),
+        false => Ok(None),
+    }
+}
+
+/// Says what a previous team of this name left that creating the ports removed.
+fn log_stale(ports: &OrchestratorPorts, team: &TeamName) {
+    if ports.stale_nodes_removed() > 0 {
+        tracing::info!(
+            removed = ports.stale_nodes_removed(),
+            "removed stale resources of a previous team {team}"
+        );
+    }
 }
 
 /// The run's inputs: commands.json (`--commands`), scenario.toml, and the members' JSON copy
@@ -499,7 +535,6 @@ fn fly_team(
     let clock = MonotonicClock::start();
     let mut core = team_core(s, o, last, clock.now());
     let mut io = LockstepIo {
-        s,
         o,
         hash: s.content_hash(),
         last,
@@ -510,6 +545,8 @@ fn fly_team(
         rec: Recorder::new(s, last, &*o.notices),
         ticking: None,
         granted: 0,
+        flown: std::sync::Arc::new(s.clone()),
+        switching: None,
     };
     let all = crate::fly::fly(&mut core, &mut io, &clock, interrupted)?;
     Ok((io.ticking.unwrap_or_else(Instant::now), all))
@@ -518,7 +555,6 @@ fn fly_team(
 /// The lockstep loop's I/O: grants on the clock channel, complete ticks audited and written,
 /// waits woken by the members.
 struct LockstepIo<'a, 'w> {
-    s: &'a Scenario,
     o: &'a LaunchOptions,
     hash: u64,
     last: u64,
@@ -531,14 +567,19 @@ struct LockstepIo<'a, 'w> {
     ticking: Option<Instant>,
     /// The highest tick granted so far.
     granted: u64,
+    /// The plan flown, as commanded so far (the same before every switch).
+    flown: std::sync::Arc<Scenario>,
+    /// The latest accepted command's switch tick, until every member has flown it, and when
+    /// it was accepted (logged: from the answer to the switch).
+    switching: Option<(u64, Instant)>,
 }
 
 impl crate::fly::TeamIo for LockstepIo<'_, '_> {
     fn receive(&mut self, core: &mut TeamCore, now: Duration) -> Result<(), Stop> {
         self.ports
             .receive_notified_states(|msg| core.on_state(&msg, now))
-            .map(drop)
-            .map_err(transport_stop(core.position()))
+            .map_err(transport_stop(core.position()))?;
+        self.serve_command(core)
     }
 
     fn grant(&mut self, core: &TeamCore, g: u64) -> Result<(), Stop> {
@@ -565,8 +606,18 @@ impl crate::fly::TeamIo for LockstepIo<'_, '_> {
         states: TickStates,
     ) -> Result<Option<bool>, Stop> {
         let stop = self.o.stop_on_violation;
-        let (s, w, tel) = (self.s, &mut self.w, &mut *self.tel);
-        let ends = self.rec.complete(s, (tick, states), core, w, tel, stop)?;
+        let s = std::sync::Arc::clone(&self.flown);
+        let (w, tel) = (&mut self.w, &mut *self.tel);
+        let ends = self.rec.complete(&s, (tick, states), core, w, tel, stop)?;
+        if let Some((switch, accepted)) = self.switching.filter(|&(k, _)| tick >= k) {
+            let ms = accepted.elapsed().as_secs_f64() * 1e3;
+            tracing::info!(
+                tick = switch,
+                after_ms = ms,
+                "every member flew the switch tick"
+            );
+            self.switching = None;
+        }
         Ok(ends.then_some(tick >= self.last))
     }
 
@@ -604,7 +655,12 @@ impl crate::fly::TeamIo for LockstepIo<'_, '_> {
         if !nap.is_zero() {
             std::thread::sleep(nap);
         }
-        let _ = self.ports.wait(d - nap);
+        // A command is looked for at least this often while the members are slow to answer.
+        let d = match self.w.steer.channel {
+            Some(_) => (d - nap).min(COMMAND_POLL),
+            None => d - nap,
+        };
+        let _ = self.ports.wait(d);
     }
 
     fn end(&mut self, core: &TeamCore, finished: bool) -> Result<(), Stop> {
@@ -617,7 +673,63 @@ impl crate::fly::TeamIo for LockstepIo<'_, '_> {
     }
 }
 
+/// How often a lockstep loop waiting for its members looks for a command, at the least.
+const COMMAND_POLL: Duration = Duration::from_millis(50);
+
 impl LockstepIo<'_, '_> {
+    /// Answers the command waiting on the channel, if one is. It is decided here, between two
+    /// turns of the loop (the grants pause meanwhile): its switch is the first tick not granted
+    /// yet, so no member has flown past it, and the flight up to it is the same whichever
+    /// wall-clock instant the command came at. An accepted one goes to the core, which
+    /// announces it before granting its switch tick.
+    fn serve_command(&mut self, core: &mut TeamCore) -> Result<(), Stop> {
+        let Some(channel) = self.w.steer.channel else {
+            return Ok(());
+        };
+        let at = FlightAt {
+            first_free: self.granted + 1,
+            complete: core.position(),
+            last: self.last,
+        };
+        let live = &mut *self.w.steer.live;
+        let mut decided = None;
+        channel.serve_one(|request| match request {
+            Err(why) => CommandAnswer::without_switch(Answered::BadInput, why),
+            Ok(r) => {
+                let d = live.decide(r, at);
+                let answer = d.answer.clone();
+                decided = Some(d);
+                answer
+            }
+        });
+        let Some(d) = decided else { return Ok(()) };
+        tracing::info!(answer = ?d.answer.answer, decided_ms = d.answer.decided_ms, "{}", d.answer.text);
+        if !d.recorded {
+            return Ok(());
+        }
+        if let Some((notice, flown, last)) = d.accepted {
+            self.switching = Some((notice.tick, std::time::Instant::now()));
+            let last = self.o.max_ticks.map_or(last, |k| k.min(last));
+            core.command(notice, last);
+            self.w.audit.replan(&flown);
+            self.flown = flown;
+            self.last = last;
+            self.rec.progress.set_last_tick(last);
+        }
+        let steer = &mut self.w.steer;
+        if let Some(r) = steer.live.records().last() {
+            self.w.live.command(&r.summary());
+        }
+        let (accepted, refused) = steer.live.counts();
+        self.rec.progress.set_commands(accepted, refused);
+        crate::steer::write_commands(steer.dir, steer.live.records()).map_err(|e| {
+            (
+                fault(FaultKind::Io, None, None, core.position(), e.to_string()),
+                StopReason::AgentFault,
+            )
+        })
+    }
+
     fn publish(&mut self, msg: ClockMsg, core: &TeamCore) -> Result<(), Stop> {
         self.ports
             .publish_clock(msg)

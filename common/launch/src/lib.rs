@@ -2,6 +2,7 @@
 //! cdm-hosts, on other hosts) and grants ticks in lockstep; `realtime` paces the same team by
 //! the wall clock. Both audit every tick and write the run directory.
 
+pub mod channel;
 pub mod feeds;
 pub mod flight;
 mod fly;

@@ -441,6 +441,18 @@ impl Auditor {
         }
     }
 
+    /// The team's plan is commanded in flight from a switch on: the rest of the flight is
+    /// audited against `flown` (its plan the same before the switch) with its safety numbers,
+    /// as `simulate --commands` audits the commanded plan from the start.
+    pub fn replan(&mut self, flown: &Scenario) {
+        self.numbers = SafetyNumbers::of(flown);
+        self.report.numbers = self.numbers;
+        if let Some(a) = &mut self.airspace {
+            a.set_delta(self.numbers.delta_m);
+        }
+        self.scenario = flown.clone();
+    }
+
     /// Whether the audit needs the members' velocities ([`Self::observe_velocities`]).
     pub fn wants_velocities(&self) -> bool {
         self.limits.is_some()

@@ -45,6 +45,9 @@ pub struct TimedCommand {
     pub spec: CommandSpec,
     pub switch_tick: u64,
     pub command: TeamCommand,
+    /// When it arrived (simulation time), as a run's `commands.json` records a command given
+    /// live (`orchestrator command`); `None`: at its switch, as a file's command.
+    pub arrived_s: Option<Real>,
 }
 
 /// A command file that cannot be used; names the file, the command's index and its field.
@@ -73,10 +76,12 @@ pub fn parse_commands(text: &str, s: &Scenario) -> Result<Vec<TimedCommand>, E> 
         .map_err(|e| E::Parse(format!("a JSON list of commands: {e}")))?;
     let mut out: Vec<TimedCommand> = Vec::with_capacity(items.len());
     for (k, mut item) in items.into_iter().enumerate() {
+        let arrived = item.get("arrived_s").cloned();
         item.retain(|key, _| !RECORD_FIELDS.contains(&key.as_str()));
         let spec: CommandSpec = serde_json::from_value(serde_json::Value::Object(item))
             .map_err(|e| E::Parse(format!("commands[{k}]: {e}")))?;
-        let c = check_command(spec, s, &format!("commands[{k}]"))?;
+        let mut c = check_command(spec, s, &format!("commands[{k}]"))?;
+        c.arrived_s = arrived_s(arrived, &c, k)?;
         if let Some(prev) = out.last() {
             if c.switch_tick <= prev.switch_tick {
                 return Err(E::Invalid {
@@ -127,7 +132,28 @@ pub fn check_command(spec: CommandSpec, s: &Scenario, name: &str) -> Result<Time
         spec,
         switch_tick,
         command,
+        arrived_s: None,
     })
+}
+
+/// A recorded `arrived_s` (a run's `commands.json`): a number from 0 to the command's `at_s`.
+fn arrived_s(v: Option<serde_json::Value>, c: &TimedCommand, k: usize) -> Result<Option<Real>, E> {
+    let Some(v) = v else { return Ok(None) };
+    let field = format!("commands[{k}].arrived_s");
+    let a = v.as_f64().ok_or_else(|| E::Invalid {
+        field: field.clone(),
+        reason: format!("must be a number, got {v}"),
+    })?;
+    if !(0.0..=c.spec.at_s).contains(&a) {
+        return Err(E::Invalid {
+            field,
+            reason: format!(
+                "= {a} s must be from 0 to the command's at_s = {} s",
+                c.spec.at_s
+            ),
+        });
+    }
+    Ok(Some(a))
 }
 
 fn goto(spec: &CommandSpec, s: &Scenario, name: &str) -> Result<TeamCommand, E> {

@@ -23,6 +23,14 @@ pub trait TickProgress: Send {
     fn tick(&mut self, tick: u64, audit: &AuditReport);
     /// The run is over (a bar is removed).
     fn finish(&mut self);
+    /// The run's last tick changed (a command given in flight).
+    fn set_last_tick(&mut self, last_tick: u64) {
+        let _ = last_tick;
+    }
+    /// The commands given in flight so far, shown from now on.
+    fn set_commands(&mut self, accepted: usize, refused: usize) {
+        let _ = (accepted, refused);
+    }
 }
 
 /// Drops every notice (`--quiet`, tests).
