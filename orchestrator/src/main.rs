@@ -8,6 +8,7 @@ mod export_cmd;
 mod print_certificate;
 mod print_origin;
 mod replay;
+mod replay_realtime;
 
 use cdm_team::Exit;
 use clap::Parser;
