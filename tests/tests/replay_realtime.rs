@@ -114,7 +114,7 @@ fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
     assert_eq!(figures(&rt), figures(&same), "audit.json's safety figures");
 
     // What if: other gains on the same history differ from the run, and deterministically.
-    let gains = ["--gains", "180,140,70,18"];
+    let gains = ["--gains", "30,40,25,8"];
     let (a, b) = (dir.path().join("gains-a"), dir.path().join("gains-b"));
     for out in [&a, &b] {
         let o = replay(&rt, out, &gains);

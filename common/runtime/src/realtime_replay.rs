@@ -122,7 +122,7 @@ pub fn replay(
                 }
             }
         }
-        let vehicle = ModelVehicle::new(cfg.clone(), &s.plan, m);
+        let vehicle = ModelVehicle::new(cfg, &s.plan, m);
         let state = vehicle.state();
         fliers.push(Flier {
             member: m.clone(),
