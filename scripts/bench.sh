@@ -54,7 +54,8 @@
 # Usage: [BIN=DIR] [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
 #        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [BENCH_N_FLAGS=...] [SCALE_ONLY=1]
 #        [BEFORE_BIN=DIR] [ROUNDS=3] [BEFORE_ONLY=1]
-#        [TELEMETRY_ONLY=1] [TELEMETRY_N=1000] [TELEMETRY_TICKS=K] scripts/bench.sh [N ...]
+#        [TELEMETRY_ONLY=1] [TELEMETRY_N=1000] [TELEMETRY_TICKS=K]
+#        [RECORDING_ONLY=1] [RECORDING_NS="40 250"] [RECORDING_S=10] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).

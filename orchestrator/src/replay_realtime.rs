@@ -17,7 +17,7 @@ use std::time::Instant;
 use cdm_records::audit::Auditor;
 use cdm_records::run_record::RunRecord;
 use cdm_records::rundir::RunDir;
-use cdm_runtime::realtime_replay::{replay, ReplayEnd, ReplayTiming};
+use cdm_runtime::realtime_replay::{replay, Recorded, ReplayEnd, ReplayTiming};
 use cdm_scenario::{Checks, Scenario};
 use cdm_simulate::replay::read_audit;
 use cdm_team::{Exit, Failure};
@@ -51,8 +51,17 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     let recordings = cdm_recording::read_dir(&run.join(cdm_recording::DIR), &ids, hash)
         .map_err(Failure::bad_input)?;
     let flown = crate::replay::changed(&s, a)?;
-    let journals: BTreeMap<u32, Vec<[Option<u64>; 3]>> = (recordings.iter())
-        .map(|(id, rec)| (*id, rec.used.clone()))
+    let journals: BTreeMap<u32, Recorded> = (recordings.iter())
+        .map(|(id, rec)| {
+            let used = rec.used.clone();
+            (
+                *id,
+                Recorded {
+                    used,
+                    whole: !rec.cut_short,
+                },
+            )
+        })
         .collect();
     if crate::replay::same_dir(run, &a.out) {
         return Err(Failure::bad_input(format!(
@@ -193,8 +202,8 @@ fn cut_short(run: &Path, cut: &[(u32, u64)], end: Option<ReplayEnd>) -> Failure 
         .collect();
     let upto = end.map_or(String::new(), |e| {
         format!(
-            ": replayed {} audit instants, up to where the shortest ends (tick {})",
-            e.audits, e.ticks_recorded
+            ": replayed {} audit instants, up to where the recordings end (tick {})",
+            e.audits, e.ticks_flown
         )
     });
     Failure::fault(format!(

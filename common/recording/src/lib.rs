@@ -11,7 +11,8 @@
 //! - `/cdm/recording/ages`, one message per second of flight: `tick` (the first tick of the
 //!   batch), `ticks` (how many), and `age`: for each tick and each of the three in-neighbour
 //!   slots (in the order of the law's weights), the tick flown minus the tick of the state it
-//!   flew on, or -1 when it had none yet; empty for a leader.
+//!   flew on (negative when the member flew late, on a state stamped after its own time), or
+//!   null when it had none yet; empty for a leader.
 
 mod reader;
 mod writer;
@@ -51,5 +52,5 @@ struct Ages {
     member: u32,
     tick: u64,
     ticks: u64,
-    age: Vec<i64>,
+    age: Vec<Option<i64>>,
 }

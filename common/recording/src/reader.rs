@@ -10,6 +10,10 @@ use crate::{file_name, Ages, Header, AGES_TOPIC, FORMAT, MEMBER_TOPIC};
 /// A recording is at most this large (about 1 KB per member-second: days of flight).
 const MAX_BYTES: u64 = 1 << 30;
 
+/// A member flies on no state more than this many ticks ahead of its own (it would be that
+/// late, far beyond any stale bound).
+const MAX_AHEAD: i64 = 1 << 20;
+
 /// Why a recording cannot be replayed: each names the file, and a bad one its first bad record
 /// (1-based, counting the file's messages).
 #[derive(Debug, thiserror::Error)]
@@ -155,12 +159,17 @@ fn append(a: &Ages, id: u32, used: &mut Vec<[Option<u64>; 3]>) -> Result<(), Str
                 let tick = a.tick + k as u64;
                 let mut u = [None; 3];
                 for (slot, &age) in ages.iter().enumerate() {
+                    // A late member may fly on a state stamped after its own time (age < 0),
+                    // never on one of a tick before 0.
                     u[slot] = match age {
-                        -1 => None,
-                        age if (0..=tick as i64).contains(&age) => Some(tick - age as u64),
-                        _ => {
+                        None => None,
+                        Some(age) if age <= tick as i64 && age > -MAX_AHEAD => {
+                            Some((tick as i64 - age) as u64)
+                        }
+                        Some(age) => {
                             return Err(format!(
-                                "tick {tick} slot {slot}: age {age} is neither -1 nor in 0..={tick}"
+                                "tick {tick} slot {slot}: age {age} is not in {}..={tick}",
+                                1 - MAX_AHEAD
                             ))
                         }
                     };
@@ -262,7 +271,7 @@ mod tests {
         assert!(e.contains("7.mcap: record 1: of scenario"), "{e}");
         let e = read(&p, 8, 0xabc).unwrap_err().to_string();
         assert!(e.contains("record 1: the recording of agent 7"), "{e}");
-        // An age edited to something impossible in the second batch (record 3).
+        // An age edited to an older state than the one before, in the second batch (record 3).
         let mut bytes = std::fs::read(&p).expect("written");
         let at = bytes
             .windows(10)

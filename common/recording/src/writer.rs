@@ -35,7 +35,7 @@ pub struct McapJournal {
     dt_ns: f64,
     first: u64,
     ticks: u64,
-    age: Vec<i64>,
+    age: Vec<Option<i64>>,
     sequence: u32,
 }
 
@@ -175,7 +175,7 @@ impl Journal for McapJournal {
             self.first = f.tick;
         }
         if !self.leader {
-            let age = |u: Option<u64>| u.map_or(-1, |t| f.tick as i64 - t as i64);
+            let age = |u: Option<u64>| u.map(|t| f.tick as i64 - t as i64);
             self.age.extend(f.used.map(age));
         }
         self.ticks += 1;
@@ -204,7 +204,7 @@ fn w_schema(which: &str) -> String {
             r#""format":{"type":"string"},"member":{"type":"integer"},"scenario_hash":{"type":"string"},"dt_s":{"type":"number"}"#
         }
         _ => {
-            r#""member":{"type":"integer"},"tick":{"type":"integer"},"ticks":{"type":"integer"},"age":{"type":"array","items":{"type":"integer"}}"#
+            r#""member":{"type":"integer"},"tick":{"type":"integer"},"ticks":{"type":"integer"},"age":{"type":"array","items":{"type":["integer","null"]}}"#
         }
     };
     format!(r#"{{"type":"object","properties":{{{props}}}}}"#)
