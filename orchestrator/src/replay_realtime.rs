@@ -8,7 +8,7 @@
 //! Outcomes: exit 0/1 as the replay's verdict when it equals the run (or, with a change,
 //! whatever it gives); 2 for a run directory or recording that does not belong (named, with its
 //! first bad record); 3 when a recording is cut short (the replay flies up to where the
-//! shortest one ends and says so) or when an unchanged replay differs from the run.
+//! recordings end and says so) or when an unchanged replay differs from the run.
 
 use std::collections::BTreeMap;
 use std::path::Path;
