@@ -51,7 +51,7 @@
 # Every flight above writes every tick (`--every 1`, as before the default --every grew with N),
 # so the figures compare with earlier runs of this script.
 #
-# Usage: [BIN=DIR] [WINDOW=256] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
+# Usage: [BIN=DIR] [WINDOW=W] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
 #        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [BENCH_N_FLAGS=...] [SCALE_ONLY=1]
 #        [BEFORE_BIN=DIR] [ROUNDS=3] [BEFORE_ONLY=1]
 #        [TELEMETRY_ONLY=1] [TELEMETRY_N=1000] [TELEMETRY_TICKS=K]
@@ -71,13 +71,15 @@ else
 fi
 out=$(mktemp -d /tmp/cdm-bench.XXXXXX)
 trap 'rm -rf "$out"' EXIT
-window=${WINDOW:-256}
+# WINDOW=W flies the main table with --window W; unset, launch picks its default for each N.
+window=${WINDOW:-}
+window_flag=(); [ -z "$window" ] || window_flag=(--window "$window")
 ns=("$@"); [ ${#ns[@]} -gt 0 ] || ns=(10 40 100 250 1000)
 
 echo "Machine: nproc $(nproc), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'),"\
   "$(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo), kernel $(uname -r);"\
   "commit $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%dT%H:%MZ)."
-echo "Command: WINDOW=$window${QUICK:+ QUICK=$QUICK}${BIN:+ BIN=$BIN} scripts/bench.sh ${ns[*]}"
+echo "Command:${window:+ WINDOW=$window}${QUICK:+ QUICK=$QUICK}${BIN:+ BIN=$BIN} scripts/bench.sh ${ns[*]}"
 echo
 
 # Real time: one `launch --realtime` per N, REALTIME_S seconds of a 60 s plan.
@@ -272,7 +274,7 @@ if [ -n "${BEFORE_ONLY:-}" ]; then before_after_section; exit 0; fi
 if [ -n "${SCALE_ONLY:-}" ]; then scale_section; exit 0; fi
 if [ -n "${REALTIME_ONLY:-}" ]; then realtime_section; exit 0; fi
 if [ -n "${RECORDING_ONLY:-}" ]; then recording_section; exit 0; fi
-echo "| N | ticks flown | engine ticks/s | simulate ticks/s | launch ticks/s (window $window) | barrier ticks/s | launch/engine | launch/simulate | launch/barrier | start-up s | largest member RSS MiB | orchestrator RSS MiB |"
+echo "| N | ticks flown | engine ticks/s | simulate ticks/s | launch ticks/s (window ${window:-default}) | barrier ticks/s | launch/engine | launch/simulate | launch/barrier | start-up s | largest member RSS MiB | orchestrator RSS MiB |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
 for n in "${ns[@]}"; do
   limit=()
@@ -288,7 +290,7 @@ for n in "${ns[@]}"; do
   # simulate's telemetry (about 9 GB at N = 1000) is still being written back to disk: without
   # this, launch's start-up below would time the kernel's writeback too.
   sync
-  l=$("$bin/orchestrator" launch --n "$n" "${limit[@]}" --every 1 --no-figures --window "$window" \
+  l=$("$bin/orchestrator" launch --n "$n" "${limit[@]}" --every 1 --no-figures "${window_flag[@]}" \
       --team "bench$n-$$" --out "$out/l$n" 2>/dev/null)
   lt=$(grep "ticking:" <<<"$l" | rate)
   su=$(grep "ticking:" <<<"$l" | startup_s)

@@ -103,7 +103,7 @@ pub enum Command {
         /// Play the run to Foxglove instead, at its own pace, once a client connects (ADDR:
         /// HOST:PORT or PORT; a bare --foxglove is 127.0.0.1:8765).
         #[command(flatten)]
-        foxglove: cdm_launch::feeds::FoxgloveArgs,
+        foxglove: crate::launch_args::FoxgloveArgs,
     },
     /// Redraw every figure of a finished run from its telemetry.csv, audit.json and
     /// scenario.toml (SVG and PNG, into the run directory).
@@ -197,9 +197,11 @@ pub struct LaunchArgs {
     #[arg(long)]
     pub no_spawn: bool,
     /// How many ticks a member may run ahead of the slowest (1 = strict lockstep). Larger
-    /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory.
-    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
-    pub window: u32,
+    /// windows mean fewer wake-ups per tick (BENCHMARKS.md) and more shared memory. Default:
+    /// 1024 up to 250 members, 512 up to 500, 256 above, halved while the team would take more
+    /// than half of the free /dev/shm.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub window: Option<u32>,
     /// Seconds without any member progress before the team is stopped as faulty (at most
     /// 86400).
     #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
@@ -218,11 +220,11 @@ pub struct LaunchArgs {
     #[command(flatten)]
     pub hosts: HostArgs,
     #[command(flatten)]
-    pub realtime: cdm_launch::realtime::RealtimeArgs,
+    pub realtime: crate::launch_args::RealtimeArgs,
     #[command(flatten)]
-    pub ros2: cdm_launch::feeds::Ros2Args,
+    pub ros2: crate::launch_args::Ros2Args,
     #[command(flatten)]
-    pub foxglove: cdm_launch::feeds::FoxgloveArgs,
+    pub foxglove: crate::launch_args::FoxgloveArgs,
     #[command(flatten)]
     pub run: RunOptions,
     /// Steer the team in flight from a file, as `simulate --commands` does (lockstep: the same

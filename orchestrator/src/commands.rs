@@ -26,11 +26,11 @@ use cdm_member::options::timeout;
 use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand};
 use crate::export_args::{load, SourceArgs};
 use crate::print_certificate::print_certificate;
+use crate::progress::Spinner;
 use cdm_launch::launch::{launch, LaunchOptions};
 use cdm_launch::steer::{write_commands, FileCommands};
 use cdm_report::{report, ReportError};
 use cdm_team::errors::CommandError;
-use cdm_team::progress::{Progress, Spinner};
 use cdm_team::{Exit, Failure};
 
 pub fn run(cli: Cli) -> Result<Exit, Failure> {
@@ -92,7 +92,8 @@ pub fn run(cli: Cli) -> Result<Exit, Failure> {
             scenario,
             join_timeout,
         } => {
-            let t = cdm_hosts::Transport::choose("--connect", &connect, keys.as_deref(), insecure)?;
+            let t = cdm_hosts::Transport::choose("--connect", &connect, keys.as_deref(), insecure)
+                .map_err(Failure::bad_input)?;
             host_daemon(connect, t, team, host, scenario, join_timeout, cli.quiet)
         }
         Command::Keys { action } => keys_command(action, cli.quiet),
@@ -111,7 +112,7 @@ fn simulate_command(
     commands: Option<&Path>,
     quiet: bool,
 ) -> Result<Exit, Failure> {
-    cdm_team::telemetry::check_available(run.telemetry)?;
+    cdm_team::telemetry::check_available(run.telemetry).map_err(Failure::bad_input)?;
     let s = run.link.apply(&load(source)?).map_err(Failure::bad_input)?;
     check_follow(&s, run.follow)?;
     // Checked before the run directory exists: a refused loss writes nothing.
@@ -211,7 +212,7 @@ fn fly_in_process(s: &Scenario, dir: &RunDir, f: InProcess) -> Result<AuditRepor
     let last = run
         .max_ticks
         .map_or(s.last_tick(), |k| k.min(s.last_tick()));
-    let mut progress = Progress::new(f.what, last, s.dt_s(), f.quiet);
+    let mut progress = crate::notices::sink(f.quiet).progress(f.what, last, s.dt_s());
     let report = simulate(s, dir, opts, tel.as_mut(), |tick, audit| {
         progress.tick(tick, audit.report())
     })
@@ -333,9 +334,28 @@ fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
     Ok(exit)
 }
 
+/// `--window`, or the default for the team's size and the free shared memory
+/// ([`cdm_iox::lockstep_window`]); said when short shared memory narrowed it.
+fn lockstep_window(a: &LaunchArgs, s: &Scenario, quiet: bool) -> u32 {
+    if let Some(w) = a.window {
+        return w;
+    }
+    let agents = s.formation.members.len();
+    let delay = u32::try_from(s.link_model().max_ticks()).unwrap_or(u32::MAX);
+    let free = cdm_iox::shm_free_bytes();
+    let window = cdm_iox::lockstep_window(agents, delay, free);
+    if !quiet && window < cdm_iox::lockstep_window(agents, delay, None) {
+        out!(
+            "window: {window} ticks (/dev/shm has {} KiB free; --window W to choose)",
+            free.unwrap_or(0) / 1024
+        );
+    }
+    window
+}
+
 /// The scenario and the launch options from the command line, every value checked.
 fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOptions), Failure> {
-    cdm_team::telemetry::check_available(a.run.telemetry)?;
+    cdm_team::telemetry::check_available(a.run.telemetry).map_err(Failure::bad_input)?;
     let vehicles = a
         .vehicle
         .validate(a.realtime.realtime)
@@ -388,12 +408,12 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         window: if realtime.is_some() {
             cdm_launch::realtime::REALTIME_WINDOW
         } else {
-            a.window
+            lockstep_window(a, &s, quiet)
         },
         spawn: !a.no_spawn,
         agent_timeout: secs(a.agent_timeout, "--agent-timeout")?,
         join_timeout: secs(a.join_timeout, "--join-timeout")?,
-        quiet,
+        notices: crate::notices::sink(quiet),
         stop_on_violation: a.run.stop_on_violation,
         max_ticks: a.run.max_ticks,
         vehicles,
@@ -451,7 +471,8 @@ fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
 fn host_options(a: &LaunchArgs) -> Result<cdm_hosts::HostOptions, Failure> {
     let transport = match a.hosts.listen.as_deref() {
         Some(l) if a.hosts.hosts > 1 => {
-            cdm_hosts::Transport::choose("--listen", l, a.hosts.keys.as_deref(), a.hosts.insecure)?
+            cdm_hosts::Transport::choose("--listen", l, a.hosts.keys.as_deref(), a.hosts.insecure)
+                .map_err(Failure::bad_input)?
         }
         _ => cdm_hosts::Transport::Insecure,
     };
@@ -1023,9 +1044,11 @@ fn host_daemon(
         host,
         scenario,
         join_timeout: timeout("--join-timeout", join_timeout).map_err(Failure::bad_input)?,
-        quiet,
     };
-    cdm_hosts::daemon::run(&o)
+    cdm_hosts::daemon::run(&o, &*crate::notices::sink(quiet)).map_err(|e| Failure {
+        exit: e.exit(),
+        error: Box::new(e),
+    })
 }
 
 /// Without the `hosts` feature there is no daemon.

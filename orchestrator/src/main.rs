@@ -5,8 +5,11 @@ mod cli;
 mod commands;
 mod export_args;
 mod export_cmd;
+mod launch_args;
+mod notices;
 mod print_certificate;
 mod print_origin;
+mod progress;
 mod replay;
 mod replay_realtime;
 

@@ -35,7 +35,7 @@ pub fn prepare(a: &ReplayArgs) -> Result<Prepared, Failure> {
     let r = &inputs.record;
     // Checked by RunRecord::read.
     let format = r.telemetry_format().unwrap_or_default();
-    cdm_team::telemetry::check_available(format)?;
+    cdm_team::telemetry::check_available(format).map_err(Failure::bad_input)?;
     let what_if = a.what_if();
     let s = changed(&inputs.scenario, a)?;
     let run = RunOptions {

@@ -69,7 +69,7 @@ pub fn read_telemetry<'py>(py: Python<'py>, run_dir: PathBuf) -> PyResult<Bound<
             let mut c = Columns::default();
             cdm_report::data::read_telemetry(&run_dir, |row| {
                 c.push(row);
-                Ok(())
+                Ok::<_, std::convert::Infallible>(())
             })
             .map(|_| c)
         })

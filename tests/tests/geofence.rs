@@ -11,31 +11,19 @@
 
 mod support;
 
-use std::path::Path;
-use std::process::{Command, Output};
-
 use cdm_model::airspace::Shape;
-use cdm_scenario::{generated, GeofenceSpec, ObstacleSpec, ScenarioFile};
-use integration_tests::{bin, describe, run, write_scenario, TempDir};
+use cdm_scenario::{ObstacleSpec, ScenarioFile};
+use integration_tests::{describe, run, write_scenario, TempDir};
+use support::airspace::{fence, four_members, plan};
 use support::{assert_exit, read_json, simulate};
 
 const DEADLINE: std::time::Duration = integration_tests::deadline::FLIGHT;
 
-/// generated(4) in 20 s: primary 1 flies (360, 0, 900) -> (224, 434, 560), through
-/// (292, 217, 730) at t = 10 s.
+/// generated(4) in 20 s inside the fence: primary 1 flies (360, 0, 900) -> (224, 434, 560),
+/// through (292, 217, 730) at t = 10 s.
 fn team() -> ScenarioFile {
-    let mut f = generated(4).expect("four agents generate");
-    f.t_total_s = 20.0;
-    f.geofence = Some(GeofenceSpec {
-        polygon: vec![
-            [-100.0, -200.0],
-            [500.0, -200.0],
-            [500.0, 600.0],
-            [-100.0, 600.0],
-        ],
-        min_z_m: 0.0,
-        max_z_m: 1200.0,
-    });
+    let mut f = four_members(20.0);
+    f.geofence = Some(fence());
     f
 }
 
@@ -48,19 +36,6 @@ fn tower(dx: f64) -> ObstacleSpec {
             max: [302.0 + dx, 227.0, 740.0],
         },
     }
-}
-
-fn orchestrator(args: &[&str]) -> Output {
-    run(Command::new(bin("orchestrator")).args(args), DEADLINE)
-}
-
-/// `plan --scenario PATH --json DIR/cert.json --suggest`, and the certificate read back.
-fn plan(dir: &Path, scenario: &Path) -> (Output, serde_json::Value) {
-    let json = dir.join("cert.json");
-    let (s, j) = (scenario.to_str().unwrap(), json.to_str().unwrap());
-    let out = orchestrator(&["plan", "--scenario", s, "--json", j, "--suggest"]);
-    let cert = read_json(&json);
-    (out, cert)
 }
 
 /// The airspace row of `name` in a certificate.

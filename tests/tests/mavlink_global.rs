@@ -21,9 +21,7 @@ use std::time::Duration;
 
 use cdm_math::Vec3;
 use cdm_model::airspace::Shape;
-use cdm_scenario::{
-    Checks, GeoOrigin, GeoPoint, GeofenceSpec, ObstacleSpec, Scenario, ScenarioFile,
-};
+use cdm_scenario::{Checks, GeoOrigin, GeoPoint, ObstacleSpec, Scenario, ScenarioFile};
 use integration_tests::{
     describe, free_udp_ports, python_script, run, spawn, unique_team, venv_python, write_scenario,
     Running, TempDir,
@@ -182,16 +180,7 @@ fn a_local_vehicle_origin_on_a_scenario_with_an_origin_is_refused() {
 /// The team inside a fence, with a box and a cylinder well aside of its path.
 fn fenced_team() -> ScenarioFile {
     let mut f = team();
-    f.geofence = Some(GeofenceSpec {
-        polygon: vec![
-            [-100.0, -200.0],
-            [500.0, -200.0],
-            [500.0, 600.0],
-            [-100.0, 600.0],
-        ],
-        min_z_m: 0.0,
-        max_z_m: 1200.0,
-    });
+    f.geofence = Some(support::airspace::fence());
     f.obstacles = vec![
         ObstacleSpec {
             name: "tower".into(),

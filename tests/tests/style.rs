@@ -1,8 +1,9 @@
 //! The style rules that a reviewer would otherwise count by hand, checked on the sources: no
 //! function outside tests is longer than 80 lines (STYLE.md: a long function is a sign to split),
 //! no module is mounted with `#[path]` (a file's module is where its path says), no two modules
-//! of a crate import each other (directly or through others), and no public type, trait or enum
-//! name means two things in the workspace.
+//! of a crate import each other (directly or through others), no public type, trait or enum
+//! name means two things in the workspace, and no library under common/ prints or depends on
+//! clap (the binaries do both).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -614,4 +615,109 @@ fn the_ticket_finder_finds_an_issue_number_and_nothing_else() {
     let text = "// the airspace (issue 27)\n// Issues #12 and 13\n// an issue with links\n";
     let found: Vec<usize> = ticket_references(text).iter().map(|(l, _)| *l).collect();
     assert_eq!(found, vec![1, 2]);
+}
+
+/// Library files under common/ that still print, and why; a binary (src/main.rs, src/bin/)
+/// prints, a library hands its notices to the binary's sink (`cdm_team::notices::NoticeSink`).
+const ALLOWED_PRINTING: &[(&str, &str)] = &[
+    // The watchdog of the tests aborts a hung test: its last word goes to the test's stderr.
+    ("common/test-support/src/lib.rs", "a test's watchdog"),
+    // Defines `out!`, the macro the binaries print with (a full stdout must not stop them).
+    ("common/team/src/lib.rs", "the binaries' macro"),
+    // The member processes' `main` (argument parsing, logging, the error line and exit code),
+    // shared by the agent and leader binaries; it belongs beside them.
+    ("common/member/src/member_cli.rs", "not yet moved"),
+];
+
+/// Library crates under common/ that still depend on clap: their option structs derive the
+/// parser the member binaries and the orchestrator flatten into theirs (cdm-mavlink's clap is
+/// its example's, a dev-dependency). cdm-unified-features has no code: it lists every feature
+/// the workspace builds its third-party crates with, clap's among them, for the Python module.
+const ALLOWED_CLAP: &[&str] = &["common/member", "common/unified-features"];
+
+/// The lines of `text` (outside its tests) that print: `println!`, `eprintln!`, `print!`,
+/// `eprint!`, the orchestrator's `out!`, or a write to `io::stdout()` or `io::stderr()`.
+fn printing_lines(text: &str) -> Vec<usize> {
+    let printing = [
+        "println!(",
+        "eprintln!(",
+        "print!(",
+        "eprint!(",
+        "out!(",
+        "io::stdout()",
+        "io::stderr()",
+    ];
+    code_outside_tests(text)
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| {
+            printing.iter().any(|p| {
+                l.match_indices(p).any(|(at, _)| {
+                    // A whole name: `eprintln!(` is not `println!(` and `layout!(` not `out!(`.
+                    !l[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_')
+                })
+            })
+        })
+        .map(|(i, _)| i + 1)
+        .collect()
+}
+
+/// True when a Cargo.toml's `[dependencies]` (not its dev- or build-dependencies) names clap.
+fn depends_on_clap(manifest: &str) -> bool {
+    let mut in_deps = false;
+    for line in manifest.lines().map(str::trim) {
+        if line.starts_with('[') {
+            in_deps = line == "[dependencies]";
+        } else if in_deps && (line.starts_with("clap ") || line.starts_with("clap.")) {
+            return true;
+        }
+    }
+    false
+}
+
+#[test]
+fn no_library_under_common_prints_or_parses_arguments() {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let mut found = Vec::new();
+    for file in sources() {
+        let rel = file.strip_prefix(root).unwrap_or(&file).to_string_lossy();
+        let rel = rel.trim_start_matches("./").to_string();
+        let binary = rel.contains("/src/bin/") || rel.ends_with("/src/main.rs");
+        if !rel.starts_with("common/") || binary {
+            continue;
+        }
+        let text = std::fs::read_to_string(&file).expect("source is readable");
+        let lines = printing_lines(&text);
+        if !lines.is_empty() && !ALLOWED_PRINTING.iter().any(|(f, _)| *f == rel) {
+            found.push(format!("{rel}: prints on lines {lines:?}"));
+        }
+    }
+    for package in packages().iter().filter(|p| p.starts_with("common/")) {
+        let manifest = std::fs::read_to_string(root.join(package).join("Cargo.toml"))
+            .expect("Cargo.toml is readable");
+        if depends_on_clap(&manifest) && !ALLOWED_CLAP.contains(&package.as_str()) {
+            found.push(format!("{package}: depends on clap"));
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "libraries print or parse arguments (hand notices to the binary's sink; clap belongs \
+         to agent/, leader/, orchestrator/):\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn the_printing_finder_finds_prints_and_clap_and_nothing_else() {
+    let text = "fn a() {\n    out!(\"x\");\n    let s = \"println!(\";\n    layout!(1);\n}\n\
+                fn b() { eprintln!(\"y\"); }\nfn c() { let _ = std::io::stderr().write_all(b); }\n#[cfg(test)]\nmod tests {\n    fn c() { println!(); }\n}\n";
+    assert_eq!(printing_lines(text), vec![2, 6, 7]);
+    assert!(depends_on_clap("[dependencies]\nclap.workspace = true\n"));
+    assert!(depends_on_clap(
+        "[dependencies]\nserde = \"1\"\nclap = { version = \"4\" }\n"
+    ));
+    assert!(!depends_on_clap(
+        "[dev-dependencies]\nclap.workspace = true\n"
+    ));
+    assert!(!depends_on_clap("[dependencies]\nclap-verbosity = \"1\"\n"));
 }

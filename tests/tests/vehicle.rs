@@ -23,21 +23,13 @@ use cdm_model::formation::Role;
 use cdm_model::limits::downwash_distance;
 use cdm_scenario::{generated, AgentSpec, ScenarioFile, VehicleSpec};
 use integration_tests::{bin, describe, run, write_scenario, TempDir};
+use support::airspace::{four_members, plan};
 use support::{assert_exit, read_json};
 
 const DEADLINE: std::time::Duration = integration_tests::deadline::FLIGHT;
 
 fn orchestrator(args: &[&str]) -> Output {
     run(Command::new(bin("orchestrator")).args(args), DEADLINE)
-}
-
-/// `plan --scenario PATH --json DIR/NAME.json --suggest` and the certificate read back.
-fn plan(dir: &Path, scenario: &Path) -> (Output, serde_json::Value) {
-    let json = dir.join("cert.json");
-    let (s, j) = (scenario.to_str().unwrap(), json.to_str().unwrap());
-    let out = orchestrator(&["plan", "--scenario", s, "--json", j, "--suggest"]);
-    let cert = read_json(&json);
-    (out, cert)
 }
 
 /// `simulate` into DIR/NAME and its audit.json.
@@ -55,8 +47,7 @@ fn simulate(
 
 /// generated(4) flying its descent in `t_total_s`, with limits a light quadcopter has.
 fn limited(t_total_s: f64) -> ScenarioFile {
-    let mut f = generated(4).expect("four agents generate");
-    f.t_total_s = t_total_s;
+    let mut f = four_members(t_total_s);
     f.vehicle = Some(VehicleSpec {
         max_speed_xy_m_s: Some(15.0),
         max_speed_up_m_s: Some(5.0),

@@ -90,7 +90,7 @@ pub struct CrazyflieFit {
 }
 
 /// What [`export_plan`] did.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct PlanExport {
     pub target: PlanTarget,
     pub out: PathBuf,
@@ -110,7 +110,16 @@ pub struct PlanExport {
     /// `force` (the certificate and the scaled scenario are written either way).
     pub written: bool,
     /// The top view drawn beside a written export, or why it was not.
-    pub top_view: Option<Result<PathBuf, String>>,
+    pub top_view: Option<Result<PathBuf, TopViewError>>,
+}
+
+/// Why the top view beside an export was not drawn (the export stands without it).
+#[derive(Debug, thiserror::Error)]
+pub enum TopViewError {
+    #[error(transparent)]
+    Figure(#[from] cdm_report::FigureError),
+    #[error("no figure written")]
+    NoFigure,
 }
 
 /// The scaled scenario and everything derived from it.
@@ -365,7 +374,7 @@ fn writes(cert: &Certificate, force: bool, out: &Path) -> bool {
     force
 }
 
-fn draw(dir: &Path, stem: &str, sc: &Scaled) -> Result<PathBuf, String> {
+fn draw(dir: &Path, stem: &str, sc: &Scaled) -> Result<PathBuf, TopViewError> {
     const SAMPLES: usize = 60;
     let paths = sc
         .trajs
@@ -384,8 +393,7 @@ fn draw(dir: &Path, stem: &str, sc: &Scaled) -> Result<PathBuf, String> {
         sc.trajs.len(),
         sc.frame.scale
     );
-    match top_view(dir, stem, &title, paths) {
-        Ok(mut files) => files.pop().ok_or_else(|| "no figure written".to_string()),
-        Err(e) => Err(e.to_string()),
-    }
+    top_view(dir, stem, &title, paths)?
+        .pop()
+        .ok_or(TopViewError::NoFigure)
 }

@@ -12,35 +12,19 @@ use cdm_iox::{OrchestratorPorts, TeamName, TeamProcess};
 use cdm_records::audit::FaultRecord;
 use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::Scenario;
-use cdm_team::out;
-use cdm_team::Failure;
-use cdm_zenoh::{down_key, up_key, JoinDesk, JoinReply, Net, NetError, PendingJoin};
+use cdm_team::notices::NoticeSink;
+use cdm_zenoh::{down_key, up_key, JoinDesk, JoinReply, Net, PendingJoin};
 
 use crate::bridge_core::{BridgeCore, Ctx, HostReport};
-use crate::error::Refusal;
+use crate::error::{BridgeError, Refusal};
 use crate::host_link::ZenohLink;
 use crate::idle::IdleBackoff;
 use crate::links::Links;
+use crate::notice::HostNotice;
 use crate::other_hosts::OtherHosts;
 use crate::placed::placed;
 use crate::regions::Regions;
 use crate::{HostOptions, TeamFlight};
-
-/// Why the bridge cannot start (the team's fault: exit 3).
-#[derive(Debug, thiserror::Error)]
-pub enum BridgeError {
-    /// The join desk cannot be declared on the session.
-    #[error("--listen: {0}")]
-    Listen(#[source] NetError),
-    #[error("cannot start the bridge thread: {0}")]
-    Thread(#[source] std::io::Error),
-}
-
-impl From<BridgeError> for Failure {
-    fn from(e: BridgeError) -> Self {
-        Failure::fault(e)
-    }
-}
 
 /// What the bridge thread knows of each host's link, read by the launch.
 type SharedLinks = Arc<Mutex<Links>>;
@@ -51,6 +35,7 @@ pub struct Bridge {
     thread: Option<JoinHandle<Vec<HostReport>>>,
     crossing: Vec<(u32, u32)>,
     links: SharedLinks,
+    notices: Arc<dyn NoticeSink>,
 }
 
 impl Bridge {
@@ -62,8 +47,8 @@ impl Bridge {
         regions: &Regions,
         h: &HostOptions,
         flight: TeamFlight,
-        quiet: bool,
-    ) -> Result<Self, Failure> {
+        notices: Arc<dyn NoticeSink>,
+    ) -> Result<Self, BridgeError> {
         let ctx = Ctx::new(s, team, regions, h, flight);
         let desk = net
             .join_desk(team.as_str(), ctx.tls.then(|| regions.hosts() - 1))
@@ -77,15 +62,17 @@ impl Bridge {
         let shared = links.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
+        let said = notices.clone();
         let thread = std::thread::Builder::new()
             .name("bridge".into())
-            .spawn(move || run(net, desk, ctx, &shared, &flag, quiet))
+            .spawn(move || run(net, desk, ctx, &shared, &flag, &*said))
             .map_err(BridgeError::Thread)?;
         Ok(Self {
             stop,
             thread: Some(thread),
             crossing,
             links,
+            notices,
         })
     }
 
@@ -177,7 +164,7 @@ impl OtherHosts for Bridge {
 
     /// After the team's stop: lets the daemons stop their members (bounded), then writes
     /// `hosts.json` and says how many bytes a tick cost on the wire.
-    fn finish(mut self: Box<Self>, dir: &cdm_records::rundir::RunDir, ticks: u64, quiet: bool) {
+    fn finish(mut self: Box<Self>, dir: &cdm_records::rundir::RunDir, ticks: u64) {
         let hosts = self.join();
         // The edges that crossed hosts by the end: a repair may have added some.
         let added = self.links().crossing_added;
@@ -195,15 +182,12 @@ impl OtherHosts for Bridge {
         });
         let text = serde_json::to_string_pretty(&doc).unwrap_or_default();
         let _ = cdm_records::rundir::write_atomic(&dir.path().join("hosts.json"), text.as_bytes());
-        if !quiet {
-            out!(
-                "  hosts: {} crossing edges, {:.0} bytes per tick on the network ({} sent, {} received)",
-                crossing.len(),
-                per_tick,
-                sent,
-                received
-            );
-        }
+        self.notices.notice(&HostNotice::Traffic {
+            crossing: crossing.len(),
+            per_tick,
+            sent,
+            received,
+        });
     }
 }
 
@@ -223,14 +207,14 @@ fn run(
     ctx: Ctx,
     shared: &Mutex<Links>,
     stop: &AtomicBool,
-    quiet: bool,
+    notices: &dyn NoticeSink,
 ) -> Vec<HostReport> {
     let mut idle = IdleBackoff::for_team(ctx.flight.realtime_stale_after.is_some());
     let mut core = BridgeCore::new(ctx);
     loop {
         let now = Instant::now();
         while let Some(p) = desk.poll() {
-            admit(&net, &mut core, p, now, quiet);
+            admit(&net, &mut core, p, now, notices);
         }
         let kills = shared
             .lock()
@@ -256,7 +240,7 @@ fn run(
 }
 
 /// Answers one join request: refused with the reason, or accepted with the host's share.
-fn admit(net: &Net, core: &mut BridgeCore, p: PendingJoin, now: Instant, quiet: bool) {
+fn admit(net: &Net, core: &mut BridgeCore, p: PendingJoin, now: Instant, notices: &dyn NoticeSink) {
     let q = p.request.clone();
     let refuse = |p: PendingJoin, why: Refusal| {
         tracing::warn!(daemon = %q.who, "refused a daemon: {why}");
@@ -276,7 +260,9 @@ fn admit(net: &Net, core: &mut BridgeCore, p: PendingJoin, now: Instant, quiet: 
     };
     p.answer(&JoinReply::Accepted(Box::new(core.assignment(host))));
     let members = core.joined(host, q.who.clone(), chan, now);
-    if !quiet {
-        out!("host {host} joined: {} (agents {members:?})", q.who);
-    }
+    notices.notice(&HostNotice::Joined {
+        host,
+        who: q.who,
+        members,
+    });
 }

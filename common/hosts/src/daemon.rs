@@ -12,9 +12,9 @@ use cdm_iox::{MemberPorts, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_runtime::messages::{StateMsg, StopReason};
 use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::{Checks, Scenario};
-use cdm_team::out;
+use cdm_team::notices::NoticeSink;
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
-use cdm_team::{Exit, Failure};
+use cdm_team::Exit;
 use cdm_zenoh::{
     down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, Up, PROTOCOL_VERSION,
 };
@@ -24,6 +24,7 @@ use crate::daemon_repair::DaemonRepairs;
 use crate::error::{DaemonError, DaemonStop};
 use crate::host_link::{HostLink, ZenohLink};
 use crate::idle::IdleBackoff;
+use crate::notice::HostNotice;
 use crate::repairs::{partners, single_loss_links, CrossRepairs};
 
 /// The link to the orchestrator: its frames down, this host's up.
@@ -42,7 +43,6 @@ pub struct DaemonOptions {
     pub scenario: Option<PathBuf>,
     /// How long to wait for the orchestrator and for the members to start.
     pub join_timeout: Duration,
-    pub quiet: bool,
 }
 
 /// A daemon that joined: its share of the team and its ports.
@@ -54,15 +54,16 @@ struct Joined {
     link_timeout: Duration,
 }
 
-/// Runs the daemon to the end of the team (exit 0), a lost link (3) or a refusal (2).
-pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
+/// Runs the daemon to the end of the team (exit 0), a lost link (3) or a refusal (2,
+/// [`DaemonError::exit`]); says which members it runs to `notices`.
+pub fn run(o: &DaemonOptions, notices: &dyn NoticeSink) -> Result<Exit, DaemonError> {
     let interrupted = cdm_process::signals::install();
     cdm_team::team::member_binaries_present()?;
     super::workdir::sweep_dead();
     let expected_hash = match &o.scenario {
         Some(p) => Some(
             Scenario::load(p, Checks::Member)
-                .map_err(Failure::bad_input)?
+                .map_err(DaemonError::Scenario)?
                 .content_hash(),
         ),
         None => None,
@@ -70,7 +71,7 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
     let (security, bound) = crate::security::daemon(&o.transport)?;
     let host = match (bound, o.host) {
         (Some(certified), Some(asked)) if asked != certified => {
-            return Err(DaemonError::NotCertified { asked, certified }.into())
+            return Err(DaemonError::NotCertified { asked, certified })
         }
         (Some(k), _) => Some(k),
         (None, h) => h,
@@ -90,9 +91,9 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
         Ok(JoinReply::Accepted(a)) => *a,
         Ok(JoinReply::Refused(why)) => {
             let at = o.connect.clone();
-            return Err(DaemonError::Refused { at, why }.into());
+            return Err(DaemonError::Refused { at, why });
         }
-        Err(e) => return Err(DaemonError::Join(e).into()),
+        Err(e) => return Err(DaemonError::Join(e)),
     };
     let (j, chan) = joined(&net, a)?;
     if let Some(p) = j.a.realtime_priority {
@@ -103,18 +104,15 @@ pub fn run(o: &DaemonOptions) -> Result<Exit, Failure> {
             source,
         })?;
     }
-    if !o.quiet {
-        out!(
-            "joined team {} as host {}: agents {:?}",
-            j.team,
-            j.a.host,
-            j.mine.iter().collect::<Vec<_>>()
-        );
-    }
+    notices.notice(&HostNotice::DaemonJoined {
+        team: j.team.to_string(),
+        host: j.a.host,
+        members: j.mine.iter().copied().collect(),
+    });
     let dir = super::workdir::create(j.team.as_str())?;
     let result = fly(&j, chan, &dir, interrupted);
     let _ = std::fs::remove_dir_all(&dir);
-    Ok(result?)
+    result
 }
 
 /// Checks the assignment and opens the host's link.

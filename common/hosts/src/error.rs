@@ -1,11 +1,15 @@
 //! Why a host's link ends, as typed values: the bridge's verdict on a daemon ([`LinkLost`]), a
 //! join request it refuses ([`Refusal`]), what ends a daemon's bridging ([`DaemonStop`]), and
-//! why a daemon fails as a whole ([`DaemonError`]).
+//! why a daemon fails as a whole ([`DaemonError`]); before any of them, why a team cannot be
+//! split ([`PlanError`]), an endpoint is refused ([`EndpointError`]) or the bridge cannot start
+//! ([`BridgeError`]).
 //! Their texts are written here and nowhere else; the multi-host tests and the operators read
 //! them in the log, audit.json's fault and hosts.json.
 
 use std::time::Duration;
 
+#[cfg(feature = "hosts")]
+use crate::{security::SecurityError, workdir::WorkDirError};
 use cdm_iox::TransportError;
 use cdm_runtime::messages::StopReason;
 use cdm_runtime::notices::NoticeGap;
@@ -20,6 +24,79 @@ use {
 };
 
 use crate::host_link::LinkError;
+
+/// Why a team cannot be split over the hosts asked for (the operator's input: exit 2).
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    #[error("--hosts {hosts}: the team has only {members} members")]
+    TooManyHosts { hosts: u32, members: usize },
+    #[error("--hosts: this orchestrator was built without the `hosts` feature (zenoh)")]
+    NotBuilt,
+    #[error("--hosts needs --listen ENDPOINT (e.g. tls/10.77.0.1:7447 with --keys DIR)")]
+    NoListen,
+}
+
+/// An endpoint refused before anything opens (the operator's input: exit 2).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{option} {endpoint}: {problem}")]
+pub struct EndpointError {
+    /// The option that gave it (`--listen`, `--connect`).
+    pub option: String,
+    pub endpoint: String,
+    pub problem: EndpointProblem,
+}
+
+/// What is wrong with an endpoint and the options beside it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum EndpointProblem {
+    #[error("a tls/ endpoint needs --keys DIR (the directory `orchestrator keys new` made for this machine)")]
+    TlsWithoutKeys,
+    #[error("--insecure is for tcp/ endpoints only")]
+    TlsInsecure,
+    #[error("--keys is for tls/ endpoints; plain TCP would not use them")]
+    TcpWithKeys,
+    #[error("plain TCP lets anyone who reaches the port join the team, read every member's state and send it frames; use tls/ADDR with --keys DIR, or say --insecure on a network you trust")]
+    TcpNotInsecure,
+    #[error("expected tls/ADDR:PORT (or tcp/ADDR:PORT with --insecure)")]
+    Form,
+}
+
+/// Why the bridge cannot start: the endpoint or keys given (exit 2), or this host (exit 3).
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    /// `--listen`'s endpoint cannot be listened on.
+    #[cfg(feature = "hosts")]
+    #[error("--listen: {0}")]
+    Endpoint(NetError),
+    /// `--keys` cannot secure the link.
+    #[cfg(feature = "hosts")]
+    #[error(transparent)]
+    Security(#[from] SecurityError),
+    /// The join desk cannot be declared on the session.
+    #[cfg(feature = "hosts")]
+    #[error("--listen: {0}")]
+    Listen(#[source] NetError),
+    #[error("cannot start the bridge thread: {0}")]
+    Thread(#[source] std::io::Error),
+}
+
+/// A launch (still a library returning [`Failure`]) passes it on with `?`.
+#[cfg(feature = "hosts")]
+impl From<BridgeError> for Failure {
+    fn from(e: BridgeError) -> Self {
+        match e {
+            BridgeError::Endpoint(_) | BridgeError::Security(_) => Failure::bad_input(e),
+            _ => Failure::fault(e),
+        }
+    }
+}
+
+#[cfg(not(feature = "hosts"))]
+impl From<BridgeError> for cdm_team::Failure {
+    fn from(e: BridgeError) -> Self {
+        cdm_team::Failure::fault(e)
+    }
+}
 
 /// Why the bridge calls a host lost.
 #[derive(Debug, thiserror::Error)]
@@ -183,6 +260,18 @@ pub enum DaemonError {
          its certificate names)"
     )]
     NotCertified { asked: u32, certified: u32 },
+    /// The member binaries are not beside this one.
+    #[error(transparent)]
+    Binaries(#[from] cdm_team::team::MemberBinaryError),
+    /// `--scenario` (the scenario this host expects) does not load.
+    #[error(transparent)]
+    Scenario(ScenarioError),
+    /// `--keys` cannot secure the link.
+    #[error(transparent)]
+    Security(#[from] SecurityError),
+    /// The daemon's work directory cannot be made.
+    #[error(transparent)]
+    WorkDir(#[from] WorkDirError),
     /// The orchestrator's endpoint cannot be reached.
     #[error("--connect: {0}")]
     Connect(#[source] NetError),
@@ -241,22 +330,16 @@ impl DaemonError {
     /// The process's exit: bad input is the operator's (2), the rest the team's fault (3).
     pub fn exit(&self) -> Exit {
         match self {
+            DaemonError::Binaries(cdm_team::team::MemberBinaryError::Locate(_)) => Exit::Fault,
             DaemonError::NotCertified { .. }
+            | DaemonError::Binaries(_)
+            | DaemonError::Scenario(_)
+            | DaemonError::Security(_)
             | DaemonError::Connect(_)
             | DaemonError::Refused { .. }
             | DaemonError::Priority { .. }
             | DaemonError::Services(_) => Exit::BadInput,
             _ => Exit::Fault,
-        }
-    }
-}
-
-#[cfg(feature = "hosts")]
-impl From<DaemonError> for Failure {
-    fn from(e: DaemonError) -> Self {
-        Failure {
-            exit: e.exit(),
-            error: Box::new(e),
         }
     }
 }

@@ -26,6 +26,7 @@ pub mod host_link;
 pub mod idle;
 #[cfg(feature = "hosts")]
 mod links;
+pub mod notice;
 mod other_hosts;
 mod placed;
 mod plan;
@@ -42,6 +43,7 @@ mod workdir;
 
 #[cfg(feature = "hosts")]
 pub use bridge::Bridge;
+pub use notice::HostNotice;
 pub use other_hosts::{OneHost, OtherHosts};
 pub use plan::HostPlan;
 pub use regions::{Placed, Regions};

@@ -24,8 +24,8 @@ pub trait OtherHosts {
     /// True when the link (reader, writer) a repair opened is connected.
     fn linked(&self, ports: &OrchestratorPorts, reader: u32, writer: u32) -> bool;
     /// After the team's stop: the other hosts stop their members; their record is written
-    /// into the run directory.
-    fn finish(self: Box<Self>, dir: &RunDir, ticks: u64, quiet: bool);
+    /// into the run directory (and their traffic told to the launch's notices).
+    fn finish(self: Box<Self>, dir: &RunDir, ticks: u64);
 }
 
 /// The whole team on this host: no other host to ask, links only on this host's memory.
@@ -49,5 +49,5 @@ impl OtherHosts for OneHost {
     fn linked(&self, ports: &OrchestratorPorts, reader: u32, writer: u32) -> bool {
         ports.linked(reader, writer).unwrap_or(false)
     }
-    fn finish(self: Box<Self>, _dir: &RunDir, _ticks: u64, _quiet: bool) {}
+    fn finish(self: Box<Self>, _dir: &RunDir, _ticks: u64) {}
 }

@@ -1,12 +1,14 @@
 //! Which member runs where, decided once before the team's services exist.
 
 use std::collections::BTreeSet;
+use std::sync::Arc;
 
 use cdm_iox::{TeamLayout, TeamName};
 use cdm_scenario::Scenario;
-use cdm_team::out;
-use cdm_team::Failure;
+use cdm_team::notices::NoticeSink;
 
+use crate::error::{BridgeError, PlanError};
+use crate::notice::HostNotice;
 use crate::other_hosts::{OneHost, OtherHosts};
 use crate::placed::placed;
 use crate::regions::{Placed, Regions};
@@ -17,8 +19,9 @@ pub struct HostPlan {
     regions: Regions,
     placed: Vec<Placed>,
     options: HostOptions,
+    /// Where the split and, later, the bridge's notices go.
     #[cfg_attr(not(feature = "hosts"), allow(dead_code))]
-    quiet: bool,
+    notices: Arc<dyn NoticeSink>,
 }
 
 impl HostPlan {
@@ -27,24 +30,20 @@ impl HostPlan {
         s: &Scenario,
         h: &HostOptions,
         team: &TeamName,
-        quiet: bool,
-    ) -> Result<Self, Failure> {
-        let n = s.formation.members.len();
-        if h.hosts as usize > n {
-            return Err(Failure::bad_input(format!(
-                "--hosts {}: the team has only {n} members",
-                h.hosts
-            )));
+        notices: Arc<dyn NoticeSink>,
+    ) -> Result<Self, PlanError> {
+        let members = s.formation.members.len();
+        if h.hosts as usize > members {
+            return Err(PlanError::TooManyHosts {
+                hosts: h.hosts,
+                members,
+            });
         }
         if h.hosts > 1 && !cfg!(feature = "hosts") {
-            return Err(Failure::bad_input(
-                "--hosts: this orchestrator was built without the `hosts` feature (zenoh)",
-            ));
+            return Err(PlanError::NotBuilt);
         }
         if h.hosts > 1 && h.listen.is_none() {
-            return Err(Failure::bad_input(
-                "--hosts needs --listen ENDPOINT (e.g. tls/10.77.0.1:7447 with --keys DIR)",
-            ));
+            return Err(PlanError::NoListen);
         }
         let placed = placed(s);
         let regions = Regions::split(&placed, h.hosts);
@@ -52,24 +51,20 @@ impl HostPlan {
             regions,
             placed,
             options: h.clone(),
-            quiet,
+            notices,
         };
-        if h.hosts > 1 && !quiet {
-            for host in 0..h.hosts {
-                let here = if host == 0 { " (this one)" } else { "" };
-                out!("host {host}{here}: agents {:?}", plan.regions.members(host));
-            }
-            let crossing = plan.crossing();
-            let how = match &h.transport {
-                Transport::Tls(_) => "--keys DIR/host-K",
-                Transport::Insecure => "--insecure",
-            };
-            out!(
-                "team {team}: {} of {} communication edges cross hosts; start each daemon with:\n  orchestrator host --connect {} --team {team} {how}",
-                crossing.len(),
-                plan.placed.iter().map(|p| p.in_neighbors.len()).sum::<usize>(),
-                h.listen.as_deref().unwrap_or_default(),
-            );
+        if h.hosts > 1 {
+            plan.notices.notice(&HostNotice::Split {
+                team: team.to_string(),
+                hosts: (0..h.hosts).map(|k| plan.regions.members(k)).collect(),
+                crossing: plan.crossing().len(),
+                edges: plan.placed.iter().map(|p| p.in_neighbors.len()).sum(),
+                listen: h.listen.clone().unwrap_or_default(),
+                how: match &h.transport {
+                    Transport::Tls(_) => "--keys DIR/host-K",
+                    Transport::Insecure => "--insecure",
+                },
+            });
         }
         Ok(plan)
     }
@@ -110,7 +105,7 @@ impl HostPlan {
         s: &Scenario,
         team: &TeamName,
         flight: TeamFlight,
-    ) -> Result<Box<dyn OtherHosts>, Failure> {
+    ) -> Result<Box<dyn OtherHosts>, BridgeError> {
         match self.options.listen.as_deref() {
             Some(endpoint) if self.options.hosts > 1 => self.listen(endpoint, s, team, flight),
             _ => Ok(Box::new(OneHost)),
@@ -124,15 +119,15 @@ impl HostPlan {
         s: &Scenario,
         team: &TeamName,
         flight: TeamFlight,
-    ) -> Result<Box<dyn OtherHosts>, Failure> {
+    ) -> Result<Box<dyn OtherHosts>, BridgeError> {
         let security = crate::security::listener(&self.options)?;
         if let Some(w) = self.options.transport.warning(endpoint) {
             tracing::warn!("{w}");
         }
-        let net = cdm_zenoh::Net::listen(endpoint, &security)
-            .map_err(|e| Failure::bad_input(format!("--listen: {e}")))?;
+        let net = cdm_zenoh::Net::listen(endpoint, &security).map_err(BridgeError::Endpoint)?;
         let (regions, h) = (&self.regions, &self.options);
-        let bridge = crate::bridge::Bridge::start(net, s, team, regions, h, flight, self.quiet)?;
+        let bridge =
+            crate::bridge::Bridge::start(net, s, team, regions, h, flight, self.notices.clone())?;
         Ok(Box::new(bridge))
     }
 
@@ -144,7 +139,7 @@ impl HostPlan {
         _s: &Scenario,
         _team: &TeamName,
         _flight: TeamFlight,
-    ) -> Result<Box<dyn OtherHosts>, Failure> {
+    ) -> Result<Box<dyn OtherHosts>, BridgeError> {
         Ok(Box::new(OneHost))
     }
 }

@@ -4,7 +4,6 @@
 use std::path::{Path, PathBuf};
 
 use cdm_keys::{Holder, KeyDir, KeyDirError};
-use cdm_team::Failure;
 use cdm_zenoh::{host_key_exprs, orchestrator_key_exprs, Peer, Security};
 
 use crate::{HostOptions, Transport};
@@ -30,12 +29,6 @@ pub enum SecurityError {
         #[source]
         source: KeyDirError,
     },
-}
-
-impl From<SecurityError> for Failure {
-    fn from(e: SecurityError) -> Self {
-        Failure::bad_input(e)
-    }
 }
 
 /// The listener's security: the orchestrator's keys; host k's certificate on host k's keys.

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use cdm_team::Failure;
+use crate::error::{EndpointError, EndpointProblem};
 
 /// The link's transport, as the options asked for it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -21,23 +21,22 @@ impl Transport {
         endpoint: &str,
         keys: Option<&Path>,
         insecure: bool,
-    ) -> Result<Self, Failure> {
-        let bad = |why: String| Err(Failure::bad_input(format!("{option} {endpoint}: {why}")));
-        match (endpoint.split_once('/').map(|(p, _)| p), keys, insecure) {
-            (Some("tls"), Some(dir), false) => Ok(Transport::Tls(dir.to_owned())),
-            (Some("tls"), None, _) => bad(
-                "a tls/ endpoint needs --keys DIR (the directory `orchestrator keys new` made for this machine)".into(),
-            ),
-            (Some("tls"), Some(_), true) => bad("--insecure is for tcp/ endpoints only".into()),
-            (Some("tcp"), None, true) => Ok(Transport::Insecure),
-            (Some("tcp"), Some(_), _) => bad(
-                "--keys is for tls/ endpoints; plain TCP would not use them".into(),
-            ),
-            (Some("tcp"), None, false) => bad(
-                "plain TCP lets anyone who reaches the port join the team, read every member's state and send it frames; use tls/ADDR with --keys DIR, or say --insecure on a network you trust".into(),
-            ),
-            _ => bad("expected tls/ADDR:PORT (or tcp/ADDR:PORT with --insecure)".into()),
-        }
+    ) -> Result<Self, EndpointError> {
+        use EndpointProblem::*;
+        let problem = match (endpoint.split_once('/').map(|(p, _)| p), keys, insecure) {
+            (Some("tls"), Some(dir), false) => return Ok(Transport::Tls(dir.to_owned())),
+            (Some("tcp"), None, true) => return Ok(Transport::Insecure),
+            (Some("tls"), None, _) => TlsWithoutKeys,
+            (Some("tls"), Some(_), true) => TlsInsecure,
+            (Some("tcp"), Some(_), _) => TcpWithKeys,
+            (Some("tcp"), None, false) => TcpNotInsecure,
+            _ => Form,
+        };
+        Err(EndpointError {
+            option: option.to_owned(),
+            endpoint: endpoint.to_owned(),
+            problem,
+        })
     }
 
     /// The warning `--insecure` prints once, naming the endpoint.
@@ -54,9 +53,9 @@ impl Transport {
 mod tests {
     use super::*;
 
-    fn choose(e: &str, keys: bool, insecure: bool) -> Result<Transport, String> {
+    fn choose(e: &str, keys: bool, insecure: bool) -> Result<Transport, EndpointError> {
         let k = keys.then(|| Path::new("/k"));
-        Transport::choose("--listen", e, k, insecure).map_err(|f| f.message())
+        Transport::choose("--listen", e, k, insecure)
     }
 
     #[test]
@@ -70,12 +69,15 @@ mod tests {
             Ok(Transport::Insecure)
         );
         let e = choose("tcp/10.0.0.1:7447", false, false).unwrap_err();
+        assert_eq!(e.problem, EndpointProblem::TcpNotInsecure);
+        let e = e.to_string();
         assert!(
             e.contains("--insecure") && e.contains("tcp/10.0.0.1:7447"),
             "{e}"
         );
         assert!(choose("tls/10.0.0.1:7447", false, false)
             .unwrap_err()
+            .to_string()
             .contains("--keys"));
         assert!(choose("tls/a:1", true, true).is_err());
         assert!(choose("tcp/a:1", true, true).is_err());

@@ -5,8 +5,6 @@
 use std::os::unix::fs::{DirBuilderExt, MetadataExt};
 use std::path::{Path, PathBuf};
 
-use cdm_team::Failure;
-
 const PREFIX: &str = "cdm-host-";
 
 /// The process id a work directory's name ends with, when it is one of ours.
@@ -65,12 +63,6 @@ pub struct WorkDirError {
     dir: PathBuf,
     #[source]
     source: std::io::Error,
-}
-
-impl From<WorkDirError> for Failure {
-    fn from(e: WorkDirError) -> Self {
-        Failure::fault(e)
-    }
 }
 
 /// Creates this daemon's work directory (readable by this user only).

@@ -85,7 +85,7 @@ mod wire;
 
 pub use dead_teams::{remove_dead_teams, Cleaned, RemovedTeam};
 pub use error::TransportError;
-pub use limits::describe_spawn_error;
+pub use limits::{describe_spawn_error, lockstep_window, shm_free_bytes, MIN_AUTO_WINDOW};
 pub use member::MemberPorts;
 pub use orchestrator::{AgentReadiness, OrchestratorPorts, Readiness};
 pub use team::{scenario_hash_value, RepairRoom, TeamLayout, TeamName, SCENARIO_HASH_KEY};

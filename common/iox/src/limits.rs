@@ -144,6 +144,38 @@ pub fn shm_need_bytes(agents: usize, window: u32) -> u64 {
     (agents as u64 + 4) * (64 + u64::from(window) * per_tick_kib) * 1024
 }
 
+/// The smallest window [`lockstep_window`] falls back to when shared memory is short.
+pub const MIN_AUTO_WINDOW: u32 = 16;
+
+/// The window a lockstep team of `agents` flies with when none is asked for, with link delays
+/// of up to `delay` ticks (the buffers hold `window + delay` ticks) and `free` bytes free in
+/// [`SHM_DIR`] (`None`: not known).
+///
+/// Wider windows let a member fly more ticks per wake-up (docs/src/benchmarks/scale.md: 1024
+/// against 256 flew N = 250 1.6x, N = 40 1.15x and N = 1000 1.41x faster) but cost about
+/// 0.8 KiB of shared memory per member per tick of window, and a member touches more of it: at
+/// N = 1000 the largest member's peak RSS was 11.8 MiB at 1024 against 9.8 at 256. So 1024 for
+/// teams of up to 250, 512 up to 500, 256 above; then halved (down to [`MIN_AUTO_WINDOW`])
+/// while the team's segments would take more than half of what is free, leaving the rest to
+/// other teams. When even the smallest does not fit, the smallest is returned and the
+/// orchestrator's check refuses the team with the space it needs.
+pub fn lockstep_window(agents: usize, delay: u32, free: Option<u64>) -> u32 {
+    let mut window: u32 = match agents {
+        0..=250 => 1024,
+        251..=500 => 512,
+        _ => 256,
+    };
+    let Some(free) = free else {
+        return window;
+    };
+    while window > MIN_AUTO_WINDOW
+        && shm_need_bytes(agents, window.saturating_add(delay)) > free / 2
+    {
+        window /= 2;
+    }
+    window
+}
+
 /// Free bytes for unprivileged writers in `dir`, if it can be asked.
 pub fn free_bytes(dir: &str) -> Option<u64> {
     let path = std::ffi::CString::new(dir).ok()?;
@@ -155,6 +187,11 @@ pub fn free_bytes(dir: &str) -> Option<u64> {
     }
     #[allow(clippy::unnecessary_cast)] // the field types differ between platforms
     Some(st.f_bavail as u64 * st.f_frsize as u64)
+}
+
+/// Free bytes in [`SHM_DIR`], where the team's segments go, if it can be asked.
+pub fn shm_free_bytes() -> Option<u64> {
+    free_bytes(SHM_DIR)
 }
 
 /// `e`, the error of starting a process, with the limit behind it when it is the process limit
@@ -179,4 +216,35 @@ pub fn describe_spawn_error(e: &std::io::Error) -> String {
         "{e}: the process limit was hit (RLIMIT_NPROC {nproc}, or the pids.max of this \
          process's cgroup); raise it (`ulimit -u`, or the cgroup's pids.max) or fly a smaller team"
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_window_narrows_with_the_team() {
+        assert_eq!(lockstep_window(40, 0, None), 1024);
+        assert_eq!(lockstep_window(250, 0, None), 1024);
+        assert_eq!(lockstep_window(400, 0, None), 512);
+        assert_eq!(lockstep_window(1000, 0, None), 256);
+    }
+
+    #[test]
+    fn the_window_halves_until_the_team_takes_at_most_half_the_free_memory() {
+        let plenty = 1 << 40;
+        assert_eq!(lockstep_window(40, 0, Some(plenty)), 1024);
+        // Room for exactly window 128 in half the free space.
+        let free = 2 * shm_need_bytes(1000, 128);
+        assert_eq!(lockstep_window(1000, 0, Some(free)), 128);
+        assert_eq!(lockstep_window(1000, 0, Some(free - 1)), 64);
+        // Link delays count: the buffers hold window + delay ticks.
+        assert_eq!(lockstep_window(1000, 64, Some(free)), 64);
+    }
+
+    #[test]
+    fn a_full_file_system_gets_the_smallest_window_for_the_check_to_refuse() {
+        assert_eq!(lockstep_window(1000, 0, Some(0)), MIN_AUTO_WINDOW);
+        assert!(shm_need_bytes(1000, MIN_AUTO_WINDOW) > 0);
+    }
 }

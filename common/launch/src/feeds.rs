@@ -6,79 +6,11 @@
 use cdm_foxglove::FoxgloveOptions;
 use cdm_math::Vec3;
 use cdm_records::audit::{AuditReport, Auditor, CommandSummary};
-use cdm_ros2::{Backend, Live, Ros2Options};
+use cdm_ros2::{Live, Ros2Options};
 use cdm_scenario::Scenario;
-use cdm_team::{out, Failure};
+use cdm_team::notices::NoticeSink;
+use cdm_team::Failure;
 use cdm_viewer::live::LiveView;
-
-/// `--ros2` and `--ros2-hz`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct Ros2Args {
-    /// Publish the run live on ROS 2 over MIDDLEWARE (dds: DDS/RTPS as rmw_fastrtps and
-    /// rmw_cyclonedds speak it; zenoh: rmw_zenoh's format): the topics of its bag, each
-    /// member's pose, /tf, /cdm/formation and /cdm/audit. Output only: nothing is subscribed.
-    #[arg(long, value_name = "MIDDLEWARE")]
-    pub ros2: Option<Backend>,
-    /// With --ros2: ticks published per second of wall time, at most (0.01 to 1000, default 30).
-    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
-    pub ros2_hz: Option<f64>,
-}
-
-/// `--ros2-hz` when not given.
-pub const DEFAULT_ROS2_HZ: f64 = 30.0;
-
-/// `--ros2-hz`'s range: one tick every 100 s at the least (a slower feed is no live view),
-/// a thousand a second at the most.
-pub const ROS2_HZ_RANGE: std::ops::RangeInclusive<f64> = 0.01..=1000.0;
-
-impl Ros2Args {
-    /// The options, or `None` without --ros2; a bad value is bad input naming its flag.
-    pub fn options(&self) -> Result<Option<Ros2Options>, Failure> {
-        let Some(backend) = self.ros2 else {
-            if self.ros2_hz.is_some() {
-                return Err(Failure::bad_input("--ros2-hz needs --ros2"));
-            }
-            return Ok(None);
-        };
-        let hz = self.ros2_hz.unwrap_or(DEFAULT_ROS2_HZ);
-        if !ROS2_HZ_RANGE.contains(&hz) {
-            return Err(Failure::bad_input(format!(
-                "--ros2-hz must be in [{}, {}], got {hz:e}",
-                ROS2_HZ_RANGE.start(),
-                ROS2_HZ_RANGE.end()
-            )));
-        }
-        Ok(Some(Ros2Options { backend, hz }))
-    }
-}
-
-/// `--foxglove` and `--foxglove-hz`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct FoxgloveArgs {
-    /// Serve the run live to Foxglove (its WebSocket protocol) on ADDR (HOST:PORT or PORT; a
-    /// bare --foxglove is 127.0.0.1:8765): each member's pose, /tf, the formation as a 3-D
-    /// scene, the margins, the verdict and losses. Only loopback unless another address is given.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = cdm_foxglove::DEFAULT_ADDR)]
-    pub foxglove: Option<String>,
-    /// With --foxglove: ticks published per second of wall time, at most (default 30).
-    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
-    pub foxglove_hz: Option<f64>,
-}
-
-impl FoxgloveArgs {
-    /// The options, or `None` without --foxglove; a bad value is bad input naming its flag.
-    pub fn options(&self) -> Result<Option<FoxgloveOptions>, Failure> {
-        match &self.foxglove {
-            None if self.foxglove_hz.is_some() => {
-                Err(Failure::bad_input("--foxglove-hz needs --foxglove"))
-            }
-            None => Ok(None),
-            Some(addr) => FoxgloveOptions::parse(addr, self.foxglove_hz)
-                .map(Some)
-                .map_err(Failure::bad_input),
-        }
-    }
-}
 
 /// The live feeds of a launch.
 #[derive(Default)]
@@ -99,7 +31,7 @@ impl Feeds {
         ros2: Option<&Ros2Options>,
         foxglove: Option<&FoxgloveOptions>,
         commands: &[CommandSummary],
-        quiet: bool,
+        notices: &dyn NoticeSink,
     ) -> Result<Self, Failure> {
         let view = match serve {
             Some(addr) => {
@@ -109,9 +41,7 @@ impl Feeds {
                 for c in commands {
                     view.command(c);
                 }
-                if !quiet {
-                    out!("live view: http://{}/", view.addr());
-                }
+                notices.notice(&format_args!("live view: http://{}/", view.addr()));
                 Some(view)
             }
             None => None,
@@ -126,9 +56,7 @@ impl Feeds {
         let foxglove = match foxglove {
             Some(o) => {
                 let f = cdm_foxglove::FoxgloveLive::start(o, s).map_err(Failure::bad_input)?;
-                if !quiet {
-                    out!("foxglove: ws://{}", f.addr());
-                }
+                notices.notice(&format_args!("foxglove: ws://{}", f.addr()));
                 Some(f)
             }
             None => None,
@@ -163,22 +91,14 @@ impl Feeds {
     /// The run is over: the page gets its verdict, the ROS 2 topics their last messages,
     /// Foxglove the final verdict before its server closes (the view keeps serving until the
     /// caller drops it).
-    pub fn finish(&mut self, report: &AuditReport, quiet: bool) {
+    pub fn finish(&mut self, report: &AuditReport, notices: &dyn NoticeSink) {
         if let Some(f) = self.foxglove.take() {
             let s = f.finish(report.verdict);
-            if !quiet {
-                let unfinished = if s.unfinished {
-                    "; still publishing when the launch ended"
-                } else {
-                    ""
-                };
-                out!(
-                    "  foxglove (ws://{}): {} ticks published, {} dropped (queue full){unfinished}",
-                    s.addr,
-                    s.ticks,
-                    s.dropped
-                );
-            }
+            let unfinished = unfinished(s.unfinished);
+            notices.notice(&format_args!(
+                "  foxglove (ws://{}): {} ticks published, {} dropped (queue full){unfinished}",
+                s.addr, s.ticks, s.dropped
+            ));
         }
         if let Some(v) = &self.view {
             v.finish(report);
@@ -189,19 +109,20 @@ impl Feeds {
                 Some(e) => format!(", {} messages refused (first: {e})", s.failed),
                 None => String::new(),
             };
-            let unfinished = if s.unfinished {
-                "; still publishing when the launch ended"
-            } else {
-                ""
-            };
-            if !quiet {
-                out!(
-                    "  ros2 ({}): {} ticks published, {} dropped (queue full){failed}{unfinished}",
-                    s.backend,
-                    s.ticks,
-                    s.dropped
-                );
-            }
+            let unfinished = unfinished(s.unfinished);
+            notices.notice(&format_args!(
+                "  ros2 ({}): {} ticks published, {} dropped (queue full){failed}{unfinished}",
+                s.backend, s.ticks, s.dropped
+            ));
         }
+    }
+}
+
+/// The end of a feed's summary line when it was still publishing as the launch ended.
+fn unfinished(still_publishing: bool) -> &'static str {
+    if still_publishing {
+        "; still publishing when the launch ended"
+    } else {
+        ""
     }
 }

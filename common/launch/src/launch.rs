@@ -7,7 +7,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use cdm_records::audit::{AuditReport, Auditor};
-use cdm_team::out;
 use cdm_team::telemetry_thread::ThreadedSink;
 
 use crate::realtime::Elsewhere;
@@ -48,7 +47,8 @@ pub struct LaunchOptions {
     pub spawn: bool,
     pub agent_timeout: Duration,
     pub join_timeout: Duration,
-    pub quiet: bool,
+    /// Where the launch's notices go (the binary prints them, or drops them under `--quiet`).
+    pub notices: std::sync::Arc<dyn cdm_team::notices::NoticeSink>,
     /// End the run at the tick of its first safety violation (telemetry kept, verdict UNSAFE).
     pub stop_on_violation: bool,
     /// Fly only ticks 0..=K of the plan.
@@ -107,7 +107,8 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     // wait in the preflight (a ROS 2 participant or zenoh session opening) ends at once on one.
     let mut live = preflight(s, o)?;
     let interrupted = cdm_process::signals::install();
-    let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.quiet)?;
+    let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.notices.clone())
+        .map_err(Failure::bad_input)?;
     let layout = team_layout(s, o, &hosts)?;
     let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
     let others = hosts.start_bridge(s, &o.team, crate::flight::flight_of(o))?;
@@ -168,9 +169,9 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     for l in &mut report.losses {
         l.host = others.host_of(l.id);
     }
-    others.finish(&dir, report.ticks, o.quiet);
+    others.finish(&dir, report.ticks);
     dir.write_audit(&report).map_err(Failure::fault)?;
-    live.finish(&report, o.quiet);
+    live.finish(&report, &*o.notices);
     Ok(Launched {
         report,
         ticking: first_tick.map_or(Duration::ZERO, |t| ended - t),
@@ -204,7 +205,7 @@ fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Feeds, Failure> {
         .map(|c| c.summaries())
         .unwrap_or_default();
     let (ros2, foxglove) = (o.ros2.as_ref(), o.foxglove.as_ref());
-    let live = Feeds::start(s, o.serve, ros2, foxglove, &commands, o.quiet)?;
+    let live = Feeds::start(s, o.serve, ros2, foxglove, &commands, &*o.notices)?;
     match raise_fd_limit() {
         Ok(n) => tracing::debug!(limit = n, "file-descriptor limit"),
         Err(e) => tracing::warn!("{e}"),
@@ -300,8 +301,8 @@ fn start_members(
                 }
             }
         }
-    } else if !o.quiet {
-        out!(
+    } else {
+        o.notices.notice(&format_args!(
             "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
             o.team,
             ids.len(),
@@ -313,7 +314,7 @@ fn start_members(
             o.team,
             crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
-        );
+        ));
     }
     Ok(children)
 }
@@ -508,7 +509,7 @@ fn fly_team(
         children,
         tel,
         w: watchers,
-        rec: Recorder::new(s, last, o.quiet),
+        rec: Recorder::new(s, last, &*o.notices),
         ticking: None,
         granted: 0,
     };
@@ -656,16 +657,16 @@ fn check_exited(
 /// (`TickRecorder`), then the live view and the progress line.
 struct Recorder {
     tick: TickRecorder,
-    progress: cdm_team::progress::Progress,
+    progress: Box<dyn cdm_team::notices::TickProgress>,
     /// The losses' audit records (as `simulate` writes them).
     losses: LossState,
 }
 
 impl Recorder {
-    fn new(s: &Scenario, last: u64, quiet: bool) -> Self {
+    fn new(s: &Scenario, last: u64, notices: &dyn cdm_team::notices::NoticeSink) -> Self {
         Recorder {
             tick: TickRecorder::new(s),
-            progress: cdm_team::progress::Progress::new("launch", last, s.dt_s(), quiet),
+            progress: notices.progress("launch", last, s.dt_s()),
             losses: LossState::new(s, LossSchedule::default()),
         }
     }

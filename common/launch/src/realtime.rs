@@ -32,8 +32,6 @@ use cdm_runtime::team_core::{LostMember, RealtimePlan, TeamCore, WallClock, MEMB
 use cdm_runtime::team_loss::TeamLosses;
 use cdm_scenario::Scenario;
 
-use cdm_team::out;
-
 use crate::launch::LaunchOptions;
 use crate::vehicle_reports::VehicleBook;
 use cdm_team::team::{fault, first_exited_but, Spawned, Stop};
@@ -42,40 +40,6 @@ use cdm_team::Failure;
 /// Which members run on other hosts and may still send reports (`launch --hosts`: those whose
 /// daemon neither stopped nor was lost).
 pub type Elsewhere<'a> = &'a dyn Fn(u32) -> bool;
-
-/// The real-time options of `launch`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct RealtimeArgs {
-    /// Fly in real time: every member ticks at comm_hz on its own clock from a start instant
-    /// this orchestrator announces, with no grant and no barrier; the orchestrator monitors.
-    #[arg(long)]
-    pub realtime: bool,
-    /// With --realtime: the monitor's audit rate, the telemetry's rows per second (default:
-    /// the scenario's comm_hz).
-    #[arg(long, value_name = "HZ")]
-    pub audit_hz: Option<f64>,
-    /// With --realtime: seconds after which a member's newest state is too old (a fault).
-    #[arg(
-        long,
-        value_name = "SECONDS",
-        default_value_t = 0.5,
-        allow_negative_numbers = true
-    )]
-    pub stale_after: f64,
-    /// With --realtime: the seed of the members' phase offsets in [0, 1/comm_hz); 0 aligns
-    /// every member on the start instant.
-    #[arg(long, value_name = "SEED", default_value_t = 1)]
-    pub phase_seed: u32,
-    /// With --realtime: run the orchestrator and every member under SCHED_FIFO at this
-    /// priority (1-99), so their wake-ups preempt ordinary processes; needs root,
-    /// CAP_SYS_NICE or `ulimit -r` (BENCHMARKS.md: late ticks with and without).
-    #[arg(long, value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_process::sched::RT_PRIORITIES))]
-    pub rt_priority: Option<u8>,
-    /// With --realtime: the members write no recording (the run cannot be replayed); for
-    /// measuring what recording costs (BENCHMARKS.md).
-    #[arg(long)]
-    pub no_recording: bool,
-}
 
 /// Validated real-time options.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -101,39 +65,6 @@ pub fn schedule(o: &LaunchOptions) -> Result<(), Failure> {
 /// The state buffer a real-time team needs (ticks of states kept per subscriber): readers read
 /// the newest state at their own rate, so a few periods are plenty.
 pub const REALTIME_WINDOW: u32 = 16;
-
-impl RealtimeArgs {
-    /// The options, or `None` without --realtime; a bad value is bad input naming its flag.
-    pub fn options(&self, s: &Scenario) -> Result<Option<RealtimeOptions>, Failure> {
-        if !self.realtime {
-            if self.audit_hz.is_some() {
-                return Err(Failure::bad_input("--audit-hz needs --realtime"));
-            }
-            if self.rt_priority.is_some() {
-                return Err(Failure::bad_input("--rt-priority needs --realtime"));
-            }
-            if self.no_recording {
-                return Err(Failure::bad_input("--no-recording needs --realtime"));
-            }
-            return Ok(None);
-        }
-        let audit_hz = self.audit_hz.unwrap_or(s.file.comm_hz);
-        if !(audit_hz.is_finite() && audit_hz > 0.0 && audit_hz <= 10_000.0) {
-            return Err(Failure::bad_input(format!(
-                "--audit-hz must be in (0, 10000], got {audit_hz}"
-            )));
-        }
-        let stale_after = cdm_member::options::timeout("--stale-after", self.stale_after)
-            .map_err(Failure::bad_input)?;
-        Ok(Some(RealtimeOptions {
-            audit_hz,
-            stale_after,
-            phase_seed: self.phase_seed,
-            rt_priority: self.rt_priority,
-            record: !self.no_recording,
-        }))
-    }
-}
 
 /// The member flags of a real-time launch (spawned members get them; hand-started ones are told).
 /// A team that repairs its losses gives its members [`MEMBER_STALE_FACTOR`] times the stale
@@ -232,8 +163,8 @@ pub fn run(
         lost: Vec::new(),
         out: vec![false; s.formation.members.len()],
         start_msg,
-        progress: cdm_team::progress::Progress::new("launch", last_audit, period_s, o.quiet),
-        quiet: o.quiet,
+        progress: o.notices.progress("launch", last_audit, period_s),
+        notices: o.notices.clone(),
     };
     let cpu_at_start = team_cpu_s(m.children);
     let result = crate::fly::fly(&mut core, &mut m, &clock, interrupted);
@@ -255,9 +186,8 @@ pub fn run(
     vehicles.record(audit);
     let cpu_cores = (!children.is_empty() && flight_s > 0.0).then(|| cpu_s / flight_s);
     let figures = book.figures(run_figures(rt, audits, flight_s, cpu_cores));
-    if !o.quiet {
-        print_figures(&figures, s.formation.members.len());
-    }
+    o.notices
+        .notice(&FiguresLine(&figures, s.formation.members.len()));
     audit.set_realtime(figures);
     match result {
         Ok(complete) => {
@@ -327,27 +257,34 @@ fn announce(
     Ok((core, clock, started + lead, start_msg))
 }
 
-/// The pacing line of the summary (and what the links dropped, when they are impaired).
-fn print_figures(f: &RealtimeFigures, agents: usize) {
-    let links = if f.link_states_lost > 0 {
-        format!(
-            "; the links dropped {} of {} neighbour states",
-            f.link_states_lost, f.link_states_received
-        )
-    } else {
-        String::new()
-    };
-    out!(
-        "  real time: {} ticks, {} late ({:.3} %), neighbour age p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms ({} of {} members reported){links}",
-        f.ticks,
-        f.late_ticks,
-        f.late_ticks_pct,
-        f.neighbor_age_ms_p50,
-        f.neighbor_age_ms_p99,
-        f.neighbor_age_ms_max,
-        f.members_reported,
-        agents
-    );
+/// The pacing line of the summary (and what the links dropped, when they are impaired), for a
+/// team of this many members.
+struct FiguresLine<'a>(&'a RealtimeFigures, usize);
+
+impl std::fmt::Display for FiguresLine<'_> {
+    fn fmt(&self, out: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let FiguresLine(f, agents) = *self;
+        write!(
+            out,
+            "  real time: {} ticks, {} late ({:.3} %), neighbour age p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms ({} of {} members reported)",
+            f.ticks,
+            f.late_ticks,
+            f.late_ticks_pct,
+            f.neighbor_age_ms_p50,
+            f.neighbor_age_ms_p99,
+            f.neighbor_age_ms_max,
+            f.members_reported,
+            agents
+        )?;
+        if f.link_states_lost > 0 {
+            write!(
+                out,
+                "; the links dropped {} of {} neighbour states",
+                f.link_states_lost, f.link_states_received
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// Waits (at most 1.5 s) for the final pacing report of every member still running, here or
@@ -439,8 +376,8 @@ struct Monitor<'a, 'p> {
     out: Vec<bool>,
     /// The start's clock message: loss notices ride on copies of it.
     start_msg: ClockMsg,
-    progress: cdm_team::progress::Progress,
-    quiet: bool,
+    progress: Box<dyn cdm_team::notices::TickProgress>,
+    notices: std::sync::Arc<dyn cdm_team::notices::NoticeSink>,
 }
 
 impl crate::fly::TeamIo for Monitor<'_, '_> {
@@ -549,16 +486,14 @@ impl Monitor<'_, '_> {
             repair_tick: Some(l.tick),
         };
         let (r, records) = self.losses.repair(self.s, at, &[l.id], l.cause);
-        if !self.quiet {
-            let switched: Vec<u32> = r.retriangulated.iter().map(|x| x.id).collect();
-            out!(
-                "agent {} lost ({}) after its tick {}: its readers {switched:?} fly the repaired graph from their tick {}",
-                l.id,
-                l.cause,
-                at.last_tick,
-                l.tick
-            );
-        }
+        let switched: Vec<u32> = r.retriangulated.iter().map(|x| x.id).collect();
+        self.notices.notice(&format_args!(
+            "agent {} lost ({}) after its tick {}: its readers {switched:?} fly the repaired graph from their tick {}",
+            l.id,
+            l.cause,
+            at.last_tick,
+            l.tick
+        ));
         self.lost.push((l.index, records));
     }
 

@@ -15,7 +15,6 @@ use cdm_model::outcome::FaultKind;
 use cdm_runtime::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg, StopReason, STATUS_FAULT};
 use cdm_runtime::team_fault::{InterruptedAt, TeamFault};
 use cdm_scenario::Scenario;
-use cdm_team::out;
 
 use crate::launch::LaunchOptions;
 use cdm_team::team::{check_children, fault, Spawned, Stop};
@@ -104,12 +103,10 @@ pub fn arm_team(
     }
     let hash = s.content_hash();
     let mut roll = ArmRoll::new(s.formation.members.iter().map(|m| m.id));
-    if !o.quiet {
-        out!(
-            "all {} vehicles ready: ordering OFFBOARD/GUIDED and arming",
-            roll.waiting().len()
-        );
-    }
+    o.notices.notice(&format_args!(
+        "all {} vehicles ready: ordering OFFBOARD/GUIDED and arming",
+        roll.waiting().len()
+    ));
     ports.publish_clock(ClockMsg::arm(hash)).map_err(|e| {
         let f = fault(FaultKind::Transport, None, None, 0, e.to_string());
         (f, StopReason::AgentFault)

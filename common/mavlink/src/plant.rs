@@ -64,6 +64,16 @@ pub enum PlantError {
     },
 }
 
+/// Why `--disarm-at-end` did not see the vehicle landed and disarmed after the flight.
+#[derive(Debug, thiserror::Error)]
+pub enum DisarmError {
+    /// The link failed (its text names the member); shown as the member said it, no more.
+    #[error("{0}")]
+    Link(PlantError),
+    #[error("agent {agent}: --disarm-at-end: the vehicle was not seen disarmed after the flight")]
+    NotDisarmed { agent: u32 },
+}
+
 /// What the streaming thread and the member share.
 #[derive(Debug)]
 struct Shared {
@@ -392,13 +402,14 @@ impl LinkFigures {
     /// once when no landing was ordered (no `--disarm-at-end`, or a team stopped before its
     /// landing ended). The landing's own deadline (`landing::LANDING_DEADLINE`, counted from
     /// its order) ends the wait with the link's fault; this wait is bounded by it too.
-    pub fn wait_landed(&self, interrupted: &AtomicBool) -> Result<(), String> {
+    pub fn wait_landed(&self, interrupted: &AtomicBool) -> Result<(), DisarmError> {
         let until = Instant::now() + crate::landing::LANDING_DEADLINE + LANDED_MARGIN;
         loop {
             {
-                let g = lock(&self.0);
-                if let Some(f) = &g.fault {
-                    return Err(f.to_string());
+                // The member ends with this wait: the fault is its to report, taken from here.
+                let mut g = lock(&self.0);
+                if let Some(f) = g.fault.take() {
+                    return Err(DisarmError::Link(f));
                 }
                 if g.vehicle.landing_done() {
                     return Ok(());
@@ -406,9 +417,7 @@ impl LinkFigures {
             }
             if interrupted.load(Ordering::Relaxed) || Instant::now() >= until {
                 let agent = lock(&self.0).vehicle.agent();
-                return Err(format!(
-                    "agent {agent}: --disarm-at-end: the vehicle was not seen disarmed after the flight"
-                ));
+                return Err(DisarmError::NotDisarmed { agent });
             }
             std::thread::sleep(Duration::from_millis(10));
         }

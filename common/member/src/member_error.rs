@@ -44,8 +44,8 @@ pub enum MemberError {
     VehicleLink(#[from] PlantError),
     /// `--disarm-at-end`: the vehicle was not seen landed and disarmed after a complete flight
     /// (the message names the member).
-    #[error("{0}")]
-    Landing(String),
+    #[error(transparent)]
+    Landing(#[from] cdm_mavlink::plant::DisarmError),
     /// A bad `--vehicle-origins` file (names the file, the line and the member).
     #[error(transparent)]
     VehicleOrigins(#[from] crate::vehicle_origins::OriginsError),

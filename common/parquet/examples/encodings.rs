@@ -58,7 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Some(t) if t[0].tick == r.tick => t.push(*r),
             _ => ticks.push(vec![*r]),
         }
-        Ok(())
+        Ok::<_, std::convert::Infallible>(())
     })?;
     let rows: usize = ticks.iter().map(Vec::len).sum();
     println!("{}: {rows} rows in {} ticks", input.display(), ticks.len());

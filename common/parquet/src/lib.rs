@@ -386,10 +386,11 @@ fn column<'a, T: 'static>(
 }
 
 /// Read a telemetry.parquet row by row, in file order, one record batch in memory at a time.
-/// `visit` may stop the read with a message ([`TelemetryParquetError::Refused`]).
-pub fn read_rows(
+/// `visit` may stop the read with its error, reported by its text and the row
+/// ([`TelemetryParquetError::Refused`]).
+pub fn read_rows<E: std::fmt::Display>(
     path: &Path,
-    mut visit: impl FnMut(&Row) -> Result<(), String>,
+    mut visit: impl FnMut(&Row) -> Result<(), E>,
 ) -> Result<(), TelemetryParquetError> {
     let file = File::open(path)?;
     let reader = ParquetRecordBatchReaderBuilder::try_new(file)?.build()?;
@@ -421,9 +422,9 @@ pub fn read_rows(
                 v: vec3(3),
                 ht: vec3(6),
             })
-            .map_err(|message| TelemetryParquetError::Refused {
+            .map_err(|e| TelemetryParquetError::Refused {
                 row: row_no,
-                message,
+                message: e.to_string(),
             })?;
         }
     }
@@ -470,7 +471,7 @@ mod tests {
         let mut got = Vec::new();
         read_rows(&path, |r| {
             got.push(*r);
-            Ok(())
+            Ok::<_, std::convert::Infallible>(())
         })
         .unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
@@ -491,7 +492,7 @@ mod tests {
         let mut got = Vec::new();
         read_rows(path, |r| {
             got.push(*r);
-            Ok(())
+            Ok::<_, std::convert::Infallible>(())
         })
         .unwrap();
         got

@@ -403,9 +403,9 @@ pub struct TickPositions<'a> {
 /// lines of bounded length). One row (CSV) or one record batch (Parquet) is in memory at a time.
 /// `visit` refuses a row with a message, which is reported with the file and row. Returns the
 /// file read.
-pub fn read_telemetry(
+pub fn read_telemetry<E: std::fmt::Display>(
     dir: &Path,
-    mut visit: impl FnMut(&Row) -> Result<(), String>,
+    mut visit: impl FnMut(&Row) -> Result<(), E>,
 ) -> Result<PathBuf, ReadError> {
     let parquet = dir.join(TelemetryFormat::Parquet.file_name());
     if parquet.exists() {
@@ -453,28 +453,41 @@ pub fn read_telemetry(
             v: vec3([num(7)?, num(8)?, num(9)?]),
             ht: vec3([num(10)?, num(11)?, num(12)?]),
         };
-        visit(&row).map_err(|m| bad(&m))?;
+        visit(&row).map_err(|e| bad(&e.to_string()))?;
     }
     Ok(path)
 }
 
 #[cfg(feature = "parquet")]
-fn read_parquet(
+fn read_parquet<E: std::fmt::Display>(
     path: &Path,
-    visit: impl FnMut(&Row) -> Result<(), String>,
+    visit: impl FnMut(&Row) -> Result<(), E>,
 ) -> Result<(), ReadError> {
     cdm_parquet::read_rows(path, visit).map_err(|e| invalid(path, e.to_string()))
 }
 
 #[cfg(not(feature = "parquet"))]
-fn read_parquet(
+fn read_parquet<E: std::fmt::Display>(
     path: &Path,
-    _visit: impl FnMut(&Row) -> Result<(), String>,
+    _visit: impl FnMut(&Row) -> Result<(), E>,
 ) -> Result<(), ReadError> {
     Err(invalid(
         path,
         "this orchestrator was built without its `parquet` feature",
     ))
+}
+
+/// A telemetry row that does not fit the scenario or the rows before it.
+#[derive(Debug, thiserror::Error)]
+enum RowMisfit {
+    #[error("agent {0} is not in scenario.toml")]
+    Agent(u32),
+    #[error("tick {tick} has {seen} rows, expected {expected}")]
+    Rows {
+        tick: u64,
+        seen: usize,
+        expected: usize,
+    },
 }
 
 /// Stream a run directory's telemetry one complete tick at a time (paper40 is 800k rows, so
@@ -507,13 +520,17 @@ pub fn stream_ticks(
     };
     let tel_path = read_telemetry(dir, |row| {
         let Some(&k) = index.get(&row.id) else {
-            return Err(format!("agent {} is not in scenario.toml", row.id));
+            return Err(RowMisfit::Agent(row.id));
         };
         if let Some((ct, t)) = current {
             if ct != row.tick {
                 let n = expected_rows(ct, &mut alive);
                 if seen != n {
-                    return Err(format!("tick {ct} has {seen} rows, expected {n}"));
+                    return Err(RowMisfit::Rows {
+                        tick: ct,
+                        seen,
+                        expected: n,
+                    });
                 }
                 on_tick(TickPositions {
                     tick: ct,

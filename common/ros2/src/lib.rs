@@ -41,13 +41,18 @@ impl std::fmt::Display for Backend {
     }
 }
 
+/// A `--ros2` value that names no backend.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0:?}: expected dds or zenoh")]
+pub struct UnknownBackend(pub String);
+
 impl std::str::FromStr for Backend {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownBackend;
+    fn from_str(s: &str) -> Result<Self, UnknownBackend> {
         match s {
             "dds" => Ok(Backend::Dds),
             "zenoh" => Ok(Backend::Zenoh),
-            _ => Err(format!("{s:?}: expected dds or zenoh")),
+            _ => Err(UnknownBackend(s.to_owned())),
         }
     }
 }

@@ -336,10 +336,18 @@ mod tests {
     use crate::{paper40, Checks, Scenario};
 
     /// paper40 (start z 900-1197 m, goals at 560 m) with a fence and obstacles appended in TOML.
-    fn with_tables(tables: &str) -> Result<Scenario, String> {
+    fn with_tables(tables: &str) -> Result<Scenario, crate::ScenarioError> {
         let f = paper40();
         let text = format!("{}\n{tables}", toml::to_string(&f).unwrap());
-        Scenario::parse(&text, "t.toml", Checks::Member).map_err(|e| e.to_string())
+        Scenario::parse(&text, "t.toml", Checks::Member)
+    }
+
+    /// The refusal's text, or "" when `tables` are accepted.
+    fn refusal(tables: &str) -> String {
+        with_tables(tables)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
     }
 
     const FENCE: &str = "[geofence]\npolygon = [[-300.0, -200.0], [500.0, -200.0], [500.0, 600.0], [-300.0, 600.0]]\nmin_z_m = 0.0\nmax_z_m = 1500.0\n";
@@ -420,7 +428,7 @@ mod tests {
             ),
         ];
         for (tables, want) in cases {
-            let got = with_tables(&tables).err().unwrap_or_default();
+            let got = refusal(&tables);
             assert!(got.contains(want), "{tables}\nwant {want:?}\ngot  {got:?}");
         }
     }
@@ -431,9 +439,7 @@ mod tests {
     fn a_take_off_starts_on_the_ground() {
         let take_off = "[takeoff]\nground_z_m = 0.0\nt_s = 60.0\n";
         let raised = FENCE.replace("min_z_m = 0.0", "min_z_m = 10.0");
-        let got = with_tables(&format!("{take_off}{raised}"))
-            .err()
-            .unwrap_or_default();
+        let got = refusal(&format!("{take_off}{raised}"));
         assert!(
             got.contains("geofence: agent 1 starts below its floor at [360.000, 0.000, 0.000]"),
             "{got}"

@@ -1,5 +1,5 @@
 //! Running one team's processes: spawning members and watching them (`team`), the losses a
-//! launch scripts and repairs (`loss`), the telemetry sink, the progress line, and the failure
+//! launch scripts and repairs (`loss`), the telemetry sink, the notices a run hands its binary, and the failure
 //! type every orchestrator command ends with (an error and its exit code).
 
 /// `println!` that never panics: a closed or full stdout (`plan | head -1`, `launch >
@@ -17,7 +17,7 @@ pub mod errors;
 mod failure;
 pub mod loss;
 pub mod member_priority;
-pub mod progress;
+pub mod notices;
 pub mod team;
 pub mod telemetry;
 pub mod telemetry_thread;

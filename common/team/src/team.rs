@@ -36,19 +36,43 @@ pub fn fault(
 
 /// The `leader` and `agent` binaries must sit next to this one (`cargo build --release` builds
 /// them; `cargo run --bin orchestrator` alone does not). Checked before anything is created.
-pub fn member_binaries_present() -> Result<(), Failure> {
-    let exe = std::env::current_exe()
-        .map_err(|e| Failure::fault(crate::errors::CommandError::LocateBinary(e)))?;
+pub fn member_binaries_present() -> Result<(), MemberBinaryError> {
+    let exe = std::env::current_exe().map_err(MemberBinaryError::Locate)?;
     for name in ["leader", "agent"] {
-        let bin = exe.with_file_name(name);
-        if !bin.is_file() {
-            return Err(Failure::bad_input(format!(
-                "the `{name}` binary is missing ({}): build every binary with `cargo build --release` (`cargo run --bin orchestrator` builds only the orchestrator)",
-                bin.display()
-            )));
+        let path = exe.with_file_name(name);
+        if !path.is_file() {
+            return Err(MemberBinaryError::Missing { name, path });
         }
     }
     Ok(())
+}
+
+/// Why the member binaries cannot be started.
+#[derive(Debug, thiserror::Error)]
+pub enum MemberBinaryError {
+    /// The running executable could not be found (the member binaries sit beside it): a fault.
+    #[error("cannot locate the orchestrator binary: {0}")]
+    Locate(#[source] std::io::Error),
+    /// A member binary is not built: the operator's to fix (bad input).
+    #[error(
+        "the `{name}` binary is missing ({}): build every binary with `cargo build --release` \
+         (`cargo run --bin orchestrator` builds only the orchestrator)",
+        path.display()
+    )]
+    Missing {
+        name: &'static str,
+        path: std::path::PathBuf,
+    },
+}
+
+impl From<MemberBinaryError> for Failure {
+    /// A launch (still a library returning [`Failure`]) passes it on with `?`.
+    fn from(e: MemberBinaryError) -> Self {
+        match e {
+            MemberBinaryError::Locate(_) => Failure::fault(e),
+            MemberBinaryError::Missing { .. } => Failure::bad_input(e),
+        }
+    }
 }
 
 /// Starts member `id`'s binary; `flags` are passed on (`--realtime`, ...).

@@ -10,8 +10,6 @@ use cdm_records::rundir::{RunDir, RunDirError};
 use cdm_records::telemetry::{TelemetryFormat, TelemetrySink};
 use cdm_scenario::Scenario;
 
-use crate::Failure;
-
 /// Rows a tick the default `--every` keeps at most: a team of N members writes every
 /// ceil(N / 40)-th tick, so a default run's telemetry grows with its length, not its team
 /// (about 2 million rows for the longest built-in plans; docs/src/benchmarks/telemetry.md).
@@ -22,25 +20,30 @@ pub fn every_or_default(every: Option<u64>, members: usize) -> u64 {
     every.unwrap_or_else(|| (members as u64).div_ceil(DEFAULT_ROWS_PER_TICK).max(1))
 }
 
+/// A `--telemetry` format this build cannot write (the operator's input: exit 2).
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "--telemetry {option}: this orchestrator was built without its `{feature}` feature \
+     (build with default features)"
+)]
+pub struct FormatNotBuilt {
+    /// The value of `--telemetry`.
+    option: &'static str,
+    /// The cargo feature that writes it.
+    feature: &'static str,
+}
+
 /// Refuse a format this build cannot write, before anything is created.
-pub fn check_available(format: TelemetryFormat) -> Result<(), Failure> {
-    let (name, built) = match format {
+pub fn check_available(format: TelemetryFormat) -> Result<(), FormatNotBuilt> {
+    let (option, feature, built) = match format {
         TelemetryFormat::Csv => return Ok(()),
-        TelemetryFormat::Parquet => ("parquet", cfg!(feature = "parquet")),
-        TelemetryFormat::Mcap => ("rosbag", cfg!(feature = "rosbag")),
+        TelemetryFormat::Parquet => ("parquet", "parquet", cfg!(feature = "parquet")),
+        TelemetryFormat::Mcap => ("mcap", "rosbag", cfg!(feature = "rosbag")),
     };
     if built {
         return Ok(());
     }
-    Err(Failure::bad_input(format!(
-        "--telemetry {}: this orchestrator was built without its `{name}` feature \
-         (build with default features)",
-        if format == TelemetryFormat::Mcap {
-            "mcap"
-        } else {
-            name
-        }
-    )))
+    Err(FormatNotBuilt { option, feature })
 }
 
 /// The bag's directory in a run directory (`--telemetry mcap`).

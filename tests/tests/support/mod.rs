@@ -31,6 +31,7 @@ pub const PROGRESS_DEADLINE: Duration = integration_tests::deadline::SHORT;
 #[allow(unused_imports)] // each test file uses a different part
 pub use integration_tests::{launch, launch_loud, simulate};
 
+pub mod airspace;
 pub mod netns;
 pub mod users;
 

@@ -1,11 +1,12 @@
 //! Progress of long runs: a bar on a terminal (tick, simulated time, ticks per second, the worst
-//! safety margins so far), plain `tracing` INFO lines every few seconds otherwise, nothing with
-//! `--quiet`.
+//! safety margins so far), plain `tracing` INFO lines every few seconds otherwise (`--quiet`
+//! shows none: its sink, [`crate::notices::sink`], makes no [`Progress`]).
 
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
 use cdm_records::audit::AuditReport;
+use cdm_team::notices::TickProgress;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Seconds between plain log lines when stderr is not a terminal.
@@ -14,7 +15,6 @@ const LOG_EVERY: Duration = Duration::from_secs(5);
 const DRAW_EVERY: Duration = Duration::from_millis(100);
 
 enum Mode {
-    Quiet,
     Bar(ProgressBar),
     Log,
 }
@@ -57,11 +57,9 @@ pub fn margins(r: &AuditReport) -> String {
 }
 
 impl Progress {
-    /// A bar when stderr is a terminal, log lines otherwise, nothing when quiet.
-    pub fn new(what: &'static str, last_tick: u64, dt_s: f64, quiet: bool) -> Self {
-        let mode = if quiet {
-            Mode::Quiet
-        } else if std::io::stderr().is_terminal() {
+    /// A bar when stderr is a terminal, log lines otherwise.
+    pub fn new(what: &'static str, last_tick: u64, dt_s: f64) -> Self {
+        let mode = if std::io::stderr().is_terminal() {
             let bar = ProgressBar::with_draw_target(
                 Some(last_tick + 1),
                 ProgressDrawTarget::stderr_with_hz(10),
@@ -88,7 +86,6 @@ impl Progress {
     /// Tick `tick` is done; `r` is the audit so far.
     pub fn tick(&mut self, tick: u64, r: &AuditReport) {
         let every = match self.mode {
-            Mode::Quiet => return,
             Mode::Bar(_) => DRAW_EVERY,
             Mode::Log => LOG_EVERY,
         };
@@ -116,7 +113,6 @@ impl Progress {
                 self.what,
                 margins(r)
             ),
-            Mode::Quiet => {}
         }
     }
 
@@ -125,6 +121,15 @@ impl Progress {
         if let Mode::Bar(bar) = &self.mode {
             bar.finish_and_clear();
         }
+    }
+}
+
+impl TickProgress for Progress {
+    fn tick(&mut self, tick: u64, audit: &AuditReport) {
+        Progress::tick(self, tick, audit);
+    }
+    fn finish(&mut self) {
+        Progress::finish(self);
     }
 }
 
