@@ -70,7 +70,7 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
         )));
     }
     let format = r.telemetry_format().unwrap_or_default();
-    cdm_team::telemetry::check_available(format)?;
+    cdm_team::telemetry::check_available(format).map_err(Failure::bad_input)?;
     let dir = RunDir::create(&a.out, a.force).map_err(Failure::from)?;
     dir.write_scenario(&flown).map_err(Failure::fault)?;
     let mut tel =
