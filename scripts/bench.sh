@@ -19,6 +19,12 @@
 # SCHED_FIFO, needs root or `ulimit -r`; RT_PRIORITY=0 skips these rows).
 # REALTIME_ONLY=1 runs only this section.
 #
+# Recording (RECORDING_ONLY=1, only on demand): for N in RECORDING_NS (default 40), ROUNDS
+# (default 2) alternations of a real-time run of RECORDING_S seconds (default 10) with the
+# members' recordings and with `--no-recording`: late ticks and the team's CPU, the recordings'
+# and telemetry.csv's bytes per member-second, and the replay's wall time (and whether its
+# telemetry is the run's) against `simulate` of the same plan.
+#
 # Scale, after the main table: for N in SCALE_NS (default 1000; SCALE_NS=0 skips it)
 # and, opt-in, BENCH_N (e.g. BENCH_N=2000: 2000 processes, a full plan of about 66,000 ticks,
 # tens of minutes on 2 cores): the engine alone, start-up (command to first tick) with
@@ -48,7 +54,8 @@
 # Usage: [BIN=DIR] [WINDOW=W] [QUICK=1] [FORMATS_N=1000] [REALTIME_NS="10 40"] [REALTIME_S=10]
 #        [REALTIME_ONLY=1] [SCALE_NS="1000"] [BENCH_N=2000] [BENCH_N_FLAGS=...] [SCALE_ONLY=1]
 #        [BEFORE_BIN=DIR] [ROUNDS=3] [BEFORE_ONLY=1]
-#        [TELEMETRY_ONLY=1] [TELEMETRY_N=1000] [TELEMETRY_TICKS=K] scripts/bench.sh [N ...]
+#        [TELEMETRY_ONLY=1] [TELEMETRY_N=1000] [TELEMETRY_TICKS=K]
+#        [RECORDING_ONLY=1] [RECORDING_NS="40 250"] [RECORDING_S=10] scripts/bench.sh [N ...]
 #   (default N: 10 40 100 250 1000)
 #   Full plans for N <= 100 and N = 1000; N = 250 flies 5000 ticks (stated in the table).
 #   QUICK=1: N = 1000 flies 3000 ticks instead of its full plan (46,601 ticks, about 3 minutes).
@@ -203,6 +210,42 @@ before_after_section() {
     echo "| start-up s, \`launch --n $n\` (command to first tick) | $mb (${sb[*]}) | $ma (${sa[*]}) | $(awk -v a="$ma" -v b="$mb" 'BEGIN{printf "%.2f", a/b}') |"
   done
 }
+# Recording (see the header): a real-time run with and without the members' recordings, alternated.
+recording_section() {
+  local rn=(${RECORDING_NS:-40}) rs=${RECORDING_S:-10} rounds=${ROUNDS:-2} n i rec
+  echo "Recording (\`launch --n N --t-total 60 --max-ticks $((rs * 100)) --realtime [--no-recording]\`, $rs s of flight, $rounds rounds alternated):"
+  echo
+  echo "| N | recording | late ticks | late % | team CPU (cores) | recording bytes per member-second | telemetry.csv bytes per member-second | replay wall s (identical?) | simulate wall s | load average before / after |"
+  echo "|---|---|---|---|---|---|---|---|---|---|"
+  for n in "${rn[@]}"; do
+  for i in $(seq "$rounds"); do
+  for rec in on off; do
+    local flags=() load_before; load_before=$(cut -d' ' -f1 /proc/loadavg)
+    [ "$rec" = on ] || flags=(--no-recording)
+    "$bin/orchestrator" launch --n "$n" --t-total 60 --max-ticks $((rs * 100)) --realtime \
+      "${flags[@]}" --no-figures --quiet --out "$out/rec$n" >/dev/null 2>&1 || true
+    local rbytes="-" tbytes replay="-" sim="-"
+    tbytes=$(stat -c %s "$out/rec$n/telemetry.csv")
+    if [ "$rec" = on ]; then
+      rbytes=$(du -cb "$out/rec$n"/recording/*.mcap | tail -1 | cut -f1)
+      replay=$(secs "$bin/orchestrator" replay "$out/rec$n" --out "$out/rep$n" --no-figures | cut -d' ' -f1)
+      cmp -s "$out/rec$n/telemetry.csv" "$out/rep$n/telemetry.csv" && replay="$replay (yes)" || replay="$replay (no)"
+      sim=$(secs "$bin/orchestrator" simulate --n "$n" --t-total 60 --max-ticks $((rs * 100)) --no-figures --quiet --out "$out/sim$n" | cut -d' ' -f1)
+    fi
+    python3 - "$out/rec$n/audit.json" "$n" "$rec" "$rbytes" "$tbytes" "$rs" "$replay" "$sim" "$load_before" "$(cut -d' ' -f1 /proc/loadavg)" <<'PY'
+import json, sys
+a = json.load(open(sys.argv[1])); r = a["realtime"]
+n, s = int(sys.argv[2]), float(sys.argv[6])
+per = lambda b: "-" if b == "-" else f"{int(b) / (n * s):.0f}"
+cpu = r.get("team_cpu_cores"); cpu = "?" if cpu is None else f"{cpu:.2f}"
+print(f"| {n} | {sys.argv[3]} | {r['late_ticks']} | {r['late_ticks_pct']:.3f} | {cpu} | {per(sys.argv[4])} | {per(sys.argv[5])} | "
+      f"{sys.argv[7]} | {sys.argv[8]} | {sys.argv[9]} / {sys.argv[10]} |")
+PY
+    rm -rf "$out/rec$n" "$out/rep$n" "$out/sim$n"
+  done
+  done
+  done
+}
 # Telemetry (see the header): the writing cost of telemetry.parquet, interleaved medians.
 telemetry_section() {
   local tn=${TELEMETRY_N:-1000} rounds=${ROUNDS:-3} limit=() i
@@ -230,6 +273,7 @@ if [ -n "${TELEMETRY_ONLY:-}" ]; then telemetry_section; exit 0; fi
 if [ -n "${BEFORE_ONLY:-}" ]; then before_after_section; exit 0; fi
 if [ -n "${SCALE_ONLY:-}" ]; then scale_section; exit 0; fi
 if [ -n "${REALTIME_ONLY:-}" ]; then realtime_section; exit 0; fi
+if [ -n "${RECORDING_ONLY:-}" ]; then recording_section; exit 0; fi
 echo "| N | ticks flown | engine ticks/s | simulate ticks/s | launch ticks/s (window ${window:-default}) | barrier ticks/s | launch/engine | launch/simulate | launch/barrier | start-up s | largest member RSS MiB | orchestrator RSS MiB |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
 for n in "${ns[@]}"; do

@@ -147,6 +147,9 @@ fn simulate_command(
 /// `orchestrator replay`: the run directory checked and flown again (changed or not), then
 /// compared with the run.
 fn replay_command(a: &crate::cli::ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
+    if crate::replay_realtime::is_realtime(&a.run) {
+        return crate::replay_realtime::replay_realtime(a, quiet);
+    }
     let p = crate::replay::prepare(a)?;
     let flight = InProcess {
         what: "replay",

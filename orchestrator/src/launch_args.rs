@@ -104,6 +104,10 @@ pub struct RealtimeArgs {
     /// CAP_SYS_NICE or `ulimit -r` (BENCHMARKS.md: late ticks with and without).
     #[arg(long, value_name = "P", value_parser = clap::value_parser!(u8).range(cdm_process::sched::RT_PRIORITIES))]
     pub rt_priority: Option<u8>,
+    /// With --realtime: the members write no recording (the run cannot be replayed); for
+    /// measuring what recording costs (BENCHMARKS.md).
+    #[arg(long)]
+    pub no_recording: bool,
 }
 
 impl RealtimeArgs {
@@ -115,6 +119,9 @@ impl RealtimeArgs {
             }
             if self.rt_priority.is_some() {
                 return Err(Failure::bad_input("--rt-priority needs --realtime"));
+            }
+            if self.no_recording {
+                return Err(Failure::bad_input("--no-recording needs --realtime"));
             }
             return Ok(None);
         }
@@ -131,6 +138,7 @@ impl RealtimeArgs {
             stale_after,
             phase_seed: self.phase_seed,
             rt_priority: self.rt_priority,
+            record: !self.no_recording,
         }))
     }
 }

@@ -11,6 +11,7 @@ mod print_certificate;
 mod print_origin;
 mod progress;
 mod replay;
+mod replay_realtime;
 mod steer_cmd;
 
 use cdm_team::Exit;

@@ -94,7 +94,7 @@ pub fn outcome(a: &ReplayArgs, what_if: bool, differs: Option<String>) -> Result
 }
 
 /// The run's scenario with the what-if changes, validated as a scenario file is.
-fn changed(s: &Scenario, a: &ReplayArgs) -> Result<Scenario, Failure> {
+pub(crate) fn changed(s: &Scenario, a: &ReplayArgs) -> Result<Scenario, Failure> {
     let mut file = s.file.clone();
     let mut origin = s.origin.clone();
     if let Some(text) = &a.gains {
@@ -127,7 +127,7 @@ fn parse_gains(text: &str) -> Result<[f64; 4], String> {
     }
 }
 
-fn same_dir(a: &Path, b: &Path) -> bool {
+pub(crate) fn same_dir(a: &Path, b: &Path) -> bool {
     match (a.canonicalize(), b.canonicalize()) {
         (Ok(x), Ok(y)) => x == y,
         _ => false,

@@ -305,9 +305,11 @@ fn start_members(
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let mut children = Vec::new();
     if o.spawn {
+        let record = crate::realtime::recording_flags(o, dir)?;
         // With --hosts K, the other hosts' daemons spawn theirs.
         for m in s.formation.members.iter().filter(|m| runs_here(m.id)) {
             let mut flags = crate::realtime::member_flags(o);
+            flags.extend(record.iter().cloned());
             flags.extend(o.vehicles.member_args());
             if o.realtime.is_none() {
                 flags.extend(cdm_team::member_priority::lockstep_flags(o.agent_timeout));

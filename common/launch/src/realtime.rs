@@ -9,6 +9,7 @@
 //! (no I/O, driven by the clock passed in), flown by the one loop of `fly.rs`; this file moves
 //! messages, sleeps, and writes files.
 
+use std::os::unix::fs::DirBuilderExt;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
@@ -47,6 +48,8 @@ pub struct RealtimeOptions {
     pub stale_after: Duration,
     pub phase_seed: u32,
     pub rt_priority: Option<u8>,
+    /// Spawned members write their recordings (`recording/<id>.mcap`).
+    pub record: bool,
 }
 
 /// `--rt-priority`: the orchestrator takes SCHED_FIFO itself before it creates or spawns
@@ -86,6 +89,33 @@ pub fn member_flags(o: &LaunchOptions) -> Vec<String> {
         }
         None => Vec::new(),
     }
+}
+
+/// `--record DIR` for the members a real-time launch spawns: the run directory's recording
+/// folder (created here, readable by this user only), where each member writes the neighbour
+/// states its ticks flew on (cdm-recording), so `replay` can fly the run again. None in
+/// lockstep, which replays without one.
+pub fn recording_flags(o: &LaunchOptions, dir: &RunDir) -> Result<Vec<String>, Failure> {
+    if !o.realtime.as_ref().is_some_and(|rt| rt.record) {
+        return Ok(Vec::new());
+    }
+    let at = dir.path().join(cdm_recording::DIR);
+    let made = std::fs::DirBuilder::new()
+        .mode(0o700)
+        .create(&at)
+        .or_else(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists if at.is_dir() => Ok(()),
+            _ => Err(e),
+        });
+    made.map_err(|e| {
+        Failure::fault(format!(
+            "{}: {}",
+            at.display(),
+            cdm_files::describe(&at, &e)
+        ))
+    })?;
+    let at = at.canonicalize().unwrap_or(at);
+    Ok(vec!["--record".into(), at.display().to_string()])
 }
 
 /// Wall-clock lead of the start instant over its announcement, so every member has the clock

@@ -65,6 +65,8 @@ pub struct Flight {
     pub deadlines: Deadlines,
     pub mode: Mode,
     pub vehicles: Vehicles,
+    /// `--record DIR`: where a real-time member writes its recording.
+    pub record: Option<std::path::PathBuf>,
 }
 
 /// Run one member until the orchestrator stops the team.
@@ -80,6 +82,7 @@ pub fn run_member(
         deadlines,
         mode,
         ref vehicles,
+        ref record,
     } = *flight;
     let s = Scenario::load(scenario_path, Checks::Member)?;
     let s = link.apply(&s)?;
@@ -114,6 +117,7 @@ pub fn run_member(
         team,
         deadlines,
         mode,
+        record: record.as_deref(),
     };
     match vehicles {
         Vehicles::Model => member.fly(
@@ -137,6 +141,7 @@ struct Joined<'a> {
     team: &'a TeamName,
     deadlines: Deadlines,
     mode: Mode,
+    record: Option<&'a Path>,
 }
 
 impl Joined<'_> {
@@ -180,6 +185,9 @@ impl Joined<'_> {
             let mut core = RealtimeCore::realtime(me, at_rest, setup, vehicle, clock.now())
                 .with_losses(losses)
                 .with_steering(MemberSteering::new(s.steering(), s.file.comm_hz));
+            if let Some(dir) = self.record {
+                core = core.with_journal(Box::new(self.recording(dir)?));
+            }
             let done = crate::member_vehicle::fly(
                 &mut core,
                 &mut ports,
@@ -208,6 +216,17 @@ impl Joined<'_> {
         let hook = hook.as_ref().map(|h| h as BeforePublish);
         fly(&mut core, &mut ports, &clock, interrupted, hook)
             .map_err(|e| MemberError::from_loop(e, id, team))
+    }
+}
+
+impl Joined<'_> {
+    /// This member's recording in `dir` (`--record`).
+    fn recording(&self, dir: &Path) -> Result<cdm_recording::McapJournal, MemberError> {
+        let (s, me) = (self.s, self.me);
+        let path = dir.join(cdm_recording::file_name(me.id));
+        let leader = !cdm_runtime::member_core::subscriptions(me).is_empty();
+        cdm_recording::McapJournal::create(&path, (me.id, !leader), s.content_hash(), s.dt_s())
+            .map_err(|e| MemberError::Recording(e.to_string()))
     }
 }
 

@@ -62,6 +62,10 @@ pub struct MemberArgs {
     /// What this member flies (the model, or a MAVLink vehicle: needs --realtime).
     #[command(flatten)]
     pub vehicle: crate::vehicles::VehicleArgs,
+    /// With --realtime: write this member's recording (the neighbour states each tick flew on,
+    /// for `orchestrator replay`) as DIR/<id>.mcap.
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<std::path::PathBuf>,
 }
 
 /// The whole `main` of a member binary: parse arguments, initialise logging (`RUST_LOG`,
@@ -145,10 +149,15 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
     }
     let span = tracing::info_span!("member", id = args.id);
     let _g = span.enter();
+    if args.record.is_some() && !args.realtime {
+        say("error: --record needs --realtime (a lockstep flight is replayed without one)");
+        return 2;
+    }
     let flight = Flight {
         deadlines,
         mode,
         vehicles,
+        record: args.record,
     };
     let run = run_member(
         kind,

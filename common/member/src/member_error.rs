@@ -21,6 +21,9 @@ pub enum MemberError {
     /// A bad `--link-*` or `--seed` value (the message names the flag).
     #[error("{0}")]
     Link(String),
+    /// `--record DIR`: the recording cannot be created (names the file).
+    #[error("--record: {0}")]
+    Recording(String),
     /// A bad `--link-*` or `--seed` value, or a `[link]` table the scenario refuses.
     #[error(transparent)]
     LinkArgs(#[from] crate::options::LinkArgsError),
@@ -102,6 +105,7 @@ impl MemberError {
         match self {
             MemberError::Scenario(_)
             | MemberError::Link(_)
+            | MemberError::Recording(_)
             | MemberError::LinkArgs(_)
             | MemberError::NotInScenario { .. }
             | MemberError::WrongRole { .. }

@@ -40,6 +40,7 @@ use crate::member_core::{
 use crate::member_loss::MemberLosses;
 use crate::member_protocol::WaitingFor;
 use crate::messages::{ClockCommand, ClockMsg, FaultCode, StateMsg, PHASES_ALIGNED, STATUS_PACING};
+use crate::realtime_journal::{Flown, Journal};
 use crate::realtime_links::DelayLine;
 use crate::seams::Vehicle;
 
@@ -231,6 +232,8 @@ pub struct Realtime {
     losses: Option<Box<MemberLosses>>,
     /// The repair tick whose wait for a new in-neighbour's state was logged.
     waited_at: Option<u64>,
+    /// Where each flown tick's neighbour choices go (`realtime_journal.rs`), if anywhere.
+    journal: Option<Box<dyn Journal>>,
 }
 
 impl<V: Vehicle> MemberCore<V, Realtime> {
@@ -254,6 +257,7 @@ impl<V: Vehicle> MemberCore<V, Realtime> {
             created: now,
             losses: None,
             waited_at: None,
+            journal: None,
         };
         let plan = (setup.hash, setup.last);
         Self::with_timing(member, plan, vehicle, setup.deadlines, (timing, now))
@@ -263,6 +267,12 @@ impl<V: Vehicle> MemberCore<V, Realtime> {
     /// flight, `realtime/repair.rs`); without it a notice is a fault.
     pub fn with_losses(mut self, losses: MemberLosses) -> Self {
         self.timing.losses = Some(Box::new(losses));
+        self
+    }
+
+    /// The same core, handing each flown tick's neighbour choices to `journal`.
+    pub fn with_journal(mut self, journal: Box<dyn Journal>) -> Self {
+        self.timing.journal = Some(journal);
         self
     }
 
@@ -399,6 +409,14 @@ impl Realtime {
             return m.vehicle_failed(m.tick, fault);
         }
         self.pacing.tick(late_s, dt);
+        if let Some(j) = self.journal.as_mut() {
+            let used = if m.is_follower {
+                self.heard.map(|h| h.map(|(tick, _)| tick))
+            } else {
+                [None; 3]
+            };
+            j.flown(&Flown { tick: m.tick, used });
+        }
         m.tick += 1;
         // A pacing report every second of flight, so the monitor has one whatever stops the team.
         let per_second = (1.0 / dt).round().max(1.0) as u64;

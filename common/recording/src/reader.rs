@@ -1,0 +1,298 @@
+//! The replay's side: a recording read back and checked against the run it claims to be of.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use cdm_records::run_record::RunRecord;
+
+use crate::{file_name, Ages, Header, AGES_TOPIC, FORMAT, MEMBER_TOPIC};
+
+/// A recording is at most this large (about 1 KB per member-second: days of flight).
+const MAX_BYTES: u64 = 1 << 30;
+
+/// A member flies on no state more than this many ticks ahead of its own (it would be that
+/// late, far beyond any stale bound).
+const MAX_AHEAD: i64 = 1 << 20;
+
+/// Why a recording cannot be replayed: each names the file, and a bad one its first bad record
+/// (1-based, counting the file's messages).
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// The file is missing or cannot be read.
+    #[error(transparent)]
+    Read(#[from] cdm_files::FileError),
+    /// A record is malformed, or belongs to another member, scenario or flight.
+    #[error("{path}: record {record}: {reason}")]
+    Bad {
+        path: PathBuf,
+        record: usize,
+        reason: String,
+    },
+}
+
+/// A member's recording as read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    pub header: Header,
+    /// For each tick flown from tick 0, the tick of the state each in-neighbour slot flew on.
+    pub used: Vec<[Option<u64>; 3]>,
+    /// The file has no end: the member stopped writing it before the flight ended (a crash, a
+    /// kill, a full disk); `used` holds every tick before that.
+    pub cut_short: bool,
+}
+
+/// Reads member `id`'s recording at `path`, which must be of the scenario with content hash
+/// `hash`.
+pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError> {
+    let f = cdm_files::open_input(path)?;
+    let mut bytes = Vec::new();
+    use std::io::Read;
+    f.take(MAX_BYTES)
+        .read_to_end(&mut bytes)
+        .map_err(|e| bad(path, 0, format!("cannot be read: {e}")))?;
+    if !bytes.starts_with(mcap::MAGIC) {
+        return Err(bad(path, 1, "not MCAP: no MCAP magic at its start".into()));
+    }
+    let ended = bytes.len() > mcap::MAGIC.len() && bytes.ends_with(mcap::MAGIC);
+    let stream =
+        mcap::MessageStream::new(&bytes).map_err(|e| bad(path, 1, format!("not MCAP: {e}")))?;
+    let mut header: Option<Header> = None;
+    let mut used = Vec::new();
+    for (k, msg) in stream.enumerate() {
+        let record = k + 1;
+        let msg = match msg {
+            Ok(m) => m,
+            // A file without its end was cut short: what came before stands.
+            Err(_) if !ended => return finish(path, header, used, true),
+            Err(e) => return Err(bad(path, record, e.to_string())),
+        };
+        let topic = msg.channel.topic.as_str();
+        match (&header, topic) {
+            (None, MEMBER_TOPIC) => {
+                let h: Header = serde_json::from_slice(&msg.data)
+                    .map_err(|e| bad(path, record, format!("not a recording's header: {e}")))?;
+                check_header(&h, id, hash).map_err(|why| bad(path, record, why))?;
+                header = Some(h);
+            }
+            (Some(_), AGES_TOPIC) => {
+                let a: Ages = serde_json::from_slice(&msg.data)
+                    .map_err(|e| bad(path, record, format!("not a batch of ticks: {e}")))?;
+                append(&a, id, &mut used).map_err(|why| bad(path, record, why))?;
+            }
+            _ => {
+                return Err(bad(
+                    path,
+                    record,
+                    format!("unexpected message on {topic} (the first is the member's header)"),
+                ))
+            }
+        }
+    }
+    finish(path, header, used, !ended)
+}
+
+/// The recordings of `ids` in the run directory's recording folder `dir`.
+pub fn read_dir(
+    dir: &Path,
+    ids: &[u32],
+    hash: u64,
+) -> Result<BTreeMap<u32, Recording>, RecordingError> {
+    ids.iter()
+        .map(|&id| Ok((id, read(&dir.join(file_name(id)), id, hash)?)))
+        .collect()
+}
+
+fn finish(
+    path: &Path,
+    header: Option<Header>,
+    used: Vec<[Option<u64>; 3]>,
+    cut_short: bool,
+) -> Result<Recording, RecordingError> {
+    let header =
+        header.ok_or_else(|| bad(path, 1, "no header: not a member's recording".into()))?;
+    Ok(Recording {
+        header,
+        used,
+        cut_short,
+    })
+}
+
+fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), String> {
+    if h.format != FORMAT {
+        return Err(format!("format {:?}, expected {FORMAT:?}", h.format));
+    }
+    if h.member != id {
+        return Err(format!(
+            "the recording of agent {}, not of agent {id}",
+            h.member
+        ));
+    }
+    let want = RunRecord::hash_text(hash);
+    if h.scenario_hash != want {
+        return Err(format!(
+            "of scenario {}, not of this run's {want}",
+            h.scenario_hash
+        ));
+    }
+    if !(h.dt_s.is_finite() && h.dt_s > 0.0) {
+        return Err(format!("dt_s {} is not a period", h.dt_s));
+    }
+    Ok(())
+}
+
+/// Appends a batch's ticks to `used` (which holds every tick before it).
+fn append(a: &Ages, id: u32, used: &mut Vec<[Option<u64>; 3]>) -> Result<(), String> {
+    if a.member != id {
+        return Err(format!("ticks of agent {}, not of agent {id}", a.member));
+    }
+    let next = used.len() as u64;
+    if a.tick != next {
+        return Err(format!("starts at tick {}, expected tick {next}", a.tick));
+    }
+    if a.ticks == 0 || a.ticks > 1 << 20 {
+        return Err(format!("{} ticks in one batch", a.ticks));
+    }
+    match a.age.len() as u64 {
+        0 => used.extend((0..a.ticks).map(|_| [None; 3])),
+        n if n == 3 * a.ticks => {
+            for (k, ages) in a.age.chunks_exact(3).enumerate() {
+                let tick = a.tick + k as u64;
+                let mut u = [None; 3];
+                for (slot, &age) in ages.iter().enumerate() {
+                    // A late member may fly on a state stamped after its own time (age < 0),
+                    // never on one of a tick before 0.
+                    u[slot] = match age {
+                        None => None,
+                        Some(age) if age <= tick as i64 && age > -MAX_AHEAD => {
+                            Some((tick as i64 - age) as u64)
+                        }
+                        Some(age) => {
+                            return Err(format!(
+                                "tick {tick} slot {slot}: age {age} is not in {}..={tick}",
+                                1 - MAX_AHEAD
+                            ))
+                        }
+                    };
+                }
+                // A slot keeps the newest state heard: it never flies on an older one.
+                if let Some(before) = used.last() {
+                    if let Some(slot) = (0..3).find(|&k| u[k] < before[k]) {
+                        return Err(format!(
+                            "tick {tick} slot {slot}: flew on {:?}, older than the {:?} before",
+                            u[slot], before[slot]
+                        ));
+                    }
+                }
+                used.push(u);
+            }
+        }
+        n => {
+            return Err(format!(
+                "{n} ages for {} ticks (three per tick, or none for a leader)",
+                a.ticks
+            ))
+        }
+    }
+    Ok(())
+}
+
+fn bad(path: &Path, record: usize, reason: String) -> RecordingError {
+    RecordingError::Bad {
+        path: path.to_path_buf(),
+        record,
+        reason,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::McapJournal;
+    use cdm_runtime::realtime_journal::{Flown, Journal};
+
+    fn dir(test: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("cdm-recording-{test}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("temp dir");
+        d
+    }
+
+    /// 250 ticks at 100 Hz of agent 7, flying on slot 0's state one tick old, slot 1's two
+    /// ticks old, slot 2's never heard.
+    fn write(path: &Path) -> Vec<[Option<u64>; 3]> {
+        let mut j = McapJournal::create(path, (7, false), 0xabc, 0.01).expect("created");
+        let mut want = Vec::new();
+        for tick in 0..250u64 {
+            let used = [tick.checked_sub(1), tick.checked_sub(2), None];
+            j.flown(&Flown { tick, used });
+            want.push(used);
+        }
+        want
+    }
+
+    #[test]
+    fn a_recording_reads_back_as_written() {
+        let d = dir("back");
+        let p = d.join("7.mcap");
+        let want = write(&p);
+        let r = read(&p, 7, 0xabc).expect("read");
+        assert_eq!(r.used, want);
+        assert!(!r.cut_short);
+        assert_eq!(r.header.member, 7);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_recording_cut_short_reads_up_to_where_it_ends() {
+        let d = dir("cut");
+        let p = d.join("7.mcap");
+        let want = write(&p);
+        let bytes = std::fs::read(&p).expect("written");
+        // Cut inside the third batch's message (after the header and two batches).
+        let mut cut = bytes.clone();
+        let third = bytes
+            .windows(10)
+            .position(|w| w == b"\"tick\":200")
+            .expect("third batch");
+        cut.truncate(third + 40);
+        std::fs::write(&p, &cut).expect("cut");
+        let r = read(&p, 7, 0xabc).expect("read");
+        assert!(r.cut_short);
+        assert_eq!(r.used, want[..200]);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_foreign_or_tampered_recording_names_its_first_bad_record() {
+        let d = dir("bad");
+        let p = d.join("7.mcap");
+        write(&p);
+        let e = read(&p, 7, 0xabd).unwrap_err().to_string();
+        assert!(e.contains("7.mcap: record 1: of scenario"), "{e}");
+        let e = read(&p, 8, 0xabc).unwrap_err().to_string();
+        assert!(e.contains("record 1: the recording of agent 7"), "{e}");
+        // An age edited to an older state than the one before, in the second batch (record 3).
+        let mut bytes = std::fs::read(&p).expect("written");
+        let at = bytes
+            .windows(10)
+            .position(|w| w == b"\"tick\":100")
+            .expect("second batch");
+        let age = at
+            + bytes[at..]
+                .windows(7)
+                .position(|w| w == b"\"age\":[")
+                .expect("ages")
+            + 7;
+        bytes[age] = b'9';
+        std::fs::write(&p, &bytes).expect("edited");
+        let e = read(&p, 7, 0xabc).unwrap_err().to_string();
+        assert!(
+            e.contains("record 3: tick 100 slot 0: flew on Some(91)"),
+            "{e}"
+        );
+        std::fs::write(&p, b"not an mcap file at all").expect("foreign");
+        let e = read(&p, 7, 0xabc).unwrap_err().to_string();
+        assert!(e.contains("record 1: not MCAP"), "{e}");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}

@@ -1,0 +1,322 @@
+//! A real-time flight flown again in one process from what the wall clock decided
+//! (`realtime_journal.rs`): every member's tick k is `step::step_at` at its own time
+//! `k dt + phi_i`, on the in-neighbour states it flew on in the run (their ticks recorded),
+//! brought to its time by the same cubic Taylor model (`step::extrapolate_flat`); the monitor's
+//! audit instants are taken by the same [`MonitorCore`] from the same states. Nothing here
+//! reads a clock: the same journals give the same telemetry, byte for byte, and other gains
+//! ("what if") fly the same history with the change.
+//!
+//! A late member may have flown on a state stamped after its own time (a neighbour's of a
+//! later tick), so members do not fly in rounds of ticks: each flies its next tick as soon as
+//! the states it flew on in the run are there (the run's own wall-clock order is one such
+//! order, so a whole recording always flies through). The audit instants are then taken from
+//! every member's states as the monitor took them: each instant once every member has a state
+//! at or after it.
+
+use std::collections::BTreeMap;
+
+use cdm_math::Vec3;
+use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::formation::Role;
+use cdm_model::step::{extrapolate_flat, law_for, Law, NeighborModel, TickAt};
+use cdm_records::audit::{Auditor, FaultRecord};
+use cdm_records::record::TickRecorder;
+use cdm_records::telemetry::TelemetrySink;
+use cdm_scenario::Scenario;
+
+use crate::messages::StateMsg;
+use crate::realtime::{phase_offset_s, stamp_s};
+use crate::realtime_monitor::MonitorCore;
+use crate::seams::{ModelVehicle, Vehicle, VehicleFault};
+
+/// How the run was flown, besides the scenario.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReplayTiming {
+    /// The phase seed announced with the start.
+    pub phase_seed: u32,
+    /// The monitor's audit rate (Hz).
+    pub audit_hz: f64,
+    /// The monitor's stale bound (s): how much history it kept.
+    pub stale_after_s: f64,
+    /// The run's `--max-ticks`.
+    pub max_ticks: Option<u64>,
+}
+
+/// Why a replay cannot fly a member's recorded tick.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ReplayInputError {
+    /// A member of the scenario has no journal.
+    #[error("agent {id}: no recording")]
+    Missing { id: u32 },
+    /// A journal names a member the scenario does not have.
+    #[error("agent {id}: recorded, but not in the scenario")]
+    Stranger { id: u32 },
+    /// A tick flew on a state no order of the ticks gives (a neighbour's tick that needs this
+    /// one first, or one past the neighbour's recording).
+    #[error("agent {id} tick {tick}: flew on agent {peer}'s state of tick {used}, which the recordings cannot give before it")]
+    Unflyable {
+        id: u32,
+        tick: u64,
+        peer: u32,
+        used: u64,
+    },
+    /// A leader's tick names a neighbour state.
+    #[error("agent {id} tick {tick}: a leader flies on no neighbour")]
+    LeaderWithNeighbors { id: u32, tick: u64 },
+}
+
+/// One member's recording as the replay takes it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Recorded {
+    /// For each tick flown from tick 0, the tick of the state each in-neighbour slot flew on.
+    pub used: Vec<[Option<u64>; 3]>,
+    /// False when the recording was cut short: a reader may then have flown on a state of this
+    /// member it does not hold, and the replay ends there.
+    pub whole: bool,
+}
+
+/// How far a replay got.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReplayEnd {
+    /// Audit instants recorded.
+    pub audits: u64,
+    /// Every audit instant of the run's plan was recorded.
+    pub complete: bool,
+    /// The fewest ticks any member flew (where a recording cut short ends the replay).
+    pub ticks_flown: u64,
+}
+
+/// One member as the replay flies it.
+struct Flier<'a> {
+    id: u32,
+    vehicle: ModelVehicle<'a>,
+    phase_s: f64,
+    /// Formation indices of the in-neighbours (followers only), in the order of the law.
+    neighbors: Option<[usize; 3]>,
+    /// The in-neighbours at rest where they start: their state before their first.
+    initial: [Flat; 3],
+    rec: &'a Recorded,
+    /// The state of every tick so far (tick k's before tick k is flown), and its flat output.
+    states: Vec<([f64; 12], Flat)>,
+}
+
+impl Flier<'_> {
+    /// The next tick to fly.
+    fn next(&self) -> u64 {
+        self.states.len() as u64 - 1
+    }
+
+    /// Every recorded tick is flown.
+    fn done(&self) -> bool {
+        self.next() as usize >= self.rec.used.len()
+    }
+}
+
+/// Flies `s` again on `recorded` (per member id), recording the audit instants into `audit`
+/// and `tel` as the run's monitor did. A recording cut short ends the replay at the last
+/// instant every member's states cover.
+pub fn replay(
+    s: &Scenario,
+    timing: ReplayTiming,
+    recorded: &BTreeMap<u32, Recorded>,
+    audit: &mut Auditor,
+    tel: &mut dyn TelemetrySink,
+) -> Result<Result<ReplayEnd, FaultRecord>, ReplayInputError> {
+    if let Some(id) = recorded
+        .keys()
+        .find(|id| s.formation.member(**id).is_none())
+    {
+        return Err(ReplayInputError::Stranger { id: *id });
+    }
+    let cfg = s.step_config();
+    let dt = s.dt_s();
+    let members = &s.formation.members;
+    let index_of = |id: u32| members.iter().position(|m| m.id == id);
+    let mut fliers = Vec::with_capacity(members.len());
+    for m in members {
+        let rec = recorded
+            .get(&m.id)
+            .ok_or(ReplayInputError::Missing { id: m.id })?;
+        let (law, ins) = law_for(m);
+        let follower = matches!(law, Law::Follower { .. });
+        let neighbors = follower.then(|| ins.map(|j| index_of(j).unwrap_or(usize::MAX)));
+        if !follower {
+            if let Some(tick) = rec.used.iter().position(|u| u.iter().any(Option::is_some)) {
+                let tick = tick as u64;
+                return Err(ReplayInputError::LeaderWithNeighbors { id: m.id, tick });
+            }
+        }
+        let mut initial = [Flat::rest(Vec3::zeros()); 3];
+        if follower {
+            for (f, j) in initial.iter_mut().zip(ins) {
+                if let Some(n) = s.formation.member(j) {
+                    *f = Flat::rest(n.position);
+                }
+            }
+        }
+        let vehicle = ModelVehicle::new(cfg, &s.plan, m);
+        let x = vehicle.state();
+        let mut states = Vec::with_capacity(rec.used.len() + 1);
+        states.push((x, QuadState(x).flat()));
+        fliers.push(Flier {
+            id: m.id,
+            vehicle,
+            phase_s: phase_offset_s(timing.phase_seed, m.id, dt),
+            neighbors,
+            initial,
+            rec,
+            states,
+        });
+    }
+    let fault = fly_all(&mut fliers, dt)?;
+    let end = audit_all(s, timing, &fliers, audit, tel)?;
+    Ok(match fault {
+        Some(f) => Err(f),
+        None => Ok(end),
+    })
+}
+
+/// Flies every member's recorded ticks, each as soon as the states it flew on are there. A
+/// control fault (a what-if's) ends the flight; so does a reader of a recording cut short.
+fn fly_all(fliers: &mut [Flier], dt: f64) -> Result<Option<FaultRecord>, ReplayInputError> {
+    let mut progress = true;
+    while progress {
+        progress = false;
+        for k in 0..fliers.len() {
+            while !fliers[k].done() && blocker(fliers, k).is_none() {
+                let tick = fliers[k].next();
+                let flats = neighbors_of(fliers, k, tick, dt);
+                let f = &mut fliers[k];
+                let at = TickAt {
+                    tick,
+                    offset_s: f.phase_s,
+                };
+                if let Err(e) = f.vehicle.fly_tick_at(at, &flats) {
+                    return Ok(Some(control_fault(f.id, tick, e)));
+                }
+                let x = f.vehicle.state();
+                f.states.push((x, QuadState(x).flat()));
+                progress = true;
+            }
+        }
+    }
+    // Whatever is left waits for a state no order gives, unless a recording cut short ends it.
+    for k in 0..fliers.len() {
+        if let Some((slot, used)) = blocker(fliers, k).filter(|_| !fliers[k].done()) {
+            let n = fliers[k].neighbors.map_or(usize::MAX, |ins| ins[slot]);
+            let cut = fliers.get(n).is_some_and(|n| !n.rec.whole && n.done());
+            if !cut {
+                return Err(ReplayInputError::Unflyable {
+                    id: fliers[k].id,
+                    tick: fliers[k].next(),
+                    peer: fliers.get(n).map_or(0, |n| n.id),
+                    used,
+                });
+            }
+        }
+    }
+    Ok(None)
+}
+
+/// The slot (and tick) of member `k`'s next tick whose state is not there yet, if any.
+fn blocker(fliers: &[Flier], k: usize) -> Option<(usize, u64)> {
+    let f = &fliers[k];
+    let ins = f.neighbors?;
+    let used = f.rec.used.get(f.next() as usize)?;
+    (0..3).find_map(|slot| {
+        let t = used[slot]?;
+        let have = fliers.get(ins[slot]).map_or(0, |n| n.states.len() as u64);
+        (t >= have).then_some((slot, t))
+    })
+}
+
+/// The audit instants, each from every member's newest state at or before it once every member
+/// has a state at or after it (the monitor's rule), until the plan's last or the states end.
+fn audit_all(
+    s: &Scenario,
+    timing: ReplayTiming,
+    fliers: &[Flier],
+    audit: &mut Auditor,
+    tel: &mut dyn TelemetrySink,
+) -> Result<ReplayEnd, ReplayInputError> {
+    let dt = s.dt_s();
+    let hash = s.content_hash();
+    let members: Vec<_> = (s.formation.members.iter())
+        .map(|m| (m.id, m.start, m.role == Role::Follower))
+        .collect();
+    let history = (dt, timing.stale_after_s);
+    let mut book = MonitorCore::new(&members, hash, history, timing.phase_seed);
+    let last = timing
+        .max_ticks
+        .map_or(s.last_tick(), |k| k.min(s.last_tick()));
+    let period_s = 1.0 / timing.audit_hz;
+    let last_audit = (last as f64 * dt / period_s + 1e-9).floor() as u64;
+    let mut rec = TickRecorder::new(s);
+    let n = fliers.len();
+    let mut pushed = vec![0usize; n];
+    let mut at = Vec::with_capacity(n);
+    let mut audits = 0u64;
+    'instants: while audits <= last_audit {
+        let t_s = audits as f64 * period_s;
+        for (k, f) in fliers.iter().enumerate() {
+            let stamp = |tick: usize| stamp_s(tick as u64, f.phase_s, dt);
+            while pushed[k] == 0 || stamp(pushed[k] - 1) < t_s {
+                let Some((x, _)) = f.states.get(pushed[k]) else {
+                    break 'instants;
+                };
+                book.on_state(&StateMsg::ok(pushed[k] as u64, hash, f.id, *x));
+                pushed[k] += 1;
+            }
+        }
+        at.clear();
+        at.extend((0..n).map(|k| book.state_at(k, t_s)));
+        if let Err(f) = rec.record_at(s, (audits, t_s), audit, tel, |k| Some(at[k])) {
+            audit.fault(f);
+            break;
+        }
+        audits += 1;
+    }
+    Ok(ReplayEnd {
+        audits,
+        complete: audits > last_audit,
+        ticks_flown: fliers.iter().map(|f| f.next()).min().unwrap_or(0),
+    })
+}
+
+/// Member `k`'s in-neighbours at its own time of `tick`, from the states it flew on.
+fn neighbors_of(fliers: &[Flier], k: usize, tick: u64, dt: f64) -> [Flat; 3] {
+    let f = &fliers[k];
+    let mut flats = f.initial;
+    let Some(ins) = f.neighbors else {
+        return flats;
+    };
+    let t_own = stamp_s(tick, f.phase_s, dt);
+    for (slot, out) in flats.iter_mut().enumerate() {
+        let (stamp, flat) = match (f.rec.used[tick as usize][slot], fliers.get(ins[slot])) {
+            (Some(t), Some(n)) => (stamp_s(t, n.phase_s, dt), n.states[t as usize].1),
+            _ => (0.0, f.initial[slot]),
+        };
+        *out = extrapolate_flat(&flat, t_own - stamp, NeighborModel::Taylor);
+    }
+    flats
+}
+
+fn control_fault(id: u32, tick: u64, e: VehicleFault) -> FaultRecord {
+    let (kind, peer, message) = match e {
+        VehicleFault::Step(f) => {
+            let peer = match f {
+                cdm_model::step::StepFault::NeighborNonFinite { peer } => Some(peer),
+                _ => None,
+            };
+            (cdm_model::outcome::FaultKind::Control, peer, f.to_string())
+        }
+        VehicleFault::Link { what, .. } => (cdm_model::outcome::FaultKind::Control, None, what),
+    };
+    FaultRecord {
+        kind,
+        agent: Some(id),
+        peer,
+        tick,
+        message: format!("agent {id} tick {tick}: {message}"),
+    }
+}

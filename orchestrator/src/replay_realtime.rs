@@ -1,0 +1,214 @@
+//! `orchestrator replay RUN_DIR --out DIR` of a real-time run (`launch --realtime`): the team
+//! rebuilt in this process from the run directory (scenario.toml, run.json, audit.json's
+//! real-time figures: phase seed, audit rate, stale bound) and the members' recordings
+//! (`recording/<id>.mcap`: the neighbour states each tick flew on), flown again by
+//! cdm-runtime's `realtime_replay` and compared with the run. With `--gains` or `--t-total`
+//! the same history flies with the change.
+//!
+//! Outcomes: exit 0/1 as the replay's verdict when it equals the run (or, with a change,
+//! whatever it gives); 2 for a run directory or recording that does not belong (named, with its
+//! first bad record); 3 when a recording is cut short (the replay flies up to where the
+//! recordings end and says so) or when an unchanged replay differs from the run.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+use cdm_records::audit::Auditor;
+use cdm_records::run_record::RunRecord;
+use cdm_records::rundir::RunDir;
+use cdm_runtime::realtime_replay::{replay, Recorded, ReplayEnd, ReplayTiming};
+use cdm_scenario::{Checks, Scenario};
+use cdm_simulate::replay::read_audit;
+use cdm_team::{Exit, Failure};
+
+use crate::cli::ReplayArgs;
+
+/// True when `dir` is a real-time run's directory (run.json says so).
+pub fn is_realtime(dir: &Path) -> bool {
+    RunRecord::read(dir).is_ok_and(|r| r.mode == cdm_records::run_record::RunMode::Realtime)
+}
+
+/// The replay of the real-time run `a.run`.
+pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
+    let started = Instant::now();
+    let run = &a.run;
+    let s = Scenario::load(&run.join("scenario.toml"), Checks::Full).map_err(Failure::bad_input)?;
+    let r = RunRecord::read(run).map_err(Failure::bad_input)?;
+    let hash = s.content_hash();
+    if r.scenario_hash != RunRecord::hash_text(hash) {
+        return Err(Failure::bad_input(format!(
+            "{}: scenario {}, but scenario.toml is {}",
+            run.join("run.json").display(),
+            r.scenario_hash,
+            RunRecord::hash_text(hash)
+        )));
+    }
+    let audit = read_audit(run).map_err(Failure::bad_input)?;
+    let timing = timing_of(run, &audit, r.max_ticks)?;
+    refuse_unsupported(run, &audit, a)?;
+    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
+    let recordings = cdm_recording::read_dir(&run.join(cdm_recording::DIR), &ids, hash)
+        .map_err(Failure::bad_input)?;
+    let flown = crate::replay::changed(&s, a)?;
+    let journals: BTreeMap<u32, Recorded> = (recordings.iter())
+        .map(|(id, rec)| {
+            let used = rec.used.clone();
+            (
+                *id,
+                Recorded {
+                    used,
+                    whole: !rec.cut_short,
+                },
+            )
+        })
+        .collect();
+    if crate::replay::same_dir(run, &a.out) {
+        return Err(Failure::bad_input(format!(
+            "--out {}: the run directory itself: the replay needs a directory of its own",
+            a.out.display()
+        )));
+    }
+    let format = r.telemetry_format().unwrap_or_default();
+    cdm_team::telemetry::check_available(format).map_err(Failure::bad_input)?;
+    let dir = RunDir::create(&a.out, a.force).map_err(Failure::from)?;
+    dir.write_scenario(&flown).map_err(Failure::fault)?;
+    let mut tel =
+        cdm_team::telemetry::open(&dir, format, r.every, &flown).map_err(Failure::bad_input)?;
+    let mut auditor = Auditor::new(&flown);
+    let end = replay(&flown, timing, &journals, &mut auditor, tel.as_mut()).map_err(|e| {
+        Failure::bad_input(format!("{}: {e}", run.join(cdm_recording::DIR).display()))
+    })?;
+    let end = match end {
+        Ok(end) => Some(end),
+        Err(fault) => {
+            auditor.fault(fault);
+            None
+        }
+    };
+    let complete = end.is_some_and(|e| e.complete);
+    tel.finish()
+        .map_err(|e| Failure::fault(format!("{}: {e}", dir.path().display())))?;
+    let report = auditor.finish(complete);
+    dir.write_audit(&report).map_err(Failure::fault)?;
+    crate::commands::summary("replay", &report, started, dir.path(), quiet);
+    let cut: Vec<(u32, u64)> = (recordings.iter())
+        .filter(|(_, rec)| rec.cut_short)
+        .map(|(id, rec)| (*id, rec.used.len() as u64))
+        .collect();
+    if !cut.is_empty() {
+        return Err(cut_short(run, &cut, end));
+    }
+    let differs = crate::replay::compare(run, dir.path(), format, quiet)?;
+    crate::replay::outcome(a, a.what_if(), differs)?;
+    Ok(if report.verdict == cdm_model::outcome::Verdict::Safe {
+        Exit::Safe
+    } else {
+        Exit::Unsafe
+    })
+}
+
+/// The phase seed, audit rate and stale bound of the run (audit.json's `realtime`).
+fn timing_of(
+    run: &Path,
+    audit: &serde_json::Value,
+    max_ticks: Option<u64>,
+) -> Result<ReplayTiming, Failure> {
+    let path = run.join("audit.json");
+    let rt = audit.get("realtime").ok_or_else(|| {
+        Failure::bad_input(format!(
+            "{}: no `realtime` figures: not a real-time run's audit",
+            path.display()
+        ))
+    })?;
+    let number = |k: &str| {
+        rt.get(k)
+            .and_then(serde_json::Value::as_f64)
+            .ok_or_else(|| {
+                Failure::bad_input(format!(
+                    "{}: realtime.{k} is missing or not a number",
+                    path.display()
+                ))
+            })
+    };
+    let (seed, audit_hz, stale_after_s) = (
+        number("phase_seed")?,
+        number("audit_hz")?,
+        number("stale_after_s")?,
+    );
+    let good = seed >= 0.0
+        && seed <= f64::from(u32::MAX)
+        && seed.fract() == 0.0
+        && audit_hz.is_finite()
+        && audit_hz > 0.0
+        && stale_after_s.is_finite()
+        && stale_after_s > 0.0;
+    if !good {
+        return Err(Failure::bad_input(format!(
+            "{}: realtime figures out of range (phase_seed {seed}, audit_hz {audit_hz}, stale_after_s {stale_after_s})",
+            path.display()
+        )));
+    }
+    Ok(ReplayTiming {
+        phase_seed: seed as u32,
+        audit_hz,
+        stale_after_s,
+        max_ticks,
+    })
+}
+
+/// What this replay cannot fly yet: a real-time run's losses and commands (their switch ticks
+/// are not in the recording), and other links (the recording is what the links delivered).
+fn refuse_unsupported(
+    run: &Path,
+    audit: &serde_json::Value,
+    a: &ReplayArgs,
+) -> Result<(), Failure> {
+    let lost = audit
+        .get("losses")
+        .and_then(serde_json::Value::as_array)
+        .is_some_and(|l| !l.is_empty());
+    if lost {
+        return Err(Failure::bad_input(format!(
+            "{}: a real-time run with members lost in flight: its replay is not supported yet",
+            run.join("audit.json").display()
+        )));
+    }
+    let commands = run.join("commands.json");
+    if commands.exists() {
+        return Err(Failure::bad_input(format!(
+            "{}: a real-time run with commands in flight: its replay is not supported yet",
+            commands.display()
+        )));
+    }
+    let l = &a.link;
+    if l.link_delay_ms.is_some()
+        || l.link_jitter_ms.is_some()
+        || l.link_loss.is_some()
+        || l.seed.is_some()
+    {
+        return Err(Failure::bad_input(
+            "--link-*/--seed: a real-time run's recording is what its links delivered; other links cannot be replayed on it",
+        ));
+    }
+    Ok(())
+}
+
+/// A recording cut short: what was replayed, and which recordings end early.
+fn cut_short(run: &Path, cut: &[(u32, u64)], end: Option<ReplayEnd>) -> Failure {
+    let shown: Vec<String> = cut
+        .iter()
+        .map(|(id, ticks)| format!("agent {id} after {ticks} ticks"))
+        .collect();
+    let upto = end.map_or(String::new(), |e| {
+        format!(
+            ": replayed {} audit instants, up to where the recordings end (tick {})",
+            e.audits, e.ticks_flown
+        )
+    });
+    Failure::fault(format!(
+        "{}: the recording is cut short ({}){upto}",
+        run.join(cdm_recording::DIR).display(),
+        shown.join(", ")
+    ))
+}
