@@ -12,6 +12,7 @@ mod print_origin;
 mod progress;
 mod replay;
 mod replay_realtime;
+mod run_summary;
 mod steer_cmd;
 
 use cdm_team::Exit;

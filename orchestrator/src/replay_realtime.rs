@@ -91,7 +91,7 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
         .map_err(|e| Failure::fault(format!("{}: {e}", dir.path().display())))?;
     let report = auditor.finish(complete);
     dir.write_audit(&report).map_err(Failure::fault)?;
-    crate::commands::summary("replay", &report, started, dir.path(), quiet);
+    crate::run_summary::summary("replay", &report, started, dir.path(), quiet);
     let cut: Vec<(u32, u64)> = (recordings.iter())
         .filter(|(_, rec)| rec.cut_short)
         .map(|(id, rec)| (*id, rec.used.len() as u64))
