@@ -100,6 +100,14 @@ fn build_command(profile_dir: &Path, what: &[&str]) -> Command {
     if let Some(t) = triple {
         cmd.arg("--target").arg(t);
     }
+    without_test_variables(&mut cmd);
+    cmd.stdin(Stdio::null());
+    cmd
+}
+
+/// Removes the variables cargo gives a running test (CARGO_MANIFEST_DIR, CARGO_PKG_*...) from a
+/// command that runs cargo (directly, or through pip and maturin).
+pub fn without_test_variables(cmd: &mut Command) {
     // Cargo gives a running test its package's variables (CARGO_MANIFEST_DIR, CARGO_PKG_*...).
     // Passed on, they make this build differ from the developer's `cargo test`: ring's build
     // script asks to rerun when CARGO_MANIFEST_DIR changes, so each of the two builds would
@@ -120,8 +128,6 @@ fn build_command(profile_dir: &Path, what: &[&str]) -> Command {
             cmd.env_remove(k.as_ref());
         }
     }
-    cmd.stdin(Stdio::null());
-    cmd
 }
 
 /// Run `cargo build <what>` once per test process and `what`, with the running test's profile

@@ -20,8 +20,8 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 use integration_tests::{
-    bin, describe, fenced_paper40, python_script, run, venv_python, write_scenario, write_text,
-    TempDir,
+    bin, describe, fenced_paper40, python_script, run, venv_python, without_test_variables,
+    write_scenario, write_text, TempDir,
 };
 
 /// pip building the extension (cargo, incremental over the workspace's build) and installing.
@@ -46,9 +46,13 @@ fn python_with_cdm() -> PathBuf {
         let path =
             std::env::join_paths(std::iter::once(bin_dir).chain(std::env::split_paths(&path)))
                 .unwrap_or(path);
+        let mut pip = Command::new(&python);
+        // maturin runs cargo on the workspace's build directory, where the module shares the
+        // workspace's units: with the test's own CARGO_* variables, build scripts that watch them
+        // (ring's) would run again, and the next test's `cargo build` would rebuild what is above.
+        without_test_variables(&mut pip);
         let out = run(
-            Command::new(&python)
-                .env("PATH", path)
+            pip.env("PATH", path)
                 .args([
                     "-m",
                     "pip",
