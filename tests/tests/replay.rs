@@ -14,31 +14,20 @@
 mod support;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::Duration;
 
 use integration_tests::{bin, run, unique_team, write_text, TempDir};
 use serde_json::Value;
 use support::{
     assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file, launch,
-    read_json, simulate,
+    read_json, replay, simulate,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
 /// A hold at 12 s and a resume at 18 s, inside the first 30 s of paper40.
 const COMMANDS: &str = r#"[{"at_s": 12, "command": "hold"}, {"at_s": 18, "command": "resume"}]"#;
-
-fn replay(run_dir: &Path, out: &Path, extra: &[&str]) -> Output {
-    let mut c = Command::new(bin("orchestrator"));
-    c.arg("replay")
-        .arg(run_dir)
-        .arg("--out")
-        .arg(out)
-        .arg("--no-figures")
-        .args(extra);
-    run(&mut c, DEADLINE)
-}
 
 /// audit.json without what only says how a loss was noticed.
 fn figures(dir: &Path) -> Value {

@@ -16,27 +16,17 @@
 mod support;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
 use std::time::Duration;
 
-use integration_tests::{bin, run, unique_team, TempDir};
+use integration_tests::{run, unique_team, TempDir};
 use serde_json::Value;
 use support::{
     assert_exit, assert_no_process_of, assert_same_file, assert_stderr_has, launch, read_json,
+    replay,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
-
-fn replay(run_dir: &Path, out: &Path, extra: &[&str]) -> Output {
-    let mut c = Command::new(bin("orchestrator"));
-    c.arg("replay")
-        .arg(run_dir)
-        .arg("--out")
-        .arg(out)
-        .arg("--no-figures")
-        .args(extra);
-    run(&mut c, DEADLINE)
-}
 
 /// audit.json without what the wall clock decided (the pacing figures).
 fn figures(dir: &Path) -> Value {

@@ -104,6 +104,18 @@ pub fn read_json(path: &Path) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{} is not JSON: {e}", path.display()))
 }
 
+/// `orchestrator replay RUN --out OUT --no-figures EXTRA...`, run to its end.
+pub fn replay(run_dir: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut c = std::process::Command::new(integration_tests::bin("orchestrator"));
+    c.arg("replay")
+        .arg(run_dir)
+        .arg("--out")
+        .arg(out)
+        .arg("--no-figures")
+        .args(extra);
+    integration_tests::run(&mut c, integration_tests::deadline::FLIGHT)
+}
+
 /// The scenario a run flew (`<run>/scenario.toml`: positions projected, in-neighbours filled in).
 pub fn flown_scenario(run_dir: &Path) -> ScenarioFile {
     flown_scenario_file(&run_dir.join("scenario.toml"))
