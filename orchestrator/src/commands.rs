@@ -21,7 +21,7 @@ use cdm_simulate::{simulate, SimulateOptions};
 use cdm_team::out;
 
 use cdm_iox::TeamName;
-use cdm_member::options::timeout;
+use cdm_member_cli::timeout;
 
 use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand};
 use crate::export_args::{load, SourceArgs};
@@ -455,7 +455,7 @@ fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
         Some("--realtime (steer a real-time team live with `orchestrator command`)")
     } else if a.hosts.hosts > 1 {
         Some("--hosts above 1")
-    } else if a.vehicle.vehicles != cdm_member::vehicles::VehicleKind::Model {
+    } else if a.vehicle.vehicles != cdm_member_cli::VehicleKind::Model {
         Some("--vehicles mavlink")
     } else {
         None
