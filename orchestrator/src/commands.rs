@@ -316,7 +316,7 @@ fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
         out!("{}", crate::cli::every_line(a.every, s.file.agents.len()));
     }
     let started = Instant::now();
-    let launched = launch(&s, &opts)?;
+    let launched = launch(&s, &opts).map_err(crate::launch_failure::launch_failure)?;
     let mode = match opts.realtime {
         Some(_) => RunMode::Realtime,
         None => RunMode::Lockstep,
