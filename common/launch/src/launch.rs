@@ -339,7 +339,7 @@ fn start_members(
     } else {
         let mut flags = crate::realtime::member_flags(o);
         flags.extend(o.vehicles.member_args());
-        let of = |leader: bool| {
+        let of = |leader: bool| -> Vec<u32> {
             let members = s.formation.members.iter();
             members
                 .filter(|m| m.role.is_leader() == leader)
