@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use cdm_iox::{TeamName, TransportError};
-use cdm_member::member::{Binary, Deadlines, Flight, MemberConfig, Mode};
 use cdm_member::member::DEFAULT_SILENCE_TIMEOUT_S;
+use cdm_member::member::{Binary, Deadlines, Flight, MemberConfig, Mode};
 
 use crate::link_args::LinkArgs;
 use crate::timeout::{timeout, TimeoutError};

@@ -16,10 +16,17 @@ const MAX_FN_LINES: usize = 80;
 fn sources() -> Vec<PathBuf> {
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let mut out = Vec::new();
-    let mut dirs: Vec<PathBuf> = ["agent", "leader", "member-cli", "orchestrator", "python", "tests"]
-        .iter()
-        .map(|p| root.join(p).join("src"))
-        .collect();
+    let mut dirs: Vec<PathBuf> = [
+        "agent",
+        "leader",
+        "member-cli",
+        "orchestrator",
+        "python",
+        "tests",
+    ]
+    .iter()
+    .map(|p| root.join(p).join("src"))
+    .collect();
     let common = std::fs::read_dir(root.join("common")).expect("common/ is readable");
     dirs.extend(common.flatten().map(|e| e.path().join("src")));
     while let Some(dir) = dirs.pop() {
@@ -213,15 +220,13 @@ const ALLOWED_CIRCLES: &[(&str, &[&str])] = &[
 
 /// Public type names defined twice that belong to crates being reworked elsewhere (with the
 /// files that define them). Empty this list as they are renamed; nothing may be added to it.
-const ALLOWED_TWICE: &[(&str, &[&str])] = &[
-    (
-        "BoxError",
-        &[
-            "common/hosts/src/host_link.rs",
-            "common/team/src/failure.rs",
-        ],
-    ),
-];
+const ALLOWED_TWICE: &[(&str, &[&str])] = &[(
+    "BoxError",
+    &[
+        "common/hosts/src/host_link.rs",
+        "common/team/src/failure.rs",
+    ],
+)];
 
 /// The text of `text` before its `#[cfg(test)] mod`, without comments and string contents.
 fn code_outside_tests(text: &str) -> String {
@@ -363,9 +368,16 @@ fn import_circles(modules: &[(Vec<String>, String)]) -> Vec<Vec<String>> {
 /// Every package directory with a `src/` (relative to the workspace root).
 fn packages() -> Vec<String> {
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    let mut out: Vec<String> = ["agent", "leader", "member-cli", "orchestrator", "python", "tests"]
-        .map(str::to_owned)
-        .to_vec();
+    let mut out: Vec<String> = [
+        "agent",
+        "leader",
+        "member-cli",
+        "orchestrator",
+        "python",
+        "tests",
+    ]
+    .map(str::to_owned)
+    .to_vec();
     for e in std::fs::read_dir(root.join("common"))
         .expect("common/ is readable")
         .flatten()

@@ -315,7 +315,10 @@ impl Follower {
 }
 
 /// Calls `step` until it returns true; fails after [`DEADLINE`] naming `what` it waited for.
-fn until(mut step: impl FnMut() -> Result<bool, ExchangeError>, what: &str) -> Result<(), ExchangeError> {
+fn until(
+    mut step: impl FnMut() -> Result<bool, ExchangeError>,
+    what: &str,
+) -> Result<(), ExchangeError> {
     let start = Instant::now();
     while !step()? {
         if start.elapsed() > DEADLINE {

@@ -3,14 +3,14 @@
 //! Foxglove (`--foxglove`, cdm-foxglove). Each paces itself by the wall clock and never makes
 //! the loop wait.
 
+use crate::launch_error::LaunchError;
+use crate::notice::LaunchNotice;
 use cdm_foxglove::FoxgloveOptions;
 use cdm_math::Vec3;
 use cdm_records::audit::{AuditReport, Auditor, CommandSummary};
 use cdm_ros2::{Live, Ros2Options};
 use cdm_scenario::Scenario;
 use cdm_team::notices::NoticeSink;
-use crate::launch_error::LaunchError;
-use crate::notice::LaunchNotice;
 use cdm_viewer::live::LiveView;
 
 /// The live feeds of a launch.

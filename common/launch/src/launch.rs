@@ -30,11 +30,11 @@ use crate::channel::{Answered, CommandAnswer, CommandChannel};
 use crate::feeds::Feeds;
 use crate::steer::{FlightAt, LiveSteer};
 
+use crate::launch_error::LaunchError;
 use cdm_team::team::{
     check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
     Spawned, Stop,
 };
-use crate::launch_error::LaunchError;
 
 /// Options of a launch, validated.
 pub struct LaunchOptions {

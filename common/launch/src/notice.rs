@@ -141,7 +141,9 @@ mod tests {
         let text = n.to_string();
         assert!(text.starts_with("agent 7 lost ("), "{text}");
         assert!(
-            text.ends_with("after its tick 40: its readers [8, 9] fly the repaired graph from their tick 45"),
+            text.ends_with(
+                "after its tick 40: its readers [8, 9] fly the repaired graph from their tick 45"
+            ),
             "{text}"
         );
     }

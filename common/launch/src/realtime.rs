@@ -33,9 +33,9 @@ use cdm_runtime::team_loss::TeamLosses;
 use cdm_scenario::Scenario;
 
 use crate::launch::LaunchOptions;
+use crate::launch_error::LaunchError;
 use crate::vehicle_reports::VehicleBook;
 use cdm_team::team::{fault, first_exited_but, Spawned, Stop};
-use crate::launch_error::LaunchError;
 
 /// Which members run on other hosts and may still send reports (`launch --hosts`: those whose
 /// daemon neither stopped nor was lost).

@@ -237,7 +237,8 @@ enum RunError {
 fn run(args: &Args) -> Result<(), RunError> {
     let run = validate(args).map_err(RunError::BadInput)?;
     let agent = run.config.agent;
-    let mut link = UdpLink::bind(agent, run.bind, None).map_err(|e| RunError::BadInput(e.into()))?;
+    let mut link =
+        UdpLink::bind(agent, run.bind, None).map_err(|e| RunError::BadInput(e.into()))?;
     let mut vehicle = MavlinkVehicle::new(run.config);
     let clock = Instant::now();
     eprintln!("agent {agent}: listening on {}", link.local_addr());

@@ -105,9 +105,7 @@ fn parse_key(bytes: &[u8]) -> Result<[u8; 32], KeyProblem> {
     }
     match <[u8; 32]>::try_from(bytes) {
         Ok(key) => check_not_zero(key),
-        Err(_) => Err(KeyProblem::Length {
-            bytes: bytes.len(),
-        }),
+        Err(_) => Err(KeyProblem::Length { bytes: bytes.len() }),
     }
 }
 

@@ -155,7 +155,10 @@ fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), BadRecord> {
         });
     }
     if h.member != id {
-        return Err(BadRecord::OtherMember { found: h.member, id });
+        return Err(BadRecord::OtherMember {
+            found: h.member,
+            id,
+        });
     }
     let want = RunRecord::hash_text(hash);
     if h.scenario_hash != want {
