@@ -70,11 +70,14 @@ impl Feeds {
         })
     }
 
-    /// A command given to the team in flight (`orchestrator command`): the live view marks it
-    /// (the live ROS 2 topics carry only the commands known at their start).
+    /// A command given to the team in flight (`orchestrator command`): the live view marks it,
+    /// the live ROS 2 topics send it with the first tick at or after its switch.
     pub fn command(&mut self, c: &CommandSummary) {
         if let Some(v) = self.view.as_mut() {
             v.command(c);
+        }
+        if let Some(r) = self.ros2.as_mut() {
+            r.command(c);
         }
     }
 

@@ -192,11 +192,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, LaunchError> 
 }
 
 /// The channel `orchestrator command` reaches the team by, when it takes commands in flight:
-/// in lockstep, on one host, with model vehicles (as `--commands`).
+/// in lockstep with model vehicles (as `--commands`), on one host or several: a command's
+/// notice rides the clock's message, which the link carries whole to the other hosts' members.
 fn command_channel(o: &LaunchOptions) -> Result<Option<CommandChannel>, LaunchError> {
-    let takes = o.realtime.is_none()
-        && o.hosts.hosts <= 1
-        && o.vehicles == cdm_member::vehicles::Vehicles::Model;
+    let takes = o.realtime.is_none() && o.vehicles == cdm_member::vehicles::Vehicles::Model;
     match takes {
         true => Ok(Some(CommandChannel::open(&o.team)?)),
         false => Ok(None),
