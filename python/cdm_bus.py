@@ -21,7 +21,7 @@ import iceoryx2 as iox2
 
 # Where the runtime keeps iceoryx2's files and what its shared-memory names start with. Mirrors
 # the one Rust function that decides both (cdm-iox, `common::transport`: root and global
-# prefix); tests/tests/python_bus.rs checks the two agree. Change them here only.
+# prefix); tests/tests/python/python_bus.rs checks the two agree. Change them here only.
 ROOT_FORMAT = "/dev/shm/cdm-iceoryx2-{uid}/"
 PREFIX_FORMAT = "cdm{uid}_"
 
@@ -255,7 +255,7 @@ def min_separation(states):
 # ---------------------------------------------------------------------------------------------
 # Steering a running team: the command channel of `orchestrator command TEAM ...`
 # (common/launch/src/channel.rs): a Unix socket `<team>.command` in the bus root, owner-only;
-# one JSON line asked and one answered per connection. tests/tests/steering_live.rs checks this
+# one JSON line asked and one answered per connection. tests/tests/steering/steering_live.rs checks this
 # client against a live team.
 
 # The answers (`channel::Answered`) and the CLI exit code each stands for.

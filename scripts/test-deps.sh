@@ -30,7 +30,7 @@ if [ ! -x .venv/bin/python ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; th
   .venv/bin/python -m pip install -q --disable-pip-version-check -r "$req"
   echo "$want" > "$stamp"
 fi
-# The Foxglove client of tests/tests/foxglove.rs: exactly the lock file's packages.
+# The Foxglove client of tests/tests/view/foxglove.rs: exactly the lock file's packages.
 lock=tests/foxglove/package-lock.json
 npm_stamp=tests/foxglove/node_modules/.lock.sha256
 want=$(sha256sum "$lock" | cut -d' ' -f1)

@@ -7,7 +7,11 @@
 //! deadline passes or a guard is dropped.
 //!
 //! This is test support: it panics, with a message naming the command, file or deadline at
-//! fault, instead of returning errors. Unix only (process groups, SIGKILL).
+//! fault, instead of returning errors. Unix only (process groups, SIGKILL). `support` holds the
+//! helpers the test files share (`tests/tests/`: a directory per command or feature, each
+//! directory one test binary).
+
+pub mod support;
 
 use std::collections::BTreeMap;
 use std::ffi::OsStr;

@@ -1,5 +1,5 @@
 //! Test-only fault injection: corrupt one member's published state at one tick, so the fault
-//! tests (`tests/tests/faults.rs`) can check that receivers report a bad neighbour state with
+//! tests (`tests/tests/launch/faults.rs`) can check that receivers report a bad neighbour state with
 //! both ids instead of flying on it.
 //!
 //! Set `CDM_FAULT_INJECT=<id>:<kind>@<tick>` in the environment of a member (or of the

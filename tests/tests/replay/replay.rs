@@ -1,0 +1,225 @@
+//! `orchestrator replay`: a finished lockstep run flown again from its directory alone.
+//!
+//! - A `simulate` run with commands, a scripted loss, `--every` and `--max-ticks`, and a
+//!   lockstep `launch` of 41 processes with a `--lose`: the replay's telemetry.csv is the run's
+//!   byte for byte and audit.json's safety figures are the run's; run.json records the options.
+//! - What if: `--gains` re-flies the same history differently, and two such replays are
+//!   identical.
+//! - `report --against` draws a run and its what-if side by side.
+//! - A tampered or foreign file (audit.json's losses, commands.json, another scenario.toml, a
+//!   missing run.json) is exit 2 naming the file and its first bad record; nothing panics.
+//!
+//! How to run: `cargo test --release -p integration-tests --test replay -- replay::`.
+
+use integration_tests::support;
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use integration_tests::{bin, run, unique_team, write_text, TempDir};
+use serde_json::Value;
+use support::{
+    assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file, launch,
+    read_json, replay, simulate,
+};
+
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
+
+/// A hold at 12 s and a resume at 18 s, inside the first 30 s of paper40.
+const COMMANDS: &str = r#"[{"at_s": 12, "command": "hold"}, {"at_s": 18, "command": "resume"}]"#;
+
+/// audit.json without what only says how a loss was noticed.
+fn figures(dir: &Path) -> Value {
+    let mut a = read_json(&dir.join("audit.json"));
+    if let Some(Value::Array(losses)) = a.get_mut("losses") {
+        for l in losses.iter_mut().filter_map(Value::as_object_mut) {
+            l.remove("cause");
+            l.remove("host");
+        }
+    }
+    a
+}
+
+fn assert_replays(run_dir: &Path, tmp: &Path, what: &str) {
+    let out = tmp.join(format!("{what}-replay"));
+    let o = replay(run_dir, &out, &[]);
+    assert_exit(&o, 0, &format!("replay of {what}"));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("telemetry.csv: identical to the run's"),
+        "{said}"
+    );
+    assert_same_file(&run_dir.join("telemetry.csv"), &out.join("telemetry.csv"));
+    assert_eq!(figures(run_dir), figures(&out), "{what}: audit.json");
+}
+
+/// paper40 simulated to tick `max_ticks` with [`COMMANDS`] and member 20 lost at 8 s, into
+/// `tmp/sim`.
+fn simulated(tmp: &Path, max_ticks: &str, extra: &[&str]) -> std::path::PathBuf {
+    let commands = write_text(tmp, "commands.json", COMMANDS);
+    let run_dir = tmp.join("sim");
+    let flags = [
+        "--builtin",
+        "paper40",
+        "--no-figures",
+        "--max-ticks",
+        max_ticks,
+    ];
+    let mut c = simulate(&run_dir, &flags);
+    c.args(extra)
+        .args(["--lose", "20@8", "--commands"])
+        .arg(&commands);
+    assert_exit(&run(&mut c, DEADLINE), 0, "simulate");
+    run_dir
+}
+
+#[test]
+fn a_simulate_run_with_commands_and_a_loss_replays_byte_for_byte_and_what_if_is_deterministic() {
+    let tmp = TempDir::new();
+    let run_dir = simulated(tmp.path(), "3000", &["--every", "3"]);
+    let r = read_json(&run_dir.join("run.json"));
+    assert_eq!(r["mode"], "simulate");
+    assert_eq!(
+        (r["every"].as_u64(), r["max_ticks"].as_u64()),
+        (Some(3), Some(3000))
+    );
+    assert_eq!(r["losses"], serde_json::json!([[801, [20]]]));
+    assert_replays(&run_dir, tmp.path(), "simulate");
+
+    // What if: other (stable) gains on the same history, twice.
+    let gains = ["--gains", "30,40,25,8"];
+    let (a, b) = (tmp.path().join("gains-a"), tmp.path().join("gains-b"));
+    for out in [&a, &b] {
+        let o = replay(&run_dir, out, &gains);
+        assert!(
+            matches!(o.status.code(), Some(0 | 1)),
+            "{}",
+            integration_tests::describe(&o)
+        );
+        let said = String::from_utf8_lossy(&o.stdout);
+        assert!(said.contains("telemetry.csv differs from line"), "{said}");
+    }
+    assert_same_file(&a.join("telemetry.csv"), &b.join("telemetry.csv"));
+    assert_same_file(&a.join("audit.json"), &b.join("audit.json"));
+    let g =
+        toml::from_str::<toml::Table>(&std::fs::read_to_string(a.join("scenario.toml")).unwrap())
+            .unwrap();
+    assert_eq!(g["gains"].as_array().unwrap()[0].as_float(), Some(30.0));
+    // The same losses and commands were flown.
+    assert_eq!(read_json(&a.join("audit.json"))["losses"][0]["tick"], 801);
+    assert!(a.join("commands.json").exists());
+
+    // The two side by side.
+    let mut c = Command::new(bin("orchestrator"));
+    c.args(["report", "--quiet"])
+        .arg(&a)
+        .arg("--against")
+        .arg(&run_dir);
+    assert_exit(&run(&mut c, DEADLINE), 0, "report --against");
+    let table = std::fs::read_to_string(a.join("fig_compare.csv")).unwrap();
+    let rows = |k: &str| table.lines().filter(|l| l.starts_with(k)).count();
+    assert_eq!(
+        (rows("0,"), rows("1,")),
+        (1001, 1001),
+        "every third tick of 0..=3000"
+    );
+    assert!(a.join("fig_compare.svg").exists() && a.join("fig_compare.png").exists());
+}
+
+#[test]
+fn a_lockstep_launch_with_a_loss_replays_byte_for_byte() {
+    let tmp = TempDir::new();
+    let team = unique_team("replay");
+    let run_dir = tmp.path().join("launch");
+    let flags = [
+        "--builtin",
+        "paper40",
+        "--no-figures",
+        "--max-ticks",
+        "1200",
+        "--lose",
+        "5@4",
+    ];
+    let o = run(&mut launch(&team, &run_dir, &flags), DEADLINE);
+    assert_no_process_of(&team);
+    assert_no_team_resources(&team);
+    assert_exit(&o, 0, "launch");
+    assert_eq!(read_json(&run_dir.join("run.json"))["mode"], "lockstep");
+    assert_replays(&run_dir, tmp.path(), "launch");
+}
+
+/// Copies `src`'s files into a new directory `dst`.
+fn copy_run(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_file() {
+            std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+        }
+    }
+}
+
+fn edit(dir: &Path, name: &str, from: &str, to: &str) {
+    let p = dir.join(name);
+    let text = std::fs::read_to_string(&p).unwrap();
+    assert!(text.contains(from), "{name} has {from:?}");
+    std::fs::write(&p, text.replacen(from, to, 1)).unwrap();
+}
+
+#[test]
+fn a_tampered_or_foreign_file_is_refused_naming_it_and_its_first_bad_record() {
+    let tmp = TempDir::new();
+    let run_dir = simulated(tmp.path(), "2500", &[]);
+    let other = tmp.path().join("other");
+    let mut c = simulate(&other, &["--n", "12", "--no-figures", "--max-ticks", "100"]);
+    assert_exit(&run(&mut c, DEADLINE), 0, "simulate --n 12");
+
+    type Tamper = fn(&Path, &Path);
+    let cases: [(&str, Tamper, &[&str]); 5] = [
+        (
+            "a loss of nobody",
+            |d, _| edit(d, "audit.json", "\"id\": 20", "\"id\": 999"),
+            &["audit.json", "losses[0]", "999"],
+        ),
+        (
+            "a moved loss",
+            |d, _| edit(d, "audit.json", "\"tick\": 801", "\"tick\": 900"),
+            &["audit.json", "losses[0]", "tick 900"],
+        ),
+        (
+            "a moved command",
+            |d, _| {
+                edit(
+                    d,
+                    "commands.json",
+                    "\"switch_tick\": 1200",
+                    "\"switch_tick\": 1300",
+                )
+            },
+            &["commands.json", "commands[0].switch_tick", "1300"],
+        ),
+        (
+            "another team's scenario",
+            |d, o| {
+                std::fs::copy(o.join("scenario.toml"), d.join("scenario.toml")).unwrap();
+            },
+            &["run.json", "scenario_hash"],
+        ),
+        (
+            "no run.json",
+            |d, _| std::fs::remove_file(d.join("run.json")).unwrap(),
+            &["run.json"],
+        ),
+    ];
+    for (k, (what, tamper, needles)) in cases.iter().enumerate() {
+        let d = tmp.path().join(format!("tampered-{k}"));
+        copy_run(&run_dir, &d);
+        tamper(&d, &other);
+        let out = tmp.path().join(format!("replay-{k}"));
+        let o = replay(&d, &out, &[]);
+        assert_exit(&o, 2, what);
+        support::assert_stderr_has(&o, what, needles);
+        assert!(!out.exists(), "{what}: nothing written");
+    }
+}

@@ -1,0 +1,168 @@
+//! `orchestrator replay` of a real-time run: the members' recordings (which in-neighbour state
+//! each tick flew on, decided by the wall clock) make a `launch --realtime` flight reproducible.
+//!
+//! One real-time flight of 10 processes over impaired links (delay, jitter and loss), 3 s of
+//! plan, then in process only:
+//! - the replay's telemetry.csv is the run's byte for byte and audit.json's safety figures are
+//!   the run's; every member left a recording;
+//! - what if: `--gains` flies the same history differently, and two such replays are
+//!   identical;
+//! - a recording cut short (as a killed member leaves it) replays up to where it ends and says
+//!   so, exit 3; a tampered or foreign one is exit 2 naming the file and its first bad record;
+//!   nothing panics.
+//!
+//! How to run: `cargo test --release -p integration-tests --test replay -- replay_realtime::`.
+
+use integration_tests::support;
+
+use std::path::{Path, PathBuf};
+
+use std::time::Duration;
+
+use integration_tests::{run, unique_team, TempDir};
+use serde_json::Value;
+use support::{
+    assert_exit, assert_no_process_of, assert_same_file, assert_stderr_has, launch, read_json,
+    replay,
+};
+
+const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
+
+/// audit.json without what the wall clock decided (the pacing figures).
+fn figures(dir: &Path) -> Value {
+    let mut a = read_json(&dir.join("audit.json"));
+    if let Some(o) = a.as_object_mut() {
+        o.remove("realtime");
+    }
+    a
+}
+
+/// A copy of the run directory `from` at `to` (flat, plus its recording folder).
+fn copy_run(from: &Path, to: &Path) {
+    for sub in ["", "recording"] {
+        std::fs::create_dir_all(to.join(sub)).expect("mkdir");
+        for e in std::fs::read_dir(from.join(sub)).expect("read_dir") {
+            let p = e.expect("entry").path();
+            if p.is_file() {
+                let name = p.file_name().expect("name");
+                std::fs::copy(&p, to.join(sub).join(name)).expect("copy");
+            }
+        }
+    }
+}
+
+/// The 10-agent team over impaired links, 3 s of plan, into `out`: exit 0, SAFE, complete.
+fn flight(dir: &Path) -> PathBuf {
+    let team = unique_team("rt_replay");
+    let out = dir.join("rt");
+    let args = [
+        "--n",
+        "10",
+        "--t-total",
+        "30",
+        "--realtime",
+        "--no-figures",
+        "--max-ticks",
+        "300",
+        "--link-delay-ms",
+        "15",
+        "--link-jitter-ms",
+        "10",
+        "--link-loss",
+        "0.1",
+        "--seed",
+        "5",
+    ];
+    let o = run(&mut launch(&team, &out, &args), DEADLINE);
+    assert_exit(&o, 0, "launch --realtime over impaired links");
+    let audit = read_json(&out.join("audit.json"));
+    assert_eq!(audit["verdict"], "SAFE", "{audit:#}");
+    assert_eq!(audit["complete"], true, "{audit:#}");
+    assert_no_process_of(&team);
+    out
+}
+
+#[test]
+fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
+    let dir = TempDir::new();
+    let rt = flight(dir.path());
+    for id in 1..=10 {
+        let p = rt.join("recording").join(format!("{id}.mcap"));
+        assert!(p.is_file(), "no recording of agent {id}");
+    }
+
+    // The same flight, in process.
+    let same = dir.path().join("same");
+    let o = replay(&rt, &same, &[]);
+    assert_exit(&o, 0, "replay of a real-time run");
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("telemetry.csv: identical to the run's"),
+        "{said}"
+    );
+    assert_same_file(&rt.join("telemetry.csv"), &same.join("telemetry.csv"));
+    assert_eq!(figures(&rt), figures(&same), "audit.json's safety figures");
+
+    // What if: other gains on the same history differ from the run, and deterministically.
+    let gains = ["--gains", "30,40,25,8"];
+    let (a, b) = (dir.path().join("gains-a"), dir.path().join("gains-b"));
+    for out in [&a, &b] {
+        let o = replay(&rt, out, &gains);
+        assert!(matches!(o.status.code(), Some(0 | 1)), "{o:?}");
+    }
+    let read = |p: &Path| std::fs::read(p.join("telemetry.csv")).expect("telemetry.csv");
+    assert_ne!(read(&rt), read(&a), "other gains fly differently");
+    assert_same_file(&a.join("telemetry.csv"), &b.join("telemetry.csv"));
+    assert_eq!(figures(&a), figures(&b));
+
+    // Cut short: agent 8's recording as a kill would leave it (no end, half its bytes).
+    let cut = dir.path().join("cut");
+    copy_run(&rt, &cut);
+    let p = cut.join("recording").join("8.mcap");
+    let bytes = std::fs::read(&p).expect("recording");
+    std::fs::write(&p, &bytes[..bytes.len() / 2]).expect("cut");
+    let o = replay(&cut, &dir.path().join("cut-replay"), &[]);
+    assert_exit(&o, 3, "replay of a recording cut short");
+    assert_stderr_has(
+        &o,
+        "replay",
+        &["recording is cut short", "agent 8 after", "replayed"],
+    );
+    let rows = std::fs::read_to_string(dir.path().join("cut-replay").join("telemetry.csv"))
+        .expect("telemetry.csv of what was replayed");
+    let run_rows = std::fs::read_to_string(rt.join("telemetry.csv")).expect("telemetry.csv");
+    assert!(rows.lines().count() > 1 && rows.lines().count() < run_rows.lines().count());
+    assert!(
+        run_rows.starts_with(&rows),
+        "the replayed rows are the run's first ones"
+    );
+
+    // Tampered: an age made impossible in agent 9's recording.
+    let bad = dir.path().join("bad");
+    copy_run(&rt, &bad);
+    let p = bad.join("recording").join("9.mcap");
+    let mut bytes = std::fs::read(&p).expect("recording");
+    let at = bytes
+        .windows(7)
+        .position(|w| w == b"\"age\":[")
+        .expect("ages")
+        + 7;
+    // Tick 0 flies before any state could arrive over the 15 ms links: its age is null.
+    assert_eq!(&bytes[at..at + 4], b"null");
+    bytes[at..at + 4].copy_from_slice(b"77  ");
+    std::fs::write(&p, &bytes).expect("tampered");
+    let o = replay(&bad, &dir.path().join("bad-replay"), &[]);
+    assert_exit(&o, 2, "replay of a tampered recording");
+    assert_stderr_has(&o, "replay", &["9.mcap: record 2: tick 0 slot 0: age 77"]);
+
+    // Foreign: agent 9's recording in agent 10's place.
+    copy_run(&rt, &bad);
+    std::fs::copy(rt.join("recording/9.mcap"), bad.join("recording/10.mcap")).expect("copy");
+    let o = replay(&bad, &dir.path().join("foreign-replay"), &["--force"]);
+    assert_exit(&o, 2, "replay of another member's recording");
+    assert_stderr_has(
+        &o,
+        "replay",
+        &["10.mcap: record 1: the recording of agent 9"],
+    );
+}
