@@ -392,7 +392,7 @@ pub fn team_nodes(team: &TeamName) -> Vec<(String, u32)> {
 use cdm_iox::ids::{born_s, id_pid, id_seconds, ids_in};
 
 /// A team's processes and services, recorded while it runs, to find what it leaves behind.
-pub struct Footprint {
+pub struct TeamFootprint {
     team: TeamName,
     /// The team's processes, each with the monotonic second it was born (`None`: it had
     /// exited when recorded).
@@ -400,7 +400,7 @@ pub struct Footprint {
     service_hashes: BTreeSet<String>,
 }
 
-impl Footprint {
+impl TeamFootprint {
     /// Record the live team: the given processes, those its iceoryx2 nodes name, and the hashes
     /// of its services.
     pub fn record(team: &str, pids: impl IntoIterator<Item = u32>) -> Self {
@@ -408,7 +408,7 @@ impl Footprint {
         let mut all: BTreeSet<u32> = pids.into_iter().collect();
         all.extend(team_nodes(&team).into_iter().map(|(_, pid)| pid));
         let service_hashes = team_services(&team).into_iter().map(|(h, _)| h).collect();
-        Footprint {
+        TeamFootprint {
             team,
             pids: all.into_iter().map(|p| (p, born_s(p))).collect(),
             service_hashes,
@@ -416,7 +416,7 @@ impl Footprint {
     }
 
     /// Adds what `other` recorded (a team recorded several times while it starts and runs).
-    pub fn absorb(&mut self, other: Footprint) {
+    pub fn absorb(&mut self, other: TeamFootprint) {
         for (pid, born) in other.pids {
             let mine = self.pids.entry(pid).or_insert(born);
             *mine = (*mine).or(born);

@@ -57,13 +57,13 @@ fn ids_of(s: &ScenarioFile) -> BTreeSet<u32> {
 
 /// A team whose members all run: the orchestrator, the flown scenario and the footprint
 /// (checked visible: orchestrator + 10 members).
-fn running(team: &str, out: &Path, extra: &[&str]) -> (Running, ScenarioFile, Footprint) {
+fn running(team: &str, out: &Path, extra: &[&str]) -> (Running, ScenarioFile, TeamFootprint) {
     let mut orch = spawn(&mut launch_team(team, out, "600", extra));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), ROWS_BEFORE_FAULT);
     let s = flown_scenario(out);
     let procs = team_processes(team);
     assert_eq!(procs.len(), s.agents.len() + 1, "{procs:#?}");
-    let fp = Footprint::record(team, procs.keys().copied());
+    let fp = TeamFootprint::record(team, procs.keys().copied());
     fp.assert_visible(s.agents.len() + 1);
     (orch, s, fp)
 }
@@ -104,12 +104,12 @@ fn launch_injected(
     let mut orch = spawn(&mut cmd);
     // Record the team's processes and services while it lives (until the fault stops it).
     let until = Instant::now() + PROGRESS_DEADLINE;
-    let mut fp = Footprint::record(team, []);
+    let mut fp = TeamFootprint::record(team, []);
     let mut seen_whole_team = false;
     while !orch.has_exited() && Instant::now() < until {
         let procs = team_processes(team);
         seen_whole_team |= procs.len() == 11;
-        fp.absorb(Footprint::record(team, procs.keys().copied()));
+        fp.absorb(TeamFootprint::record(team, procs.keys().copied()));
         std::thread::sleep(Duration::from_millis(2));
     }
     let o = orch.finish(STOP_DEADLINE);

@@ -192,7 +192,7 @@ fn two_teams_fly_at_once_without_seeing_each_other() {
 
 /// Starts a 10-agent team and lets it write some ticks; returns the orchestrator, the flown
 /// scenario and the team's footprint (checked to be visible: 11 processes).
-fn running_team(team: &str, out: &Path) -> (Running, ScenarioFile, Footprint) {
+fn running_team(team: &str, out: &Path) -> (Running, ScenarioFile, TeamFootprint) {
     // `--on-loss stop`: a dead member is a fault (the default repairs: `loss_launch.rs`).
     let args = ["--n", "10", "--t-total", "600", "--on-loss", "stop"];
     let mut orch = spawn(&mut launch(team, out, &args));
@@ -205,7 +205,7 @@ fn running_team(team: &str, out: &Path) -> (Running, ScenarioFile, Footprint) {
         "expected the orchestrator and {} members of team {team}: {procs:#?}",
         s.agents.len()
     );
-    let footprint = Footprint::record(team, procs.keys().copied());
+    let footprint = TeamFootprint::record(team, procs.keys().copied());
     footprint.assert_visible(s.agents.len() + 1);
     (orch, s, footprint)
 }

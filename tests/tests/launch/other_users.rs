@@ -401,7 +401,7 @@ fn clean_never_touches_a_live_team() {
     let mut orch = spawn(&mut launch(&team, &out, &["--n", "10", "--t-total", "600"]));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
     let procs = team_processes(&team);
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let fp = TeamFootprint::record(&team, procs.keys().copied());
     fp.assert_visible(11);
     let o = run(Command::new(bin("orchestrator")).arg("clean"), DEADLINE);
     assert_exit(&o, 0, "orchestrator clean");

@@ -40,7 +40,7 @@ fn a_teams_shared_memory_files_are_owner_only() {
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
     let procs = team_processes(&team);
     assert_eq!(procs.len(), 11, "{procs:#?}");
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let fp = TeamFootprint::record(&team, procs.keys().copied());
     fp.assert_visible(11);
     let files: Vec<String> = fp
         .leftovers()
@@ -306,7 +306,7 @@ fn a_bus_error_in_a_member_is_reported_as_shared_memory_full() {
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
     let procs = team_processes(&team);
     assert_eq!(procs.len(), 11, "{procs:#?}");
-    let fp = Footprint::record(&team, procs.keys().copied());
+    let fp = TeamFootprint::record(&team, procs.keys().copied());
     let pid = member_pid(&team, 9).expect("agent 9 runs");
     signal(pid, libc::SIGBUS);
     let o = orch.finish(DEADLINE);

@@ -8,7 +8,7 @@
 //! - `orchestrator clean` removes such a node and says so, and a launch after it leaves /dev/shm
 //!   as it was (in a private /dev/shm: a mount namespace, skipped where `unshare -m` is not
 //!   allowed);
-//! - the leftovers check (`support::Footprint`) reports the files of a team's process, and not
+//! - the leftovers check (`support::TeamFootprint`) reports the files of a team's process, and not
 //!   those minted before a process of the team took the same pid.
 //!
 //! The node is made by this test binary run as a child (`node_maker`): it creates an iceoryx2
@@ -127,7 +127,7 @@ fn leftovers_name_a_process_files_but_not_older_files_of_a_recycled_pid() {
         "monitor files of node {id}: {monitors:?}"
     );
 
-    let fp = Footprint::record(&team, [pid]);
+    let fp = TeamFootprint::record(&team, [pid]);
     let left = fp.leftovers();
     let id_text = id.to_string();
     let named: Vec<&String> = left.iter().filter(|l| l.contains(&id_text)).collect();
@@ -139,11 +139,11 @@ fn leftovers_name_a_process_files_but_not_older_files_of_a_recycled_pid() {
 
     // The same pid, held by a process born two seconds after the node was made: none of the
     // node's files is blamed (the node's name still is: it names the team).
-    let files = |fp: &Footprint| -> Vec<String> {
+    let files = |fp: &TeamFootprint| -> Vec<String> {
         let left = fp.leftovers();
         left.into_iter().filter(|l| l.starts_with('/')).collect()
     };
-    let mut recycled = Footprint::record(&team, []);
+    let mut recycled = TeamFootprint::record(&team, []);
     recycled.assume_process(pid, id_seconds(id) + 2);
     assert_eq!(files(&recycled), Vec::<String>::new());
     recycled.assume_process(pid, id_seconds(id));

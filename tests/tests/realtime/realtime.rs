@@ -43,12 +43,12 @@ fn realtime_launch(team: &str, out: &Path, extra: &[&str]) -> Command {
 /// A real-time team of 10 flying a long plan under `--on-loss stop` (a dead or silent member
 /// stops it), seen with its 11 processes: the orchestrator and the team's footprint (for the
 /// "nothing left" check).
-fn flying(team: &str, out: &Path) -> (integration_tests::Running, Footprint) {
+fn flying(team: &str, out: &Path) -> (integration_tests::Running, TeamFootprint) {
     let mut orch = spawn(&mut realtime_launch(team, out, &["--on-loss", "stop"]));
     wait_for_rows(&mut orch, &out.join("telemetry.csv"), 100);
     let procs = team_processes(team);
     assert_eq!(procs.len(), 11, "{procs:#?}");
-    (orch, Footprint::record(team, procs.keys().copied()))
+    (orch, TeamFootprint::record(team, procs.keys().copied()))
 }
 
 fn ids(n: u32) -> BTreeSet<u32> {

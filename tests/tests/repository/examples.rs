@@ -10,7 +10,7 @@ use std::time::Duration;
 use integration_tests::{bin, describe, example, run, spawn, unique_team};
 
 use integration_tests::support;
-use support::Footprint;
+use support::TeamFootprint;
 
 /// Generous: the machine is shared; the exchange itself takes milliseconds.
 const DEADLINE: Duration = integration_tests::deadline::SHORT;
@@ -27,9 +27,9 @@ fn two_members_exchange_every_tick_and_leave_nothing() {
     let team = unique_team("two_members");
     let mut leader = spawn(&mut side("leader", &team));
     leader.wait_for_output("waiting for member 1", DEADLINE);
-    let mut footprint = Footprint::record(&team, [leader.id()]);
+    let mut footprint = TeamFootprint::record(&team, [leader.id()]);
     let mut follower = spawn(&mut side("follower", &team));
-    footprint.absorb(Footprint::record(&team, [follower.id()]));
+    footprint.absorb(TeamFootprint::record(&team, [follower.id()]));
     let (l, f) = (leader.finish(DEADLINE), follower.finish(DEADLINE));
     assert!(l.status.success(), "leader side:\n{}", describe(&l));
     assert!(f.status.success(), "follower side:\n{}", describe(&f));
