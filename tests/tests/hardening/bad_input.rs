@@ -607,6 +607,24 @@ fn an_unwritable_out_is_refused_and_nothing_is_written() {
     assert_no_team_resources(&team);
 }
 
+/// Waits until a just copied executable can run: another test's thread that forked while the
+/// copy was open for writing holds it until its child execs (ETXTBSY), for a moment.
+fn wait_until_runnable(exe: &Path) {
+    let deadline = std::time::Instant::now() + integration_tests::deadline::REFUSE;
+    loop {
+        match Command::new(exe).arg("--version").output() {
+            Err(e)
+                if e.kind() == std::io::ErrorKind::ExecutableFileBusy
+                    && std::time::Instant::now() < deadline =>
+            {
+                std::thread::sleep(Duration::from_millis(20))
+            }
+            Err(e) => panic!("{}: {e}", exe.display()),
+            Ok(_) => return,
+        }
+    }
+}
+
 /// `cargo run --bin orchestrator` builds only the orchestrator: a launch without the member
 /// binaries beside it is refused before anything is created, saying how to build them.
 #[test]
@@ -614,6 +632,7 @@ fn a_launch_without_the_member_binaries_says_how_to_build_them() {
     let dir = TempDir::new();
     let lonely = dir.path().join("orchestrator");
     std::fs::copy(bin("orchestrator"), &lonely).expect("copy the orchestrator binary");
+    wait_until_runnable(&lonely);
     let out_dir = dir.path().join("run");
     let team = unique_team("lonely");
     let out = run(
