@@ -11,5 +11,6 @@ pub mod member_cli;
 pub mod member_error;
 mod member_vehicle;
 pub mod options;
+pub mod template;
 pub mod vehicle_origins;
 pub mod vehicles;

@@ -69,10 +69,34 @@ pub struct Flight {
     pub record: Option<std::path::PathBuf>,
 }
 
+/// A member's scenario file, read and validated, with its content hash. Both cost a member more
+/// than the rest of its start (the hash writes the whole scenario out again): the member
+/// template (`template.rs`) loads it once for every member it forks.
+#[derive(Debug)]
+pub struct Loaded {
+    /// The file it was read from.
+    pub path: std::path::PathBuf,
+    pub scenario: Scenario,
+    /// `scenario.content_hash()`.
+    pub hash: u64,
+}
+
+impl Loaded {
+    /// Reads and validates `path` (the member's checks: the orchestrator did the full ones).
+    pub fn load(path: &Path) -> Result<Self, MemberError> {
+        let scenario = Scenario::load(path, Checks::Member)?;
+        Ok(Loaded {
+            path: path.to_path_buf(),
+            hash: scenario.content_hash(),
+            scenario,
+        })
+    }
+}
+
 /// Run one member until the orchestrator stops the team.
 pub fn run_member(
     kind: Kind,
-    scenario_path: &Path,
+    loaded: &Loaded,
     team: &TeamName,
     (id, link): (u32, &LinkArgs),
     flight: &Flight,
@@ -84,10 +108,18 @@ pub fn run_member(
         ref vehicles,
         ref record,
     } = *flight;
-    let s = Scenario::load(scenario_path, Checks::Member)?;
-    let s = link.apply(&s)?;
+    // Other links change the scenario and its hash; without `--link-*` flags it is flown as
+    // loaded.
+    let relinked = match link.is_empty() {
+        true => None,
+        false => Some(link.apply(&loaded.scenario)?),
+    };
+    let (s, hash) = match &relinked {
+        Some(s) => (s, s.content_hash()),
+        None => (&loaded.scenario, loaded.hash),
+    };
     if let Some(why) = match mode {
-        Mode::Realtime { stale_after } => crate::options::realtime_links_refusal(&s, stale_after),
+        Mode::Realtime { stale_after } => crate::options::realtime_links_refusal(s, stale_after),
         Mode::Lockstep => None,
     } {
         return Err(MemberError::Link(why));
@@ -112,7 +144,8 @@ pub fn run_member(
         });
     }
     let member = Joined {
-        s: &s,
+        s,
+        hash,
         me: &me,
         team,
         deadlines,
@@ -127,8 +160,8 @@ pub fn run_member(
         // The vehicle first: the team starts only once every member's vehicle is heard (and
         // armed with --arm), since a member joins only then.
         Vehicles::Mavlink(o) => {
-            vehicles.check(&s)?;
-            let plant = crate::vehicles::connect(&s, &me, o, deadlines.join, interrupted)?;
+            vehicles.check(s)?;
+            let plant = crate::vehicles::connect(s, &me, o, deadlines.join, interrupted)?;
             member.fly(plant, interrupted)
         }
     }
@@ -137,6 +170,8 @@ pub fn run_member(
 /// A member about to join its team.
 struct Joined<'a> {
     s: &'a Scenario,
+    /// `s.content_hash()`.
+    hash: u64,
     me: &'a Member,
     team: &'a TeamName,
     deadlines: Deadlines,
@@ -152,7 +187,7 @@ impl Joined<'_> {
         interrupted: &AtomicBool,
     ) -> Result<Finished, MemberError> {
         let (s, me, team, id) = (self.s, self.me, self.team, self.me.id);
-        let hash = s.content_hash();
+        let hash = self.hash;
         let ins = subscriptions(me);
         let outs = s.formation.readers_of(id);
         let mut ports = MemberPorts::open(team, id, hash, &ins, &outs)?;
@@ -225,7 +260,7 @@ impl Joined<'_> {
         let (s, me) = (self.s, self.me);
         let path = dir.join(cdm_recording::file_name(me.id));
         let leader = !cdm_runtime::member_core::subscriptions(me).is_empty();
-        cdm_recording::McapJournal::create(&path, (me.id, !leader), s.content_hash(), s.dt_s())
+        cdm_recording::McapJournal::create(&path, (me.id, !leader), self.hash, s.dt_s())
             .map_err(|e| MemberError::Recording(e.to_string()))
     }
 }

@@ -1,8 +1,13 @@
 //! The command line shared by the `agent` and `leader` binaries.
 
-use crate::member::{run_member, Deadlines, Flight, Kind, Mode};
+use crate::member::{run_member, Deadlines, Flight, Kind, Loaded, Mode};
 use crate::options::{timeout, LinkArgs};
+use crate::template::{ForkReply, ForkRequest};
 use cdm_iox::TeamName;
+use std::ffi::OsString;
+use std::io::{BufRead, Write};
+use std::os::unix::ffi::OsStringExt;
+use std::path::Path;
 use std::path::PathBuf;
 
 /// A member's default `--silence-timeout`, seconds (the orchestrator passes a longer one only
@@ -69,10 +74,31 @@ pub struct MemberArgs {
 }
 
 /// The whole `main` of a member binary: parse arguments, initialise logging (`RUST_LOG`,
-/// default `warn`), run, exit with the member's exit code.
+/// default `warn`), run, exit with the member's exit code. Started as `NAME --template FILE
+/// ROOM` by a launch, it is instead the team's member template ([`serve_template`]).
 pub fn main(kind: Kind, name: &'static str) -> ! {
+    let mut raw = std::env::args_os().skip(1);
+    if raw.next().is_some_and(|a| a == crate::template::FLAG) {
+        init_tracing();
+        let file = PathBuf::from(raw.next().unwrap_or_default());
+        std::process::exit(serve_template(&file));
+    }
+    let args = match parse(kind, name, std::env::args_os()) {
+        Ok(a) => a,
+        Err(e) => std::process::exit(print_parse_error(&e)),
+    };
+    init_tracing();
+    std::process::exit(main_for(kind, args))
+}
+
+/// A member's arguments (`args` starts with the program's name), as its binary reads them.
+fn parse<I, T>(kind: Kind, name: &'static str, args: I) -> Result<MemberArgs, clap::Error>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
     use clap::{CommandFactory, FromArgMatches};
-    let parsed = MemberArgs::command()
+    MemberArgs::command()
         .name(name)
         .bin_name(name)
         .about(match kind {
@@ -87,29 +113,130 @@ pub fn main(kind: Kind, name: &'static str) -> ! {
                  was stopped or failed."
             }
         })
-        .try_get_matches()
-        .and_then(|m| MemberArgs::from_arg_matches(&m));
-    let args = match parsed {
-        Ok(a) => a,
-        Err(e) => {
-            let code = if e.use_stderr() { 2 } else { 0 };
-            let _ = e.print();
-            std::process::exit(code);
-        }
-    };
+        .try_get_matches_from(args)
+        .and_then(|m| MemberArgs::from_arg_matches(&m))
+}
+
+/// Prints a parse error (or `--help`, `--version`) as clap does; returns the exit code.
+fn print_parse_error(e: &clap::Error) -> i32 {
+    let _ = e.print();
+    if e.use_stderr() {
+        2
+    } else {
+        0
+    }
+}
+
+/// Logging to stderr, `RUST_LOG` (default `warn`); plain text when stderr is a file or a pipe,
+/// as the orchestrator does.
+fn init_tracing() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    // Plain text when stderr is a file or a pipe, as the orchestrator does.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
-    std::process::exit(main_for(kind, args))
+}
+
+/// Serves fork requests on stdin until it ends; returns the exit code (0, or 2 when the
+/// scenario cannot be loaded, 3 when the pipes fail).
+pub fn serve_template(scenario: &Path) -> i32 {
+    let loaded = match Loaded::load(scenario) {
+        Ok(l) => l,
+        Err(e) => {
+            say(&format!("error: member template: {e}"));
+            return e.exit_code();
+        }
+    };
+    let mut input = std::io::stdin().lock();
+    let mut frame = Vec::new();
+    loop {
+        frame.clear();
+        match input.read_until(0, &mut frame) {
+            Ok(0) => return 0,
+            Ok(_) => {}
+            Err(e) => {
+                say(&format!("error: member template: reading a request: {e}"));
+                return 3;
+            }
+        }
+        let reply = match postcard::from_bytes_cobs::<ForkRequest>(&mut frame) {
+            Ok(r) => fork_one(r, &loaded),
+            Err(e) => ForkReply::Failed {
+                errno: None,
+                why: format!("a malformed request: {e}"),
+            },
+        };
+        let sent = postcard::to_stdvec_cobs(&reply)
+            .map_err(|e| e.to_string())
+            .and_then(|b| {
+                let mut out = std::io::stdout().lock();
+                out.write_all(&b)
+                    .and_then(|()| out.flush())
+                    .map_err(|e| e.to_string())
+            });
+        if let Err(e) = sent {
+            say(&format!("error: member template: answering a request: {e}"));
+            return 3;
+        }
+    }
+}
+
+fn fork_one(r: ForkRequest, loaded: &Loaded) -> ForkReply {
+    match cdm_process::fork::fork_detached(|| member(r, loaded)) {
+        Ok(pid) => ForkReply::Forked(pid),
+        Err(e) => ForkReply::Failed {
+            errno: e.raw_os_error(),
+            why: e.to_string(),
+        },
+    }
+}
+
+/// The forked member: standard input and output on /dev/null (as a spawned member's), its
+/// command line and name as if started from its binary, then the binary's own `main`.
+fn member(r: ForkRequest, loaded: &Loaded) -> i32 {
+    null_stdio();
+    let kind = if r.leader { Kind::Leader } else { Kind::Agent };
+    let name = match kind {
+        Kind::Leader => "leader",
+        Kind::Agent => "agent",
+    };
+    let args: Vec<OsString> = std::iter::once(OsString::from(name))
+        .chain(r.args.into_iter().map(OsString::from_vec))
+        .collect();
+    // Best effort: only `ps` and tools that find a member by its arguments see them.
+    let _ = cdm_process::fork::set_cmdline(&args);
+    cdm_process::fork::set_name(name);
+    match parse(kind, name, args) {
+        Ok(a) => main_with(kind, a, Some(loaded)),
+        Err(e) => print_parse_error(&e),
+    }
+}
+
+/// Points file descriptors 0 and 1 at /dev/null (the template's are its pipes).
+fn null_stdio() {
+    // SAFETY: open/dup2/close on descriptors of our own; the path is NUL-terminated.
+    unsafe {
+        let fd = libc::open(c"/dev/null".as_ptr(), libc::O_RDWR);
+        if fd >= 0 {
+            libc::dup2(fd, 0);
+            libc::dup2(fd, 1);
+            if fd > 1 {
+                libc::close(fd);
+            }
+        }
+    }
 }
 
 /// Run a member process and return its exit code: 0 finished, 2 bad input, 3 runtime fault.
 pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
+    main_with(kind, args, None)
+}
+
+/// [`main_for`] with the scenario already loaded (by the member template): used when
+/// `--scenario` names the file it was loaded from.
+fn main_with(kind: Kind, args: MemberArgs, loaded: Option<&Loaded>) -> i32 {
     let interrupted = cdm_process::signals::install();
     let team = match TeamName::new(&args.team) {
         Ok(t) => t,
@@ -118,27 +245,9 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             return 2;
         }
     };
-    let deadlines = match (
-        timeout("--join-timeout", args.join_timeout_s),
-        timeout("--silence-timeout", args.silence_timeout_s),
-    ) {
-        (Ok(join), Ok(silence)) => Deadlines { join, silence },
-        (Err(e), _) | (_, Err(e)) => {
-            say(&format!("error: {e}"));
-            return 2;
-        }
-    };
-    let vehicles = match args.vehicle.validate(args.realtime) {
-        Ok(v) => v,
+    let (deadlines, vehicles, mode) = match checked(&args) {
+        Ok(c) => c,
         Err(e) => {
-            say(&format!("error: {e}"));
-            return 2;
-        }
-    };
-    let mode = match (args.realtime, timeout("--stale-after", args.stale_after_s)) {
-        (false, _) => Mode::Lockstep,
-        (true, Ok(stale_after)) => Mode::Realtime { stale_after },
-        (true, Err(e)) => {
             say(&format!("error: {e}"));
             return 2;
         }
@@ -159,9 +268,23 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
         vehicles,
         record: args.record,
     };
+    let own;
+    let loaded = match loaded.filter(|l| l.path == args.scenario) {
+        Some(l) => l,
+        None => match Loaded::load(&args.scenario) {
+            Ok(l) => {
+                own = l;
+                &own
+            }
+            Err(e) => {
+                say(&format!("error: {e}"));
+                return e.exit_code();
+            }
+        },
+    };
     let run = run_member(
         kind,
-        &args.scenario,
+        loaded,
         &team,
         (args.id, &args.link),
         &flight,
@@ -174,6 +297,23 @@ pub fn main_for(kind: Kind, args: MemberArgs) -> i32 {
             e.exit_code()
         }
     }
+}
+
+/// The deadlines, vehicles and mode the arguments ask for, each checked (the error names the
+/// option).
+fn checked(args: &MemberArgs) -> Result<(Deadlines, crate::vehicles::Vehicles, Mode), String> {
+    let deadlines = Deadlines {
+        join: timeout("--join-timeout", args.join_timeout_s)?,
+        silence: timeout("--silence-timeout", args.silence_timeout_s)?,
+    };
+    let vehicles = args.vehicle.validate(args.realtime)?;
+    let mode = match args.realtime {
+        false => Mode::Lockstep,
+        true => Mode::Realtime {
+            stale_after: timeout("--stale-after", args.stale_after_s)?,
+        },
+    };
+    Ok((deadlines, vehicles, mode))
 }
 
 /// `--rt-priority`: only with `--realtime` (lockstep is paced by grants, not by wake-ups on

@@ -83,6 +83,14 @@ pub enum LinkArgsError {
 }
 
 impl LinkArgs {
+    /// True when no flag was given (the scenario's `[link]` table stands).
+    pub fn is_empty(&self) -> bool {
+        self.link_delay_ms.is_none()
+            && self.link_jitter_ms.is_none()
+            && self.link_loss.is_none()
+            && self.seed.is_none()
+    }
+
     /// `s` with the flags given applied to its `[link]` table (unchanged when none is given).
     /// A bad value is refused naming its flag (or the scenario's field, when it came from there).
     pub fn apply(
