@@ -12,8 +12,8 @@
 //! [`ForkRequest`]: the binary a member would have been started as and its arguments; the
 //! template answers each with one [`ForkReply`], the member's pid, once the member is the
 //! orchestrator's child (`cdm_process::fork`). Frames are postcard with COBS, ended by a zero
-//! byte. The template ends at the end of its input. Its loop is the member binaries' `main`
-//! (`member_cli.rs`, `serve_template`); this file is the protocol both sides share. ROOM is ignored: its length is the room
+//! byte. The template ends at the end of its input. Its loop is the member binaries' (the
+//! cdm-member-cli crate's `template.rs`); this file is the protocol both sides share. ROOM is ignored: its length is the room
 //! the forked members have for their own command lines (`cdm_process::fork::set_cmdline`).
 //! A member started by hand is started from its binary, as always.
 
