@@ -8,6 +8,7 @@
 
 pub mod link_args;
 pub mod member_args;
+mod template;
 pub mod timeout;
 pub mod vehicle_args;
 
@@ -17,14 +18,35 @@ pub use timeout::{timeout, TimeoutError, MAX_TIMEOUT_S};
 pub use vehicle_args::{VehicleArgs, VehicleArgsError, VehicleKind};
 
 use cdm_iox::TeamName;
-use cdm_member::member::{Binary, Finished};
+use cdm_member::member::{Binary, Finished, Loaded};
 
 /// The whole `main` of a member binary: parse arguments, initialise logging (`RUST_LOG`,
-/// default `warn`), run, exit with the member's exit code.
+/// default `warn`), run, exit with the member's exit code. Started as `NAME --template FILE
+/// ROOM` by a launch, it is instead the team's member template ([`template::serve`]).
 pub fn main(binary: Binary) -> ! {
+    let mut raw = std::env::args_os().skip(1);
+    if raw.next().is_some_and(|a| a == cdm_member::template::FLAG) {
+        init_tracing();
+        let file = std::path::PathBuf::from(raw.next().unwrap_or_default());
+        std::process::exit(template::serve(&file));
+    }
+    let args = match parse(binary, std::env::args_os()) {
+        Ok(a) => a,
+        Err(e) => std::process::exit(print_parse_error(&e)),
+    };
+    init_tracing();
+    std::process::exit(main_for(binary, args))
+}
+
+/// A member's arguments (`args` starts with the program's name), as its binary reads them.
+fn parse<I, T>(binary: Binary, args: I) -> Result<MemberArgs, clap::Error>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
     use clap::{CommandFactory, FromArgMatches};
     let name = binary.name();
-    let parsed = MemberArgs::command()
+    MemberArgs::command()
         .name(name)
         .bin_name(name)
         .about(match binary {
@@ -39,29 +61,40 @@ pub fn main(binary: Binary) -> ! {
                  was stopped or failed."
             }
         })
-        .try_get_matches()
-        .and_then(|m| MemberArgs::from_arg_matches(&m));
-    let args = match parsed {
-        Ok(a) => a,
-        Err(e) => {
-            let code = if e.use_stderr() { 2 } else { 0 };
-            let _ = e.print();
-            std::process::exit(code);
-        }
-    };
+        .try_get_matches_from(args)
+        .and_then(|m| MemberArgs::from_arg_matches(&m))
+}
+
+/// Prints a parse error (or `--help`, `--version`) as clap does; returns the exit code.
+fn print_parse_error(e: &clap::Error) -> i32 {
+    let _ = e.print();
+    if e.use_stderr() {
+        2
+    } else {
+        0
+    }
+}
+
+/// Logging to stderr, `RUST_LOG` (default `warn`); plain text when stderr is a file or a pipe,
+/// as the orchestrator does.
+fn init_tracing() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    // Plain text when stderr is a file or a pipe, as the orchestrator does.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
-    std::process::exit(main_for(binary, args))
 }
 
 /// Run a member process and return its exit code: 0 finished, 2 bad input, 3 runtime fault.
 pub fn main_for(binary: Binary, args: MemberArgs) -> i32 {
+    main_with(binary, args, None)
+}
+
+/// [`main_for`] with the scenario already loaded (by the member template): used when
+/// `--scenario` names the file it was loaded from.
+fn main_with(binary: Binary, args: MemberArgs, loaded: Option<&Loaded>) -> i32 {
     let interrupted = cdm_process::signals::install();
     let (id, priority) = (args.id, args.rt_priority);
     let config = match args.config(binary) {
@@ -77,7 +110,7 @@ pub fn main_for(binary: Binary, args: MemberArgs) -> i32 {
     }
     let span = tracing::info_span!("member", id);
     let _g = span.enter();
-    match cdm_member::member::run(&config, interrupted) {
+    match cdm_member::member::run_loaded(&config, loaded, interrupted) {
         Ok(f) => stopped(&config.team, id, f),
         Err(e) => {
             say(&format!("error: {e}"));

@@ -330,7 +330,10 @@ fn spawn_members(
             .filter(|m| j.mine.contains(&m.id))
     {
         match spawn_member(&file, &j.team, m.id, m.role, &flags) {
-            Ok(child) => children.push(Spawned { id: m.id, child }),
+            Ok(child) => children.push(Spawned {
+                id: m.id,
+                child: child.into(),
+            }),
             Err(source) => {
                 stop_team(ports, &mut children, &j.s, StopReason::AgentFault);
                 return Err(DaemonError::Spawn { id: m.id, source });

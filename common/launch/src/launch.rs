@@ -35,6 +35,7 @@ use cdm_team::team::{
     check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
     Spawned, Stop,
 };
+use cdm_team::template::MemberTemplate;
 
 /// Options of a launch, validated.
 pub struct LaunchOptions {
@@ -301,6 +302,7 @@ fn start_members(
     let mut children = Vec::new();
     if o.spawn {
         let record = crate::realtime::recording_flags(o, dir)?;
+        let mut template = member_template(member_file);
         // With --hosts K, the other hosts' daemons spawn theirs.
         for m in s.formation.members.iter().filter(|m| runs_here(m.id)) {
             let mut flags = crate::realtime::member_flags(o);
@@ -309,14 +311,21 @@ fn start_members(
             if o.realtime.is_none() {
                 flags.extend(cdm_team::member_priority::lockstep_flags(o.agent_timeout));
             }
-            match spawn_member(member_file, &o.team, m.id, m.role, &flags) {
+            let started = match template.as_mut() {
+                Some(t) => t.fork(member_file, &o.team, (m.id, m.role), &flags),
+                None => spawn_member(member_file, &o.team, m.id, m.role, &flags).map(Into::into),
+            };
+            match started {
                 Ok(c) => {
                     if o.realtime.is_none() {
-                        cdm_team::member_priority::lower(&c);
+                        cdm_team::member_priority::lower(c.id());
                     }
                     children.push(Spawned { id: m.id, child: c });
                 }
                 Err(e) => {
+                    if let Some(t) = template.take() {
+                        t.finish();
+                    }
                     stop_team(ports, &mut children, s, StopReason::AgentFault);
                     let error = LaunchError::Spawn {
                         id: m.id,
@@ -334,6 +343,9 @@ fn start_members(
                     return Err(error);
                 }
             }
+        }
+        if let Some(t) = template {
+            t.finish();
         }
     } else {
         let mut flags = crate::realtime::member_flags(o);
@@ -355,6 +367,19 @@ fn start_members(
         });
     }
     Ok(children)
+}
+
+/// The template every member is forked from (a member started from its binary pays its `exec`
+/// and its scenario, a thousand times at N = 1000); `None`, and members started one by one,
+/// when it cannot start.
+fn member_template(member_file: &std::path::Path) -> Option<MemberTemplate> {
+    match MemberTemplate::start(member_file) {
+        Ok(t) => Some(t),
+        Err(e) => {
+            tracing::warn!("members started one by one: no member template: {e}");
+            None
+        }
+    }
 }
 
 /// The stop of a run interrupted by SIGINT, SIGTERM, SIGHUP or SIGQUIT before it started.

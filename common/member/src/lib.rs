@@ -12,5 +12,6 @@ pub mod member;
 pub mod member_error;
 mod member_vehicle;
 pub mod options;
+pub mod template;
 pub mod vehicle_origins;
 pub mod vehicles;

@@ -46,6 +46,21 @@ impl Binary {
         }
     }
 
+    /// The error for a member of `s` this binary does not fly.
+    fn refuses(self, me: &Member, s: &Scenario) -> MemberError {
+        MemberError::WrongRole {
+            id: me.id,
+            role: me.role.as_str(),
+            binary: self.name(),
+            flies: if self == Binary::Leader {
+                "primary and secondary leaders"
+            } else {
+                "followers"
+            },
+            origin: s.origin.clone(),
+        }
+    }
+
     /// The binary's name (`leader`, `agent`).
     pub fn name(self) -> &'static str {
         match self {
@@ -87,11 +102,53 @@ pub struct MemberConfig {
     pub flight: Flight,
 }
 
+/// A member's scenario file, read and validated, with its content hash. Both cost a member more
+/// than the rest of its start (the hash writes the whole scenario out again): the member
+/// template (`template.rs`) loads it once for every member it forks.
+#[derive(Debug)]
+pub struct Loaded {
+    /// The file it was read from.
+    pub path: PathBuf,
+    pub scenario: Scenario,
+    /// `scenario.content_hash()`.
+    pub hash: u64,
+}
+
+impl Loaded {
+    /// Reads and validates `path` (the member's checks: the orchestrator did the full ones).
+    pub fn load(path: &Path) -> Result<Self, MemberError> {
+        let scenario = Scenario::load(path, Checks::Member)?;
+        Ok(Loaded {
+            path: path.to_path_buf(),
+            hash: scenario.content_hash(),
+            scenario,
+        })
+    }
+}
+
 /// Run one member until the orchestrator stops the team.
 pub fn run(config: &MemberConfig, interrupted: &AtomicBool) -> Result<Finished, MemberError> {
+    run_loaded(config, None, interrupted)
+}
+
+/// [`run`] with the scenario already loaded (by the member template): used when the config's
+/// scenario is the file it was loaded from, else the file is read here.
+pub fn run_loaded(
+    config: &MemberConfig,
+    loaded: Option<&Loaded>,
+    interrupted: &AtomicBool,
+) -> Result<Finished, MemberError> {
+    let own;
+    let loaded = match loaded.filter(|l| l.path == config.scenario) {
+        Some(l) => l,
+        None => {
+            own = Loaded::load(&config.scenario)?;
+            &own
+        }
+    };
     let MemberConfig {
         binary,
-        ref scenario,
+        scenario: _,
         ref team,
         id,
         links,
@@ -103,10 +160,17 @@ pub fn run(config: &MemberConfig, interrupted: &AtomicBool) -> Result<Finished, 
         ref vehicles,
         ref record,
     } = *flight;
-    let s = Scenario::load(scenario, Checks::Member)?;
-    let s = links.apply(&s)?;
+    // Other links change the scenario and its hash; without overrides it flies as loaded.
+    let relinked = match links.is_empty() {
+        true => None,
+        false => Some(links.apply(&loaded.scenario)?),
+    };
+    let (s, hash) = match &relinked {
+        Some(s) => (s, s.content_hash()),
+        None => (&loaded.scenario, loaded.hash),
+    };
     if let Mode::Realtime { stale_after } = mode {
-        if let Some(refusal) = crate::options::realtime_links_refusal(&s, stale_after) {
+        if let Some(refusal) = crate::options::realtime_links_refusal(s, stale_after) {
             return Err(MemberError::StaleLinks(refusal));
         }
     }
@@ -117,20 +181,11 @@ pub fn run(config: &MemberConfig, interrupted: &AtomicBool) -> Result<Finished, 
         });
     };
     if !binary.accepts(me.role) {
-        return Err(MemberError::WrongRole {
-            id,
-            role: me.role.as_str(),
-            binary: binary.name(),
-            flies: if binary == Binary::Leader {
-                "primary and secondary leaders"
-            } else {
-                "followers"
-            },
-            origin: s.origin.clone(),
-        });
+        return Err(binary.refuses(&me, s));
     }
     let member = Joined {
-        s: &s,
+        s,
+        hash,
         me: &me,
         team,
         deadlines,
@@ -145,8 +200,8 @@ pub fn run(config: &MemberConfig, interrupted: &AtomicBool) -> Result<Finished, 
         // The vehicle first: the team starts only once every member's vehicle is heard (and
         // armed with --arm), since a member joins only then.
         Vehicles::Mavlink(o) => {
-            vehicles.check(&s)?;
-            let plant = crate::vehicles::connect(&s, &me, o, deadlines.join, interrupted)?;
+            vehicles.check(s)?;
+            let plant = crate::vehicles::connect(s, &me, o, deadlines.join, interrupted)?;
             member.fly(plant, interrupted)
         }
     }
@@ -155,6 +210,8 @@ pub fn run(config: &MemberConfig, interrupted: &AtomicBool) -> Result<Finished, 
 /// A member about to join its team.
 struct Joined<'a> {
     s: &'a Scenario,
+    /// `s.content_hash()`.
+    hash: u64,
     me: &'a Member,
     team: &'a TeamName,
     deadlines: Deadlines,
@@ -170,7 +227,7 @@ impl Joined<'_> {
         interrupted: &AtomicBool,
     ) -> Result<Finished, MemberError> {
         let (s, me, team, id) = (self.s, self.me, self.team, self.me.id);
-        let hash = s.content_hash();
+        let hash = self.hash;
         let ins = subscriptions(me);
         let outs = s.formation.readers_of(id);
         let mut ports = MemberPorts::open(team, id, hash, &ins, &outs)?;
@@ -243,7 +300,7 @@ impl Joined<'_> {
         let (s, me) = (self.s, self.me);
         let path = dir.join(cdm_recording::file_name(me.id));
         let leader = !cdm_runtime::member_core::subscriptions(me).is_empty();
-        cdm_recording::McapJournal::create(&path, (me.id, !leader), s.content_hash(), s.dt_s())
+        cdm_recording::McapJournal::create(&path, (me.id, !leader), self.hash, s.dt_s())
             .map_err(MemberError::Recording)
     }
 }

@@ -21,5 +21,6 @@ pub mod notices;
 pub mod team;
 pub mod telemetry;
 pub mod telemetry_thread;
+pub mod template;
 
 pub use failure::{BoxError, Exit, Failure};

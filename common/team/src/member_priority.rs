@@ -11,15 +11,13 @@
 //! raising a child's nice value needs no privilege. Real-time members keep their priority (the
 //! real-time options decide it).
 
-use std::process::Child;
-
 /// How far above the orchestrator's nice value a lockstep member runs (clamped to 19).
 pub const MEMBER_NICE: i32 = 10;
 
-/// Lowers `child`'s priority to the orchestrator's nice value + [`MEMBER_NICE`]. Best effort:
-/// a member that keeps its priority still flies, only the orchestrator may then be starved on a
-/// crowded machine, so a failure is logged.
-pub fn lower(child: &Child) {
+/// Lowers the priority of child `pid` to the orchestrator's nice value + [`MEMBER_NICE`]. Best
+/// effort: a member that keeps its priority still flies, only the orchestrator may then be
+/// starved on a crowded machine, so a failure is logged.
+pub fn lower(pid: u32) {
     // SAFETY: getpriority/setpriority take plain integers and touch no memory of ours; errno is
     // cleared first because -1 is also a valid nice value.
     let own = unsafe {
@@ -27,9 +25,9 @@ pub fn lower(child: &Child) {
         libc::getpriority(libc::PRIO_PROCESS, 0)
     };
     let nice = (own + MEMBER_NICE).min(19);
-    // SAFETY: as above; `child.id()` is our own child's pid, not yet reaped.
-    if unsafe { libc::setpriority(libc::PRIO_PROCESS, child.id(), nice) } != 0 {
-        tracing::debug!(pid = child.id(), nice, error = %std::io::Error::last_os_error(),
+    // SAFETY: as above; `pid` is our own child's, not yet reaped.
+    if unsafe { libc::setpriority(libc::PRIO_PROCESS, pid, nice) } != 0 {
+        tracing::debug!(pid, nice, error = %std::io::Error::last_os_error(),
             "cannot lower a member's priority");
     }
 }

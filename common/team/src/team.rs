@@ -17,7 +17,55 @@ use crate::Failure;
 /// A spawned member process.
 pub struct Spawned {
     pub id: u32,
-    pub child: Child,
+    pub child: MemberProcess,
+}
+
+/// A member's process: started from its binary, or forked by the member template and adopted
+/// (`template.rs`); watched and stopped the same way.
+#[derive(Debug)]
+pub enum MemberProcess {
+    Started(Child),
+    Forked(cdm_process::fork::Adopted),
+}
+
+impl From<Child> for MemberProcess {
+    fn from(c: Child) -> Self {
+        MemberProcess::Started(c)
+    }
+}
+
+impl MemberProcess {
+    /// Its process id.
+    pub fn id(&self) -> u32 {
+        match self {
+            MemberProcess::Started(c) => c.id(),
+            MemberProcess::Forked(a) => a.id(),
+        }
+    }
+
+    /// How it ended, if it has, without waiting.
+    pub fn try_wait(&mut self) -> std::io::Result<Option<std::process::ExitStatus>> {
+        match self {
+            MemberProcess::Started(c) => c.try_wait(),
+            MemberProcess::Forked(a) => a.try_wait(),
+        }
+    }
+
+    /// Waits until it ends.
+    pub fn wait(&mut self) -> std::io::Result<std::process::ExitStatus> {
+        match self {
+            MemberProcess::Started(c) => c.wait(),
+            MemberProcess::Forked(a) => a.wait(),
+        }
+    }
+
+    /// SIGKILL (nothing once it was reaped).
+    pub fn kill(&mut self) -> std::io::Result<()> {
+        match self {
+            MemberProcess::Started(c) => c.kill(),
+            MemberProcess::Forked(a) => a.kill(),
+        }
+    }
 }
 
 pub use cdm_runtime::process_exit::ProcessExit;
@@ -86,16 +134,29 @@ pub fn spawn_member(
     let exe = std::env::current_exe()?;
     let bin = exe.with_file_name(if role.is_leader() { "leader" } else { "agent" });
     Command::new(bin)
-        .arg("--scenario")
-        .arg(scenario)
-        .arg("--team")
-        .arg(team.as_str())
-        .arg("--id")
-        .arg(id.to_string())
-        .args(flags)
+        .args(member_args(scenario, team, id, flags))
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .spawn()
+}
+
+/// A member's arguments after the program's name: `--scenario FILE --team T --id ID FLAGS`.
+pub fn member_args(
+    scenario: &Path,
+    team: &TeamName,
+    id: u32,
+    flags: &[String],
+) -> Vec<std::ffi::OsString> {
+    let mut args: Vec<std::ffi::OsString> = vec![
+        "--scenario".into(),
+        scenario.into(),
+        "--team".into(),
+        team.as_str().into(),
+        "--id".into(),
+        id.to_string().into(),
+    ];
+    args.extend(flags.iter().map(Into::into));
+    args
 }
 
 /// The first spawned member that has exited: its id and how.
@@ -154,7 +215,7 @@ pub fn stop_team(
     if wait_all(children, graceful) > 0 {
         for c in children.iter_mut() {
             if matches!(c.child.try_wait(), Ok(None)) {
-                // SAFETY: plain kill(2) on our own child's pid.
+                // SAFETY: plain kill(2) on our own child's pid, not reaped yet.
                 unsafe {
                     libc::kill(c.child.id() as libc::pid_t, libc::SIGTERM);
                 }

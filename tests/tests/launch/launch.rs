@@ -205,9 +205,22 @@ fn running_team(team: &str, out: &Path) -> (Running, ScenarioFile, TeamFootprint
         "expected the orchestrator and {} members of team {team}: {procs:#?}",
         s.agents.len()
     );
+    // Forked from the member template, each member is the orchestrator's own child (adopted):
+    // waited for, and its exit status read, by the orchestrator.
+    let orch_pid = orch.id();
+    for (&pid, args) in procs.iter().filter(|(&pid, _)| pid != orch_pid) {
+        assert_eq!(parent_of(pid), Some(orch_pid), "member {pid} {args:?}");
+    }
     let footprint = TeamFootprint::record(team, procs.keys().copied());
     footprint.assert_visible(s.agents.len() + 1);
     (orch, s, footprint)
+}
+
+/// The parent pid of process `pid` (`/proc/<pid>/stat`, field 4).
+fn parent_of(pid: u32) -> Option<u32> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let rest = stat.rsplit_once(')')?.1;
+    rest.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// The faulted run's audit and telemetry: a fault of `kind` at the first tick the telemetry
