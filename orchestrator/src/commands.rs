@@ -397,6 +397,8 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
     let team = TeamName::new(&team_name)
         .map_err(|e| Failure::bad_input(CommandError::option("--team")(e)))?;
     let secs = |v: f64, what: &str| timeout(what, v).map_err(Failure::bad_input);
+    let mavlink = matches!(vehicles, cdm_member::vehicles::Vehicles::Mavlink(_));
+    let land_on_interrupt = land_on_interrupt(a, mavlink)?;
     let opts = LaunchOptions {
         out: a
             .out
@@ -432,8 +434,25 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         losses,
         on_loss: a.run.on_loss.into(),
         commands,
+        land_on_interrupt,
     };
     Ok((s, opts))
+}
+
+/// `--on-interrupt`: whether SIGINT or SIGTERM lands the team before it stops (by default
+/// with MAVLink vehicles, which would otherwise fall back to their own failsafes). In lockstep
+/// on any number of hosts, in real time on one host (where it takes commands): a real-time
+/// team across hosts stops on an interrupt.
+fn land_on_interrupt(a: &LaunchArgs, mavlink: bool) -> Result<bool, Failure> {
+    use crate::cli::OnInterruptArg;
+    let takes_commands = !a.realtime.realtime || a.hosts.hosts <= 1;
+    match a.on_interrupt {
+        Some(OnInterruptArg::Land) if !takes_commands => Err(Failure::bad_input(
+            "--on-interrupt land with --realtime needs one host: a real-time team across hosts takes no command, and an interrupt stops it",
+        )),
+        Some(what) => Ok(what == OnInterruptArg::Land),
+        None => Ok(mavlink && takes_commands),
+    }
 }
 
 /// `--commands FILE` decided for the team of `s`: the commanded scenario to launch and the

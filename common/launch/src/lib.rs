@@ -8,6 +8,7 @@ pub mod flight;
 mod fly;
 pub mod launch;
 pub mod realtime;
+mod realtime_steer;
 pub mod steer;
 pub mod team_arm;
 pub mod vehicle_reports;

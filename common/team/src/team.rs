@@ -83,10 +83,21 @@ pub fn spawn_member(
     role: Role,
     flags: &[String],
 ) -> std::io::Result<Child> {
+    member_command(scenario, team, id, role, flags)?.spawn()
+}
+
+/// The command [`spawn_member`] runs (to change before it is spawned).
+pub fn member_command(
+    scenario: &Path,
+    team: &TeamName,
+    id: u32,
+    role: Role,
+    flags: &[String],
+) -> std::io::Result<Command> {
     let exe = std::env::current_exe()?;
     let bin = exe.with_file_name(if role.is_leader() { "leader" } else { "agent" });
-    Command::new(bin)
-        .arg("--scenario")
+    let mut c = Command::new(bin);
+    c.arg("--scenario")
         .arg(scenario)
         .arg("--team")
         .arg(team.as_str())
@@ -94,8 +105,8 @@ pub fn spawn_member(
         .arg(id.to_string())
         .args(flags)
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .spawn()
+        .stdout(Stdio::null());
+    Ok(c)
 }
 
 /// The first spawned member that has exited: its id and how.
