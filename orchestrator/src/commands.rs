@@ -397,8 +397,6 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
     let team = TeamName::new(&team_name)
         .map_err(|e| Failure::bad_input(CommandError::option("--team")(e)))?;
     let secs = |v: f64, what: &str| timeout(what, v).map_err(Failure::bad_input);
-    let mavlink = matches!(vehicles, cdm_member::vehicles::Vehicles::Mavlink(_));
-    let land_on_interrupt = land_on_interrupt(a, mavlink)?;
     let opts = LaunchOptions {
         out: a
             .out
@@ -420,6 +418,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         notices: crate::notices::sink(quiet),
         stop_on_violation: a.run.stop_on_violation,
         max_ticks: a.run.max_ticks,
+        land_on_interrupt: land_on_interrupt(a, &vehicles)?,
         vehicles,
         serve: a
             .serve
@@ -434,7 +433,6 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         losses,
         on_loss: a.run.on_loss.into(),
         commands,
-        land_on_interrupt,
     };
     Ok((s, opts))
 }
@@ -443,8 +441,12 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
 /// with MAVLink vehicles, which would otherwise fall back to their own failsafes). In lockstep
 /// on any number of hosts, in real time on one host (where it takes commands): a real-time
 /// team across hosts stops on an interrupt.
-fn land_on_interrupt(a: &LaunchArgs, mavlink: bool) -> Result<bool, Failure> {
+fn land_on_interrupt(
+    a: &LaunchArgs,
+    vehicles: &cdm_member::vehicles::Vehicles,
+) -> Result<bool, Failure> {
     use crate::cli::OnInterruptArg;
+    let mavlink = matches!(vehicles, cdm_member::vehicles::Vehicles::Mavlink(_));
     let takes_commands = !a.realtime.realtime || a.hosts.hosts <= 1;
     match a.on_interrupt {
         Some(OnInterruptArg::Land) if !takes_commands => Err(Failure::bad_input(

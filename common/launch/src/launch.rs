@@ -29,7 +29,7 @@ use cdm_viewer::live::LiveView;
 
 use crate::channel::{Answered, CommandAnswer, CommandChannel, CommandRequest};
 use crate::feeds::Feeds;
-use crate::steer::{FlightAt, LiveSteer};
+use crate::steer::{FlightAt, LiveSteer, Steer};
 
 use cdm_team::team::{
     check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
@@ -108,14 +108,6 @@ struct Watchers<'a> {
     steer: Steer<'a>,
 }
 
-/// A team's commands: the channel (`orchestrator command`), what became of each so far, and
-/// the run directory their commands.json is written to.
-pub(crate) struct Steer<'a> {
-    pub(crate) channel: Option<&'a CommandChannel>,
-    pub(crate) live: &'a mut LiveSteer,
-    pub(crate) dir: &'a RunDir,
-}
-
 /// Run a launch to the end.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     // The stop signals are caught only from here on: until now nothing needs cleaning up, and a
@@ -142,12 +134,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
     let result = if let Some(rt) = &o.realtime {
         let elsewhere = |id: u32| others.reporting(id);
         let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
-        let steer = Steer {
-            channel: channel.as_ref(),
-            live: &mut steered,
-            dir: &dir,
-        };
-        let watch = (&mut audit, &mut live, steer);
+        let watch = (
+            &mut audit,
+            &mut live,
+            Steer::new(channel.as_ref(), &mut steered, &dir),
+        );
         crate::realtime::run(s, o, rt, &dir, team, watch, interrupted)
     } else {
         run_team(
@@ -160,11 +151,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
                 audit: &mut audit,
                 live: &mut live,
                 hosts: others.as_ref(),
-                steer: Steer {
-                    channel: channel.as_ref(),
-                    live: &mut steered,
-                    dir: &dir,
-                },
+                steer: Steer::new(channel.as_ref(), &mut steered, &dir),
             },
             interrupted,
         )

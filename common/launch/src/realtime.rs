@@ -135,7 +135,7 @@ pub(crate) fn run(
     rt: &RealtimeOptions,
     dir: &RunDir,
     team: (&mut OrchestratorPorts, &mut [Spawned], Elsewhere),
-    (audit, live, steer): (&mut Auditor, &mut Feeds, crate::launch::Steer),
+    (audit, live, steer): (&mut Auditor, &mut Feeds, crate::steer::Steer),
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
     let (ports, children, elsewhere) = team;
@@ -166,7 +166,12 @@ pub(crate) fn run(
         start_msg,
         progress: o.notices.progress("launch", last_audit, period_s),
         notices: o.notices.clone(),
-        steer: RealtimeSteer::new(steer, clock, s, o),
+        steer: RealtimeSteer::new(
+            (steer, clock),
+            s,
+            (o.max_ticks, o.land_on_interrupt),
+            o.notices.clone(),
+        ),
     };
     let cpu_at_start = team_cpu_s(m.children);
     let result = crate::fly::fly(&mut core, &mut m, &clock, interrupted);

@@ -22,8 +22,7 @@ use cdm_team::team::{fault, Stop};
 
 use crate::channel::{Answered, CommandAnswer, PendingAnswer};
 use crate::feeds::Feeds;
-use crate::launch::Steer;
-use crate::steer::{FlightAt, LiveDecision, LiveSteer};
+use crate::steer::{FlightAt, LiveDecision, LiveSteer, Steer};
 
 /// A command proposed to the team and not decided yet.
 struct Proposed {
@@ -71,13 +70,14 @@ fn complete_tick(audits: u64, period_s: f64, dt_s: f64) -> u64 {
 }
 
 impl<'a> RealtimeSteer<'a> {
+    /// The commands of `s`'s flight on `clock`: `--max-ticks`, `--on-interrupt land`, and
+    /// where notices go.
     pub(crate) fn new(
-        steer: Steer<'a>,
-        clock: MonotonicClock,
+        (steer, clock): (Steer<'a>, MonotonicClock),
         s: &Scenario,
-        o: &crate::launch::LaunchOptions,
+        (max_ticks, land_on_interrupt): (Option<u64>, bool),
+        notices: Arc<dyn cdm_team::notices::NoticeSink>,
     ) -> Self {
-        let max_ticks = o.max_ticks;
         let last = max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
         RealtimeSteer {
             flown: Arc::clone(steer.live.flown()),
@@ -87,9 +87,9 @@ impl<'a> RealtimeSteer<'a> {
             certify: Duration::ZERO,
             last,
             max_ticks,
-            land_on_interrupt: o.land_on_interrupt,
+            land_on_interrupt,
             interrupted: None,
-            notices: o.notices.clone(),
+            notices,
         }
     }
 

@@ -93,6 +93,24 @@ pub struct LiveSteer {
     after: Option<u64>,
 }
 
+/// A team's commands: the channel (`orchestrator command`), what became of each so far, and
+/// the run directory their commands.json is written to.
+pub(crate) struct Steer<'a> {
+    pub(crate) channel: Option<&'a crate::channel::CommandChannel>,
+    pub(crate) live: &'a mut LiveSteer,
+    pub(crate) dir: &'a RunDir,
+}
+
+impl<'a> Steer<'a> {
+    pub(crate) fn new(
+        channel: Option<&'a crate::channel::CommandChannel>,
+        live: &'a mut LiveSteer,
+        dir: &'a RunDir,
+    ) -> Self {
+        Steer { channel, live, dir }
+    }
+}
+
 /// Where the flight is when a command arrives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FlightAt {
