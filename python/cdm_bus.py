@@ -137,7 +137,7 @@ class ClockMsg(ctypes.Structure):
         ("loss_seq", ctypes.c_uint32),
         ("loss_id", ctypes.c_uint32),
         ("loss_linked", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
+        ("steer_phase", ctypes.c_uint32),
         ("steer_tick", ctypes.c_uint64),
         ("steer_seq", ctypes.c_uint32),
         ("steer_command", ctypes.c_uint32),

@@ -6,7 +6,10 @@
 # team's own time to decide (`decided in X ms`: reading the request and certifying) and, from
 # the launch's log, the time from the answer to the switch tick flown by every member
 # (`every member flew the switch tick`). Prints a table and the load average.
-# Usage: [NS="40 250 1000"] scripts/bench-command.sh
+# REALTIME=1 launches with --realtime instead: the switch is then chosen ahead and every leader
+# acknowledges it first; the last column is how far ahead of the switch instant the command
+# became final (the launch's log, `ahead_ms`).
+# Usage: [REALTIME=1] [NS="40 250 1000"] scripts/bench-command.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ns=${NS:-40 250 1000}
@@ -19,9 +22,15 @@ echo "Machine: nproc $(nproc), load average $(cut -d' ' -f1-3 /proc/loadavg); $(
 echo
 echo "| N | command | to the answer (wall ms) | decided by the team (ms) | answer to switch flown (ms) |"
 echo "|---|---|---|---|---|"
+mode=()
+switch_re='s/.*every member flew the switch tick.*after_ms=([0-9.]+).*/\1/p'
+if [ -n "${REALTIME:-}" ]; then
+  mode=(--realtime)
+  switch_re='s/.*command: final.*ahead_ms=([0-9.e-]+).*/\1/p'
+fi
 for n in $ns; do
   team="bench_cmd_${n}_$$"
-  RUST_LOG=info "$bin/orchestrator" launch --n "$n" --team "$team" --out "$out/run$n" \
+  RUST_LOG=info "$bin/orchestrator" launch --n "$n" --team "$team" --out "$out/run$n" "${mode[@]}" \
     --no-figures --t-total 600 --agent-timeout 120 >"$out/launch$n.out" 2>"$out/launch$n.log" &
   pid=$!
   until [ -S "$root/$team.command" ] && [ -s "$out/run$n/telemetry.csv" ]; do sleep 0.2; done
@@ -37,7 +46,7 @@ for n in $ns; do
   kill -TERM "$pid"
   wait "$pid" || true
   # The launch's log lines of each switch, in command order.
-  sed -nE 's/.*every member flew the switch tick.*after_ms=([0-9.]+).*/\1/p' "$out/launch$n.log" >"$out/switch$n"
+  sed -nE "$switch_re" "$out/launch$n.log" >"$out/switch$n"
   k=0
   grep "^$n " "$out/rows" | while read -r nn c wall decided; do
     k=$((k + 1))

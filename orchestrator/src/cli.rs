@@ -238,6 +238,11 @@ pub struct LaunchArgs {
     /// run byte for byte); commands.json says what became of each.
     #[arg(long, value_name = "FILE")]
     pub commands: Option<PathBuf>,
+    /// What SIGINT or SIGTERM to the orchestrator does: land the team now (certified as
+    /// `orchestrator command TEAM land`, then the normal end; a second signal stops at once),
+    /// or stop it at once. Default: land with --vehicles mavlink, stop without.
+    #[arg(long, value_enum, value_name = "WHAT")]
+    pub on_interrupt: Option<OnInterruptArg>,
 }
 
 /// The options of `orchestrator replay`.
@@ -411,6 +416,13 @@ fn telemetry_format() -> impl clap::builder::TypedValueParser<Value = TelemetryF
         "mcap" => TelemetryFormat::Mcap,
         _ => TelemetryFormat::Csv,
     })
+}
+
+/// `--on-interrupt`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnInterruptArg {
+    Stop,
+    Land,
 }
 
 /// `--on-loss`.

@@ -418,6 +418,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         notices: crate::notices::sink(quiet),
         stop_on_violation: a.run.stop_on_violation,
         max_ticks: a.run.max_ticks,
+        land_on_interrupt: land_on_interrupt(a, &vehicles)?,
         vehicles,
         serve: a
             .serve
@@ -434,6 +435,26 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         commands,
     };
     Ok((s, opts))
+}
+
+/// `--on-interrupt`: whether SIGINT or SIGTERM lands the team before it stops (by default
+/// with MAVLink vehicles, which would otherwise fall back to their own failsafes). In lockstep
+/// on any number of hosts, in real time on one host (where it takes commands): a real-time
+/// team across hosts stops on an interrupt.
+fn land_on_interrupt(
+    a: &LaunchArgs,
+    vehicles: &cdm_member::vehicles::Vehicles,
+) -> Result<bool, Failure> {
+    use crate::cli::OnInterruptArg;
+    let mavlink = matches!(vehicles, cdm_member::vehicles::Vehicles::Mavlink(_));
+    let takes_commands = !a.realtime.realtime || a.hosts.hosts <= 1;
+    match a.on_interrupt {
+        Some(OnInterruptArg::Land) if !takes_commands => Err(Failure::bad_input(
+            "--on-interrupt land with --realtime needs one host: a real-time team across hosts takes no command, and an interrupt stops it",
+        )),
+        Some(what) => Ok(what == OnInterruptArg::Land),
+        None => Ok(mavlink && takes_commands),
+    }
 }
 
 /// `--commands FILE` decided for the team of `s`: the commanded scenario to launch and the

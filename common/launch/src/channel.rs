@@ -35,6 +35,17 @@ pub struct CommandRequest {
     pub travel_s: Option<f64>,
 }
 
+impl CommandRequest {
+    /// `land` (an interrupt under `--on-interrupt land` asks for it too).
+    pub fn land() -> Self {
+        CommandRequest {
+            command: "land".into(),
+            goals: None,
+            travel_s: None,
+        }
+    }
+}
+
 /// What became of a command, as its exit code tells it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -148,27 +159,56 @@ impl CommandChannel {
     /// Answers the request waiting, if one is, with `handle`; true when one was answered. Never
     /// waits for a connection.
     pub fn serve_one(&self, handle: impl FnOnce(Request) -> CommandAnswer) -> bool {
+        let Some((pending, request)) = self.take_one() else {
+            return false;
+        };
+        pending.answer(handle(request));
+        true
+    }
+
+    /// The request waiting, if one is, with the connection to answer it on later (a real-time
+    /// command is answered once the leaders acknowledged it). A peer that is not the owner is
+    /// answered at once, and one that asks nothing is let go. Never waits for a connection.
+    pub fn take_one(&self) -> Option<(PendingAnswer, Request)> {
         let stream = match self.listener.accept() {
             Ok((s, _)) => s,
             Err(e) => {
                 if e.kind() != std::io::ErrorKind::WouldBlock {
                     tracing::warn!("command channel {}: {e}", self.path.display());
                 }
-                return false;
+                return None;
             }
         };
-        let started = std::time::Instant::now();
-        let mut answer = match owner_only(&stream).and_then(|()| read_request(&stream)) {
-            // A peer that asks nothing (`orchestrator clean` looking for live channels).
-            Ok(None) => return false,
-            Err(why) => CommandAnswer::without_switch(Answered::Unavailable, why.to_string()),
-            Ok(Some(request)) => handle(request),
+        let pending = PendingAnswer {
+            stream,
+            started: std::time::Instant::now(),
         };
-        answer.decided_ms = started.elapsed().as_secs_f64() * 1e3;
-        if let Err(e) = write_line(&stream, &answer) {
+        match owner_only(&pending.stream).and_then(|()| read_request(&pending.stream)) {
+            // A peer that asks nothing (`orchestrator clean` looking for live channels).
+            Ok(None) => None,
+            Err(why) => {
+                pending.answer(CommandAnswer::without_switch(Answered::Unavailable, why.to_string()));
+                None
+            }
+            Ok(Some(request)) => Some((pending, request)),
+        }
+    }
+}
+
+/// A request read whose answer is still to come.
+#[derive(Debug)]
+pub struct PendingAnswer {
+    stream: UnixStream,
+    started: std::time::Instant,
+}
+
+impl PendingAnswer {
+    /// Sends `answer` (its `decided_ms` the time since the request was taken).
+    pub fn answer(self, mut answer: CommandAnswer) {
+        answer.decided_ms = self.started.elapsed().as_secs_f64() * 1e3;
+        if let Err(e) = write_line(&self.stream, &answer) {
             tracing::warn!("command channel: the answer was not delivered: {e}");
         }
-        true
     }
 }
 
@@ -265,7 +305,7 @@ fn write_line<T: Serialize>(mut stream: &UnixStream, value: &T) -> std::io::Resu
 #[derive(Debug, thiserror::Error)]
 pub enum SendError {
     /// Nothing listens on the team's channel.
-    #[error("no team {team} takes commands here ({path}: {source}); is it launched, in lockstep, by this user?")]
+    #[error("no team {team} takes commands here ({path}: {source}); is it launched on this host by this user, with model vehicles?")]
     NoTeam {
         team: TeamName,
         path: PathBuf,

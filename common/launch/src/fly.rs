@@ -26,8 +26,9 @@ pub(crate) trait TeamIo {
     /// Publishes the clock message again with the loss notice `n`.
     fn announce(&mut self, core: &TeamCore, n: LossNotice) -> Result<(), Stop>;
 
-    /// Publishes the clock message again with the command notice `n`.
-    fn steer(&mut self, core: &TeamCore, n: SteerNotice) -> Result<(), Stop> {
+    /// Publishes the clock message again with the command notice `n` (real time: then takes
+    /// what became of a proposed command from the core).
+    fn steer(&mut self, core: &mut TeamCore, n: SteerNotice) -> Result<(), Stop> {
         let _ = (core, n);
         Ok(())
     }
@@ -44,6 +45,13 @@ pub(crate) trait TeamIo {
         core.recycle(states);
         let _ = tick;
         Ok(None)
+    }
+
+    /// `--on-interrupt land`: the first interrupt (`signal`) lands the team, certified as a
+    /// command; true when the landing was taken (or is being decided). The default: no.
+    fn land_on_interrupt(&mut self, core: &mut TeamCore, signal: &'static str) -> bool {
+        let _ = (core, signal);
+        false
     }
 
     /// Real time: audits and writes instant `index` at `t_s`.
@@ -87,7 +95,14 @@ pub(crate) fn fly(
     loop {
         let now = clock.now();
         if interrupted.load(Ordering::Relaxed) {
-            core.on_interrupt(cdm_process::signals::received());
+            let signal = cdm_process::signals::received();
+            // `--on-interrupt land`: the first signal lands the team (the flag is cleared, so
+            // a second one stops it at once); otherwise the team stops now.
+            if io.land_on_interrupt(core, signal) {
+                interrupted.store(false, Ordering::Relaxed);
+            } else {
+                core.on_interrupt(signal);
+            }
         }
         core.on_turn(now);
         io.receive(core, now)?;

@@ -26,9 +26,9 @@ use cdm_runtime::team_loss::TeamLosses;
 use cdm_scenario::Scenario;
 use cdm_viewer::live::LiveView;
 
-use crate::channel::{Answered, CommandAnswer, CommandChannel};
+use crate::channel::{Answered, CommandAnswer, CommandChannel, CommandRequest};
 use crate::feeds::Feeds;
-use crate::steer::{FlightAt, LiveSteer};
+use crate::steer::{FlightAt, LiveSteer, Steer};
 
 use crate::launch_error::LaunchError;
 use cdm_team::team::{
@@ -74,6 +74,9 @@ pub struct LaunchOptions {
     /// `--commands FILE`, decided before the flight (the scenario launched is the commanded
     /// one: its plan the same before every switch).
     pub commands: Option<crate::steer::FileCommands>,
+    /// `--on-interrupt land`: the first SIGINT or SIGTERM lands the team (certified as a
+    /// command), then the run ends as usual; a second one stops it at once.
+    pub land_on_interrupt: bool,
 }
 
 /// When the orchestrator process started (set first thing in `main`): start-up is measured from
@@ -105,14 +108,6 @@ struct Watchers<'a> {
     steer: Steer<'a>,
 }
 
-/// A lockstep team's commands: the channel (`orchestrator command`), what became of each so
-/// far, and the run directory their commands.json is written to.
-struct Steer<'a> {
-    channel: Option<&'a CommandChannel>,
-    live: &'a mut LiveSteer,
-    dir: &'a RunDir,
-}
-
 /// Run a launch to the end.
 pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, LaunchError> {
     // The stop signals are caught only from here on: until now nothing needs cleaning up, and a
@@ -138,7 +133,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, LaunchError> 
     let result = if let Some(rt) = &o.realtime {
         let elsewhere = |id: u32| others.reporting(id);
         let team = (&mut ports, children.as_mut_slice(), &elsewhere as Elsewhere);
-        let watch = (&mut audit, &mut live);
+        let watch = (
+            &mut audit,
+            &mut live,
+            Steer::new(channel.as_ref(), &mut steered, &dir),
+        );
         crate::realtime::run(s, o, rt, &dir, team, watch, interrupted)
     } else {
         run_team(
@@ -151,11 +150,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, LaunchError> 
                 audit: &mut audit,
                 live: &mut live,
                 hosts: others.as_ref(),
-                steer: Steer {
-                    channel: channel.as_ref(),
-                    live: &mut steered,
-                    dir: &dir,
-                },
+                steer: Steer::new(channel.as_ref(), &mut steered, &dir),
             },
             interrupted,
         )
@@ -193,10 +188,11 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, LaunchError> 
 }
 
 /// The channel `orchestrator command` reaches the team by, when it takes commands in flight:
-/// in lockstep with model vehicles (as `--commands`), on one host or several: a command's
-/// notice rides the clock's message, which the link carries whole to the other hosts' members.
+/// in lockstep on one host or several (a command's notice rides the clock's message, which the
+/// link carries whole to the other hosts' members), and in real time on one host (with model
+/// or MAVLink vehicles: a command is proposed, acknowledged by the leaders, then final).
 fn command_channel(o: &LaunchOptions) -> Result<Option<CommandChannel>, LaunchError> {
-    let takes = o.realtime.is_none() && o.vehicles == cdm_member::vehicles::Vehicles::Model;
+    let takes = o.realtime.is_none() || o.hosts.hosts <= 1;
     match takes {
         true => Ok(Some(CommandChannel::open(&o.team)?)),
         false => Ok(None),
@@ -289,6 +285,24 @@ fn startup(first_tick: Option<Instant>) -> Duration {
     }
 }
 
+/// Spawns member `id`. Under `--on-interrupt land` in a process group of its own: a terminal's
+/// Ctrl-C (SIGINT to the whole foreground group) then reaches the orchestrator alone, which
+/// lands the team, instead of stopping every member at once.
+fn spawn(
+    o: &LaunchOptions,
+    member_file: &std::path::Path,
+    (id, role): (u32, cdm_model::formation::Role),
+    flags: &[String],
+) -> std::io::Result<std::process::Child> {
+    if !o.land_on_interrupt {
+        return spawn_member(member_file, &o.team, id, role, flags);
+    }
+    use std::os::unix::process::CommandExt;
+    cdm_team::team::member_command(member_file, &o.team, id, role, flags)?
+        .process_group(0)
+        .spawn()
+}
+
 /// Spawns one process per member (`--spawn`), or tells how to start them by hand.
 fn start_members(
     s: &Scenario,
@@ -302,7 +316,12 @@ fn start_members(
     let mut children = Vec::new();
     if o.spawn {
         let record = crate::realtime::recording_flags(o, dir)?;
-        let mut template = member_template(member_file);
+        // Members forked from the template share its process group; a team that lands on the
+        // terminal's interrupt needs its members out of the terminal's group, one by one.
+        let mut template = match o.land_on_interrupt {
+            true => None,
+            false => member_template(member_file),
+        };
         // With --hosts K, the other hosts' daemons spawn theirs.
         for m in s.formation.members.iter().filter(|m| runs_here(m.id)) {
             let mut flags = crate::realtime::member_flags(o);
@@ -313,7 +332,7 @@ fn start_members(
             }
             let started = match template.as_mut() {
                 Some(t) => t.fork(member_file, &o.team, (m.id, m.role), &flags),
-                None => spawn_member(member_file, &o.team, m.id, m.role, &flags).map(Into::into),
+                None => spawn(o, member_file, (m.id, m.role), &flags).map(Into::into),
             };
             match started {
                 Ok(c) => {
@@ -576,6 +595,7 @@ fn fly_team(
         granted: 0,
         flown: std::sync::Arc::new(s.clone()),
         switching: None,
+        interrupt_landing: false,
     };
     let all = crate::fly::fly(&mut core, &mut io, &clock, interrupted)?;
     Ok((io.ticking.unwrap_or_else(Instant::now), all))
@@ -601,6 +621,8 @@ struct LockstepIo<'a, 'w> {
     /// The latest accepted command's switch tick, until every member has flown it, and when
     /// it was accepted (logged: from the answer to the switch).
     switching: Option<(u64, Instant)>,
+    /// An interrupt asked for a landing already (`--on-interrupt land`).
+    interrupt_landing: bool,
 }
 
 impl crate::fly::TeamIo for LockstepIo<'_, '_> {
@@ -609,6 +631,14 @@ impl crate::fly::TeamIo for LockstepIo<'_, '_> {
             .receive_notified_states(|msg| core.on_state(&msg, now))
             .map_err(transport_stop(core.position()))?;
         self.serve_command(core)
+    }
+
+    fn land_on_interrupt(&mut self, core: &mut TeamCore, signal: &'static str) -> bool {
+        if !self.o.land_on_interrupt || self.interrupt_landing {
+            return false;
+        }
+        self.interrupt_landing = true;
+        self.land_now(core, signal)
     }
 
     fn grant(&mut self, core: &TeamCore, g: u64) -> Result<(), Stop> {
@@ -623,7 +653,7 @@ impl crate::fly::TeamIo for LockstepIo<'_, '_> {
         self.publish(msg, core)
     }
 
-    fn steer(&mut self, core: &TeamCore, n: SteerNotice) -> Result<(), Stop> {
+    fn steer(&mut self, core: &mut TeamCore, n: SteerNotice) -> Result<(), Stop> {
         let msg = notices(ClockMsg::run(self.granted, self.hash), core).with_steer(Some(n));
         self.publish(msg, core)
     }
@@ -715,11 +745,7 @@ impl LockstepIo<'_, '_> {
         let Some(channel) = self.w.steer.channel else {
             return Ok(());
         };
-        let at = FlightAt {
-            first_free: self.granted + 1,
-            complete: core.position(),
-            last: self.last,
-        };
+        let at = self.flight_at(core);
         let live = &mut *self.w.steer.live;
         let mut decided = None;
         channel.serve_one(|request| match request {
@@ -731,11 +757,50 @@ impl LockstepIo<'_, '_> {
                 answer
             }
         });
-        let Some(d) = decided else { return Ok(()) };
+        match decided {
+            Some(d) => self.apply(core, d).map(drop),
+            None => Ok(()),
+        }
+    }
+
+    /// Where the flight is for a command decided now: the first tick not granted yet is free.
+    fn flight_at(&self, core: &TeamCore) -> FlightAt {
+        FlightAt {
+            first_free: self.granted + 1,
+            complete: core.position(),
+            last: self.last,
+        }
+    }
+
+    /// `--on-interrupt land`, the first interrupt: a land decided now as an operator's is.
+    /// True when it is accepted, or the team lands already.
+    fn land_now(&mut self, core: &mut TeamCore, signal: &'static str) -> bool {
+        let d = (self.w.steer.live).decide(CommandRequest::land(), self.flight_at(core));
+        let t_s = self.granted as f64 * self.flown.dt_s();
+        let landing = (self.flown.plan.phases().last())
+            .is_some_and(|p| p.kind == cdm_model::plan::PhaseKind::Landing && p.t_start_s <= t_s);
+        let text = d.answer.text.clone();
+        let landed = matches!(self.apply(core, d), Ok(true)) || landing;
+        let what = if landed {
+            "landing the team (--on-interrupt land); a second signal stops it at once"
+        } else {
+            "the team cannot land now; stopping it"
+        };
+        self.o
+            .notices
+            .notice(&format_args!("{signal}: {what}\n  {text}"));
+        landed
+    }
+
+    /// A decided command: an accepted one goes to the core, which announces it before
+    /// granting its switch tick; a recorded one goes to commands.json, the live view and the
+    /// progress line. True when accepted.
+    fn apply(&mut self, core: &mut TeamCore, d: crate::steer::LiveDecision) -> Result<bool, Stop> {
         tracing::info!(answer = ?d.answer.answer, decided_ms = d.answer.decided_ms, "{}", d.answer.text);
         if !d.recorded {
-            return Ok(());
+            return Ok(false);
         }
+        let accepted = d.accepted.is_some();
         if let Some((notice, flown, last)) = d.accepted {
             self.switching = Some((notice.tick, std::time::Instant::now()));
             let last = self.o.max_ticks.map_or(last, |k| k.min(last));
@@ -749,14 +814,15 @@ impl LockstepIo<'_, '_> {
         if let Some(r) = steer.live.records().last() {
             self.w.live.command(&r.summary());
         }
-        let (accepted, refused) = steer.live.counts();
-        self.rec.progress.set_commands(accepted, refused);
+        let (n_accepted, refused) = steer.live.counts();
+        self.rec.progress.set_commands(n_accepted, refused);
         crate::steer::write_commands(steer.dir, steer.live.records()).map_err(|e| {
             (
                 fault(FaultKind::Io, None, None, core.position(), e.to_string()),
                 StopReason::AgentFault,
             )
-        })
+        })?;
+        Ok(accepted)
     }
 
     fn publish(&mut self, msg: ClockMsg, core: &TeamCore) -> Result<(), Stop> {

@@ -10,6 +10,7 @@ pub mod launch;
 pub mod launch_error;
 pub mod notice;
 pub mod realtime;
+mod realtime_steer;
 pub mod steer;
 pub mod team_arm;
 pub mod vehicle_reports;

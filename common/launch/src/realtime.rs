@@ -23,7 +23,7 @@ use cdm_records::audit::{Auditor, LossRecord, RealtimeFigures};
 use cdm_records::record::{write_fault, TickRecorder};
 use cdm_records::rundir::RunDir;
 use cdm_records::telemetry::TelemetrySink;
-use cdm_runtime::messages::{ClockMsg, LossNotice, StopReason};
+use cdm_runtime::messages::{ClockMsg, LossNotice, SteerNotice, StopReason};
 use cdm_runtime::realtime_loop::unix_now_ns;
 use cdm_runtime::realtime_monitor::{MonitorCore, RunFigures};
 use cdm_runtime::seams::{Clock, MonotonicClock};
@@ -34,6 +34,7 @@ use cdm_scenario::Scenario;
 
 use crate::launch::LaunchOptions;
 use crate::launch_error::LaunchError;
+use crate::realtime_steer::RealtimeSteer;
 use crate::vehicle_reports::VehicleBook;
 use cdm_team::team::{fault, first_exited_but, Spawned, Stop};
 
@@ -125,13 +126,13 @@ fn start_lead(agents: usize) -> Duration {
 /// adds the pacing figures to the audit. Returns when the flight began and whether the whole
 /// plan was audited (as the lockstep loop does); the caller stops the team. `team`'s third part
 /// says which members run on other hosts whose final reports may still come (`launch --hosts`).
-pub fn run(
+pub(crate) fn run(
     s: &Scenario,
     o: &LaunchOptions,
     rt: &RealtimeOptions,
     dir: &RunDir,
     team: (&mut OrchestratorPorts, &mut [Spawned], Elsewhere),
-    (audit, live): (&mut Auditor, &mut Feeds),
+    (audit, live, steer): (&mut Auditor, &mut Feeds, crate::steer::Steer),
     interrupted: &AtomicBool,
 ) -> Result<(Instant, bool), Stop> {
     let (ports, children, elsewhere) = team;
@@ -162,6 +163,12 @@ pub fn run(
         start_msg,
         progress: o.notices.progress("launch", last_audit, period_s),
         notices: o.notices.clone(),
+        steer: RealtimeSteer::new(
+            (steer, clock),
+            s,
+            (o.max_ticks, o.land_on_interrupt),
+            o.notices.clone(),
+        ),
     };
     let cpu_at_start = team_cpu_s(m.children);
     let result = crate::fly::fly(&mut core, &mut m, &clock, interrupted);
@@ -371,10 +378,12 @@ struct Monitor<'a, 'p> {
     lost: Vec<(u64, Vec<LossRecord>)>,
     /// Members out of the audit and telemetry (formation order).
     out: Vec<bool>,
-    /// The start's clock message: loss notices ride on copies of it.
+    /// The start's clock message: loss and command notices ride on copies of it.
     start_msg: ClockMsg,
     progress: Box<dyn cdm_team::notices::TickProgress>,
     notices: std::sync::Arc<dyn cdm_team::notices::NoticeSink>,
+    /// Commands to the team in flight, and the plan as commanded so far.
+    steer: RealtimeSteer<'a>,
 }
 
 impl crate::fly::TeamIo for Monitor<'_, '_> {
@@ -388,17 +397,38 @@ impl crate::fly::TeamIo for Monitor<'_, '_> {
                     core.on_state(&msg, now);
                 }
             })
-            .map(drop)
-            .map_err(|e| transport(e, at))
+            .map_err(|e| transport(e, at))?;
+        (self.steer).serve(core, (&mut *self.live, &mut *self.progress))
     }
 
     fn announce(&mut self, core: &TeamCore, n: LossNotice) -> Result<(), Stop> {
-        let msg = self.start_msg.with_loss(Some(n));
+        let msg = self
+            .start_msg
+            .with_loss(Some(n))
+            .with_steer(core.steer_notice());
         let at = core.position();
         self.ports
             .publish_clock(msg)
             .map(drop)
             .map_err(|e| transport(e, at))
+    }
+
+    fn steer(&mut self, core: &mut TeamCore, n: SteerNotice) -> Result<(), Stop> {
+        let loss = core.losses().and_then(|l| l.notice());
+        let msg = self.start_msg.with_loss(loss).with_steer(Some(n));
+        let at = core.position();
+        self.ports
+            .publish_clock(msg)
+            .map_err(|e| transport(e, at))?;
+        (self.steer).on_notice(
+            core,
+            n,
+            (&mut *self.audit, &mut *self.live, &mut *self.progress),
+        )
+    }
+
+    fn land_on_interrupt(&mut self, core: &mut TeamCore, signal: &'static str) -> bool {
+        (self.steer).land_on_interrupt(core, signal, (&mut *self.live, &mut *self.progress))
     }
 
     fn audit(&mut self, core: &TeamCore, index: u64, t_s: f64) -> Result<(), Stop> {
@@ -442,6 +472,7 @@ impl crate::fly::TeamIo for Monitor<'_, '_> {
     }
 
     fn end(&mut self, _core: &TeamCore, finished: bool) -> Result<(), Stop> {
+        self.steer.end();
         if finished {
             self.progress.finish();
         }
@@ -460,8 +491,10 @@ impl Monitor<'_, '_> {
         self.at.extend((0..n).map(|k| book.state_at(k, t_s)));
         let (at, out) = (&self.at, &self.out);
         let member = |k: usize| (!out[k]).then(|| at[k]);
+        // The commanded plan: the same as the launched one before every switch.
+        let flown = std::sync::Arc::clone(self.steer.flown());
         self.rec
-            .record_at(self.s, (index, t_s), self.audit, self.tel, member)
+            .record_at(&flown, (index, t_s), self.audit, self.tel, member)
             .map_err(|f| (f, StopReason::AgentFault))?;
         // The feeds count ticks of the plan (dt), as in lockstep; an audit instant is at most
         // half a tick from its nearest one. A lost member is no longer shown.

@@ -41,11 +41,7 @@ impl FileCommands {
         let notices = (list.iter().zip(&records))
             .filter(|(_, r)| r.accepted)
             .enumerate()
-            .map(|(k, (c, r))| SteerNotice {
-                seq: k as u32 + 1,
-                tick: r.switch_tick,
-                command: Some(c.command),
-            })
+            .map(|(k, (c, r))| SteerNotice::decided(k as u32 + 1, r.switch_tick, c.command))
             .collect();
         let file = FileCommands {
             records,
@@ -83,7 +79,7 @@ pub fn write_commands(dir: &RunDir, records: &[CommandRecord]) -> Result<(), Wri
 /// The commands a running team takes (`orchestrator command`), after its file's: each is
 /// certified at its switch tick against the plan as commanded so far, with the code of a file's
 /// (`decide`), so `simulate --commands RUN/commands.json` flies the same run.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct LiveSteer {
     steering: Steering,
     numbers: SafetyNumbers,
@@ -95,6 +91,24 @@ pub struct LiveSteer {
     announced: u32,
     /// No switch at or before this tick: the latest command's, the file's included.
     after: Option<u64>,
+}
+
+/// A team's commands: the channel (`orchestrator command`), what became of each so far, and
+/// the run directory their commands.json is written to.
+pub(crate) struct Steer<'a> {
+    pub(crate) channel: Option<&'a crate::channel::CommandChannel>,
+    pub(crate) live: &'a mut LiveSteer,
+    pub(crate) dir: &'a RunDir,
+}
+
+impl<'a> Steer<'a> {
+    pub(crate) fn new(
+        channel: Option<&'a crate::channel::CommandChannel>,
+        live: &'a mut LiveSteer,
+        dir: &'a RunDir,
+    ) -> Self {
+        Steer { channel, live, dir }
+    }
 }
 
 /// Where the flight is when a command arrives.
@@ -151,6 +165,27 @@ impl LiveSteer {
         (accepted, self.records.len() - accepted)
     }
 
+    /// [`Self::decide`] without changing anything yet (real time: a command accepted by its
+    /// certificate becomes final only once every leader acknowledged it): the decision, and
+    /// this steering as it is once the command is final ([`Self::adopt`]).
+    pub fn tentatively(&self, request: CommandRequest, at: FlightAt) -> (LiveDecision, LiveSteer) {
+        let mut next = self.clone();
+        let decision = next.decide(request, at);
+        (decision, next)
+    }
+
+    /// The steering [`Self::tentatively`] made, now that its command is final (or was refused
+    /// by its certificate, which is recorded too).
+    pub fn adopt(&mut self, next: LiveSteer) {
+        *self = next;
+    }
+
+    /// A proposed command was withdrawn (real time): nothing changed, but the members spent
+    /// its notice number.
+    pub fn spend_notice(&mut self) {
+        self.announced += 1;
+    }
+
     /// Decide `request` arriving with the flight at `at`: it switches at the first tick no
     /// member flew yet (and after the latest command's), certified there.
     pub fn decide(&mut self, request: CommandRequest, at: FlightAt) -> LiveDecision {
@@ -192,11 +227,7 @@ impl LiveSteer {
         let mut accepted = None;
         if record.accepted {
             self.announced += 1;
-            let notice = SteerNotice {
-                seq: self.announced,
-                tick: switch,
-                command: Some(c.command),
-            };
+            let notice = SteerNotice::decided(self.announced, switch, c.command);
             let mut flown = (*self.flown).clone();
             flown.plan = self.steering.plan().clone();
             let last = flown.last_tick();

@@ -122,7 +122,8 @@ pub struct MavlinkPlant<'a> {
     /// `--arm`.
     arm: bool,
     step: StepConfig,
-    plan: &'a TeamPlan,
+    /// The launched plan, or the commanded one once a command to the team arrived.
+    plan: std::borrow::Cow<'a, TeamPlan>,
     law: Law,
     neighbor_ids: [u32; 3],
     shared: Arc<Mutex<Shared>>,
@@ -175,18 +176,14 @@ impl<'a> MavlinkPlant<'a> {
             agent,
             arm: config.vehicle.arm,
             step,
-            plan,
+            plan: std::borrow::Cow::Borrowed(plan),
             law,
             neighbor_ids,
             shared,
             streamer: Some(streamer),
             x0: QuadState::hover(member.start),
             feed_forward: config.feed_forward,
-            landing_end_s: plan
-                .phases()
-                .last()
-                .filter(|p| p.kind == PhaseKind::Landing)
-                .map(|p| p.t_end_s()),
+            landing_end_s: landing_end_s(plan),
         };
         plant.wait_ready(interrupted)?;
         Ok(plant)
@@ -328,7 +325,7 @@ impl Vehicle for MavlinkPlant<'_> {
             }
         }
         let t_k = tick_time(at.tick, self.step.dt_s) + at.offset_s;
-        let sp = setpoint_for(&self.step, self.plan, &self.law, t_k, neighbors);
+        let sp = setpoint_for(&self.step, &self.plan, &self.law, t_k, neighbors);
         let mut g = lock(&self.shared);
         if let Some(f) = &g.fault {
             return Err(Self::link_fault(f));
@@ -348,6 +345,21 @@ impl Vehicle for MavlinkPlant<'_> {
         (self.law, self.neighbor_ids) = law_for(member);
         Ok(())
     }
+
+    /// A command to the team in flight: the setpoints follow the commanded plan (the same as
+    /// the launched one before its switch), and a land ends in the vehicle's own landing.
+    fn replan(&mut self, plan: &TeamPlan) -> Result<(), RelinkUnsupported> {
+        self.landing_end_s = landing_end_s(plan);
+        self.plan = std::borrow::Cow::Owned(plan.clone());
+        Ok(())
+    }
+}
+
+/// When `plan`'s last phase, a landing, ends (none without one).
+fn landing_end_s(plan: &TeamPlan) -> Option<f64> {
+    (plan.phases().last())
+        .filter(|p| p.kind == PhaseKind::Landing)
+        .map(|p| p.t_end_s())
 }
 
 impl Drop for MavlinkPlant<'_> {

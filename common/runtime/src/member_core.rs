@@ -17,7 +17,7 @@ use std::time::Duration;
 use cdm_model::formation::Member;
 use cdm_model::step::{law_for, Law, StepFault};
 
-use crate::member_steer::{MemberSteering, SteerFault};
+use crate::member_steer::{MemberSteering, Noticed, SteerFault};
 use crate::member_watch::{report_fault, Watch};
 use crate::messages::{
     AgentStatus, ClockCommand, ClockMsg, FaultCode, StateMsg, SteerNotice, NO_PEER,
@@ -60,6 +60,11 @@ pub trait Timing<V: Vehicle> {
     /// An in-neighbour's state of this scenario (`slot` in the order of its law).
     fn on_neighbor(&mut self, m: &mut Shared<V>, slot: usize, msg: &StateMsg);
 
+    /// A command notice became final for this member (flown from its switch tick on).
+    fn on_steered(&mut self, m: &mut Shared<V>, n: &SteerNotice) {
+        let _ = (m, n);
+    }
+
     /// A state of a member that is not an in-neighbour (yet).
     fn on_stranger(&mut self, m: &mut Shared<V>, msg: &StateMsg) {
         let _ = (m, msg);
@@ -96,18 +101,43 @@ pub struct Shared<V> {
     pub(crate) watch: Watch,
     /// Commands to the team in flight (`None`: a command notice is a fault).
     pub(crate) steering: Option<Box<MemberSteering>>,
+    /// A real-time leader's acknowledgement of a proposed command, to publish.
+    pub(crate) steer_ack: Option<StateMsg>,
 }
 
 impl<V: Vehicle> Shared<V> {
-    /// A command notice: the vehicle flies the commanded plan from now on (the same as the old
-    /// one before the switch), and the flight ends at its last tick.
-    fn steer(&mut self, n: SteerNotice) -> Result<(), MemberFault> {
+    /// A command notice: once final, the vehicle flies the commanded plan from now on (the
+    /// same as the old one before the switch), and the flight ends at its last tick; proposed
+    /// (real time), a leader acknowledges it. Returns the notice when it became final here.
+    fn steer(&mut self, n: SteerNotice) -> Result<Option<SteerNotice>, MemberFault> {
         let seq = n.seq;
         let Some(st) = self.steering.as_mut() else {
             return Err(MemberFault::Steer(SteerFault::Unsupported { seq }));
         };
-        let Some(replan) = st.on_notice(n, self.tick).map_err(MemberFault::Steer)? else {
-            return Ok(());
+        let noticed = (st.on_notice(n, self.tick, self.is_follower)).map_err(MemberFault::Steer)?;
+        let replan = match noticed {
+            Noticed::Nothing => return Ok(None),
+            Noticed::Proposed { seq } => {
+                if !self.is_follower {
+                    self.steer_ack = Some(StateMsg::steer_ack(self.tick, self.hash, self.id, seq));
+                }
+                return Ok(None);
+            }
+            Noticed::TooLate { seq } => {
+                tracing::warn!(
+                    id = self.id,
+                    seq,
+                    switch_tick = n.tick,
+                    tick = self.tick,
+                    "a proposed command came after its switch tick: not acknowledged"
+                );
+                return Ok(None);
+            }
+            Noticed::Withdrawn { seq } => {
+                tracing::info!(id = self.id, seq, "the proposed command was withdrawn");
+                return Ok(None);
+            }
+            Noticed::Replan(r) => *r,
         };
         if self.vehicle.replan(&replan.plan).is_err() {
             return Err(MemberFault::Steer(SteerFault::Unsupported { seq }));
@@ -120,7 +150,24 @@ impl<V: Vehicle> Shared<V> {
             "flying the commanded plan"
         );
         self.last = replan.last_tick;
-        Ok(())
+        Ok(Some(n))
+    }
+
+    /// A real-time leader holds before flying a switch tick whose proposed command it
+    /// acknowledged and is still undecided, bounded by `give_up`: `Some(action)` while it
+    /// waits (or gives up), `None` to fly on.
+    pub(crate) fn wait_for_decision(&self, now: Duration, give_up: Duration) -> Option<Action> {
+        if self.is_follower {
+            return None;
+        }
+        let (seq, tick) = self.steering.as_ref()?.undecided_at(self.tick)?;
+        if now >= give_up {
+            let fault = MemberFault::Steer(SteerFault::Undecided { seq, tick });
+            return Some(self.fail(FaultCode::OrchestratorLost, NO_PEER, fault));
+        }
+        Some(Action::Wait(
+            give_up.saturating_sub(now).min(Duration::from_millis(1)),
+        ))
     }
 
     /// Publishes this tick's state (once).
@@ -214,6 +261,7 @@ impl<V, T> MemberCore<V, T> {
             unnotified: false,
             watch: Watch::new(now),
             steering: None,
+            steer_ack: None,
         };
         Self { m, timing }
     }
@@ -265,7 +313,9 @@ impl<V: Vehicle, T: Timing<V>> MemberCore<V, T> {
         }
         self.timing.on_clock(&mut self.m, c, (now, unix_now_ns))?;
         if let Some(n) = c.steer() {
-            self.m.steer(n)?;
+            if let Some(n) = self.m.steer(n)? {
+                self.timing.on_steered(&mut self.m, &n);
+            }
         }
         match c.command() {
             ClockCommand::Stop(_) => Ok(Some(Finished {
@@ -313,6 +363,9 @@ impl<V: Vehicle, T: Timing<V>> MemberCore<V, T> {
     pub fn poll(&mut self, now: Duration) -> Action {
         if let Some(a) = self.m.watch.take() {
             return a;
+        }
+        if let Some(ack) = self.m.steer_ack.take() {
+            return Action::Publish(ack);
         }
         self.timing.poll(&mut self.m, now)
     }

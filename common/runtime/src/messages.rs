@@ -6,7 +6,7 @@
 //! place them in shared memory as they are. The backend (cdm-iox) gives them `ZeroCopySend` and
 //! their stable type names; this crate does not name iceoryx2. The same types cross hosts: they
 //! derive serde, and cdm-zenoh's one `encode` (postcard) writes them field by field in
-//! declaration order (`ClockMsg::reserved` stays behind: it is padding, always zero). Codes travel as `u32` with the
+//! declaration order. Codes travel as `u32` with the
 //! documented constants below; [`AgentStatus`] and [`ClockCommand`] are the Rust-side view of
 //! them. Decoding never fails: a code this build does not know is kept as `Unknown(code)` so a
 //! newer peer cannot crash an older one.
@@ -28,6 +28,11 @@ pub const STATUS_ARMED: u32 = 3;
 /// `StateMsg::status`: not a state but a MAVLink member's vehicle report (attitude and late
 /// setpoints, `cdm_mavlink::report`), published just before each of its pacing reports.
 pub const STATUS_VEHICLE: u32 = 4;
+/// `StateMsg::status`: not a state but a real-time leader's acknowledgement of a proposed
+/// command ([`STEER_PROPOSED`]): it can switch at the notice's tick (`state[0]` = the notice's
+/// sequence number, `tick` = the tick it flies next). [`StateMsg::status`] decodes it as a
+/// fault, like [`STATUS_PACING`], so a reader that does not know it never audits it.
+pub const STATUS_STEER_ACK: u32 = 5;
 
 /// `StateMsg::fault_code`: no fault (always the value while `status == STATUS_OK`).
 pub const FAULT_NONE: u32 = 0;
@@ -148,9 +153,10 @@ pub struct ClockMsg {
     /// How many of the announced losses have every new link of their repair connected: the
     /// new in-neighbours then hand their readers the states these missed (iceoryx2 history).
     pub loss_linked: u32,
-    /// Zero (keeps the layout free of implicit padding); never on the network.
-    #[serde(skip)]
-    pub reserved: u32,
+    /// One of the `STEER_*` phases of the latest command notice: [`STEER_FINAL`] (lockstep,
+    /// and a real-time command every leader acknowledged), [`STEER_PROPOSED`] or
+    /// [`STEER_WITHDRAWN`]. It also keeps the layout free of implicit padding.
+    pub steer_phase: u32,
     /// The latest command to the team in flight announced: the tick its new motion starts
     /// from. Meaningless while `steer_seq` is 0.
     pub steer_tick: u64,
@@ -174,6 +180,51 @@ pub const STEER_LAND: u32 = 3;
 /// `ClockMsg::steer_command`: goto (`steer_goals`, `steer_travel_s`).
 pub const STEER_GOTO: u32 = 4;
 
+/// `ClockMsg::steer_phase`: the command is decided; every member flies it from its switch tick.
+pub const STEER_FINAL: u32 = 0;
+/// `ClockMsg::steer_phase`: real time, the command is proposed: every leader that can still
+/// switch at its tick acknowledges it ([`STATUS_STEER_ACK`]) and waits for the decision
+/// before flying that tick.
+pub const STEER_PROPOSED: u32 = 1;
+/// `ClockMsg::steer_phase`: real time, the proposed command is withdrawn (a leader did not
+/// acknowledge it in time): nothing changes, and its sequence number is spent.
+pub const STEER_WITHDRAWN: u32 = 2;
+
+/// Where a command notice stands (the Rust view of `ClockMsg::steer_phase`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SteerPhase {
+    /// [`STEER_FINAL`]
+    Final,
+    /// [`STEER_PROPOSED`]
+    Proposed,
+    /// [`STEER_WITHDRAWN`]
+    Withdrawn,
+    /// A phase this build does not know (a member then stops: it cannot tell whether to fly it).
+    Unknown(u32),
+}
+
+impl SteerPhase {
+    /// The wire value.
+    pub fn code(self) -> u32 {
+        match self {
+            SteerPhase::Final => STEER_FINAL,
+            SteerPhase::Proposed => STEER_PROPOSED,
+            SteerPhase::Withdrawn => STEER_WITHDRAWN,
+            SteerPhase::Unknown(c) => c,
+        }
+    }
+
+    /// The Rust view of a wire value.
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            STEER_FINAL => SteerPhase::Final,
+            STEER_PROPOSED => SteerPhase::Proposed,
+            STEER_WITHDRAWN => SteerPhase::Withdrawn,
+            other => SteerPhase::Unknown(other),
+        }
+    }
+}
+
 /// The latest accepted command a clock message announces (the Rust view of the `steer_*`
 /// fields): every member applies it to its plan from tick `tick` on, as the orchestrator did
 /// (`cdm_model::steer::Steering`, the same code, so the same plan).
@@ -186,6 +237,25 @@ pub struct SteerNotice {
     /// The command; `None` for a code this build does not know (a member then stops: it
     /// cannot fly the team's plan).
     pub command: Option<TeamCommand>,
+    /// Decided, proposed (real time, waiting for the leaders' acknowledgements) or withdrawn.
+    pub phase: SteerPhase,
+}
+
+impl SteerNotice {
+    /// A decided command: number `seq`, switching at `tick`.
+    pub fn decided(seq: u32, tick: u64, command: TeamCommand) -> Self {
+        SteerNotice {
+            seq,
+            tick,
+            command: Some(command),
+            phase: SteerPhase::Final,
+        }
+    }
+
+    /// The same notice in `phase`.
+    pub fn in_phase(self, phase: SteerPhase) -> Self {
+        SteerNotice { phase, ..self }
+    }
 }
 
 /// The latest loss a clock message announces (the Rust view of the `loss_*` fields).
@@ -359,6 +429,22 @@ impl StateMsg {
         }
     }
 
+    /// A real-time leader's acknowledgement ([`STATUS_STEER_ACK`]) of the proposed command
+    /// number `seq`, sent while it flies `tick` next.
+    pub fn steer_ack(tick: u64, scenario_hash: u64, id: u32, seq: u32) -> Self {
+        let mut state = [0.0; 12];
+        state[0] = f64::from(seq);
+        Self {
+            status: STATUS_STEER_ACK,
+            ..Self::ok(tick, scenario_hash, id, state)
+        }
+    }
+
+    /// `Some(seq)` for an acknowledgement of proposed command `seq`, `None` for anything else.
+    pub fn steer_acked(&self) -> Option<u32> {
+        (self.status == STATUS_STEER_ACK).then_some(self.state[0] as u32)
+    }
+
     /// `Some(armed)` for an answer to [`COMMAND_ARM`], `None` for anything else.
     pub fn armed(&self) -> Option<bool> {
         (self.status == STATUS_ARMED).then_some(self.state[0] == 1.0)
@@ -447,7 +533,7 @@ impl ClockMsg {
             loss_seq: 0,
             loss_id: 0,
             loss_linked: 0,
-            reserved: 0,
+            steer_phase: STEER_FINAL,
             steer_tick: 0,
             steer_seq: 0,
             steer_command: 0,
@@ -462,6 +548,7 @@ impl ClockMsg {
         let Some(n) = notice else { return self };
         self.steer_seq = n.seq;
         self.steer_tick = n.tick;
+        self.steer_phase = n.phase.code();
         self.steer_command = match n.command {
             Some(TeamCommand::Hold) | None => STEER_HOLD,
             Some(TeamCommand::Resume) => STEER_RESUME,
@@ -497,6 +584,7 @@ impl ClockMsg {
             seq: self.steer_seq,
             tick: self.steer_tick,
             command,
+            phase: SteerPhase::from_code(self.steer_phase),
         })
     }
 
@@ -659,12 +747,15 @@ mod tests {
                 travel_s: None,
             },
         ] {
-            let n = SteerNotice {
-                seq: 3,
-                tick: 77,
-                command: Some(command),
-            };
-            assert_eq!(ClockMsg::run(5, 1).with_steer(Some(n)).steer(), Some(n));
+            for phase in [
+                SteerPhase::Final,
+                SteerPhase::Proposed,
+                SteerPhase::Withdrawn,
+                SteerPhase::Unknown(9),
+            ] {
+                let n = SteerNotice::decided(3, 77, command).in_phase(phase);
+                assert_eq!(ClockMsg::run(5, 1).with_steer(Some(n)).steer(), Some(n));
+            }
         }
         let unknown = ClockMsg {
             steer_seq: 1,
@@ -676,6 +767,11 @@ mod tests {
         assert_eq!(r.armed(), Some(true));
         assert!(matches!(r.status(), AgentStatus::Fault { .. }));
         assert_eq!(StateMsg::ok(0, 1, 4, [1.0; 12]).armed(), None);
+        let ack = StateMsg::steer_ack(40, 1, 2, 3);
+        assert_eq!(ack.steer_acked(), Some(3));
+        assert!(matches!(ack.status(), AgentStatus::Fault { .. }));
+        assert_eq!(ack.armed(), None);
+        assert_eq!(StateMsg::ok(0, 1, 4, [3.0; 12]).steer_acked(), None);
         assert_eq!(
             ClockMsg::realtime(1_700_000_000_000_000_000, 1, 7).command(),
             ClockCommand::Realtime {

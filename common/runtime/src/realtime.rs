@@ -39,7 +39,9 @@ use crate::member_core::{
 };
 use crate::member_loss::MemberLosses;
 use crate::member_protocol::WaitingFor;
-use crate::messages::{ClockCommand, ClockMsg, FaultCode, StateMsg, PHASES_ALIGNED, STATUS_PACING};
+use crate::messages::{
+    ClockCommand, ClockMsg, FaultCode, StateMsg, SteerNotice, PHASES_ALIGNED, STATUS_PACING,
+};
 use crate::realtime_journal::{Flown, Journal};
 use crate::realtime_links::DelayLine;
 use crate::seams::Vehicle;
@@ -333,6 +335,13 @@ impl<V: Vehicle> Timing<V> for Realtime {
         }
     }
 
+    /// The switch goes into the journal (a replay flies the commanded plan from it).
+    fn on_steered(&mut self, _: &mut Shared<V>, n: &SteerNotice) {
+        if let Some(j) = self.journal.as_mut() {
+            j.steered(n);
+        }
+    }
+
     /// Kept, once its link delivers it, when it is the in-neighbour's newest.
     fn on_neighbor(&mut self, _: &mut Shared<V>, slot: usize, msg: &StateMsg) {
         let flat = QuadState(msg.state).flat();
@@ -370,6 +379,10 @@ impl<V: Vehicle> Timing<V> for Realtime {
             // The plan is flown: wait for the stop (bounded).
             let silence = due.saturating_add(m.deadlines.silence);
             return self.idle(m, now, Some(silence), None);
+        }
+        // A command this leader acknowledged and that switches now is decided first.
+        if let Some(a) = m.wait_for_decision(now, due.saturating_add(self.stale_after)) {
+            return a;
         }
         if let Some(a) = self.relink_if_due(m, t_own) {
             return a;

@@ -23,4 +23,12 @@ pub struct Flown {
 pub trait Journal: std::fmt::Debug + Send {
     /// Tick `f.tick` was flown, on the states `f.used`.
     fn flown(&mut self, f: &Flown);
+
+    /// A command to the team became final for this member: from tick `n.tick` on it flies the
+    /// commanded plan (`cdm_model::steer`, made from the notice alone, as the orchestrator
+    /// made it). The default keeps nothing: a journal that does not record commands cannot
+    /// replay a commanded flight.
+    fn steered(&mut self, n: &crate::messages::SteerNotice) {
+        let _ = n;
+    }
 }

@@ -166,6 +166,22 @@ impl MonitorCore {
             .map(|(t, _)| stamp_s(*t, m.phase_s, self.dt_s))
     }
 
+    /// The stamp of `msg` when it is a leader's healthy state of this flight (`None` for a
+    /// follower's, a report, or another scenario's).
+    pub fn leader_stamp(&self, msg: &StateMsg) -> Option<f64> {
+        let m = &self.members[self.index.get(msg.id)?];
+        let state = msg.status() == AgentStatus::Ok && msg.scenario_hash == self.hash;
+        (state && !m.follower).then(|| stamp_s(msg.tick, m.phase_s, self.dt_s))
+    }
+
+    /// The leaders still flying (not lost), in formation order.
+    pub fn leaders(&self) -> Vec<u32> {
+        (self.members.iter())
+            .filter(|m| !m.follower && !m.lost)
+            .map(|m| m.id)
+            .collect()
+    }
+
     /// The tick of member `id`'s newest state, if any arrived.
     pub fn newest_tick(&self, id: u32) -> Option<u64> {
         let k = self.index.get(id)?;

@@ -41,6 +41,7 @@ pub use lockstep::{
 use losses::LossEvents;
 pub use realtime::{RealtimePlan, WallClock, LATE_WAIT, MAX_WAIT};
 pub use realtime_losses::{MEMBER_STALE_FACTOR, REPAIR_LEAD_OF_STALE};
+pub use steer::{SteerOutcome, SWITCH_MARGIN_OF_STALE, SWITCH_MARGIN_TICKS};
 
 /// A member lost, as the audit records it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -237,8 +238,13 @@ impl TeamCore {
         }
     }
 
-    /// A message from a member's state service: a state, a fault report, a pacing report.
+    /// A message from a member's state service: a state, a fault report, a pacing report, an
+    /// acknowledgement of a proposed command.
     pub fn on_state(&mut self, msg: &StateMsg, now: Duration) {
+        if let Some(seq) = msg.steer_acked() {
+            self.t.steer.ack(msg.id, seq);
+            return;
+        }
         match &mut self.pacing {
             Pacing::Lockstep(g) => g.on_state(&mut self.t, msg, now),
             Pacing::Realtime(w) => w.on_state(&mut self.t, msg, now),

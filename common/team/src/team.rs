@@ -131,13 +131,24 @@ pub fn spawn_member(
     role: Role,
     flags: &[String],
 ) -> std::io::Result<Child> {
+    member_command(scenario, team, id, role, flags)?.spawn()
+}
+
+/// The command [`spawn_member`] runs (to change before it is spawned).
+pub fn member_command(
+    scenario: &Path,
+    team: &TeamName,
+    id: u32,
+    role: Role,
+    flags: &[String],
+) -> std::io::Result<Command> {
     let exe = std::env::current_exe()?;
     let bin = exe.with_file_name(if role.is_leader() { "leader" } else { "agent" });
-    Command::new(bin)
-        .args(member_args(scenario, team, id, flags))
+    let mut c = Command::new(bin);
+    c.args(member_args(scenario, team, id, flags))
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .spawn()
+        .stdout(Stdio::null());
+    Ok(c)
 }
 
 /// A member's arguments after the program's name: `--scenario FILE --team T --id ID FLAGS`.

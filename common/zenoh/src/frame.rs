@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
-pub const PROTOCOL_VERSION: u32 = 8;
+pub const PROTOCOL_VERSION: u32 = 9;
 
 /// Orchestrator -> daemon.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -204,8 +204,7 @@ mod tests {
         assert_eq!(back, Down::Clock(c));
     }
 
-    /// The bytes of protocol 7: the message encodes its fields in declaration order, and its
-    /// padding never travels.
+    /// The bytes of protocol 9: the message encodes its fields in declaration order.
     #[test]
     fn the_clock_message_keeps_the_bytes_of_its_protocol() {
         let notice = LossNotice {
@@ -215,14 +214,17 @@ mod tests {
             linked: 1,
         };
         let mut c = ClockMsg::run(9, 1).with_loss(Some(notice));
-        c.reserved = 5;
+        c.steer_phase = 1;
         let bytes = encode(&Down::Clock(c));
         // variant 0, grant 9, hash 1, command 0, reason 0, loss tick 300 (varint), seq, id,
-        // linked; then no command: its tick, seq and kind (varints), 10 f64 of 8 bytes
-        assert_eq!(bytes[..13], [0, 9, 1, 0, 0, 0xac, 0x02, 2, 7, 1, 0, 0, 0]);
-        assert_eq!(bytes.len(), 13 + 10 * 8);
+        // linked, the command's phase; then no command: its tick, seq and kind (varints),
+        // 10 f64 of 8 bytes
+        assert_eq!(
+            bytes[..14],
+            [0, 9, 1, 0, 0, 0xac, 0x02, 2, 7, 1, 1, 0, 0, 0]
+        );
+        assert_eq!(bytes.len(), 14 + 10 * 8);
         let back: Down = decode(&bytes).unwrap();
-        c.reserved = 0;
         assert_eq!(back, Down::Clock(c));
         let s = StateMsg::ok(1, 2, 3, [0.5; 12]);
         let bytes = encode(&Up::States(vec![s]));

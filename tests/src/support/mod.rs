@@ -91,9 +91,15 @@ pub fn assert_no_team_resources(team: &str) {
     let t = TeamName::new(team).expect("team name");
     let services = team_services(&t);
     let nodes = team_nodes(&t);
+    let channel = Path::new(iox2_root()).join(format!("{team}.command"));
     assert!(
-        services.is_empty() && nodes.is_empty(),
-        "team {team} left {services:?} {nodes:?}"
+        services.is_empty() && nodes.is_empty() && !channel.exists(),
+        "team {team} left {services:?} {nodes:?}{}",
+        if channel.exists() {
+            format!(" and its command channel {}", channel.display())
+        } else {
+            String::new()
+        }
     );
 }
 
@@ -479,8 +485,10 @@ impl TeamFootprint {
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
                     .unwrap_or_default();
-                // iceoryx2's one global management file is shared by every process.
-                if !name.ends_with(".global_mgmt") && self.names_the_team(&name, &pids) {
+                // iceoryx2's one global management file is shared by every process; the
+                // team's command channel (`<team>.command`) is named after the team.
+                let channel = name == format!("{team}.command");
+                if channel || !name.ends_with(".global_mgmt") && self.names_the_team(&name, &pids) {
                     out.push(path.display().to_string());
                 }
             }

@@ -274,8 +274,9 @@ fn a_stopped_orchestrator_records_that_its_clock_stalled() {
 }
 
 /// SIGKILL of the orchestrator: every member notices the clock's node is dead and exits by
-/// itself (exit 3, "the orchestrator of team T is gone"); telemetry keeps whole ticks; then a
-/// new launch of the same team removes the dead orchestrator's files and flies to the end.
+/// itself (exit 3, "the orchestrator of team T is gone"); telemetry keeps whole ticks; the
+/// leftover checker lists its node and command channel; then a new launch of the same team
+/// removes the dead orchestrator's files and flies to the end.
 #[test]
 fn after_the_orchestrator_is_killed_members_exit_and_the_team_can_fly_again() {
     let dir = TempDir::new();
@@ -334,7 +335,13 @@ fn after_the_orchestrator_is_killed_members_exit_and_the_team_can_fly_again() {
             .any(|l| l.contains(&format!("cdm/{team}/orchestrator"))),
         "expected the dead orchestrator's node: {left:#?}"
     );
-    // ... and the next launch of the team removes it and flies.
+    // ... with its command channel (the socket `<team>.command`) ...
+    assert!(
+        left.iter()
+            .any(|l| l.ends_with(&format!("/{team}.command"))),
+        "expected the dead orchestrator's command channel: {left:#?}"
+    );
+    // ... and the next launch of the team removes them and flies.
     let again = dir.path().join("again");
     let mut relaunch = launch_team(&team, &again, "30", &[]);
     relaunch.env("RUST_LOG", "info");

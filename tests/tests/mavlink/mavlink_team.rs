@@ -1146,3 +1146,39 @@ fn fly_one_special(
         id: file.agents[which].id,
     }
 }
+
+/// `--on-interrupt land`, the default with `--vehicles mavlink`: SIGINT to the orchestrator in
+/// the middle of [`support::lab_mission`]'s translation (made 30 s long) lands the team,
+/// certified as `orchestrator command TEAM land` (audit.json lists that land, accepted), and
+/// the run ends as a mission does: the members land and disarm their vehicles
+/// (`--disarm-at-end`), every vehicle on the ground and disarmed, SAFE, exit 0.
+#[test]
+fn sigint_lands_a_mavlink_team_and_every_vehicle_ends_disarmed_on_the_ground() {
+    let dir = TempDir::new();
+    let mut file = support::lab_mission();
+    file.t_total_s = 30.0;
+    let scenario = write_scenario(dir.path(), "lab4.toml", &file);
+    let base = free_udp_ports(file.agents.len() as u16);
+    let team_name = unique_team("mavsigint");
+    let vehicles = lab_vehicles(&file, base, 0..file.agents.len(), &[]);
+    let at = ["--vehicle-origin", "0,0,0", "--arm", "--disarm-at-end"];
+    let mut orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+    // Past the take-off (4 s of the plan at 50 Hz: 200 instants of four rows).
+    support::wait_for_rows(&mut orch, &dir.path().join("run/telemetry.csv"), 4 * 250);
+    support::signal(orch.id(), libc::SIGINT);
+    let (outs, audit, why) = finished_safe(orch, vehicles, dir.path());
+    let commands = audit["commands"].as_array().cloned().unwrap_or_default();
+    assert_eq!(commands.len(), 1, "{why}");
+    assert_eq!(commands[0]["command"], "land", "{why}");
+    assert_eq!(commands[0]["accepted"], true, "{why}");
+    for (i, o) in outs.iter().enumerate() {
+        let v = summary(o, &format!("vehicle {i}"));
+        assert_eq!(v["armed"], false, "vehicle {i}: {v}\n{why}");
+        assert_eq!(
+            v["landed_state"], MAV_LANDED_STATE_ON_GROUND,
+            "vehicle {i}: {v}"
+        );
+        assert!(num(&v, "height_m").abs() < 0.05, "vehicle {i}: {v}");
+    }
+    assert_no_team_resources(&team_name);
+}

@@ -6,3 +6,4 @@ mod commands_seen;
 mod steering;
 mod steering_launch;
 mod steering_live;
+mod steering_realtime;

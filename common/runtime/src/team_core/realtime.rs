@@ -63,6 +63,13 @@ impl RealtimePlan {
             dt_s,
         }
     }
+
+    /// The flight's last tick is now `last_tick` (a command to the team): the last audit
+    /// instant moves with it.
+    pub fn set_last_tick(&mut self, last_tick: u64) {
+        let t_end = last_tick as f64 * self.dt_s;
+        self.last_audit = (t_end / self.period_s + 1e-9).floor() as u64;
+    }
 }
 
 /// The real-time pacing's state (see the module doc).
@@ -74,6 +81,10 @@ pub struct WallClock {
     pub(super) audits: u64,
     /// Losses applied, not yet handed to the audit.
     pub(super) found: VecDeque<LostMember>,
+    /// The largest delay seen from a leader's state stamp to its arrival here (s): how far
+    /// behind the common time line a leader is heard (its publishing, the transport, this
+    /// loop's turn), measured on every state.
+    leader_delay_s: f64,
 }
 
 impl WallClock {
@@ -83,7 +94,13 @@ impl WallClock {
             book,
             audits: 0,
             found: VecDeque::new(),
+            leader_delay_s: 0.0,
         }
+    }
+
+    /// The largest delay measured so far from a leader's state stamp to its arrival (s).
+    pub fn leader_delay_s(&self) -> f64 {
+        self.leader_delay_s
     }
 
     /// The timing of the audits.
@@ -122,6 +139,12 @@ impl WallClock {
         let event = self.book.on_state(msg);
         if t.is_gone(msg.id) {
             return;
+        }
+        if let Some(stamp) = (event == MonitorEvent::Nothing)
+            .then(|| self.book.leader_stamp(msg))
+            .flatten()
+        {
+            self.leader_delay_s = self.leader_delay_s.max(self.time_s(now) - stamp);
         }
         let (rank, fault) = match event {
             MonitorEvent::Nothing => return,
@@ -196,6 +219,9 @@ impl WallClock {
     /// are repaired); then the audit instants due; then a flush; then a wait.
     pub(super) fn next_action(&mut self, t: &mut TeamState, now: Duration) -> TeamAction {
         if let Some(a) = t.loss_action(self, now) {
+            return a;
+        }
+        if let Some(a) = t.steer_realtime(self.time_s(now)) {
             return a;
         }
         let (now_s, bound_s) = (self.time_s(now), self.plan.stale_after.as_secs_f64());
