@@ -11,6 +11,10 @@
 //!   so, exit 3; a tampered or foreign one is exit 2 naming the file and its first bad record;
 //!   nothing panics.
 //!
+//! A second flight over the same links loses a member (`--lose`, repaired around): its readers'
+//! recordings hold the tick each flew its repaired link from, and the replay is the run's byte
+//! for byte (telemetry.csv and the safety figures, the loss's records among them).
+//!
 //! How to run: `cargo test --release -p integration-tests --test replay_realtime`.
 
 mod support;
@@ -51,11 +55,12 @@ fn copy_run(from: &Path, to: &Path) {
     }
 }
 
-/// The 10-agent team over impaired links, 3 s of plan, into `out`: exit 0, SAFE, complete.
-fn flight(dir: &Path) -> PathBuf {
+/// The 10-agent team over impaired links, 3 s of plan, into `dir/name` with `extra` flags:
+/// exit 0, SAFE, complete.
+fn flight(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
     let team = unique_team("rt_replay");
-    let out = dir.join("rt");
-    let args = [
+    let out = dir.join(name);
+    let mut args = vec![
         "--n",
         "10",
         "--t-total",
@@ -73,6 +78,7 @@ fn flight(dir: &Path) -> PathBuf {
         "--seed",
         "5",
     ];
+    args.extend(extra);
     let o = run(&mut launch(&team, &out, &args), DEADLINE);
     assert_exit(&o, 0, "launch --realtime over impaired links");
     let audit = read_json(&out.join("audit.json"));
@@ -85,7 +91,7 @@ fn flight(dir: &Path) -> PathBuf {
 #[test]
 fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
     let dir = TempDir::new();
-    let rt = flight(dir.path());
+    let rt = flight(dir.path(), "rt", &[]);
     for id in 1..=10 {
         let p = rt.join("recording").join(format!("{id}.mcap"));
         assert!(p.is_file(), "no recording of agent {id}");
@@ -165,4 +171,32 @@ fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
         "replay",
         &["10.mcap: record 1: the recording of agent 9"],
     );
+}
+
+/// `--lose 6@1` over the impaired links: secondary leader 6 is stopped once it has published
+/// its tick of 1 s, and its readers 7, 9 and 10 fly the repaired graph from the ticks their
+/// recordings say; the replay gives the run's telemetry and safety figures (the loss's audit
+/// instant, repair tick and re-triangulations among them) byte for byte.
+#[test]
+fn a_real_time_run_with_a_loss_replays_byte_for_byte() {
+    let dir = TempDir::new();
+    let rt = flight(dir.path(), "lose", &["--lose", "6@1"]);
+    let audit = read_json(&rt.join("audit.json"));
+    let losses = audit["losses"].as_array().expect("losses");
+    assert_eq!(losses.len(), 1, "{audit:#}");
+    assert_eq!(losses[0]["id"], 6, "{audit:#}");
+    for reader in [7, 9, 10] {
+        let p = rt.join("recording").join(format!("{reader}.mcap"));
+        let bytes = std::fs::read(&p).expect("recording");
+        let needle = b"{\"repair\":{\"at";
+        let relinked = bytes.windows(needle.len()).any(|w| w == needle);
+        assert!(relinked, "agent {reader}'s recording has no repaired link");
+    }
+    let same = dir.path().join("same");
+    let o = replay(&rt, &same, &[]);
+    assert_exit(&o, 0, "replay of a real-time run with a loss");
+    assert_same_file(&rt.join("telemetry.csv"), &same.join("telemetry.csv"));
+    assert_eq!(figures(&rt), figures(&same), "audit.json's safety figures");
+    let replayed = read_json(&same.join("audit.json"));
+    assert_eq!(replayed["losses"], audit["losses"], "the loss as recorded");
 }

@@ -127,6 +127,22 @@ impl LossCause {
             LossCause::VehicleDisarmed => "vehicle-disarmed",
         }
     }
+
+    /// The cause audit.json names `text`, if any.
+    pub fn from_text(text: &str) -> Option<Self> {
+        use LossCause::*;
+        [
+            Scripted,
+            Killed,
+            Exited,
+            Silent,
+            VehicleLost,
+            VehicleMode,
+            VehicleDisarmed,
+        ]
+        .into_iter()
+        .find(|c| c.as_str() == text)
+    }
 }
 
 /// Which safety condition a violation breaks (`violations[].kind` in audit.json; Sec. VI).

@@ -4,8 +4,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use cdm_records::run_record::RunRecord;
+use cdm_runtime::realtime_journal::{Switch, Switched};
 
-use crate::{file_name, Ages, Header, AGES_TOPIC, FORMAT, MEMBER_TOPIC};
+use crate::{file_name, Ages, Header, SwitchMsg, AGES_TOPIC, FORMAT, MEMBER_TOPIC, SWITCH_TOPIC};
 
 /// A recording is at most this large (about 1 KB per member-second: days of flight).
 const MAX_BYTES: u64 = 1 << 30;
@@ -36,6 +37,8 @@ pub struct Recording {
     pub header: Header,
     /// For each tick flown from tick 0, the tick of the state each in-neighbour slot flew on.
     pub used: Vec<[Option<u64>; 3]>,
+    /// The switches applied (repaired links, commands), in the order applied.
+    pub switches: Vec<Switch>,
     /// The file has no end: the member stopped writing it before the flight ended (a crash, a
     /// kill, a full disk); `used` holds every tick before that.
     pub cut_short: bool,
@@ -57,13 +60,13 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
     let stream =
         mcap::MessageStream::new(&bytes).map_err(|e| bad(path, 1, format!("not MCAP: {e}")))?;
     let mut header: Option<Header> = None;
-    let mut used = Vec::new();
+    let mut read = Parsed::default();
     for (k, msg) in stream.enumerate() {
         let record = k + 1;
         let msg = match msg {
             Ok(m) => m,
             // A file without its end was cut short: what came before stands.
-            Err(_) if !ended => return finish(path, header, used, true),
+            Err(_) if !ended => return finish(path, header, read, true),
             Err(e) => return Err(bad(path, record, e.to_string())),
         };
         let topic = msg.channel.topic.as_str();
@@ -77,7 +80,12 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
             (Some(_), AGES_TOPIC) => {
                 let a: Ages = serde_json::from_slice(&msg.data)
                     .map_err(|e| bad(path, record, format!("not a batch of ticks: {e}")))?;
-                append(&a, id, &mut used).map_err(|why| bad(path, record, why))?;
+                append(&a, id, &mut read).map_err(|why| bad(path, record, why))?;
+            }
+            (Some(_), SWITCH_TOPIC) => {
+                let s: SwitchMsg = serde_json::from_slice(&msg.data)
+                    .map_err(|e| bad(path, record, format!("not a switch: {e}")))?;
+                switched(&s, id, &mut read).map_err(|why| bad(path, record, why))?;
             }
             _ => {
                 return Err(bad(
@@ -88,7 +96,14 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
             }
         }
     }
-    finish(path, header, used, !ended)
+    finish(path, header, read, !ended)
+}
+
+/// What the messages read so far hold.
+#[derive(Default)]
+struct Parsed {
+    used: Vec<[Option<u64>; 3]>,
+    switches: Vec<Switch>,
 }
 
 /// The recordings of `ids` in the run directory's recording folder `dir`.
@@ -105,16 +120,56 @@ pub fn read_dir(
 fn finish(
     path: &Path,
     header: Option<Header>,
-    used: Vec<[Option<u64>; 3]>,
+    read: Parsed,
     cut_short: bool,
 ) -> Result<Recording, RecordingError> {
     let header =
         header.ok_or_else(|| bad(path, 1, "no header: not a member's recording".into()))?;
     Ok(Recording {
         header,
-        used,
+        used: read.used,
+        switches: read.switches,
         cut_short,
     })
+}
+
+/// Takes a switch: written before the ticks flown on it, after those of the switches before.
+fn switched(s: &SwitchMsg, id: u32, read: &mut Parsed) -> Result<(), String> {
+    if s.member != id {
+        return Err(format!("a switch of agent {}, not of agent {id}", s.member));
+    }
+    let sw = s.switch();
+    let flown = read.used.len() as u64;
+    if sw.tick < flown {
+        return Err(format!(
+            "a switch at tick {}, written after tick {} was flown",
+            sw.tick,
+            flown - 1
+        ));
+    }
+    if let Some(before) = read.switches.last().filter(|b| b.tick > sw.tick) {
+        return Err(format!(
+            "a switch at tick {}, after one at tick {}",
+            sw.tick, before.tick
+        ));
+    }
+    if let Switched::Repair { at, .. } = sw.what {
+        if at > sw.tick {
+            return Err(format!(
+                "the repaired link of tick {at} applied at tick {}, before it",
+                sw.tick
+            ));
+        }
+    }
+    read.switches.push(sw);
+    Ok(())
+}
+
+/// True when a repaired link applied at `tick` (its slots then name other neighbours).
+fn relinked_at(switches: &[Switch], tick: u64) -> bool {
+    switches
+        .iter()
+        .any(|s| s.tick == tick && matches!(s.what, Switched::Repair { .. }))
 }
 
 fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), String> {
@@ -140,8 +195,9 @@ fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), String> {
     Ok(())
 }
 
-/// Appends a batch's ticks to `used` (which holds every tick before it).
-fn append(a: &Ages, id: u32, used: &mut Vec<[Option<u64>; 3]>) -> Result<(), String> {
+/// Appends a batch's ticks to `read.used` (which holds every tick before it).
+fn append(a: &Ages, id: u32, read: &mut Parsed) -> Result<(), String> {
+    let (used, switches) = (&mut read.used, &read.switches);
     if a.member != id {
         return Err(format!("ticks of agent {}, not of agent {id}", a.member));
     }
@@ -174,8 +230,9 @@ fn append(a: &Ages, id: u32, used: &mut Vec<[Option<u64>; 3]>) -> Result<(), Str
                         }
                     };
                 }
-                // A slot keeps the newest state heard: it never flies on an older one.
-                if let Some(before) = used.last() {
+                // A slot keeps the newest state heard: it never flies on an older one (unless
+                // a repaired link gave it another neighbour).
+                if let Some(before) = used.last().filter(|_| !relinked_at(switches, tick)) {
                     if let Some(slot) = (0..3).find(|&k| u[k] < before[k]) {
                         return Err(format!(
                             "tick {tick} slot {slot}: flew on {:?}, older than the {:?} before",
@@ -239,6 +296,55 @@ mod tests {
         assert_eq!(r.used, want);
         assert!(!r.cut_short);
         assert_eq!(r.header.member, 7);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn switches_read_back_and_a_repaired_slot_may_name_an_older_state() {
+        use cdm_runtime::realtime_journal::{Switch, Switched};
+        let d = dir("switch");
+        let p = d.join("7.mcap");
+        let relink = Switch {
+            tick: 150,
+            what: Switched::Repair {
+                at: 140,
+                in_neighbors: Some([1, 3, 8]),
+            },
+        };
+        let command = Switch {
+            tick: 160,
+            what: Switched::Command { seq: 1, at: 200 },
+        };
+        {
+            let mut j = McapJournal::create(&p, (7, false), 0xabc, 0.01).expect("created");
+            for tick in 0..250u64 {
+                for s in [relink, command].iter().filter(|s| s.tick == tick) {
+                    j.switched(s);
+                }
+                // From the repair on, slot 1 is a new neighbour, heard from far behind.
+                let used = match tick {
+                    150.. => [tick.checked_sub(1), tick.checked_sub(40), None],
+                    _ => [tick.checked_sub(1), tick.checked_sub(2), None],
+                };
+                j.flown(&Flown { tick, used });
+            }
+        }
+        let r = read(&p, 7, 0xabc).expect("read");
+        assert_eq!(r.switches, [relink, command]);
+        assert_eq!(r.used[150], [Some(149), Some(110), None]);
+        // A switch claimed for a tick already flown is a tampered file.
+        let mut bytes = std::fs::read(&p).expect("written");
+        let at = bytes
+            .windows(10)
+            .position(|w| w == b"\"tick\":160")
+            .expect("the command's switch");
+        bytes[at + 7..at + 10].copy_from_slice(b" 10");
+        std::fs::write(&p, &bytes).expect("edited");
+        let e = read(&p, 7, 0xabc).unwrap_err().to_string();
+        assert!(
+            e.contains("a switch at tick 10, written after tick 99 was flown"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&d);
     }
 

@@ -68,6 +68,11 @@ pub trait Timing<V: Vehicle> {
     /// The next action at `now`, once no fault is pending.
     fn poll(&mut self, m: &mut Shared<V>, now: Duration) -> Action;
 
+    /// A new command notice was taken: the commanded plan flies from tick `m.tick` on.
+    fn steered(&mut self, m: &Shared<V>, n: &SteerNotice) {
+        let _ = (m, n);
+    }
+
     /// What the member publishes when the stop arrives (its pacing figures), if anything; the
     /// loop then keeps it readable until the orchestrator's second stop.
     fn final_report(&self, m: &Shared<V>) -> Option<StateMsg> {
@@ -100,14 +105,14 @@ pub struct Shared<V> {
 
 impl<V: Vehicle> Shared<V> {
     /// A command notice: the vehicle flies the commanded plan from now on (the same as the old
-    /// one before the switch), and the flight ends at its last tick.
-    fn steer(&mut self, n: SteerNotice) -> Result<(), MemberFault> {
+    /// one before the switch), and the flight ends at its last tick. True when it was a new one.
+    fn steer(&mut self, n: SteerNotice) -> Result<bool, MemberFault> {
         let seq = n.seq;
         let Some(st) = self.steering.as_mut() else {
             return Err(MemberFault::Steer(SteerFault::Unsupported { seq }));
         };
         let Some(replan) = st.on_notice(n, self.tick).map_err(MemberFault::Steer)? else {
-            return Ok(());
+            return Ok(false);
         };
         if self.vehicle.replan(&replan.plan).is_err() {
             return Err(MemberFault::Steer(SteerFault::Unsupported { seq }));
@@ -120,7 +125,7 @@ impl<V: Vehicle> Shared<V> {
             "flying the commanded plan"
         );
         self.last = replan.last_tick;
-        Ok(())
+        Ok(true)
     }
 
     /// Publishes this tick's state (once).
@@ -265,7 +270,9 @@ impl<V: Vehicle, T: Timing<V>> MemberCore<V, T> {
         }
         self.timing.on_clock(&mut self.m, c, (now, unix_now_ns))?;
         if let Some(n) = c.steer() {
-            self.m.steer(n)?;
+            if self.m.steer(n)? {
+                self.timing.steered(&self.m, &n);
+            }
         }
         match c.command() {
             ClockCommand::Stop(_) => Ok(Some(Finished {

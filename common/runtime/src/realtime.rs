@@ -39,8 +39,10 @@ use crate::member_core::{
 };
 use crate::member_loss::MemberLosses;
 use crate::member_protocol::WaitingFor;
-use crate::messages::{ClockCommand, ClockMsg, FaultCode, StateMsg, PHASES_ALIGNED, STATUS_PACING};
-use crate::realtime_journal::{Flown, Journal};
+use crate::messages::{
+    ClockCommand, ClockMsg, FaultCode, StateMsg, SteerNotice, PHASES_ALIGNED, STATUS_PACING,
+};
+use crate::realtime_journal::{Flown, Journal, Switch, Switched};
 use crate::realtime_links::DelayLine;
 use crate::seams::Vehicle;
 
@@ -377,6 +379,19 @@ impl<V: Vehicle> Timing<V> for Realtime {
         // A repair may have moved the in-neighbours' phases.
         start = self.start.unwrap_or(start);
         self.fly(m, start, t_own, (now - due).as_secs_f64())
+    }
+
+    /// Journaled as a switch, on the path of a repair's (the tick it was taken at).
+    fn steered(&mut self, m: &Shared<V>, n: &SteerNotice) {
+        if let Some(j) = self.journal.as_mut() {
+            j.switched(&Switch {
+                tick: m.tick,
+                what: Switched::Command {
+                    seq: n.seq,
+                    at: n.tick,
+                },
+            });
+        }
     }
 
     /// The final pacing figures.
