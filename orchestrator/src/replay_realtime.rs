@@ -3,8 +3,9 @@
 //! real-time figures: phase seed, audit rate, stale bound; its losses as the monitor applied
 //! them; commands.json) and the members' recordings (`recording/<id>.mcap`: the neighbour
 //! states each tick flew on, and the ticks each repaired link and command was applied from),
-//! flown again by cdm-runtime's `realtime_replay` and compared with the run. With `--gains` or
-//! `--t-total` the same history flies with the change.
+//! flown again by cdm-runtime's `realtime_replay` and compared with the run. With `--gains`,
+//! `--t-total`, `--scenario` (the same team) or `--link-delay-ms` the same history flies with
+//! the change.
 //!
 //! Outcomes: exit 0/1 as the replay's verdict when it equals the run (or, with a change,
 //! whatever it gives); 2 for a run directory or recording that does not belong (named, with its
@@ -57,6 +58,10 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
         .map_err(Failure::bad_input)?;
     let changed = crate::replay::changed(&s, a)?;
     let (flown, history) = history_of(run, (&s, changed), &audit, &recordings, a.what_if())?;
+    let timing = ReplayTiming {
+        link_shift_ticks: link_shift_ticks(&s, &flown),
+        ..timing
+    };
     if crate::replay::same_dir(run, &a.out) {
         return Err(Failure::bad_input(format!(
             "--out {}: the run directory itself: the replay needs a directory of its own",
@@ -196,22 +201,26 @@ fn timing_of(
         audit_hz,
         stale_after_s,
         max_ticks,
+        link_shift_ticks: 0,
     })
 }
 
-/// What this replay cannot fly: other links (the recording is what the links delivered).
+/// What this replay cannot fly: other jitter, loss or draws (the recording is what the links
+/// delivered; only their delay can be changed, as a shift of every state flown on).
 fn refuse_unsupported(a: &ReplayArgs) -> Result<(), Failure> {
     let l = &a.link;
-    if l.link_delay_ms.is_some()
-        || l.link_jitter_ms.is_some()
-        || l.link_loss.is_some()
-        || l.seed.is_some()
-    {
+    if l.link_jitter_ms.is_some() || l.link_loss.is_some() || l.seed.is_some() {
         return Err(Failure::bad_input(
-            "--link-*/--seed: a real-time run's recording is what its links delivered; other links cannot be replayed on it",
+            "--link-jitter-ms/--link-loss/--seed: a real-time run's recording is what its links delivered; of its links only --link-delay-ms can change in a replay",
         ));
     }
     Ok(())
+}
+
+/// The what-if's link delay over the run's, in whole ticks (as the links round it).
+fn link_shift_ticks(run: &Scenario, flown: &Scenario) -> i64 {
+    let ms = flown.link_model().spec().delay_ms - run.link_model().spec().delay_ms;
+    (ms / 1e3 / run.dt_s()).round() as i64
 }
 
 /// A recording cut short: what was replayed, and which recordings end early.

@@ -5,8 +5,9 @@
 //! plan, then in process only:
 //! - the replay's telemetry.csv is the run's byte for byte and audit.json's safety figures are
 //!   the run's; every member left a recording;
-//! - what if: `--gains` flies the same history differently, and two such replays are
-//!   identical;
+//! - what if: `--gains`, `--scenario` (the same team with those gains: the same bytes) and
+//!   `--link-delay-ms` fly the same history differently, and two such replays are identical;
+//!   other jitter is refused;
 //! - a recording cut short (as a killed member leaves it) replays up to where it ends and says
 //!   so, exit 3; a tampered or foreign one is exit 2 naming the file and its first bad record;
 //!   nothing panics.
@@ -27,7 +28,7 @@ use integration_tests::{run, unique_team, TempDir};
 use serde_json::Value;
 use support::{
     assert_exit, assert_no_process_of, assert_same_file, assert_stderr_has, launch, read_json,
-    replay,
+    replay, with_line,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
@@ -120,6 +121,30 @@ fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
     assert_ne!(read(&rt), read(&a), "other gains fly differently");
     assert_same_file(&a.join("telemetry.csv"), &b.join("telemetry.csv"));
     assert_eq!(figures(&a), figures(&b));
+
+    // What if from a scenario file: the run's team with those gains flies as --gains does.
+    let text = std::fs::read_to_string(rt.join("scenario.toml")).expect("scenario.toml");
+    let soft = with_line(&text, "gains = ", "gains = [30.0, 40.0, 25.0, 8.0]");
+    let soft = integration_tests::write_text(dir.path(), "soft.toml", &soft);
+    let from_file = dir.path().join("from-file");
+    let o = replay(&rt, &from_file, &["--scenario", soft.to_str().expect("path")]);
+    assert!(matches!(o.status.code(), Some(0 | 1)), "{o:?}");
+    assert_same_file(&a.join("telemetry.csv"), &from_file.join("telemetry.csv"));
+
+    // What if the links were slower: 40 ms more than the run's 15 (every state flown on four
+    // ticks older), twice; their jitter or losses cannot change (the recording is what they
+    // delivered).
+    let slow = ["--link-delay-ms", "55"];
+    let (c, d) = (dir.path().join("slow-a"), dir.path().join("slow-b"));
+    for out in [&c, &d] {
+        let o = replay(&rt, out, &slow);
+        assert!(matches!(o.status.code(), Some(0 | 1)), "{o:?}");
+    }
+    assert_ne!(read(&rt), read(&c), "slower links fly differently");
+    assert_same_file(&c.join("telemetry.csv"), &d.join("telemetry.csv"));
+    let o = replay(&rt, &dir.path().join("jitter"), &["--link-jitter-ms", "5"]);
+    assert_exit(&o, 2, "replay --link-jitter-ms of a real-time run");
+    assert_stderr_has(&o, "replay", &["only --link-delay-ms can change"]);
 
     // Cut short: agent 8's recording as a kill would leave it (no end, half its bytes).
     let cut = dir.path().join("cut");

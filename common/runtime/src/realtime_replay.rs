@@ -48,6 +48,9 @@ pub struct ReplayTiming {
     pub stale_after_s: f64,
     /// The run's `--max-ticks`.
     pub max_ticks: Option<u64>,
+    /// What if the links were slower (positive) or faster (negative) by this many ticks: each
+    /// neighbour state flown on is that much older or newer than the one the run flew on.
+    pub link_shift_ticks: i64,
 }
 
 /// Why a replay cannot fly a member's recorded tick.
@@ -137,6 +140,8 @@ struct Flier<'a> {
     rec: &'a Recorded,
     /// The repaired links it flew, each from its tick, and how many are applied.
     relinks: (Vec<(u64, Member)>, usize),
+    /// [`ReplayTiming::link_shift_ticks`].
+    shift: i64,
     /// The state of every tick so far (tick k's before tick k is flown), and its flat output.
     states: Vec<([f64; 12], Flat)>,
 }
@@ -211,6 +216,7 @@ pub fn replay(
             initial,
             rec,
             relinks: (relinks, 0),
+            shift: timing.link_shift_ticks,
             states,
         });
     }
@@ -274,12 +280,31 @@ fn fly_all(s: &Scenario, fliers: &mut [Flier]) -> Result<Option<FaultRecord>, Re
 fn blocker(fliers: &[Flier], k: usize) -> Option<(usize, u64)> {
     let f = &fliers[k];
     let ins = f.neighbors?;
-    let used = f.rec.used.get(f.next() as usize)?;
+    let tick = f.next();
     (0..3).find_map(|slot| {
-        let t = used[slot]?;
+        let t = used_at(fliers, k, tick, slot)?;
         let have = fliers.get(ins[slot]).map_or(0, |n| n.states.len() as u64);
         (t >= have).then_some((slot, t))
     })
+}
+
+/// The tick of the state member `k` flies its tick `tick` on in `slot`: the one it flew on in
+/// the run or, what if the links were slower, that many ticks older (none yet when there is no
+/// such state) or, faster, newer (never past its own tick, unless the run's was, nor past the
+/// neighbour's last state).
+fn used_at(fliers: &[Flier], k: usize, tick: u64, slot: usize) -> Option<u64> {
+    let f = &fliers[k];
+    let t = f.rec.used.get(tick as usize)?[slot]?;
+    match f.shift {
+        0 => Some(t),
+        d if d > 0 => t.checked_sub(d.unsigned_abs()),
+        d => {
+            let newest = (f.neighbors.and_then(|ins| fliers.get(ins[slot])))
+                .map_or(t, |n| n.rec.used.len() as u64);
+            let newer = t.saturating_add(d.unsigned_abs());
+            Some(newer.min(tick.max(t)).min(newest.max(t)))
+        }
+    }
 }
 
 /// The audit instants, each from every member's newest state at or before it once every member
@@ -356,7 +381,7 @@ fn neighbors_of(fliers: &[Flier], k: usize, tick: u64, dt: f64) -> [Flat; 3] {
     };
     let t_own = stamp_s(tick, f.phase_s, dt);
     for (slot, out) in flats.iter_mut().enumerate() {
-        let (stamp, flat) = match (f.rec.used[tick as usize][slot], fliers.get(ins[slot])) {
+        let (stamp, flat) = match (used_at(fliers, k, tick, slot), fliers.get(ins[slot])) {
             (Some(t), Some(n)) => (stamp_s(t, n.phase_s, dt), n.states[t as usize].1),
             _ => (0.0, f.initial[slot]),
         };
