@@ -17,7 +17,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use cdm_records::audit::Auditor;
-use cdm_records::run_record::RunRecord;
+use cdm_records::run_record::{RunMode, RunRecord};
 use cdm_records::rundir::RunDir;
 use cdm_recording::Recording;
 use cdm_runtime::realtime_replay::{
@@ -32,7 +32,7 @@ use crate::cli::ReplayArgs;
 
 /// True when `dir` is a real-time run's directory (run.json says so).
 pub fn is_realtime(dir: &Path) -> bool {
-    RunRecord::read(dir).is_ok_and(|r| r.mode == cdm_records::run_record::RunMode::Realtime)
+    RunRecord::read(dir).is_ok_and(|r| r.mode == RunMode::Realtime)
 }
 
 /// The replay of the real-time run `a.run`.
@@ -72,6 +72,13 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     cdm_team::telemetry::check_available(format).map_err(Failure::bad_input)?;
     let dir = RunDir::create(&a.out, a.force).map_err(Failure::from)?;
     dir.write_scenario(&flown).map_err(Failure::fault)?;
+    RunRecord {
+        mode: RunMode::RealtimeReplay,
+        scenario_hash: RunRecord::hash_text(flown.content_hash()),
+        ..r.clone()
+    }
+    .write(dir.path())
+    .map_err(Failure::from)?;
     let mut tel =
         cdm_team::telemetry::open(&dir, format, r.every, &flown).map_err(Failure::bad_input)?;
     let mut auditor = Auditor::new(&flown);

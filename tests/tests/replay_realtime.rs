@@ -4,7 +4,8 @@
 //! One real-time flight of 10 processes over impaired links (delay, jitter and loss), 3 s of
 //! plan, then in process only:
 //! - the replay's telemetry.csv is the run's byte for byte and audit.json's safety figures are
-//!   the run's; every member left a recording;
+//!   the run's; every member left a recording; the replay's run.json says it is one (and a
+//!   replay of it is refused: the recordings are the run's);
 //! - what if: `--gains`, `--scenario` (the same team with those gains: the same bytes) and
 //!   `--link-delay-ms` fly the same history differently, and two such replays are identical;
 //!   other jitter is refused;
@@ -16,6 +17,9 @@
 //! recordings hold the tick each flew its repaired link from, and the replay is the run's byte
 //! for byte (telemetry.csv and the safety figures, the loss's records among them).
 //!
+//! A third, started by hand (`--no-spawn`): `launch` prints `--record` among the members' flags,
+//! and the members started with them record; the replay is the run's byte for byte.
+//!
 //! How to run: `cargo test --release -p integration-tests --test replay_realtime`.
 
 mod support;
@@ -24,7 +28,7 @@ use std::path::{Path, PathBuf};
 
 use std::time::Duration;
 
-use integration_tests::{run, unique_team, TempDir};
+use integration_tests::{run, spawn, unique_team, TempDir};
 use serde_json::Value;
 use support::{
     assert_exit, assert_no_process_of, assert_same_file, assert_stderr_has, launch, read_json,
@@ -109,6 +113,14 @@ fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
     );
     assert_same_file(&rt.join("telemetry.csv"), &same.join("telemetry.csv"));
     assert_eq!(figures(&rt), figures(&same), "audit.json's safety figures");
+    // Its run.json says what it is; its history is the run's recordings, so replaying the
+    // replay is refused, pointing at the run.
+    let r = read_json(&same.join("run.json"));
+    assert_eq!(r["mode"], "realtime-replay", "{r:#}");
+    assert_eq!(r["every"], read_json(&rt.join("run.json"))["every"], "{r:#}");
+    let o = replay(&same, &dir.path().join("again"), &[]);
+    assert_exit(&o, 2, "replay of a real-time run's replay");
+    assert_stderr_has(&o, "replay", &["the replay of a real-time run: replay the run's own directory"]);
 
     // What if: other gains on the same history differ from the run, and deterministically.
     let gains = ["--gains", "30,40,25,8"];
@@ -224,4 +236,63 @@ fn a_real_time_run_with_a_loss_replays_byte_for_byte() {
     assert_eq!(figures(&rt), figures(&same), "audit.json's safety figures");
     let replayed = read_json(&same.join("audit.json"));
     assert_eq!(replayed["losses"], audit["losses"], "the loss as recorded");
+}
+
+/// A real-time team started by hand (`--no-spawn`): `launch` prints `--record DIR` among the
+/// members' flags, the members started with the printed flags record into the run directory, and
+/// the run replays byte for byte.
+#[test]
+fn a_team_started_by_hand_records_as_told_and_replays_byte_for_byte() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_by_hand");
+    let out = dir.path().join("hand");
+    let args = [
+        "--n",
+        "10",
+        "--t-total",
+        "30",
+        "--realtime",
+        "--no-figures",
+        "--max-ticks",
+        "300",
+        "--no-spawn",
+        "--join-timeout",
+        "60",
+    ];
+    let mut orch = spawn(&mut integration_tests::launch_loud(&team, &out, &args));
+    orch.wait_for_output("start each with:", DEADLINE);
+    let (o, e) = orch.output_so_far();
+    let line = (o.lines().chain(e.lines()))
+        .find(|l| l.trim_start().starts_with("agent "))
+        .expect("the agents' command line")
+        .to_string();
+    let flags = line.split("   (ids").next().expect("the flags");
+    let words: Vec<&str> = flags.split_whitespace().skip(1).collect();
+    let after = |flag: &str| {
+        let k = words.iter().position(|w| *w == flag);
+        k.and_then(|k| words.get(k + 1)).copied()
+    };
+    let record = after("--record").unwrap_or_else(|| panic!("no --record in {line:?}"));
+    assert!(Path::new(record).ends_with("recording"), "{line}");
+    let scenario = after("--scenario").expect("--scenario");
+    let s = support::flown_scenario_file(Path::new(scenario));
+    let mut members = Vec::new();
+    for a in &s.agents {
+        let id = a.id.to_string();
+        let mut c = std::process::Command::new(integration_tests::bin(support::binary_for(a.role)));
+        c.args(words.iter().map(|w| if *w == "ID" { id.as_str() } else { w }));
+        members.push(spawn(&mut c));
+    }
+    for m in members {
+        assert_exit(&m.finish(DEADLINE), 0, "a member started by hand");
+    }
+    assert_exit(&orch.finish(DEADLINE), 0, "launch --realtime --no-spawn");
+    for a in &s.agents {
+        let p = out.join("recording").join(format!("{}.mcap", a.id));
+        assert!(p.is_file(), "no recording of agent {}", a.id);
+    }
+    let same = dir.path().join("same");
+    assert_exit(&replay(&out, &same, &[]), 0, "replay of a team started by hand");
+    assert_same_file(&out.join("telemetry.csv"), &same.join("telemetry.csv"));
+    assert_no_process_of(&team);
 }

@@ -304,8 +304,8 @@ fn start_members(
 ) -> Result<Vec<Spawned>, Failure> {
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let mut children = Vec::new();
+    let record = crate::realtime::recording_flags(o, dir)?;
     if o.spawn {
-        let record = crate::realtime::recording_flags(o, dir)?;
         // With --hosts K, the other hosts' daemons spawn theirs.
         for m in s.formation.members.iter().filter(|m| runs_here(m.id)) {
             let mut flags = crate::realtime::member_flags(o);
@@ -338,17 +338,23 @@ fn start_members(
             }
         }
     } else {
+        // Hand-started members are told every flag a spawned one gets, `--record` among them.
+        let flags: String = (crate::realtime::member_flags(o).iter())
+            .chain(&record)
+            .chain(&o.vehicles.member_args())
+            .map(|f| format!(" {f}"))
+            .collect();
         o.notices.notice(&format_args!(
             "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
             o.team,
             ids.len(),
             scenario_file.display(),
             o.team,
-            crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
+            flags,
             s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
             scenario_file.display(),
             o.team,
-            crate::realtime::member_flags(o).iter().chain(&o.vehicles.member_args()).map(|f| format!(" {f}")).collect::<String>(),
+            flags,
             s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
         ));
     }

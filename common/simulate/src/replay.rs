@@ -35,6 +35,9 @@ pub enum ReplayError {
     /// and the run directory does not record it.
     #[error("{path}: a real-time run (`launch --realtime`): its replay needs a recording of the neighbour states each member used, which this run directory does not have")]
     Realtime { path: PathBuf },
+    /// The replay of a real-time run: its history is the run's recordings.
+    #[error("{path}: the replay of a real-time run: replay the run's own directory, which holds its recordings")]
+    RealtimeReplay { path: PathBuf },
 }
 
 /// A run directory's inputs, checked against one another.
@@ -57,6 +60,10 @@ impl RunInputs {
     pub fn read(dir: &Path) -> Result<Self, ReplayError> {
         let scenario = Scenario::load(&dir.join("scenario.toml"), Checks::Full)?;
         let record = RunRecord::read(dir)?;
+        if record.mode == RunMode::RealtimeReplay {
+            let path = dir.join(cdm_records::run_record::RUN_RECORD_FILE);
+            return Err(ReplayError::RealtimeReplay { path });
+        }
         let audit_path = dir.join("audit.json");
         let audit = read_json(&audit_path)?;
         if record.mode == RunMode::Realtime || audit.get("realtime").is_some() {
