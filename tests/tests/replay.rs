@@ -1,11 +1,14 @@
 //! `orchestrator replay`: a finished lockstep run flown again from its directory alone.
 //!
 //! - A `simulate` run with commands, a scripted loss, `--every` and `--max-ticks`, and a
-//!   lockstep `launch` of 41 processes with a `--lose`: the replay's telemetry.csv is the run's
-//!   byte for byte and audit.json's safety figures are the run's; run.json records the options.
+//!   lockstep `launch` of 41 processes with a `--lose` and the same commands: the replay's
+//!   telemetry.csv is the run's byte for byte and audit.json's safety figures are the run's;
+//!   run.json records the options.
 //! - What if: `--gains` re-flies the same history differently, and two such replays are
-//!   identical.
-//! - `report --against` draws a run and its what-if side by side.
+//!   identical; `--scenario` with the run's team and those gains flies the same bytes as
+//!   `--gains`; another team (another comm_hz) is exit 2 naming what differs.
+//! - `report --against` draws a run and its what-if side by side, each named by its directory
+//!   in the CSV and the legend; their deviations differ.
 //! - A tampered or foreign file (audit.json's losses, commands.json, another scenario.toml, a
 //!   missing run.json) is exit 2 naming the file and its first bad record; nothing panics.
 //!
@@ -168,24 +171,31 @@ fn a_simulate_run_with_commands_and_a_loss_replays_byte_for_byte_and_what_if_is_
 }
 
 #[test]
-fn a_lockstep_launch_with_a_loss_replays_byte_for_byte() {
+fn a_lockstep_launch_with_a_loss_and_commands_replays_byte_for_byte() {
     let tmp = TempDir::new();
     let team = unique_team("replay");
     let run_dir = tmp.path().join("launch");
+    let commands = write_text(tmp.path(), "commands.json", COMMANDS);
     let flags = [
         "--builtin",
         "paper40",
         "--no-figures",
         "--max-ticks",
-        "1200",
+        "2000",
         "--lose",
         "5@4",
+        "--commands",
+        commands.to_str().unwrap(),
     ];
     let o = run(&mut launch(&team, &run_dir, &flags), DEADLINE);
     assert_no_process_of(&team);
     assert_no_team_resources(&team);
     assert_exit(&o, 0, "launch");
     assert_eq!(read_json(&run_dir.join("run.json"))["mode"], "lockstep");
+    let accepted = read_json(&run_dir.join("commands.json"));
+    let accepted = accepted.as_array().expect("commands.json: a list");
+    assert_eq!(accepted.len(), 2, "{accepted:?}");
+    assert!(accepted.iter().all(|c| c["accepted"] == true), "{accepted:?}");
     assert_replays(&run_dir, tmp.path(), "launch");
 }
 
