@@ -142,3 +142,107 @@ impl<'a> Out<'a> {
         self.out.get(k).copied().unwrap_or(false)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::realtime_journal::Switch;
+
+    /// generated10 losing 6 from tick 20: follower 9 reads [1, 6, 8], then [1, 3, 8].
+    fn lose_six() -> (Scenario, Vec<ReplayLoss>) {
+        let s = Scenario::generated(10).expect("generated10");
+        let loss = ReplayLoss {
+            id: 6,
+            repair_tick: 20,
+            out_from: 3,
+            records: Vec::new(),
+        };
+        (s, vec![loss])
+    }
+
+    fn recorded(switches: Vec<Switch>) -> Recorded {
+        Recorded {
+            used: Vec::new(),
+            switches,
+            whole: true,
+        }
+    }
+
+    fn repaired(tick: u64, at: u64, ins: [u32; 3]) -> Switch {
+        Switch {
+            tick,
+            what: Switched::Repair {
+                at,
+                in_neighbors: Some(ins),
+            },
+        }
+    }
+
+    #[test]
+    fn a_repaired_link_is_the_run_s_repair_and_a_command_was_taken_before_its_switch() {
+        let (s, losses) = lose_six();
+        let e = epochs(&s, &losses);
+        // Flown late (from 23), the repair of tick 20: the member with that link.
+        let r = relinks(9, &recorded(vec![repaired(23, 20, [1, 3, 8])]), &e, &[]).expect("ok");
+        assert_eq!(r.len(), 1);
+        assert_eq!(r[0].0, 23);
+        assert_eq!(r[0].1.link.map(|l| l.in_neighbors), Some([1, 3, 8]));
+        // Other in-neighbours, or a repair at a tick the losses do not give: refused, named.
+        let bad = relinks(9, &recorded(vec![repaired(23, 20, [1, 2, 8])]), &e, &[]);
+        let why = bad.unwrap_err().to_string();
+        assert!(why.starts_with("agent 9 tick 23: flew in-neighbours Some([1, 2, 8])"), "{why}");
+        let bad = relinks(9, &recorded(vec![repaired(23, 21, [1, 3, 8])]), &e, &[]);
+        assert!(bad.unwrap_err().to_string().contains("change no link then"));
+        // Commands: taken in order, each before its switch, at the run's switch ticks.
+        let command = |tick, seq, at| Switch {
+            tick,
+            what: Switched::Command { seq, at },
+        };
+        let ok = recorded(vec![command(10, 1, 50), command(60, 2, 90)]);
+        assert_eq!(relinks(9, &ok, &e, &[50, 90]).expect("ok"), []);
+        for (sw, commands) in [
+            (vec![command(10, 1, 50)], vec![60]),
+            (vec![command(10, 2, 50)], vec![50]),
+            (vec![command(51, 1, 50)], vec![50]),
+            (vec![command(10, 1, 50)], vec![]),
+        ] {
+            let why = relinks(9, &recorded(sw), &e, &commands).unwrap_err();
+            assert!(why.to_string().contains("took command"), "{why}");
+        }
+    }
+
+    #[test]
+    fn a_lost_body_leaves_the_audit_at_its_instant_with_its_records() {
+        let (s, mut losses) = lose_six();
+        let mut audit = Auditor::new(&s);
+        losses[0].records = record_of_six(&s);
+        let mut out = Out::new(&s, &losses);
+        out.hand(2, &mut audit);
+        let six = s.formation.members.iter().position(|m| m.id == 6);
+        let six = six.expect("member 6");
+        assert!(!out.is_out(six));
+        out.hand(3, &mut audit);
+        assert!(out.is_out(six));
+        assert_eq!(audit.report().losses.len(), 1);
+        // Handed once.
+        out.hand(u64::MAX, &mut audit);
+        assert_eq!(audit.report().losses.len(), 1);
+    }
+
+    /// A loss record of member 6 as the audit takes it.
+    fn record_of_six(s: &Scenario) -> Vec<cdm_records::audit::LossRecord> {
+        let role = s.formation.member(6).map(|m| m.role);
+        vec![cdm_records::audit::LossRecord {
+            id: 6,
+            role,
+            cause: cdm_model::outcome::LossCause::Scripted,
+            last_tick: 10,
+            tick: 3,
+            t_s: 0.3,
+            repair_tick: Some(20),
+            retriangulated: Vec::new(),
+            degraded: Vec::new(),
+            host: None,
+        }]
+    }
+}
