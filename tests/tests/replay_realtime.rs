@@ -37,6 +37,18 @@ use support::{
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
 
+/// The team of every flight here: 10 members in real time, 3 s of a 30 s plan.
+const TEAM: [&str; 8] = [
+    "--n",
+    "10",
+    "--t-total",
+    "30",
+    "--realtime",
+    "--no-figures",
+    "--max-ticks",
+    "300",
+];
+
 /// audit.json without what the wall clock decided (the pacing figures).
 fn figures(dir: &Path) -> Value {
     let mut a = read_json(&dir.join("audit.json"));
@@ -65,15 +77,8 @@ fn copy_run(from: &Path, to: &Path) {
 fn flight(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
     let team = unique_team("rt_replay");
     let out = dir.join(name);
-    let mut args = vec![
-        "--n",
-        "10",
-        "--t-total",
-        "30",
-        "--realtime",
-        "--no-figures",
-        "--max-ticks",
-        "300",
+    let mut args = TEAM.to_vec();
+    args.extend([
         "--link-delay-ms",
         "15",
         "--link-jitter-ms",
@@ -82,7 +87,7 @@ fn flight(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
         "0.1",
         "--seed",
         "5",
-    ];
+    ]);
     args.extend(extra);
     let o = run(&mut launch(&team, &out, &args), DEADLINE);
     assert_exit(&o, 0, "launch --realtime over impaired links");
@@ -246,19 +251,8 @@ fn a_team_started_by_hand_records_as_told_and_replays_byte_for_byte() {
     let dir = TempDir::new();
     let team = unique_team("rt_by_hand");
     let out = dir.path().join("hand");
-    let args = [
-        "--n",
-        "10",
-        "--t-total",
-        "30",
-        "--realtime",
-        "--no-figures",
-        "--max-ticks",
-        "300",
-        "--no-spawn",
-        "--join-timeout",
-        "60",
-    ];
+    let mut args = TEAM.to_vec();
+    args.extend(["--no-spawn", "--join-timeout", "60"]);
     let mut orch = spawn(&mut integration_tests::launch_loud(&team, &out, &args));
     orch.wait_for_output("start each with:", DEADLINE);
     let (o, e) = orch.output_so_far();

@@ -91,8 +91,8 @@ impl FaultKind {
     }
 }
 
-/// Why a member was lost in flight (`losses[].cause` in audit.json).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+/// Why a member was lost in flight (`losses[].cause` in audit.json, read back by `replay`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LossCause {
     /// `--lose ID@SECONDS`: `simulate` drops it; `launch` kills it once it published that tick.
@@ -126,22 +126,6 @@ impl LossCause {
             LossCause::VehicleMode => "vehicle-mode",
             LossCause::VehicleDisarmed => "vehicle-disarmed",
         }
-    }
-
-    /// The cause audit.json names `text`, if any.
-    pub fn from_text(text: &str) -> Option<Self> {
-        use LossCause::*;
-        [
-            Scripted,
-            Killed,
-            Exited,
-            Silent,
-            VehicleLost,
-            VehicleMode,
-            VehicleDisarmed,
-        ]
-        .into_iter()
-        .find(|c| c.as_str() == text)
     }
 }
 

@@ -71,37 +71,17 @@ impl McapJournal {
             .library(concat!("cdm-recording ", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
             .map_err(fail)?;
-        let header_schema = w
-            .add_schema(
-                "cdm.recording.Member",
-                "jsonschema",
-                w_schema("member").as_bytes(),
-            )
-            .map_err(fail)?;
-        let ages_schema = w
-            .add_schema(
-                "cdm.recording.Ages",
-                "jsonschema",
-                w_schema("ages").as_bytes(),
-            )
-            .map_err(fail)?;
-        let switch_schema = w
-            .add_schema(
-                "cdm.recording.Switch",
-                "jsonschema",
-                w_schema("switch").as_bytes(),
-            )
-            .map_err(fail)?;
         let none = BTreeMap::new();
-        let header_channel = w
-            .add_channel(header_schema, MEMBER_TOPIC, "json", &none)
-            .map_err(fail)?;
-        let channel = w
-            .add_channel(ages_schema, AGES_TOPIC, "json", &none)
-            .map_err(fail)?;
-        let switch_channel = w
-            .add_channel(switch_schema, SWITCH_TOPIC, "json", &none)
-            .map_err(fail)?;
+        // One schema and channel per message kind (the schema a JSON schema, for tools).
+        let mut channel_of = |name: &str, which: &str, topic: &str| {
+            let schema = w
+                .add_schema(name, "jsonschema", w_schema(which).as_bytes())
+                .map_err(fail)?;
+            w.add_channel(schema, topic, "json", &none).map_err(fail)
+        };
+        let header_channel = channel_of("cdm.recording.Member", "member", MEMBER_TOPIC)?;
+        let channel = channel_of("cdm.recording.Ages", "ages", AGES_TOPIC)?;
+        let switch_channel = channel_of("cdm.recording.Switch", "switch", SWITCH_TOPIC)?;
         let header = Header {
             format: FORMAT.into(),
             member,

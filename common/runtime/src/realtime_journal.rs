@@ -53,3 +53,17 @@ pub trait Journal: std::fmt::Debug + Send {
     /// A switch, applied before tick `s.tick` is flown.
     fn switched(&mut self, s: &Switch);
 }
+
+#[cfg(test)]
+impl Switch {
+    /// The repaired link of tick `at` with in-neighbours `ins`, flown from `tick` (tests).
+    pub(crate) fn repaired(tick: u64, at: u64, ins: [u32; 3]) -> Self {
+        Switch {
+            tick,
+            what: Switched::Repair {
+                at,
+                in_neighbors: Some(ins),
+            },
+        }
+    }
+}

@@ -87,8 +87,9 @@ fn one_loss(l: &Value, s: &Scenario) -> Result<RealtimeLoss, String> {
     if s.formation.member(id).is_none() {
         return Err(format!("id {id}: no such member in scenario.toml"));
     }
-    let text = l.get("cause").and_then(Value::as_str).unwrap_or_default();
-    let cause = LossCause::from_text(text).ok_or_else(|| format!("cause {text:?} is not one"))?;
+    let cause = l.get("cause").cloned().unwrap_or_default();
+    let cause: LossCause = serde_json::from_value(cause.clone())
+        .map_err(|_| format!("cause {cause} is not a cause of a loss"))?;
     let t_s = (l.get("t_s").and_then(Value::as_f64))
         .filter(|t| t.is_finite() && *t >= 0.0)
         .ok_or("t_s: expected a time")?;

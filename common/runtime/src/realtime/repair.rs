@@ -245,16 +245,6 @@ mod tests {
         }
     }
 
-    fn repaired(tick: u64, at: u64, ins: [u32; 3]) -> Switch {
-        Switch {
-            tick,
-            what: Switched::Repair {
-                at,
-                in_neighbors: Some(ins),
-            },
-        }
-    }
-
     /// Follower 9 of generated10 in real time with losses and steering, started at 1 s, aligned
     /// phases; its journal's switches.
     fn reader(s: &Scenario) -> (RealtimeCore<Relinked>, Kept) {
@@ -343,7 +333,7 @@ mod tests {
         assert_eq!(c.m.vehicle.links, [(20, Some([1, 3, 8]))]);
         assert_eq!(c.m.neighbor_ids, [1, 3, 8]);
         // The journal has the switch as applied, for a replay.
-        assert_eq!(kept.switches(), [repaired(20, 20, [1, 3, 8])]);
+        assert_eq!(kept.switches(), [Switch::repaired(20, 20, [1, 3, 8])]);
     }
 
     #[test]
@@ -358,7 +348,7 @@ mod tests {
         assert!(c.m.vehicle.links.is_empty());
         fly_to(&mut c, 36, &[1, 3, 8]);
         assert_eq!(c.m.vehicle.links, [(33, Some([1, 3, 8]))]);
-        assert_eq!(kept.switches(), [repaired(33, 20, [1, 3, 8])]);
+        assert_eq!(kept.switches(), [Switch::repaired(33, 20, [1, 3, 8])]);
         // A notice naming this member: it was declared lost, it stops.
         told(&mut c, notice(2, ME, 50, 1));
         match c.poll(Duration::from_secs_f64(1.36)) {
