@@ -60,13 +60,13 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
     let stream =
         mcap::MessageStream::new(&bytes).map_err(|e| bad(path, 1, format!("not MCAP: {e}")))?;
     let mut header: Option<Header> = None;
-    let mut read = Parsed::default();
+    let mut parsed = Parsed::default();
     for (k, msg) in stream.enumerate() {
         let record = k + 1;
         let msg = match msg {
             Ok(m) => m,
             // A file without its end was cut short: what came before stands.
-            Err(_) if !ended => return finish(path, header, read, true),
+            Err(_) if !ended => return finish(path, header, parsed, true),
             Err(e) => return Err(bad(path, record, e.to_string())),
         };
         let topic = msg.channel.topic.as_str();
@@ -80,12 +80,12 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
             (Some(_), AGES_TOPIC) => {
                 let a: Ages = serde_json::from_slice(&msg.data)
                     .map_err(|e| bad(path, record, format!("not a batch of ticks: {e}")))?;
-                append(&a, id, &mut read).map_err(|why| bad(path, record, why))?;
+                append(&a, id, &mut parsed).map_err(|why| bad(path, record, why))?;
             }
             (Some(_), SWITCH_TOPIC) => {
                 let s: SwitchMsg = serde_json::from_slice(&msg.data)
                     .map_err(|e| bad(path, record, format!("not a switch: {e}")))?;
-                switched(&s, id, &mut read).map_err(|why| bad(path, record, why))?;
+                switched(&s, id, &mut parsed).map_err(|why| bad(path, record, why))?;
             }
             _ => {
                 return Err(bad(
@@ -96,7 +96,7 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
             }
         }
     }
-    finish(path, header, read, !ended)
+    finish(path, header, parsed, !ended)
 }
 
 /// What the messages read so far hold.

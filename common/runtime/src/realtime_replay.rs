@@ -221,7 +221,7 @@ pub fn replay(
         });
     }
     let fault = fly_all(s, &mut fliers)?;
-    let end = audit_all(s, timing, (&fliers, &history.losses), audit, tel)?;
+    let end = audit_all(s, timing, (&fliers[..], &history.losses[..]), audit, tel)?;
     Ok(match fault {
         Some(f) => Err(f),
         None => Ok(end),
