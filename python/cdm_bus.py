@@ -9,10 +9,13 @@ the team: when it falls behind, it loses its oldest samples.
 """
 
 import ctypes
+import json
 import math
 import os
 import re
+import socket
 import stat
+import time
 
 import iceoryx2 as iox2
 
@@ -247,3 +250,90 @@ def min_separation(states):
             if d < best[0]:
                 best = (d, min(i, j), max(i, j))
     return best
+
+
+# ---------------------------------------------------------------------------------------------
+# Steering a running team: the command channel of `orchestrator command TEAM ...`
+# (common/launch/src/channel.rs): a Unix socket `<team>.command` in the bus root, owner-only;
+# one JSON line asked and one answered per connection. tests/tests/steering_live.rs checks this
+# client against a live team.
+
+# The answers (`channel::Answered`) and the CLI exit code each stands for.
+ANSWER_EXIT = {"accepted": 0, "unsafe": 1, "bad_input": 2, "unavailable": 3}
+
+TEAM_NAME = re.compile(r"^[A-Za-z0-9_-]{1,48}$")
+
+
+class NoTeam(Exception):
+    """Nothing takes commands under that team name here (exit 3 of `orchestrator command`)."""
+
+
+class NoAnswer(Exception):
+    """The team did not answer in time; the command may still be decided (see its
+    commands.json). Exit 3 of `orchestrator command`."""
+
+
+def command_socket(team, uid=None):
+    """The path of team `team`'s command channel (`channel::socket_path`)."""
+    return os.path.join(bus_paths(uid)[0], f"{team}.command")
+
+
+def command(team, what, goals=None, travel_s=None, within_s=10.0):
+    """Sends one command to a running team, as `orchestrator command TEAM WHAT ...` does, and
+    returns its answer: a dict with `answer` (a key of ANSWER_EXIT), `switch_tick` and
+    `t_switch_s` (when it takes effect; absent for bad input), `text` (the certificate's summary,
+    or why not) and `decided_ms`. `what` is "hold", "resume", "land" or "goto"; `goals` (goto
+    only) the three primary leaders' new positions as [x, y, z], ascending id order; `travel_s`
+    (goto only) the travel time. Raises ValueError for bad input before asking the team, NoTeam
+    when nothing listens, NoAnswer after `within_s` seconds without an answer."""
+    if not TEAM_NAME.match(team or ""):
+        raise ValueError(f"team name {team!r}: 1 to 48 of A-Z, a-z, 0-9, '_' and '-'")
+    if what not in ("hold", "resume", "land", "goto"):
+        raise ValueError(f"command {what!r}: one of hold, resume, land, goto")
+    if not (isinstance(within_s, (int, float)) and math.isfinite(within_s) and 0 < within_s <= 3600):
+        raise ValueError(f"within_s must be in (0, 3600] seconds, got {within_s!r}")
+    request = {"command": what}
+    if what == "goto":
+        if goals is None or len(goals) != 3:
+            raise ValueError("goto takes the goals of the 3 primary leaders")
+        request["goals"] = []
+        for k, g in enumerate(goals):
+            if len(g) != 3 or not all(math.isfinite(float(c)) for c in g):
+                raise ValueError(f"goal {k + 1}: three finite numbers [x, y, z], got {g!r}")
+            request["goals"].append([float(c) for c in g])
+        if travel_s is not None:
+            if not (math.isfinite(float(travel_s)) and float(travel_s) > 0):
+                raise ValueError(f"travel_s must be a positive number of seconds, got {travel_s!r}")
+            request["travel_s"] = float(travel_s)
+    elif goals is not None or travel_s is not None:
+        raise ValueError(f"goals and travel_s: only goto takes them, not {what}")
+
+    path = command_socket(team)
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        try:
+            s.connect(path)
+        except (FileNotFoundError, ConnectionRefusedError) as e:
+            raise NoTeam(f"no team {team} takes commands here ({path}: {e})") from None
+        until = time.monotonic() + within_s
+        s.settimeout(within_s)
+        s.sendall((json.dumps(request) + "\n").encode())
+        line = b""
+        try:
+            while not line.endswith(b"\n"):
+                # One deadline for the whole answer, however it arrives.
+                s.settimeout(max(until - time.monotonic(), 1e-3))
+                chunk = s.recv(65536)
+                if not chunk:
+                    break
+                line += chunk
+        except socket.timeout:
+            raise NoAnswer(f"team {team} did not answer within {within_s} s") from None
+    finally:
+        s.close()
+    if not line:
+        raise NoAnswer(f"team {team} closed the channel without an answer")
+    answer = json.loads(line)
+    if answer.get("answer") not in ANSWER_EXIT:
+        raise ValueError(f"team {team}: an answer that is not one: {line!r}")
+    return answer

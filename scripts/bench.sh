@@ -16,7 +16,8 @@
 # members, from /proc at the start instant and the last audit), all from audit.json's `realtime`;
 # beside each row the 1-minute load average before and after the run (the machine may be shared).
 # Each N flies twice: with ordinary scheduling, and with `--rt-priority RT_PRIORITY` (default 10;
-# SCHED_FIFO, needs root or `ulimit -r`; RT_PRIORITY=0 skips these rows).
+# SCHED_FIFO, needs root or `ulimit -r`; RT_PRIORITY=0 skips these rows). After each N, the
+# machine's own floor: N processes that only sleep to the same instants (`cdm-bench sleepers`).
 # REALTIME_ONLY=1 runs only this section.
 #
 # Recording (RECORDING_ONLY=1, only on demand): for N in RECORDING_NS (default 40), ROUNDS
@@ -114,6 +115,14 @@ print(f"| {sys.argv[2]} | {sys.argv[5]} | {r['ticks']} | {r['late_ticks']} | {r[
 PY
     rm -rf "$out/rt$n"
   done
+  # The machine's own floor in the same run: N processes that only sleep to the same 10 ms
+  # instants (`cdm-bench sleepers`), with ordinary scheduling; late = more than a period after.
+  if [ -x "$bin/cdm-bench" ] && "$bin/cdm-bench" sleepers --help >/dev/null 2>&1; then
+    local lb fl; lb=$(cut -d' ' -f1 /proc/loadavg)
+    fl=$("$bin/cdm-bench" sleepers --n "$n" --secs "$rs" || echo "sleepers failed")
+    echo "$fl" | sed -E 's/^sleepers: ([0-9]+) processes .*: ([0-9]+) of ([0-9]+) wake-ups late \(([0-9.]+) %\), latest ([0-9.]+) ms.*/| \1 | floor: \1 processes that only sleep (CFS) | \3 | \2 | \4 | - | - | - | (latest wake-up \5 ms after its instant) | - | - | LOADS |/' \
+      | sed "s#LOADS#$lb / $(cut -d' ' -f1 /proc/loadavg)#"
+  fi
   done
 }
 
@@ -271,7 +280,7 @@ telemetry_section() {
   echo
   echo "| \`simulate --every 1000\` wall s: median (runs) | \`simulate --every 1 --telemetry parquet\` wall s: median (runs) | writing / flight (medians) | bytes a row |"
   echo "|---|---|---|---|"
-  echo "| $mb (${bare[*]}) | $mf (${full[*]}) | $(awk -v a="$mf" -v b="$mb" 'BEGIN{printf "%.2f", (a-b)/b}') | $(awk -v s="$size" -v r="$rows" 'BEGIN{printf "%.2f (%d bytes, %d rows)", s/r, s, r}') |"
+  echo "| $mb (${bare[*]}) | $mf (${full[*]}) | $(awk -v a="$mf" -v b="$mb" 'BEGIN{printf "%.2f", (a-b)/b}') | $(awk -v s="$size" -v r="$rows" 'BEGIN{printf "%.2f (%.0f bytes, %.0f rows)", s/r, s, r}') |"
 }
 median() { tr ' ' '\n' | grep -v '^$' | sort -g | awk '{v[NR]=$1} END{if (NR%2) print v[(NR+1)/2]; else printf "%.3f\n", (v[NR/2]+v[NR/2+1])/2}'; }
 secs() { /usr/bin/time -f "%e %M" "$@" 2>&1 >/dev/null | tail -1; }

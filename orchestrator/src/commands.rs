@@ -448,13 +448,11 @@ fn file_commands(a: &LaunchArgs, s: Scenario) -> Result<(Scenario, Option<FileCo
     Ok((flown, Some(c)))
 }
 
-/// `launch --commands` flies a lockstep team of model vehicles on one host: refused, not
-/// ignored, elsewhere.
+/// `launch --commands` flies a lockstep team of model vehicles (on one host or several):
+/// refused, not ignored, elsewhere.
 fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
     let why = if a.realtime.realtime {
         Some("--realtime (steer a real-time team live with `orchestrator command`)")
-    } else if a.hosts.hosts > 1 {
-        Some("--hosts above 1")
     } else if a.vehicle.vehicles != cdm_member::vehicles::VehicleKind::Model {
         Some("--vehicles mavlink")
     } else {
@@ -462,7 +460,7 @@ fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
     };
     match why {
         Some(w) => Err(Failure::bad_input(format!(
-            "--commands flies a lockstep team of model vehicles on one host, not with {w}"
+            "--commands flies a lockstep team of model vehicles, not with {w}"
         ))),
         None => Ok(()),
     }

@@ -15,6 +15,8 @@
 //! - Real time: a short plan paced on one wall-clock start instant on both hosts is SAFE, with
 //!   every member's pacing counted; a daemon killed mid-flight is named with its members; a
 //!   partition, or a daemon stopped with SIGSTOP, is the host's loss on both sides, named.
+//! - Commands (a file, and `orchestrator command` live) steer a team over two hosts exactly as
+//!   `simulate --commands` flies them.
 //! - A killed daemon's work directory is removed by the next daemon.
 //! - Nothing is left in /dev/shm on either side.
 //!
@@ -718,4 +720,86 @@ fn a_killed_member_on_another_host_is_repaired() {
     assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
     assert_no_team_resources(&team);
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+}
+
+/// Commands over two hosts: their notices ride the clock's message, which the link carries
+/// whole, so host B's members fly the commanded plan as host A's do. paper40 with a command
+/// file (hold, an UNSAFE goto, a SAFE goto, land) writes `simulate --commands`'s telemetry and
+/// commands.json byte for byte.
+#[test]
+fn a_commanded_flight_over_two_hosts_flies_as_simulate() {
+    let Some(h) = Hosts::create("sf") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("hsteerf");
+    let file = dir.path().join("commands.json");
+    std::fs::write(&file, STEERING_COMMANDS).expect("the command file");
+    let (out, sim) = (dir.path().join("launch"), dir.path().join("sim"));
+    let source = [
+        "--builtin",
+        "paper40",
+        "--no-figures",
+        "--commands",
+        file.to_str().unwrap(),
+    ];
+    let out_s = out.to_string_lossy().into_owned();
+    let orch = spawn(&mut h.on_a(&launch_args(&h, &team, &out_s, &source)));
+    let daemon = spawn(&mut h.daemon(&["--team", &team]));
+    assert_exit(
+        &run(&mut simulate(&sim, &source), RUN_DEADLINE),
+        0,
+        "simulate --commands",
+    );
+    assert_exit(&orch.finish(RUN_DEADLINE), 0, "launch --hosts 2 --commands");
+    assert_exit(&daemon.finish(RUN_DEADLINE), 0, "orchestrator host");
+    for name in ["telemetry.csv", "commands.json"] {
+        assert_same_file(&out.join(name), &sim.join(name));
+    }
+    assert_no_team_resources(&team);
+}
+
+/// `orchestrator command` to a team over two hosts, live: held with a follower stopped (the
+/// grants wait for it), then landed; the team lands and ends, and `simulate --commands
+/// RUN/commands.json` flies the same telemetry.
+#[test]
+fn a_team_over_two_hosts_is_steered_live() {
+    let Some(h) = Hosts::create("sl") else { return };
+    let dir = TempDir::new();
+    let team = unique_team("hsteerl");
+    let out = dir.path().join("launch");
+    let source = [
+        "--builtin",
+        "paper40",
+        "--no-figures",
+        "--agent-timeout",
+        "120",
+    ];
+    let out_s = out.to_string_lossy().into_owned();
+    let mut orch = spawn(&mut h.on_a(&launch_args(&h, &team, &out_s, &source)));
+    let daemon = spawn(&mut h.daemon(&["--team", &team]));
+    let stopped = support::steering::stop_a_follower(&mut orch, &team, &out, 500);
+    for what in ["hold", "land"] {
+        let o = run(&mut h.on_a(&["command", &team, what]), REFUSE_DEADLINE);
+        assert_exit(&o, 0, &format!("command {what} over two hosts"));
+    }
+    support::steering::resume(stopped);
+    assert_exit(&orch.finish(RUN_DEADLINE), 0, "launch --hosts 2, steered");
+    assert_exit(&daemon.finish(RUN_DEADLINE), 0, "orchestrator host");
+    let list = out.join("commands.json");
+    let commands = read_json(&list);
+    assert_eq!(commands.as_array().map(Vec::len), Some(2), "{commands:#}");
+    let sim = dir.path().join("sim");
+    let again = [
+        "--builtin",
+        "paper40",
+        "--no-figures",
+        "--commands",
+        list.to_str().unwrap(),
+    ];
+    assert_exit(
+        &run(&mut simulate(&sim, &again), RUN_DEADLINE),
+        0,
+        "simulate --commands RUN/commands.json",
+    );
+    assert_same_file(&out.join("telemetry.csv"), &sim.join("telemetry.csv"));
+    assert_no_team_resources(&team);
 }

@@ -3,13 +3,17 @@
 //! `python/examples/watch.py` reads a running team and prints, per tick, the same smallest
 //! separation as the audit's function computes from the same states (telemetry.csv).
 
+mod support;
+
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 use std::time::Duration;
 
 use cdm_math::{vec3, Vec3};
-use integration_tests::{describe, run, spawn, unique_team, venv_python, TempDir};
+use integration_tests::{describe, run, spawn, unique_team, TempDir};
+use support::python::{python, python_dir};
+use support::read_json;
+use support::steering::{resume, stopped_team};
 
 /// A Python start-up and one query.
 const PYTHON_DEADLINE: Duration = integration_tests::deadline::SHORT;
@@ -19,21 +23,6 @@ const TEAM_DEADLINE: Duration = integration_tests::deadline::LONG;
 /// fast team publishes, so it completes the ticks it can (the team never waits for it); the
 /// buffered last ticks of a finished team complete in any case.
 const WATCHED_TICKS: usize = 50;
-
-fn python_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("python")
-}
-
-fn python(args: &[&str]) -> Command {
-    let mut c = Command::new(venv_python());
-    // No __pycache__ in the source tree.
-    c.env("PYTHONPATH", python_dir())
-        .env("PYTHONDONTWRITEBYTECODE", "1")
-        .args(args);
-    c
-}
 
 #[test]
 fn python_wire_types_and_paths_are_the_rust_ones() {
@@ -163,4 +152,86 @@ fn watch_py_reads_a_live_team_like_the_audit() {
             "tick {tick}: watch.py {sep} m, audit {audit_sep} m"
         );
     }
+}
+
+/// The Python bus steers a live team as `orchestrator command` does (`cdm_bus.command`): a hold
+/// is accepted with a switch tick, a goto with two goals is refused in Python before the team is
+/// asked, a squeezed goto is UNSAFE, a land is accepted; the run's commands.json lists exactly
+/// those three with the switch ticks and verdicts Python got, the team lands and ends, and a
+/// command after the end raises NoTeam.
+#[test]
+fn the_python_bus_steers_a_live_team_like_orchestrator_command() {
+    let (_tmp, team, out, orch, stopped) = stopped_team("py_steer");
+    let script = format!(
+        r#"
+import cdm_bus as b
+team = "{team}"
+def show(what, a):
+    print(what, a["answer"], a["switch_tick"], b.ANSWER_EXIT[a["answer"]])
+show("hold", b.command(team, "hold"))
+try:
+    b.command(team, "goto", goals=[[1, 2, 3], [4, 5, 6]])
+    print("goto-two-goals sent")
+except ValueError as e:
+    print("goto-two-goals refused", e)
+show("goto", b.command(team, "goto", goals=[[224, 434, 600], [220, 224, 600], [228, 224, 600]]))
+show("land", b.command(team, "land"))
+"#
+    );
+    let o = run(&mut python(&["-c", &script]), PYTHON_DEADLINE);
+    resume(stopped);
+    assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
+    let done = orch.finish(TEAM_DEADLINE);
+    assert_eq!(done.status.code(), Some(0), "{}", describe(&done));
+
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    let lines: Vec<Vec<&str>> = text.lines().map(|l| l.split(' ').collect()).collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    assert_eq!(&lines[1][..2], ["goto-two-goals", "refused"], "{text}");
+    let said: Vec<(&str, &str, u64, &str)> = [&lines[0], &lines[2], &lines[3]]
+        .iter()
+        .map(|f| {
+            assert_eq!(f.len(), 4, "{text}");
+            (f[0], f[1], f[2].parse().unwrap_or(u64::MAX), f[3])
+        })
+        .collect();
+    assert_eq!(
+        said.iter().map(|s| (s.0, s.1, s.3)).collect::<Vec<_>>(),
+        [
+            ("hold", "accepted", "0"),
+            ("goto", "unsafe", "1"),
+            ("land", "accepted", "0")
+        ],
+        "{text}"
+    );
+    let list = read_json(&out.join("commands.json"));
+    let recorded: Vec<(&str, bool, u64)> = (list.as_array().expect("a list").iter())
+        .map(|c| {
+            (
+                c["command"].as_str().unwrap_or_default(),
+                c["accepted"].as_bool().unwrap_or_default(),
+                c["switch_tick"].as_u64().unwrap_or(u64::MAX),
+            )
+        })
+        .collect();
+    let expected: Vec<(&str, bool, u64)> = (said.iter())
+        .map(|s| (s.0, s.1 == "accepted", s.2))
+        .collect();
+    assert_eq!(recorded, expected, "{list:#}");
+
+    let after = run(
+        &mut python(&[
+            "-c",
+            &format!(
+                "import cdm_bus as b\ntry:\n    b.command('{team}', 'hold')\nexcept b.NoTeam as e:\n    print('no team', e)"
+            ),
+        ]),
+        PYTHON_DEADLINE,
+    );
+    assert_eq!(after.status.code(), Some(0), "{}", describe(&after));
+    assert!(
+        String::from_utf8_lossy(&after.stdout).starts_with("no team"),
+        "{}",
+        describe(&after)
+    );
 }

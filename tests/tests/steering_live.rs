@@ -17,14 +17,14 @@
 
 mod support;
 
-use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use integration_tests::{bin, run, spawn, unique_team, Running, TempDir};
+use integration_tests::{bin, run, spawn, unique_team};
+use support::steering::{resume, stopped_team};
 use support::{
     assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file,
-    assert_stderr_has, launch, member_pid, read_json, signal, simulate, Stopped,
+    assert_stderr_has, read_json, simulate,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
@@ -35,9 +35,6 @@ const SHORT: Duration = integration_tests::deadline::REFUSE;
 const UNSAFE_GOALS: [&str; 3] = ["224,434,600", "220,224,600", "228,224,600"];
 const SAFE_GOALS: [&str; 3] = ["224,434,600", "126,224,600", "322,224,600"];
 
-/// The follower stopped while the commands are given.
-const STOPPED: u32 = 9;
-
 fn command(team: &str, args: &[&str]) -> Command {
     let mut c = Command::new(bin("orchestrator"));
     c.arg("command").arg(team).args(args);
@@ -46,64 +43,6 @@ fn command(team: &str, args: &[&str]) -> Command {
 
 fn commanded(team: &str, args: &[&str]) -> Output {
     run(&mut command(team, args), SHORT)
-}
-
-/// paper40 launched in lockstep (a long agent timeout: one member is stopped for a while).
-fn launched(team: &str, out: &Path) -> Running {
-    let source = [
-        "--builtin",
-        "paper40",
-        "--no-figures",
-        "--agent-timeout",
-        "120",
-    ];
-    spawn(&mut launch(team, out, &source))
-}
-
-/// Waits until telemetry.csv holds a row of tick `tick` or later.
-fn wait_for_tick(orch: &mut Running, telemetry: &Path, tick: u64) {
-    let until = Instant::now() + integration_tests::deadline::scaled(SHORT);
-    loop {
-        let text = std::fs::read_to_string(telemetry).unwrap_or_default();
-        let last = (text.lines().rev())
-            .filter_map(|l| l.split(',').next()?.parse::<u64>().ok())
-            .next();
-        if last.is_some_and(|t| t >= tick) {
-            return;
-        }
-        assert!(!orch.has_exited(), "the launch ended before tick {tick}");
-        assert!(
-            Instant::now() < until,
-            "no tick {tick} in {}",
-            telemetry.display()
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
-/// Stops follower `STOPPED` once the team flew past `tick`: the grants then wait for it.
-fn stop_a_follower(orch: &mut Running, team: &str, out: &Path, tick: u64) -> Stopped {
-    wait_for_tick(orch, &out.join("telemetry.csv"), tick);
-    let pid = member_pid(team, STOPPED).expect("the follower runs");
-    signal(pid, libc::SIGSTOP);
-    Stopped(pid)
-}
-
-/// Lets the stopped follower go on (the guard would kill it).
-fn resume(stopped: Stopped) {
-    signal(stopped.0, libc::SIGCONT);
-    std::mem::forget(stopped);
-}
-
-/// A paper40 team launched under a unique name from `tag`, in flight with a follower stopped:
-/// its temporary directory, name, run directory, launch and stopped follower.
-fn stopped_team(tag: &str) -> (TempDir, String, PathBuf, Running, Stopped) {
-    let tmp = TempDir::new();
-    let team = unique_team(tag);
-    let out = tmp.path().join("launch");
-    let mut orch = launched(&team, &out);
-    let stopped = stop_a_follower(&mut orch, &team, &out, 500);
-    (tmp, team, out, orch, stopped)
 }
 
 fn stdout(o: &Output) -> String {

@@ -194,11 +194,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
 }
 
 /// The channel `orchestrator command` reaches the team by, when it takes commands in flight:
-/// in lockstep, on one host, with model vehicles (as `--commands`).
+/// in lockstep with model vehicles (as `--commands`), on one host or several: a command's
+/// notice rides the clock's message, which the link carries whole to the other hosts' members.
 fn command_channel(o: &LaunchOptions) -> Result<Option<CommandChannel>, Failure> {
-    let takes = o.realtime.is_none()
-        && o.hosts.hosts <= 1
-        && o.vehicles == cdm_member::vehicles::Vehicles::Model;
+    let takes = o.realtime.is_none() && o.vehicles == cdm_member::vehicles::Vehicles::Model;
     match takes {
         true => CommandChannel::open(&o.team)
             .map(Some)

@@ -33,6 +33,8 @@ pub use integration_tests::{launch, launch_loud, simulate};
 
 pub mod airspace;
 pub mod netns;
+pub mod python;
+pub mod steering;
 pub mod users;
 
 /// Commands to paper40 in flight (`steering.rs`, `steering_launch.rs`): a hold, an UNSAFE goto
