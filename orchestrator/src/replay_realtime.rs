@@ -16,10 +16,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
+use cdm_recording::Recording;
 use cdm_records::audit::Auditor;
 use cdm_records::run_record::{RunMode, RunRecord};
 use cdm_records::rundir::RunDir;
-use cdm_recording::Recording;
 use cdm_runtime::realtime_replay::{
     replay, History, Recorded, ReplayEnd, ReplayLoss, ReplayTiming,
 };
@@ -124,17 +124,17 @@ fn history_of(
     recordings: &BTreeMap<u32, Recording>,
     what_if: bool,
 ) -> Result<(Scenario, History), Failure> {
-    let losses =
-        realtime_losses(&run.join("audit.json"), audit, s).map_err(Failure::bad_input)?;
-    let (flown, commands) = match commands_of(run, &changed, !what_if).map_err(Failure::bad_input)? {
-        Some((flown, records)) => {
-            let ticks = (records.iter().filter(|r| r.accepted))
-                .map(|r| r.switch_tick)
-                .collect();
-            (flown, ticks)
-        }
-        None => (changed, Vec::new()),
-    };
+    let losses = realtime_losses(&run.join("audit.json"), audit, s).map_err(Failure::bad_input)?;
+    let (flown, commands) =
+        match commands_of(run, &changed, !what_if).map_err(Failure::bad_input)? {
+            Some((flown, records)) => {
+                let ticks = (records.iter().filter(|r| r.accepted))
+                    .map(|r| r.switch_tick)
+                    .collect();
+                (flown, ticks)
+            }
+            None => (changed, Vec::new()),
+        };
     let records = loss_records(&flown, &losses);
     let losses = (losses.iter().zip(records))
         .map(|(l, records)| ReplayLoss {

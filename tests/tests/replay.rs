@@ -118,7 +118,11 @@ fn a_simulate_run_with_commands_and_a_loss_replays_byte_for_byte_and_what_if_is_
     let soft = with_line(&text, "gains = ", "gains = [30.0, 40.0, 25.0, 8.0]");
     let soft = write_text(tmp.path(), "soft.toml", &soft);
     let from_file = tmp.path().join("from-file");
-    let o = replay(&run_dir, &from_file, &["--scenario", soft.to_str().unwrap()]);
+    let o = replay(
+        &run_dir,
+        &from_file,
+        &["--scenario", soft.to_str().unwrap()],
+    );
     assert!(matches!(o.status.code(), Some(0 | 1)), "{o:?}");
     assert_same_file(&a.join("telemetry.csv"), &from_file.join("telemetry.csv"));
     // Another team is refused, naming what differs.
@@ -198,7 +202,10 @@ fn a_lockstep_launch_with_a_loss_and_commands_replays_byte_for_byte() {
     let accepted = read_json(&run_dir.join("commands.json"));
     let accepted = accepted.as_array().expect("commands.json: a list");
     assert_eq!(accepted.len(), 2, "{accepted:?}");
-    assert!(accepted.iter().all(|c| c["accepted"] == true), "{accepted:?}");
+    assert!(
+        accepted.iter().all(|c| c["accepted"] == true),
+        "{accepted:?}"
+    );
     assert_replays(&run_dir, tmp.path(), "launch");
 }
 

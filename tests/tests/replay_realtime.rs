@@ -122,10 +122,18 @@ fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
     // replay is refused, pointing at the run.
     let r = read_json(&same.join("run.json"));
     assert_eq!(r["mode"], "realtime-replay", "{r:#}");
-    assert_eq!(r["every"], read_json(&rt.join("run.json"))["every"], "{r:#}");
+    assert_eq!(
+        r["every"],
+        read_json(&rt.join("run.json"))["every"],
+        "{r:#}"
+    );
     let o = replay(&same, &dir.path().join("again"), &[]);
     assert_exit(&o, 2, "replay of a real-time run's replay");
-    assert_stderr_has(&o, "replay", &["the replay of a real-time run: replay the run's own directory"]);
+    assert_stderr_has(
+        &o,
+        "replay",
+        &["the replay of a real-time run: replay the run's own directory"],
+    );
 
     // What if: other gains on the same history differ from the run, and deterministically.
     let gains = ["--gains", "30,40,25,8"];
@@ -144,7 +152,11 @@ fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
     let soft = with_line(&text, "gains = ", "gains = [30.0, 40.0, 25.0, 8.0]");
     let soft = integration_tests::write_text(dir.path(), "soft.toml", &soft);
     let from_file = dir.path().join("from-file");
-    let o = replay(&rt, &from_file, &["--scenario", soft.to_str().expect("path")]);
+    let o = replay(
+        &rt,
+        &from_file,
+        &["--scenario", soft.to_str().expect("path")],
+    );
     assert!(matches!(o.status.code(), Some(0 | 1)), "{o:?}");
     assert_same_file(&a.join("telemetry.csv"), &from_file.join("telemetry.csv"));
 
@@ -274,7 +286,11 @@ fn a_team_started_by_hand_records_as_told_and_replays_byte_for_byte() {
     for a in &s.agents {
         let id = a.id.to_string();
         let mut c = std::process::Command::new(integration_tests::bin(support::binary_for(a.role)));
-        c.args(words.iter().map(|w| if *w == "ID" { id.as_str() } else { w }));
+        c.args(
+            words
+                .iter()
+                .map(|w| if *w == "ID" { id.as_str() } else { w }),
+        );
         members.push(spawn(&mut c));
     }
     for m in members {
@@ -286,7 +302,11 @@ fn a_team_started_by_hand_records_as_told_and_replays_byte_for_byte() {
         assert!(p.is_file(), "no recording of agent {}", a.id);
     }
     let same = dir.path().join("same");
-    assert_exit(&replay(&out, &same, &[]), 0, "replay of a team started by hand");
+    assert_exit(
+        &replay(&out, &same, &[]),
+        0,
+        "replay of a team started by hand",
+    );
     assert_same_file(&out.join("telemetry.csv"), &same.join("telemetry.csv"));
     assert_no_process_of(&team);
 }

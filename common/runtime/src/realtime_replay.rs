@@ -23,9 +23,9 @@ use std::collections::BTreeMap;
 
 use cdm_math::Vec3;
 use cdm_model::dynamics::{Flat, QuadState};
+use cdm_model::formation::Member;
 use cdm_model::formation::Role;
 use cdm_model::step::{extrapolate_flat, law_for, Law, NeighborModel, TickAt};
-use cdm_model::formation::Member;
 use cdm_records::audit::{Auditor, FaultRecord, LossRecord};
 use cdm_records::record::TickRecorder;
 use cdm_records::telemetry::TelemetrySink;

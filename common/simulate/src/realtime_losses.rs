@@ -54,7 +54,10 @@ pub fn realtime_losses(
     for (k, l) in items.iter().enumerate() {
         let loss = one_loss(l, s).map_err(|why| bad(format!("losses[{k}]: {why}")))?;
         if !seen.insert(loss.id) {
-            return Err(bad(format!("losses[{k}]: member {} is lost twice", loss.id)));
+            return Err(bad(format!(
+                "losses[{k}]: member {} is lost twice",
+                loss.id
+            )));
         }
         out.push(loss);
     }

@@ -173,15 +173,34 @@ mod tests {
         let (s, losses) = lose_six();
         let e = epochs(&s, &losses);
         // Flown late (from 23), the repair of tick 20: the member with that link.
-        let r = relinks(9, &recorded(vec![Switch::repaired(23, 20, [1, 3, 8])]), &e, &[]).expect("ok");
+        let r = relinks(
+            9,
+            &recorded(vec![Switch::repaired(23, 20, [1, 3, 8])]),
+            &e,
+            &[],
+        )
+        .expect("ok");
         assert_eq!(r.len(), 1);
         assert_eq!(r[0].0, 23);
         assert_eq!(r[0].1.link.map(|l| l.in_neighbors), Some([1, 3, 8]));
         // Other in-neighbours, or a repair at a tick the losses do not give: refused, named.
-        let bad = relinks(9, &recorded(vec![Switch::repaired(23, 20, [1, 2, 8])]), &e, &[]);
+        let bad = relinks(
+            9,
+            &recorded(vec![Switch::repaired(23, 20, [1, 2, 8])]),
+            &e,
+            &[],
+        );
         let why = bad.unwrap_err().to_string();
-        assert!(why.starts_with("agent 9 tick 23: flew in-neighbours Some([1, 2, 8])"), "{why}");
-        let bad = relinks(9, &recorded(vec![Switch::repaired(23, 21, [1, 3, 8])]), &e, &[]);
+        assert!(
+            why.starts_with("agent 9 tick 23: flew in-neighbours Some([1, 2, 8])"),
+            "{why}"
+        );
+        let bad = relinks(
+            9,
+            &recorded(vec![Switch::repaired(23, 21, [1, 3, 8])]),
+            &e,
+            &[],
+        );
         assert!(bad.unwrap_err().to_string().contains("change no link then"));
         // Commands: taken in order, each before its switch, at the run's switch ticks.
         let command = |tick, seq, at| Switch {
