@@ -17,7 +17,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use cdm_recording::Recording;
-use cdm_records::audit::Auditor;
+use cdm_records::audit::{Auditor, FaultRecord};
 use cdm_records::run_record::{RunMode, RunRecord};
 use cdm_records::rundir::RunDir;
 use cdm_runtime::realtime_replay::{
@@ -58,8 +58,10 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
         .map_err(Failure::bad_input)?;
     let changed = crate::replay::changed(&s, a)?;
     let (flown, history) = history_of(run, (&s, changed), &audit, &recordings, a.what_if())?;
+    let stop = run_fault(run, &audit)?;
     let timing = ReplayTiming {
         link_shift_ticks: link_shift_ticks(&s, &flown),
+        stopped_at: stop.as_ref().map(|(_, at)| *at),
         ..timing
     };
     if crate::replay::same_dir(run, &a.out) {
@@ -92,6 +94,10 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
             None
         }
     };
+    // The run's monitor stopped the flight there: the same fault ends the replay.
+    if let Some((f, _)) = stop.filter(|_| auditor.report().fault.is_none()) {
+        auditor.fault(f);
+    }
     let complete = end.is_some_and(|e| e.complete);
     tel.finish()
         .map_err(|e| Failure::fault(format!("{}: {e}", dir.path().display())))?;
@@ -107,11 +113,26 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     }
     let differs = crate::replay::compare(run, dir.path(), format, quiet)?;
     crate::replay::outcome(a, a.what_if(), differs)?;
-    Ok(if report.verdict == cdm_model::outcome::Verdict::Safe {
-        Exit::Safe
-    } else {
-        Exit::Unsafe
-    })
+    Ok(crate::commands::exit_of(&report))
+}
+
+/// The fault the run's monitor stopped the flight on (audit.json's `fault`), if any, and the
+/// audit instant it stopped at (`ticks`: the instants audited before it): the wall clock
+/// decided when, so the replay stops there too.
+fn run_fault(run: &Path, audit: &serde_json::Value) -> Result<Option<(FaultRecord, u64)>, Failure> {
+    let Some(f) = audit.get("fault").filter(|f| !f.is_null()) else {
+        return Ok(None);
+    };
+    let bad = |why: String| {
+        Failure::bad_input(format!(
+            "{}: {why} (a tampered or foreign file)",
+            run.join("audit.json").display()
+        ))
+    };
+    let fault = serde_json::from_value(f.clone()).map_err(|e| bad(format!("fault: {e}")))?;
+    let at = (audit.get("ticks").and_then(serde_json::Value::as_u64))
+        .ok_or_else(|| bad("ticks: expected a whole number".into()))?;
+    Ok(Some((fault, at)))
 }
 
 /// What the replay flies (the changed scenario `changed`, its plan the commanded one when the
@@ -209,6 +230,7 @@ fn timing_of(
         stale_after_s,
         max_ticks,
         link_shift_ticks: 0,
+        stopped_at: None,
     })
 }
 

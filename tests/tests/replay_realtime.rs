@@ -310,3 +310,36 @@ fn a_team_started_by_hand_records_as_told_and_replays_byte_for_byte() {
     assert_same_file(&out.join("telemetry.csv"), &same.join("telemetry.csv"));
     assert_no_process_of(&team);
 }
+
+/// A real-time run its monitor stopped on a fault (a stale bound of 20 ms under 15 ms links: a
+/// member is soon stale): the instant it stopped at was the wall clock's decision, and the
+/// replay stops there with the same fault; telemetry.csv and the safety figures are the run's.
+#[test]
+fn a_real_time_run_stopped_on_a_fault_replays_up_to_its_stop() {
+    let dir = TempDir::new();
+    let team = unique_team("rt_replay_stale");
+    let rt = dir.path().join("stale");
+    let mut args = TEAM.to_vec();
+    args.extend([
+        "--on-loss",
+        "stop",
+        "--link-delay-ms",
+        "15",
+        "--stale-after",
+        "0.02",
+    ]);
+    let o = run(&mut launch(&team, &rt, &args), DEADLINE);
+    assert_exit(
+        &o,
+        3,
+        "launch --realtime with a stale bound below the links' delay",
+    );
+    let audit = read_json(&rt.join("audit.json"));
+    assert!(audit["fault"].is_object(), "{audit:#}");
+    let same = dir.path().join("same");
+    let o = replay(&rt, &same, &[]);
+    assert_exit(&o, 3, "replay of a run stopped on a fault");
+    assert_same_file(&rt.join("telemetry.csv"), &same.join("telemetry.csv"));
+    assert_eq!(figures(&rt), figures(&same), "audit.json's safety figures");
+    assert_no_process_of(&team);
+}

@@ -32,8 +32,8 @@ impl Verdict {
     }
 }
 
-/// What kind of runtime fault ended a run (`fault.kind` in audit.json).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+/// What kind of runtime fault ended a run (`fault.kind` in audit.json, read back by `replay`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FaultKind {
     /// The controller refused to fly on, or a neighbour's state was non-finite (eq. 46).

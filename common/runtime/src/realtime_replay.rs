@@ -51,6 +51,9 @@ pub struct ReplayTiming {
     /// What if the links were slower (positive) or faster (negative) by this many ticks: each
     /// neighbour state flown on is that much older or newer than the one the run flew on.
     pub link_shift_ticks: i64,
+    /// The audit instant at which the run's monitor stopped the flight on a fault (a stale
+    /// member, say: the wall clock decided it), if it did: no instant from it on is audited.
+    pub stopped_at: Option<u64>,
 }
 
 /// Why a replay cannot fly a member's recorded tick.
@@ -334,7 +337,11 @@ fn audit_all(
     let mut at = Vec::with_capacity(n);
     let mut audits = 0u64;
     let mut out = switches::Out::new(s, losses);
-    'instants: while audits <= last_audit {
+    let last_audit = timing
+        .stopped_at
+        .map_or(last_audit, |k| last_audit.min(k.saturating_sub(1)));
+    let stopped = timing.stopped_at == Some(0);
+    'instants: while audits <= last_audit && !stopped {
         let t_s = audits as f64 * period_s;
         out.hand(audits, audit);
         for (k, f) in fliers.iter().enumerate() {
@@ -364,7 +371,7 @@ fn audit_all(
     let lost = |f: &&Flier| losses.iter().any(|l| l.id == f.id);
     Ok(ReplayEnd {
         audits,
-        complete: audits > last_audit,
+        complete: timing.stopped_at.is_none() && audits > last_audit,
         ticks_flown: (fliers.iter().filter(|f| !lost(f)))
             .map(|f| f.next())
             .min()
