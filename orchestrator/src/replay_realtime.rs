@@ -113,7 +113,7 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     }
     let differs = crate::replay::compare(run, dir.path(), format, quiet)?;
     crate::replay::outcome(a, a.what_if(), differs)?;
-    Ok(crate::commands::exit_of(&report))
+    Ok(crate::run_summary::exit_of(&report))
 }
 
 /// The fault the run's monitor stopped the flight on (audit.json's `fault`), if any, and the
