@@ -237,9 +237,9 @@ recording_section() {
     tbytes=$(stat -c %s "$out/rec$n/telemetry.csv")
     if [ "$rec" = on ]; then
       rbytes=$(du -cb "$out/rec$n"/recording/*.mcap | tail -1 | cut -f1)
-      # A replay exits with the run's verdict (1: a violation, which a loaded machine's late
-      # ticks can cause at N = 250), or 3 when it differs: a row either way, never the end of
-      # the section (set -e).
+      # A replay exits with the run's outcome (1 a violation, 3 a fault: a member stale on a
+      # loaded machine at N = 250) or 3 when it differs: a row either way, with the exit code,
+      # never the end of the section (set -e).
       replay=$(secs "$bin/orchestrator" replay "$out/rec$n" --out "$out/rep$n" --no-figures | cut -d' ' -f1) || rc=$?
       cmp -s "$out/rec$n/telemetry.csv" "$out/rep$n/telemetry.csv" && replay="$replay (yes" || replay="$replay (no"
       [ "$rc" = 0 ] && replay="$replay)" || replay="$replay, exit $rc)"
