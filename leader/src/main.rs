@@ -2,8 +2,8 @@
 //!
 //! It joins a team created by `orchestrator launch` (or `orchestrator launch --no-spawn`),
 //! subscribes only to its in-neighbours' state services, and publishes its own state every tick.
-//! Arguments: see `cdm_member::member_cli::MemberArgs` (`leader --help`).
+//! Arguments: see `cdm_member_cli::MemberArgs` (`leader --help`).
 
 fn main() {
-    cdm_member::member_cli::main(cdm_member::member::Kind::Leader, "leader")
+    cdm_member_cli::main(cdm_member::member::Binary::Leader)
 }

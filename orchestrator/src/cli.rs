@@ -225,7 +225,7 @@ pub struct LaunchArgs {
     /// What the members fly (`--vehicles mavlink`: real or SITL vehicles over MAVLink;
     /// README "Fly real vehicles").
     #[command(flatten)]
-    pub vehicle: cdm_member::vehicles::VehicleArgs,
+    pub vehicle: cdm_member_cli::VehicleArgs,
     #[command(flatten)]
     pub hosts: HostArgs,
     #[command(flatten)]
@@ -269,7 +269,7 @@ pub struct ReplayArgs {
     /// What if: other links (each flag overrides that key of the run's `[link]`; a real-time
     /// run takes only --link-delay-ms: each neighbour state flown on is as much older or newer).
     #[command(flatten)]
-    pub link: cdm_member::options::LinkArgs,
+    pub link: cdm_member_cli::LinkArgs,
     /// Do not draw the figures at the end of the replay.
     #[arg(long)]
     pub no_figures: bool,
@@ -381,7 +381,7 @@ pub struct HostArgs {
 #[derive(Debug, Args, Clone)]
 pub struct RunOptions {
     #[command(flatten)]
-    pub link: cdm_member::options::LinkArgs,
+    pub link: cdm_member_cli::LinkArgs,
     /// End the run at the tick of its first safety violation (telemetry kept, exit 1).
     #[arg(long)]
     pub stop_on_violation: bool,

@@ -21,7 +21,7 @@ use cdm_simulate::{simulate, SimulateOptions};
 use cdm_team::out;
 
 use cdm_iox::TeamName;
-use cdm_member::options::timeout;
+use cdm_member_cli::timeout;
 
 use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand};
 use crate::export_args::{load, SourceArgs};
@@ -316,7 +316,7 @@ fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
         out!("{}", crate::cli::every_line(a.every, s.file.agents.len()));
     }
     let started = Instant::now();
-    let launched = launch(&s, &opts)?;
+    let launched = launch(&s, &opts).map_err(crate::launch_failure::launch_failure)?;
     let mode = match opts.realtime {
         Some(_) => RunMode::Realtime,
         None => RunMode::Lockstep,
@@ -453,7 +453,7 @@ fn file_commands(a: &LaunchArgs, s: Scenario) -> Result<(Scenario, Option<FileCo
 fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
     let why = if a.realtime.realtime {
         Some("--realtime (steer a real-time team live with `orchestrator command`)")
-    } else if a.vehicle.vehicles != cdm_member::vehicles::VehicleKind::Model {
+    } else if a.vehicle.vehicles != cdm_member_cli::VehicleKind::Model {
         Some("--vehicles mavlink")
     } else {
         None

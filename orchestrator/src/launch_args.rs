@@ -131,7 +131,7 @@ impl RealtimeArgs {
                 "--audit-hz must be in (0, 10000], got {audit_hz}"
             )));
         }
-        let stale_after = cdm_member::options::timeout("--stale-after", self.stale_after)
+        let stale_after = cdm_member_cli::timeout("--stale-after", self.stale_after)
             .map_err(Failure::bad_input)?;
         Ok(Some(RealtimeOptions {
             audit_hz,

@@ -6,6 +6,7 @@ mod commands;
 mod export_args;
 mod export_cmd;
 mod launch_args;
+mod launch_failure;
 mod notices;
 mod print_certificate;
 mod print_origin;

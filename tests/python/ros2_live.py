@@ -86,8 +86,9 @@ def dds(out, count, deadline):
         rclpy.spin_once(node, timeout_sec=0.05)
     pubs, subs = graph_of_our_node(node, time.monotonic() + 10)
     types = {name: t for name, t in pubs}
+    # /cdm/commands exists from the start: a launched team may be commanded in flight.
     want = {"/tf": "tf2_msgs/msg/TFMessage", "/cdm/formation": "visualization_msgs/msg/MarkerArray",
-            "/cdm/audit": "std_msgs/msg/String"}
+            "/cdm/audit": "std_msgs/msg/String", "/cdm/commands": "std_msgs/msg/String"}
     want.update({t: POSE for t in types if t.startswith("/cdm/agent_") and t.endswith("/pose")})
     # ros2-client's node also announces /parameter_events, as rclcpp's and rclpy's nodes do.
     extra = set(types) - set(want) - {"/parameter_events"}

@@ -177,7 +177,9 @@ fn a_mission_over_two_hosts_flies_as_simulate() {
 
 /// Real time over two hosts: the start instant travels as a wall-clock time in the clock's
 /// message, members on both hosts pace on it and states cross as they come. A 3 s plan
-/// (301 audits) completes SAFE with its pacing figures; nothing left on either host.
+/// (301 audits) completes SAFE with its pacing figures; nothing left on either host; the
+/// members' recordings of both hosts are in the run directory and `replay` flies the run again
+/// byte for byte.
 #[test]
 fn two_hosts_fly_in_real_time() {
     let Some(h) = Hosts::create("rt") else { return };
@@ -237,6 +239,24 @@ fn two_hosts_fly_in_real_time() {
     assert_eq!(hosts["hosts"][0]["outcome"], "stopped", "{hosts:#}");
     assert_no_team_resources(&team);
     assert_eq!(left_on_b(&d), Vec::<String>::new(), "{}", describe(&d));
+    // Every member recorded, on either host (host B's daemon sent its members' recordings up
+    // at the end), and the run replays in one process byte for byte.
+    let recorded: BTreeSet<u32> = std::fs::read_dir(out.join("recording"))
+        .expect("the run's recording folder")
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.strip_suffix(".mcap")?.parse().ok())
+        .collect();
+    assert_eq!(
+        recorded, ids,
+        "every member's recording is in the run directory"
+    );
+    let again = dir.path().join("replay");
+    assert_exit(
+        &replay(&out, &again, &[]),
+        0,
+        "replay of a two-host real-time run",
+    );
+    assert_same_file(&out.join("telemetry.csv"), &again.join("telemetry.csv"));
 }
 
 /// A long flight: strict lockstep (`--window 1`: a round trip over the network per tick) keeps

@@ -16,10 +16,17 @@ const MAX_FN_LINES: usize = 80;
 fn sources() -> Vec<PathBuf> {
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let mut out = Vec::new();
-    let mut dirs: Vec<PathBuf> = ["agent", "leader", "orchestrator", "python", "tests"]
-        .iter()
-        .map(|p| root.join(p).join("src"))
-        .collect();
+    let mut dirs: Vec<PathBuf> = [
+        "agent",
+        "leader",
+        "member-cli",
+        "orchestrator",
+        "python",
+        "tests",
+    ]
+    .iter()
+    .map(|p| root.join(p).join("src"))
+    .collect();
     let common = std::fs::read_dir(root.join("common")).expect("common/ is readable");
     dirs.extend(common.flatten().map(|e| e.path().join("src")));
     while let Some(dir) = dirs.pop() {
@@ -209,28 +216,17 @@ const ALLOWED_CIRCLES: &[(&str, &[&str])] = &[
     ),
     // The runtime's wire messages and its seams.
     ("common/runtime", &["messages", "seams"]),
-    // A member's errors and its vehicles.
-    ("common/member", &["member_error", "vehicles"]),
 ];
 
 /// Public type names defined twice that belong to crates being reworked elsewhere (with the
 /// files that define them). Empty this list as they are renamed; nothing may be added to it.
-const ALLOWED_TWICE: &[(&str, &[&str])] = &[
-    (
-        "BoxError",
-        &[
-            "common/hosts/src/host_link.rs",
-            "common/team/src/failure.rs",
-        ],
-    ),
-    (
-        "Kind",
-        &[
-            "common/member/src/member.rs",
-            "common/process/src/fault_inject.rs",
-        ],
-    ),
-];
+const ALLOWED_TWICE: &[(&str, &[&str])] = &[(
+    "BoxError",
+    &[
+        "common/hosts/src/host_link.rs",
+        "common/team/src/failure.rs",
+    ],
+)];
 
 /// The text of `text` before its `#[cfg(test)] mod`, without comments and string contents.
 fn code_outside_tests(text: &str) -> String {
@@ -372,9 +368,16 @@ fn import_circles(modules: &[(Vec<String>, String)]) -> Vec<Vec<String>> {
 /// Every package directory with a `src/` (relative to the workspace root).
 fn packages() -> Vec<String> {
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    let mut out: Vec<String> = ["agent", "leader", "orchestrator", "python", "tests"]
-        .map(str::to_owned)
-        .to_vec();
+    let mut out: Vec<String> = [
+        "agent",
+        "leader",
+        "member-cli",
+        "orchestrator",
+        "python",
+        "tests",
+    ]
+    .map(str::to_owned)
+    .to_vec();
     for e in std::fs::read_dir(root.join("common"))
         .expect("common/ is readable")
         .flatten()
@@ -624,16 +627,12 @@ const ALLOWED_PRINTING: &[(&str, &str)] = &[
     ("common/test-support/src/lib.rs", "a test's watchdog"),
     // Defines `out!`, the macro the binaries print with (a full stdout must not stop them).
     ("common/team/src/lib.rs", "the binaries' macro"),
-    // The member processes' `main` (argument parsing, logging, the error line and exit code),
-    // shared by the agent and leader binaries; it belongs beside them.
-    ("common/member/src/member_cli.rs", "not yet moved"),
 ];
 
-/// Library crates under common/ that still depend on clap: their option structs derive the
-/// parser the member binaries and the orchestrator flatten into theirs (cdm-mavlink's clap is
-/// its example's, a dev-dependency). cdm-unified-features has no code: it lists every feature
-/// the workspace builds its third-party crates with, clap's among them, for the Python module.
-const ALLOWED_CLAP: &[&str] = &["common/member", "common/unified-features"];
+/// Library crates under common/ that depend on clap (cdm-mavlink's clap is its example's, a
+/// dev-dependency). cdm-unified-features has no code: it lists every feature the workspace
+/// builds its third-party crates with, clap's among them, for the Python module.
+const ALLOWED_CLAP: &[&str] = &["common/unified-features"];
 
 /// The lines of `text` (outside its tests) that print: `println!`, `eprintln!`, `print!`,
 /// `eprint!`, the orchestrator's `out!`, or a write to `io::stdout()` or `io::stderr()`.
@@ -702,7 +701,7 @@ fn no_library_under_common_prints_or_parses_arguments() {
     assert!(
         found.is_empty(),
         "libraries print or parse arguments (hand notices to the binary's sink; clap belongs \
-         to agent/, leader/, orchestrator/):\n{}",
+         to agent/, leader/, member-cli/, orchestrator/):\n{}",
         found.join("\n")
     );
 }

@@ -3,6 +3,7 @@
 //! kills, and passes what the core noted on to the launch ([`Links`], shared with it).
 
 use std::collections::BTreeSet;
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -15,7 +16,7 @@ use cdm_scenario::Scenario;
 use cdm_team::notices::NoticeSink;
 use cdm_zenoh::{down_key, up_key, JoinDesk, JoinReply, Net, PendingJoin};
 
-use crate::bridge_core::{BridgeCore, Ctx, HostReport};
+use crate::bridge_core::{BridgeCore, Ctx, HostReport, RecordingChunk};
 use crate::error::{BridgeError, Refusal};
 use crate::host_link::ZenohLink;
 use crate::idle::IdleBackoff;
@@ -210,6 +211,7 @@ fn run(
     notices: &dyn NoticeSink,
 ) -> Vec<HostReport> {
     let mut idle = IdleBackoff::for_team(ctx.flight.realtime_stale_after.is_some());
+    let recording = ctx.flight.recording.clone();
     let mut core = BridgeCore::new(ctx);
     loop {
         let now = Instant::now();
@@ -221,6 +223,12 @@ fn run(
             .map(|mut l| std::mem::take(&mut l.to_kill))
             .unwrap_or_default();
         let busy = core.turn(kills, now);
+        for part in core.take_recordings() {
+            let Some(dir) = &recording else { break };
+            if let Err(e) = write_recording(dir, &part) {
+                tracing::warn!(id = part.id, "agent {}'s recording not saved: {e}", part.id);
+            }
+        }
         let done = stop.load(Ordering::Relaxed) && core.stopping(now);
         core.settle(|notes| {
             if let Ok(mut l) = shared.lock() {
@@ -237,6 +245,27 @@ fn run(
         }
     }
     core.report()
+}
+
+/// Writes a part of another host's member's recording into the run directory's recording
+/// folder (created owner-only if the launch spawned no member here), at its offset; the first
+/// part starts the file afresh. Owner-only, and never through a symbolic link.
+fn write_recording(dir: &Path, part: &RecordingChunk) -> std::io::Result<()> {
+    use std::io::{Seek, SeekFrom, Write};
+    use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
+    match std::fs::DirBuilder::new().mode(0o700).create(dir) {
+        Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => return Err(e),
+        _ => {}
+    }
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(part.offset == 0)
+        .mode(0o600)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(dir.join(cdm_recording::file_name(part.id)))?;
+    f.seek(SeekFrom::Start(part.offset))?;
+    f.write_all(&part.bytes)
 }
 
 /// Answers one join request: refused with the reason, or accepted with the host's share.

@@ -131,8 +131,20 @@ struct Remote<L = DaemonLink, R = MemberPorts> {
     handing: Option<PendingHandOver>,
     /// What the launch is to learn, oldest first.
     notes: Vec<Note>,
+    /// Parts of its members' recordings received and not yet written, in order.
+    recordings: Vec<RecordingChunk>,
+    /// Each member's recording: the bytes received so far (the next part's offset).
+    recorded: BTreeMap<u32, u64>,
     /// Fault reports to publish on its members' behalf once the launch learnt the notes.
     faults: Vec<StateMsg>,
+}
+
+/// Part of another host's member's recording, for the run directory's copy of its file.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct RecordingChunk {
+    pub id: u32,
+    pub offset: u64,
+    pub bytes: Vec<u8>,
 }
 
 /// The bridge: every joined daemon, the team core's kills not yet sent, the stop's start.
@@ -229,6 +241,13 @@ impl<L: HostLink<In = Up, Out = Down>, R: Relay> BridgeCore<L, R> {
         }
     }
 
+    /// The parts of the other hosts' recordings received since the last call, in order.
+    pub(crate) fn take_recordings(&mut self) -> Vec<RecordingChunk> {
+        (self.remotes.values_mut())
+            .flat_map(|r| std::mem::take(&mut r.recordings))
+            .collect()
+    }
+
     /// Sleeps until a frame comes from the first daemon or `timeout` passes; false when no
     /// daemon joined (nothing to wait on).
     pub(crate) fn wait(&mut self, timeout: Duration) -> bool {
@@ -268,6 +287,8 @@ impl<L, R> Remote<L, R> {
             killed: BTreeSet::new(),
             handing: None,
             notes: Vec::new(),
+            recordings: Vec::new(),
+            recorded: BTreeMap::new(),
             faults: Vec::new(),
         }
     }
@@ -389,8 +410,31 @@ fn on_frame<L, R: Relay>(r: &mut Remote<L, R>, ctx: &Ctx, frame: Up) -> Result<(
             r.phase = Phase::Stopped;
             r.notes.push(Note::Stopped(r.host));
         }
+        Up::Recording { id, offset, bytes } => on_recording(r, ctx, id, offset, bytes),
     }
     Ok(())
+}
+
+/// A part of member `id`'s recording: kept for the run directory when the team records, the
+/// member is this host's and the part continues what came before (a part out of order would
+/// leave a hole in the file; it and the member's later parts are dropped, and the replay then
+/// finds that recording cut short).
+fn on_recording<L, R>(r: &mut Remote<L, R>, ctx: &Ctx, id: u32, offset: u64, bytes: Vec<u8>) {
+    let next = r.recorded.get(&id).copied().unwrap_or(0);
+    if ctx.flight.recording.is_none() || !r.members.contains(&id) || offset != next {
+        tracing::warn!(
+            host = r.host,
+            id,
+            offset,
+            expected = next,
+            "dropped a part of agent {id}'s recording from host {} that does not belong",
+            r.host
+        );
+        r.recorded.insert(id, u64::MAX);
+        return;
+    }
+    r.recorded.insert(id, next + bytes.len() as u64);
+    r.recordings.push(RecordingChunk { id, offset, bytes });
 }
 
 /// The relay ports of a ready host's members: each reads (and forwards) its in-neighbours on
@@ -551,6 +595,7 @@ mod tests {
             realtime_stale_after: None,
             realtime_priority: None,
             repair,
+            recording: None,
         };
         let team = TeamName::new("unit").unwrap();
         Ctx::new(&s, &team, &regions, &HostOptions::default(), flight)
@@ -589,6 +634,48 @@ mod tests {
 
     fn ms(n: u64) -> Duration {
         Duration::from_millis(n)
+    }
+
+    #[test]
+    fn recordings_are_kept_in_order_for_the_hosts_members_only() {
+        let t0 = Instant::now();
+        let mut c = core(false, t0);
+        c.ctx.flight.recording = Some("unused".into());
+        let mine = c.ctx.regions.members(1)[0];
+        let theirs = c.ctx.regions.members(0)[0];
+        let part = |id, offset, n| Up::Recording {
+            id,
+            offset,
+            bytes: vec![7; n],
+        };
+        let frames = [
+            part(mine, 0, 3),
+            part(mine, 3, 2),
+            part(theirs, 0, 4), // another host's member: not this daemon's to send
+            part(mine, 9, 1),   // a gap: this and what follows are dropped
+            part(mine, 5, 1),
+        ];
+        host1(&mut c)
+            .chan
+            .incoming
+            .extend(frames.into_iter().map(Ok));
+        c.turn(vec![], t0 + ms(1));
+        let kept: Vec<(u32, u64, usize)> = (c.take_recordings().into_iter())
+            .map(|p| (p.id, p.offset, p.bytes.len()))
+            .collect();
+        assert_eq!(kept, [(mine, 0, 3), (mine, 3, 2)]);
+        assert!(
+            c.take_recordings().is_empty(),
+            "each part is handed over once"
+        );
+
+        let mut c = core(false, t0);
+        host1(&mut c).chan.incoming.push_back(Ok(part(mine, 0, 3)));
+        c.turn(vec![], t0 + ms(1));
+        assert!(
+            c.take_recordings().is_empty(),
+            "a team that does not record keeps nothing"
+        );
     }
 
     fn state(id: u32, tick: u64) -> StateMsg {

@@ -4,6 +4,7 @@
 //! up (the orchestrator audits them all).
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::os::unix::fs::DirBuilderExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -227,6 +228,16 @@ fn member_flags(a: &Assignment) -> Vec<String> {
     flags
 }
 
+/// Where this host's members write their recordings: a folder of the work directory, in real
+/// time with recording on.
+fn recording_dir(j: &Joined, dir: &Path) -> Option<PathBuf> {
+    let records = j.a.record && j.a.realtime_stale_after_s.is_some();
+    records.then(|| dir.join(cdm_recording::DIR))
+}
+
+/// The largest part of a recording in one frame.
+const RECORDING_PART: usize = 256 * 1024;
+
 /// A relayed member's neighbours on this host.
 #[derive(Default)]
 struct Neighbours {
@@ -269,6 +280,7 @@ fn fly(
         repairs,
         interrupted,
         realtime: j.a.realtime_stale_after_s.is_some(),
+        recording: recording_dir(j, dir),
     };
     let outcome = host.wait_ready().and_then(|()| host.bridge());
     host.land(&j.s, &outcome);
@@ -300,7 +312,17 @@ fn spawn_members(
         }
     })?;
     let mut children = Vec::new();
-    let flags = member_flags(&j.a);
+    let mut flags = member_flags(&j.a);
+    if let Some(at) = recording_dir(j, dir) {
+        std::fs::DirBuilder::new()
+            .mode(0o700)
+            .create(&at)
+            .map_err(|source| DaemonError::RecordingDir {
+                dir: at.clone(),
+                source,
+            })?;
+        flags.extend(["--record".into(), at.display().to_string()]);
+    }
     for m in
         j.s.formation
             .members
@@ -338,6 +360,8 @@ struct Host<'a, L = OrchestratorLink> {
     repairs: DaemonRepairs,
     interrupted: &'a AtomicBool,
     realtime: bool,
+    /// Where this host's members record (real time with recording on).
+    recording: Option<PathBuf>,
 }
 
 /// Interrupted by a signal: the daemon says which.
@@ -437,6 +461,7 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
             let now = Instant::now();
             let states = drain(&mut self.ports);
             let _ = self.apply(DaemonEvent::States(states), now);
+            self.send_recordings(now);
             let _ = self.apply(DaemonEvent::MembersStopped, now);
         }
         drop(self.relays);
@@ -469,6 +494,29 @@ impl<L: HostLink<In = Down, Out = Up>> Host<'_, L> {
             }
         }
         Ok(stop)
+    }
+
+    /// The members' recordings, complete now that they stopped, go up in bounded parts (a
+    /// member that never started one has none to send).
+    fn send_recordings(&mut self, now: Instant) {
+        let Some(dir) = self.recording.clone() else {
+            return;
+        };
+        let ids: Vec<u32> = self.children.iter().map(|c| c.id).collect();
+        for id in ids {
+            let Ok(bytes) = std::fs::read(dir.join(cdm_recording::file_name(id))) else {
+                continue;
+            };
+            for (k, part) in bytes.chunks(RECORDING_PART).enumerate() {
+                let (offset, bytes) = ((k * RECORDING_PART) as u64, part.to_vec());
+                if self
+                    .apply(DaemonEvent::Recording { id, offset, bytes }, now)
+                    .is_err()
+                {
+                    return;
+                }
+            }
+        }
     }
 
     /// Members that exited: each one's last states first, then the exit.
@@ -524,6 +572,7 @@ mod tests {
             realtime_stale_after_s: stale,
             realtime_priority: priority,
             repair: false,
+            record: false,
         }
     }
 

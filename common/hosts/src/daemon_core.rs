@@ -42,6 +42,13 @@ pub enum DaemonEvent {
     Exited { id: u32, how: ProcessExit },
     /// Links a repair opened, whose reader runs here, now connected.
     Linked(Vec<(u32, u32)>),
+    /// Part of a member's recording, read after the members stopped: it goes up before the
+    /// daemon says it leaves.
+    Recording {
+        id: u32,
+        offset: u64,
+        bytes: Vec<u8>,
+    },
     /// The members were stopped: the daemon leaves.
     MembersStopped,
 }
@@ -170,6 +177,10 @@ impl DaemonCore {
                     self.send(Up::Linked(pairs), now, &mut out);
                 }
             }
+            DaemonEvent::Recording { id, offset, bytes } if self.mine.contains(&id) => {
+                self.send(Up::Recording { id, offset, bytes }, now, &mut out)
+            }
+            DaemonEvent::Recording { .. } => {}
             DaemonEvent::MembersStopped => self.send(Up::Stopped, now, &mut out),
         }
         Ok(out)
@@ -400,6 +411,20 @@ mod tests {
             d.handle(DaemonEvent::Woke, t + ms(3000)).unwrap(),
             [DaemonAction::Done]
         );
+        // The recordings go up before the leave; another host's member's is none of this one's.
+        let part = |id| DaemonEvent::Recording {
+            id,
+            offset: 0,
+            bytes: vec![1, 2],
+        };
+        let sent = Up::Recording {
+            id: 2,
+            offset: 0,
+            bytes: vec![1, 2],
+        };
+        let t3 = t + ms(3000);
+        assert_eq!(d.handle(part(2), t3).unwrap(), [DaemonAction::Send(sent)]);
+        assert_eq!(d.handle(part(7), t3).unwrap(), []);
         let bye = d.handle(DaemonEvent::MembersStopped, t + ms(3000)).unwrap();
         assert_eq!(bye, [DaemonAction::Send(Up::Stopped)]);
     }

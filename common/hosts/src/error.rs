@@ -309,6 +309,12 @@ pub enum DaemonError {
         #[source]
         source: RunDirError,
     },
+    #[error("cannot create the members' recording folder {}: {source}", dir.display())]
+    RecordingDir {
+        dir: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("cannot start agent {id}: {source}")]
     Spawn {
         id: u32,

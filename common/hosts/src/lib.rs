@@ -52,7 +52,7 @@ pub use transport::Transport;
 use std::time::Duration;
 
 /// How the team flies, as a daemon needs to know it to start its members.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct TeamFlight {
     /// The clock window (ticks of states kept per subscriber).
     pub window: u32,
@@ -63,6 +63,9 @@ pub struct TeamFlight {
     /// Lost members are repaired around (`--on-loss repair` with spawned members, lockstep:
     /// real time repairs nothing, an exit stays a fault there as on one host).
     pub repair: bool,
+    /// Real time with recording on: where the other hosts' members' recordings go (the run
+    /// directory's recording folder), as their daemons send them at the end.
+    pub recording: Option<std::path::PathBuf>,
 }
 
 /// `launch`'s host options, validated.

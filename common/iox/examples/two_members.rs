@@ -74,23 +74,47 @@ struct Args {
     ticks: u64,
 }
 
-fn parse_args() -> Result<Args, String> {
+/// Why the command line is refused (exit 2).
+#[derive(Debug, thiserror::Error)]
+enum UsageError {
+    #[error("expected `leader` or `follower`, got {0:?}")]
+    Side(Option<String>),
+    #[error("{0} needs a value")]
+    NoValue(String),
+    #[error("--ticks {value}: {error}")]
+    Ticks {
+        value: String,
+        error: std::num::ParseIntError,
+    },
+    #[error("unknown option {0}")]
+    Unknown(String),
+    #[error("{0}")]
+    Team(TransportError),
+}
+
+fn parse_args() -> Result<Args, UsageError> {
     let mut args = std::env::args().skip(1);
     let leader = match args.next().as_deref() {
         Some("leader") => true,
         Some("follower") => false,
-        other => return Err(format!("expected `leader` or `follower`, got {other:?}")),
+        other => return Err(UsageError::Side(other.map(str::to_owned))),
     };
     let (mut team, mut ticks) = ("two-members".to_owned(), 10);
     while let Some(flag) = args.next() {
-        let value = args.next().ok_or(format!("{flag} needs a value"))?;
+        let Some(value) = args.next() else {
+            return Err(UsageError::NoValue(flag));
+        };
         match flag.as_str() {
             "--team" => team = value,
-            "--ticks" => ticks = value.parse().map_err(|e| format!("--ticks {value}: {e}"))?,
-            _ => return Err(format!("unknown option {flag}")),
+            "--ticks" => {
+                ticks = value
+                    .parse()
+                    .map_err(|error| UsageError::Ticks { value, error })?
+            }
+            _ => return Err(UsageError::Unknown(flag)),
         }
     }
-    let team = TeamName::new(&team).map_err(|e| e.to_string())?;
+    let team = TeamName::new(&team).map_err(UsageError::Team)?;
     Ok(Args {
         leader,
         team,
@@ -123,38 +147,16 @@ fn main() -> ExitCode {
 }
 
 /// What went wrong, with the transport error as its source.
-#[derive(Debug)]
-enum Failure {
-    Transport(TransportError),
+#[derive(Debug, thiserror::Error)]
+enum ExchangeError {
+    #[error("transport: {0}")]
+    Transport(#[from] TransportError),
+    #[error("gave up after {deadline:?}: {0}", deadline = DEADLINE)]
     Deadline(String),
 }
 
-impl std::fmt::Display for Failure {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Failure::Transport(e) => write!(f, "transport: {e}"),
-            Failure::Deadline(what) => write!(f, "gave up after {DEADLINE:?}: {what}"),
-        }
-    }
-}
-
-impl std::error::Error for Failure {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            Failure::Transport(e) => Some(e),
-            Failure::Deadline(_) => None,
-        }
-    }
-}
-
-impl From<TransportError> for Failure {
-    fn from(e: TransportError) -> Self {
-        Failure::Transport(e)
-    }
-}
-
 /// Terminal 1: the team's creator and member 0.
-fn lead(team: &TeamName, ticks: u64) -> Result<(), Failure> {
+fn lead(team: &TeamName, ticks: u64) -> Result<(), ExchangeError> {
     let ins = BTreeMap::from([(FOLLOWER, vec![LEADER])]);
     let layout = TeamLayout::new(vec![LEADER, FOLLOWER], ins, 1)?.with_scenario_hash(SCENARIO_HASH);
     let mut orch = OrchestratorPorts::create(team, &layout)?;
@@ -205,7 +207,7 @@ fn lead(team: &TeamName, ticks: u64) -> Result<(), Failure> {
 }
 
 /// Terminal 2: member 1, reading member 0.
-fn follow(team: &TeamName) -> Result<(), Failure> {
+fn follow(team: &TeamName) -> Result<(), ExchangeError> {
     let mut me = None;
     until(
         || match MemberPorts::open(team, FOLLOWER, SCENARIO_HASH, &[LEADER], &[]) {
@@ -249,7 +251,7 @@ fn follow(team: &TeamName) -> Result<(), Failure> {
             return Ok(());
         }
         if last_progress.elapsed() > DEADLINE || !me.orchestrator_alive() {
-            return Err(Failure::Deadline(format!(
+            return Err(ExchangeError::Deadline(format!(
                 "no grant or state for tick {} (is Terminal 1 still running?)",
                 follower.next_tick
             )));
@@ -313,11 +315,14 @@ impl Follower {
 }
 
 /// Calls `step` until it returns true; fails after [`DEADLINE`] naming `what` it waited for.
-fn until(mut step: impl FnMut() -> Result<bool, Failure>, what: &str) -> Result<(), Failure> {
+fn until(
+    mut step: impl FnMut() -> Result<bool, ExchangeError>,
+    what: &str,
+) -> Result<(), ExchangeError> {
     let start = Instant::now();
     while !step()? {
         if start.elapsed() > DEADLINE {
-            return Err(Failure::Deadline(format!("waiting for {what}")));
+            return Err(ExchangeError::Deadline(format!("waiting for {what}")));
         }
         std::thread::sleep(Duration::from_millis(2));
     }

@@ -161,7 +161,7 @@ impl CommandChannel {
         let mut answer = match owner_only(&stream).and_then(|()| read_request(&stream)) {
             // A peer that asks nothing (`orchestrator clean` looking for live channels).
             Ok(None) => return false,
-            Err(why) => CommandAnswer::without_switch(Answered::Unavailable, why),
+            Err(why) => CommandAnswer::without_switch(Answered::Unavailable, why.to_string()),
             Ok(Some(request)) => handle(request),
         };
         answer.decided_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -178,8 +178,30 @@ impl Drop for CommandChannel {
     }
 }
 
+/// Why a connection to the channel brought no request to decide (its answer says so).
+#[derive(Debug, thiserror::Error)]
+pub enum PeerError {
+    /// The peer's credentials cannot be read.
+    #[error("the command's sender is unknown: {0}")]
+    Unknown(std::io::Error),
+    /// Another user than the team's owner.
+    #[error("only the team's owner (uid {owner}) commands it, not uid {peer}")]
+    NotOwner { owner: u32, peer: u32 },
+    /// The socket refused its read deadline.
+    #[error("{0}")]
+    Deadline(std::io::Error),
+    /// The request's line could not be read (in time).
+    #[error("the request was not read: {0}")]
+    Read(std::io::Error),
+}
+
+/// A request line that is not a command (the peer's input).
+#[derive(Debug, thiserror::Error)]
+#[error("the request: {0}")]
+pub struct MalformedRequest(serde_json::Error);
+
 /// Refuses a peer that is not this user.
-fn owner_only(stream: &UnixStream) -> Result<(), String> {
+fn owner_only(stream: &UnixStream) -> Result<(), PeerError> {
     let mut cred = libc::ucred {
         pid: 0,
         uid: u32::MAX,
@@ -199,39 +221,36 @@ fn owner_only(stream: &UnixStream) -> Result<(), String> {
     // SAFETY: getuid(2) cannot fail and touches no memory of ours.
     let me = unsafe { libc::getuid() };
     if rc != 0 {
-        return Err(format!(
-            "the command's sender is unknown: {}",
-            std::io::Error::last_os_error()
-        ));
+        return Err(PeerError::Unknown(std::io::Error::last_os_error()));
     }
     if cred.uid != me {
         tracing::warn!(uid = cred.uid, "a command from another user was refused");
-        return Err(format!(
-            "only the team's owner (uid {me}) commands it, not uid {}",
-            cred.uid
-        ));
+        return Err(PeerError::NotOwner {
+            owner: me,
+            peer: cred.uid,
+        });
     }
     Ok(())
 }
 
 /// A request as read: the command, or why it is none (malformed: bad input).
-pub type Request = Result<CommandRequest, String>;
+pub type Request = Result<CommandRequest, MalformedRequest>;
 
 /// The request of a peer that may command the team: `None` when it asked nothing; `Err` when
 /// the line could not be read at all.
-fn read_request(stream: &UnixStream) -> Result<Option<Request>, String> {
+fn read_request(stream: &UnixStream) -> Result<Option<Request>, PeerError> {
     stream
         .set_read_timeout(Some(REQUEST_WITHIN))
-        .map_err(|e| e.to_string())?;
+        .map_err(PeerError::Deadline)?;
     let mut line = String::new();
     BufReader::new(stream.take(MAX_REQUEST_BYTES))
         .read_line(&mut line)
-        .map_err(|e| format!("the request was not read: {e}"))?;
+        .map_err(PeerError::Read)?;
     if line.is_empty() {
         return Ok(None);
     }
     Ok(Some(
-        serde_json::from_str(line.trim_end()).map_err(|e| format!("the request: {e}")),
+        serde_json::from_str(line.trim_end()).map_err(MalformedRequest),
     ))
 }
 

@@ -3,13 +3,14 @@
 //! Foxglove (`--foxglove`, cdm-foxglove). Each paces itself by the wall clock and never makes
 //! the loop wait.
 
+use crate::launch_error::LaunchError;
+use crate::notice::LaunchNotice;
 use cdm_foxglove::FoxgloveOptions;
 use cdm_math::Vec3;
 use cdm_records::audit::{AuditReport, Auditor, CommandSummary};
 use cdm_ros2::{Live, Ros2Options};
 use cdm_scenario::Scenario;
 use cdm_team::notices::NoticeSink;
-use cdm_team::Failure;
 use cdm_viewer::live::LiveView;
 
 /// The live feeds of a launch.
@@ -32,16 +33,17 @@ impl Feeds {
         foxglove: Option<&FoxgloveOptions>,
         commands: &[CommandSummary],
         notices: &dyn NoticeSink,
-    ) -> Result<Self, Failure> {
+    ) -> Result<Self, LaunchError> {
         let view = match serve {
             Some(addr) => {
                 let auditor = Auditor::new(s);
-                let mut view = LiveView::start(&addr.to_string(), s, auditor.numbers())
-                    .map_err(Failure::bad_input)?;
+                let mut view = LiveView::start(&addr.to_string(), s, auditor.numbers())?;
                 for c in commands {
                     view.command(c);
                 }
-                notices.notice(&format_args!("live view: http://{}/", view.addr()));
+                notices.notice(&LaunchNotice::LiveView {
+                    addr: view.addr().to_owned(),
+                });
                 Some(view)
             }
             None => None,
@@ -49,14 +51,14 @@ impl Feeds {
         let ros2 = match ros2 {
             Some(o) => {
                 let live = Live::start_commanded(o, s, commands.to_vec());
-                Some(live.map_err(Failure::bad_input)?)
+                Some(live?)
             }
             None => None,
         };
         let foxglove = match foxglove {
             Some(o) => {
-                let f = cdm_foxglove::FoxgloveLive::start(o, s).map_err(Failure::bad_input)?;
-                notices.notice(&format_args!("foxglove: ws://{}", f.addr()));
+                let f = cdm_foxglove::FoxgloveLive::start(o, s)?;
+                notices.notice(&LaunchNotice::Foxglove { addr: f.addr() });
                 Some(f)
             }
             None => None,
@@ -68,11 +70,14 @@ impl Feeds {
         })
     }
 
-    /// A command given to the team in flight (`orchestrator command`): the live view marks it
-    /// (the live ROS 2 topics carry only the commands known at their start).
+    /// A command given to the team in flight (`orchestrator command`): the live view marks it,
+    /// the live ROS 2 topics send it with the first tick at or after its switch.
     pub fn command(&mut self, c: &CommandSummary) {
         if let Some(v) = self.view.as_mut() {
             v.command(c);
+        }
+        if let Some(r) = self.ros2.as_mut() {
+            r.command(c);
         }
     }
 
@@ -101,36 +106,13 @@ impl Feeds {
     /// caller drops it).
     pub fn finish(&mut self, report: &AuditReport, notices: &dyn NoticeSink) {
         if let Some(f) = self.foxglove.take() {
-            let s = f.finish(report.verdict);
-            let unfinished = unfinished(s.unfinished);
-            notices.notice(&format_args!(
-                "  foxglove (ws://{}): {} ticks published, {} dropped (queue full){unfinished}",
-                s.addr, s.ticks, s.dropped
-            ));
+            notices.notice(&LaunchNotice::FoxgloveDone(f.finish(report.verdict)));
         }
         if let Some(v) = &self.view {
             v.finish(report);
         }
         if let Some(r) = self.ros2.take() {
-            let s = r.finish();
-            let failed = match &s.first_error {
-                Some(e) => format!(", {} messages refused (first: {e})", s.failed),
-                None => String::new(),
-            };
-            let unfinished = unfinished(s.unfinished);
-            notices.notice(&format_args!(
-                "  ros2 ({}): {} ticks published, {} dropped (queue full){failed}{unfinished}",
-                s.backend, s.ticks, s.dropped
-            ));
+            notices.notice(&LaunchNotice::Ros2Done(r.finish()));
         }
-    }
-}
-
-/// The end of a feed's summary line when it was still publishing as the launch ended.
-fn unfinished(still_publishing: bool) -> &'static str {
-    if still_publishing {
-        "; still publishing when the launch ended"
-    } else {
-        ""
     }
 }

@@ -12,5 +12,8 @@ pub fn flight_of(o: &LaunchOptions) -> TeamFlight {
         realtime_stale_after: o.realtime.as_ref().map(|rt| rt.stale_after),
         realtime_priority: o.realtime.as_ref().and_then(|rt| rt.rt_priority),
         repair: o.on_loss == cdm_engine::loss::OnLoss::Repair && o.spawn && o.realtime.is_none(),
+        recording: (o.realtime.as_ref())
+            .is_some_and(|rt| rt.record)
+            .then(|| o.out.join(cdm_recording::DIR)),
     }
 }

@@ -14,7 +14,6 @@ use cdm_engine::loss::{LossSchedule, LossState};
 use cdm_hosts::OtherHosts;
 use cdm_iox::{describe_spawn_error, raise_fd_limit, OrchestratorPorts, TeamLayout, TeamName};
 use cdm_math::vec3;
-use cdm_model::formation::Role;
 use cdm_model::outcome::FaultKind;
 use cdm_records::record::TickRecorder;
 use cdm_records::rundir::RunDir;
@@ -31,11 +30,11 @@ use crate::channel::{Answered, CommandAnswer, CommandChannel};
 use crate::feeds::Feeds;
 use crate::steer::{FlightAt, LiveSteer};
 
+use crate::launch_error::LaunchError;
 use cdm_team::team::{
     check_children, fault, first_exited_but, member_binaries_present, spawn_member, stop_team,
     Spawned, Stop,
 };
-use cdm_team::Failure;
 
 /// Options of a launch, validated.
 pub struct LaunchOptions {
@@ -114,19 +113,18 @@ struct Steer<'a> {
 }
 
 /// Run a launch to the end.
-pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
+pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, LaunchError> {
     // The stop signals are caught only from here on: until now nothing needs cleaning up, and a
     // wait in the preflight (a ROS 2 participant or zenoh session opening) ends at once on one.
     let mut live = preflight(s, o)?;
     let interrupted = cdm_process::signals::install();
-    let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.notices.clone())
-        .map_err(Failure::bad_input)?;
+    let hosts = cdm_hosts::HostPlan::new(s, &o.hosts, &o.team, o.notices.clone())?;
     let layout = team_layout(s, o, &hosts)?;
-    let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(Failure::bad_input)?;
+    let mut ports = OrchestratorPorts::create(&o.team, &layout).map_err(LaunchError::Ports)?;
     let others = hosts.start_bridge(s, &o.team, crate::flight::flight_of(o))?;
     // Only now, with the team name ours, touch the run directory: a refused second launch of a
     // running team writes nothing (not even into the first one's --out).
-    let dir = RunDir::create(&o.out, o.force).map_err(Failure::from)?;
+    let dir = RunDir::create(&o.out, o.force).map_err(LaunchError::RunDir)?;
     let member_file = write_inputs(&dir, s, o)?;
     // Humans start members with scenario.toml; spawned members read the JSON copy (same hash).
     let scenario_file = dir.path().join("scenario.toml");
@@ -182,7 +180,7 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
         l.host = others.host_of(l.id);
     }
     others.finish(&dir, report.ticks);
-    dir.write_audit(&report).map_err(Failure::fault)?;
+    dir.write_audit(&report).map_err(LaunchError::Write)?;
     live.finish(&report, &*o.notices);
     Ok(Launched {
         report,
@@ -196,12 +194,10 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, Failure> {
 /// The channel `orchestrator command` reaches the team by, when it takes commands in flight:
 /// in lockstep with model vehicles (as `--commands`), on one host or several: a command's
 /// notice rides the clock's message, which the link carries whole to the other hosts' members.
-fn command_channel(o: &LaunchOptions) -> Result<Option<CommandChannel>, Failure> {
+fn command_channel(o: &LaunchOptions) -> Result<Option<CommandChannel>, LaunchError> {
     let takes = o.realtime.is_none() && o.vehicles == cdm_member::vehicles::Vehicles::Model;
     match takes {
-        true => CommandChannel::open(&o.team)
-            .map(Some)
-            .map_err(Failure::fault),
+        true => Ok(Some(CommandChannel::open(&o.team)?)),
         false => Ok(None),
     }
 }
@@ -218,18 +214,18 @@ fn log_stale(ports: &OrchestratorPorts, team: &TeamName) {
 
 /// The run's inputs: commands.json (`--commands`), scenario.toml, and the members' JSON copy
 /// (its path returned).
-fn write_inputs(dir: &RunDir, s: &Scenario, o: &LaunchOptions) -> Result<PathBuf, Failure> {
+fn write_inputs(dir: &RunDir, s: &Scenario, o: &LaunchOptions) -> Result<PathBuf, LaunchError> {
     if let Some(c) = &o.commands {
-        crate::steer::write_commands(dir, &c.records).map_err(Failure::fault)?;
+        crate::steer::write_commands(dir, &c.records)?;
     }
-    dir.write_scenario(s).map_err(Failure::fault)?;
-    dir.write_member_scenario(s).map_err(Failure::fault)
+    dir.write_scenario(s).map_err(LaunchError::Write)?;
+    dir.write_member_scenario(s).map_err(LaunchError::Write)
 }
 
 /// Before anything is created: the member binaries are there, the real-time scheduling asked
 /// for is granted, the live feeds (`--serve`, `--ros2`) are started, the file-descriptor limit
 /// is raised.
-fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Feeds, Failure> {
+fn preflight(s: &Scenario, o: &LaunchOptions) -> Result<Feeds, LaunchError> {
     if o.spawn {
         member_binaries_present()?;
     }
@@ -255,7 +251,7 @@ fn team_layout(
     s: &Scenario,
     o: &LaunchOptions,
     hosts: &cdm_hosts::HostPlan,
-) -> Result<TeamLayout, Failure> {
+) -> Result<TeamLayout, LaunchError> {
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let ins: BTreeMap<u32, Vec<u32>> = s
         .formation
@@ -268,7 +264,7 @@ fn team_layout(
     let delay = u32::try_from(s.link_model().max_ticks()).unwrap_or(u32::MAX);
     let buffers = o.window.saturating_add(delay);
     let mut layout = TeamLayout::new(ids.clone(), ins, buffers)
-        .map_err(Failure::fault)?
+        .map_err(LaunchError::Layout)?
         .with_scenario_hash(s.content_hash());
     if o.on_loss == cdm_engine::loss::OnLoss::Repair {
         let room = cdm_team::loss::repair_room(s, buffers);
@@ -300,7 +296,7 @@ fn start_members(
     ports: &mut OrchestratorPorts,
     (member_file, scenario_file): (&std::path::Path, &std::path::Path),
     runs_here: impl Fn(u32) -> bool,
-) -> Result<Vec<Spawned>, Failure> {
+) -> Result<Vec<Spawned>, LaunchError> {
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let mut children = Vec::new();
     let record = crate::realtime::recording_flags(o, dir)?;
@@ -322,40 +318,43 @@ fn start_members(
                 }
                 Err(e) => {
                     stop_team(ports, &mut children, s, StopReason::AgentFault);
-                    let what = format!("cannot start agent {}: {}", m.id, describe_spawn_error(&e));
+                    let error = LaunchError::Spawn {
+                        id: m.id,
+                        what: describe_spawn_error(&e),
+                    };
                     let mut audit = Auditor::new(s);
                     audit.fault(fault(
                         FaultKind::SpawnFailed,
                         Some(m.id),
                         None,
                         0,
-                        what.clone(),
+                        error.to_string(),
                     ));
                     let _ = dir.write_audit(&audit.finish(false));
-                    return Err(Failure::fault(what));
+                    return Err(error);
                 }
             }
         }
     } else {
         // Hand-started members are told every flag a spawned one gets, `--record` among them.
-        let flags: String = (crate::realtime::member_flags(o).iter())
-            .chain(&record)
-            .chain(&o.vehicles.member_args())
-            .map(|f| format!(" {f}"))
-            .collect();
-        o.notices.notice(&format_args!(
-            "team {} waits for {} processes; start each with:\n  leader --scenario {} --team {} --id ID{}   (ids {:?})\n  agent  --scenario {} --team {} --id ID{}   (ids {:?})",
-            o.team,
-            ids.len(),
-            scenario_file.display(),
-            o.team,
+        let mut flags = crate::realtime::member_flags(o);
+        flags.extend(record);
+        flags.extend(o.vehicles.member_args());
+        let of = |leader: bool| -> Vec<u32> {
+            let members = s.formation.members.iter();
+            members
+                .filter(|m| m.role.is_leader() == leader)
+                .map(|m| m.id)
+                .collect()
+        };
+        o.notices.notice(&crate::notice::LaunchNotice::StartByHand {
+            team: o.team.to_string(),
+            members: ids.len(),
+            scenario: scenario_file.to_path_buf(),
             flags,
-            s.formation.members.iter().filter(|m| m.role.is_leader()).map(|m| m.id).collect::<Vec<_>>(),
-            scenario_file.display(),
-            o.team,
-            flags,
-            s.formation.members.iter().filter(|m| m.role == Role::Follower).map(|m| m.id).collect::<Vec<_>>(),
-        ));
+            leaders: of(true),
+            followers: of(false),
+        });
     }
     Ok(children)
 }
@@ -701,7 +700,7 @@ impl LockstepIo<'_, '_> {
         let live = &mut *self.w.steer.live;
         let mut decided = None;
         channel.serve_one(|request| match request {
-            Err(why) => CommandAnswer::without_switch(Answered::BadInput, why),
+            Err(why) => CommandAnswer::without_switch(Answered::BadInput, why.to_string()),
             Ok(r) => {
                 let d = live.decide(r, at);
                 let answer = d.answer.clone();

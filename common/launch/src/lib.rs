@@ -7,6 +7,8 @@ pub mod feeds;
 pub mod flight;
 mod fly;
 pub mod launch;
+pub mod launch_error;
+pub mod notice;
 pub mod realtime;
 pub mod steer;
 pub mod team_arm;

@@ -33,9 +33,9 @@ use cdm_runtime::team_loss::TeamLosses;
 use cdm_scenario::Scenario;
 
 use crate::launch::LaunchOptions;
+use crate::launch_error::LaunchError;
 use crate::vehicle_reports::VehicleBook;
 use cdm_team::team::{fault, first_exited_but, Spawned, Stop};
-use cdm_team::Failure;
 
 /// Which members run on other hosts and may still send reports (`launch --hosts`: those whose
 /// daemon neither stopped nor was lost).
@@ -55,9 +55,9 @@ pub struct RealtimeOptions {
 /// `--rt-priority`: the orchestrator takes SCHED_FIFO itself before it creates or spawns
 /// anything (spawned members are also told with the flag, for hand-started ones), so a
 /// machine that does not allow it is refused up front with exit 2.
-pub fn schedule(o: &LaunchOptions) -> Result<(), Failure> {
+pub fn schedule(o: &LaunchOptions) -> Result<(), LaunchError> {
     match o.realtime.as_ref().and_then(|rt| rt.rt_priority) {
-        Some(p) => cdm_process::sched::fifo(p).map_err(Failure::bad_input),
+        Some(p) => Ok(cdm_process::sched::fifo(p)?),
         None => Ok(()),
     }
 }
@@ -99,7 +99,7 @@ pub fn member_flags(o: &LaunchOptions) -> Vec<String> {
 /// folder (created here, readable by this user only), where each member writes the neighbour
 /// states its ticks flew on (cdm-recording), so `replay` can fly the run again. None in
 /// lockstep, which replays without one.
-pub fn recording_flags(o: &LaunchOptions, dir: &RunDir) -> Result<Vec<String>, Failure> {
+pub fn recording_flags(o: &LaunchOptions, dir: &RunDir) -> Result<Vec<String>, LaunchError> {
     if !o.realtime.as_ref().is_some_and(|rt| rt.record) {
         return Ok(Vec::new());
     }
@@ -111,12 +111,9 @@ pub fn recording_flags(o: &LaunchOptions, dir: &RunDir) -> Result<Vec<String>, F
             std::io::ErrorKind::AlreadyExists if at.is_dir() => Ok(()),
             _ => Err(e),
         });
-    made.map_err(|e| {
-        Failure::fault(format!(
-            "{}: {}",
-            at.display(),
-            cdm_files::describe(&at, &e)
-        ))
+    made.map_err(|e| LaunchError::RecordingDir {
+        reason: cdm_files::describe(&at, &e),
+        path: at.clone(),
     })?;
     let at = at.canonicalize().unwrap_or(at);
     Ok(vec!["--record".into(), at.display().to_string()])
@@ -502,13 +499,13 @@ impl Monitor<'_, '_> {
         };
         let (r, records) = self.losses.repair(self.s, at, &[l.id], l.cause);
         let switched: Vec<u32> = r.retriangulated.iter().map(|x| x.id).collect();
-        self.notices.notice(&format_args!(
-            "agent {} lost ({}) after its tick {}: its readers {switched:?} fly the repaired graph from their tick {}",
-            l.id,
-            l.cause,
-            at.last_tick,
-            l.tick
-        ));
+        self.notices.notice(&crate::notice::LaunchNotice::Lost {
+            id: l.id,
+            cause: l.cause,
+            last_tick: at.last_tick,
+            readers: switched,
+            repair_tick: l.tick,
+        });
         self.lost.push((l.index, records));
     }
 

@@ -103,10 +103,9 @@ pub fn arm_team(
     }
     let hash = s.content_hash();
     let mut roll = ArmRoll::new(s.formation.members.iter().map(|m| m.id));
-    o.notices.notice(&format_args!(
-        "all {} vehicles ready: ordering OFFBOARD/GUIDED and arming",
-        roll.waiting().len()
-    ));
+    o.notices.notice(&crate::notice::LaunchNotice::Arming {
+        vehicles: roll.waiting().len(),
+    });
     ports.publish_clock(ClockMsg::arm(hash)).map_err(|e| {
         let f = fault(FaultKind::Transport, None, None, 0, e.to_string());
         (f, StopReason::AgentFault)

@@ -226,21 +226,25 @@ fn summary(run: &Run, link: &UdpLink, vehicle: &MavlinkVehicle, late: u64) -> se
 }
 
 /// How the run failed: the arguments (exit 2) or the vehicle link (exit 3).
-enum Failure {
+#[derive(Debug, thiserror::Error)]
+enum RunError {
+    #[error(transparent)]
     BadInput(anyhow::Error),
+    #[error(transparent)]
     Link(anyhow::Error),
 }
 
-fn run(args: &Args) -> Result<(), Failure> {
-    let run = validate(args).map_err(Failure::BadInput)?;
+fn run(args: &Args) -> Result<(), RunError> {
+    let run = validate(args).map_err(RunError::BadInput)?;
     let agent = run.config.agent;
-    let mut link = UdpLink::bind(agent, run.bind, None).map_err(|e| Failure::BadInput(e.into()))?;
+    let mut link =
+        UdpLink::bind(agent, run.bind, None).map_err(|e| RunError::BadInput(e.into()))?;
     let mut vehicle = MavlinkVehicle::new(run.config);
     let clock = Instant::now();
     eprintln!("agent {agent}: listening on {}", link.local_addr());
-    connect(&mut link, &mut vehicle, clock, run.period).map_err(Failure::Link)?;
+    connect(&mut link, &mut vehicle, clock, run.period).map_err(RunError::Link)?;
     eprintln!("agent {agent}: vehicle heard from {:?}", link.peer());
-    let late = stream(&run, &mut link, &mut vehicle, clock).map_err(Failure::Link)?;
+    let late = stream(&run, &mut link, &mut vehicle, clock).map_err(RunError::Link)?;
     println!("{}", summary(&run, &link, &vehicle, late));
     Ok(())
 }
@@ -248,11 +252,11 @@ fn run(args: &Args) -> Result<(), Failure> {
 fn main() -> ExitCode {
     match run(&Args::parse()) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(Failure::BadInput(e)) => {
+        Err(RunError::BadInput(e)) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)
         }
-        Err(Failure::Link(e)) => {
+        Err(RunError::Link(e)) => {
             eprintln!("error: {e:#}");
             ExitCode::from(3)
         }

@@ -36,7 +36,21 @@ pub enum KeyError {
         source: std::io::Error,
     },
     #[error("--mavlink-signing-key {}: {problem}", path.display())]
-    Invalid { path: PathBuf, problem: String },
+    Invalid { path: PathBuf, problem: KeyProblem },
+}
+
+/// What makes a key file's contents no key.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum KeyProblem {
+    #[error("not a regular file")]
+    NotAFile,
+    #[error("readable or writable by others (mode {mode:o}); the key commands the vehicles: chmod 600 it")]
+    Exposed { mode: u32 },
+    #[error("expected 64 hexadecimal digits (the 32-byte key) or the 32 bytes themselves, found {bytes} bytes")]
+    Length { bytes: usize },
+    /// An all-zero key means "signing off" to MAVLink (SETUP_SIGNING).
+    #[error("the key is all zeros, which MAVLink reads as signing disabled")]
+    Zero,
 }
 
 /// The largest key file read (a key line is 65 bytes).
@@ -45,7 +59,7 @@ const MAX_KEY_FILE_BYTES: u64 = 4096;
 impl SigningKey {
     /// The key of `path`: owner-only, 64 hex digits or 32 bytes.
     pub fn load(path: &Path) -> Result<Self, KeyError> {
-        let invalid = |problem: String| KeyError::Invalid {
+        let invalid = |problem: KeyProblem| KeyError::Invalid {
             path: path.to_path_buf(),
             problem,
         };
@@ -56,14 +70,11 @@ impl SigningKey {
         let file = std::fs::File::open(path).map_err(read)?;
         let meta = file.metadata().map_err(read)?;
         if !meta.is_file() {
-            return Err(invalid("not a regular file".into()));
+            return Err(invalid(KeyProblem::NotAFile));
         }
         let mode = meta.permissions().mode();
         if mode & 0o077 != 0 {
-            return Err(invalid(format!(
-                "readable or writable by others (mode {:o}); the key commands the vehicles: chmod 600 it",
-                mode & 0o777
-            )));
+            return Err(invalid(KeyProblem::Exposed { mode: mode & 0o777 }));
         }
         let mut bytes = Vec::new();
         file.take(MAX_KEY_FILE_BYTES)
@@ -80,7 +91,7 @@ impl SigningKey {
 }
 
 /// A key file's bytes: 64 hex digits (surrounding white space allowed) or exactly 32 bytes.
-fn parse_key(bytes: &[u8]) -> Result<[u8; 32], String> {
+fn parse_key(bytes: &[u8]) -> Result<[u8; 32], KeyProblem> {
     let text = std::str::from_utf8(bytes).map(str::trim);
     if let Ok(hex) = text {
         if hex.len() == 64 && hex.bytes().all(|b| b.is_ascii_hexdigit()) {
@@ -94,17 +105,14 @@ fn parse_key(bytes: &[u8]) -> Result<[u8; 32], String> {
     }
     match <[u8; 32]>::try_from(bytes) {
         Ok(key) => check_not_zero(key),
-        Err(_) => Err(format!(
-            "expected 64 hexadecimal digits (the 32-byte key) or the 32 bytes themselves, found {} bytes",
-            bytes.len()
-        )),
+        Err(_) => Err(KeyProblem::Length { bytes: bytes.len() }),
     }
 }
 
 /// An all-zero key means "signing off" to MAVLink (SETUP_SIGNING): refused as a key.
-fn check_not_zero(key: [u8; 32]) -> Result<[u8; 32], String> {
+fn check_not_zero(key: [u8; 32]) -> Result<[u8; 32], KeyProblem> {
     if key.iter().all(|&b| b == 0) {
-        return Err("the key is all zeros, which MAVLink reads as signing disabled".into());
+        return Err(KeyProblem::Zero);
     }
     Ok(key)
 }
@@ -120,13 +128,18 @@ mod tests {
         assert_eq!(key[1], 0x11);
         assert_eq!(key[31], 0xff);
         assert_eq!(parse_key(&key).unwrap(), key);
-        assert!(parse_key(b"abc").unwrap_err().contains("found 3 bytes"));
-        assert!(parse_key(&[0u8; 32]).unwrap_err().contains("all zeros"));
+        assert_eq!(parse_key(b"abc"), Err(KeyProblem::Length { bytes: 3 }));
+        assert!(parse_key(b"abc")
+            .unwrap_err()
+            .to_string()
+            .contains("found 3 bytes"));
+        assert_eq!(parse_key(&[0u8; 32]), Err(KeyProblem::Zero));
         let zeros = "0".repeat(64);
         assert!(parse_key(zeros.as_bytes()).is_err());
         let not_hex = "g".repeat(64);
         assert!(parse_key(not_hex.as_bytes())
             .unwrap_err()
+            .to_string()
             .contains("64 hexadecimal digits"));
     }
 

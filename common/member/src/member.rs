@@ -1,8 +1,9 @@
 //! One team member as a process: the member core (cdm-runtime, no I/O) flown over the iceoryx2
 //! ports by the generic loop. This file only loads the scenario, checks the binary flies this
-//! member's role, opens the ports and maps the outcome to an error with an exit code.
+//! member's role, opens the ports and maps the outcome to a typed error (the binary prints it
+//! and exits with its code).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
@@ -15,7 +16,7 @@ use cdm_runtime::realtime::{RealtimeCore, RealtimeSetup};
 use cdm_runtime::seams::{Clock, LockstepClock, ModelVehicle, MonotonicClock};
 
 use crate::member_vehicle::BeforeStart;
-use crate::options::LinkArgs;
+use crate::options::LinkOverrides;
 use crate::vehicles::Vehicles;
 use cdm_iox::{MemberPorts, TeamName};
 use cdm_model::dynamics::QuadState;
@@ -26,25 +27,30 @@ use cdm_scenario::{Checks, Scenario};
 pub use crate::member_error::MemberError;
 pub use cdm_runtime::member_core::{Deadlines, Finished, MemberFault};
 
+/// A member's default silence timeout, seconds (the orchestrator passes a longer one only when
+/// its own `--agent-timeout` asks for more patience).
+pub const DEFAULT_SILENCE_TIMEOUT_S: f64 = 10.0;
+
 /// Which binary is running: `leader` flies primary and secondary leaders, `agent` flies followers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Kind {
+pub enum Binary {
     Leader,
     Agent,
 }
 
-impl Kind {
+impl Binary {
     fn accepts(self, role: Role) -> bool {
         match self {
-            Kind::Leader => role.is_leader(),
-            Kind::Agent => role == Role::Follower,
+            Binary::Leader => role.is_leader(),
+            Binary::Agent => role == Role::Follower,
         }
     }
 
-    fn name(self) -> &'static str {
+    /// The binary's name (`leader`, `agent`).
+    pub fn name(self) -> &'static str {
         match self {
-            Kind::Leader => "leader",
-            Kind::Agent => "agent",
+            Binary::Leader => "leader",
+            Binary::Agent => "agent",
         }
     }
 }
@@ -69,28 +75,40 @@ pub struct Flight {
     pub record: Option<std::path::PathBuf>,
 }
 
+/// One member process, every value checked: which binary, the scenario file, the team and the
+/// member to fly, the links it flies over and how it flies.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MemberConfig {
+    pub binary: Binary,
+    pub scenario: PathBuf,
+    pub team: TeamName,
+    pub id: u32,
+    pub links: LinkOverrides,
+    pub flight: Flight,
+}
+
 /// Run one member until the orchestrator stops the team.
-pub fn run_member(
-    kind: Kind,
-    scenario_path: &Path,
-    team: &TeamName,
-    (id, link): (u32, &LinkArgs),
-    flight: &Flight,
-    interrupted: &AtomicBool,
-) -> Result<Finished, MemberError> {
+pub fn run(config: &MemberConfig, interrupted: &AtomicBool) -> Result<Finished, MemberError> {
+    let MemberConfig {
+        binary,
+        ref scenario,
+        ref team,
+        id,
+        links,
+        ref flight,
+    } = *config;
     let Flight {
         deadlines,
         mode,
         ref vehicles,
         ref record,
     } = *flight;
-    let s = Scenario::load(scenario_path, Checks::Member)?;
-    let s = link.apply(&s)?;
-    if let Some(why) = match mode {
-        Mode::Realtime { stale_after } => crate::options::realtime_links_refusal(&s, stale_after),
-        Mode::Lockstep => None,
-    } {
-        return Err(MemberError::Link(why));
+    let s = Scenario::load(scenario, Checks::Member)?;
+    let s = links.apply(&s)?;
+    if let Mode::Realtime { stale_after } = mode {
+        if let Some(refusal) = crate::options::realtime_links_refusal(&s, stale_after) {
+            return Err(MemberError::StaleLinks(refusal));
+        }
     }
     let Some(me) = s.formation.member(id).cloned() else {
         return Err(MemberError::NotInScenario {
@@ -98,12 +116,12 @@ pub fn run_member(
             origin: s.origin.clone(),
         });
     };
-    if !kind.accepts(me.role) {
+    if !binary.accepts(me.role) {
         return Err(MemberError::WrongRole {
             id,
             role: me.role.as_str(),
-            binary: kind.name(),
-            flies: if kind == Kind::Leader {
+            binary: binary.name(),
+            flies: if binary == Binary::Leader {
                 "primary and secondary leaders"
             } else {
                 "followers"
@@ -226,7 +244,7 @@ impl Joined<'_> {
         let path = dir.join(cdm_recording::file_name(me.id));
         let leader = !cdm_runtime::member_core::subscriptions(me).is_empty();
         cdm_recording::McapJournal::create(&path, (me.id, !leader), s.content_hash(), s.dt_s())
-            .map_err(|e| MemberError::Recording(e.to_string()))
+            .map_err(MemberError::Recording)
     }
 }
 

@@ -13,20 +13,44 @@ use cdm_runtime::member_loop::LoopError;
 use cdm_runtime::member_loss::LossFault;
 use cdm_scenario::ScenarioError;
 
+use crate::vehicle_origins::OriginsError;
+
+/// Why the MAVLink options do not fit the scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    #[error(transparent)]
+    Origins(#[from] OriginsError),
+    /// `--disarm-at-end` on a scenario that does not end on the ground.
+    #[error("--disarm-at-end: the scenario has no [landing] (the vehicles would be disarmed in the air)")]
+    DisarmWithoutLanding,
+    /// `--vehicle-origin(s)` on a scenario with an `[origin]`, whose vehicles fly in global
+    /// coordinates and have no use for a local origin.
+    #[error("--vehicle-origin and --vehicle-origins are for local NED; the scenario has an [origin], so its vehicles fly latitude and longitude (leave them out)")]
+    LocalOriginOutdoors,
+    /// `--upload-fence` without an `[origin]`: fence items are latitudes and longitudes.
+    #[error("--upload-fence: the scenario has no [origin] (a vehicle's fence is in latitude and longitude)")]
+    FenceWithoutOrigin,
+    /// `--upload-fence` with nothing to upload.
+    #[error(
+        "--upload-fence: the scenario has no [geofence] and no [[obstacle]] (nothing to upload)"
+    )]
+    NoFence,
+}
+
 /// Why a member stopped without finishing.
 #[derive(Debug, thiserror::Error)]
 pub enum MemberError {
     #[error(transparent)]
     Scenario(#[from] ScenarioError),
-    /// A bad `--link-*` or `--seed` value (the message names the flag).
-    #[error("{0}")]
-    Link(String),
+    /// Links too slow for real time (names the delay and the stale bound).
+    #[error(transparent)]
+    StaleLinks(crate::options::StaleLinks),
     /// `--record DIR`: the recording cannot be created (names the file).
     #[error("--record: {0}")]
-    Recording(String),
+    Recording(cdm_recording::WriterError),
     /// A bad `--link-*` or `--seed` value, or a `[link]` table the scenario refuses.
     #[error(transparent)]
-    LinkArgs(#[from] crate::options::LinkArgsError),
+    LinkOverrides(#[from] crate::options::LinkOverrideError),
     #[error("agent {id} is not in scenario {origin}")]
     NotInScenario { id: u32, origin: String },
     #[error("agent {id} is a {role} in {origin}; the `{binary}` binary flies {flies}")]
@@ -48,10 +72,10 @@ pub enum MemberError {
     Landing(#[from] cdm_mavlink::plant::DisarmError),
     /// A bad `--vehicle-origins` file (names the file, the line and the member).
     #[error(transparent)]
-    VehicleOrigins(#[from] crate::vehicle_origins::OriginsError),
+    VehicleOrigins(#[from] OriginsError),
     /// MAVLink options that do not fit the scenario (`--disarm-at-end` without a landing).
     #[error(transparent)]
-    VehicleCheck(#[from] crate::vehicles::CheckError),
+    VehicleCheck(#[from] CheckError),
     /// Waiting for the team's arm order failed (the vehicle, the orchestrator, a mismatch).
     #[error(transparent)]
     TeamArm(#[from] TeamArmError<TransportError>),
@@ -104,9 +128,9 @@ impl MemberError {
     pub fn exit_code(&self) -> i32 {
         match self {
             MemberError::Scenario(_)
-            | MemberError::Link(_)
+            | MemberError::StaleLinks(_)
             | MemberError::Recording(_)
-            | MemberError::LinkArgs(_)
+            | MemberError::LinkOverrides(_)
             | MemberError::NotInScenario { .. }
             | MemberError::WrongRole { .. }
             | MemberError::ModeMismatch { .. } => 2,

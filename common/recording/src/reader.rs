@@ -74,18 +74,18 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
             (None, MEMBER_TOPIC) => {
                 let h: Header = serde_json::from_slice(&msg.data)
                     .map_err(|e| bad(path, record, format!("not a recording's header: {e}")))?;
-                check_header(&h, id, hash).map_err(|why| bad(path, record, why))?;
+                check_header(&h, id, hash).map_err(|why| bad(path, record, why.to_string()))?;
                 header = Some(h);
             }
             (Some(_), AGES_TOPIC) => {
                 let a: Ages = serde_json::from_slice(&msg.data)
                     .map_err(|e| bad(path, record, format!("not a batch of ticks: {e}")))?;
-                append(&a, id, &mut parsed).map_err(|why| bad(path, record, why))?;
+                append(&a, id, &mut parsed).map_err(|why| bad(path, record, why.to_string()))?;
             }
             (Some(_), SWITCH_TOPIC) => {
                 let s: SwitchMsg = serde_json::from_slice(&msg.data)
                     .map_err(|e| bad(path, record, format!("not a switch: {e}")))?;
-                switched(&s, id, &mut parsed).map_err(|why| bad(path, record, why))?;
+                switched(&s, id, &mut parsed).map_err(|why| bad(path, record, why.to_string()))?;
             }
             _ => {
                 return Err(bad(
@@ -133,32 +133,70 @@ fn finish(
     })
 }
 
+/// What makes a record not one of this member's recording (the reason of
+/// [`RecordingError::Bad`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum BadRecord {
+    #[error("format {found:?}, expected {expected:?}", expected = FORMAT)]
+    Format { found: String },
+    #[error("the recording of agent {found}, not of agent {id}")]
+    OtherMember { found: u32, id: u32 },
+    #[error("of scenario {found}, not of this run's {want}")]
+    OtherScenario { found: String, want: String },
+    #[error("dt_s {0} is not a period")]
+    Period(f64),
+    #[error("ticks of agent {found}, not of agent {id}")]
+    OtherMembersTicks { found: u32, id: u32 },
+    #[error("starts at tick {found}, expected tick {next}")]
+    Start { found: u64, next: u64 },
+    #[error("{0} ticks in one batch")]
+    BatchSize(u64),
+    #[error("tick {tick} slot {slot}: age {age} is not in {lowest}..={tick}", lowest = 1 - MAX_AHEAD)]
+    Age { tick: u64, slot: usize, age: i64 },
+    #[error("tick {tick} slot {slot}: flew on {now:?}, older than the {before:?} before")]
+    Older {
+        tick: u64,
+        slot: usize,
+        now: Option<u64>,
+        before: Option<u64>,
+    },
+    #[error("{ages} ages for {ticks} ticks (three per tick, or none for a leader)")]
+    AgeCount { ages: u64, ticks: u64 },
+    #[error("a switch of agent {found}, not of agent {id}")]
+    OtherMembersSwitch { found: u32, id: u32 },
+    #[error("a switch at tick {tick}, written after tick {flown} was flown")]
+    SwitchAfterItsTick { tick: u64, flown: u64 },
+    #[error("a switch at tick {tick}, after one at tick {before}")]
+    SwitchOutOfOrder { tick: u64, before: u64 },
+    #[error("the repaired link of tick {at} applied at tick {tick}, before it")]
+    RepairBeforeItsTick { at: u64, tick: u64 },
+}
+
 /// Takes a switch: written before the ticks flown on it, after those of the switches before.
-fn switched(s: &SwitchMsg, id: u32, read: &mut Parsed) -> Result<(), String> {
+fn switched(s: &SwitchMsg, id: u32, read: &mut Parsed) -> Result<(), BadRecord> {
     if s.member != id {
-        return Err(format!("a switch of agent {}, not of agent {id}", s.member));
+        return Err(BadRecord::OtherMembersSwitch {
+            found: s.member,
+            id,
+        });
     }
     let sw = s.switch();
     let flown = read.used.len() as u64;
     if sw.tick < flown {
-        return Err(format!(
-            "a switch at tick {}, written after tick {} was flown",
-            sw.tick,
-            flown - 1
-        ));
+        return Err(BadRecord::SwitchAfterItsTick {
+            tick: sw.tick,
+            flown: flown - 1,
+        });
     }
     if let Some(before) = read.switches.last().filter(|b| b.tick > sw.tick) {
-        return Err(format!(
-            "a switch at tick {}, after one at tick {}",
-            sw.tick, before.tick
-        ));
+        return Err(BadRecord::SwitchOutOfOrder {
+            tick: sw.tick,
+            before: before.tick,
+        });
     }
     if let Switched::Repair { at, .. } = sw.what {
         if at > sw.tick {
-            return Err(format!(
-                "the repaired link of tick {at} applied at tick {}, before it",
-                sw.tick
-            ));
+            return Err(BadRecord::RepairBeforeItsTick { at, tick: sw.tick });
         }
     }
     read.switches.push(sw);
@@ -172,41 +210,49 @@ fn relinked_at(switches: &[Switch], tick: u64) -> bool {
         .any(|s| s.tick == tick && matches!(s.what, Switched::Repair { .. }))
 }
 
-fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), String> {
+fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), BadRecord> {
     if h.format != FORMAT {
-        return Err(format!("format {:?}, expected {FORMAT:?}", h.format));
+        return Err(BadRecord::Format {
+            found: h.format.clone(),
+        });
     }
     if h.member != id {
-        return Err(format!(
-            "the recording of agent {}, not of agent {id}",
-            h.member
-        ));
+        return Err(BadRecord::OtherMember {
+            found: h.member,
+            id,
+        });
     }
     let want = RunRecord::hash_text(hash);
     if h.scenario_hash != want {
-        return Err(format!(
-            "of scenario {}, not of this run's {want}",
-            h.scenario_hash
-        ));
+        return Err(BadRecord::OtherScenario {
+            found: h.scenario_hash.clone(),
+            want,
+        });
     }
     if !(h.dt_s.is_finite() && h.dt_s > 0.0) {
-        return Err(format!("dt_s {} is not a period", h.dt_s));
+        return Err(BadRecord::Period(h.dt_s));
     }
     Ok(())
 }
 
 /// Appends a batch's ticks to `read.used` (which holds every tick before it).
-fn append(a: &Ages, id: u32, read: &mut Parsed) -> Result<(), String> {
+fn append(a: &Ages, id: u32, read: &mut Parsed) -> Result<(), BadRecord> {
     let (used, switches) = (&mut read.used, &read.switches);
     if a.member != id {
-        return Err(format!("ticks of agent {}, not of agent {id}", a.member));
+        return Err(BadRecord::OtherMembersTicks {
+            found: a.member,
+            id,
+        });
     }
     let next = used.len() as u64;
     if a.tick != next {
-        return Err(format!("starts at tick {}, expected tick {next}", a.tick));
+        return Err(BadRecord::Start {
+            found: a.tick,
+            next,
+        });
     }
     if a.ticks == 0 || a.ticks > 1 << 20 {
-        return Err(format!("{} ticks in one batch", a.ticks));
+        return Err(BadRecord::BatchSize(a.ticks));
     }
     match a.age.len() as u64 {
         0 => used.extend((0..a.ticks).map(|_| [None; 3])),
@@ -222,32 +268,29 @@ fn append(a: &Ages, id: u32, read: &mut Parsed) -> Result<(), String> {
                         Some(age) if age <= tick as i64 && age > -MAX_AHEAD => {
                             Some((tick as i64 - age) as u64)
                         }
-                        Some(age) => {
-                            return Err(format!(
-                                "tick {tick} slot {slot}: age {age} is not in {}..={tick}",
-                                1 - MAX_AHEAD
-                            ))
-                        }
+                        Some(age) => return Err(BadRecord::Age { tick, slot, age }),
                     };
                 }
                 // A slot keeps the newest state heard: it never flies on an older one (unless
                 // a repaired link gave it another neighbour).
                 if let Some(before) = used.last().filter(|_| !relinked_at(switches, tick)) {
                     if let Some(slot) = (0..3).find(|&k| u[k] < before[k]) {
-                        return Err(format!(
-                            "tick {tick} slot {slot}: flew on {:?}, older than the {:?} before",
-                            u[slot], before[slot]
-                        ));
+                        return Err(BadRecord::Older {
+                            tick,
+                            slot,
+                            now: u[slot],
+                            before: before[slot],
+                        });
                     }
                 }
                 used.push(u);
             }
         }
-        n => {
-            return Err(format!(
-                "{n} ages for {} ticks (three per tick, or none for a leader)",
-                a.ticks
-            ))
+        ages => {
+            return Err(BadRecord::AgeCount {
+                ages,
+                ticks: a.ticks,
+            })
         }
     }
     Ok(())

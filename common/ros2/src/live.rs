@@ -3,7 +3,7 @@
 //! messages (cdm-rosbag `Team::messages`, the same bytes) and publishes them. The loop never
 //! waits: a full queue drops the tick and counts it.
 
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -61,6 +61,8 @@ pub struct Live {
     pacer: Pacer,
     last_tick: u64,
     tx: Option<SyncSender<Snapshot>>,
+    /// Commands decided in flight, for the thread (never dropped: a few per flight).
+    commands: Option<Sender<CommandSummary>>,
     worker: Option<JoinHandle<Published>>,
     dropped: u64,
 }
@@ -73,8 +75,10 @@ impl Live {
         Self::start_commanded(o, scenario, Vec::new())
     }
 
-    /// [`Live::start`] for a commanded run: each command also goes out on `/cdm/commands`
-    /// with the first published tick at or after its switch (as the bag carries it).
+    /// [`Live::start`] for a team that takes commands: each command (the run's, and those
+    /// given in flight through [`Live::command`]) goes out on `/cdm/commands` with the first
+    /// published tick at or after its switch (as the bag carries it); the topic exists from
+    /// the start.
     pub fn start_commanded(
         o: &Ros2Options,
         scenario: &Scenario,
@@ -83,6 +87,7 @@ impl Live {
         let env = Env::of_process()?;
         let team =
             Team::new(scenario, Limits::from(&SafetyNumbers::of(scenario))).with_commands(commands);
+        let team = team.commandable();
         let out = open(o.backend, &env, &team)?;
         tracing::info!(backend = %o.backend, domain = env.domain, hz = o.hz, "live ROS 2 topics");
         Live::over(out, o, scenario, team)
@@ -96,15 +101,17 @@ impl Live {
         team: Team,
     ) -> Result<Self, Ros2Error> {
         let (tx, rx) = sync_channel(QUEUE);
+        let (commands, decided) = channel();
         let worker = std::thread::Builder::new()
             .name("ros2".into())
-            .spawn(move || publish_all(&team, out, rx))
+            .spawn(move || publish_all(team, out, rx, decided))
             .map_err(Ros2Error::Thread)?;
         Ok(Live {
             backend: o.backend,
             pacer: Pacer::new(o.hz),
             last_tick: scenario.last_tick(),
             tx: Some(tx),
+            commands: Some(commands),
             worker: Some(worker),
             dropped: 0,
         })
@@ -139,10 +146,19 @@ impl Live {
         }
     }
 
+    /// A command decided in flight (`orchestrator command`): it goes out on `/cdm/commands`
+    /// with the first published tick at or after its switch. Never waits.
+    pub fn command(&mut self, c: &CommandSummary) {
+        if let Some(tx) = &self.commands {
+            let _ = tx.send(c.clone());
+        }
+    }
+
     /// Lets the thread publish what is queued and close the middleware (waiting at most a few
     /// seconds), and says what was published.
     pub fn finish(mut self) -> Summary {
         drop(self.tx.take());
+        drop(self.commands.take());
         let until = Instant::now() + FINISH_WITHIN;
         let worker = self.worker.take();
         while worker.as_ref().is_some_and(|w| !w.is_finished()) && Instant::now() < until {
@@ -180,7 +196,12 @@ fn open(backend: Backend, env: &Env, team: &Team) -> Result<Box<dyn Publish + Se
 }
 
 /// The thread: every queued tick to its messages, each to its topic, until the launch lets go.
-fn publish_all(team: &Team, mut out: Box<dyn Publish + Send>, rx: Receiver<Snapshot>) -> Published {
+fn publish_all(
+    mut team: Team,
+    mut out: Box<dyn Publish + Send>,
+    rx: Receiver<Snapshot>,
+    decided: Receiver<CommandSummary>,
+) -> Published {
     let members = team.ids().len();
     let mut done = Published::default();
     let mut messages = Vec::new();
@@ -195,6 +216,10 @@ fn publish_all(team: &Team, mut out: Box<dyn Publish + Send>, rx: Receiver<Snaps
             alive: &s.alive,
         };
         team.messages(&tick, &mut messages);
+        // A command is decided before any tick at or after its switch is audited.
+        for c in decided.try_iter() {
+            team.add_command(c);
+        }
         team.command_messages(shown, &tick, &mut messages);
         shown = Some(s.tick);
         for m in &messages {
@@ -243,6 +268,12 @@ mod tests {
     fn live(gate: Option<Receiver<()>>) -> (Scenario, Live, Seen) {
         let s = Scenario::generated(6).unwrap();
         let team = Team::new(&s, Limits::from(&SafetyNumbers::of(&s)));
+        let (live, seen) = recorded(&s, team, gate, 30.0);
+        (s, live, seen)
+    }
+
+    /// The live topics of `team` at `hz`, into a recorder (held at `gate` when given).
+    fn recorded(s: &Scenario, team: Team, gate: Option<Receiver<()>>, hz: f64) -> (Live, Seen) {
         let seen = Arc::new(Mutex::new(Vec::new()));
         let out = Box::new(Recorder {
             seen: seen.clone(),
@@ -250,9 +281,9 @@ mod tests {
         });
         let o = Ros2Options {
             backend: Backend::Dds,
-            hz: 30.0,
+            hz,
         };
-        (s.clone(), Live::over(out, &o, &s, team).unwrap(), seen)
+        (Live::over(out, &o, s, team).unwrap(), seen)
     }
 
     #[test]
@@ -297,16 +328,7 @@ mod tests {
         let team = Team::new(&s, Limits::from(&SafetyNumbers::of(&s))).with_commands(vec![goto]);
         let commands = team.topics().len() - 1;
         assert_eq!(team.topics()[commands].1, "/cdm/commands");
-        let seen = Arc::new(Mutex::new(Vec::new()));
-        let out = Box::new(Recorder {
-            seen: seen.clone(),
-            gate: None,
-        });
-        let o = Ros2Options {
-            backend: Backend::Dds,
-            hz: 30.0,
-        };
-        let mut live = Live::over(out, &o, &s, team).unwrap();
+        let (mut live, seen) = recorded(&s, team, None, 30.0);
         let n = s.formation.members.len();
         let pos = vec![Vec3::zeros(); n];
         // At 30 Hz of wall time the first tick goes out, the next two (the switch's among them)
@@ -325,6 +347,43 @@ mod tests {
         assert!(
             text.contains(r#""tick":5"#) && text.contains("too quick"),
             "{text}"
+        );
+    }
+
+    /// A command decided in flight goes out like one known from the start: once, with the
+    /// first published tick at or after its switch; the topic exists before it comes.
+    #[test]
+    fn a_command_given_in_flight_goes_out_once_after_its_switch() {
+        let s = Scenario::generated(6).unwrap();
+        let team = Team::new(&s, Limits::from(&SafetyNumbers::of(&s))).commandable();
+        let commands = team.topics().len() - 1;
+        assert_eq!(team.topics()[commands].1, "/cdm/commands");
+        let (mut live, seen) = recorded(&s, team, None, 1000.0);
+        let n = s.formation.members.len();
+        let pos = vec![Vec3::zeros(); n];
+        live.tick(0, 0.0, (&pos, &pos), |_| true);
+        live.command(&CommandSummary {
+            command: "hold".into(),
+            arrived_s: 0.01,
+            switch_tick: 4,
+            verdict: None,
+            accepted: true,
+            why: None,
+        });
+        for k in [2, 4, 6] {
+            std::thread::sleep(Duration::from_millis(2)); // past the rate's period
+            live.tick(k, k as f64 * 0.01, (&pos, &pos), |_| true);
+        }
+        assert_eq!(live.finish().ticks, 4);
+        let seen = seen.lock().unwrap();
+        let on_commands: Vec<String> = (seen.iter())
+            .filter(|(i, _)| *i == commands)
+            .map(|(_, b)| String::from_utf8_lossy(b).into_owned())
+            .collect();
+        assert_eq!(on_commands.len(), 1, "{on_commands:?}");
+        assert!(
+            on_commands[0].contains(r#""tick":4"#) && on_commands[0].contains("hold"),
+            "{on_commands:?}"
         );
     }
 

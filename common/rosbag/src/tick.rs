@@ -91,6 +91,9 @@ pub struct Team {
     airspace: Vec<Solid>,
     /// The run's commands (`commands.json`), in switch tick order; none for a run without.
     commands: Vec<CommandSummary>,
+    /// `/cdm/commands` is a topic even before any command: a live team may be commanded in
+    /// flight ([`Team::add_command`]).
+    commandable: bool,
 }
 
 /// A static marker of the airspace: the geofence's edges or one obstacle.
@@ -179,7 +182,24 @@ impl Team {
             airspace: airspace(scenario, 0.5 * limits.eps_m),
             limits,
             commands: Vec::new(),
+            commandable: false,
         }
+    }
+
+    /// The same team, with a `/cdm/commands` topic whether or not a command ever comes: the
+    /// live topics of a team that takes commands in flight.
+    pub fn commandable(mut self) -> Self {
+        self.commandable = true;
+        self
+    }
+
+    /// A command decided in flight: it goes out on `/cdm/commands` with the first shown tick
+    /// at or after its switch, as a command known from the start does.
+    pub fn add_command(&mut self, c: CommandSummary) {
+        let at = self
+            .commands
+            .partition_point(|k| k.switch_tick <= c.switch_tick);
+        self.commands.insert(at, c);
     }
 
     /// The same team with the run's commands: a `/cdm/commands` topic carries each, as the
@@ -247,7 +267,7 @@ impl Team {
                 (Topic::Audit, "/cdm/audit".to_owned(), MsgType::String),
             ])
             .chain(
-                (!self.commands.is_empty())
+                (self.commandable || !self.commands.is_empty())
                     .then(|| (Topic::Commands, "/cdm/commands".to_owned(), MsgType::String)),
             )
             .collect()

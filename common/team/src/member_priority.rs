@@ -42,7 +42,7 @@ pub fn lower(child: &Child) {
 /// and the orchestrator still notices a silent member first.
 pub fn lockstep_flags(agent_timeout: std::time::Duration) -> Vec<String> {
     let silence_s = 2.0 * agent_timeout.as_secs_f64();
-    if silence_s > cdm_member::member_cli::DEFAULT_SILENCE_TIMEOUT_S {
+    if silence_s > cdm_member::member::DEFAULT_SILENCE_TIMEOUT_S {
         vec!["--silence-timeout".into(), silence_s.to_string()]
     } else {
         Vec::new()

@@ -66,7 +66,7 @@ pub enum MemberBinaryError {
 }
 
 impl From<MemberBinaryError> for Failure {
-    /// A launch (still a library returning [`Failure`]) passes it on with `?`.
+    /// The host daemon (still a library returning [`Failure`]) passes it on with `?`.
     fn from(e: MemberBinaryError) -> Self {
         match e {
             MemberBinaryError::Locate(_) => Failure::fault(e),

@@ -17,7 +17,7 @@ use cdm_scenario::{Checks, Scenario};
 use cdm_report::data::{read_audit, read_timeline, stream_ticks, ReadError};
 use scene::{frame_stride, CommandMark, Scene, ShownTickMaker};
 
-pub use serve::serve_page;
+pub use serve::{serve_page, ServeError};
 
 /// Size budget of replay.html: telemetry is decimated to stay within it (N = 1000 included).
 pub const REPLAY_BUDGET_BYTES: usize = 20 << 20;

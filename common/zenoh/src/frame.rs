@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a frame changes shape: a daemon of another version is refused by name.
-pub const PROTOCOL_VERSION: u32 = 7;
+pub const PROTOCOL_VERSION: u32 = 8;
 
 /// Orchestrator -> daemon.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -79,6 +79,14 @@ pub enum Up {
     /// Links (reader, writer) a repair opened, whose reader runs on this host, now connected
     /// on its shared memory.
     Linked(Vec<(u32, u32)>),
+    /// Part of member `id`'s real-time recording (its `<id>.mcap`), read on the host after its
+    /// members stopped and sent before [`Up::Stopped`], in order: the bytes go at `offset` of
+    /// the run directory's copy, so a recording of any size crosses in bounded frames.
+    Recording {
+        id: u32,
+        offset: u64,
+        bytes: Vec<u8>,
+    },
 }
 
 /// A daemon asks to join. Every field it gives must match the team's.
@@ -119,6 +127,9 @@ pub struct Assignment {
     /// `--on-loss repair`: the host's services keep room for repairs, and a member that exits
     /// is lost and repaired around rather than a fault.
     pub repair: bool,
+    /// Real time with recording on (the default; `--no-recording` off): the members record
+    /// the states their ticks flew on, and the daemon sends the recordings up at the end.
+    pub record: bool,
 }
 
 /// The orchestrator's answer to a [`JoinRequest`].

@@ -31,6 +31,7 @@ pub(super) fn assignment(ctx: &Ctx, host: u32) -> Assignment {
         realtime_stale_after_s: ctx.flight.realtime_stale_after.map(|d| d.as_secs_f64()),
         realtime_priority: ctx.flight.realtime_priority,
         repair: ctx.flight.repair,
+        record: ctx.flight.recording.is_some(),
     }
 }
 
