@@ -233,13 +233,19 @@ recording_section() {
     [ "$rec" = on ] || flags=(--no-recording)
     "$bin/orchestrator" launch --n "$n" --t-total 60 --max-ticks $((rs * 100)) --realtime \
       "${flags[@]}" --no-figures --quiet --out "$out/rec$n" >/dev/null 2>&1 || true
-    local rbytes="-" tbytes replay="-" sim="-"
+    local rbytes="-" tbytes replay="-" sim="-" rc=0
     tbytes=$(stat -c %s "$out/rec$n/telemetry.csv")
     if [ "$rec" = on ]; then
       rbytes=$(du -cb "$out/rec$n"/recording/*.mcap | tail -1 | cut -f1)
-      replay=$(secs "$bin/orchestrator" replay "$out/rec$n" --out "$out/rep$n" --no-figures | cut -d' ' -f1)
-      cmp -s "$out/rec$n/telemetry.csv" "$out/rep$n/telemetry.csv" && replay="$replay (yes)" || replay="$replay (no)"
-      sim=$(secs "$bin/orchestrator" simulate --n "$n" --t-total 60 --max-ticks $((rs * 100)) --no-figures --quiet --out "$out/sim$n" | cut -d' ' -f1)
+      # A replay exits with the run's outcome (1 a violation, 3 a fault: a member stale on a
+      # loaded machine at N = 250) or 3 when it differs: a row either way, with the exit code,
+      # never the end of the section (set -e).
+      replay=$(secs "$bin/orchestrator" replay "$out/rec$n" --out "$out/rep$n" --no-figures | cut -d' ' -f1) || rc=$?
+      cmp -s "$out/rec$n/telemetry.csv" "$out/rep$n/telemetry.csv" && replay="$replay (yes" || replay="$replay (no"
+      [ "$rc" = 0 ] && replay="$replay)" || replay="$replay, exit $rc)"
+      rc=0
+      sim=$(secs "$bin/orchestrator" simulate --n "$n" --t-total 60 --max-ticks $((rs * 100)) --no-figures --quiet --out "$out/sim$n" | cut -d' ' -f1) || rc=$?
+      [ "$rc" = 0 ] || sim="$sim (exit $rc)"
     fi
     python3 - "$out/rec$n/audit.json" "$n" "$rec" "$rbytes" "$tbytes" "$rs" "$replay" "$sim" "$load_before" "$(cut -d' ' -f1 /proc/loadavg)" <<'PY'
 import json, sys

@@ -92,11 +92,13 @@ pub enum Command {
     /// 3 no such team, no answer in time, or no tick left.
     #[command(name = "command")]
     Steer(Box<crate::steer_cmd::SteerArgs>),
-    /// Fly a finished lockstep run (simulate or launch) again from its directory alone: its
-    /// scenario, options, commands and losses. Its telemetry and audit.json's safety figures
-    /// equal the run's byte for byte (checked: exit 3 when not). With --gains, --t-total or
-    /// --link-* the same history is flown with that change ("what if"). Exit 0 safe, 1
-    /// violation, 2 bad input (a tampered or foreign file: named, with its first bad record).
+    /// Fly a finished run (simulate, or launch in lockstep or real time) again from its
+    /// directory alone: its scenario, options, commands and losses (and a real-time run's
+    /// recordings). Its telemetry and audit.json's safety figures equal the run's byte for byte
+    /// (checked: exit 3 when not). With --gains, --t-total, --scenario or --link-* the same
+    /// history is flown with that change ("what if"). Exit 0 safe, 1 violation, 2 bad input (a
+    /// tampered or foreign file: named, with its first bad record), 3 a real-time recording cut
+    /// short.
     Replay(Box<ReplayArgs>),
     /// Replay a finished run in the browser: (re)writes RUN_DIR/replay.html, a self-contained
     /// page that works from file://; with --serve, also serves it until interrupted.
@@ -265,7 +267,12 @@ pub struct ReplayArgs {
     /// keep their ticks and times).
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub t_total: Option<f64>,
-    /// What if: other links (each flag overrides that key of the run's `[link]`).
+    /// What if: fly this scenario file instead of the run's: the same team (the same ids,
+    /// roles, graph and comm_hz) with another shape, gains, plan or airspace.
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
+    /// What if: other links (each flag overrides that key of the run's `[link]`; a real-time
+    /// run takes only --link-delay-ms: each neighbour state flown on is as much older or newer).
     #[command(flatten)]
     pub link: cdm_member_cli::LinkArgs,
     /// Do not draw the figures at the end of the replay.
@@ -279,6 +286,7 @@ impl ReplayArgs {
         let l = &self.link;
         self.gains.is_some()
             || self.t_total.is_some()
+            || self.scenario.is_some()
             || l.link_delay_ms.is_some()
             || l.link_jitter_ms.is_some()
             || l.link_loss.is_some()

@@ -142,7 +142,7 @@ fn simulate_command(
     };
     let report = fly_in_process(&s, &dir, flight)?;
     after_run(dir.path(), &report, run, quiet);
-    Ok(exit_of(&report))
+    Ok(crate::run_summary::exit_of(&report))
 }
 
 /// `orchestrator replay`: the run directory checked and flown again (changed or not), then
@@ -165,7 +165,7 @@ fn replay_command(a: &crate::cli::ReplayArgs, quiet: bool) -> Result<Exit, Failu
     let differs = crate::replay::compare(&a.run, p.dir.path(), p.format, quiet)?;
     after_run(p.dir.path(), &report, &p.run, quiet);
     crate::replay::outcome(a, p.what_if, differs)?;
-    Ok(exit_of(&report))
+    Ok(crate::run_summary::exit_of(&report))
 }
 
 /// A flight with the in-process engine: `simulate`, and `replay` with the run's options.
@@ -330,7 +330,7 @@ fn launch_command(a: LaunchArgs, quiet: bool) -> Result<Exit, Failure> {
         figures_after_run(&opts.out, &a.run, quiet);
         replay_after_run(&opts.out, quiet);
     }
-    let exit = exit_of(&launched.report);
+    let exit = crate::run_summary::exit_of(&launched.report);
     // The live view (`--serve`) served until the figures and the replay were written.
     drop(launched.live);
     Ok(exit)
@@ -948,15 +948,6 @@ fn print_loss_certificate(l: &LossCertificate) {
     let degraded: usize = l.members.iter().filter(|m| !m.degraded.is_empty()).count();
     out!("  losses that leave a follower flying its plan: {degraded}");
     out!("loss verdict: {}", l.verdict);
-}
-
-/// Exit code of a finished run.
-pub fn exit_of(r: &AuditReport) -> Exit {
-    match r.verdict {
-        Verdict::Safe => Exit::Safe,
-        Verdict::Unsafe => Exit::Unsafe,
-        Verdict::Fault => Exit::Fault,
-    }
 }
 
 /// `orchestrator host`: validates the options and runs the daemon.

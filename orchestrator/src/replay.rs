@@ -93,8 +93,23 @@ pub fn outcome(a: &ReplayArgs, what_if: bool, differs: Option<String>) -> Result
     }
 }
 
-/// The run's scenario with the what-if changes, validated as a scenario file is.
+/// The run's scenario with the what-if changes, validated as a scenario file is: `--scenario`
+/// (of the same team) in its place, then `--gains`, `--t-total` and `--link-*`.
 pub(crate) fn changed(s: &Scenario, a: &ReplayArgs) -> Result<Scenario, Failure> {
+    let base = match &a.scenario {
+        Some(path) => {
+            let other = Scenario::load(path, Checks::Full).map_err(Failure::bad_input)?;
+            same_team(s, &other).map_err(|why| {
+                Failure::bad_input(format!(
+                    "--scenario {}: {why}: not the run's team",
+                    path.display()
+                ))
+            })?;
+            other
+        }
+        None => s.clone(),
+    };
+    let s = &base;
     let mut file = s.file.clone();
     let mut origin = s.origin.clone();
     if let Some(text) = &a.gains {
@@ -108,9 +123,47 @@ pub(crate) fn changed(s: &Scenario, a: &ReplayArgs) -> Result<Scenario, Failure>
     let s = if a.gains.is_some() || a.t_total.is_some() {
         Scenario::from_file(file, &origin, Checks::Full).map_err(Failure::bad_input)?
     } else {
-        s.clone()
+        base
     };
     a.link.apply(&s).map_err(Failure::bad_input)
+}
+
+/// Why `other` is not the team of the run's scenario `run`, if it is not: other ids, roles,
+/// in-neighbours (the graph) or comm_hz (the run's ticks would be other instants).
+fn same_team(run: &Scenario, other: &Scenario) -> Result<(), String> {
+    let (a, b) = (&run.formation.members, &other.formation.members);
+    if a.len() != b.len() {
+        return Err(format!("{} agents, the run has {}", b.len(), a.len()));
+    }
+    for (x, y) in a.iter().zip(b) {
+        if x.id != y.id {
+            return Err(format!("agent {} where the run has agent {}", y.id, x.id));
+        }
+        if x.role != y.role {
+            return Err(format!(
+                "agent {} is a {}, in the run a {}",
+                y.id,
+                y.role.as_str(),
+                x.role.as_str()
+            ));
+        }
+        let ins = |m: &cdm_model::formation::Member| m.link.map(|l| l.in_neighbors);
+        if ins(x) != ins(y) {
+            return Err(format!(
+                "agent {} reads {:?}, in the run {:?} (another graph)",
+                y.id,
+                ins(y),
+                ins(x)
+            ));
+        }
+    }
+    if run.file.comm_hz != other.file.comm_hz {
+        return Err(format!(
+            "comm_hz {}, the run's {}",
+            other.file.comm_hz, run.file.comm_hz
+        ));
+    }
+    Ok(())
 }
 
 /// `--gains K1,K2,K3,K4`: four finite numbers (their stability is the scenario's check).

@@ -1,9 +1,11 @@
 //! `orchestrator replay RUN_DIR --out DIR` of a real-time run (`launch --realtime`): the team
 //! rebuilt in this process from the run directory (scenario.toml, run.json, audit.json's
-//! real-time figures: phase seed, audit rate, stale bound) and the members' recordings
-//! (`recording/<id>.mcap`: the neighbour states each tick flew on), flown again by
-//! cdm-runtime's `realtime_replay` and compared with the run. With `--gains` or `--t-total`
-//! the same history flies with the change.
+//! real-time figures: phase seed, audit rate, stale bound; its losses as the monitor applied
+//! them; commands.json) and the members' recordings (`recording/<id>.mcap`: the neighbour
+//! states each tick flew on, and the ticks each repaired link and command was applied from),
+//! flown again by cdm-runtime's `realtime_replay` and compared with the run. With `--gains`,
+//! `--t-total`, `--scenario` (the same team) or `--link-delay-ms` the same history flies with
+//! the change.
 //!
 //! Outcomes: exit 0/1 as the replay's verdict when it equals the run (or, with a change,
 //! whatever it gives); 2 for a run directory or recording that does not belong (named, with its
@@ -14,19 +16,23 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
-use cdm_records::audit::Auditor;
-use cdm_records::run_record::RunRecord;
+use cdm_recording::Recording;
+use cdm_records::audit::{Auditor, FaultRecord};
+use cdm_records::run_record::{RunMode, RunRecord};
 use cdm_records::rundir::RunDir;
-use cdm_runtime::realtime_replay::{replay, Recorded, ReplayEnd, ReplayTiming};
+use cdm_runtime::realtime_replay::{
+    replay, History, Recorded, ReplayEnd, ReplayLoss, ReplayTiming,
+};
 use cdm_scenario::{Checks, Scenario};
-use cdm_simulate::replay::read_audit;
+use cdm_simulate::realtime_losses::{loss_records, realtime_losses};
+use cdm_simulate::replay::{commands_of, read_audit};
 use cdm_team::{Exit, Failure};
 
 use crate::cli::ReplayArgs;
 
 /// True when `dir` is a real-time run's directory (run.json says so).
 pub fn is_realtime(dir: &Path) -> bool {
-    RunRecord::read(dir).is_ok_and(|r| r.mode == cdm_records::run_record::RunMode::Realtime)
+    RunRecord::read(dir).is_ok_and(|r| r.mode == RunMode::Realtime)
 }
 
 /// The replay of the real-time run `a.run`.
@@ -46,23 +52,18 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     }
     let audit = read_audit(run).map_err(Failure::bad_input)?;
     let timing = timing_of(run, &audit, r.max_ticks)?;
-    refuse_unsupported(run, &audit, a)?;
+    refuse_unsupported(a)?;
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let recordings = cdm_recording::read_dir(&run.join(cdm_recording::DIR), &ids, hash)
         .map_err(Failure::bad_input)?;
-    let flown = crate::replay::changed(&s, a)?;
-    let journals: BTreeMap<u32, Recorded> = (recordings.iter())
-        .map(|(id, rec)| {
-            let used = rec.used.clone();
-            (
-                *id,
-                Recorded {
-                    used,
-                    whole: !rec.cut_short,
-                },
-            )
-        })
-        .collect();
+    let changed = crate::replay::changed(&s, a)?;
+    let (flown, history) = history_of(run, (&s, changed), &audit, &recordings, a.what_if())?;
+    let stop = run_fault(run, &audit)?;
+    let timing = ReplayTiming {
+        link_shift_ticks: link_shift_ticks(&s, &flown),
+        stopped_at: stop.as_ref().map(|(_, at)| *at),
+        ..timing
+    };
     if crate::replay::same_dir(run, &a.out) {
         return Err(Failure::bad_input(format!(
             "--out {}: the run directory itself: the replay needs a directory of its own",
@@ -73,10 +74,17 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     cdm_team::telemetry::check_available(format).map_err(Failure::bad_input)?;
     let dir = RunDir::create(&a.out, a.force).map_err(Failure::from)?;
     dir.write_scenario(&flown).map_err(Failure::fault)?;
+    RunRecord {
+        mode: RunMode::RealtimeReplay,
+        scenario_hash: RunRecord::hash_text(flown.content_hash()),
+        ..r.clone()
+    }
+    .write(dir.path())
+    .map_err(Failure::from)?;
     let mut tel =
         cdm_team::telemetry::open(&dir, format, r.every, &flown).map_err(Failure::bad_input)?;
     let mut auditor = Auditor::new(&flown);
-    let end = replay(&flown, timing, &journals, &mut auditor, tel.as_mut()).map_err(|e| {
+    let end = replay(&flown, timing, &history, &mut auditor, tel.as_mut()).map_err(|e| {
         Failure::bad_input(format!("{}: {e}", run.join(cdm_recording::DIR).display()))
     })?;
     let end = match end {
@@ -86,6 +94,10 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
             None
         }
     };
+    // The run's monitor stopped the flight there: the same fault ends the replay.
+    if let Some((f, _)) = stop.filter(|_| auditor.report().fault.is_none()) {
+        auditor.fault(f);
+    }
     let complete = end.is_some_and(|e| e.complete);
     tel.finish()
         .map_err(|e| Failure::fault(format!("{}: {e}", dir.path().display())))?;
@@ -101,11 +113,74 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     }
     let differs = crate::replay::compare(run, dir.path(), format, quiet)?;
     crate::replay::outcome(a, a.what_if(), differs)?;
-    Ok(if report.verdict == cdm_model::outcome::Verdict::Safe {
-        Exit::Safe
-    } else {
-        Exit::Unsafe
-    })
+    Ok(crate::run_summary::exit_of(&report))
+}
+
+/// The fault the run's monitor stopped the flight on (audit.json's `fault`), if any, and the
+/// audit instant it stopped at (`ticks`: the instants audited before it): the wall clock
+/// decided when, so the replay stops there too.
+fn run_fault(run: &Path, audit: &serde_json::Value) -> Result<Option<(FaultRecord, u64)>, Failure> {
+    let Some(f) = audit.get("fault").filter(|f| !f.is_null()) else {
+        return Ok(None);
+    };
+    let bad = |why: String| {
+        Failure::bad_input(format!(
+            "{}: {why} (a tampered or foreign file)",
+            run.join("audit.json").display()
+        ))
+    };
+    let fault = serde_json::from_value(f.clone()).map_err(|e| bad(format!("fault: {e}")))?;
+    let at = (audit.get("ticks").and_then(serde_json::Value::as_u64))
+        .ok_or_else(|| bad("ticks: expected a whole number".into()))?;
+    Ok(Some((fault, at)))
+}
+
+/// What the replay flies (the changed scenario `changed`, its plan the commanded one when the
+/// run had commands) and the run's history: the recordings, the losses (audit.json) and the
+/// commands' switch ticks. `check`: the commands must come out as the run recorded them.
+fn history_of(
+    run: &Path,
+    (s, changed): (&Scenario, Scenario),
+    audit: &serde_json::Value,
+    recordings: &BTreeMap<u32, Recording>,
+    what_if: bool,
+) -> Result<(Scenario, History), Failure> {
+    let losses = realtime_losses(&run.join("audit.json"), audit, s).map_err(Failure::bad_input)?;
+    let (flown, commands) =
+        match commands_of(run, &changed, !what_if).map_err(Failure::bad_input)? {
+            Some((flown, records)) => {
+                let ticks = (records.iter().filter(|r| r.accepted))
+                    .map(|r| r.switch_tick)
+                    .collect();
+                (flown, ticks)
+            }
+            None => (changed, Vec::new()),
+        };
+    let records = loss_records(&flown, &losses);
+    let losses = (losses.iter().zip(records))
+        .map(|(l, records)| ReplayLoss {
+            id: l.id,
+            repair_tick: l.repair_tick(),
+            out_from: l.at.tick,
+            records,
+        })
+        .collect();
+    let recorded = (recordings.iter())
+        .map(|(id, rec)| {
+            let r = Recorded {
+                used: rec.used.clone(),
+                switches: rec.switches.clone(),
+                whole: !rec.cut_short,
+            };
+            (*id, r)
+        })
+        .collect();
+    let history = History {
+        recorded,
+        losses,
+        commands,
+    };
+    Ok((flown, history))
 }
 
 /// The phase seed, audit rate and stale bound of the run (audit.json's `realtime`).
@@ -154,44 +229,27 @@ fn timing_of(
         audit_hz,
         stale_after_s,
         max_ticks,
+        link_shift_ticks: 0,
+        stopped_at: None,
     })
 }
 
-/// What this replay cannot fly yet: a real-time run's losses and commands (their switch ticks
-/// are not in the recording), and other links (the recording is what the links delivered).
-fn refuse_unsupported(
-    run: &Path,
-    audit: &serde_json::Value,
-    a: &ReplayArgs,
-) -> Result<(), Failure> {
-    let lost = audit
-        .get("losses")
-        .and_then(serde_json::Value::as_array)
-        .is_some_and(|l| !l.is_empty());
-    if lost {
-        return Err(Failure::bad_input(format!(
-            "{}: a real-time run with members lost in flight: its replay is not supported yet",
-            run.join("audit.json").display()
-        )));
-    }
-    let commands = run.join("commands.json");
-    if commands.exists() {
-        return Err(Failure::bad_input(format!(
-            "{}: a real-time run with commands in flight: its replay is not supported yet",
-            commands.display()
-        )));
-    }
+/// What this replay cannot fly: other jitter, loss or draws (the recording is what the links
+/// delivered; only their delay can be changed, as a shift of every state flown on).
+fn refuse_unsupported(a: &ReplayArgs) -> Result<(), Failure> {
     let l = &a.link;
-    if l.link_delay_ms.is_some()
-        || l.link_jitter_ms.is_some()
-        || l.link_loss.is_some()
-        || l.seed.is_some()
-    {
+    if l.link_jitter_ms.is_some() || l.link_loss.is_some() || l.seed.is_some() {
         return Err(Failure::bad_input(
-            "--link-*/--seed: a real-time run's recording is what its links delivered; other links cannot be replayed on it",
+            "--link-jitter-ms/--link-loss/--seed: a real-time run's recording is what its links delivered; of its links only --link-delay-ms can change in a replay",
         ));
     }
     Ok(())
+}
+
+/// The what-if's link delay over the run's, in whole ticks (as the links round it).
+fn link_shift_ticks(run: &Scenario, flown: &Scenario) -> i64 {
+    let ms = flown.link_model().spec().delay_ms - run.link_model().spec().delay_ms;
+    (ms / 1e3 / run.dt_s()).round() as i64
 }
 
 /// A recording cut short: what was replayed, and which recordings end early.

@@ -4,8 +4,10 @@
 use std::path::Path;
 use std::time::Instant;
 
+use cdm_model::outcome::Verdict;
 use cdm_records::audit::AuditReport;
 use cdm_team::out;
+use cdm_team::Exit;
 
 /// One-paragraph summary of a run.
 pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet: bool) {
@@ -91,5 +93,14 @@ fn airspace_summary(r: &AuditReport) {
                 v.t_s
             );
         }
+    }
+}
+
+/// Exit code of a finished run.
+pub fn exit_of(r: &AuditReport) -> Exit {
+    match r.verdict {
+        Verdict::Safe => Exit::Safe,
+        Verdict::Unsafe => Exit::Unsafe,
+        Verdict::Fault => Exit::Fault,
     }
 }

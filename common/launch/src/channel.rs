@@ -187,7 +187,10 @@ impl CommandChannel {
             // A peer that asks nothing (`orchestrator clean` looking for live channels).
             Ok(None) => None,
             Err(why) => {
-                pending.answer(CommandAnswer::without_switch(Answered::Unavailable, why.to_string()));
+                pending.answer(CommandAnswer::without_switch(
+                    Answered::Unavailable,
+                    why.to_string(),
+                ));
                 None
             }
             Ok(Some(request)) => Some((pending, request)),

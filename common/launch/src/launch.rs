@@ -314,8 +314,8 @@ fn start_members(
 ) -> Result<Vec<Spawned>, LaunchError> {
     let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let mut children = Vec::new();
+    let record = crate::realtime::recording_flags(o, dir)?;
     if o.spawn {
-        let record = crate::realtime::recording_flags(o, dir)?;
         // Members forked from the template share its process group; a team that lands on the
         // terminal's interrupt needs its members out of the terminal's group, one by one.
         let mut template = match o.land_on_interrupt {
@@ -367,7 +367,9 @@ fn start_members(
             t.finish();
         }
     } else {
+        // Hand-started members are told every flag a spawned one gets, `--record` among them.
         let mut flags = crate::realtime::member_flags(o);
+        flags.extend(record);
         flags.extend(o.vehicles.member_args());
         let of = |leader: bool| -> Vec<u32> {
             let members = s.formation.members.iter();

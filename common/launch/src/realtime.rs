@@ -63,6 +63,10 @@ pub fn schedule(o: &LaunchOptions) -> Result<(), LaunchError> {
     }
 }
 
+/// How long a member stopped by `--lose` has to exit after SIGTERM before it is SIGKILLed (it
+/// reads the signal within a tick; the monitor's loop waits meanwhile).
+const SCRIPTED_GRACE: Duration = Duration::from_millis(200);
+
 /// The state buffer a real-time team needs (ticks of states kept per subscriber): readers read
 /// the newest state at their own rate, so a few periods are plenty.
 pub const REALTIME_WINDOW: u32 = 16;
@@ -161,6 +165,9 @@ pub(crate) fn run(
         lost: Vec::new(),
         out: vec![false; s.formation.members.len()],
         start_msg,
+        scripted: (cdm_team::loss::scripted_kills(&o.losses).into_iter())
+            .map(|(id, _)| id)
+            .collect(),
         progress: o.notices.progress("launch", last_audit, period_s),
         notices: o.notices.clone(),
         steer: RealtimeSteer::new(
@@ -380,6 +387,8 @@ struct Monitor<'a, 'p> {
     out: Vec<bool>,
     /// The start's clock message: loss and command notices ride on copies of it.
     start_msg: ClockMsg,
+    /// The members `--lose` stops.
+    scripted: Vec<u32>,
     progress: Box<dyn cdm_team::notices::TickProgress>,
     notices: std::sync::Arc<dyn cdm_team::notices::NoticeSink>,
     /// Commands to the team in flight, and the plan as commanded so far.
@@ -452,8 +461,14 @@ impl crate::fly::TeamIo for Monitor<'_, '_> {
         Ok(())
     }
 
+    /// A scripted loss (`--lose`) is stopped by SIGTERM, so its recording holds every tick it
+    /// flew and `replay` flies through it; a silent member (perhaps hung) is SIGKILLed.
     fn kill(&mut self, id: u32) {
-        cdm_team::loss::kill_and_reap(self.children, id);
+        if self.scripted.contains(&id) {
+            cdm_team::loss::stop_and_reap(self.children, id, SCRIPTED_GRACE);
+        } else {
+            cdm_team::loss::kill_and_reap(self.children, id);
+        }
     }
 
     fn linked(&self, reader: u32, writer: u32) -> bool {

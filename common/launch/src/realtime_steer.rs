@@ -118,7 +118,10 @@ impl<'a> RealtimeSteer<'a> {
         let request = match request {
             Ok(r) => r,
             Err(why) => {
-                to.answer(CommandAnswer::without_switch(Answered::BadInput, why.to_string()));
+                to.answer(CommandAnswer::without_switch(
+                    Answered::BadInput,
+                    why.to_string(),
+                ));
                 return Ok(());
             }
         };

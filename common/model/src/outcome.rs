@@ -32,8 +32,8 @@ impl Verdict {
     }
 }
 
-/// What kind of runtime fault ended a run (`fault.kind` in audit.json).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+/// What kind of runtime fault ended a run (`fault.kind` in audit.json, read back by `replay`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FaultKind {
     /// The controller refused to fly on, or a neighbour's state was non-finite (eq. 46).
@@ -91,8 +91,8 @@ impl FaultKind {
     }
 }
 
-/// Why a member was lost in flight (`losses[].cause` in audit.json).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+/// Why a member was lost in flight (`losses[].cause` in audit.json, read back by `replay`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LossCause {
     /// `--lose ID@SECONDS`: `simulate` drops it; `launch` kills it once it published that tick.

@@ -4,8 +4,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use cdm_records::run_record::RunRecord;
+use cdm_runtime::realtime_journal::{Switch, Switched};
 
-use crate::{file_name, Ages, Header, AGES_TOPIC, FORMAT, MEMBER_TOPIC};
+use crate::{file_name, Ages, Header, SwitchMsg, AGES_TOPIC, FORMAT, MEMBER_TOPIC, SWITCH_TOPIC};
 
 /// A recording is at most this large (about 1 KB per member-second: days of flight).
 const MAX_BYTES: u64 = 1 << 30;
@@ -36,6 +37,8 @@ pub struct Recording {
     pub header: Header,
     /// For each tick flown from tick 0, the tick of the state each in-neighbour slot flew on.
     pub used: Vec<[Option<u64>; 3]>,
+    /// The switches applied (repaired links, commands), in the order applied.
+    pub switches: Vec<Switch>,
     /// The file has no end: the member stopped writing it before the flight ended (a crash, a
     /// kill, a full disk); `used` holds every tick before that.
     pub cut_short: bool,
@@ -57,13 +60,13 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
     let stream =
         mcap::MessageStream::new(&bytes).map_err(|e| bad(path, 1, format!("not MCAP: {e}")))?;
     let mut header: Option<Header> = None;
-    let mut used = Vec::new();
+    let mut parsed = Parsed::default();
     for (k, msg) in stream.enumerate() {
         let record = k + 1;
         let msg = match msg {
             Ok(m) => m,
             // A file without its end was cut short: what came before stands.
-            Err(_) if !ended => return finish(path, header, used, true),
+            Err(_) if !ended => return finish(path, header, parsed, true),
             Err(e) => return Err(bad(path, record, e.to_string())),
         };
         let topic = msg.channel.topic.as_str();
@@ -77,7 +80,12 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
             (Some(_), AGES_TOPIC) => {
                 let a: Ages = serde_json::from_slice(&msg.data)
                     .map_err(|e| bad(path, record, format!("not a batch of ticks: {e}")))?;
-                append(&a, id, &mut used).map_err(|why| bad(path, record, why.to_string()))?;
+                append(&a, id, &mut parsed).map_err(|why| bad(path, record, why.to_string()))?;
+            }
+            (Some(_), SWITCH_TOPIC) => {
+                let s: SwitchMsg = serde_json::from_slice(&msg.data)
+                    .map_err(|e| bad(path, record, format!("not a switch: {e}")))?;
+                switched(&s, id, &mut parsed).map_err(|why| bad(path, record, why.to_string()))?;
             }
             _ => {
                 return Err(bad(
@@ -88,7 +96,14 @@ pub fn read(path: &Path, id: u32, hash: u64) -> Result<Recording, RecordingError
             }
         }
     }
-    finish(path, header, used, !ended)
+    finish(path, header, parsed, !ended)
+}
+
+/// What the messages read so far hold.
+#[derive(Default)]
+struct Parsed {
+    used: Vec<[Option<u64>; 3]>,
+    switches: Vec<Switch>,
 }
 
 /// The recordings of `ids` in the run directory's recording folder `dir`.
@@ -105,14 +120,15 @@ pub fn read_dir(
 fn finish(
     path: &Path,
     header: Option<Header>,
-    used: Vec<[Option<u64>; 3]>,
+    read: Parsed,
     cut_short: bool,
 ) -> Result<Recording, RecordingError> {
     let header =
         header.ok_or_else(|| bad(path, 1, "no header: not a member's recording".into()))?;
     Ok(Recording {
         header,
-        used,
+        used: read.used,
+        switches: read.switches,
         cut_short,
     })
 }
@@ -146,6 +162,52 @@ enum BadRecord {
     },
     #[error("{ages} ages for {ticks} ticks (three per tick, or none for a leader)")]
     AgeCount { ages: u64, ticks: u64 },
+    #[error("a switch of agent {found}, not of agent {id}")]
+    OtherMembersSwitch { found: u32, id: u32 },
+    #[error("a switch at tick {tick}, written after tick {flown} was flown")]
+    SwitchAfterItsTick { tick: u64, flown: u64 },
+    #[error("a switch at tick {tick}, after one at tick {before}")]
+    SwitchOutOfOrder { tick: u64, before: u64 },
+    #[error("the repaired link of tick {at} applied at tick {tick}, before it")]
+    RepairBeforeItsTick { at: u64, tick: u64 },
+}
+
+/// Takes a switch: written before the ticks flown on it, after those of the switches before.
+fn switched(s: &SwitchMsg, id: u32, read: &mut Parsed) -> Result<(), BadRecord> {
+    if s.member != id {
+        return Err(BadRecord::OtherMembersSwitch {
+            found: s.member,
+            id,
+        });
+    }
+    let sw = s.switch();
+    let flown = read.used.len() as u64;
+    if sw.tick < flown {
+        return Err(BadRecord::SwitchAfterItsTick {
+            tick: sw.tick,
+            flown: flown - 1,
+        });
+    }
+    if let Some(before) = read.switches.last().filter(|b| b.tick > sw.tick) {
+        return Err(BadRecord::SwitchOutOfOrder {
+            tick: sw.tick,
+            before: before.tick,
+        });
+    }
+    if let Switched::Repair { at, .. } = sw.what {
+        if at > sw.tick {
+            return Err(BadRecord::RepairBeforeItsTick { at, tick: sw.tick });
+        }
+    }
+    read.switches.push(sw);
+    Ok(())
+}
+
+/// True when a repaired link applied at `tick` (its slots then name other neighbours).
+fn relinked_at(switches: &[Switch], tick: u64) -> bool {
+    switches
+        .iter()
+        .any(|s| s.tick == tick && matches!(s.what, Switched::Repair { .. }))
 }
 
 fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), BadRecord> {
@@ -173,8 +235,9 @@ fn check_header(h: &Header, id: u32, hash: u64) -> Result<(), BadRecord> {
     Ok(())
 }
 
-/// Appends a batch's ticks to `used` (which holds every tick before it).
-fn append(a: &Ages, id: u32, used: &mut Vec<[Option<u64>; 3]>) -> Result<(), BadRecord> {
+/// Appends a batch's ticks to `read.used` (which holds every tick before it).
+fn append(a: &Ages, id: u32, read: &mut Parsed) -> Result<(), BadRecord> {
+    let (used, switches) = (&mut read.used, &read.switches);
     if a.member != id {
         return Err(BadRecord::OtherMembersTicks {
             found: a.member,
@@ -208,8 +271,9 @@ fn append(a: &Ages, id: u32, used: &mut Vec<[Option<u64>; 3]>) -> Result<(), Bad
                         Some(age) => return Err(BadRecord::Age { tick, slot, age }),
                     };
                 }
-                // A slot keeps the newest state heard: it never flies on an older one.
-                if let Some(before) = used.last() {
+                // A slot keeps the newest state heard: it never flies on an older one (unless
+                // a repaired link gave it another neighbour).
+                if let Some(before) = used.last().filter(|_| !relinked_at(switches, tick)) {
                     if let Some(slot) = (0..3).find(|&k| u[k] < before[k]) {
                         return Err(BadRecord::Older {
                             tick,
@@ -275,6 +339,55 @@ mod tests {
         assert_eq!(r.used, want);
         assert!(!r.cut_short);
         assert_eq!(r.header.member, 7);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn switches_read_back_and_a_repaired_slot_may_name_an_older_state() {
+        use cdm_runtime::realtime_journal::{Switch, Switched};
+        let d = dir("switch");
+        let p = d.join("7.mcap");
+        let relink = Switch {
+            tick: 150,
+            what: Switched::Repair {
+                at: 140,
+                in_neighbors: Some([1, 3, 8]),
+            },
+        };
+        let command = Switch {
+            tick: 160,
+            what: Switched::Command { seq: 1, at: 200 },
+        };
+        {
+            let mut j = McapJournal::create(&p, (7, false), 0xabc, 0.01).expect("created");
+            for tick in 0..250u64 {
+                for s in [relink, command].iter().filter(|s| s.tick == tick) {
+                    j.switched(s);
+                }
+                // From the repair on, slot 1 is a new neighbour, heard from far behind.
+                let used = match tick {
+                    150.. => [tick.checked_sub(1), tick.checked_sub(40), None],
+                    _ => [tick.checked_sub(1), tick.checked_sub(2), None],
+                };
+                j.flown(&Flown { tick, used });
+            }
+        }
+        let r = read(&p, 7, 0xabc).expect("read");
+        assert_eq!(r.switches, [relink, command]);
+        assert_eq!(r.used[150], [Some(149), Some(110), None]);
+        // A switch claimed for a tick already flown is a tampered file.
+        let mut bytes = std::fs::read(&p).expect("written");
+        let at = bytes
+            .windows(10)
+            .position(|w| w == b"\"tick\":160")
+            .expect("the command's switch");
+        bytes[at + 7..at + 10].copy_from_slice(b" 10");
+        std::fs::write(&p, &bytes).expect("edited");
+        let e = read(&p, 7, 0xabc).unwrap_err().to_string();
+        assert!(
+            e.contains("a switch at tick 10, written after tick 99 was flown"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&d);
     }
 

@@ -6,9 +6,9 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use cdm_records::run_record::RunRecord;
-use cdm_runtime::realtime_journal::{Flown, Journal};
+use cdm_runtime::realtime_journal::{Flown, Journal, Switch};
 
-use crate::{Ages, Header, AGES_TOPIC, FORMAT, MEMBER_TOPIC};
+use crate::{Ages, Header, SwitchMsg, AGES_TOPIC, FORMAT, MEMBER_TOPIC, SWITCH_TOPIC};
 
 /// Why a recording cannot be started or written (the flight goes on without it; a replay then
 /// says where it ends).
@@ -28,6 +28,7 @@ pub struct McapJournal {
     path: PathBuf,
     writer: Option<mcap::Writer<BufWriter<File>>>,
     channel: u16,
+    switch_channel: u16,
     member: u32,
     leader: bool,
     /// Ticks per message.
@@ -70,27 +71,17 @@ impl McapJournal {
             .library(concat!("cdm-recording ", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
             .map_err(fail)?;
-        let header_schema = w
-            .add_schema(
-                "cdm.recording.Member",
-                "jsonschema",
-                w_schema("member").as_bytes(),
-            )
-            .map_err(fail)?;
-        let ages_schema = w
-            .add_schema(
-                "cdm.recording.Ages",
-                "jsonschema",
-                w_schema("ages").as_bytes(),
-            )
-            .map_err(fail)?;
         let none = BTreeMap::new();
-        let header_channel = w
-            .add_channel(header_schema, MEMBER_TOPIC, "json", &none)
-            .map_err(fail)?;
-        let channel = w
-            .add_channel(ages_schema, AGES_TOPIC, "json", &none)
-            .map_err(fail)?;
+        // One schema and channel per message kind (the schema a JSON schema, for tools).
+        let mut channel_of = |name: &str, which: &str, topic: &str| {
+            let schema = w
+                .add_schema(name, "jsonschema", w_schema(which).as_bytes())
+                .map_err(fail)?;
+            w.add_channel(schema, topic, "json", &none).map_err(fail)
+        };
+        let header_channel = channel_of("cdm.recording.Member", "member", MEMBER_TOPIC)?;
+        let channel = channel_of("cdm.recording.Ages", "ages", AGES_TOPIC)?;
+        let switch_channel = channel_of("cdm.recording.Switch", "switch", SWITCH_TOPIC)?;
         let header = Header {
             format: FORMAT.into(),
             member,
@@ -114,6 +105,7 @@ impl McapJournal {
             path: path.to_path_buf(),
             writer: Some(w),
             channel,
+            switch_channel,
             member,
             leader,
             batch,
@@ -138,26 +130,31 @@ impl McapJournal {
         };
         self.first += self.ticks;
         self.ticks = 0;
+        let data = serde_json::to_vec(&msg).map_err(|e| e.to_string());
+        self.write(self.channel, msg.tick, data);
+        self.age = msg.age;
+        self.age.clear();
+    }
+
+    /// Writes one message of `channel` stamped with tick `tick`'s time, and flushes it to the
+    /// file.
+    fn write(&mut self, channel: u16, tick: u64, data: Result<Vec<u8>, String>) {
         let Some(w) = self.writer.as_mut() else {
             return;
         };
-        let time = (msg.tick as f64 * self.dt_ns) as u64;
+        let time = (tick as f64 * self.dt_ns) as u64;
         let at = mcap::records::MessageHeader {
-            channel_id: self.channel,
+            channel_id: channel,
             sequence: self.sequence,
             log_time: time,
             publish_time: time,
         };
         self.sequence += 1;
-        let written = serde_json::to_vec(&msg)
-            .map_err(|e| e.to_string())
-            .and_then(|data| {
-                w.write_to_known_channel(&at, &data)
-                    .and_then(|()| w.flush())
-                    .map_err(|e| e.to_string())
-            });
-        self.age = msg.age;
-        self.age.clear();
+        let written = data.and_then(|data| {
+            w.write_to_known_channel(&at, &data)
+                .and_then(|()| w.flush())
+                .map_err(|e| e.to_string())
+        });
         if let Err(reason) = written {
             // The flight goes on; the recording ends here (a replay says so).
             tracing::warn!(path = %self.path.display(), %reason, "the recording stops");
@@ -183,6 +180,13 @@ impl Journal for McapJournal {
             self.write_batch();
         }
     }
+
+    /// Written at once, before the batch that holds its tick: a reader then knows of the
+    /// switch before the ticks flown on it.
+    fn switched(&mut self, s: &Switch) {
+        let data = serde_json::to_vec(&SwitchMsg::of(self.member, s)).map_err(|e| e.to_string());
+        self.write(self.switch_channel, s.tick, data);
+    }
 }
 
 impl Drop for McapJournal {
@@ -202,6 +206,9 @@ fn w_schema(which: &str) -> String {
     let props = match which {
         "member" => {
             r#""format":{"type":"string"},"member":{"type":"integer"},"scenario_hash":{"type":"string"},"dt_s":{"type":"number"}"#
+        }
+        "switch" => {
+            r#""member":{"type":"integer"},"tick":{"type":"integer"},"switch":{"type":"object"}"#
         }
         _ => {
             r#""member":{"type":"integer"},"tick":{"type":"integer"},"ticks":{"type":"integer"},"age":{"type":"array","items":{"type":["integer","null"]}}"#

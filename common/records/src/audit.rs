@@ -107,7 +107,7 @@ impl Violation {
 }
 
 /// A runtime fault that ended a run early.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct FaultRecord {
     pub kind: FaultKind,
     pub agent: Option<u32>,

@@ -31,6 +31,9 @@ pub enum RunMode {
     Realtime,
     /// `orchestrator replay`: a run flown again from its directory.
     Replay,
+    /// `orchestrator replay` of a real-time run: flown again from the run's recordings, which
+    /// stay in the run's directory (replay that one again).
+    RealtimeReplay,
 }
 
 /// run.json.

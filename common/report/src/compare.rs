@@ -13,19 +13,19 @@ use crate::data::{read_run, RunData, TickSample};
 use crate::plot::{thin_min, write_figure, Line, Panel, Rule, Stack, GREY, LIMIT, PALETTE};
 use crate::{csv, ReportError, MAX_POINTS};
 
-/// Draw fig_compare (SVG, PNG and its CSV) into `dir`: `dir`'s run against `other`'s.
+/// Draw fig_compare (SVG, PNG and its CSV) into `dir`: `dir`'s run against `other`'s, each
+/// named by its directory in the legend and in the CSV's `run` column.
 pub fn compare(dir: &Path, other: &Path) -> Result<Vec<PathBuf>, ReportError> {
-    let runs = [
-        (name(dir), read_run(dir, None)?),
-        (name(other), read_run(other, None)?),
-    ];
+    let [a, b] = names(dir, other);
+    let runs = [(a, read_run(dir, None)?), (b, read_run(other, None)?)];
     let mut text =
         String::from("run,tick,t,max_deviation_m,min_separation_m,min_boundary_distance_m\n");
-    for (k, (_, d)) in runs.iter().enumerate() {
+    for (label, d) in &runs {
+        let label = csv_field(label);
         for s in &d.samples {
             let _ = writeln!(
                 text,
-                "{k},{},{},{},{},{}",
+                "{label},{},{},{},{},{}",
                 s.tick, s.t_s, s.max_deviation_m, s.min_separation_m, s.min_boundary_m
             );
         }
@@ -83,9 +83,26 @@ pub fn compare(dir: &Path, other: &Path) -> Result<Vec<PathBuf>, ReportError> {
     Ok(files)
 }
 
-fn name(dir: &Path) -> String {
-    dir.file_name()
-        .map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into())
+/// The two runs' names: their directories' names, or their paths when those are the same.
+fn names(dir: &Path, other: &Path) -> [String; 2] {
+    let name = |d: &Path| {
+        d.file_name()
+            .map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into())
+    };
+    let (a, b) = (name(dir), name(other));
+    if a == b {
+        return [dir.display().to_string(), other.display().to_string()];
+    }
+    [a, b]
+}
+
+/// A CSV field: quoted (its quotes doubled) when it holds a comma, a quote or a line break.
+fn csv_field(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
 }
 
 fn limit(label: String, at: Real) -> Rule {

@@ -42,7 +42,7 @@ use crate::member_protocol::WaitingFor;
 use crate::messages::{
     ClockCommand, ClockMsg, FaultCode, StateMsg, SteerNotice, PHASES_ALIGNED, STATUS_PACING,
 };
-use crate::realtime_journal::{Flown, Journal};
+use crate::realtime_journal::{Flown, Journal, Switch, Switched};
 use crate::realtime_links::DelayLine;
 use crate::seams::Vehicle;
 
@@ -335,10 +335,17 @@ impl<V: Vehicle> Timing<V> for Realtime {
         }
     }
 
-    /// The switch goes into the journal (a replay flies the commanded plan from it).
-    fn on_steered(&mut self, _: &mut Shared<V>, n: &SteerNotice) {
+    /// The switch goes into the journal, on the path of a repair's (the tick it was taken at):
+    /// a replay flies the commanded plan from it.
+    fn on_steered(&mut self, m: &mut Shared<V>, n: &SteerNotice) {
         if let Some(j) = self.journal.as_mut() {
-            j.steered(n);
+            j.switched(&Switch {
+                tick: m.tick,
+                what: Switched::Command {
+                    seq: n.seq,
+                    at: n.tick,
+                },
+            });
         }
     }
 

@@ -5,6 +5,7 @@
 //! engine, the records and the scenario together. The pre-flight certificate of `plan` is
 //! `cdm_certificates::certificate`.
 
+pub mod realtime_losses;
 pub mod replay;
 
 use cdm_engine::engine::{quad_engine, AgentFault};

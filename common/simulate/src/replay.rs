@@ -35,6 +35,9 @@ pub enum ReplayError {
     /// and the run directory does not record it.
     #[error("{path}: a real-time run (`launch --realtime`): its replay needs a recording of the neighbour states each member used, which this run directory does not have")]
     Realtime { path: PathBuf },
+    /// The replay of a real-time run: its history is the run's recordings.
+    #[error("{path}: the replay of a real-time run: replay the run's own directory, which holds its recordings")]
+    RealtimeReplay { path: PathBuf },
 }
 
 /// A run directory's inputs, checked against one another.
@@ -57,6 +60,10 @@ impl RunInputs {
     pub fn read(dir: &Path) -> Result<Self, ReplayError> {
         let scenario = Scenario::load(&dir.join("scenario.toml"), Checks::Full)?;
         let record = RunRecord::read(dir)?;
+        if record.mode == RunMode::RealtimeReplay {
+            let path = dir.join(cdm_records::run_record::RUN_RECORD_FILE);
+            return Err(ReplayError::RealtimeReplay { path });
+        }
         let audit_path = dir.join("audit.json");
         let audit = read_json(&audit_path)?;
         if record.mode == RunMode::Realtime || audit.get("realtime").is_some() {
@@ -125,15 +132,40 @@ impl RunInputs {
         let Some(text) = &self.commands else {
             return Ok(None);
         };
-        let path = self.dir.join("commands.json");
-        let list = cdm_scenario::parse_commands(text, s)
-            .map_err(|e| file_error(&path, format!("{e} (a tampered or foreign file)")))?;
-        let (flown, records) = apply_commands(s, &list);
-        if check {
-            check_commands(&path, text, &records)?;
-        }
-        Ok(Some((flown, records)))
+        apply_run_commands(&self.dir.join("commands.json"), text, s, check).map(Some)
     }
+}
+
+/// A run directory's commands (commands.json, if any) applied to `s`, as
+/// [`RunInputs::commands_for`] applies them: for a real-time run, whose other inputs its replay
+/// reads itself.
+pub fn commands_of(
+    dir: &Path,
+    s: &Scenario,
+    check: bool,
+) -> Result<Option<(Scenario, Vec<CommandRecord>)>, ReplayError> {
+    let path = dir.join("commands.json");
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = read_text(&path, cdm_files::MAX_INPUT_BYTES)?;
+    apply_run_commands(&path, &text, s, check).map(Some)
+}
+
+/// commands.json's `text` (at `path`) applied to `s`; `check`: each must come out as recorded.
+fn apply_run_commands(
+    path: &Path,
+    text: &str,
+    s: &Scenario,
+    check: bool,
+) -> Result<(Scenario, Vec<CommandRecord>), ReplayError> {
+    let list = cdm_scenario::parse_commands(text, s)
+        .map_err(|e| file_error(path, format!("{e} (a tampered or foreign file)")))?;
+    let (flown, records) = apply_commands(s, &list);
+    if check {
+        check_commands(path, text, &records)?;
+    }
+    Ok((flown, records))
 }
 
 fn file_error(path: &Path, reason: String) -> ReplayError {

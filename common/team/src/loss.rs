@@ -31,6 +31,28 @@ pub fn kill_and_reap(children: &mut [Spawned], id: u32) {
     }
 }
 
+/// SIGTERM member `id`, then SIGKILL it if it has not exited within `grace`, and reap it. A
+/// member stopped by SIGTERM stops flying at once and closes its recording (`recording/<id>.mcap`
+/// then holds every tick it flew, so `replay` flies the run through its loss); a killed one
+/// leaves its recording cut short.
+pub fn stop_and_reap(children: &mut [Spawned], id: u32, grace: std::time::Duration) {
+    let Some(c) = children.iter_mut().find(|c| c.id == id) else {
+        return;
+    };
+    if matches!(c.child.try_wait(), Ok(None)) {
+        // SAFETY: plain kill(2) on our own child's pid, not reaped yet.
+        unsafe {
+            libc::kill(c.child.id() as libc::pid_t, libc::SIGTERM);
+        }
+        let until = std::time::Instant::now() + grace;
+        while matches!(c.child.try_wait(), Ok(None)) && std::time::Instant::now() < until {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    }
+    let _ = c.child.kill();
+    let _ = c.child.wait();
+}
+
 /// Room for repairs: every member may gain, as a new in-neighbour, as many readers as the loss
 /// of any single member gives it, plus two for further losses; every follower may gain three
 /// new in-neighbours' wake-ups plus two. History: a window of states plus one (a new reader may

@@ -650,3 +650,15 @@ in_neighbors = [1, 2, 3]
 pub fn lab_mission() -> ScenarioFile {
     toml::from_str(LAB_MISSION).expect("the lab mission parses")
 }
+
+/// `text` (a scenario file) with its line that starts with `prefix` replaced by `line`.
+pub fn with_line(text: &str, prefix: &str, line: &str) -> String {
+    assert!(
+        text.lines().any(|l| l.starts_with(prefix)),
+        "no line starts with {prefix:?}:\n{text}"
+    );
+    let lines: Vec<&str> = (text.lines())
+        .map(|l| if l.starts_with(prefix) { line } else { l })
+        .collect();
+    lines.join("\n") + "\n"
+}

@@ -1,11 +1,14 @@
 //! `orchestrator replay`: a finished lockstep run flown again from its directory alone.
 //!
 //! - A `simulate` run with commands, a scripted loss, `--every` and `--max-ticks`, and a
-//!   lockstep `launch` of 41 processes with a `--lose`: the replay's telemetry.csv is the run's
-//!   byte for byte and audit.json's safety figures are the run's; run.json records the options.
+//!   lockstep `launch` of 41 processes with a `--lose` and the same commands: the replay's
+//!   telemetry.csv is the run's byte for byte and audit.json's safety figures are the run's;
+//!   run.json records the options.
 //! - What if: `--gains` re-flies the same history differently, and two such replays are
-//!   identical.
-//! - `report --against` draws a run and its what-if side by side.
+//!   identical; `--scenario` with the run's team and those gains flies the same bytes as
+//!   `--gains`; another team (another comm_hz) is exit 2 naming what differs.
+//! - `report --against` draws a run and its what-if side by side, each named by its directory
+//!   in the CSV and the legend; their deviations differ.
 //! - A tampered or foreign file (audit.json's losses, commands.json, another scenario.toml, a
 //!   missing run.json) is exit 2 naming the file and its first bad record; nothing panics.
 //!
@@ -21,7 +24,7 @@ use integration_tests::{bin, run, unique_team, write_text, TempDir};
 use serde_json::Value;
 use support::{
     assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file, launch,
-    read_json, replay, simulate,
+    read_json, replay, simulate, with_line,
 };
 
 const DEADLINE: Duration = integration_tests::deadline::FLIGHT;
@@ -110,7 +113,34 @@ fn a_simulate_run_with_commands_and_a_loss_replays_byte_for_byte_and_what_if_is_
     assert_eq!(read_json(&a.join("audit.json"))["losses"][0]["tick"], 801);
     assert!(a.join("commands.json").exists());
 
-    // The two side by side.
+    // What if from a scenario file: the run's team with those gains flies as --gains does.
+    let text = std::fs::read_to_string(run_dir.join("scenario.toml")).unwrap();
+    let soft = with_line(&text, "gains = ", "gains = [30.0, 40.0, 25.0, 8.0]");
+    let soft = write_text(tmp.path(), "soft.toml", &soft);
+    let from_file = tmp.path().join("from-file");
+    let o = replay(
+        &run_dir,
+        &from_file,
+        &["--scenario", soft.to_str().unwrap()],
+    );
+    assert!(matches!(o.status.code(), Some(0 | 1)), "{o:?}");
+    assert_same_file(&a.join("telemetry.csv"), &from_file.join("telemetry.csv"));
+    // Another team is refused, naming what differs.
+    let other = with_line(&text, "comm_hz = ", "comm_hz = 50.0");
+    let other = write_text(tmp.path(), "other.toml", &other);
+    let o = replay(
+        &run_dir,
+        &tmp.path().join("other"),
+        &["--scenario", other.to_str().unwrap()],
+    );
+    assert_exit(&o, 2, "replay --scenario of another team");
+    support::assert_stderr_has(
+        &o,
+        "replay --scenario",
+        &["other.toml: comm_hz 50, the run's 100: not the run's team"],
+    );
+
+    // The two side by side: each run named by its directory, in the CSV and the figure.
     let mut c = Command::new(bin("orchestrator"));
     c.args(["report", "--quiet"])
         .arg(&a)
@@ -120,32 +150,62 @@ fn a_simulate_run_with_commands_and_a_loss_replays_byte_for_byte_and_what_if_is_
     let table = std::fs::read_to_string(a.join("fig_compare.csv")).unwrap();
     let rows = |k: &str| table.lines().filter(|l| l.starts_with(k)).count();
     assert_eq!(
-        (rows("0,"), rows("1,")),
+        (rows("gains-a,"), rows("sim,")),
         (1001, 1001),
         "every third tick of 0..=3000"
     );
-    assert!(a.join("fig_compare.svg").exists() && a.join("fig_compare.png").exists());
+    let svg = std::fs::read_to_string(a.join("fig_compare.svg")).unwrap();
+    let texts: Vec<&str> = svg.split(['<', '>']).map(str::trim).collect();
+    for name in ["gains-a", "sim"] {
+        assert!(texts.contains(&name), "the legend names {name}");
+    }
+    assert!(a.join("fig_compare.png").exists());
+    // The deviations differ where the gains do, at the same ticks.
+    let column = |name: &str| -> Vec<(String, String)> {
+        (table.lines().filter(|l| l.starts_with(&format!("{name},"))))
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[1].to_string(), f[3].to_string())
+            })
+            .collect()
+    };
+    let (soft, stiff) = (column("gains-a"), column("sim"));
+    let ticks = |c: &[(String, String)]| c.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
+    assert_eq!(ticks(&soft), ticks(&stiff));
+    assert_eq!(soft[0], stiff[0], "tick 0: the same start");
+    let differ = soft.iter().zip(&stiff).filter(|(x, y)| x.1 != y.1).count();
+    assert!(differ > 100, "{differ} of 1001 deviations differ");
 }
 
 #[test]
-fn a_lockstep_launch_with_a_loss_replays_byte_for_byte() {
+fn a_lockstep_launch_with_a_loss_and_commands_replays_byte_for_byte() {
     let tmp = TempDir::new();
     let team = unique_team("replay");
     let run_dir = tmp.path().join("launch");
+    let commands = write_text(tmp.path(), "commands.json", COMMANDS);
     let flags = [
         "--builtin",
         "paper40",
         "--no-figures",
         "--max-ticks",
-        "1200",
+        "2000",
         "--lose",
         "5@4",
+        "--commands",
+        commands.to_str().unwrap(),
     ];
     let o = run(&mut launch(&team, &run_dir, &flags), DEADLINE);
     assert_no_process_of(&team);
     assert_no_team_resources(&team);
     assert_exit(&o, 0, "launch");
     assert_eq!(read_json(&run_dir.join("run.json"))["mode"], "lockstep");
+    let accepted = read_json(&run_dir.join("commands.json"));
+    let accepted = accepted.as_array().expect("commands.json: a list");
+    assert_eq!(accepted.len(), 2, "{accepted:?}");
+    assert!(
+        accepted.iter().all(|c| c["accepted"] == true),
+        "{accepted:?}"
+    );
     assert_replays(&run_dir, tmp.path(), "launch");
 }
 

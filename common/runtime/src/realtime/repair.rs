@@ -18,6 +18,7 @@ use cdm_model::step::{law_for, Law};
 use super::{hear, phase_offset_s, stamp_s, Realtime};
 use crate::member_core::{Action, MemberFault, Shared};
 use crate::messages::{AgentStatus, LossNotice, StateMsg};
+use crate::realtime_journal::{Switch, Switched};
 use crate::seams::Vehicle;
 
 impl Realtime {
@@ -106,6 +107,13 @@ impl Realtime {
             });
         }
         self.relink(m, &member);
+        if let Some(j) = self.journal.as_mut() {
+            let in_neighbors = member.link.map(|l| l.in_neighbors);
+            j.switched(&Switch {
+                tick: m.tick,
+                what: Switched::Repair { at, in_neighbors },
+            });
+        }
         if at < m.tick {
             tracing::warn!(
                 id = m.id,
@@ -207,6 +215,10 @@ mod tests {
                 .push((self.flown, m.link.map(|l| l.in_neighbors)));
             Ok(())
         }
+
+        fn replan(&mut self, _: &cdm_model::plan::TeamPlan) -> Result<(), RelinkUnsupported> {
+            Ok(())
+        }
     }
 
     fn state(id: u32, tick: u64) -> StateMsg {
@@ -215,8 +227,27 @@ mod tests {
         StateMsg::ok(tick, HASH, id, x)
     }
 
-    /// Follower 9 of generated10 in real time with losses, started at 1 s, aligned phases.
-    fn reader(s: &Scenario) -> RealtimeCore<Relinked> {
+    /// A journal that keeps the switches.
+    #[derive(Debug, Default, Clone)]
+    struct Kept(std::sync::Arc<std::sync::Mutex<Vec<Switch>>>);
+
+    impl crate::realtime_journal::Journal for Kept {
+        fn flown(&mut self, _: &crate::realtime_journal::Flown) {}
+
+        fn switched(&mut self, s: &Switch) {
+            self.0.lock().expect("journal").push(*s);
+        }
+    }
+
+    impl Kept {
+        fn switches(&self) -> Vec<Switch> {
+            self.0.lock().expect("journal").clone()
+        }
+    }
+
+    /// Follower 9 of generated10 in real time with losses and steering, started at 1 s, aligned
+    /// phases; its journal's switches.
+    fn reader(s: &Scenario) -> (RealtimeCore<Relinked>, Kept) {
         let me = s.formation.member(ME).expect("member 9");
         let setup = RealtimeSetup {
             hash: HASH,
@@ -230,11 +261,15 @@ mod tests {
         let outs = s.formation.readers_of(ME);
         let losses = MemberLosses::new(me, LossLog::new(s), &ins, &outs);
         let at_rest = [cdm_math::Vec3::zeros(); 3];
+        let kept = Kept::default();
+        let steering = crate::member_steer::MemberSteering::new(s.steering(), s.file.comm_hz);
         let mut c = RealtimeCore::realtime(me, at_rest, setup, Relinked::default(), Duration::ZERO)
-            .with_losses(losses);
+            .with_losses(losses)
+            .with_steering(steering)
+            .with_journal(Box::new(kept.clone()));
         let start = ClockMsg::realtime(UNIX_START + 1_000_000_000, HASH, PHASES_ALIGNED);
         assert_eq!(c.on_clock(&start, Duration::ZERO, UNIX_START), Ok(None));
-        c
+        (c, kept)
     }
 
     /// The clock message with loss notice (seq, id, tick, linked).
@@ -279,7 +314,7 @@ mod tests {
     #[test]
     fn a_reader_switches_at_the_notice_tick_once_its_new_neighbour_is_heard() {
         let s = Scenario::generated(10).expect("generated10");
-        let mut c = reader(&s);
+        let (mut c, kept) = reader(&s);
         fly_to(&mut c, 10, &[1, 6, 8]);
         // Member 6 is lost: the repair applies from tick 20, linked at once.
         told(&mut c, notice(1, 6, 20, 0));
@@ -297,12 +332,14 @@ mod tests {
         assert_eq!(work, [LossWork::HandOver]);
         assert_eq!(c.m.vehicle.links, [(20, Some([1, 3, 8]))]);
         assert_eq!(c.m.neighbor_ids, [1, 3, 8]);
+        // The journal has the switch as applied, for a replay.
+        assert_eq!(kept.switches(), [Switch::repaired(20, 20, [1, 3, 8])]);
     }
 
     #[test]
     fn a_notice_past_its_tick_or_an_unheard_neighbour_switches_at_the_next_tick_heard() {
         let s = Scenario::generated(10).expect("generated10");
-        let mut c = reader(&s);
+        let (mut c, kept) = reader(&s);
         fly_to(&mut c, 30, &[1, 6, 8]);
         // A notice of tick 20 that arrives at 30 (a starved member): followed, not a fault.
         told(&mut c, notice(1, 6, 20, 1));
@@ -311,6 +348,7 @@ mod tests {
         assert!(c.m.vehicle.links.is_empty());
         fly_to(&mut c, 36, &[1, 3, 8]);
         assert_eq!(c.m.vehicle.links, [(33, Some([1, 3, 8]))]);
+        assert_eq!(kept.switches(), [Switch::repaired(33, 20, [1, 3, 8])]);
         // A notice naming this member: it was declared lost, it stops.
         told(&mut c, notice(2, ME, 50, 1));
         match c.poll(Duration::from_secs_f64(1.36)) {
@@ -319,5 +357,23 @@ mod tests {
             }
             a => panic!("{a:?}"),
         }
+    }
+
+    #[test]
+    fn a_command_taken_is_journaled_on_the_path_of_a_repair() {
+        let s = Scenario::generated(10).expect("generated10");
+        let (mut c, kept) = reader(&s);
+        fly_to(&mut c, 12, &[1, 6, 8]);
+        let n = crate::messages::SteerNotice::decided(1, 40, cdm_model::steer::TeamCommand::Hold);
+        let m = ClockMsg::realtime(UNIX_START + 1_000_000_000, HASH, PHASES_ALIGNED)
+            .with_steer(Some(n));
+        told(&mut c, m);
+        // A repeat of the notice is not taken again.
+        told(&mut c, m);
+        let taken = Switch {
+            tick: 12,
+            what: Switched::Command { seq: 1, at: 40 },
+        };
+        assert_eq!(kept.switches(), [taken]);
     }
 }
