@@ -312,7 +312,6 @@ fn start_members(
     (member_file, scenario_file): (&std::path::Path, &std::path::Path),
     runs_here: impl Fn(u32) -> bool,
 ) -> Result<Vec<Spawned>, LaunchError> {
-    let ids: Vec<u32> = s.formation.members.iter().map(|m| m.id).collect();
     let mut children = Vec::new();
     let record = crate::realtime::recording_flags(o, dir)?;
     if o.spawn {
@@ -346,20 +345,7 @@ fn start_members(
                         t.finish();
                     }
                     stop_team(ports, &mut children, s, StopReason::AgentFault);
-                    let error = LaunchError::Spawn {
-                        id: m.id,
-                        what: describe_spawn_error(&e),
-                    };
-                    let mut audit = Auditor::new(s);
-                    audit.fault(fault(
-                        FaultKind::SpawnFailed,
-                        Some(m.id),
-                        None,
-                        0,
-                        error.to_string(),
-                    ));
-                    let _ = dir.write_audit(&audit.finish(false));
-                    return Err(error);
+                    return Err(spawn_failed(s, dir, m.id, &e));
                 }
             }
         }
@@ -367,27 +353,49 @@ fn start_members(
             t.finish();
         }
     } else {
-        // Hand-started members are told every flag a spawned one gets, `--record` among them.
-        let mut flags = crate::realtime::member_flags(o);
-        flags.extend(record);
-        flags.extend(o.vehicles.member_args());
-        let of = |leader: bool| -> Vec<u32> {
-            let members = s.formation.members.iter();
-            members
-                .filter(|m| m.role.is_leader() == leader)
-                .map(|m| m.id)
-                .collect()
-        };
-        o.notices.notice(&crate::notice::LaunchNotice::StartByHand {
-            team: o.team.to_string(),
-            members: ids.len(),
-            scenario: scenario_file.to_path_buf(),
-            flags,
-            leaders: of(true),
-            followers: of(false),
-        });
+        tell_hand_start(s, o, scenario_file, record);
     }
     Ok(children)
+}
+
+/// A member that could not start: the run's audit says so, and the launch's error.
+fn spawn_failed(s: &Scenario, dir: &RunDir, id: u32, e: &std::io::Error) -> LaunchError {
+    let error = LaunchError::Spawn {
+        id,
+        what: describe_spawn_error(e),
+    };
+    let mut audit = Auditor::new(s);
+    let text = error.to_string();
+    audit.fault(fault(FaultKind::SpawnFailed, Some(id), None, 0, text));
+    let _ = dir.write_audit(&audit.finish(false));
+    error
+}
+
+/// Hand-started members are told every flag a spawned one gets, `--record` among them.
+fn tell_hand_start(
+    s: &Scenario,
+    o: &LaunchOptions,
+    scenario_file: &std::path::Path,
+    record: Vec<String>,
+) {
+    let mut flags = crate::realtime::member_flags(o);
+    flags.extend(record);
+    flags.extend(o.vehicles.member_args());
+    let of = |leader: bool| -> Vec<u32> {
+        let members = s.formation.members.iter();
+        members
+            .filter(|m| m.role.is_leader() == leader)
+            .map(|m| m.id)
+            .collect()
+    };
+    o.notices.notice(&crate::notice::LaunchNotice::StartByHand {
+        team: o.team.to_string(),
+        members: s.formation.members.len(),
+        scenario: scenario_file.to_path_buf(),
+        flags,
+        leaders: of(true),
+        followers: of(false),
+    });
 }
 
 /// The template every member is forked from (a member started from its binary pays its `exec`

@@ -143,10 +143,7 @@ pub(crate) fn run(
     crate::launch::gather(s, o, ports, children, interrupted)?;
     crate::team_arm::arm_team(s, o, ports, children, interrupted)?;
     crate::launch::write_subscriptions(s, ports, dir);
-    let mut tel = cdm_team::telemetry::open(dir, o.telemetry, o.every, s).map_err(|e| {
-        let f = fault(FaultKind::Io, None, None, 0, e.to_string());
-        (f, StopReason::AgentFault)
-    })?;
+    let mut tel = open_telemetry(s, o, dir)?;
     let (mut core, clock, start, start_msg) = announce(s, o, rt, ports)?;
     let hash = s.content_hash();
     let plan = *wall_clock(&mut core).plan();
@@ -211,6 +208,18 @@ pub(crate) fn run(
             Err(stop)
         }
     }
+}
+
+/// The run's telemetry file; a file that cannot be opened stops the team as an I/O fault.
+fn open_telemetry(
+    s: &Scenario,
+    o: &LaunchOptions,
+    dir: &RunDir,
+) -> Result<Box<dyn cdm_records::telemetry::TelemetrySink + Send>, Stop> {
+    cdm_team::telemetry::open(dir, o.telemetry, o.every, s).map_err(|e| {
+        let f = fault(FaultKind::Io, None, None, 0, e.to_string());
+        (f, StopReason::AgentFault)
+    })
 }
 
 /// The monitor's own figures of a flight of `wall_s` seconds with `audits` instants audited.
