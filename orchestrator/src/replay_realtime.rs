@@ -16,6 +16,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
+use cdm_certificates::command_certificate::CommandRecord;
 use cdm_recording::Recording;
 use cdm_records::audit::{Auditor, FaultRecord};
 use cdm_records::run_record::{RunMode, RunRecord};
@@ -57,7 +58,8 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     let recordings = cdm_recording::read_dir(&run.join(cdm_recording::DIR), &ids, hash)
         .map_err(Failure::bad_input)?;
     let changed = crate::replay::changed(&s, a)?;
-    let (flown, history) = history_of(run, (&s, changed), &audit, &recordings, a.what_if())?;
+    let (flown, history, commanded) =
+        history_of(run, (&s, changed), &audit, &recordings, a.what_if())?;
     let stop = run_fault(run, &audit)?;
     let timing = ReplayTiming {
         link_shift_ticks: link_shift_ticks(&s, &flown),
@@ -101,7 +103,13 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     let complete = end.is_some_and(|e| e.complete);
     tel.finish()
         .map_err(|e| Failure::fault(format!("{}: {e}", dir.path().display())))?;
-    let report = auditor.finish(complete);
+    let mut report = auditor.finish(complete);
+    // The run's commands, as they were decided (the replay flies their switches): listed as the
+    // run's audit lists them, and commands.json beside, as a commanded launch writes them.
+    if !commanded.is_empty() {
+        report.commands = commanded.iter().map(|r| r.summary()).collect();
+        cdm_launch::steer::write_commands(&dir, &commanded).map_err(Failure::fault)?;
+    }
     dir.write_audit(&report).map_err(Failure::fault)?;
     crate::run_summary::summary("replay", &report, started, dir.path(), quiet);
     let cut: Vec<(u32, u64)> = (recordings.iter())
@@ -144,18 +152,13 @@ fn history_of(
     audit: &serde_json::Value,
     recordings: &BTreeMap<u32, Recording>,
     what_if: bool,
-) -> Result<(Scenario, History), Failure> {
+) -> Result<(Scenario, History, Vec<CommandRecord>), Failure> {
     let losses = realtime_losses(&run.join("audit.json"), audit, s).map_err(Failure::bad_input)?;
-    let (flown, commands) =
-        match commands_of(run, &changed, !what_if).map_err(Failure::bad_input)? {
-            Some((flown, records)) => {
-                let ticks = (records.iter().filter(|r| r.accepted))
-                    .map(|r| r.switch_tick)
-                    .collect();
-                (flown, ticks)
-            }
-            None => (changed, Vec::new()),
-        };
+    let (flown, commanded) = (commands_of(run, &changed, !what_if).map_err(Failure::bad_input)?)
+        .unwrap_or((changed, Vec::new()));
+    let commands = (commanded.iter().filter(|r| r.accepted))
+        .map(|r| r.switch_tick)
+        .collect();
     let records = loss_records(&flown, &losses);
     let losses = (losses.iter().zip(records))
         .map(|(l, records)| ReplayLoss {
@@ -180,7 +183,7 @@ fn history_of(
         losses,
         commands,
     };
-    Ok((flown, history))
+    Ok((flown, history, commanded))
 }
 
 /// The phase seed, audit rate and stale bound of the run (audit.json's `realtime`).
