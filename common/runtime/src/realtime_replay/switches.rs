@@ -34,7 +34,7 @@ pub(super) fn relinks(
     commands: &[u64],
 ) -> Result<Vec<(u64, Member)>, ReplayInputError> {
     let mut out = Vec::new();
-    let mut taken = 0u32;
+    let (mut taken, mut last_seq) = (0u32, 0u32);
     for sw in &rec.switches {
         let bad = |why: String| ReplayInputError::Switch {
             id,
@@ -60,9 +60,13 @@ pub(super) fn relinks(
                 out.push((sw.tick, member.clone()));
             }
             Switched::Command { seq, at } => {
+                // Notice numbers grow with every proposal, withdrawn ones too (real time), so
+                // the k-th command taken is the run's k-th, whatever its number.
                 taken += 1;
                 let given = commands.get(taken as usize - 1);
-                if seq != taken || given != Some(&at) || sw.tick > at {
+                let in_order = seq > last_seq;
+                last_seq = seq;
+                if !in_order || given != Some(&at) || sw.tick > at {
                     return Err(bad(format!(
                         "took command {seq} switching at tick {at}, but the run's command {taken} switches at {given:?}"
                     )));
@@ -209,9 +213,12 @@ mod tests {
         };
         let ok = recorded(vec![command(10, 1, 50), command(60, 2, 90)]);
         assert_eq!(relinks(9, &ok, &e, &[50, 90]).expect("ok"), []);
+        // A withdrawn proposal took number 2: the run's second command is number 3.
+        let ok = recorded(vec![command(10, 1, 50), command(60, 3, 90)]);
+        assert_eq!(relinks(9, &ok, &e, &[50, 90]).expect("ok"), []);
         for (sw, commands) in [
             (vec![command(10, 1, 50)], vec![60]),
-            (vec![command(10, 2, 50)], vec![50]),
+            (vec![command(10, 2, 50), command(60, 2, 90)], vec![50, 90]),
             (vec![command(51, 1, 50)], vec![50]),
             (vec![command(10, 1, 50)], vec![]),
         ] {
