@@ -103,14 +103,7 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     let complete = end.is_some_and(|e| e.complete);
     tel.finish()
         .map_err(|e| Failure::fault(format!("{}: {e}", dir.path().display())))?;
-    let mut report = auditor.finish(complete);
-    // The run's commands, as they were decided (the replay flies their switches): listed as the
-    // run's audit lists them, and commands.json beside, as a commanded launch writes them.
-    if !commanded.is_empty() {
-        report.commands = commanded.iter().map(|r| r.summary()).collect();
-        cdm_launch::steer::write_commands(&dir, &commanded).map_err(Failure::fault)?;
-    }
-    dir.write_audit(&report).map_err(Failure::fault)?;
+    let report = write_audit(&dir, auditor.finish(complete), &commanded)?;
     crate::run_summary::summary("replay", &report, started, dir.path(), quiet);
     let cut: Vec<(u32, u64)> = (recordings.iter())
         .filter(|(_, rec)| rec.cut_short)
@@ -122,6 +115,22 @@ pub fn replay_realtime(a: &ReplayArgs, quiet: bool) -> Result<Exit, Failure> {
     let differs = crate::replay::compare(run, dir.path(), format, quiet)?;
     crate::replay::outcome(a, a.what_if(), differs)?;
     Ok(crate::run_summary::exit_of(&report))
+}
+
+/// The replay's audit.json, with the run's commands as they were decided (the replay flies
+/// their switches): listed as the run's audit lists them, and commands.json beside, as a
+/// commanded launch writes them.
+fn write_audit(
+    dir: &RunDir,
+    mut report: cdm_records::audit::AuditReport,
+    commanded: &[CommandRecord],
+) -> Result<cdm_records::audit::AuditReport, Failure> {
+    if !commanded.is_empty() {
+        report.commands = commanded.iter().map(|r| r.summary()).collect();
+        cdm_launch::steer::write_commands(dir, commanded).map_err(Failure::fault)?;
+    }
+    dir.write_audit(&report).map_err(Failure::fault)?;
+    Ok(report)
 }
 
 /// The fault the run's monitor stopped the flight on (audit.json's `fault`), if any, and the
