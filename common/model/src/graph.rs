@@ -64,8 +64,13 @@ pub fn synthesize(formation: &mut Formation, floor: Real) -> Result<(), Synthesi
             placed.push((id, p));
             continue;
         }
-        let ids = best_triangle(&p, &nearest(&placed, &p), &leader_ids, floor)
-            .map_err(|best| SynthesisError { id, floor, best })?;
+        let ids = best_triangle(
+            &p,
+            &nearest_candidates(&placed, &p, &leader_ids),
+            &leader_ids,
+            floor,
+        )
+        .map_err(|best| SynthesisError { id, floor, best })?;
         // best_triangle only returns weights >= floor > 0, which set_link accepts.
         formation
             .set_link(id, ids)
@@ -168,6 +173,41 @@ pub fn farthest_point_order(formation: &Formation, leaders: &[(u32, Vec2)]) -> V
 pub fn nearest(pts: &[(u32, Vec2)], p: &Vec2) -> Vec<(Real, u32, Vec2)> {
     let mut near: Vec<(Real, u32, Vec2)> =
         pts.iter().map(|(j, q)| ((q - p).norm(), *j, *q)).collect();
-    near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    near.sort_by(by_distance_then_id);
     near
+}
+
+/// What [`best_triangle`] reads of [`nearest`]`(pts, p)`: its first `CANDIDATES`' largest
+/// count, then the members of `leader_ids` ranked after them, in the same order (so
+/// `best_triangle` sees the same candidates in the same order and picks the same triangle).
+/// Selection instead of a sort of every point: repairing each single loss of N = 1000 to size
+/// the services sorted all members for every follower it re-triangulated.
+pub fn nearest_candidates(
+    pts: &[(u32, Vec2)],
+    p: &Vec2,
+    leader_ids: &[u32],
+) -> Vec<(Real, u32, Vec2)> {
+    let mut near: Vec<(Real, u32, Vec2)> =
+        pts.iter().map(|(j, q)| ((q - p).norm(), *j, *q)).collect();
+    let k = CANDIDATES[CANDIDATES.len() - 1];
+    if near.len() > k {
+        near.select_nth_unstable_by(k, by_distance_then_id);
+        let (head, tail) = near.split_at_mut(k);
+        head.sort_by(by_distance_then_id);
+        let mut leaders: Vec<(Real, u32, Vec2)> = tail
+            .iter()
+            .filter(|(_, j, _)| leader_ids.contains(j))
+            .copied()
+            .collect();
+        leaders.sort_by(by_distance_then_id);
+        near.truncate(k);
+        near.extend(leaders);
+    } else {
+        near.sort_by(by_distance_then_id);
+    }
+    near
+}
+
+fn by_distance_then_id(a: &(Real, u32, Vec2), b: &(Real, u32, Vec2)) -> std::cmp::Ordering {
+    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
 }

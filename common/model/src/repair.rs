@@ -21,7 +21,7 @@ use std::collections::BTreeSet;
 use serde::Serialize;
 
 use crate::formation::{Formation, Role};
-use crate::graph::{best_triangle, farthest_point_order, nearest};
+use crate::graph::{best_triangle, farthest_point_order, nearest_candidates};
 use cdm_math::{Real, Vec2};
 
 /// A follower that switched to a new triangle.
@@ -74,57 +74,11 @@ pub fn repair_in_order(
     order: &[(u32, Vec2)],
 ) -> Repair {
     let mut f = formation.clone();
-    let leader_ids: Vec<u32> = f
-        .members
-        .iter()
-        .filter(|m| m.role.is_leader() && !lost.contains(&m.id))
-        .map(|m| m.id)
-        .collect();
-    let mut retriangulated = Vec::new();
-    let mut degraded = Vec::new();
     // Built once and kept current as links change: a table per walk was a third of the
     // orchestrator's start-up CPU at N = 1000 (its N single-loss repairs).
     let mut table = ReaderTable::of(&f);
-    for &(id, p) in order {
-        let Some(old) = f.member(id).and_then(|m| m.link) else {
-            continue;
-        };
-        if lost.contains(&id) || !old.in_neighbors.iter().any(|j| lost.contains(j)) {
-            continue;
-        }
-        let downstream = readers_of(&f, &table, id, lost);
-        let survivors: Vec<(u32, Vec2)> = f
-            .members
-            .iter()
-            .filter(|m| m.id != id && !lost.contains(&m.id))
-            .map(|m| (m.id, m.planar))
-            .collect();
-        let acyclic: Vec<(u32, Vec2)> = survivors
-            .iter()
-            .filter(|(j, _)| !downstream.contains(j))
-            .copied()
-            .collect();
-        let pick = best_triangle(&p, &nearest(&acyclic, &p), &leader_ids, floor)
-            .or_else(|_| best_triangle(&p, &nearest(&survivors, &p), &leader_ids, floor));
-        let set = pick
-            .ok()
-            .and_then(|new| f.set_link(id, new).ok().map(|()| new));
-        match set {
-            Some(new) => {
-                table.relink(&f, id, Some(old.in_neighbors), Some(new));
-                retriangulated.push(Retriangulation {
-                    id,
-                    old: old.in_neighbors,
-                    new,
-                });
-            }
-            None => {
-                degrade(&mut f, id);
-                table.relink(&f, id, Some(old.in_neighbors), None);
-                degraded.push(id);
-            }
-        }
-    }
+    let (mut retriangulated, mut degraded) =
+        relink_affected(&mut f, &mut table, floor, lost, order.iter().copied());
     // Strict containment makes every survivor reachable (see `graph`); should that ever fail,
     // the unreachable ones fly their plan rather than follow nobody.
     for id in unreachable_in(&f, &table, lost) {
@@ -138,6 +92,136 @@ pub fn repair_in_order(
         lost: lost.clone(),
         retriangulated,
         degraded,
+    }
+}
+
+/// Every follower of `candidates` (in synthesis order) that read a lost member picks a new
+/// triangle, or is degraded: `f` and `table` are changed as it goes (a later follower must not
+/// pick one that now reads it). Returns the re-triangulated and the degraded ones.
+fn relink_affected(
+    f: &mut Formation,
+    table: &mut ReaderTable,
+    floor: Real,
+    lost: &BTreeSet<u32>,
+    candidates: impl Iterator<Item = (u32, Vec2)>,
+) -> (Vec<Retriangulation>, Vec<u32>) {
+    let leader_ids: Vec<u32> = f
+        .members
+        .iter()
+        .filter(|m| m.role.is_leader() && !lost.contains(&m.id))
+        .map(|m| m.id)
+        .collect();
+    let mut retriangulated = Vec::new();
+    let mut degraded = Vec::new();
+    for (id, p) in candidates {
+        let Some(old) = f.member(id).and_then(|m| m.link) else {
+            continue;
+        };
+        if lost.contains(&id) || !old.in_neighbors.iter().any(|j| lost.contains(j)) {
+            continue;
+        }
+        let downstream = reader_mask(f, table, id, lost);
+        let (mut survivors, mut acyclic) = (Vec::new(), Vec::new());
+        for (k, m) in f.members.iter().enumerate() {
+            if m.id != id && !lost.contains(&m.id) {
+                survivors.push((m.id, m.planar));
+                if !downstream[k] {
+                    acyclic.push((m.id, m.planar));
+                }
+            }
+        }
+        let near = |pts: &[(u32, Vec2)]| nearest_candidates(pts, &p, &leader_ids);
+        let pick = best_triangle(&p, &near(&acyclic), &leader_ids, floor)
+            .or_else(|_| best_triangle(&p, &near(&survivors), &leader_ids, floor));
+        let set = pick
+            .ok()
+            .and_then(|new| f.set_link(id, new).ok().map(|()| new));
+        match set {
+            Some(new) => {
+                table.relink(f, id, Some(old.in_neighbors), Some(new));
+                retriangulated.push(Retriangulation {
+                    id,
+                    old: old.in_neighbors,
+                    new,
+                });
+            }
+            None => {
+                degrade(f, id);
+                table.relink(f, id, Some(old.in_neighbors), None);
+                degraded.push(id);
+            }
+        }
+    }
+    (retriangulated, degraded)
+}
+
+/// The repairs of many single losses, one after another on one working copy of the formation
+/// (each undone before the next): the re-triangulations of [`repair_in_order`] with one member
+/// lost, without its copy of the formation, its reader table and its walk of every follower
+/// per loss (sizing the services for each single loss of N = 1000 spent most of its time
+/// there).
+pub struct SingleLosses<'a> {
+    original: &'a Formation,
+    f: Formation,
+    table: ReaderTable,
+    floor: Real,
+    /// Each follower's place in the synthesis order, by member index.
+    rank: Vec<usize>,
+    order: &'a [(u32, Vec2)],
+}
+
+impl<'a> SingleLosses<'a> {
+    /// `order` must be [`synthesis_order`] of `formation`.
+    pub fn new(formation: &'a Formation, floor: Real, order: &'a [(u32, Vec2)]) -> Self {
+        let mut rank = vec![usize::MAX; formation.members.len()];
+        for (r, (id, _)) in order.iter().enumerate() {
+            if let Some(k) = formation.index_of(*id) {
+                rank[k] = r;
+            }
+        }
+        SingleLosses {
+            original: formation,
+            f: formation.clone(),
+            table: ReaderTable::of(formation),
+            floor,
+            rank,
+            order,
+        }
+    }
+
+    /// [`Repair::retriangulated`] of [`repair_in_order`] for the loss of `id` alone.
+    pub fn retriangulated(&mut self, id: u32) -> Vec<Retriangulation> {
+        let Some(k) = self.f.index_of(id) else {
+            return Vec::new();
+        };
+        // Only the lost member's readers are affected; walked in synthesis order as the full
+        // repair walks them.
+        let mut ranks: Vec<usize> = self.table.row(k).iter().map(|&r| self.rank[r]).collect();
+        ranks.sort_unstable();
+        let order = self.order;
+        let affected = ranks.into_iter().filter_map(|r| order.get(r).copied());
+        let lost = BTreeSet::from([id]);
+        let (mut retriangulated, degraded) =
+            relink_affected(&mut self.f, &mut self.table, self.floor, &lost, affected);
+        // Undone in reverse, each member back to its original link.
+        for x in retriangulated.iter().rev() {
+            self.restore(x.id, Some(x.new));
+        }
+        for &d in degraded.iter().rev() {
+            self.restore(d, None);
+        }
+        retriangulated.sort_by_key(|x| x.id);
+        retriangulated
+    }
+
+    fn restore(&mut self, id: u32, now: Option<[u32; 3]>) {
+        let Some(k) = self.original.index_of(id) else {
+            return;
+        };
+        let link = self.original.members[k].link;
+        self.f.members[k].link = link;
+        self.table
+            .relink(&self.f, id, now, link.map(|l| l.in_neighbors));
     }
 }
 
@@ -187,7 +271,18 @@ impl ReaderTable {
 }
 
 /// Survivors that read `id`, directly or through other survivors (`table`: `f`'s readers).
+#[cfg(test)]
 fn readers_of(f: &Formation, table: &ReaderTable, id: u32, lost: &BTreeSet<u32>) -> BTreeSet<u32> {
+    let seen = reader_mask(f, table, id, lost);
+    (0..f.members.len())
+        .filter(|&k| seen[k])
+        .map(|k| f.members[k].id)
+        .collect()
+}
+
+/// Survivors that read `id`, directly or through other survivors (`table`: `f`'s readers), by
+/// member index.
+fn reader_mask(f: &Formation, table: &ReaderTable, id: u32, lost: &BTreeSet<u32>) -> Vec<bool> {
     let mut seen = vec![false; f.members.len()];
     let mut stack: Vec<usize> = f.index_of(id).into_iter().collect();
     while let Some(j) = stack.pop() {
@@ -198,10 +293,7 @@ fn readers_of(f: &Formation, table: &ReaderTable, id: u32, lost: &BTreeSet<u32>)
             }
         }
     }
-    (0..f.members.len())
-        .filter(|&k| seen[k])
-        .map(|k| f.members[k].id)
-        .collect()
+    seen
 }
 
 /// Surviving followers not reachable from a surviving leader or a degraded follower through
@@ -244,7 +336,7 @@ mod tests {
     use super::*;
     use crate::formation::MemberInput;
     use crate::frame::Frame;
-    use crate::graph::synthesize;
+    use crate::graph::{nearest, synthesize};
     use crate::link::splitmix64;
     use cdm_math::Vec3;
 
@@ -331,6 +423,50 @@ mod tests {
             found += got.len();
         }
         assert!(found > 0, "no case had an unreachable follower");
+    }
+
+    #[test]
+    fn single_losses_repair_as_the_full_repair_does() {
+        // Larger than the most candidates a triangle is picked from, so the selection is
+        // exercised; each loss is undone before the next, so any leftover would show here.
+        let team = team(300);
+        let order = synthesis_order(&team);
+        let mut singles = SingleLosses::new(&team, FLOOR, &order);
+        let mut switched = 0;
+        for m in &team.members {
+            let full = repair_in_order(&team, FLOOR, &[m.id].into(), &order);
+            let got = singles.retriangulated(m.id);
+            assert_eq!(got, full.retriangulated, "loss of {}", m.id);
+            switched += got.len();
+        }
+        assert!(switched > team.members.len(), "{switched} switches");
+    }
+
+    #[test]
+    fn the_nearest_candidates_pick_the_triangles_all_points_pick() {
+        let team = team(300);
+        let leader_ids: Vec<u32> = team
+            .members
+            .iter()
+            .filter(|m| m.role.is_leader())
+            .map(|m| m.id)
+            .collect();
+        let pts: Vec<(u32, Vec2)> = team.members.iter().map(|m| (m.id, m.planar)).collect();
+        let mut refused = 0;
+        for m in team.members.iter().filter(|m| !m.role.is_leader()) {
+            let others: Vec<(u32, Vec2)> =
+                pts.iter().filter(|(j, _)| *j != m.id).copied().collect();
+            // A floor no triangle reaches: every pass runs, the leaders' included.
+            for floor in [FLOOR, 0.34] {
+                let all =
+                    best_triangle(&m.planar, &nearest(&others, &m.planar), &leader_ids, floor);
+                let few = nearest_candidates(&others, &m.planar, &leader_ids);
+                let got = best_triangle(&m.planar, &few, &leader_ids, floor);
+                assert_eq!(got, all, "follower {}, floor {floor}", m.id);
+                refused += usize::from(got.is_err());
+            }
+        }
+        assert!(refused > 0);
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use cdm_engine::loss::LossSchedule;
 use cdm_iox::RepairRoom;
-use cdm_model::repair::{repair_in_order, synthesis_order};
+use cdm_model::repair::{synthesis_order, SingleLosses};
 use cdm_records::loss_log::LossLog;
 use cdm_scenario::Scenario;
 
@@ -60,7 +60,8 @@ pub fn stop_and_reap(children: &mut [Spawned], id: u32, grace: std::time::Durati
 /// run at most a window ahead of the last complete tick).
 ///
 /// N single-loss repairs: the synthesis order they share is computed once (it was an O(N^2) scan
-/// per repair, 2 s of the start-up at N = 1000), and the members are split over the cores.
+/// per repair, 2 s of the start-up at N = 1000), each repairs only the lost member's readers on
+/// a shared working copy (`SingleLosses`), and the members are split over the cores.
 pub fn repair_room(s: &Scenario, window: u32) -> RepairRoom {
     let floor = s
         .file
@@ -217,10 +218,10 @@ fn most_gained(
     lost_one_by_one: &[u32],
 ) -> BTreeMap<u32, usize> {
     let mut most: BTreeMap<u32, usize> = BTreeMap::new();
+    let mut singles = SingleLosses::new(&s.formation, floor, order);
     for &id in lost_one_by_one {
-        let r = repair_in_order(&s.formation, floor, &[id].into(), order);
         let mut gain: BTreeMap<u32, usize> = BTreeMap::new();
-        for x in &r.retriangulated {
+        for x in &singles.retriangulated(id) {
             for j in x.new.iter().filter(|j| !x.old.contains(j)) {
                 *gain.entry(*j).or_default() += 1;
             }
