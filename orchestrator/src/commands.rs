@@ -389,7 +389,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             "--lose needs members spawned by launch (not --no-spawn)",
         ));
     }
-    let (s, commands) = file_commands(a, s)?;
+    let (s, commands, realtime_commands) = file_commands(a, s, realtime.as_ref())?;
     let team_name = a
         .team
         .clone()
@@ -433,6 +433,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         losses,
         on_loss: a.run.on_loss.into(),
         commands,
+        realtime_commands,
     };
     Ok((s, opts))
 }
@@ -457,31 +458,59 @@ fn land_on_interrupt(
     }
 }
 
-/// `--commands FILE` decided for the team of `s`: the commanded scenario to launch and the
-/// commands (`s` itself without the option).
-fn file_commands(a: &LaunchArgs, s: Scenario) -> Result<(Scenario, Option<FileCommands>), Failure> {
+/// A launch's `--commands FILE`: in lockstep decided for the team of `s` before the flight
+/// (the commanded scenario to launch, and the commands); in real time the file's commands, each
+/// proposed to the leaders in flight (`s` launched as it is). `s` itself without the option.
+type Commanded = (
+    Scenario,
+    Option<FileCommands>,
+    Vec<cdm_scenario::TimedCommand>,
+);
+
+/// `--commands FILE` for the team of `s` (see [`Commanded`]).
+fn file_commands(
+    a: &LaunchArgs,
+    s: Scenario,
+    realtime: Option<&cdm_launch::realtime::RealtimeOptions>,
+) -> Result<Commanded, Failure> {
     let Some(path) = &a.commands else {
-        return Ok((s, None));
+        return Ok((s, None, Vec::new()));
     };
-    check_commanded_launch(a)?;
     let list = cdm_scenario::load_commands(path, &s).map_err(Failure::bad_input)?;
+    if let Some(rt) = realtime {
+        if a.hosts.hosts > 1 {
+            return Err(Failure::bad_input(
+                "--commands with --realtime needs one host: a real-time team across hosts takes no command",
+            ));
+        }
+        check_realtime_commands(path, &list, &s, rt)?;
+        return Ok((s, None, list));
+    }
     let (flown, c) = FileCommands::decide(&s, &list);
-    Ok((flown, Some(c)))
+    Ok((flown, Some(c), Vec::new()))
 }
 
-/// `launch --commands` flies a lockstep team of model vehicles (on one host or several):
-/// refused, not ignored, elsewhere.
-fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
-    let why = if a.realtime.realtime {
-        Some("--realtime (steer a real-time team live with `orchestrator command`)")
-    } else if a.vehicle.vehicles != cdm_member_cli::VehicleKind::Model {
-        Some("--vehicles mavlink")
-    } else {
-        None
-    };
-    match why {
-        Some(w) => Err(Failure::bad_input(format!(
-            "--commands flies a lockstep team of model vehicles, not with {w}"
+/// `launch --realtime --commands FILE`: each command is proposed to the leaders in flight, which
+/// needs the switch margin twice over before its switch (`earliest_file_switch_s`); a command
+/// switching earlier is refused up front, named, not left to be withdrawn in flight.
+fn check_realtime_commands(
+    path: &Path,
+    list: &[cdm_scenario::TimedCommand],
+    s: &Scenario,
+    rt: &cdm_launch::realtime::RealtimeOptions,
+) -> Result<(), Failure> {
+    let earliest_s = cdm_runtime::team_core::earliest_file_switch_s(s.dt_s(), rt.stale_after);
+    let early = (list.iter().enumerate())
+        .find(|(_, c)| cdm_model::step::tick_time(c.switch_tick, s.dt_s()) < earliest_s - 1e-9);
+    match early {
+        Some((k, c)) => Err(Failure::bad_input(format!(
+            "{}: commands[{k}] ({} at_s = {} s) switches too early for a real-time team: a file's command is proposed to the leaders in flight and needs twice the switch margin (the larger of {} ticks and {} of --stale-after) before its switch, here at_s >= {:.3} s",
+            path.display(),
+            c.spec.command,
+            c.spec.at_s,
+            cdm_runtime::team_core::SWITCH_MARGIN_TICKS,
+            cdm_runtime::team_core::SWITCH_MARGIN_OF_STALE,
+            earliest_s
         ))),
         None => Ok(()),
     }

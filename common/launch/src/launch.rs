@@ -74,6 +74,9 @@ pub struct LaunchOptions {
     /// `--commands FILE`, decided before the flight (the scenario launched is the commanded
     /// one: its plan the same before every switch).
     pub commands: Option<crate::steer::FileCommands>,
+    /// `--realtime --commands FILE`: the file's commands, each certified and proposed to the
+    /// leaders in flight, ahead of its switch tick, as a live command is (`realtime_steer.rs`).
+    pub realtime_commands: Vec<cdm_scenario::TimedCommand>,
     /// `--on-interrupt land`: the first SIGINT or SIGTERM lands the team (certified as a
     /// command), then the run ends as usual; a second one stops it at once.
     pub land_on_interrupt: bool,
