@@ -439,23 +439,18 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
 }
 
 /// `--on-interrupt`: whether SIGINT or SIGTERM lands the team before it stops (by default
-/// with MAVLink vehicles, which would otherwise fall back to their own failsafes). In lockstep
-/// on any number of hosts, in real time on one host (where it takes commands): a real-time
-/// team across hosts stops on an interrupt.
+/// with MAVLink vehicles, which would otherwise fall back to their own failsafes), in lockstep
+/// or real time, on any number of hosts.
 fn land_on_interrupt(
     a: &LaunchArgs,
     vehicles: &cdm_member::vehicles::Vehicles,
 ) -> Result<bool, Failure> {
     use crate::cli::OnInterruptArg;
     let mavlink = matches!(vehicles, cdm_member::vehicles::Vehicles::Mavlink(_));
-    let takes_commands = !a.realtime.realtime || a.hosts.hosts <= 1;
-    match a.on_interrupt {
-        Some(OnInterruptArg::Land) if !takes_commands => Err(Failure::bad_input(
-            "--on-interrupt land with --realtime needs one host: a real-time team across hosts takes no command, and an interrupt stops it",
-        )),
-        Some(what) => Ok(what == OnInterruptArg::Land),
-        None => Ok(mavlink && takes_commands),
-    }
+    Ok(match a.on_interrupt {
+        Some(what) => what == OnInterruptArg::Land,
+        None => mavlink,
+    })
 }
 
 /// A launch's `--commands FILE`: in lockstep decided for the team of `s` before the flight
@@ -478,11 +473,6 @@ fn file_commands(
     };
     let list = cdm_scenario::load_commands(path, &s).map_err(Failure::bad_input)?;
     if let Some(rt) = realtime {
-        if a.hosts.hosts > 1 {
-            return Err(Failure::bad_input(
-                "--commands with --realtime needs one host: a real-time team across hosts takes no command",
-            ));
-        }
         check_realtime_commands(path, &list, &s, rt)?;
         return Ok((s, None, list));
     }
