@@ -377,8 +377,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
     check_follow(&s, a.run.follow)?;
     let losses = LossSchedule::new(&s, &a.run.lose, a.run.max_ticks).map_err(Failure::bad_input)?;
     if realtime.is_some() && a.hosts.hosts > 1 && !a.run.lose.is_empty() {
-        // Real time repairs losses on one host only (across hosts a loss is the host's fault):
-        // a scripted loss would only stop the team: refused, not ignored.
+        // Real time repairs losses on one host only: across hosts a scripted one stops the team.
         return Err(Failure::bad_input(
             "--lose with --realtime needs one host: real time repairs a lost member only on one host (fly the losses in lockstep, or on one host)",
         ));
