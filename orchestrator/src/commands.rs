@@ -18,21 +18,20 @@ use cdm_records::run_record::{RunMode, RunRecord};
 use cdm_records::rundir::RunDir;
 use cdm_scenario::{Checks, Scenario};
 use cdm_simulate::{simulate, SimulateOptions};
-use cdm_team::out;
 
 use cdm_iox::TeamName;
 use cdm_member_cli::timeout;
 
 use crate::cli::{Cli, Command, LaunchArgs, OutDir, RunOptions, ScenarioCommand};
+use crate::command_error::CommandError;
 use crate::export_args::{load, SourceArgs};
 use crate::print_certificate::print_certificate;
 use crate::progress::Spinner;
 use crate::run_summary::summary;
+use cdm_exit::{Exit, Failure};
 use cdm_launch::launch::{launch, LaunchOptions};
 use cdm_launch::steer::{write_commands, FileCommands};
 use cdm_report::{report, ReportError};
-use cdm_team::errors::CommandError;
-use cdm_team::{Exit, Failure};
 
 pub fn run(cli: Cli) -> Result<Exit, Failure> {
     match cli.command {
@@ -992,10 +991,30 @@ fn host_daemon(
         scenario,
         join_timeout: timeout("--join-timeout", join_timeout).map_err(Failure::bad_input)?,
     };
-    cdm_hosts::daemon::run(&o, &*crate::notices::sink(quiet)).map_err(|e| Failure {
-        exit: e.exit(),
-        error: Box::new(e),
-    })
+    cdm_hosts::daemon::run(&o, &*crate::notices::sink(quiet))
+        .map(|()| Exit::Safe)
+        .map_err(|e| Failure {
+            exit: daemon_exit(&e),
+            error: Box::new(e),
+        })
+}
+
+/// A daemon's exit: bad input is the operator's (2), the rest the team's fault (3).
+#[cfg(feature = "hosts")]
+fn daemon_exit(e: &cdm_hosts::error::DaemonError) -> Exit {
+    use cdm_hosts::error::DaemonError as E;
+    match e {
+        E::Binaries(cdm_team::team::MemberBinaryError::Locate(_)) => Exit::Fault,
+        E::NotCertified { .. }
+        | E::Binaries(_)
+        | E::Scenario(_)
+        | E::Security(_)
+        | E::Connect(_)
+        | E::Refused { .. }
+        | E::Priority { .. }
+        | E::Services(_) => Exit::BadInput,
+        _ => Exit::Fault,
+    }
 }
 
 /// Without the `hosts` feature there is no daemon.

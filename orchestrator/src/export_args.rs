@@ -4,9 +4,9 @@
 
 use std::path::PathBuf;
 
+use cdm_exit::Failure;
 use cdm_export::{ExportError, ExportFrame, ScenarioSource};
 use cdm_scenario::Scenario;
-use cdm_team::Failure;
 use clap::{Args, Subcommand};
 
 #[derive(Debug, Subcommand)]

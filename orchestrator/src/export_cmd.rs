@@ -4,12 +4,12 @@
 use std::path::Path;
 
 use crate::progress::Spinner;
+use cdm_exit::{Exit, Failure};
 use cdm_export::{
     export_bag, export_geojson, export_plan, export_qgc_plan, MapSource, PlanExport, PlanTarget,
     ShowFrame,
 };
 use cdm_model::outcome::Verdict;
-use cdm_team::{out, Exit, Failure};
 
 use crate::export_args::{failure, ExportTarget, FrameArgs, SourceArgs};
 use crate::print_certificate::print_certificate;

@@ -1,11 +1,11 @@
 //! `launch`'s options of the live feeds (`--ros2`, `--foxglove`) and of real time
 //! (`--realtime` ...), parsed by clap and validated into cdm-launch's plain option structs.
 
+use cdm_exit::Failure;
 use cdm_foxglove::FoxgloveOptions;
 use cdm_launch::realtime::RealtimeOptions;
 use cdm_ros2::{Backend, Ros2Options};
 use cdm_scenario::Scenario;
-use cdm_team::Failure;
 
 /// `--ros2` and `--ros2-hz`.
 #[derive(Debug, Clone, clap::Args)]

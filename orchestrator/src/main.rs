@@ -1,7 +1,18 @@
 //! `orchestrator`: parses arguments, initialises logging, runs the command, and maps the outcome
 //! to an exit code: 0 safe and complete, 1 safety violation / UNSAFE, 2 bad input, 3 runtime fault.
 
+/// `println!` that never panics: a closed or full stdout (`plan | head -1`, `launch >
+/// /dev/full`) must not stop a command before its files are complete. What cannot be printed is
+/// dropped; the run's outcome still decides the exit code.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 mod cli;
+mod command_error;
 mod commands;
 mod export_args;
 mod export_cmd;
@@ -16,7 +27,7 @@ mod replay_realtime;
 mod run_summary;
 mod steer_cmd;
 
-use cdm_team::Exit;
+use cdm_exit::Exit;
 use clap::Parser;
 
 fn main() {

@@ -4,7 +4,6 @@ use std::fmt::Display;
 use std::sync::Arc;
 
 use cdm_team::notices::{NoticeSink, Silent, TickProgress};
-use cdm_team::out;
 
 /// Prints each notice as it comes (a full or closed stdout drops it, as every line here).
 struct Stdout;

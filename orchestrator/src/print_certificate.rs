@@ -2,7 +2,6 @@
 
 use cdm_certificates::airspace_certificate::{AirspaceCertificate, ClearanceKind};
 use cdm_certificates::certificate::{Certificate, PhaseCertificate};
-use cdm_team::out;
 
 pub fn print_certificate(c: &Certificate) {
     out!(

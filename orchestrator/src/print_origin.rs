@@ -4,7 +4,6 @@
 use cdm_math::{vec3, Vec3};
 use cdm_model::formation::Role;
 use cdm_scenario::{GeoOrigin, Scenario};
-use cdm_team::out;
 
 /// Nothing without an `[origin]`. Latitude and longitude to 1e-10 degree (about 0.01 mm),
 /// altitude to 0.1 mm: far finer than any GPS fix, so that the lines can be checked against a

@@ -6,11 +6,11 @@ use std::path::Path;
 
 use cdm_certificates::command_certificate::CommandRecord;
 use cdm_engine::loss::LossSchedule;
+use cdm_exit::Failure;
 use cdm_records::rundir::RunDir;
 use cdm_records::telemetry::TelemetryFormat;
 use cdm_scenario::{Checks, Scenario};
 use cdm_simulate::replay::{first_audit_difference, first_line_difference, read_audit, RunInputs};
-use cdm_team::{out, Failure};
 
 use crate::cli::{OnLossArg, ReplayArgs, RunOptions};
 

@@ -17,6 +17,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use cdm_certificates::command_certificate::CommandRecord;
+use cdm_exit::{Exit, Failure};
 use cdm_recording::Recording;
 use cdm_records::audit::{Auditor, FaultRecord};
 use cdm_records::run_record::{RunMode, RunRecord};
@@ -27,7 +28,6 @@ use cdm_runtime::realtime_replay::{
 use cdm_scenario::{Checks, Scenario};
 use cdm_simulate::realtime_losses::{loss_records, realtime_losses};
 use cdm_simulate::replay::{commands_of, read_audit};
-use cdm_team::{Exit, Failure};
 
 use crate::cli::ReplayArgs;
 

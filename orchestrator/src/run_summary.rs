@@ -4,10 +4,9 @@
 use std::path::Path;
 use std::time::Instant;
 
+use cdm_exit::Exit;
 use cdm_model::outcome::Verdict;
 use cdm_records::audit::AuditReport;
-use cdm_team::out;
-use cdm_team::Exit;
 
 /// One-paragraph summary of a run.
 pub fn summary(what: &str, r: &AuditReport, started: Instant, dir: &Path, quiet: bool) {

@@ -3,9 +3,9 @@
 
 use std::time::Duration;
 
+use cdm_exit::{Exit, Failure};
 use cdm_iox::TeamName;
 use cdm_launch::channel::{send, Answered, CommandRequest};
-use cdm_team::{out, Exit, Failure};
 
 /// What `orchestrator command` takes.
 #[derive(Debug, clap::Args)]

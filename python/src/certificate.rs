@@ -6,7 +6,7 @@ use cdm_certificates::airspace_suggest::suggest;
 use cdm_certificates::certificate::{self, PhaseCertificate};
 use cdm_certificates::certify::certify;
 use cdm_certificates::losscert::certify_losses;
-use cdm_team::Failure;
+use cdm_exit::Failure;
 use pyo3::prelude::*;
 
 use crate::errors::to_py;

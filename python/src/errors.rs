@@ -1,7 +1,7 @@
 //! The CLI's failures as Python exceptions: the exit code picks the class, and the text is the
 //! one the CLI prints after `error: ` (`Failure::message`).
 
-use cdm_team::{Exit, Failure};
+use cdm_exit::{Exit, Failure};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
+use cdm_exit::Failure;
 use cdm_export::{export_plan, ExportFrame, PlanTarget};
-use cdm_team::Failure;
 use pyo3::prelude::*;
 
 use crate::errors::{bad_input, to_py};

@@ -5,11 +5,11 @@
 use std::path::PathBuf;
 
 use cdm_engine::loss::{LossSchedule, OnLoss};
+use cdm_exit::Failure;
 use cdm_records::rundir::RunDir;
 use cdm_records::telemetry::{TelemetryFormat, HEADER};
 use cdm_simulate::SimulateOptions;
 use cdm_team::telemetry::every_or_default;
-use cdm_team::Failure;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 

@@ -3,9 +3,9 @@
 
 use std::path::PathBuf;
 
+use cdm_exit::Failure;
 use cdm_export::ScenarioSource;
 use cdm_scenario::{Checks, Scenario as Loaded};
-use cdm_team::Failure;
 use pyo3::prelude::*;
 
 use crate::errors::to_py;

@@ -15,7 +15,6 @@ use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::{Checks, Scenario};
 use cdm_team::notices::NoticeSink;
 use cdm_team::team::{first_exited, spawn_member, stop_team, Spawned};
-use cdm_team::Exit;
 use cdm_zenoh::{
     down_key, up_key, Assignment, Down, JoinReply, JoinRequest, Net, Up, PROTOCOL_VERSION,
 };
@@ -55,9 +54,9 @@ struct Joined {
     link_timeout: Duration,
 }
 
-/// Runs the daemon to the end of the team (exit 0), a lost link (3) or a refusal (2,
-/// [`DaemonError::exit`]); says which members it runs to `notices`.
-pub fn run(o: &DaemonOptions, notices: &dyn NoticeSink) -> Result<Exit, DaemonError> {
+/// Runs the daemon to the end of the team, or to a lost link or a refusal ([`DaemonError`]);
+/// says which members it runs to `notices`.
+pub fn run(o: &DaemonOptions, notices: &dyn NoticeSink) -> Result<(), DaemonError> {
     let interrupted = cdm_process::signals::install();
     cdm_team::team::member_binaries_present()?;
     super::workdir::sweep_dead();
@@ -251,7 +250,7 @@ fn fly(
     chan: OrchestratorLink,
     dir: &Path,
     interrupted: &AtomicBool,
-) -> Result<Exit, DaemonError> {
+) -> Result<(), DaemonError> {
     let (layout, ghosts) = host_layout(j)?;
     let mut ports = OrchestratorPorts::create(&j.team, &layout).map_err(DaemonError::Services)?;
     let host_of: BTreeMap<u32, u32> = j.a.hosts_of.iter().copied().collect();
@@ -288,13 +287,11 @@ fn fly(
         StopReason::Finished => Ok(()),
         r => Err(DaemonStop::TeamStopped(r)),
     });
-    outcome
-        .map(|()| Exit::Safe)
-        .map_err(|why| DaemonError::Stopped {
-            host: j.a.host,
-            team: j.team.to_string(),
-            why: Box::new(why),
-        })
+    outcome.map_err(|why| DaemonError::Stopped {
+        host: j.a.host,
+        team: j.team.to_string(),
+        why: Box::new(why),
+    })
 }
 
 /// Writes the team's scenario where the members read it and spawns this host's members; on a

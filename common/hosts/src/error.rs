@@ -15,12 +15,8 @@ use cdm_runtime::messages::StopReason;
 use cdm_runtime::notices::NoticeGap;
 #[cfg(feature = "hosts")]
 use {
-    cdm_process::sched::SchedError,
-    cdm_records::rundir::RunDirError,
-    cdm_scenario::ScenarioError,
-    cdm_team::{Exit, Failure},
-    cdm_zenoh::NetError,
-    std::path::PathBuf,
+    cdm_process::sched::SchedError, cdm_records::rundir::RunDirError, cdm_scenario::ScenarioError,
+    cdm_zenoh::NetError, std::path::PathBuf,
 };
 
 use crate::host_link::LinkError;
@@ -78,24 +74,6 @@ pub enum BridgeError {
     Listen(#[source] NetError),
     #[error("cannot start the bridge thread: {0}")]
     Thread(#[source] std::io::Error),
-}
-
-/// A launch (still a library returning [`Failure`]) passes it on with `?`.
-#[cfg(feature = "hosts")]
-impl From<BridgeError> for Failure {
-    fn from(e: BridgeError) -> Self {
-        match e {
-            BridgeError::Endpoint(_) | BridgeError::Security(_) => Failure::bad_input(e),
-            _ => Failure::fault(e),
-        }
-    }
-}
-
-#[cfg(not(feature = "hosts"))]
-impl From<BridgeError> for cdm_team::Failure {
-    fn from(e: BridgeError) -> Self {
-        cdm_team::Failure::fault(e)
-    }
 }
 
 /// Why the bridge calls a host lost.
@@ -329,25 +307,6 @@ pub enum DaemonError {
         #[source]
         why: Box<DaemonStop>,
     },
-}
-
-#[cfg(feature = "hosts")]
-impl DaemonError {
-    /// The process's exit: bad input is the operator's (2), the rest the team's fault (3).
-    pub fn exit(&self) -> Exit {
-        match self {
-            DaemonError::Binaries(cdm_team::team::MemberBinaryError::Locate(_)) => Exit::Fault,
-            DaemonError::NotCertified { .. }
-            | DaemonError::Binaries(_)
-            | DaemonError::Scenario(_)
-            | DaemonError::Security(_)
-            | DaemonError::Connect(_)
-            | DaemonError::Refused { .. }
-            | DaemonError::Priority { .. }
-            | DaemonError::Services(_) => Exit::BadInput,
-            _ => Exit::Fault,
-        }
-    }
 }
 
 #[cfg(test)]

@@ -20,7 +20,8 @@ use cdm_model::dynamics::{Flat, QuadState};
 use cdm_model::formation::Member;
 use cdm_model::plan::{PhaseKind, TeamPlan};
 use cdm_model::step::{law_for, tick_time, Law, StepConfig, StepFault, TickAt};
-use cdm_runtime::seams::{RelinkUnsupported, Vehicle, VehicleFault, VehicleLoss};
+use cdm_runtime::messages::VehicleLoss;
+use cdm_runtime::seams::{RelinkUnsupported, Vehicle, VehicleFault};
 
 use crate::arming::{ArmStage, VehicleMode};
 use crate::battery::BatteryFigures;

@@ -124,8 +124,8 @@ impl VehicleOrigins {
 mod tests {
     use super::*;
 
-    fn parse(text: &str) -> Result<VehicleOrigins, String> {
-        VehicleOrigins::parse(text, Path::new("o.toml"), &[1, 2]).map_err(|e| e.to_string())
+    fn parse(text: &str) -> Result<VehicleOrigins, OriginsError> {
+        VehicleOrigins::parse(text, Path::new("o.toml"), &[1, 2])
     }
 
     #[test]
@@ -165,7 +165,7 @@ mod tests {
             ),
         ];
         for (text, want) in cases {
-            let e = parse(&text).unwrap_err();
+            let e = parse(&text).unwrap_err().to_string();
             assert!(e.contains(want), "{want:?} not in {e:?}");
             assert!(e.starts_with("--vehicle-origins o.toml"), "{e}");
         }

@@ -271,6 +271,18 @@ pub struct LossNotice {
     pub linked: u32,
 }
 
+/// What kind of loss a real vehicle's failure is for the team (`FaultCode` on the wire, the
+/// loss cause in audit.json): the team repairs around each alike, and says which it was.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VehicleLoss {
+    /// The link itself: silence, a low battery, the autopilot's own failsafe state, arming.
+    Lost,
+    /// The vehicle left the mode that flies the member's setpoints (a pilot took it over).
+    LeftMode,
+    /// The vehicle was disarmed in flight.
+    Disarmed,
+}
+
 /// Why a member is faulty (the Rust view of `StateMsg::fault_code`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum FaultCode {
@@ -342,8 +354,7 @@ impl FaultCode {
     }
 
     /// The code a member reports for its vehicle's `loss`.
-    pub fn of_vehicle(loss: crate::seams::VehicleLoss) -> Self {
-        use crate::seams::VehicleLoss;
+    pub fn of_vehicle(loss: VehicleLoss) -> Self {
         match loss {
             VehicleLoss::Lost => FaultCode::VehicleLost,
             VehicleLoss::LeftMode => FaultCode::VehicleMode,
@@ -699,7 +710,6 @@ mod tests {
 
     #[test]
     fn a_vehicles_loss_is_reported_by_its_kind_and_audited_as_vehicle_lost() {
-        use crate::seams::VehicleLoss;
         for (loss, wire) in [
             (VehicleLoss::Lost, FAULT_VEHICLE_LOST),
             (VehicleLoss::LeftMode, FAULT_VEHICLE_MODE),

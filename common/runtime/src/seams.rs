@@ -11,7 +11,7 @@ use cdm_model::formation::Member;
 use cdm_model::plan::TeamPlan;
 use cdm_model::step::{law_for, step_at, Law, StepConfig, StepFault, TickAt};
 
-use crate::messages::{ClockMsg, StateMsg};
+use crate::messages::{ClockMsg, StateMsg, VehicleLoss};
 
 /// What a member needs from a transport: publish its state, receive its in-neighbours' states,
 /// read the clock channel, wake its readers, and sleep until woken. The iceoryx2 backend
@@ -123,18 +123,6 @@ pub enum VehicleFault {
     /// is the link's own message, which names the member (the link's typed error lives in its
     /// crate, which this one does not know); `loss` what kind of loss it is for the team.
     Link { what: String, loss: VehicleLoss },
-}
-
-/// What kind of loss a real vehicle's failure is for the team (`FaultCode` on the wire, the
-/// loss cause in audit.json): the team repairs around each alike, and says which it was.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum VehicleLoss {
-    /// The link itself: silence, a low battery, the autopilot's own failsafe state, arming.
-    Lost,
-    /// The vehicle left the mode that flies the member's setpoints (a pilot took it over).
-    LeftMode,
-    /// The vehicle was disarmed in flight.
-    Disarmed,
 }
 
 impl fmt::Display for VehicleFault {

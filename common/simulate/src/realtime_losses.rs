@@ -79,23 +79,38 @@ pub fn realtime_losses(
     Ok(out)
 }
 
-fn one_loss(l: &Value, s: &Scenario) -> Result<RealtimeLoss, String> {
-    let whole = |name: &str| {
+/// What is wrong with one of audit.json's losses.
+#[derive(Debug, thiserror::Error)]
+enum BadLoss {
+    #[error("{0}: expected a whole number")]
+    NotWhole(&'static str),
+    #[error("id {0} is not a member id")]
+    NotAnId(u64),
+    #[error("id {0}: no such member in scenario.toml")]
+    NoMember(u32),
+    #[error("cause {0} is not a cause of a loss")]
+    Cause(Value),
+    #[error("t_s: expected a time")]
+    Time,
+}
+
+fn one_loss(l: &Value, s: &Scenario) -> Result<RealtimeLoss, BadLoss> {
+    let whole = |name: &'static str| {
         l.get(name)
             .and_then(Value::as_u64)
-            .ok_or_else(|| format!("{name}: expected a whole number"))
+            .ok_or(BadLoss::NotWhole(name))
     };
     let id = whole("id")?;
-    let id = u32::try_from(id).map_err(|_| format!("id {id} is not a member id"))?;
+    let id = u32::try_from(id).map_err(|_| BadLoss::NotAnId(id))?;
     if s.formation.member(id).is_none() {
-        return Err(format!("id {id}: no such member in scenario.toml"));
+        return Err(BadLoss::NoMember(id));
     }
     let cause = l.get("cause").cloned().unwrap_or_default();
-    let cause: LossCause = serde_json::from_value(cause.clone())
-        .map_err(|_| format!("cause {cause} is not a cause of a loss"))?;
+    let cause: LossCause =
+        serde_json::from_value(cause.clone()).map_err(|_| BadLoss::Cause(cause))?;
     let t_s = (l.get("t_s").and_then(Value::as_f64))
         .filter(|t| t.is_finite() && *t >= 0.0)
-        .ok_or("t_s: expected a time")?;
+        .ok_or(BadLoss::Time)?;
     Ok(RealtimeLoss {
         id,
         cause,

@@ -12,8 +12,6 @@ use cdm_records::audit::FaultRecord;
 use cdm_runtime::messages::{ClockMsg, StopReason};
 use cdm_scenario::Scenario;
 
-use crate::Failure;
-
 /// A spawned member process.
 pub struct Spawned {
     pub id: u32,
@@ -111,16 +109,6 @@ pub enum MemberBinaryError {
         name: &'static str,
         path: std::path::PathBuf,
     },
-}
-
-impl From<MemberBinaryError> for Failure {
-    /// The host daemon (still a library returning [`Failure`]) passes it on with `?`.
-    fn from(e: MemberBinaryError) -> Self {
-        match e {
-            MemberBinaryError::Locate(_) => Failure::fault(e),
-            MemberBinaryError::Missing { .. } => Failure::bad_input(e),
-        }
-    }
 }
 
 /// Starts member `id`'s binary; `flags` are passed on (`--realtime`, ...).

@@ -37,7 +37,7 @@ impl Vehicle for Still {
     fn fly_tick(&mut self, tick: u64, _: &[Flat; 3]) -> Result<(), VehicleFault> {
         if self.fail_at == Some(tick) && self.link_lost {
             let what = format!("agent {ME}: vehicle lost");
-            let loss = crate::seams::VehicleLoss::Lost;
+            let loss = crate::messages::VehicleLoss::Lost;
             return Err(VehicleFault::Link { what, loss });
         }
         if self.fail_at == Some(tick) {

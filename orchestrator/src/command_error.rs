@@ -14,9 +14,6 @@ pub enum CommandError {
         #[source]
         source: TransportError,
     },
-    /// The running executable could not be found (the member binaries sit beside it).
-    #[error("cannot locate the orchestrator binary: {0}")]
-    LocateBinary(#[source] std::io::Error),
 }
 
 impl CommandError {
@@ -29,7 +26,7 @@ impl CommandError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Failure;
+    use cdm_exit::Failure;
 
     #[test]
     fn the_printed_chain_keeps_every_source_once() {
@@ -41,9 +38,12 @@ mod tests {
         // A wrapper that does not show its source gets it appended.
         #[derive(Debug, thiserror::Error)]
         #[error("cannot draw the figures")]
-        struct Outer(#[source] CommandError);
+        struct Outer(#[source] Locate);
+        #[derive(Debug, thiserror::Error)]
+        #[error("cannot locate the orchestrator binary: {0}")]
+        struct Locate(#[source] std::io::Error);
         let io = std::io::Error::new(std::io::ErrorKind::PermissionDenied, "denied");
-        let f = Failure::fault(Outer(CommandError::LocateBinary(io)));
+        let f = Failure::fault(Outer(Locate(io)));
         assert_eq!(
             f.message(),
             "cannot draw the figures: caused by cannot locate the orchestrator binary: denied"

@@ -1,4 +1,6 @@
-//! Exit codes, and the failure (a typed error and its exit code) every command ends with.
+//! Exit codes, and the failure (a typed error and its exit code) every command of the front ends
+//! ends with. Libraries return their own typed errors; the orchestrator and the Python package
+//! decide here which exit code each means.
 
 /// Exit codes of every command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -10,7 +12,7 @@ pub enum Exit {
 }
 
 /// Any error a command ends with, its source chain kept (see [`Failure::message`]).
-pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
+type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
 
 /// A failure with its exit code. The error stays typed, with its sources, until `main` prints it.
 #[derive(Debug)]
