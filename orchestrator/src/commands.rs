@@ -376,8 +376,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
     check_follow(&s, a.run.follow)?;
     let losses = LossSchedule::new(&s, &a.run.lose, a.run.max_ticks).map_err(Failure::bad_input)?;
     if realtime.is_some() && a.hosts.hosts > 1 && !a.run.lose.is_empty() {
-        // Real time repairs losses on one host only (across hosts a loss is the host's fault):
-        // a scripted loss would only stop the team: refused, not ignored.
+        // Real time repairs losses on one host only: across hosts a scripted one stops the team.
         return Err(Failure::bad_input(
             "--lose with --realtime needs one host: real time repairs a lost member only on one host (fly the losses in lockstep, or on one host)",
         ));
@@ -388,7 +387,7 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
             "--lose needs members spawned by launch (not --no-spawn)",
         ));
     }
-    let (s, commands) = file_commands(a, s)?;
+    let (s, commands, realtime_commands) = file_commands(a, s, realtime.as_ref())?;
     let team_name = a
         .team
         .clone()
@@ -432,55 +431,74 @@ fn launch_options(a: &LaunchArgs, quiet: bool) -> Result<(Scenario, LaunchOption
         losses,
         on_loss: a.run.on_loss.into(),
         commands,
+        realtime_commands,
     };
     Ok((s, opts))
 }
 
 /// `--on-interrupt`: whether SIGINT or SIGTERM lands the team before it stops (by default
-/// with MAVLink vehicles, which would otherwise fall back to their own failsafes). In lockstep
-/// on any number of hosts, in real time on one host (where it takes commands): a real-time
-/// team across hosts stops on an interrupt.
+/// with MAVLink vehicles, which would otherwise fall back to their own failsafes), in lockstep
+/// or real time, on any number of hosts.
 fn land_on_interrupt(
     a: &LaunchArgs,
     vehicles: &cdm_member::vehicles::Vehicles,
 ) -> Result<bool, Failure> {
     use crate::cli::OnInterruptArg;
     let mavlink = matches!(vehicles, cdm_member::vehicles::Vehicles::Mavlink(_));
-    let takes_commands = !a.realtime.realtime || a.hosts.hosts <= 1;
-    match a.on_interrupt {
-        Some(OnInterruptArg::Land) if !takes_commands => Err(Failure::bad_input(
-            "--on-interrupt land with --realtime needs one host: a real-time team across hosts takes no command, and an interrupt stops it",
-        )),
-        Some(what) => Ok(what == OnInterruptArg::Land),
-        None => Ok(mavlink && takes_commands),
-    }
+    Ok(match a.on_interrupt {
+        Some(what) => what == OnInterruptArg::Land,
+        None => mavlink,
+    })
 }
 
-/// `--commands FILE` decided for the team of `s`: the commanded scenario to launch and the
-/// commands (`s` itself without the option).
-fn file_commands(a: &LaunchArgs, s: Scenario) -> Result<(Scenario, Option<FileCommands>), Failure> {
+/// A launch's `--commands FILE`: in lockstep decided for the team of `s` before the flight
+/// (the commanded scenario to launch, and the commands); in real time the file's commands, each
+/// proposed to the leaders in flight (`s` launched as it is). `s` itself without the option.
+type Commanded = (
+    Scenario,
+    Option<FileCommands>,
+    Vec<cdm_scenario::TimedCommand>,
+);
+
+/// `--commands FILE` for the team of `s` (see [`Commanded`]).
+fn file_commands(
+    a: &LaunchArgs,
+    s: Scenario,
+    realtime: Option<&cdm_launch::realtime::RealtimeOptions>,
+) -> Result<Commanded, Failure> {
     let Some(path) = &a.commands else {
-        return Ok((s, None));
+        return Ok((s, None, Vec::new()));
     };
-    check_commanded_launch(a)?;
     let list = cdm_scenario::load_commands(path, &s).map_err(Failure::bad_input)?;
+    if let Some(rt) = realtime {
+        check_realtime_commands(path, &list, &s, rt)?;
+        return Ok((s, None, list));
+    }
     let (flown, c) = FileCommands::decide(&s, &list);
-    Ok((flown, Some(c)))
+    Ok((flown, Some(c), Vec::new()))
 }
 
-/// `launch --commands` flies a lockstep team of model vehicles (on one host or several):
-/// refused, not ignored, elsewhere.
-fn check_commanded_launch(a: &LaunchArgs) -> Result<(), Failure> {
-    let why = if a.realtime.realtime {
-        Some("--realtime (steer a real-time team live with `orchestrator command`)")
-    } else if a.vehicle.vehicles != cdm_member_cli::VehicleKind::Model {
-        Some("--vehicles mavlink")
-    } else {
-        None
-    };
-    match why {
-        Some(w) => Err(Failure::bad_input(format!(
-            "--commands flies a lockstep team of model vehicles, not with {w}"
+/// `launch --realtime --commands FILE`: each command is proposed to the leaders in flight, which
+/// needs the switch margin twice over before its switch (`earliest_file_switch_s`); a command
+/// switching earlier is refused up front, named, not left to be withdrawn in flight.
+fn check_realtime_commands(
+    path: &Path,
+    list: &[cdm_scenario::TimedCommand],
+    s: &Scenario,
+    rt: &cdm_launch::realtime::RealtimeOptions,
+) -> Result<(), Failure> {
+    let earliest_s = cdm_runtime::team_core::earliest_file_switch_s(s.dt_s(), rt.stale_after);
+    let early = (list.iter().enumerate())
+        .find(|(_, c)| cdm_model::step::tick_time(c.switch_tick, s.dt_s()) < earliest_s - 1e-9);
+    match early {
+        Some((k, c)) => Err(Failure::bad_input(format!(
+            "{}: commands[{k}] ({} at_s = {} s) switches too early for a real-time team: a file's command is proposed to the leaders in flight and needs twice the switch margin (the larger of {} ticks and {} of --stale-after) before its switch, here at_s >= {:.3} s",
+            path.display(),
+            c.spec.command,
+            c.spec.at_s,
+            cdm_runtime::team_core::SWITCH_MARGIN_TICKS,
+            cdm_runtime::team_core::SWITCH_MARGIN_OF_STALE,
+            earliest_s
         ))),
         None => Ok(()),
     }

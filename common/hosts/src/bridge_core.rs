@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
 use cdm_iox::{MemberPorts, TeamName};
-use cdm_runtime::messages::{AgentStatus, ClockMsg, FaultCode, LossNotice, StateMsg};
+use cdm_runtime::messages::{AgentStatus, ClockMsg, FaultCode, StateMsg};
 use cdm_runtime::process_exit::ProcessExit;
 use cdm_scenario::Scenario;
 use cdm_zenoh::{Assignment, Down, JoinRequest, Up};
@@ -123,8 +123,8 @@ struct Remote<L = DaemonLink, R = MemberPorts> {
     subscriptions: BTreeMap<u32, Vec<String>>,
     /// The repairs as the clock messages sent to this host announced them.
     repairs: CrossRepairs,
-    /// The loss notice of the last clock message sent.
-    last_notice: Option<LossNotice>,
+    /// The loss and command notices of the last clock message sent.
+    last_notice: forward::SentNotices,
     /// Members this bridge asked the daemon to kill (their exit is expected).
     killed: BTreeSet<u32>,
     /// Relays still to hand their history over (`handover.rs`).
@@ -283,7 +283,7 @@ impl<L, R> Remote<L, R> {
             stop_sent: false,
             subscriptions: BTreeMap::new(),
             repairs: ctx.repairs.clone(),
-            last_notice: None,
+            last_notice: (None, None),
             killed: BTreeSet::new(),
             handing: None,
             notes: Vec::new(),
@@ -981,6 +981,7 @@ mod tests {
 
     #[test]
     fn every_changed_notice_is_sent_and_the_newest_grant() {
+        use cdm_runtime::messages::LossNotice;
         let n = |seq, linked| LossNotice {
             seq,
             id: 7,
@@ -996,15 +997,34 @@ mod tests {
             c(14, Some(n(1, 1))),
             c(15, Some(n(1, 1))),
         ];
-        let mut last = None;
+        let mut last = (None, None);
         let sent: Vec<u64> = forward::worth_sending(&clocks, &mut last)
             .iter()
             .map(|c| c.grant_tick)
             .collect();
         assert_eq!(sent, [11, 13, 15]);
-        assert_eq!(last, Some(n(1, 1)));
+        assert_eq!(last, (Some(n(1, 1)), None));
         assert_eq!(forward::worth_sending(&[], &mut last), vec![]);
         let again = forward::worth_sending(&clocks[4..], &mut last);
         assert_eq!(again.len(), 1, "only the newest of unchanged notices");
+    }
+
+    #[test]
+    fn every_command_notice_is_sent_proposed_decided_and_the_next_proposed() {
+        use cdm_model::steer::TeamCommand;
+        use cdm_runtime::messages::{SteerNotice, SteerPhase};
+        let hold = SteerNotice::decided(1, 300, TeamCommand::Hold);
+        let land = SteerNotice::decided(2, 500, TeamCommand::Land);
+        let c = |notice: SteerNotice| ClockMsg::run(0, 1).with_steer(Some(notice));
+        // A real-time team's clock: the hold proposed, final, the land proposed, all drained
+        // at once: a member that missed the hold's decision would see notice 2 after none.
+        let clocks = [
+            c(hold.in_phase(SteerPhase::Proposed)),
+            c(hold.in_phase(SteerPhase::Final)),
+            c(land.in_phase(SteerPhase::Proposed)),
+        ];
+        let mut last = (None, None);
+        let sent = forward::worth_sending(&clocks, &mut last);
+        assert_eq!(sent, clocks);
     }
 }

@@ -74,6 +74,9 @@ pub struct LaunchOptions {
     /// `--commands FILE`, decided before the flight (the scenario launched is the commanded
     /// one: its plan the same before every switch).
     pub commands: Option<crate::steer::FileCommands>,
+    /// `--realtime --commands FILE`: the file's commands, each certified and proposed to the
+    /// leaders in flight, ahead of its switch tick, as a live command is (`realtime_steer.rs`).
+    pub realtime_commands: Vec<cdm_scenario::TimedCommand>,
     /// `--on-interrupt land`: the first SIGINT or SIGTERM lands the team (certified as a
     /// command), then the run ends as usual; a second one stops it at once.
     pub land_on_interrupt: bool,
@@ -187,16 +190,13 @@ pub fn launch(s: &Scenario, o: &LaunchOptions) -> Result<Launched, LaunchError> 
     })
 }
 
-/// The channel `orchestrator command` reaches the team by, when it takes commands in flight:
-/// in lockstep on one host or several (a command's notice rides the clock's message, which the
-/// link carries whole to the other hosts' members), and in real time on one host (with model
-/// or MAVLink vehicles: a command is proposed, acknowledged by the leaders, then final).
+/// The channel `orchestrator command` reaches the team by: in lockstep and in real time, on
+/// one host or several (a command's notice rides the clock's message, which the link carries
+/// whole to the other hosts' members; in real time a command is proposed, acknowledged by the
+/// leaders, whose states carry the acknowledgement back over the link, then final), with model
+/// or MAVLink vehicles.
 fn command_channel(o: &LaunchOptions) -> Result<Option<CommandChannel>, LaunchError> {
-    let takes = o.realtime.is_none() || o.hosts.hosts <= 1;
-    match takes {
-        true => Ok(Some(CommandChannel::open(&o.team)?)),
-        false => Ok(None),
-    }
+    Ok(Some(CommandChannel::open(&o.team)?))
 }
 
 /// Says what a previous team of this name left that creating the ports removed.

@@ -170,7 +170,7 @@ pub(crate) fn run(
         steer: RealtimeSteer::new(
             (steer, clock),
             s,
-            (o.max_ticks, o.land_on_interrupt),
+            (o.max_ticks, o.land_on_interrupt, &o.realtime_commands),
             o.notices.clone(),
         ),
     };

@@ -7,7 +7,14 @@
 //! (`LiveSteer`, on a copy), proposed to every member on the clock channel as the loss repair
 //! announces its switch tick, and becomes final once every leader acknowledged it; a leader
 //! that did not by the tick before the switch withdraws it and nothing changes (exit 3).
+//!
+//! A command file's commands (`launch --realtime --commands FILE`) go the same way, one after
+//! the other from the start of the flight: each is certified at its own switch tick (as
+//! `simulate --commands` certifies it) and proposed at once, long before that tick; the
+//! commanded plan is the old one before the switch, so a plan made final early flies the same
+//! ticks until then. Commands given live come after them.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -16,19 +23,27 @@ use cdm_records::audit::Auditor;
 use cdm_runtime::messages::SteerNotice;
 use cdm_runtime::seams::{Clock, MonotonicClock};
 use cdm_runtime::team_core::{Pacing, SteerOutcome, TeamCore};
-use cdm_scenario::Scenario;
-use cdm_team::notices::TickProgress;
+use cdm_scenario::{Scenario, TimedCommand};
+use cdm_team::notices::{NoticeSink, TickProgress};
 use cdm_team::team::{fault, Stop};
 
 use crate::channel::{Answered, CommandAnswer, PendingAnswer};
 use crate::feeds::Feeds;
 use crate::steer::{FlightAt, LiveDecision, LiveSteer, Steer};
 
+/// Who asked for a command, and hears what became of it.
+enum AnswerTo {
+    /// `orchestrator command`.
+    Operator(PendingAnswer),
+    /// An interrupt under `--on-interrupt land` (the log hears).
+    Interrupt,
+    /// The command file's command of this index (`--commands`; the launch's output hears).
+    File(usize),
+}
+
 /// A command proposed to the team and not decided yet.
 struct Proposed {
-    /// Who asked: `orchestrator command`, or (`None`) an interrupt under
-    /// `--on-interrupt land`.
-    to: Option<PendingAnswer>,
+    to: AnswerTo,
     /// `hold`, `land`, ...
     command: String,
     decision: LiveDecision,
@@ -53,14 +68,18 @@ pub(crate) struct RealtimeSteer<'a> {
     /// `--on-interrupt land`, and the signal that asked for the landing once one did.
     land_on_interrupt: bool,
     interrupted: Option<&'static str>,
-    notices: Arc<dyn cdm_team::notices::NoticeSink>,
+    notices: Arc<dyn NoticeSink>,
+    /// The command file's commands not proposed yet (`--commands`), with their index.
+    file: VecDeque<(usize, TimedCommand)>,
 }
 
-/// Where a decision goes: the operator's `command`, or the log of an interrupt.
-fn answer(to: Option<PendingAnswer>, a: CommandAnswer) {
+/// Where a decision goes: the operator's `command`, the log of an interrupt, or the launch's
+/// output for a file's command.
+fn answer(notices: &dyn NoticeSink, to: AnswerTo, a: CommandAnswer) {
     match to {
-        Some(to) => to.answer(a),
-        None => tracing::warn!(answer = ?a.answer, "{}", a.text),
+        AnswerTo::Operator(to) => to.answer(a),
+        AnswerTo::Interrupt => tracing::warn!(answer = ?a.answer, "{}", a.text),
+        AnswerTo::File(k) => notices.notice(&format_args!("  commands[{k}]: {}", a.text)),
     }
 }
 
@@ -70,13 +89,13 @@ fn complete_tick(audits: u64, period_s: f64, dt_s: f64) -> u64 {
 }
 
 impl<'a> RealtimeSteer<'a> {
-    /// The commands of `s`'s flight on `clock`: `--max-ticks`, `--on-interrupt land`, and
-    /// where notices go.
+    /// The commands of `s`'s flight on `clock`: `--max-ticks`, `--on-interrupt land`, the
+    /// command file's commands (`--commands`), and where notices go.
     pub(crate) fn new(
         (steer, clock): (Steer<'a>, MonotonicClock),
         s: &Scenario,
-        (max_ticks, land_on_interrupt): (Option<u64>, bool),
-        notices: Arc<dyn cdm_team::notices::NoticeSink>,
+        (max_ticks, land_on_interrupt, file): (Option<u64>, bool, &[TimedCommand]),
+        notices: Arc<dyn NoticeSink>,
     ) -> Self {
         let last = max_ticks.map_or(s.last_tick(), |k| k.min(s.last_tick()));
         RealtimeSteer {
@@ -90,6 +109,7 @@ impl<'a> RealtimeSteer<'a> {
             land_on_interrupt,
             interrupted: None,
             notices,
+            file: file.iter().cloned().enumerate().collect(),
         }
     }
 
@@ -109,6 +129,9 @@ impl<'a> RealtimeSteer<'a> {
         if self.proposed.is_some() || core.announcing() {
             return Ok(());
         }
+        if let Some(entry) = self.file.pop_front() {
+            return self.propose_file(core, entry, (live, progress));
+        }
         let Some(channel) = self.steer.channel else {
             return Ok(());
         };
@@ -125,8 +148,52 @@ impl<'a> RealtimeSteer<'a> {
                 return Ok(());
             }
         };
-        self.decide(core, request, Some(to), (live, progress))
+        self.decide(core, request, AnswerTo::Operator(to), (live, progress))
             .map(drop)
+    }
+
+    /// The command file's command `c` (index `k`): certified at its own switch tick and
+    /// proposed now, or refused by its certificate (recorded, as `simulate` records it), or
+    /// said on the output when its switch is too close to propose it (nothing changes).
+    fn propose_file(
+        &mut self,
+        core: &mut TeamCore,
+        (k, c): (usize, TimedCommand),
+        (live, progress): (&mut Feeds, &mut dyn TickProgress),
+    ) -> Result<(), Stop> {
+        let Pacing::Realtime(w) = core.pacing() else {
+            return Ok(());
+        };
+        let leaders = w.book().leaders();
+        let (decision, next) = self.steer.live.tentatively_timed(&c);
+        let Some((notice, flown, last)) = decision.accepted.clone() else {
+            let recorded = decision.recorded;
+            answer(&*self.notices, AnswerTo::File(k), decision.answer);
+            if recorded {
+                self.steer.live.adopt(next);
+                self.record(core, live, progress)?;
+            }
+            return Ok(());
+        };
+        if !core.realtime_in_time(self.clock.now(), notice.tick) {
+            let text = format!(
+                "{} not proposed: the flight is too close to its switch at tick {} (t = {:.2} s) for the leaders to acknowledge it; nothing changed",
+                c.spec.command, notice.tick, c.spec.at_s
+            );
+            let a = CommandAnswer::without_switch(Answered::Unavailable, text);
+            answer(&*self.notices, AnswerTo::File(k), a);
+            return Ok(());
+        }
+        core.propose(notice, leaders);
+        self.proposed = Some(Proposed {
+            to: AnswerTo::File(k),
+            command: c.spec.command.clone(),
+            decision,
+            next,
+            flown,
+            last: self.max_ticks.map_or(last, |m| m.min(last)),
+        });
+        Ok(())
     }
 
     /// `--on-interrupt land`: the first interrupt lands the team, decided as an operator's
@@ -149,7 +216,7 @@ impl<'a> RealtimeSteer<'a> {
             return false;
         }
         let land = crate::channel::CommandRequest::land();
-        match self.decide(core, land, None, feeds) {
+        match self.decide(core, land, AnswerTo::Interrupt, feeds) {
             Ok(true) => {
                 self.notices.notice(&format_args!(
                     "{signal}: landing the team (--on-interrupt land); a second signal stops it at once"
@@ -182,7 +249,7 @@ impl<'a> RealtimeSteer<'a> {
         &mut self,
         core: &mut TeamCore,
         request: crate::channel::CommandRequest,
-        to: Option<PendingAnswer>,
+        to: AnswerTo,
         (live, progress): (&mut Feeds, &mut dyn TickProgress),
     ) -> Result<bool, Stop> {
         let Pacing::Realtime(w) = core.pacing() else {
@@ -214,7 +281,7 @@ impl<'a> RealtimeSteer<'a> {
             let Some((notice, flown, last)) = decision.accepted.clone() else {
                 // Refused by its certificate, or it does not apply: decided now.
                 let recorded = decision.recorded;
-                answer(to, decision.answer);
+                answer(&*self.notices, to, decision.answer);
                 if recorded {
                     self.steer.live.adopt(next);
                     self.record(core, live, progress)?;
@@ -237,6 +304,7 @@ impl<'a> RealtimeSteer<'a> {
             certify = self.certify * 2;
         }
         answer(
+            &*self.notices,
             to,
             CommandAnswer::without_switch(
                 Answered::Unavailable,
@@ -281,7 +349,7 @@ impl<'a> RealtimeSteer<'a> {
                     ahead_ms,
                     "every leader acknowledged the command: final"
                 );
-                answer(p.to, p.decision.answer);
+                answer(&*self.notices, p.to, p.decision.answer);
                 self.steer.live.adopt(p.next);
                 audit.replan(&p.flown);
                 self.flown = p.flown;
@@ -301,6 +369,7 @@ impl<'a> RealtimeSteer<'a> {
                     notice.tick as f64 * self.flown.dt_s()
                 );
                 answer(
+                    &*self.notices,
                     p.to,
                     CommandAnswer::without_switch(Answered::Unavailable, text),
                 );
@@ -316,11 +385,16 @@ impl<'a> RealtimeSteer<'a> {
     /// The flight ended: a command still waiting for its acknowledgements is refused.
     pub(crate) fn end(&mut self) {
         if let Some(p) = self.proposed.take() {
-            answer(p.to, CommandAnswer::without_switch(
+            answer(&*self.notices, p.to, CommandAnswer::without_switch(
                 Answered::Unavailable,
                 "the flight ended before every leader acknowledged the command; nothing changed"
                     .into(),
             ));
+        }
+        for (k, c) in std::mem::take(&mut self.file) {
+            let text = format!("{} not proposed: the flight ended first", c.spec.command);
+            let a = CommandAnswer::without_switch(Answered::Unavailable, text);
+            answer(&*self.notices, AnswerTo::File(k), a);
         }
     }
 

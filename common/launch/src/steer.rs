@@ -222,7 +222,22 @@ impl LiveSteer {
         // at_s is the switch's own time: it maps back to the same tick.
         c.switch_tick = switch;
         c.arrived_s = Some(tick_time(at.complete.min(switch), dt));
-        let record = decide(&mut self.steering, &self.flown, &self.numbers, &c);
+        self.decide_timed(&c)
+    }
+
+    /// [`Self::tentatively`] for a command file's command (`launch --realtime --commands`):
+    /// decided at its own switch tick, as [`FileCommands::decide`] decides it before a
+    /// lockstep flight, so its record is the one `simulate --commands` writes.
+    pub fn tentatively_timed(&self, c: &TimedCommand) -> (LiveDecision, LiveSteer) {
+        let mut next = self.clone();
+        let decision = next.decide_timed(c);
+        (decision, next)
+    }
+
+    /// Decide `c` at its switch tick (after every command so far).
+    fn decide_timed(&mut self, c: &TimedCommand) -> LiveDecision {
+        let (switch, dt) = (c.switch_tick, self.flown.dt_s());
+        let record = decide(&mut self.steering, &self.flown, &self.numbers, c);
         self.after = Some(switch);
         let mut accepted = None;
         if record.accepted {

@@ -41,7 +41,10 @@ pub use lockstep::{
 use losses::LossEvents;
 pub use realtime::{RealtimePlan, WallClock, LATE_WAIT, MAX_WAIT};
 pub use realtime_losses::{MEMBER_STALE_FACTOR, REPAIR_LEAD_OF_STALE};
-pub use steer::{SteerOutcome, SWITCH_MARGIN_OF_STALE, SWITCH_MARGIN_TICKS};
+pub use steer::{
+    earliest_file_switch_s, switch_margin_s, SteerOutcome, SWITCH_MARGIN_OF_STALE,
+    SWITCH_MARGIN_TICKS,
+};
 
 /// A member lost, as the audit records it.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -46,7 +46,7 @@ const STOP_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 const REFUSE_DEADLINE: Duration = integration_tests::deadline::REFUSE;
 
 /// The orchestrator's `launch` on two hosts, over mutual TLS with the pair's keys.
-fn launch_args(h: &Hosts, team: &str, out: &str, source: &[&str]) -> Vec<String> {
+pub(crate) fn launch_args(h: &Hosts, team: &str, out: &str, source: &[&str]) -> Vec<String> {
     let mut v = vec!["launch"];
     v.extend_from_slice(source);
     v.extend_from_slice(&[
@@ -303,7 +303,7 @@ fn kill_daemon(team: &str) {
 }
 
 /// The pid of `team`'s daemon (`orchestrator host --connect ...`).
-fn daemon_pid(team: &str) -> u32 {
+pub(crate) fn daemon_pid(team: &str) -> u32 {
     team_processes(team)
         .into_iter()
         .find(|(_, args)| {

@@ -3,5 +3,6 @@
 //! One test binary (each file a module): the files share one link of the harness.
 
 mod hosts;
+mod hosts_steer_realtime;
 mod key_permissions;
 mod secure_link;

@@ -1182,3 +1182,65 @@ fn sigint_lands_a_mavlink_team_and_every_vehicle_ends_disarmed_on_the_ground() {
     }
     assert_no_team_resources(&team_name);
 }
+
+/// `launch --realtime --vehicles mavlink --commands FILE`: [`support::lab_mission`] (its
+/// translation made 30 s long) held after its take-off and landed by a command file, each
+/// command proposed to the members in flight and final on the leaders' acknowledgements; the
+/// members fly their vehicles along the commanded plan: audit.json lists the hold and the land,
+/// accepted, at their files' switch ticks, and every vehicle ends disarmed on the ground long
+/// before the launched plan's end. SAFE, exit 0.
+#[test]
+fn a_command_file_holds_and_lands_a_mavlink_team_in_real_time() {
+    let dir = TempDir::new();
+    let mut file = support::lab_mission();
+    file.t_total_s = 30.0;
+    let scenario = write_scenario(dir.path(), "lab4.toml", &file);
+    let commands = dir.path().join("commands.json");
+    std::fs::write(
+        &commands,
+        r#"[{"at_s": 5.0, "command": "hold"}, {"at_s": 7.0, "command": "land"}]"#,
+    )
+    .expect("the command file");
+    let base = free_udp_ports(file.agents.len() as u16);
+    let team_name = unique_team("mavfile");
+    let vehicles = lab_vehicles(&file, base, 0..file.agents.len(), &[]);
+    let at = [
+        "--vehicle-origin",
+        "0,0,0",
+        "--arm",
+        "--disarm-at-end",
+        "--commands",
+        commands.to_str().expect("utf-8 path"),
+    ];
+    let orch = launch_team(dir.path(), &team_name, &scenario, base, &at);
+    let (outs, audit, why) = finished_safe(orch, vehicles, dir.path());
+    let listed: Vec<(String, bool, u64)> = (audit["commands"].as_array().cloned())
+        .unwrap_or_default()
+        .iter()
+        .map(|c| {
+            let name = c["command"].as_str().unwrap_or_default().to_string();
+            let tick = c["switch_tick"].as_u64().unwrap_or_default();
+            (name, c["accepted"] == true, tick)
+        })
+        .collect();
+    assert_eq!(
+        listed,
+        [("hold".into(), true, 250), ("land".into(), true, 350)],
+        "{why}"
+    );
+    for (i, o) in outs.iter().enumerate() {
+        let v = summary(o, &format!("vehicle {i}"));
+        assert_eq!(v["armed"], false, "vehicle {i}: {v}\n{why}");
+        assert_eq!(
+            v["landed_state"], MAV_LANDED_STATE_ON_GROUND,
+            "vehicle {i}: {v}"
+        );
+        assert!(num(&v, "height_m").abs() < 0.05, "vehicle {i}: {v}");
+    }
+    let flown = num(&audit, "ticks");
+    assert!(
+        flown < 30.0 * 50.0,
+        "the land did not switch: {flown} ticks\n{why}"
+    );
+    assert_no_team_resources(&team_name);
+}

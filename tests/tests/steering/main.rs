@@ -7,3 +7,4 @@ mod steering;
 mod steering_launch;
 mod steering_live;
 mod steering_realtime;
+mod steering_realtime_file;

@@ -6,7 +6,6 @@
 //!   each accepted one on the clock channel ahead of its switch tick, and every member flies
 //!   the same commanded plan from it: telemetry.csv, audit.json and commands.json equal
 //!   `simulate --commands` byte for byte, and nothing of the team is left.
-//! - `launch --commands` where it does not fly yet (real time) is refused with exit 2.
 //!
 //! How to run: `cargo test --release -p integration-tests --test steering -- steering_launch::`.
 
@@ -17,8 +16,8 @@ use std::process::Output;
 
 use integration_tests::{run, unique_team, TempDir};
 use support::{
-    assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file,
-    assert_stderr_has, launch, read_json, simulate,
+    assert_exit, assert_no_process_of, assert_no_team_resources, assert_same_file, launch,
+    read_json, simulate,
 };
 
 const DEADLINE: std::time::Duration = integration_tests::deadline::FLIGHT;
@@ -78,21 +77,4 @@ fn a_launched_team_flies_the_commands_as_simulate_does_byte_for_byte() {
     for name in ["telemetry.csv", "audit.json", "commands.json"] {
         assert_same_file(&sim.join(name), &out.join(name));
     }
-}
-
-#[test]
-fn launch_commands_in_real_time_is_refused() {
-    let tmp = TempDir::new();
-    let file = tmp.path().join("commands.json");
-    std::fs::write(&file, COMMANDS).unwrap();
-    let team = unique_team("steer_rt");
-    let out = tmp.path().join("rt");
-    let o = launched(&team, &out, file.to_str().unwrap(), &["--realtime"]);
-    assert_exit(&o, 2, "launch --realtime --commands");
-    assert_stderr_has(
-        &o,
-        "launch --realtime --commands",
-        &["--commands", "--realtime"],
-    );
-    assert!(!out.exists(), "a run directory was made");
 }

@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use cdm_runtime::messages::{ClockCommand, ClockMsg, LossNotice};
+use cdm_runtime::messages::{ClockCommand, ClockMsg, LossNotice, SteerNotice};
 use cdm_zenoh::{Down, Up};
 
 use super::{Ctx, Remote};
@@ -78,13 +78,19 @@ pub(super) fn follow_repairs<L, R: Relay>(r: &mut Remote<L, R>, ctx: &Ctx, now: 
     handover::poll(&mut r.handing, &mut r.relays, wait, now, warn_hand_over);
 }
 
-/// Of the clock messages drained, in order: each whose loss notice differs from the one sent
-/// before (members must see every loss, and every rise of the connected count), and the newest.
-pub(super) fn worth_sending(clocks: &[ClockMsg], last: &mut Option<LossNotice>) -> Vec<ClockMsg> {
+/// The loss and command notices of the last clock message sent.
+pub(super) type SentNotices = (Option<LossNotice>, Option<SteerNotice>);
+
+/// Of the clock messages drained, in order: each whose loss or command notice differs from the
+/// one sent before (members must see every loss, every rise of the connected count, and every
+/// command notice: a real-time command's proposal, then its decision, and the next one's
+/// proposal may follow each other within one drain), and the newest.
+pub(super) fn worth_sending(clocks: &[ClockMsg], last: &mut SentNotices) -> Vec<ClockMsg> {
     let mut out = vec![];
     for (k, c) in clocks.iter().enumerate() {
-        if c.loss() != *last || k + 1 == clocks.len() {
-            *last = c.loss();
+        let notices = (c.loss(), c.steer());
+        if notices != *last || k + 1 == clocks.len() {
+            *last = notices;
             out.push(*c);
         }
     }

@@ -26,6 +26,22 @@ pub const SWITCH_MARGIN_TICKS: u64 = 10;
 /// command.
 pub const SWITCH_MARGIN_OF_STALE: f64 = 0.1;
 
+/// The margin of a real-time switch beyond the measured round trip (s), for ticks of `dt_s`
+/// and the stale bound `stale_after`: [`SWITCH_MARGIN_TICKS`] ticks, or
+/// [`SWITCH_MARGIN_OF_STALE`] of the stale bound when more.
+pub fn switch_margin_s(dt_s: f64, stale_after: Duration) -> f64 {
+    (SWITCH_MARGIN_TICKS as f64 * dt_s).max(SWITCH_MARGIN_OF_STALE * stale_after.as_secs_f64())
+}
+
+/// The earliest simulation time (s) a command file's command may switch at in real time
+/// (`launch --realtime --commands`): it is proposed as the flight starts, and needs the switch
+/// margin twice over before its switch: once for its proposal to reach every leader and their
+/// acknowledgements to come back while no leader has measured a delay yet, once as the margin
+/// itself.
+pub fn earliest_file_switch_s(dt_s: f64, stale_after: Duration) -> f64 {
+    2.0 * switch_margin_s(dt_s, stale_after)
+}
+
 /// A proposed real-time command waiting for the leaders' acknowledgements.
 #[derive(Debug)]
 struct Proposal {
@@ -138,8 +154,7 @@ impl TeamCore {
 
     /// The margin of a switch beyond the measured round trip (s).
     fn margin_s(w: &super::WallClock) -> f64 {
-        (SWITCH_MARGIN_TICKS as f64 * w.plan.dt_s)
-            .max(SWITCH_MARGIN_OF_STALE * w.plan.stale_after.as_secs_f64())
+        switch_margin_s(w.plan.dt_s, w.plan.stale_after)
     }
 
     /// The latest instant a proposal switching at `tick` may become final.
