@@ -19,7 +19,7 @@ use std::time::Instant;
 use cdm_certificates::command_certificate::CommandRecord;
 use cdm_exit::{Exit, Failure};
 use cdm_recording::Recording;
-use cdm_records::audit::{Auditor, FaultRecord};
+use cdm_records::audit::{Auditor, FaultRecord, Unheard};
 use cdm_records::run_record::{RunMode, RunRecord};
 use cdm_records::rundir::RunDir;
 use cdm_runtime::realtime_replay::{
@@ -191,8 +191,35 @@ fn history_of(
         recorded,
         losses,
         commands,
+        unheard: unheard_of(run, audit, s)?,
     };
     Ok((flown, history, commanded))
+}
+
+/// The states the run's monitor never received (audit.json's `realtime.unheard`; absent: none),
+/// each of a member of the scenario.
+fn unheard_of(
+    run: &Path,
+    audit: &serde_json::Value,
+    s: &Scenario,
+) -> Result<Vec<Unheard>, Failure> {
+    let Some(v) = audit.get("realtime").and_then(|rt| rt.get("unheard")) else {
+        return Ok(Vec::new());
+    };
+    let bad = |why: String| {
+        Failure::bad_input(format!(
+            "{}: realtime.unheard: {why} (a tampered or foreign file)",
+            run.join("audit.json").display()
+        ))
+    };
+    let list: Vec<Unheard> = serde_json::from_value(v.clone()).map_err(|e| bad(e.to_string()))?;
+    if let Some(u) = (list.iter()).find(|u| u.from > u.to || s.formation.member(u.id).is_none()) {
+        return Err(bad(format!(
+            "agent {} ticks {}..={}: not a member's ticks",
+            u.id, u.from, u.to
+        )));
+    }
+    Ok(list)
 }
 
 /// The phase seed, audit rate and stale bound of the run (audit.json's `realtime`).

@@ -325,6 +325,20 @@ pub struct RealtimeFigures {
     /// CPU of the whole team over the flight (orchestrator and spawned members, user + system,
     /// from /proc), in cores; absent for hand-started members.
     pub team_cpu_cores: Option<Real>,
+    /// The members' states the monitor never received (its subscriber's buffer overflowed on a
+    /// burst, a member catching up after a stall): it audited around them, and so does a
+    /// replay. Absent when it received every one.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub unheard: Vec<Unheard>,
+}
+
+/// Ticks `from..=to` of member `id` whose states the monitor never received.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Unheard {
+    pub id: u32,
+    pub from: u64,
+    pub to: u64,
 }
 
 /// The slowest member of a real-time flight.

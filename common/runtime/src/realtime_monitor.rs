@@ -8,7 +8,7 @@ use std::collections::VecDeque;
 use cdm_math::Vec3;
 use cdm_model::dynamics::{Flat, QuadState};
 use cdm_model::step::{extrapolate_flat, NeighborModel};
-use cdm_records::audit::{RealtimeFigures, SlowMember};
+use cdm_records::audit::{RealtimeFigures, SlowMember, Unheard};
 
 use crate::messages::{AgentStatus, FaultCode, StateMsg};
 use crate::realtime::{phase_offset_s, stamp_s, MemberPacing, PacingFigures};
@@ -60,6 +60,8 @@ pub struct MonitorCore {
     stopped: bool,
     /// States kept per member.
     ring: usize,
+    /// The states never received, in the order their gaps were found.
+    unheard: Vec<Unheard>,
 }
 
 impl MonitorCore {
@@ -94,6 +96,7 @@ impl MonitorCore {
             index,
             stopped: false,
             ring,
+            unheard: Vec::new(),
         }
     }
 
@@ -127,12 +130,27 @@ impl MonitorCore {
             };
         }
         if m.states.back().is_none_or(|(t, _)| msg.tick > *t) {
+            // The states between the newest kept and this one never arrived (the subscriber's
+            // buffer overflowed): the audit goes around them, and a replay must too.
+            let from = m.states.back().map_or(0, |(t, _)| t + 1);
+            if msg.tick > from {
+                self.unheard.push(Unheard {
+                    id: m.id,
+                    from,
+                    to: msg.tick - 1,
+                });
+            }
             if m.states.len() == self.ring {
                 m.states.pop_front();
             }
             m.states.push_back((msg.tick, msg.state));
         }
         MonitorEvent::Nothing
+    }
+
+    /// The states never received so far (ranges of ticks per member, in the order found).
+    pub fn unheard(&self) -> &[Unheard] {
+        &self.unheard
     }
 
     /// The members' ids in formation order.
@@ -299,6 +317,7 @@ impl MonitorCore {
             link_states_lost: reports.iter().map(|p| p.link_states.1).sum(),
             slowest_member: slowest,
             members_reported: reports.len(),
+            unheard: self.unheard().to_vec(),
             audits: run.audits,
             audit_hz: run.audit_hz,
             phase_seed: run.phase_seed,
@@ -318,4 +337,27 @@ pub struct RunFigures {
     pub stale_after_s: f64,
     pub wall_s: f64,
     pub team_cpu_cores: Option<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn states_never_received_are_listed_and_an_old_one_changes_nothing() {
+        let members = [
+            (1, Vec3::zeros(), false),
+            (2, Vec3::new(1.0, 0.0, 0.0), true),
+        ];
+        let mut m = MonitorCore::new(&members, 7, (0.01, 0.5), 0);
+        for tick in [0, 1, 2, 6, 7, 5, 8] {
+            m.on_state(&StateMsg::ok(tick, 7, 1, [0.0; 12]));
+        }
+        for tick in [3, 4] {
+            m.on_state(&StateMsg::ok(tick, 7, 2, [0.0; 12]));
+        }
+        let gap = |id, from, to| Unheard { id, from, to };
+        assert_eq!(m.unheard(), [gap(1, 3, 5), gap(2, 0, 2)]);
+        assert_eq!(m.newest_tick(1), Some(8));
+    }
 }

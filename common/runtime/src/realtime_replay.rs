@@ -26,7 +26,7 @@ use cdm_model::dynamics::{Flat, QuadState};
 use cdm_model::formation::Member;
 use cdm_model::formation::Role;
 use cdm_model::step::{extrapolate_flat, law_for, Law, NeighborModel, TickAt};
-use cdm_records::audit::{Auditor, FaultRecord, LossRecord};
+use cdm_records::audit::{Auditor, FaultRecord, LossRecord, Unheard};
 use cdm_records::record::TickRecorder;
 use cdm_records::telemetry::TelemetrySink;
 use cdm_scenario::Scenario;
@@ -116,6 +116,9 @@ pub struct History {
     pub losses: Vec<ReplayLoss>,
     /// The switch ticks of the run's accepted commands, notice 1 first.
     pub commands: Vec<u64>,
+    /// The members' states the run's monitor never received (audit.json's `unheard`): its
+    /// audit instants went around them.
+    pub unheard: Vec<Unheard>,
 }
 
 /// How far a replay got.
@@ -224,7 +227,7 @@ pub fn replay(
         });
     }
     let fault = fly_all(s, &mut fliers)?;
-    let end = audit_all(s, timing, (&fliers[..], &history.losses[..]), audit, tel)?;
+    let end = audit_all(s, timing, (&fliers[..], history), audit, tel)?;
     Ok(match fault {
         Some(f) => Err(f),
         None => Ok(end),
@@ -312,13 +315,18 @@ fn used_at(fliers: &[Flier], k: usize, tick: u64, slot: usize) -> Option<u64> {
 
 /// The audit instants, each from every member's newest state at or before it once every member
 /// has a state at or after it (the monitor's rule), until the plan's last or the states end.
+/// The states the run's monitor never received are never handed to it here either.
 fn audit_all(
     s: &Scenario,
     timing: ReplayTiming,
-    (fliers, losses): (&[Flier], &[ReplayLoss]),
+    (fliers, history): (&[Flier], &History),
     audit: &mut Auditor,
     tel: &mut dyn TelemetrySink,
 ) -> Result<ReplayEnd, ReplayInputError> {
+    let losses = &history.losses[..];
+    let unheard = |id: u32, tick: u64| {
+        (history.unheard.iter()).any(|u| u.id == id && (u.from..=u.to).contains(&tick))
+    };
     let dt = s.dt_s();
     let hash = s.content_hash();
     let members: Vec<_> = (s.formation.members.iter())
@@ -333,7 +341,9 @@ fn audit_all(
     let last_audit = (last as f64 * dt / period_s + 1e-9).floor() as u64;
     let mut rec = TickRecorder::new(s);
     let n = fliers.len();
+    // Per member: the states handed to the monitor so far, and the newest it received.
     let mut pushed = vec![0usize; n];
+    let mut heard: Vec<Option<usize>> = vec![None; n];
     let mut at = Vec::with_capacity(n);
     let mut audits = 0u64;
     let mut out = switches::Out::new(s, losses);
@@ -349,11 +359,15 @@ fn audit_all(
                 continue;
             }
             let stamp = |tick: usize| stamp_s(tick as u64, f.phase_s, dt);
-            while pushed[k] == 0 || stamp(pushed[k] - 1) < t_s {
+            while heard[k].is_none_or(|h| stamp(h) < t_s) {
                 let Some((x, _)) = f.states.get(pushed[k]) else {
                     break 'instants;
                 };
-                book.on_state(&StateMsg::ok(pushed[k] as u64, hash, f.id, *x));
+                let tick = pushed[k] as u64;
+                if !unheard(f.id, tick) {
+                    book.on_state(&StateMsg::ok(tick, hash, f.id, *x));
+                    heard[k] = Some(pushed[k]);
+                }
                 pushed[k] += 1;
             }
         }

@@ -10,7 +10,8 @@
 //!   `--link-delay-ms` fly the same history differently, and two such replays are identical;
 //!   other jitter is refused;
 //! - a recording cut short (as a killed member leaves it) replays up to where it ends and says
-//!   so, exit 3; a tampered or foreign one is exit 2 naming the file and its first bad record;
+//!   so, exit 3; a tampered or foreign one is exit 2 naming the file and its first bad record
+//!   (audit.json's states the monitor never heard, when of a stranger, naming the field);
 //!   nothing panics.
 //!
 //! A second flight over the same links loses a member (`--lose`, repaired around): its readers'
@@ -224,6 +225,24 @@ fn a_real_time_run_replays_byte_for_byte_and_what_if_is_deterministic() {
         &o,
         "replay",
         &["10.mcap: record 1: the recording of agent 9"],
+    );
+
+    // Tampered: audit.json says the monitor never heard states of a member the team lacks.
+    copy_run(&rt, &bad);
+    let path = bad.join("audit.json");
+    let mut audit = read_json(&path);
+    audit["realtime"]["unheard"] = serde_json::json!([{"id": 99, "from": 3, "to": 5}]);
+    std::fs::write(&path, audit.to_string()).expect("tampered");
+    let o = replay(&bad, &dir.path().join("unheard-replay"), &[]);
+    assert_exit(
+        &o,
+        2,
+        "replay of an audit.json with a stranger's unheard states",
+    );
+    assert_stderr_has(
+        &o,
+        "replay",
+        &["realtime.unheard: agent 99 ticks 3..=5: not a member's ticks"],
     );
 }
 

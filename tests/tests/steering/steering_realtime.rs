@@ -8,7 +8,8 @@
 //!   (the stopped leader cannot acknowledge it before its switch tick), nothing changed; the
 //!   leader resumes, the land is given again and accepted, and the team lands and ends as a
 //!   mission does: exit 0, SAFE, every member on the ground, audit.json and commands.json
-//!   listing the hold and the land (the withdrawn land is in neither).
+//!   listing the hold and the land (the withdrawn land is in neither); `replay` of the run
+//!   gives its telemetry.csv and commands.json byte for byte.
 //! - `--on-interrupt land`: SIGINT to the orchestrator lands the team (certified as a land),
 //!   and the run ends as a mission does, exit 0, and `replay` of the run gives its
 //!   telemetry.csv and commands.json byte for byte; a second SIGINT while it lands stops the team
@@ -187,6 +188,15 @@ fn a_realtime_team_is_held_refused_while_a_leader_is_stopped_then_landed() {
     let list = read_json(&out.join("commands.json"));
     assert_eq!(list.as_array().map(Vec::len), Some(2), "{list:#}");
     assert_on_the_ground(&telemetry);
+
+    // The members recorded when each command became final for them, and the withdrawn one
+    // changed nothing: the run replays in one process byte for byte, its commands with it.
+    let again = tmp.path().join("replay");
+    let replayed = support::replay(&out, &again, &[]);
+    assert_exit(&replayed, 0, "replay of a commanded real-time run");
+    for name in ["telemetry.csv", "commands.json"] {
+        support::assert_same_file(&out.join(name), &again.join(name));
+    }
 }
 
 /// Every member's last row is on the ground ([landing]'s z = 0), at rest.
