@@ -86,3 +86,58 @@ fn the_commanded_deviation_with_a_delay_is_the_engines() {
     );
     assert!(rel < 1e-6, "{linear:?} vs {flown}");
 }
+
+/// The hover after the last motion bounded from its state (`rest.rs`) gives the very maximum,
+/// follower and tick of flying it tick by tick, flying a fraction of it: paper40 held (SAFE),
+/// held then sent elsewhere (SAFE), and held then rushed 200 m in 2 s (UNSAFE: the deviation is
+/// far above delta).
+#[test]
+fn the_bounded_hover_gives_the_numbers_of_every_tick() {
+    let s = Scenario::from_file(paper40(), "paper40", Checks::Full).unwrap();
+    let delta = cdm_records::audit::SafetyNumbers::of(&s).delta_m;
+    let mut steering = s.steering();
+    let t_hold = (0.3 * s.plan.flight_end_s() * 100.0).round() / 100.0;
+    let hold = steering.propose(&TeamCommand::Hold, t_hold).unwrap();
+    let held_at = hold.held_at;
+    steering.accept(hold);
+    let held = steering.clone();
+    let t_goto = (steering.plan().end_s() * 100.0).ceil() / 100.0 + 1.0;
+    let go = |shift: Vec3, travel_s: Real| {
+        let mut st = held.clone();
+        let goto = TeamCommand::Goto {
+            goals: held_at.map(|p| p + shift),
+            travel_s: Some(travel_s),
+        };
+        let p = st.propose(&goto, t_goto).unwrap();
+        st.accept(p);
+        st.plan().clone()
+    };
+    let cases = [
+        ("hold", held.plan().clone(), t_hold, true),
+        ("goto", go(Vec3::new(40.0, -20.0, 10.0), 40.0), t_goto, true),
+        (
+            "rushed goto",
+            go(Vec3::new(200.0, 0.0, 0.0), 2.0),
+            t_goto,
+            false,
+        ),
+    ];
+    for (what, plan, t, safe) in cases {
+        let mut commanded = s.clone();
+        commanded.plan = plan;
+        let from = (t * s.file.comm_hz).round() as u64;
+        let (bounded, flown) = deviation_from(&commanded, from, 0, Hover::Bounded).unwrap();
+        let (every, all) = deviation_from(&commanded, from, 0, Hover::EveryTick).unwrap();
+        eprintln!(
+            "{what}: {} m at tick {} (agent {}), {flown} of {all} ticks flown",
+            bounded.max_m, bounded.tick, bounded.agent
+        );
+        assert_eq!(bounded, every, "{what}");
+        assert_eq!(
+            bounded.max_m <= delta,
+            safe,
+            "{what}: {bounded:?}, delta {delta}"
+        );
+        assert!(flown < all, "{what}: the hover was flown to its end");
+    }
+}
