@@ -46,54 +46,11 @@ pub struct Deviation {
 /// The largest follower deviation of `s` flying its plan (as commanded) over ticks
 /// `from_tick..=` its last, with every state between members `delay_ticks` late (the engine's
 /// `[link] delay_ms` without jitter or loss), or why the linear model does not apply.
-///
-/// The hover after the last motion (the leaders at rest to the flight's end, most of a
-/// commanded flight) is flown tick by tick only until a bound from the state there
-/// (`rest.rs`) shows that none of its later ticks can exceed the maximum found: the same
-/// maximum, follower and tick as [`Hover::EveryTick`], at a cost that does not grow with the
-/// hover's length.
 pub fn max_follower_deviation_from(
     s: &Scenario,
     from_tick: u64,
     delay_ticks: u64,
 ) -> Result<Deviation, NotLinear> {
-    max_follower_deviation_covering(s, from_tick, delay_ticks, Hover::Bounded)
-}
-
-/// [`max_follower_deviation_from`] with the hover covered as `hover` says (`cdm-bench
-/// command` times both).
-pub fn max_follower_deviation_covering(
-    s: &Scenario,
-    from_tick: u64,
-    delay_ticks: u64,
-    hover: Hover,
-) -> Result<Deviation, NotLinear> {
-    deviation_from(s, from_tick, delay_ticks, hover).map(|(d, _)| d)
-}
-
-/// How the hover after the last motion is covered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Hover {
-    /// Tick by tick until `rest.rs`'s bound covers the rest of it (without link delay).
-    Bounded,
-    /// Every tick flown (the reference the bound is tested against).
-    EveryTick,
-}
-
-/// Ticks of the hover flown before its rest is first bounded; four times more at each retry.
-const HOVER_TICKS: usize = 1000;
-
-/// Below this (m) a bound is not trusted to separate the skipped ticks from the maximum: the
-/// chains' own rounding over a long hover is far smaller.
-const ROUNDING_SLACK_M: Real = 1e-9;
-
-/// [`max_follower_deviation_from`], the hover covered as `hover` says, and the last tick flown.
-pub(crate) fn deviation_from(
-    s: &Scenario,
-    from_tick: u64,
-    delay_ticks: u64,
-    hover: Hover,
-) -> Result<(Deviation, usize), NotLinear> {
     let plan = &s.plan;
     let origin = plan.primary_derivs(0.0, plan.piece_at(0.0)).map(|d| d[0]);
     for m in &s.formation.members {
@@ -112,40 +69,45 @@ pub(crate) fn deviation_from(
     let team = LinearTeam::of_motion(s, &plan.start, &goal)?;
     let last = s.last_tick() as usize;
     let from = (from_tick as usize).min(last);
-    // From this tick on every step is one of the hover: the desired state is constant, every
-    // derivative zero (one tick past the last motion's end, whose jerk jumps there).
-    let rest = (plan.end_s() / team.dt_s).floor() as usize + 2;
-    let delay = delay_ticks as usize;
-    let bounded = hover == Hover::Bounded && delay == 0;
-    let mut ticks = HOVER_TICKS;
-    loop {
-        let upto = if bounded {
-            (rest.max(from) + ticks).min(last)
-        } else {
-            last
-        };
-        let (mut chains, state) = run_chains(plan, &team, &origin, from, upto, delay);
-        if upto == last {
-            return Ok((deviation(s, &team, &chains.scan(&team)), upto));
-        }
-        let after = rest::RestBound::new(&team.maps).after(&state);
-        chains.raise_tail(&after);
-        let best = chains.scan(&team);
-        let covered = (0..team.start.len() - 1).all(|i| {
-            let c = &team.coef[team.start[i]..team.start[i + 1]];
-            rest::weigh(&after, c) + ROUNDING_SLACK_M <= best.0
-        });
-        if covered {
-            return Ok((deviation(s, &team, &best), upto));
-        }
-        ticks *= 4;
-    }
-}
-
-/// The [`Deviation`] of a scan's (max, follower index, tick).
-fn deviation(s: &Scenario, team: &LinearTeam, best: &(Real, usize, usize)) -> Deviation {
-    let (max_m, i, tick) = *best;
-    Deviation {
+    let chains = run_chains(plan, &team, &origin, from, last, delay_ticks as usize);
+    let followers = team.start.len() - 1;
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, followers.max(1));
+    let per = followers.div_ceil(threads);
+    let best = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let (chains, team) = (&chains, &team);
+                scope.spawn(move || {
+                    let mut best = (0.0, 0, from);
+                    for i in t * per..((t + 1) * per).min(followers) {
+                        let c = &team.coef[team.start[i]..team.start[i + 1]];
+                        let (e, k) = max_norm(chains, c, team.dt_s, best.0);
+                        if e > best.0 || !e.is_finite() {
+                            best = (e, i, k);
+                        }
+                        if !best.0.is_finite() {
+                            break;
+                        }
+                    }
+                    best
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or((Real::INFINITY, 0, from)))
+            .fold((0.0, 0, from), |a, b| {
+                if b.0 > a.0 || !b.0.is_finite() {
+                    b
+                } else {
+                    a
+                }
+            })
+    });
+    let (max_m, i, tick) = best;
+    Ok(Deviation {
         max_m: if max_m.is_finite() {
             max_m
         } else {
@@ -153,60 +115,7 @@ fn deviation(s: &Scenario, team: &LinearTeam, best: &(Real, usize, usize)) -> De
         },
         agent: (team.members.get(i)).map_or(0, |&k| s.formation.members[k].id),
         tick: tick as u64,
-    }
-}
-
-impl FlightChains {
-    /// The largest follower deviation over the recorded ticks (on all cores): (max, follower
-    /// index, tick).
-    fn scan(&self, team: &LinearTeam) -> (Real, usize, usize) {
-        let from = self.from;
-        let followers = team.start.len() - 1;
-        let threads = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .clamp(1, followers.max(1));
-        let per = followers.div_ceil(threads);
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    scope.spawn(move || {
-                        let mut best = (0.0, 0, from);
-                        for i in t * per..((t + 1) * per).min(followers) {
-                            let c = &team.coef[team.start[i]..team.start[i + 1]];
-                            let (e, k) = max_norm(self, c, team.dt_s, best.0);
-                            if e > best.0 || !e.is_finite() {
-                                best = (e, i, k);
-                            }
-                            if !best.0.is_finite() {
-                                break;
-                            }
-                        }
-                        best
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or((Real::INFINITY, 0, from)))
-                .fold((0.0, 0, from), |a, b| {
-                    if b.0 > a.0 || !b.0.is_finite() {
-                        b
-                    } else {
-                        a
-                    }
-                })
-        })
-    }
-
-    /// Every later tick is bounded by `after` (per level and primary, `rest.rs`): the tail
-    /// bounds of every interval cover it.
-    fn raise_tail(&mut self, after: &[Real]) {
-        for row in self.tail.chunks_exact_mut(after.len()) {
-            for (t, a) in row.iter_mut().zip(after) {
-                *t = t.max(*a);
-            }
-        }
-    }
+    })
 }
 
 /// The scalar chains of the nine signals over ticks `from..=last`, levels g_0..g_D.
@@ -247,7 +156,7 @@ fn run_chains(
     from: usize,
     last: usize,
     delay: usize,
-) -> (FlightChains, rest::ChainState) {
+) -> FlightChains {
     let TickMaps { phi, psi, .. } = team.maps;
     let dt = team.dt_s;
     let at = |k: usize| {
@@ -314,14 +223,7 @@ fn run_chains(
             ch.tail[m * row + q] = ch.tail[m * row + q].max(ch.tail[(m + 1) * row + q]);
         }
     }
-    let state = rest::ChainState {
-        desired: d_k,
-        lam,
-        chi,
-        phi_x,
-        levels: y,
-    };
-    (ch, state)
+    ch
 }
 
 /// The followers' chains from tick k to k + 1 (`linear_certificate::LinearTeam::chains`):
@@ -496,8 +398,6 @@ fn max_norm(ch: &FlightChains, c: &[[Real; 3]], dt_s: Real, floor: Real) -> (Rea
     }
     best
 }
-
-mod rest;
 
 #[cfg(test)]
 mod tests;

@@ -10,8 +10,6 @@
 //! - `cdm-bench command --n N`: the certificate of one `hold` (at 30 % of the flight, moving)
 //!   and of one `goto` (every leader 20 m along x from where it holds, default travel time) on
 //!   the generated team of N members: what a command costs between its request and its switch.
-//!   `--t-total S` sets the plan's travel time. After the hold, one line times the tracking
-//!   bound alone, its hover bounded from its state and flown tick by tick (the same numbers).
 //!
 //! - `cdm-bench sleepers --n N --secs S`: the machine's own floor for real time. N processes that
 //!   only sleep to the same 10 ms instants a real-time member keeps (absolute deadlines from one
@@ -57,10 +55,6 @@ enum Cmd {
     Command {
         #[arg(long)]
         n: usize,
-        /// The plan's travel time (s; default the generated team's): a longer one leaves a
-        /// longer hover after the hold.
-        #[arg(long)]
-        t_total: Option<f64>,
     },
     /// The machine's real-time floor: N processes that only sleep to 10 ms instants.
     Sleepers {
@@ -110,7 +104,7 @@ fn main() -> ExitCode {
                 );
             })
             .map_err(|e| e.to_string()),
-        Cmd::Command { n, t_total } => command(n, t_total),
+        Cmd::Command { n } => command(n),
         Cmd::Sleepers { n, secs, hz } => sleepers::sleepers(n, secs, hz),
         Cmd::Sleeper {
             start_ns,
@@ -265,20 +259,11 @@ fn engine(n: usize, ticks: u64) -> Result<(), String> {
     Ok(())
 }
 
-fn command(n: usize, t_total: Option<f64>) -> Result<(), String> {
+fn command(n: usize) -> Result<(), String> {
     use cdm_certificates::command_certificate::{steer, CommandOutcome};
     use cdm_model::steer::TeamCommand;
     use cdm_records::audit::SafetyNumbers;
-    let mut file = cdm_scenario::generated(n).map_err(|e| format!("generated --n {n}: {e}"))?;
-    if let Some(t) = t_total {
-        file.t_total_s = t;
-    }
-    let s = Scenario::from_file(
-        file,
-        &format!("generated --n {n}"),
-        cdm_scenario::Checks::Full,
-    )
-    .map_err(|e| e.to_string())?;
+    let s = Scenario::generated(n).map_err(|e| format!("generated --n {n}: {e}"))?;
     let numbers = SafetyNumbers::of(&s);
     let mut steering = s.steering();
     let dt = s.dt_s();
@@ -303,7 +288,6 @@ fn command(n: usize, t_total: Option<f64>) -> Result<(), String> {
     };
     one(&mut steering, "hold", &TeamCommand::Hold, t_hold)?;
     let plan = steering.plan().clone();
-    hover_both_ways(&s, &plan, t_hold)?;
     let t = plan.end_s();
     let here = plan.primary_derivs(t, plan.piece_at(t)).map(|d| d[0]);
     let goals = here.map(|p| p + cdm_math::Vec3::new(20.0, 0.0, 0.0));
@@ -317,26 +301,4 @@ fn command(n: usize, t_total: Option<f64>) -> Result<(), String> {
         },
         t_goto,
     )
-}
-
-/// The hold's tracking bound alone, its hover bounded from its state and flown tick by tick.
-fn hover_both_ways(s: &Scenario, plan: &cdm_model::plan::TeamPlan, t: f64) -> Result<(), String> {
-    use cdm_certificates::commanded_flight::{max_follower_deviation_covering, Hover};
-    let mut commanded = s.clone();
-    commanded.plan = plan.clone();
-    let from = (t / s.dt_s()).round() as u64;
-    let mut secs = [0.0; 2];
-    for (k, hover) in [Hover::Bounded, Hover::EveryTick].into_iter().enumerate() {
-        let start = Instant::now();
-        max_follower_deviation_covering(&commanded, from, 0, hover).map_err(|e| e.to_string())?;
-        secs[k] = start.elapsed().as_secs_f64();
-    }
-    println!(
-        "hold tracking bound: hover bounded {:.3} s, every tick {:.3} s ({:.1}x), {} ticks",
-        secs[0],
-        secs[1],
-        secs[1] / secs[0],
-        s.last_tick()
-    );
-    Ok(())
 }
