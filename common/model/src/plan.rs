@@ -288,6 +288,11 @@ pub struct TeamPlan {
     /// A commanded team that ends hovering flies on at least until then (the flight it was
     /// launched for).
     end_not_before_s: Real,
+    /// A commanded plan: the smallest lambda_1(U_D) of the plan the team was launched with
+    /// (`None`: this plan is the launched one). The team keeps the safety numbers it was
+    /// certified with (eqs. 37-38) through every command: each command is certified against
+    /// them, and the audit holds the flight to them.
+    launched_lambda1: Option<Lambda1Min>,
 }
 
 /// Result of scanning a plan for its smallest deformation eigenvalue.
@@ -319,6 +324,7 @@ impl TeamPlan {
                 goal,
             )],
             end_not_before_s: 0.0,
+            launched_lambda1: None,
         })
     }
 
@@ -333,6 +339,30 @@ impl TeamPlan {
     pub fn hovering_until(mut self, t_s: Real) -> Self {
         self.end_not_before_s = t_s;
         self
+    }
+
+    /// The same plan, to be commanded: it remembers the smallest lambda_1 of the plan it was
+    /// launched as ([`Self::launched_lambda1_min`]), whatever phases commands give it.
+    pub fn commandable(mut self) -> Self {
+        self.launched_lambda1 = Some(self.launched_lambda1_min());
+        self
+    }
+
+    /// The smallest lambda_1(U_D) over the deformation segments of the plan the team was
+    /// launched with (0 when its primary leaders become collinear): this plan's own unless it
+    /// was commanded. The safety numbers of a team are this one's (eqs. 37-38), commanded or
+    /// not.
+    pub fn launched_lambda1_min(&self) -> Lambda1Min {
+        self.launched_lambda1.unwrap_or_else(|| {
+            self.lambda1_min_segments().map_or(
+                Lambda1Min {
+                    lambda1: 0.0,
+                    s: 0.0,
+                    t_s: 0.0,
+                },
+                |(l, _)| l,
+            )
+        })
     }
 
     /// Every phase in flight order.

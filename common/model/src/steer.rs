@@ -139,7 +139,7 @@ impl Steering {
         Steering {
             launched_end_s: plan.flight_end_s(),
             launched_peak_acc,
-            plan,
+            plan: plan.commandable(),
             route: None,
             settings,
         }

@@ -65,11 +65,6 @@ impl AirspaceAudit {
         })
     }
 
-    /// delta changed (the plan was commanded in flight): the ground slack from here on.
-    pub fn set_delta(&mut self, delta_m: Real) {
-        self.ground_slack_m = delta_m.max(0.0);
-    }
-
     /// Whether the scenario has a fence.
     pub fn has_fence(&self) -> bool {
         self.fence.is_some()

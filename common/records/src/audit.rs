@@ -43,14 +43,9 @@ impl SafetyNumbers {
     pub fn of(s: &Scenario) -> Self {
         // Over every deformation segment of a mission (take-off and landing are certified by
         // their ground separation instead: ARCHITECTURE.md).
-        let l = s.plan.lambda1_min_segments().map_or(
-            cdm_model::plan::Lambda1Min {
-                lambda1: 0.0,
-                s: 0.0,
-                t_s: 0.0,
-            },
-            |(l, _)| l,
-        );
+        // A commanded plan keeps the launched plan's (`TeamPlan::launched_lambda1_min`): the
+        // team is held to the numbers it was certified with through every command.
+        let l = s.plan.launched_lambda1_min();
         let d_b_m = safety::d_b(&s.formation);
         let d_s_m = safety::d_s(&s.formation);
         let eps = s.file.eps_m;
@@ -456,14 +451,10 @@ impl Auditor {
     }
 
     /// The team's plan is commanded in flight from a switch on: the rest of the flight is
-    /// audited against `flown` (its plan the same before the switch) with its safety numbers,
-    /// as `simulate --commands` audits the commanded plan from the start.
+    /// audited against `flown` (its plan the same before the switch), with the safety numbers
+    /// the team was launched and certified with (a command is certified against them too), as
+    /// `simulate --commands` audits the commanded plan from the start.
     pub fn replan(&mut self, flown: &Scenario) {
-        self.numbers = SafetyNumbers::of(flown);
-        self.report.numbers = self.numbers;
-        if let Some(a) = &mut self.airspace {
-            a.set_delta(self.numbers.delta_m);
-        }
         self.scenario = flown.clone();
     }
 

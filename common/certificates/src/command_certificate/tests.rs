@@ -168,3 +168,32 @@ fn a_goto_faster_than_the_vehicles_can_fly_is_refused() {
     }
     assert_eq!(steering.plan(), &held);
 }
+
+/// The team keeps the safety numbers it was launched with through commands: paper40-mission
+/// landed during its first segment no longer flies the segment where its lambda_1 is smallest,
+/// yet its lambda_CD,min and delta (eqs. 37-38), the audit's limits and the next command's, stay
+/// the launched ones, in a live audit (`replan`) and in one of the commanded plan from the start
+/// (`simulate --commands`) alike.
+#[test]
+fn a_commanded_team_keeps_the_numbers_it_was_launched_with() {
+    use cdm_records::audit::Auditor;
+    let s = Scenario::builtin("paper40-mission").unwrap();
+    let n = SafetyNumbers::of(&s);
+    let mut steering = s.steering();
+    let first = (s.plan.phases().iter())
+        .find(|p| p.kind == cdm_model::plan::PhaseKind::Segment(1))
+        .copied()
+        .unwrap();
+    let t = ((first.t_start_s + 0.3 * first.duration_s()) * 100.0).round() / 100.0;
+    accepted(&steer(&mut steering, &s, &n, &TeamCommand::Land, t));
+    let mut flown = s.clone();
+    flown.plan = steering.plan().clone();
+    // The commanded plan's own smallest lambda_1 is not the launched one's.
+    let own = flown.plan.lambda1_min_segments().unwrap().0.lambda1;
+    assert!(own > n.lambda1_min + 1e-6, "{own} vs {}", n.lambda1_min);
+    assert_eq!(SafetyNumbers::of(&flown), n);
+    let mut live = Auditor::new(&s);
+    live.replan(&flown);
+    assert_eq!(live.numbers(), &n);
+    assert_eq!(Auditor::new(&flown).numbers(), &n);
+}
