@@ -139,7 +139,9 @@ impl Steering {
         Steering {
             launched_end_s: plan.flight_end_s(),
             launched_peak_acc,
-            plan: plan.commandable(),
+            // Not `commandable()` here: every member builds a steering at start, and the
+            // launched plan's lambda_1 scan is needed only once a command replaces the plan.
+            plan,
             route: None,
             settings,
         }
@@ -188,7 +190,7 @@ impl Steering {
                 route_after = None;
             }
         }
-        let plan = self.plan.clone().with_phases(phases);
+        let plan = self.plan.clone().commandable().with_phases(phases);
         let lands = plan.phases().last().map(|p| p.kind) == Some(PhaseKind::Landing);
         let plan = if lands {
             plan
