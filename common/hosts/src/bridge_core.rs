@@ -283,7 +283,7 @@ impl<L, R> Remote<L, R> {
             stop_sent: false,
             subscriptions: BTreeMap::new(),
             repairs: ctx.repairs.clone(),
-            last_notice: (None, None),
+            last_notice: forward::SentNotices::default(),
             killed: BTreeSet::new(),
             handing: None,
             notes: Vec::new(),
@@ -997,13 +997,17 @@ mod tests {
             c(14, Some(n(1, 1))),
             c(15, Some(n(1, 1))),
         ];
-        let mut last = (None, None);
+        let mut last = forward::SentNotices::default();
         let sent: Vec<u64> = forward::worth_sending(&clocks, &mut last)
             .iter()
             .map(|c| c.grant_tick)
             .collect();
         assert_eq!(sent, [11, 13, 15]);
-        assert_eq!(last, (Some(n(1, 1)), None));
+        let newest = forward::SentNotices {
+            loss: Some(n(1, 1)),
+            steer: None,
+        };
+        assert_eq!(last, newest);
         assert_eq!(forward::worth_sending(&[], &mut last), vec![]);
         let again = forward::worth_sending(&clocks[4..], &mut last);
         assert_eq!(again.len(), 1, "only the newest of unchanged notices");
@@ -1023,7 +1027,7 @@ mod tests {
             c(hold.in_phase(SteerPhase::Final)),
             c(land.in_phase(SteerPhase::Proposed)),
         ];
-        let mut last = (None, None);
+        let mut last = forward::SentNotices::default();
         let sent = forward::worth_sending(&clocks, &mut last);
         assert_eq!(sent, clocks);
     }

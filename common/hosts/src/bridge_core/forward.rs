@@ -79,7 +79,11 @@ pub(super) fn follow_repairs<L, R: Relay>(r: &mut Remote<L, R>, ctx: &Ctx, now: 
 }
 
 /// The loss and command notices of the last clock message sent.
-pub(super) type SentNotices = (Option<LossNotice>, Option<SteerNotice>);
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct SentNotices {
+    pub loss: Option<LossNotice>,
+    pub steer: Option<SteerNotice>,
+}
 
 /// Of the clock messages drained, in order: each whose loss or command notice differs from the
 /// one sent before (members must see every loss, every rise of the connected count, and every
@@ -88,7 +92,10 @@ pub(super) type SentNotices = (Option<LossNotice>, Option<SteerNotice>);
 pub(super) fn worth_sending(clocks: &[ClockMsg], last: &mut SentNotices) -> Vec<ClockMsg> {
     let mut out = vec![];
     for (k, c) in clocks.iter().enumerate() {
-        let notices = (c.loss(), c.steer());
+        let notices = SentNotices {
+            loss: c.loss(),
+            steer: c.steer(),
+        };
         if notices != *last || k + 1 == clocks.len() {
             *last = notices;
             out.push(*c);
